@@ -1,0 +1,103 @@
+"""The typer application object and the helpers every command uses.
+
+Commands live one per module in this package; each imports only typer at module level and everything heavy
+inside the function body, so ``slamcli --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from typing import Callable, Iterator
+
+import typer
+
+app = typer.Typer(
+    name="slamcli",
+    help="2-D SLAM experiment runner: simulate → solve → evaluate → plot, and parameter sweeps.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        import slamcli
+
+        typer.echo(f"slamcli {slamcli.__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True, help="Print the version."),
+) -> None:
+    """2-D SLAM experiment runner."""
+
+
+def stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def stdout_console():
+    from rich.console import Console
+
+    return Console()
+
+
+@contextlib.contextmanager
+def handle_errors() -> Iterator[None]:
+    """Turn a :class:`~slamcli.errors.SlamcliError` into one line on stderr and exit status 1."""
+    from slamcli.errors import SlamcliError
+
+    try:
+        yield
+    except SlamcliError as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        typer.echo(f"error: {msg}", err=True)
+        raise typer.Exit(1) from None
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        raise typer.Exit(130) from None
+
+
+@contextlib.contextmanager
+def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[[int, int], None]]:
+    """A rich progress bar on stderr, exposed as a ``progress(done, total)`` callback.
+
+    With ``quiet`` (or when stderr is not a terminal and ``quiet`` is forced), the callback does nothing.
+    """
+    if quiet:
+        yield lambda done, total: None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=stderr_console(),
+        transient=False,
+    ) as prog:
+        task = prog.add_task(description, total=None)
+
+        def update(done: int, total: int) -> None:
+            prog.update(task, completed=done, total=total)
+
+        yield update
+
+
+def fail(message: str) -> None:
+    """Print a one-line error and exit 1 (for CLI-level argument problems)."""
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(1)
+
+
+def is_tty() -> bool:
+    return sys.stderr.isatty()

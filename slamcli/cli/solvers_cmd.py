@@ -1,0 +1,32 @@
+"""``slamcli solvers``: list the registered solver plugins and their parameters."""
+
+from __future__ import annotations
+
+import typer
+
+from slamcli.cli.app import app, handle_errors, stdout_console
+
+
+@app.command("solvers")
+def solvers_command(
+    name: str = typer.Argument(None, help="Show the parameters of this solver only."),
+) -> None:
+    """List registered solvers (entry-point group ``slamcli.solvers``): name, package, version, parameters."""
+    with handle_errors():
+        from rich.table import Table
+
+        from slamcli.params import describe_params
+        from slamcli.solvers import registry
+
+        infos = registry.available()
+        if name is not None:
+            registry.load(name)  # raises PluginError listing the names when unknown
+            infos = [i for i in infos if i.name == name]
+        table = Table(title="slamcli solvers")
+        for col in ("name", "package", "version", "parameters (default)"):
+            table.add_column(col)
+        for info in infos:
+            cls = registry.load(info.name)
+            params = ", ".join(f"{n}={d}" for n, _t, d in describe_params(cls.Params))
+            table.add_row(info.name, info.package, info.version, params or "—")
+        stdout_console().print(table)

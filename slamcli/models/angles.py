@@ -1,0 +1,47 @@
+"""The one angle-wrap helper. Never subtract headings by hand: use :func:`angle_diff`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(a):
+    """Wrap angle(s) to ``[-pi, pi)``.
+
+    Parameters
+    ----------
+    a : float or ndarray (...)
+        Angles in radians.
+
+    Returns
+    -------
+    float or ndarray (...), same shape, in ``[-pi, pi)``.
+    """
+    w = np.mod(np.asarray(a, dtype=float) + np.pi, TWO_PI) - np.pi
+    # np.mod can return TWO_PI - eps rounding to exactly pi after the shift; keep the half-open interval.
+    w = np.where(w >= np.pi, w - TWO_PI, w)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def angle_diff(a, b):
+    """``wrap(a - b)``: the signed smallest rotation taking ``b`` to ``a``."""
+    return wrap_angle(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))
+
+
+def circular_mean(angles, weights=None, axis=-1):
+    """Weighted circular mean ``atan2(sum w sin, sum w cos)`` along ``axis``."""
+    angles = np.asarray(angles, dtype=float)
+    if weights is None:
+        weights = np.ones_like(angles)
+    s = np.sum(weights * np.sin(angles), axis=axis)
+    c = np.sum(weights * np.cos(angles), axis=axis)
+    return wrap_angle(np.arctan2(s, c))
+
+
+def wrap_pose_error(e_xyt):
+    """Return a copy of pose differences ``(..., 3)`` with the heading component wrapped."""
+    e = np.array(e_xyt, dtype=float, copy=True)
+    e[..., 2] = wrap_angle(e[..., 2])
+    return e

@@ -1,0 +1,108 @@
+"""Range-bearing observation model, its inverse, and their Jacobians.
+
+Forward model (measurement space)::
+
+    h(x, m) = [ ‖m − p‖,  wrap(atan2(m_y − y, m_x − x) − θ) ]
+
+Inverse model (landmark space; paper 000 writes it as h(x_t, z_{t,i}) and builds its observation
+potentials on it)::
+
+    m = h⁻¹(x, z) = p + r · [cos(θ + b), sin(θ + b)]
+
+Paper 000 measures the bearing from the robot's right side (0 = right, π = left), i.e. ``b_paper = b + π/2``;
+slamcli stores the conventional bearing ``b`` (0 = straight ahead) everywhere.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slamcli.models.angles import wrap_angle
+
+
+def range_bearing(x, m):
+    """Predicted measurement ``z = [range, bearing] (..., 2)`` of landmark(s) ``m (..., 2)`` from pose(s)
+    ``x (..., 3)``."""
+    x = np.asarray(x, float)
+    m = np.asarray(m, float)
+    dx = m[..., 0] - x[..., 0]
+    dy = m[..., 1] - x[..., 1]
+    return np.stack([np.hypot(dx, dy), wrap_angle(np.arctan2(dy, dx) - x[..., 2])], -1)
+
+
+def range_bearing_jacobians(x, m):
+    """Jacobians of :func:`range_bearing`.
+
+    Returns
+    -------
+    H_x : ndarray (..., 2, 3)   ∂h/∂x
+    H_m : ndarray (..., 2, 2)   ∂h/∂m  (note H_m = −H_x[..., :2])
+    """
+    x = np.asarray(x, float)
+    m = np.asarray(m, float)
+    dx = m[..., 0] - x[..., 0]
+    dy = m[..., 1] - x[..., 1]
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    lead = np.broadcast_shapes(x.shape[:-1], m.shape[:-1])
+    H_m = np.empty(lead + (2, 2))
+    H_m[..., 0, 0] = dx / r
+    H_m[..., 0, 1] = dy / r
+    H_m[..., 1, 0] = -dy / q
+    H_m[..., 1, 1] = dx / q
+    H_x = np.zeros(lead + (2, 3))
+    H_x[..., :, :2] = -H_m
+    H_x[..., 1, 2] = -1.0
+    return H_x, H_m
+
+
+def inverse_range_bearing(x, z):
+    """Landmark position ``(..., 2)`` that pose(s) ``x (..., 3)`` would see at measurement(s) ``z (..., 2)``."""
+    x = np.asarray(x, float)
+    z = np.asarray(z, float)
+    a = x[..., 2] + z[..., 1]
+    return np.stack([x[..., 0] + z[..., 0] * np.cos(a), x[..., 1] + z[..., 0] * np.sin(a)], -1)
+
+
+def inverse_range_bearing_jacobians(x, z):
+    """Jacobians of :func:`inverse_range_bearing`.
+
+    Returns
+    -------
+    M_x : ndarray (..., 2, 3)   ∂m/∂x
+    M_z : ndarray (..., 2, 2)   ∂m/∂z
+    """
+    x = np.asarray(x, float)
+    z = np.asarray(z, float)
+    a = x[..., 2] + z[..., 1]
+    c, s = np.cos(a), np.sin(a)
+    r = z[..., 0]
+    lead = np.broadcast_shapes(x.shape[:-1], z.shape[:-1])
+    M_x = np.zeros(lead + (2, 3))
+    M_x[..., 0, 0] = 1.0
+    M_x[..., 1, 1] = 1.0
+    M_x[..., 0, 2] = -r * s
+    M_x[..., 1, 2] = r * c
+    M_z = np.empty(lead + (2, 2))
+    M_z[..., 0, 0] = c
+    M_z[..., 1, 0] = s
+    M_z[..., 0, 1] = -r * s
+    M_z[..., 1, 1] = r * c
+    return M_x, M_z
+
+
+def measurement_residual(z, z_hat):
+    """``z − ẑ (..., 2)`` with the bearing wrapped."""
+    z = np.asarray(z, float)
+    z_hat = np.asarray(z_hat, float)
+    return np.stack([z[..., 0] - z_hat[..., 0], wrap_angle(z[..., 1] - z_hat[..., 1])], -1)
+
+
+def to_paper_bearing(bearing):
+    """Convert slamcli's bearing (0 ahead) to paper 000's (0 right, π left)."""
+    return wrap_angle(np.asarray(bearing, float) + np.pi / 2)
+
+
+def from_paper_bearing(bearing_paper):
+    """Inverse of :func:`to_paper_bearing`."""
+    return wrap_angle(np.asarray(bearing_paper, float) - np.pi / 2)

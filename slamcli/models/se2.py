@@ -1,0 +1,112 @@
+"""SE(2) pose algebra on ``[x, y, theta]`` arrays, vectorised over leading dimensions.
+
+``compose(a, b)`` is ``a ⊕ b`` (b expressed in a's frame), ``between(a, b) = a⁻¹ ⊕ b`` is b in a's frame.
+``log``/``exp`` are the SE(2) Lie-group maps with tangent ordering ``[v_x, v_y, omega]`` (GTSAM's Pose2
+convention), used by the between factors that must match GTSAM exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slamcli.models.angles import wrap_angle
+
+
+def rot2(theta):
+    """Rotation matrices ``(..., 2, 2)`` for angles ``(...)``."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def compose(a, b):
+    """``a ⊕ b`` for poses ``(..., 3)``."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], -1)
+
+
+def inverse(a):
+    """``a⁻¹`` for poses ``(..., 3)``."""
+    a = np.asarray(a, float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], -1)
+
+
+def between(a, b):
+    """``a⁻¹ ⊕ b``: pose b expressed in the frame of pose a, ``(..., 3)``.
+
+    Its translation part is ``τ(θ_a)(p_b − p_a)`` with ``τ(θ) = R(θ)ᵀ`` — exactly the rotated odometry
+    increment of paper 000, eq. (16).
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx = b[..., 0] - a[..., 0]
+    dy = b[..., 1] - a[..., 1]
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], -1)
+
+
+def between_jacobians(a, b):
+    """Jacobians of :func:`between` (as a plain 3-vector function) w.r.t. ``a`` and ``b``.
+
+    Returns
+    -------
+    J_a, J_b : ndarray (..., 3, 3)
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx = b[..., 0] - a[..., 0]
+    dy = b[..., 1] - a[..., 1]
+    shape = a.shape[:-1] + (3, 3)
+    J_a = np.zeros(shape)
+    J_b = np.zeros(shape)
+    J_a[..., 0, 0] = -c
+    J_a[..., 0, 1] = -s
+    J_a[..., 0, 2] = -s * dx + c * dy
+    J_a[..., 1, 0] = s
+    J_a[..., 1, 1] = -c
+    J_a[..., 1, 2] = -c * dx - s * dy
+    J_a[..., 2, 2] = -1.0
+    J_b[..., 0, 0] = c
+    J_b[..., 0, 1] = s
+    J_b[..., 1, 0] = -s
+    J_b[..., 1, 1] = c
+    J_b[..., 2, 2] = 1.0
+    return J_a, J_b
+
+
+def _sinc_terms(w):
+    """``A = sin(w)/w`` and ``B = (1 - cos(w))/w`` with series near zero."""
+    w = np.asarray(w, float)
+    small = np.abs(w) < 1e-6
+    ws = np.where(small, 1.0, w)
+    A = np.where(small, 1.0 - w**2 / 6.0, np.sin(ws) / ws)
+    B = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - np.cos(ws)) / ws)
+    return A, B
+
+
+def exp(xi):
+    """SE(2) exponential: tangent ``[v_x, v_y, omega] (..., 3)`` → pose ``(..., 3)``."""
+    xi = np.asarray(xi, float)
+    w = xi[..., 2]
+    A, B = _sinc_terms(w)
+    x = A * xi[..., 0] - B * xi[..., 1]
+    y = B * xi[..., 0] + A * xi[..., 1]
+    return np.stack([x, y, wrap_angle(w)], -1)
+
+
+def log(p):
+    """SE(2) logarithm: pose ``(..., 3)`` → tangent ``[v_x, v_y, omega] (..., 3)``, omega in [-pi, pi)."""
+    p = np.asarray(p, float)
+    w = wrap_angle(p[..., 2])
+    A, B = _sinc_terms(w)
+    det = A * A + B * B
+    vx = (A * p[..., 0] + B * p[..., 1]) / det
+    vy = (-B * p[..., 0] + A * p[..., 1]) / det
+    return np.stack([vx, vy, w], -1)

@@ -1,0 +1,148 @@
+"""Parse ``key=value`` overrides into frozen parameter dataclasses, with one-line errors.
+
+Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]``, ``enum.Enum`` subclasses,
+``tuple[float, ...]`` / ``tuple[int, ...]`` (written ``1,2,3`` or ``[1, 2, 3]``), nested tuples
+(JSON ``[[1,0],[0,1]]``) and ``X | None`` of those (``none`` gives None).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import math
+import types
+import typing
+from typing import Any, Literal
+
+from slamcli.errors import ConfigError
+
+
+def split_override(text: str, where: str = "--param") -> tuple[str, str]:
+    if "=" not in text:
+        raise ConfigError(f"{where}: expected key=value, got {text!r}")
+    key, value = text.split("=", 1)
+    key = key.strip()
+    if not key:
+        raise ConfigError(f"{where}: empty key in {text!r}")
+    return key, value.strip()
+
+
+def _coerce(value: Any, tp: Any, where: str) -> Any:
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        non_none = [a for a in args if a is not type(None)]
+        if isinstance(value, str) and value.lower() in ("none", "null") and len(non_none) < len(args):
+            return None
+        if value is None and len(non_none) < len(args):
+            return None
+        errors = []
+        for a in non_none:
+            try:
+                return _coerce(value, a, where)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(errors[0] if errors else f"{where}: cannot parse {value!r}")
+    if origin is Literal:
+        for a in args:
+            if str(a) == str(value):
+                return a
+        raise ConfigError(f"{where}: {value!r} is not one of {', '.join(map(str, args))}")
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        for member in tp:
+            if str(member.value) == str(value) or member.name == str(value):
+                return member
+        raise ConfigError(f"{where}: {value!r} is not one of {', '.join(str(m.value) for m in tp)}")
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        s = str(value).lower()
+        if s in ("1", "true", "yes", "on"):
+            return True
+        if s in ("0", "false", "no", "off"):
+            return False
+        raise ConfigError(f"{where}: expected a boolean (true/false), got {value!r}")
+    if tp is int:
+        if isinstance(value, bool):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        if isinstance(value, int):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        try:
+            return int(str(value))
+        except ValueError:
+            raise ConfigError(f"{where}: expected an integer, got {value!r}") from None
+    if tp is float:
+        if isinstance(value, bool):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        try:
+            out = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{where}: expected a number, got {value!r}") from None
+        if math.isnan(out):
+            raise ConfigError(f"{where}: NaN is not allowed")
+        return out
+    if tp is str:
+        return str(value)
+    if origin is tuple:
+        if isinstance(value, str):
+            s = value.strip()
+            if s.startswith("["):
+                try:
+                    value = json.loads(s)
+                except json.JSONDecodeError:
+                    raise ConfigError(f"{where}: cannot parse {value!r} as a list") from None
+            else:
+                value = [v for v in s.split(",") if v.strip()]
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(v, args[0], where) for v in value)
+        if len(args) != len(value):
+            raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
+        return tuple(_coerce(v, a, where) for v, a in zip(value, args))
+    raise ConfigError(f"{where}: unsupported parameter type {tp!r}")
+
+
+def build_params(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param") -> Any:
+    """Instantiate ``params_cls`` with overrides (``{"k": v}`` or ``["k=v", ...]``), validating keys and types.
+
+    Raises :class:`ConfigError` naming the key, the expected type and the known keys.
+    """
+    if isinstance(overrides, list):
+        pairs: dict[str, Any] = {}
+        for text in overrides:
+            k, v = split_override(text, where)
+            pairs[k] = v
+        overrides = pairs
+    hints = typing.get_type_hints(params_cls)
+    fields = {f.name: f for f in dataclasses.fields(params_cls)}
+    kwargs = {}
+    for key, value in overrides.items():
+        if key not in fields:
+            known = ", ".join(sorted(fields)) or "none"
+            raise ConfigError(f"{where}: unknown parameter {key!r} for {params_cls.__name__}; known: {known}")
+        kwargs[key] = _coerce(value, hints[key], f"{where} {key}")
+    try:
+        return params_cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+
+
+def describe_params(params_cls: type) -> list[tuple[str, str, str]]:
+    """``[(name, type, default)]`` for help output."""
+    hints = typing.get_type_hints(params_cls)
+    out = []
+    for f in dataclasses.fields(params_cls):
+        if f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+            default = f.default_factory()  # type: ignore[misc]
+        else:
+            default = "required"
+        tp = hints[f.name]
+        tname = getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+        out.append((f.name, tname, str(default.value if isinstance(default, enum.Enum) else default)))
+    return out

@@ -1,0 +1,239 @@
+"""Typed containers that flow between the simulator, the solvers, the metrics and the ``io`` package.
+
+The split is deliberate: :class:`SlamInputs` is everything a solver may see (controls, odometry,
+observations, sensor specs and the known start pose); :class:`GroundTruth` is produced only by the
+simulator (or a real dataset's reference system) and read only by metrics. Solvers never receive it.
+
+Shapes are in the names and docstrings: ``poses_xyt (T+1, 3)``, ``landmarks_xy (L, 2)``, ``*_cov (..., k, k)``.
+Observations are a flat table in time order with CSR offsets: the observations taken at pose ``t`` are rows
+``offsets[t]:offsets[t+1]``; ``offsets`` has length ``T+2`` (one entry per pose plus the end).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class NoiseSpec:
+    """Noise levels a solver may assume (sensor data sheets / calibration), all standard deviations.
+
+    Attributes
+    ----------
+    motion_std : ndarray (2,)     [σ_v m/s, σ_ω rad/s] of the actuation noise on the commanded controls.
+    odometry_std : ndarray (3,)   [σ_x m, σ_y m, σ_θ rad] per-step noise of the body-frame odometry increment.
+    range_std : float             σ_r of range measurements, m.
+    bearing_std : float           σ_b of bearing measurements, rad.
+    """
+
+    motion_std: np.ndarray
+    odometry_std: np.ndarray
+    range_std: float
+    bearing_std: float
+
+    @property
+    def obs_cov(self) -> np.ndarray:
+        """Measurement covariance ``(2, 2)`` of one range-bearing observation."""
+        return np.diag([self.range_std**2, self.bearing_std**2])
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Flat observation table, time-ordered, with CSR offsets per pose.
+
+    Attributes
+    ----------
+    step : ndarray (N,) int64          index t of the pose at which each observation was taken.
+    range_m : ndarray (N,) float64     measured range, m (≥ 0).
+    bearing_rad : ndarray (N,) float64 measured bearing, rad, wrapped to [-pi, pi), 0 = straight ahead.
+    sensor : ndarray (N,) int16        index of the sensor that produced the row (0 = first sensor).
+    reported_id : ndarray (N,) int64   landmark identity reported *by the sensor* (e.g. MRCLAM barcodes,
+                                       simulator option ``report_ids``); -1 when the sensor reports none.
+                                       This is a measurement a solver may use, not ground truth.
+    offsets : ndarray (T+2,) int64     rows of pose t are ``offsets[t]:offsets[t+1]``.
+    """
+
+    step: np.ndarray
+    range_m: np.ndarray
+    bearing_rad: np.ndarray
+    sensor: np.ndarray
+    reported_id: np.ndarray
+    offsets: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.range_m.shape[0])
+
+    @property
+    def z(self) -> np.ndarray:
+        """Measurements ``(N, 2)`` as ``[range, bearing]``."""
+        return np.stack([self.range_m, self.bearing_rad], axis=-1)
+
+    def at(self, t: int) -> slice:
+        """Row slice of the observations taken at pose ``t``."""
+        return slice(int(self.offsets[t]), int(self.offsets[t + 1]))
+
+    @staticmethod
+    def offsets_from_steps(step: np.ndarray, n_poses: int) -> np.ndarray:
+        """CSR offsets ``(n_poses+1,)`` for a sorted step column."""
+        counts = np.bincount(np.asarray(step, dtype=np.int64), minlength=n_poses)
+        return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class SlamInputs:
+    """Everything a solver may use.
+
+    Attributes
+    ----------
+    dt : float                       sampling period, s.
+    timestamps : ndarray (T+1,)      time of each pose, s.
+    x0 : ndarray (3,)                known start pose (paper 000 §3 assumes it is known; it fixes the gauge).
+    controls : ndarray (T, 2)        commanded [v, ω] applied from pose t to pose t+1.
+    odometry_xyt : ndarray (T+1, 3)  encoder dead-reckoning poses (their increments are the odometry data).
+    observations : Observations
+    noise : NoiseSpec
+    max_range : float                sensor max range, m (inf when unlimited).
+    gps_step : ndarray (G,) int64    optional GPS fixes: pose index ...
+    gps_xy : ndarray (G, 2)          ... and position, m.
+    gps_std : float                  σ of a GPS fix, m.
+    """
+
+    dt: float
+    timestamps: np.ndarray
+    x0: np.ndarray
+    controls: np.ndarray
+    odometry_xyt: np.ndarray
+    observations: Observations
+    noise: NoiseSpec
+    max_range: float = float("inf")
+    gps_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    gps_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    gps_std: float = 0.0
+
+    @property
+    def n_poses(self) -> int:
+        """T+1."""
+        return int(self.odometry_xyt.shape[0])
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """What really happened; produced by the simulator, read only by metrics.
+
+    Attributes
+    ----------
+    poses_xyt : ndarray (T+1, 3)       true poses.
+    landmarks_xy : ndarray (L, 2)      true landmark positions.
+    obs_landmark : ndarray (N,) int64  true landmark index of each observation row; -1 for clutter.
+    """
+
+    poses_xyt: np.ndarray
+    landmarks_xy: np.ndarray
+    obs_landmark: np.ndarray
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A simulated (or imported) run: solver inputs, ground truth and self-describing metadata."""
+
+    inputs: SlamInputs
+    truth: GroundTruth | None
+    metadata: dict[str, Any]
+
+
+class Status(str, enum.Enum):
+    """How a solve ended."""
+
+    CONVERGED = "converged"  # an iterative solver met its tolerance
+    MAX_ITERATIONS = "max_iterations"  # stopped on the iteration budget
+    COMPLETED = "completed"  # a filter/one-pass solver processed every step
+    FAILED = "failed"  # no usable estimate; message says why
+
+
+@dataclass(frozen=True)
+class IterationTrace:
+    """Per-iteration record of an iterative solver (index 0 = the initialisation).
+
+    Attributes
+    ----------
+    objective : ndarray (K,)          energy / cost after each iteration.
+    map_change : ndarray (K,)         mean norm of landmark displacement from the previous iteration, m
+                                      (NaN-free; 0 for iteration 0).
+    time_s : ndarray (K,)             wall time of each iteration, s.
+    landmarks_xy : ndarray (M, 2)     landmark estimates of all iterations, flattened ...
+    landmark_offsets : ndarray (K+1,) ... iteration k owns rows ``landmark_offsets[k]:landmark_offsets[k+1]``.
+    """
+
+    objective: np.ndarray
+    map_change: np.ndarray
+    time_s: np.ndarray
+    landmarks_xy: np.ndarray
+    landmark_offsets: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.objective.shape[0])
+
+    def landmarks_at(self, k: int) -> np.ndarray:
+        """Landmark estimates ``(L_k, 2)`` after iteration ``k``."""
+        return self.landmarks_xy[self.landmark_offsets[k] : self.landmark_offsets[k + 1]]
+
+    @staticmethod
+    def from_lists(objective, map_change, time_s, landmarks_per_iter) -> "IterationTrace":
+        """Build a trace from per-iteration Python lists (landmarks: list of ``(L_k, 2)`` arrays)."""
+        counts = [len(m) for m in landmarks_per_iter]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        lm = (
+            np.concatenate([np.asarray(m, float).reshape(-1, 2) for m in landmarks_per_iter])
+            if landmarks_per_iter
+            else np.zeros((0, 2))
+        )
+        return IterationTrace(
+            objective=np.asarray(objective, float),
+            map_change=np.asarray(map_change, float),
+            time_s=np.asarray(time_s, float),
+            landmarks_xy=lm,
+            landmark_offsets=offsets,
+        )
+
+
+@dataclass(frozen=True)
+class SolverResult:
+    """What a solver returns; written by ``slamcli.io`` as a result file (schema ``slamcli.result`` v1).
+
+    Attributes
+    ----------
+    solver : str                       registered name, e.g. ``"ekf"``.
+    solver_version : str               version of the distribution that provides the solver.
+    params : dict                      the full resolved parameter set (``dataclasses.asdict`` of Params).
+    status : Status
+    message : str
+    poses_xyt : ndarray (T+1, 3)       estimated poses.
+    landmarks_xy : ndarray (L', 2)     estimated landmarks (L' may differ from the truth).
+    assoc : ndarray (N,) int64         label (row of landmarks_xy) given to every observation; -1 = none.
+    pose_cov : ndarray (T+1, 3, 3) | None     marginal pose covariances, world frame [x, y, θ].
+    landmark_cov : ndarray (L', 2, 2) | None  marginal landmark covariances.
+    trace : IterationTrace | None
+    wall_time_s : float
+    dataset_hash : str                 content hash of the input dataset (filled in by the caller).
+    extra : dict                       small solver-specific scalars/strings, e.g.
+                                       ``{"used_truth_association": True}``; JSON-serialisable.
+    """
+
+    solver: str
+    solver_version: str
+    params: dict[str, Any]
+    status: Status
+    message: str
+    poses_xyt: np.ndarray
+    landmarks_xy: np.ndarray
+    assoc: np.ndarray
+    pose_cov: np.ndarray | None = None
+    landmark_cov: np.ndarray | None = None
+    trace: IterationTrace | None = None
+    wall_time_s: float = 0.0
+    dataset_hash: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
