@@ -49,5 +49,6 @@ def observation_residual_jacobians(x, z):
 
 def weighted_sq(r, W):
     """``Σ rᵀ W r`` over all leading dimensions of ``r (..., k)`` with ``W (k, k)``."""
-    r = np.asarray(r, float)
-    return float(np.einsum("...i,ij,...j->", r, np.asarray(W, float), r))
+    W = np.asarray(W, float)
+    r = np.asarray(r, float).reshape(-1, W.shape[0])
+    return float(np.einsum("ni,ij,nj->", r, W, r))
