@@ -1,0 +1,546 @@
+# pylint: disable=invalid-name
+"""EKF-SLAM: extended Kalman filter over the joint state ``[pose, landmarks]``.
+
+The filter alternates the textbook predict → update cycle (Thrun et al., *Probabilistic Robotics*, ch. 10;
+paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
+
+* state ``x = [x_r (3,), m_1 (2,), ..., m_L (2,)]`` of length ``n = 3 + 2L``, covariance ``P (n, n)``;
+  the state grows by two entries whenever a landmark is added (buffers grow geometrically, so adding a
+  landmark costs amortised O(n) copies, not a fresh O(n²) allocation every time);
+* **predict** touches only the pose rows/columns (O(n)); the motion is either the DDMR model driven by the
+  commanded controls with actuation noise ``NoiseSpec.motion_std`` (``motion_input="controls"``), or the
+  composition with the encoder odometry increment with ``NoiseSpec.odometry_std``
+  (``motion_input="odometry"``);
+* **update** with one range-bearing observation touches pose + one landmark columns of ``H`` (sparse), so
+  one update is O(n²) (the rank-2 correction of ``P``) instead of the O(n³) dense form; it uses the Joseph
+  form ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ``; observations of one step are applied sequentially;
+* **association**: ``known`` uses the sensor-reported ids (``observations.reported_id``); ``ml`` is
+  maximum-likelihood (nearest neighbour in Mahalanobis distance of the innovation) with a χ² gate, new
+  landmark creation beyond a second χ² threshold and an optional provisional list (paper 002 §14.1: wait
+  several sightings before a landmark enters the state, against "fake" landmarks);
+* optional **stabilising noise** (paper 001 §III: the sensor noise assumed by the EKF is "pumped up by a
+  factor of approximately 10 ... to maintain consistency"): ``obs_std_scale`` multiplies σ_r, σ_b,
+  ``motion_std_scale`` the process noise σ's, and ``stabilising_pose_std`` adds a per-step pose noise.
+
+The numerical core is a set of pure functions under the class (:func:`predict`, :func:`update`,
+:func:`landmark_init`, :func:`innovation_stats`), each returning new arrays, so the class is a thin
+driver and the functions can be tested against hand-written Kalman algebra.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from slamcli.errors import SolverError
+from slamcli.models.angles import wrap_angle
+from slamcli.models.motion import ddmr_jacobians, ddmr_step, odometry_increments
+from slamcli.models.observation import (
+    inverse_range_bearing,
+    inverse_range_bearing_jacobians,
+    measurement_residual,
+    range_bearing,
+    range_bearing_jacobians,
+)
+from slamcli.models.se2 import compose, rot2
+from slamcli.solvers.base import BaseSolver
+from slamcli.types import SlamInputs, SolverResult, Status
+
+
+@dataclass(frozen=True)
+class EkfParams:
+    """Parameters of :class:`EkfSlam` (all have defaults).
+
+    Attributes
+    ----------
+    association : "known" | "ml"
+        ``known``: the landmark of a row is its sensor-reported id (rows with id −1 are discarded);
+        ``ml``: maximum-likelihood association by Mahalanobis distance (paper 002 §14.7, Fig. 14.5).
+    motion_input : "controls" | "odometry"
+        Drive the prediction by the commanded controls through the DDMR model (noise ``motion_std``) or by
+        the encoder odometry increments (noise ``odometry_std``, on the body-frame increment).
+    gate_prob : float
+        χ²(2) probability of the association gate: a row is fused with its best landmark when
+        ``d² ≤ chi2.ppf(gate_prob, 2)`` (0.99 → 9.21).
+    new_landmark_prob : float
+        χ²(2) probability beyond which the best match is so unlikely that the row starts a new landmark
+        (``d² > chi2.ppf(new_landmark_prob, 2)``; 0.9999 → 18.4). In between: ambiguous → discarded (−1).
+    provisional : bool
+        Keep new landmarks on a provisional list first (ml only, paper 002 §14.1).
+    provisional_min_hits : int
+        Consistent sightings (gated) needed before a provisional landmark enters the state.
+    provisional_window : int
+        Steps after its first sighting within which a candidate must be confirmed; otherwise dropped.
+    exclusive_per_step : bool
+        ml only: one landmark explains at most one row per (step, sensor).
+    obs_std_scale : float
+        Stabilising noise: factor on σ_r and σ_b used by the filter (paper 001 §III uses ≈10).
+    motion_std_scale : float
+        Stabilising noise: factor on the process noise standard deviations.
+    stabilising_pose_std : tuple[float, float, float]
+        Extra additive pose noise [σ_x m, σ_y m, σ_θ rad] per step (world frame), 0 = off.
+    init_pose_std : tuple[float, float, float]
+        Prior standard deviation of the start pose ``x0`` (0 = known exactly, fixes the gauge).
+    """
+
+    association: Literal["known", "ml"] = "known"
+    motion_input: Literal["controls", "odometry"] = "controls"
+    gate_prob: float = 0.99
+    new_landmark_prob: float = 0.9999
+    provisional: bool = False
+    provisional_min_hits: int = 3
+    provisional_window: int = 10
+    exclusive_per_step: bool = True
+    obs_std_scale: float = 1.0
+    motion_std_scale: float = 1.0
+    stabilising_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    init_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.gate_prob < 1.0:
+            raise ValueError(f"gate_prob must be in (0, 1), got {self.gate_prob}")
+        if not self.gate_prob <= self.new_landmark_prob < 1.0:
+            raise ValueError(
+                f"new_landmark_prob must be in [gate_prob, 1), got {self.new_landmark_prob} (gate_prob={self.gate_prob})"
+            )
+        if self.provisional_min_hits < 1 or self.provisional_window < 1:
+            raise ValueError("provisional_min_hits and provisional_window must be ≥ 1")
+        if self.obs_std_scale <= 0 or self.motion_std_scale <= 0:
+            raise ValueError("obs_std_scale and motion_std_scale must be > 0")
+        if min(self.stabilising_pose_std) < 0 or min(self.init_pose_std) < 0:
+            raise ValueError("stabilising_pose_std and init_pose_std must be ≥ 0")
+
+
+class _Candidate:
+    """A provisional landmark (paper 002 §14.1): position, 2×2 covariance, sightings."""
+
+    __slots__ = ("m", "C", "hits", "first_step", "rows")
+
+    def __init__(self, m, C, step, row):
+        self.m = m
+        self.C = C
+        self.hits = 1
+        self.first_step = step
+        self.rows = [row]
+
+
+class _GrowingState:
+    """``x (cap,)`` and ``P (cap, cap)`` buffers with an active size ``n``; capacity doubles when full."""
+
+    def __init__(self, x0, P0, cap_landmarks: int = 16):
+        cap = 3 + 2 * cap_landmarks
+        self.x_buf = np.zeros(cap)
+        self.P_buf = np.zeros((cap, cap))
+        self.n = 3
+        self.x_buf[:3] = x0
+        self.P_buf[:3, :3] = P0
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.x_buf[: self.n]
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.P_buf[: self.n, : self.n]
+
+    def set(self, x, P) -> None:
+        self.x_buf[: self.n] = x
+        self.P_buf[: self.n, : self.n] = P
+
+    def append_landmark(self, m, P_mx, P_mm) -> int:
+        """Add landmark ``m (2,)`` with cross-covariance ``P_mx (2, n)`` and ``P_mm (2, 2)``; return its index."""
+        n = self.n
+        if n + 2 > self.x_buf.shape[0]:
+            cap = 2 * self.x_buf.shape[0] - 3
+            x_new = np.zeros(cap)
+            P_new = np.zeros((cap, cap))
+            x_new[:n] = self.x_buf[:n]
+            P_new[:n, :n] = self.P_buf[:n, :n]
+            self.x_buf, self.P_buf = x_new, P_new
+        self.x_buf[n : n + 2] = m
+        self.P_buf[n : n + 2, :n] = P_mx
+        self.P_buf[:n, n : n + 2] = P_mx.T
+        self.P_buf[n : n + 2, n : n + 2] = P_mm
+        self.n = n + 2
+        return (n - 3) // 2
+
+
+class EkfSlam(BaseSolver):
+    """EKF-SLAM with known or maximum-likelihood data association.
+
+    Output (:class:`~slamcli.types.SolverResult`): ``poses_xyt (T+1, 3)`` filtered estimate of every step,
+    ``landmarks_xy (L', 2)`` final map (rows in order of creation), ``assoc (N,)`` landmark row per
+    observation (−1 = discarded / unconfirmed), ``pose_cov (T+1, 3, 3)`` filtered pose block at every step,
+    ``landmark_cov (L', 2, 2)`` final landmark blocks, ``extra`` with the mean NIS and counters.
+    """
+
+    name = "ekf"
+    Params = EkfParams
+
+    def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator, progress=None) -> SolverResult:
+        t_start = time.perf_counter()
+        p: EkfParams = self.params
+        obs = inputs.observations
+        T = inputs.n_poses - 1
+        z_all = obs.z  # (N, 2)
+        N = z_all.shape[0]
+        sensor = np.asarray(obs.sensor)
+        if p.association == "known":
+            rid = np.asarray(obs.reported_id, np.int64)
+            if N > 0 and np.all(rid < 0):
+                raise SolverError(
+                    "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
+                    "(use --param association=ml)"
+                )
+        if p.association == "ml" or p.provisional:
+            from scipy.stats import chi2
+
+            gate = float(chi2.ppf(p.gate_prob, 2))
+            new_thr = float(chi2.ppf(p.new_landmark_prob, 2))
+        else:
+            gate = new_thr = np.inf
+
+        noise = inputs.noise
+        R = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
+        Q_stab = np.diag(np.square(np.asarray(p.stabilising_pose_std, float)))
+        if p.motion_input == "controls":
+            if inputs.controls.shape[0] != T:
+                raise SolverError(f"controls: expected {T} rows, got {inputs.controls.shape[0]}")
+            M = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
+            controls = np.asarray(inputs.controls, float)
+        else:
+            Sigma_d = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
+            incr = odometry_increments(inputs.odometry_xyt)
+
+        st = _GrowingState(np.asarray(inputs.x0, float), np.diag(np.square(np.asarray(p.init_pose_std, float))))
+        poses = np.empty((T + 1, 3))
+        pose_cov = np.empty((T + 1, 3, 3))
+        assoc = np.full(N, -1, np.int64)
+        id_to_lm: dict[int, int] = {}
+        candidates: list[_Candidate] = []
+        nis_sum, n_upd, n_new, n_disc, n_dropped = 0.0, 0, 0, 0, 0
+        report_every = max(1, (T + 1) // 100)
+
+        for t in range(T + 1):
+            # ---------------- predict (pose block only) ----------------
+            if t > 0:
+                x_r = st.x[:3]
+                if p.motion_input == "controls":
+                    # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ
+                    u = controls[t - 1]
+                    F, G_u = ddmr_jacobians(x_r, u, inputs.dt)
+                    pose_new = ddmr_step(x_r, u, inputs.dt)
+                    Q = G_u @ M @ G_u.T
+                else:
+                    # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
+                    d = incr[t - 1]
+                    F, G = compose_jacobians(x_r, d)
+                    pose_new = compose(x_r, d)
+                    Q = G @ Sigma_d @ G.T
+                x, P = predict(st.x, st.P, pose_new, F, Q + Q_stab)
+                st.set(x, P)
+
+            # ---------------- update with the rows of step t ----------------
+            rows = range(int(obs.offsets[t]), int(obs.offsets[t + 1]))
+            used: set[tuple[int, int]] = set()
+            for i in rows:
+                z = z_all[i]
+                if p.association == "known":
+                    key = int(rid[i])
+                    if key < 0:
+                        n_disc += 1
+                        continue
+                    j = id_to_lm.get(key)
+                    if j is None:
+                        j = _add_landmark(st, z, R)
+                        id_to_lm[key] = j
+                        n_new += 1
+                        assoc[i] = j
+                        continue
+                else:
+                    j, d2 = _ml_best(st, z, R, exclude=[lm for (s, lm) in used if s == sensor[i]]
+                                     if p.exclusive_per_step else [])
+                    if j < 0 or d2 > new_thr:
+                        # no plausible state landmark: start a new one (or a provisional candidate)
+                        if p.provisional:
+                            j = _provisional_step(st, candidates, z, R, t, i, gate, p, assoc)
+                            if j >= 0:
+                                n_new += 1
+                                used.add((int(sensor[i]), j))
+                        else:
+                            j = _add_landmark(st, z, R)
+                            n_new += 1
+                            assoc[i] = j
+                            used.add((int(sensor[i]), j))
+                        continue
+                    if d2 > gate:
+                        n_disc += 1  # ambiguous: neither clearly this landmark nor clearly a new one
+                        continue
+                    used.add((int(sensor[i]), j))
+                x, P, y, S = update(st.x, st.P, z, j, R)
+                st.set(x, P)
+                assoc[i] = j
+                nis_sum += float(y @ np.linalg.solve(S, y))
+                n_upd += 1
+
+            if p.provisional and candidates:
+                keep = []
+                for c in candidates:
+                    if t - c.first_step >= p.provisional_window:
+                        n_dropped += 1
+                    else:
+                        keep.append(c)
+                candidates[:] = keep
+
+            poses[t] = st.x[:3]
+            P_rr = st.P[:3, :3]
+            pose_cov[t] = 0.5 * (P_rr + P_rr.T)
+            if progress is not None and (t % report_every == 0 or t == T):
+                progress(t + 1, T + 1)
+
+        L = (st.n - 3) // 2
+        P = st.P
+        landmarks = st.x[3:].reshape(L, 2).copy()
+        idx = 3 + 2 * np.arange(L)
+        landmark_cov = np.empty((L, 2, 2))
+        for a in range(2):
+            for b in range(2):
+                landmark_cov[:, a, b] = P[idx + a, idx + b]
+        return self.make_result(
+            status=Status.COMPLETED,
+            poses_xyt=poses,
+            landmarks_xy=landmarks,
+            assoc=assoc,
+            t_start=t_start,
+            message=f"filtered {T + 1} steps, {n_upd} updates, {L} landmarks",
+            pose_cov=pose_cov,
+            landmark_cov=landmark_cov,
+            extra={
+                "mean_nis": nis_sum / n_upd if n_upd else float("nan"),
+                "n_updates": n_upd,
+                "n_new_landmarks": n_new,
+                "n_discarded": n_disc,
+                "n_provisional_dropped": n_dropped,
+            },
+        )
+
+
+# ------------------------------------------------------------------------------------------------------
+# helpers of the driver
+# ------------------------------------------------------------------------------------------------------
+
+
+def _add_landmark(st: _GrowingState, z, R) -> int:
+    m, P_mx, P_mm = landmark_init(st.x, st.P, z, R)
+    return st.append_landmark(m, P_mx, P_mm)
+
+
+def _ml_best(st: _GrowingState, z, R, exclude) -> tuple[int, float]:
+    """Index and squared Mahalanobis distance of the most likely state landmark for ``z`` (−1, inf if none)."""
+    L = (st.n - 3) // 2
+    if L == 0:
+        return -1, np.inf
+    d2 = innovation_stats(st.x, st.P, z, R)
+    if exclude:
+        d2[np.asarray(exclude, np.int64)] = np.inf
+    j = int(np.argmin(d2))
+    return (j, float(d2[j])) if np.isfinite(d2[j]) else (-1, np.inf)
+
+
+def _provisional_step(st, candidates, z, R, t, row, gate, p: EkfParams, assoc) -> int:
+    """Match ``z`` against the provisional list; promote a candidate on its ``min_hits``-th sighting.
+
+    Returns the new state landmark index if one was promoted, else −1 (the row stays unassociated until
+    its candidate is confirmed; confirmed candidates label all their rows retroactively).
+    """
+    x_r, P_rr = st.x[:3], st.P[:3, :3]
+    best, best_d2 = None, np.inf
+    for c in candidates:
+        # S = H_r P_rr H_rᵀ + H_m C H_mᵀ + R   (candidate treated as independent of the pose)
+        H_r, H_m = range_bearing_jacobians(x_r, c.m)
+        y = measurement_residual(z, range_bearing(x_r, c.m))
+        S = H_r @ P_rr @ H_r.T + H_m @ c.C @ H_m.T + R
+        d2 = float(y @ np.linalg.solve(S, y))
+        if d2 < best_d2:
+            best, best_d2 = c, d2
+    if best is None or best_d2 > gate:
+        M_x, M_z = inverse_range_bearing_jacobians(x_r, z)
+        C = M_x @ P_rr @ M_x.T + M_z @ R @ M_z.T
+        candidates.append(_Candidate(inverse_range_bearing(x_r, z), C, t, row))
+        if p.provisional_min_hits > 1:
+            return -1
+        best = candidates[-1]
+    else:
+        # refine the candidate position with a 2-D Kalman update (pose uncertainty folded into R_eff)
+        H_r, H_m = range_bearing_jacobians(x_r, best.m)
+        y = measurement_residual(z, range_bearing(x_r, best.m))
+        R_eff = H_r @ P_rr @ H_r.T + R
+        S = H_m @ best.C @ H_m.T + R_eff
+        K = np.linalg.solve(S, H_m @ best.C).T
+        best.m = best.m + K @ y
+        I_KH = np.eye(2) - K @ H_m
+        best.C = I_KH @ best.C @ I_KH.T + K @ R_eff @ K.T
+        best.hits += 1
+        best.rows.append(row)
+    if best.hits < p.provisional_min_hits:
+        return -1
+    # confirmed: initialise in the state from the current sighting, label every sighting of the candidate
+    j = _add_landmark(st, z, R)
+    assoc[np.asarray(best.rows, np.int64)] = j
+    candidates.remove(best)
+    return j
+
+
+# ------------------------------------------------------------------------------------------------------
+# pure-function core (shapes: n = 3 + 2L)
+# ------------------------------------------------------------------------------------------------------
+
+
+def compose_jacobians(a, b):
+    """Jacobians of ``se2.compose(a, b)`` w.r.t. ``a`` and ``b``, each ``(3, 3)``.
+
+    ``a ⊕ b = [a_x + c b_x − s b_y, a_y + s b_x + c b_y, a_θ + b_θ]`` with ``c, s = cos a_θ, sin a_θ``.
+    """
+    c, s = np.cos(a[2]), np.sin(a[2])
+    J_a = np.eye(3)
+    J_a[0, 2] = -s * b[0] - c * b[1]
+    J_a[1, 2] = c * b[0] - s * b[1]
+    J_b = np.eye(3)
+    J_b[:2, :2] = rot2(a[2])
+    return J_a, J_b
+
+
+def predict(x, P, pose_pred, F, Q):
+    """EKF-SLAM prediction: only the pose moves.
+
+    ::
+
+        x⁻ = [g(x_r, u), m]                       (g evaluated by the caller → ``pose_pred``)
+        P⁻ = F̄ P F̄ᵀ + Q̄,   F̄ = blkdiag(F, I),  Q̄ = blkdiag(Q, 0)
+           = [[F P_rr Fᵀ + Q,  F P_rm],
+              [P_mr Fᵀ,        P_mm  ]]           (O(n), the map block is untouched)
+
+    Parameters
+    ----------
+    x : ndarray (n,)         state mean.
+    P : ndarray (n, n)       state covariance.
+    pose_pred : ndarray (3,) predicted pose g(x_r, u).
+    F : ndarray (3, 3)       motion Jacobian w.r.t. the pose.
+    Q : ndarray (3, 3)       process noise in pose coordinates (e.g. G_u M G_uᵀ).
+
+    Returns
+    -------
+    x, P : ndarray (n,), ndarray (n, n)  new arrays.
+    """
+    x = np.array(x, float, copy=True)
+    P = np.array(P, float, copy=True)
+    x[:3] = pose_pred
+    x[2] = wrap_angle(x[2])
+    P[:3, :] = F @ P[:3, :]
+    P[:, :3] = P[:, :3] @ F.T
+    P[:3, :3] += Q
+    return x, P
+
+
+def update(x, P, z, j, R):
+    """Range-bearing update of pose + landmark ``j`` (Joseph form), O(n²).
+
+    ::
+
+        ẑ = h(x_r, m_j),   y = z ⊖ ẑ               (bearing wrapped)
+        H = [H_r, 0 … 0, H_m, 0 … 0]  (2, n)     nonzero only in the pose and landmark-j columns
+        S = H P Hᵀ + R
+        K = P Hᵀ S⁻¹                               (solve, not inv)
+        x = x + K y
+        P = (I − KH) P (I − KH)ᵀ + K R Kᵀ          (Joseph form; (I−KH)P = P − K (P Hᵀ)ᵀ is O(n²))
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,) [range, bearing];  j : int landmark index;
+    R : ndarray (2, 2) measurement covariance.
+
+    Returns
+    -------
+    x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
+    """
+    x = np.asarray(x, float)
+    P = np.asarray(P, float)
+    k = 3 + 2 * j
+    idx = np.array([0, 1, 2, k, k + 1])
+    H_r, H_m = range_bearing_jacobians(x[:3], x[k : k + 2])
+    Hs = np.hstack([H_r, H_m])  # (2, 5): the nonzero columns of H
+    y = measurement_residual(z, range_bearing(x[:3], x[k : k + 2]))
+    PHt = P[:, idx] @ Hs.T  # (n, 2) = P Hᵀ
+    S = Hs @ PHt[idx] + R  # (2, 2)
+    K = np.linalg.solve(S, PHt.T).T  # (n, 2); S symmetric so K = (S⁻¹ (P Hᵀ)ᵀ)ᵀ
+    x_new = x + K @ y
+    x_new[2] = wrap_angle(x_new[2])
+    # Joseph form, exploiting the sparsity of H:
+    #   A = (I − KH) P = P − K (H P),   H P = (P Hᵀ)ᵀ
+    #   B = A (I − KH)ᵀ = A − (A Hᵀ) Kᵀ,  A Hᵀ = A[:, idx] Hsᵀ
+    #   P = B + K R Kᵀ
+    A = P - K @ PHt.T
+    B = A - (A[:, idx] @ Hs.T) @ K.T
+    P_new = B + K @ R @ K.T
+    P_new = 0.5 * (P_new + P_new.T)  # remove round-off asymmetry
+    return x_new, P_new, y, S
+
+
+def landmark_init(x, P, z, R):
+    """Initialise a landmark from its first sighting (linearised inverse observation model).
+
+    ::
+
+        m = h⁻¹(x_r, z)
+        P_mx = M_x P_{r,:}                 (2, n)   cross-covariance with the whole state
+        P_mm = M_x P_rr M_xᵀ + M_z R M_zᵀ  (2, 2)
+
+    Returns
+    -------
+    m : ndarray (2,), P_mx : ndarray (2, n), P_mm : ndarray (2, 2)
+    """
+    x = np.asarray(x, float)
+    P = np.asarray(P, float)
+    M_x, M_z = inverse_range_bearing_jacobians(x[:3], z)
+    m = inverse_range_bearing(x[:3], z)
+    P_mx = M_x @ P[:3, :]
+    P_mm = M_x @ P[:3, :3] @ M_x.T + M_z @ R @ M_z.T
+    return m, P_mx, 0.5 * (P_mm + P_mm.T)
+
+
+def innovation_stats(x, P, z, R):
+    """Squared Mahalanobis distance ``d²_k = y_kᵀ S_k⁻¹ y_k`` of ``z`` to every landmark k, vectorised.
+
+    ::
+
+        S_k = H_r P_rr H_rᵀ + H_r P_rk H_mᵀ + H_m P_kr H_rᵀ + H_m P_kk H_mᵀ + R
+
+    Returns
+    -------
+    d2 : ndarray (L,)
+    """
+    x = np.asarray(x, float)
+    P = np.asarray(P, float)
+    L = (x.shape[0] - 3) // 2
+    m = x[3:].reshape(L, 2)
+    H_r, H_m = range_bearing_jacobians(x[None, :3], m)  # (L,2,3), (L,2,2)
+    y = measurement_residual(z[None, :], range_bearing(x[None, :3], m))  # (L, 2)
+    P_rr = P[:3, :3]
+    P_rk = P[:3, 3:].reshape(3, L, 2).transpose(1, 0, 2)  # (L, 3, 2)
+    ii = 3 + 2 * np.arange(L)
+    P_kk = np.stack([np.stack([P[ii, ii], P[ii, ii + 1]], -1), np.stack([P[ii + 1, ii], P[ii + 1, ii + 1]], -1)], -2)
+    cross = np.einsum("lab,lbc,ldc->lad", H_r, P_rk, H_m)  # H_r P_rk H_mᵀ
+    S = (
+        np.einsum("lab,bc,ldc->lad", H_r, P_rr, H_r)
+        + cross
+        + cross.transpose(0, 2, 1)
+        + np.einsum("lab,lbc,ldc->lad", H_m, P_kk, H_m)
+        + R
+    )
+    # 2×2 solve in closed form: S⁻¹ = adj(S)/det(S)
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    a, b, c = S[:, 1, 1], -S[:, 0, 1], S[:, 0, 0]
+    return (a * y[:, 0] ** 2 + 2 * b * y[:, 0] * y[:, 1] + c * y[:, 1] ** 2) / det

@@ -1,0 +1,353 @@
+"""EKF-SLAM: the pure-function core against hand-written Kalman algebra, and the solver's association logic.
+
+Worlds are built here directly with ``slamcli.models`` (truth is kept by the test, never passed to the
+solver).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slamcli.errors import SolverError
+from slamcli.models import motion, observation, se2
+from slamcli.solvers.ekf import (
+    EkfParams,
+    EkfSlam,
+    compose_jacobians,
+    innovation_stats,
+    landmark_init,
+    predict,
+    update,
+)
+from slamcli.types import NoiseSpec, Observations, SlamInputs, Status
+
+
+# ------------------------------------------------------------------------------------------------ world
+def make_world(
+    seed: int,
+    *,
+    T: int = 200,
+    dt: float = 0.1,
+    v: float = 1.0,
+    radius: float = 5.0,
+    landmarks_xy: np.ndarray | None = None,
+    motion_std=(0.05, 0.02),
+    odometry_std=(0.01, 0.01, 0.005),
+    range_std: float = 0.05,
+    bearing_std: float = 0.01,
+    max_range: float = 6.0,
+    clutter_per_step: float = 0.0,
+    report_ids: bool = True,
+):
+    """A robot driving a circle of ``radius`` around a ring of landmarks.
+
+    Returns ``(inputs, truth)`` where ``truth = dict(poses, landmarks, obs_landmark)``; clutter rows have
+    true landmark −1 and reported id −1.
+    """
+    rng = np.random.default_rng(seed)
+    if landmarks_xy is None:
+        ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+        landmarks_xy = np.stack([np.r_[1.4 * radius * np.cos(ang), 0.5 * radius * np.cos(ang + 0.3)],
+                                 np.r_[1.4 * radius * np.sin(ang), 0.5 * radius * np.sin(ang + 0.3)]], -1)
+        landmarks_xy = landmarks_xy + np.array([0.0, radius])
+    x0 = np.array([0.0, 0.0, 0.0])
+    u_cmd = np.tile([v, v / radius], (T, 1))
+    u_true = u_cmd + rng.normal(0, motion_std, size=(T, 2))
+    poses = motion.integrate(x0, u_true, dt)
+    inc_true = motion.odometry_increments(poses)
+    inc_meas = inc_true + rng.normal(0, odometry_std, size=(T, 3))
+    odom = motion.chain_increments(x0, inc_meas)
+    steps, zs, ids = [], [], []
+    for t in range(T + 1):
+        zt = observation.range_bearing(poses[t][None], landmarks_xy)
+        vis = np.flatnonzero(zt[:, 0] <= max_range)
+        for k in vis:
+            z = zt[k] + rng.normal(0, [range_std, bearing_std])
+            steps.append(t)
+            zs.append(z)
+            ids.append(k)
+        for _ in range(rng.poisson(clutter_per_step)):
+            steps.append(t)
+            zs.append([rng.uniform(0.5, max_range), rng.uniform(-np.pi, np.pi)])
+            ids.append(-1)
+    zs = np.asarray(zs, float).reshape(-1, 2)
+    zs[:, 1] = observation.measurement_residual(np.zeros_like(zs), -zs)[:, 1]  # wrap bearings
+    steps = np.asarray(steps, np.int64)
+    ids = np.asarray(ids, np.int64)
+    obs = Observations(
+        step=steps,
+        range_m=zs[:, 0],
+        bearing_rad=zs[:, 1],
+        sensor=np.zeros(len(steps), np.int16),
+        reported_id=ids.copy() if report_ids else np.full(len(steps), -1, np.int64),
+        offsets=Observations.offsets_from_steps(steps, T + 1),
+    )
+    inputs = SlamInputs(
+        dt=dt,
+        timestamps=dt * np.arange(T + 1),
+        x0=x0,
+        controls=u_cmd,
+        odometry_xyt=odom,
+        observations=obs,
+        noise=NoiseSpec(
+            motion_std=np.asarray(motion_std, float),
+            odometry_std=np.asarray(odometry_std, float),
+            range_std=range_std,
+            bearing_std=bearing_std,
+        ),
+        max_range=max_range,
+    )
+    return inputs, dict(poses=poses, landmarks=landmarks_xy, obs_landmark=ids)
+
+
+def association_accuracy(assoc, true_lm):
+    """Fraction of real-landmark rows whose label maps consistently to their true landmark.
+
+    Each estimated label is mapped to the true landmark most of its rows belong to; a row counts as correct
+    when its label is ≥ 0 and maps to its own true landmark (discarded rows count as wrong).
+    """
+    real = true_lm >= 0
+    label_to_true = {}
+    for lab in np.unique(assoc[assoc >= 0]):
+        t = true_lm[assoc == lab]
+        t = t[t >= 0]
+        if t.size:
+            label_to_true[lab] = np.bincount(t).argmax()
+    ok = np.array([a >= 0 and label_to_true.get(a, -2) == t for a, t in zip(assoc[real], true_lm[real])])
+    return float(ok.mean())
+
+
+def random_spd(rng, n):
+    A = rng.normal(size=(n, n))
+    return A @ A.T + n * np.eye(n) * 0.1
+
+
+# ------------------------------------------------------------------------------------------------ core
+def test_predict_matches_full_FPFt_plus_Q():
+    rng = np.random.default_rng(0)
+    n = 3 + 2 * 4
+    x = rng.normal(size=n)
+    P = random_spd(rng, n)
+    u, dt = np.array([0.8, 0.3]), 0.1
+    F, G_u = motion.ddmr_jacobians(x[:3], u, dt)
+    M = np.diag([0.1**2, 0.05**2])
+    Q = G_u @ M @ G_u.T
+    x_new, P_new = predict(x, P, motion.ddmr_step(x[:3], u, dt), F, Q)
+    # hand computation with the full (n, n) block-diagonal F̄ and Q̄
+    Fb = np.eye(n)
+    Fb[:3, :3] = F
+    Qb = np.zeros((n, n))
+    Qb[:3, :3] = Q
+    np.testing.assert_allclose(P_new, Fb @ P @ Fb.T + Qb, rtol=0, atol=1e-12)
+    # and the pose mean is g(x, u) written out: x + dt [v cos θ, v sin θ, ω]
+    th = x[2]
+    np.testing.assert_allclose(x_new[:2], x[:2] + dt * u[0] * np.array([np.cos(th), np.sin(th)]), atol=1e-14)
+    np.testing.assert_allclose(x_new[3:], x[3:])
+    # the input was not modified (pure function)
+    assert not np.shares_memory(P_new, P)
+
+
+def test_compose_jacobians_finite_difference():
+    a, b = np.array([0.3, -1.0, 2.5]), np.array([0.4, 0.1, 0.2])
+    J_a, J_b = compose_jacobians(a, b)
+    eps = 1e-6
+    for J, which in ((J_a, 0), (J_b, 1)):
+        num = np.zeros((3, 3))
+        for k in range(3):
+            d = np.zeros(3)
+            d[k] = eps
+            args_p = (a + d, b) if which == 0 else (a, b + d)
+            args_m = (a - d, b) if which == 0 else (a, b - d)
+            diff = se2.compose(*args_p) - se2.compose(*args_m)
+            num[:, k] = diff / (2 * eps)
+        np.testing.assert_allclose(J, num, atol=1e-8)
+
+
+def test_update_one_landmark_matches_dense_kalman_update():
+    rng = np.random.default_rng(1)
+    L, j = 3, 1
+    n = 3 + 2 * L
+    x = np.r_[0.5, -0.2, 0.3, rng.uniform(2, 6, size=2 * L)]
+    P = random_spd(rng, n) * 0.01
+    R = np.diag([0.1**2, 0.02**2])
+    k = 3 + 2 * j
+    z = observation.range_bearing(x[:3], x[k : k + 2]) + np.array([0.05, -0.01])
+    x_new, P_new, y, S = update(x, P, z, j, R)
+    # dense hand-written Kalman update with the full (2, n) H
+    H_r, H_m = observation.range_bearing_jacobians(x[:3], x[k : k + 2])
+    H = np.zeros((2, n))
+    H[:, :3] = H_r
+    H[:, k : k + 2] = H_m
+    y_ref = z - observation.range_bearing(x[:3], x[k : k + 2])
+    S_ref = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S_ref)
+    x_ref = x + K @ y_ref
+    P_ref = (np.eye(n) - K @ H) @ P  # optimal K: Joseph form equals the short form
+    np.testing.assert_allclose(y, y_ref, atol=1e-14)
+    np.testing.assert_allclose(S, S_ref, rtol=1e-12)
+    np.testing.assert_allclose(x_new, x_ref, atol=1e-12)
+    np.testing.assert_allclose(P_new, P_ref, atol=1e-12)
+
+
+def test_update_wraps_bearing_innovation():
+    # landmark straight behind the robot: predicted bearing −π, measured +π−0.01 ⇒ innovation −0.01... wrapped
+    x = np.array([0.0, 0.0, 0.0, -3.0, 1e-9])
+    P = np.diag([1e-2, 1e-2, 1e-3, 1e-2, 1e-2])
+    z = np.array([3.0, np.pi - 0.01])
+    _, _, y, _ = update(x, P, z, 0, np.diag([0.01, 1e-4]))
+    assert abs(y[1]) < 0.02
+
+
+def test_joseph_form_keeps_P_symmetric_psd_over_many_updates():
+    inputs, _ = make_world(3, T=300, range_std=1e-3, bearing_std=1e-4)  # tiny R: ill-conditioned updates
+    res = EkfSlam(EkfParams()).solve(inputs, rng=np.random.default_rng(0))
+    # rebuild the final full P through the core to check it directly
+    for C in list(res.pose_cov) + list(res.landmark_cov):
+        np.testing.assert_array_equal(C, C.T)
+        assert np.linalg.eigvalsh(C).min() > -1e-12
+    # also the full state covariance of a hand-driven filter
+    rng = np.random.default_rng(2)
+    x = np.r_[0.0, 0.0, 0.1, 3.0, 1.0, 2.0, -2.0]
+    P = random_spd(rng, 7) * 1e-2
+    R = np.diag([1e-6, 1e-8])
+    for _ in range(200):
+        for j in range(2):
+            z = observation.range_bearing(x[:3], x[3 + 2 * j : 5 + 2 * j]) + rng.normal(0, [1e-3, 1e-4])
+            x, P, _, _ = update(x, P, z, j, R)
+    np.testing.assert_array_equal(P, P.T)
+    assert np.linalg.eigvalsh(P).min() > -1e-15
+
+
+def test_landmark_init_matches_linearised_augmentation():
+    rng = np.random.default_rng(4)
+    x = np.r_[1.0, 2.0, 0.7, 4.0, 4.0]
+    P = random_spd(rng, 5) * 0.01
+    z = np.array([2.0, 0.4])
+    R = np.diag([0.1**2, 0.05**2])
+    m, P_mx, P_mm = landmark_init(x, P, z, R)
+    M_x, M_z = observation.inverse_range_bearing_jacobians(x[:3], z)
+    J = np.zeros((2, 5))
+    J[:, :3] = M_x
+    np.testing.assert_allclose(m, observation.inverse_range_bearing(x[:3], z))
+    np.testing.assert_allclose(P_mx, J @ P, atol=1e-15)
+    np.testing.assert_allclose(P_mm, M_x @ P[:3, :3] @ M_x.T + M_z @ R @ M_z.T, atol=1e-15)
+
+
+def test_innovation_stats_matches_per_landmark_loop():
+    rng = np.random.default_rng(5)
+    L = 4
+    x = np.r_[0.2, 0.1, -0.4, rng.uniform(-5, 5, size=2 * L)]
+    P = random_spd(rng, 3 + 2 * L) * 0.05
+    R = np.diag([0.2**2, 0.03**2])
+    z = np.array([3.0, 0.5])
+    d2 = innovation_stats(x, P, z, R)
+    for k in range(L):
+        H_r, H_m = observation.range_bearing_jacobians(x[:3], x[3 + 2 * k : 5 + 2 * k])
+        H = np.zeros((2, 3 + 2 * L))
+        H[:, :3], H[:, 3 + 2 * k : 5 + 2 * k] = H_r, H_m
+        y = observation.measurement_residual(z, observation.range_bearing(x[:3], x[3 + 2 * k : 5 + 2 * k]))
+        S = H @ P @ H.T + R
+        assert d2[k] == pytest.approx(float(y @ np.linalg.solve(S, y)), rel=1e-10)
+
+
+# ------------------------------------------------------------------------------------------------ solver
+def test_solver_shapes_status_and_determinism():
+    inputs, truth = make_world(7, T=150)
+    a = EkfSlam(EkfParams()).solve(inputs, rng=np.random.default_rng(0))
+    b = EkfSlam(EkfParams()).solve(inputs, rng=np.random.default_rng(99))
+    T1, N = inputs.n_poses, len(inputs.observations)
+    L = a.landmarks_xy.shape[0]
+    assert a.status is Status.COMPLETED
+    assert a.poses_xyt.shape == (T1, 3) and a.pose_cov.shape == (T1, 3, 3)
+    assert a.assoc.shape == (N,) and a.landmark_cov.shape == (L, 2, 2)
+    assert L == len(np.unique(truth["obs_landmark"]))
+    np.testing.assert_array_equal(a.poses_xyt, b.poses_xyt)
+    assert np.isfinite(a.extra["mean_nis"])
+    # filtered estimate is much better than dead reckoning on the commanded controls
+    dr = motion.integrate(inputs.x0, inputs.controls, inputs.dt)
+    err_ekf = np.linalg.norm(a.poses_xyt[:, :2] - truth["poses"][:, :2], axis=1).mean()
+    err_dr = np.linalg.norm(dr[:, :2] - truth["poses"][:, :2], axis=1).mean()
+    assert err_ekf < 0.5 * err_dr
+
+
+def test_known_association_requires_reported_ids():
+    inputs, _ = make_world(8, T=20, report_ids=False)
+    with pytest.raises(SolverError, match="reported_id"):
+        EkfSlam(EkfParams(association="known")).solve(inputs, rng=np.random.default_rng(0))
+
+
+def test_bad_params_rejected():
+    with pytest.raises(ValueError, match="new_landmark_prob"):
+        EkfParams(gate_prob=0.99, new_landmark_prob=0.9)
+
+
+@pytest.mark.parametrize("motion_input", ["controls", "odometry"])
+def test_known_and_ml_agree_when_landmarks_far_apart_and_noise_small(motion_input):
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    lms = np.stack([9.0 * np.cos(ang), 5.0 + 9.0 * np.sin(ang)], -1)  # ≥ 6.9 m apart
+    inputs, truth = make_world(
+        9, T=250, landmarks_xy=lms, max_range=8.0, motion_std=(0.01, 0.005), odometry_std=(0.005, 0.005, 0.002),
+        range_std=0.01, bearing_std=0.002,
+    )
+    known = EkfSlam(EkfParams(association="known", motion_input=motion_input)).solve(inputs, rng=np.random.default_rng(0))
+    # a wide gate: with a 0.99 gate ~1 % of the true associations would (correctly) be rejected; far-apart
+    # landmarks keep wrong matches at d² ≫ 50 so a 1−1e-9 gate (d² ≤ 41.4) is still unambiguous
+    ml_params = EkfParams(association="ml", motion_input=motion_input, gate_prob=1 - 1e-9, new_landmark_prob=1 - 1e-12)
+    ml = EkfSlam(ml_params).solve(inputs, rng=np.random.default_rng(0))
+    # same partition of the rows (labels may be permuted only by creation order, which is the same here)
+    np.testing.assert_array_equal(ml.assoc, known.assoc)
+    np.testing.assert_allclose(ml.poses_xyt, known.poses_xyt, atol=1e-12)
+    np.testing.assert_allclose(ml.landmarks_xy, known.landmarks_xy, atol=1e-12)
+    np.testing.assert_allclose(ml.pose_cov, known.pose_cov, atol=1e-15)
+
+
+def test_ml_association_accuracy_on_loop_world():
+    inputs, truth = make_world(10, T=400, report_ids=False)
+    res = EkfSlam(EkfParams(association="ml")).solve(inputs, rng=np.random.default_rng(0))
+    acc = association_accuracy(res.assoc, truth["obs_landmark"])
+    assert acc >= 0.95, acc
+    # and the map has (close to) one landmark per true landmark
+    assert abs(res.landmarks_xy.shape[0] - truth["landmarks"].shape[0]) <= 2
+
+
+def test_provisional_list_reduces_spurious_landmarks_under_clutter():
+    inputs, truth = make_world(11, T=300, report_ids=False, clutter_per_step=1.0)
+    n_true = truth["landmarks"].shape[0]
+    off = EkfSlam(EkfParams(association="ml")).solve(inputs, rng=np.random.default_rng(0))
+    on = EkfSlam(EkfParams(association="ml", provisional=True, provisional_min_hits=3, provisional_window=10)).solve(
+        inputs, rng=np.random.default_rng(0)
+    )
+    spurious_off = off.landmarks_xy.shape[0] - n_true
+    spurious_on = on.landmarks_xy.shape[0] - n_true
+    assert spurious_off > 20  # each clutter row becomes a landmark without the list
+    assert spurious_on < 0.2 * spurious_off
+    assert on.extra["n_provisional_dropped"] > 0
+    # the real landmarks are still found and associated
+    assert association_accuracy(on.assoc, truth["obs_landmark"]) >= 0.9
+
+
+def test_stabilising_noise_inflates_covariance():
+    inputs, _ = make_world(12, T=100)
+    base = EkfSlam(EkfParams()).solve(inputs, rng=np.random.default_rng(0))
+    infl = EkfSlam(EkfParams(obs_std_scale=10.0, stabilising_pose_std=(0.01, 0.01, 0.005))).solve(
+        inputs, rng=np.random.default_rng(0)
+    )
+    tr_b = np.trace(base.pose_cov[1:], axis1=1, axis2=2)
+    tr_i = np.trace(infl.pose_cov[1:], axis1=1, axis2=2)
+    assert np.all(tr_i > tr_b)
+
+
+def test_growing_state_many_landmarks_and_progress():
+    # 60 landmarks force several buffer reallocations; progress is reported up to completion
+    ang = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    lms = np.stack([6.5 * np.cos(ang), 5.0 + 6.5 * np.sin(ang)], -1)
+    inputs, truth = make_world(13, T=320, landmarks_xy=lms, max_range=4.0)
+    calls = []
+    res = EkfSlam(EkfParams()).solve(inputs, rng=np.random.default_rng(0), progress=lambda d, t: calls.append((d, t)))
+    seen = np.unique(truth["obs_landmark"])
+    assert res.landmarks_xy.shape[0] == seen.size
+    assert calls[-1] == (inputs.n_poses, inputs.n_poses)
+    # landmark rows follow creation order: label of the first row of each id
+    err = np.linalg.norm(res.landmarks_xy[res.assoc] - truth["landmarks"][truth["obs_landmark"]], axis=1)
+    assert np.median(err) < 0.2
