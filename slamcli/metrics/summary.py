@@ -77,9 +77,9 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
     s: dict = {
         "solver": result.solver,
         "status": getattr(result.status, "value", str(result.status)),
-        "n_poses": int(len(est_xyt)),
-        "n_landmarks_true": int(len(true_lm)),
-        "n_landmarks_est": int(len(est_lm)),
+        "n_poses": len(est_xyt),
+        "n_landmarks_true": len(true_lm),
+        "n_landmarks_est": len(est_lm),
         "cutoff_m": float(p.cutoff_m),
         "ospa_order": float(p.ospa_order),
         "rpe_delta": float(p.rpe_delta),
@@ -170,7 +170,7 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
     # --- per iteration ---------------------------------------------------------------------------------------
     if result.trace is not None and len(result.trace) and len(true_lm):
         per_it = landmarks.paper_error_per_iteration(result.trace, true_lm, true_path, p.near_path_m)
-        s["n_iterations"] = int(len(per_it))
+        s["n_iterations"] = len(per_it)
         s["per_iteration_note"] = "ok"
     else:
         per_it = pd.DataFrame({c: [] for c in PER_ITERATION_COLUMNS})
