@@ -1,0 +1,378 @@
+"""Dataset files: HDF5 schema ``slamcli.dataset`` version 1 (full description in ``docs/schema.md``).
+
+Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``G`` GPS fixes)::
+
+    /                      @schema="slamcli.dataset" @schema_version=1 @dt @seed @scenario
+                           @scenario_params_json @sensor_json @robot_json @metadata_json
+                           @slamcli_version @created_utc @has_truth
+    /inputs/               what a solver may see (SlamInputs)
+        timestamps (T+1,)  x0 (3,)  controls (T,2)  odometry_xyt (T+1,3)  max_range ()
+        observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
+        noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
+        gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
+    /truth/                simulator ground truth, read by metrics only (GroundTruth)
+        poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from slamcli.errors import SchemaError
+from slamcli.io.atomic import atomic_path
+from slamcli.io.schema import (
+    DATASET_SCHEMA,
+    SCHEMA_VERSION,
+    Reader,
+    open_for_read,
+    to_json,
+    utc_now,
+    write_array,
+)
+from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
+
+#: metadata keys promoted to their own root attributes (dicts as ``<key>_json``); everything in
+#: ``Dataset.metadata`` also round-trips through ``@metadata_json``.
+PROMOTED_KEYS = ("seed", "scenario", "scenario_params", "sensor", "robot")
+
+_BEARING_TOL = 1e-9  # bearings must lie in [-pi, pi] up to rounding
+
+
+# --------------------------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------------------------
+def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
+    """Write ``dataset`` to ``path`` atomically (temp file in the same directory + ``os.replace``).
+
+    Arrays are stored in canonical dtypes (float64; int64 indices; int16 sensor ids) so a read gives
+    bit-identical arrays. Returns the final path.
+    """
+    import slamcli
+
+    inp = dataset.inputs
+    obs = inp.observations
+    meta = dict(dataset.metadata or {})
+    final = Path(path)
+    try:
+        metadata_json = to_json(meta)
+    except (TypeError, ValueError) as exc:
+        raise SchemaError(f"{final}: metadata: not JSON-serialisable ({exc})") from None
+    with atomic_path(final) as tmp, h5py.File(tmp, "w") as f:
+        a = f.attrs
+        a["schema"] = DATASET_SCHEMA
+        a["schema_version"] = SCHEMA_VERSION
+        a["slamcli_version"] = slamcli.__version__
+        a["created_utc"] = utc_now()
+        a["dt"] = float(inp.dt)
+        a["has_truth"] = dataset.truth is not None
+        a["metadata_json"] = metadata_json
+        if meta.get("seed") is not None:
+            a["seed"] = int(meta["seed"])
+        if meta.get("scenario") is not None:
+            a["scenario"] = str(meta["scenario"])
+        for key in ("scenario_params", "sensor", "robot"):
+            if meta.get(key) is not None:
+                a[f"{key}_json"] = to_json(meta[key])
+
+        g = f.create_group("inputs")
+        g.attrs["doc"] = "everything a solver may see (slamcli.types.SlamInputs)"
+        write_array(g, "timestamps", np.asarray(inp.timestamps, np.float64), units="s", frame="-",
+                    doc="time of each pose (T+1,)")
+        write_array(g, "x0", np.asarray(inp.x0, np.float64), units="m,m,rad", frame="world",
+                    doc="known start pose [x, y, theta] (3,)")
+        write_array(g, "controls", np.asarray(inp.controls, np.float64).reshape(-1, 2),
+                    units="m/s,rad/s", frame="body",
+                    doc="commanded [v, omega] applied from pose t to t+1 (T,2)")
+        write_array(g, "odometry_xyt", np.asarray(inp.odometry_xyt, np.float64).reshape(-1, 3),
+                    units="m,m,rad", frame="odom",
+                    doc="encoder dead-reckoning poses; only increments are trusted (T+1,3)")
+        write_array(g, "max_range", np.float64(inp.max_range), units="m", frame="-",
+                    doc="sensor max range (inf = unlimited)")
+
+        go = g.create_group("observations")
+        go.attrs["doc"] = "flat observation table in time order; rows of pose t are offsets[t]:offsets[t+1]"
+        write_array(go, "step", np.asarray(obs.step, np.int64), units="-", frame="-",
+                    doc="pose index t of each observation (N,)")
+        write_array(go, "range_m", np.asarray(obs.range_m, np.float64), units="m", frame="sensor",
+                    doc="measured range (N,)")
+        write_array(go, "bearing_rad", np.asarray(obs.bearing_rad, np.float64), units="rad",
+                    frame="body", doc="measured bearing, 0 = ahead, CCW positive, wrapped [-pi, pi) (N,)")
+        write_array(go, "sensor", np.asarray(obs.sensor, np.int16), units="-", frame="-",
+                    doc="index of the sensor that produced the row (N,)")
+        write_array(go, "reported_id", np.asarray(obs.reported_id, np.int64), units="-", frame="-",
+                    doc="landmark id reported by the sensor itself, -1 = none (N,)")
+        write_array(go, "offsets", np.asarray(obs.offsets, np.int64), units="-", frame="-",
+                    doc="CSR row offsets per pose (T+2,)")
+
+        gn = g.create_group("noise")
+        gn.attrs["doc"] = "noise standard deviations a solver may assume (slamcli.types.NoiseSpec)"
+        n = inp.noise
+        write_array(gn, "motion_std", np.asarray(n.motion_std, np.float64).reshape(2), units="m/s,rad/s",
+                    frame="body", doc="[sigma_v, sigma_omega] actuation noise (2,)")
+        write_array(gn, "odometry_std", np.asarray(n.odometry_std, np.float64).reshape(3),
+                    units="m,m,rad", frame="body", doc="per-step odometry increment noise (3,)")
+        write_array(gn, "range_std", np.float64(n.range_std), units="m", frame="sensor", doc="sigma_r")
+        write_array(gn, "bearing_std", np.float64(n.bearing_std), units="rad", frame="sensor", doc="sigma_b")
+
+        if len(inp.gps_step) > 0:
+            write_array(g, "gps_step", np.asarray(inp.gps_step, np.int64), units="-", frame="-",
+                        doc="pose index of each GPS fix (G,)")
+            write_array(g, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), units="m",
+                        frame="world", doc="GPS position fixes (G,2)")
+            write_array(g, "gps_std", np.float64(inp.gps_std), units="m", frame="world",
+                        doc="sigma of one GPS fix")
+
+        if dataset.truth is not None:
+            tr = dataset.truth
+            gt = f.create_group("truth")
+            gt.attrs["doc"] = "ground truth (slamcli.types.GroundTruth); never given to solvers"
+            write_array(gt, "poses_xyt", np.asarray(tr.poses_xyt, np.float64).reshape(-1, 3),
+                        units="m,m,rad", frame="world", doc="true poses (T+1,3)")
+            write_array(gt, "landmarks_xy", np.asarray(tr.landmarks_xy, np.float64).reshape(-1, 2),
+                        units="m", frame="world", doc="true landmark positions (L,2)")
+            write_array(gt, "obs_landmark", np.asarray(tr.obs_landmark, np.int64), units="-", frame="-",
+                        doc="true landmark index of each observation row, -1 = clutter (N,)")
+    return final
+
+
+# --------------------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------------------
+def read_dataset(path: str | os.PathLike, *, with_truth: bool = True) -> Dataset:
+    """Read and fully validate a dataset file.
+
+    Parameters
+    ----------
+    path : dataset file (schema ``slamcli.dataset`` v1).
+    with_truth : when False, ``/truth`` is not read and ``Dataset.truth`` is None.
+
+    Raises
+    ------
+    SchemaError
+        one line ``<file>: <group/field>: <problem>`` for any missing/corrupt/inconsistent content.
+    """
+    with open_for_read(path) as r:
+        r.check_schema(DATASET_SCHEMA)
+        dt = r.finite_attr("/", "dt", positive=True)
+        metadata = r.json_attr("/", "metadata_json", default={})
+        if not isinstance(metadata, dict):
+            raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
+        has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
+        inputs = _read_inputs(r, dt)
+        truth = None
+        if with_truth and has_truth:
+            truth = _read_truth(r, inputs)
+    return Dataset(inputs=inputs, truth=truth, metadata=metadata)
+
+
+def _read_inputs(r: Reader, dt: float) -> SlamInputs:
+    r.group("inputs")
+    ts = r.array("inputs/timestamps", dtype="f", shape=(None,))
+    n_poses = ts.shape[0]
+    if n_poses < 1:
+        raise r.fail("inputs/timestamps", "needs at least one pose (T+1 >= 1)")
+    if n_poses > 1 and not (np.diff(ts) > 0).all():
+        k = int(np.argmax(~(np.diff(ts) > 0)))
+        raise r.fail("inputs/timestamps", f"not strictly increasing at index {k + 1}")
+    T = n_poses - 1
+    x0 = r.array("inputs/x0", dtype="f", shape=(3,))
+    controls = r.array("inputs/controls", dtype="f", shape=(None, 2))
+    r.expect_len("inputs/controls", controls, T, "T = len(timestamps) - 1")
+    odo = r.array("inputs/odometry_xyt", dtype="f", shape=(None, 3))
+    r.expect_len("inputs/odometry_xyt", odo, n_poses, "T+1 = len(timestamps)")
+    max_range = float(r.array("inputs/max_range", dtype="f", shape=(), finite=False))
+    if np.isnan(max_range) or not max_range > 0:
+        raise r.fail("inputs/max_range", f"must be > 0 (inf allowed), got {max_range}")
+
+    observations = _read_observations(r, n_poses)
+
+    r.group("inputs/noise")
+    motion_std = r.array("inputs/noise/motion_std", dtype="f", shape=(2,))
+    odometry_std = r.array("inputs/noise/odometry_std", dtype="f", shape=(3,))
+    range_std = float(r.array("inputs/noise/range_std", dtype="f", shape=()))
+    bearing_std = float(r.array("inputs/noise/bearing_std", dtype="f", shape=()))
+    for name, v in (("motion_std", motion_std), ("odometry_std", odometry_std), ("range_std", range_std),
+                    ("bearing_std", bearing_std)):
+        if (np.asarray(v) < 0).any():
+            raise r.fail(f"inputs/noise/{name}", f"standard deviations must be >= 0, got {v}")
+    noise = NoiseSpec(motion_std=motion_std, odometry_std=odometry_std, range_std=range_std,
+                      bearing_std=bearing_std)
+
+    gps_names = [n for n in ("gps_step", "gps_xy", "gps_std") if r.has(f"inputs/{n}")]
+    gps_step = np.zeros(0, dtype=np.int64)
+    gps_xy = np.zeros((0, 2))
+    gps_std = 0.0
+    if gps_names:
+        for n in ("gps_step", "gps_xy", "gps_std"):
+            if n not in gps_names:
+                raise r.fail(f"inputs/{n}", f"missing dataset (required together with {', '.join(gps_names)})")
+        gps_step = r.array("inputs/gps_step", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+        gps_xy = r.array("inputs/gps_xy", dtype="f", shape=(None, 2))
+        r.expect_len("inputs/gps_xy", gps_xy, gps_step.shape[0], "len(gps_step)")
+        gps_std = float(r.array("inputs/gps_std", dtype="f", shape=()))
+        if gps_std < 0:
+            raise r.fail("inputs/gps_std", f"must be >= 0, got {gps_std}")
+        _check_index_range(r, "inputs/gps_step", gps_step, 0, T)
+
+    return SlamInputs(
+        dt=dt,
+        timestamps=ts,
+        x0=x0,
+        controls=controls,
+        odometry_xyt=odo,
+        observations=observations,
+        noise=noise,
+        max_range=max_range,
+        gps_step=gps_step,
+        gps_xy=gps_xy,
+        gps_std=gps_std,
+    )
+
+
+def _check_index_range(r: Reader, name: str, idx: np.ndarray, lo: int, hi: int) -> None:
+    """All entries of ``idx`` must lie in ``[lo, hi]``."""
+    if idx.size:
+        bad = np.flatnonzero((idx < lo) | (idx > hi))
+        if bad.size:
+            k = int(bad[0])
+            raise r.fail(name, f"value {int(idx[k])} at row {k} out of range [{lo}, {hi}]")
+
+
+def _read_observations(r: Reader, n_poses: int) -> Observations:
+    g = "inputs/observations"
+    r.group(g)
+    step = r.array(f"{g}/step", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    N = step.shape[0]
+    range_m = r.array(f"{g}/range_m", dtype="f", shape=(None,))
+    bearing = r.array(f"{g}/bearing_rad", dtype="f", shape=(None,))
+    sensor = r.array(f"{g}/sensor", dtype="i", shape=(None,)).astype(np.int16, copy=False)
+    reported = r.array(f"{g}/reported_id", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    offsets = r.array(f"{g}/offsets", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    for name, arr in (("range_m", range_m), ("bearing_rad", bearing), ("sensor", sensor),
+                      ("reported_id", reported)):
+        r.expect_len(f"{g}/{name}", arr, N, f"len({g}/step)")
+    r.expect_len(f"{g}/offsets", offsets, n_poses + 1, "T+2 = len(timestamps) + 1")
+    if N and (range_m < 0).any():
+        k = int(np.argmax(range_m < 0))
+        raise r.fail(f"{g}/range_m", f"negative range {range_m[k]} at row {k}")
+    if N and (np.abs(bearing) > np.pi + _BEARING_TOL).any():
+        k = int(np.argmax(np.abs(bearing) > np.pi + _BEARING_TOL))
+        raise r.fail(f"{g}/bearing_rad", f"bearing {bearing[k]} at row {k} outside [-pi, pi] (radians?)")
+    if N and (sensor < 0).any():
+        k = int(np.argmax(sensor < 0))
+        raise r.fail(f"{g}/sensor", f"negative sensor index {int(sensor[k])} at row {k}")
+    if N and (reported < -1).any():
+        k = int(np.argmax(reported < -1))
+        raise r.fail(f"{g}/reported_id", f"value {int(reported[k])} at row {k} below -1")
+    _check_index_range(r, f"{g}/step", step, 0, n_poses - 1)
+    if offsets[0] != 0:
+        raise r.fail(f"{g}/offsets", f"must start at 0, got {int(offsets[0])}")
+    d = np.diff(offsets)
+    if (d < 0).any():
+        k = int(np.argmax(d < 0))
+        raise r.fail(f"{g}/offsets", f"not monotone: offsets[{k + 1}]={int(offsets[k + 1])} < "
+                                     f"offsets[{k}]={int(offsets[k])}")
+    if offsets[-1] != N:
+        raise r.fail(f"{g}/offsets", f"last offset {int(offsets[-1])} != number of observations {N}")
+    expected = Observations.offsets_from_steps(step, n_poses)
+    if not np.array_equal(expected, offsets):
+        k = int(np.argmax(expected != offsets))
+        raise r.fail(f"{g}/offsets", f"do not match the step column (first mismatch at pose {max(k - 1, 0)}; "
+                                     "steps must be sorted and counted per pose)")
+    return Observations(step=step, range_m=range_m, bearing_rad=bearing, sensor=sensor, reported_id=reported,
+                        offsets=offsets)
+
+
+def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
+    r.group("truth")
+    poses = r.array("truth/poses_xyt", dtype="f", shape=(None, 3))
+    r.expect_len("truth/poses_xyt", poses, inputs.n_poses, "T+1 = len(inputs/timestamps)")
+    lms = r.array("truth/landmarks_xy", dtype="f", shape=(None, 2))
+    obs_lm = r.array("truth/obs_landmark", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len("truth/obs_landmark", obs_lm, len(inputs.observations), "number of observations")
+    _check_index_range(r, "truth/obs_landmark", obs_lm, -1, lms.shape[0] - 1)
+    return GroundTruth(poses_xyt=poses, landmarks_xy=lms, obs_landmark=obs_lm)
+
+
+def read_header(path: str | os.PathLike) -> dict[str, Any]:
+    """Root attributes of a slamcli dataset or result file (schema name/version checked loosely).
+
+    Returns a dict of plain Python values (JSON attributes decoded); used by ``slamcli info``.
+    """
+    import json
+
+    with open_for_read(path) as r:
+        out: dict[str, Any] = {}
+        for key in r.f.attrs:
+            v = r.f.attrs[key]
+            if isinstance(v, bytes):
+                v = v.decode("utf-8", "replace")
+            if isinstance(v, np.generic):
+                v = v.item()
+            if key.endswith("_json") and isinstance(v, str):
+                try:
+                    v = json.loads(v)
+                except json.JSONDecodeError:
+                    raise r.fail(f"@{key}", "invalid JSON") from None
+            out[key] = v
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# content hash
+# --------------------------------------------------------------------------------------------------------
+def _feed(h: hashlib._Hash, name: str, arr: Any, dtype: Any) -> None:
+    a = np.ascontiguousarray(np.asarray(arr, dtype=dtype))
+    a = a.astype(a.dtype.newbyteorder("<"), copy=False)
+    h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
+    h.update(a.tobytes())
+
+
+def dataset_hash(dataset: Dataset) -> str:
+    """``sha256:<hex>`` over the canonical input and truth arrays and key metadata (not file bytes).
+
+    Two files with the same content (e.g. the same simulation written twice, or a dataset before and after a
+    write/read round-trip) get the same hash; changing any input value, the truth, ``dt``, the noise spec,
+    ``max_range``, the GPS fixes, or metadata ``seed``/``scenario`` changes it. Creation time and
+    version attributes are deliberately left out.
+    """
+    inp = dataset.inputs
+    obs = inp.observations
+    h = hashlib.sha256()
+    h.update(f"{DATASET_SCHEMA}/v{SCHEMA_VERSION}|".encode())
+    _feed(h, "dt", inp.dt, np.float64)
+    _feed(h, "timestamps", inp.timestamps, np.float64)
+    _feed(h, "x0", inp.x0, np.float64)
+    _feed(h, "controls", np.asarray(inp.controls, np.float64).reshape(-1, 2), np.float64)
+    _feed(h, "odometry_xyt", np.asarray(inp.odometry_xyt, np.float64).reshape(-1, 3), np.float64)
+    _feed(h, "max_range", inp.max_range, np.float64)
+    _feed(h, "obs.step", obs.step, np.int64)
+    _feed(h, "obs.range_m", obs.range_m, np.float64)
+    _feed(h, "obs.bearing_rad", obs.bearing_rad, np.float64)
+    _feed(h, "obs.sensor", obs.sensor, np.int16)
+    _feed(h, "obs.reported_id", obs.reported_id, np.int64)
+    _feed(h, "obs.offsets", obs.offsets, np.int64)
+    n = inp.noise
+    _feed(h, "noise.motion_std", n.motion_std, np.float64)
+    _feed(h, "noise.odometry_std", n.odometry_std, np.float64)
+    _feed(h, "noise.range_std", n.range_std, np.float64)
+    _feed(h, "noise.bearing_std", n.bearing_std, np.float64)
+    _feed(h, "gps_step", inp.gps_step, np.int64)
+    _feed(h, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), np.float64)
+    _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
+    if dataset.truth is not None:
+        t = dataset.truth
+        _feed(h, "truth.poses_xyt", np.asarray(t.poses_xyt, np.float64).reshape(-1, 3), np.float64)
+        _feed(h, "truth.landmarks_xy", np.asarray(t.landmarks_xy, np.float64).reshape(-1, 2), np.float64)
+        _feed(h, "truth.obs_landmark", t.obs_landmark, np.int64)
+    else:
+        h.update(b"no-truth|")
+    meta = dataset.metadata or {}
+    h.update(to_json({k: meta.get(k) for k in ("seed", "scenario")}).encode())
+    return "sha256:" + h.hexdigest()

@@ -1,0 +1,175 @@
+"""Result files: HDF5 schema ``slamcli.result`` version 1 (full description in ``docs/schema.md``).
+
+Layout (``T+1`` poses, ``L'`` estimated landmarks, ``N`` observations, ``K`` trace iterations)::
+
+    /            @schema="slamcli.result" @schema_version=1 @solver @solver_version @status @message
+                 @wall_time_s @params_json @dataset_hash @dataset_path @extra_json @slamcli_version
+                 @created_utc
+    poses_xyt (T+1,3)   landmarks_xy (L',2)   assoc (N,)   [pose_cov (T+1,3,3)]  [landmark_cov (L',2,2)]
+    /trace/      (iterative solvers only) objective (K,) map_change (K,) time_s (K,)
+                 landmarks_xy (M,2) landmark_offsets (K+1,)
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from slamcli.errors import SchemaError
+from slamcli.io.atomic import atomic_path
+from slamcli.io.schema import (
+    RESULT_SCHEMA,
+    SCHEMA_VERSION,
+    Reader,
+    open_for_read,
+    to_json,
+    utc_now,
+    write_array,
+)
+from slamcli.types import IterationTrace, SolverResult, Status
+
+
+def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
+    """Write ``result`` atomically (temp file in the same directory + ``os.replace``); returns the path.
+
+    ``result.extra["dataset_path"]``, when present, is also written as the root attribute ``dataset_path``.
+    """
+    import slamcli
+
+    final = Path(path)
+    try:
+        params_json = to_json(result.params)
+        extra_json = to_json(result.extra)
+    except (TypeError, ValueError) as exc:
+        raise SchemaError(f"{final}: params/extra: not JSON-serialisable ({exc})") from None
+    status = Status(result.status)
+    with atomic_path(final) as tmp, h5py.File(tmp, "w") as f:
+        a = f.attrs
+        a["schema"] = RESULT_SCHEMA
+        a["schema_version"] = SCHEMA_VERSION
+        a["slamcli_version"] = slamcli.__version__
+        a["created_utc"] = utc_now()
+        a["solver"] = str(result.solver)
+        a["solver_version"] = str(result.solver_version)
+        a["status"] = status.value
+        a["message"] = str(result.message)
+        a["wall_time_s"] = float(result.wall_time_s)
+        a["params_json"] = params_json
+        a["dataset_hash"] = str(result.dataset_hash)
+        a["dataset_path"] = str(result.extra.get("dataset_path", ""))
+        a["extra_json"] = extra_json
+        write_array(f, "poses_xyt", np.asarray(result.poses_xyt, np.float64).reshape(-1, 3),
+                    units="m,m,rad", frame="world", doc="estimated poses (T+1,3)")
+        write_array(f, "landmarks_xy", np.asarray(result.landmarks_xy, np.float64).reshape(-1, 2),
+                    units="m", frame="world", doc="estimated landmarks (L',2)")
+        write_array(f, "assoc", np.asarray(result.assoc, np.int64), units="-", frame="-",
+                    doc="row of landmarks_xy given to each observation, -1 = none (N,)")
+        if result.pose_cov is not None:
+            write_array(f, "pose_cov", np.asarray(result.pose_cov, np.float64).reshape(-1, 3, 3),
+                        units="m^2,rad^2 (block)", frame="world",
+                        doc="marginal pose covariances over [x, y, theta] (T+1,3,3)")
+        if result.landmark_cov is not None:
+            write_array(f, "landmark_cov", np.asarray(result.landmark_cov, np.float64).reshape(-1, 2, 2),
+                        units="m^2", frame="world", doc="marginal landmark covariances (L',2,2)")
+        if result.trace is not None:
+            tr = result.trace
+            g = f.create_group("trace")
+            g.attrs["doc"] = "per-iteration record; iteration 0 = initialisation"
+            write_array(g, "objective", np.asarray(tr.objective, np.float64), units="-", frame="-",
+                        doc="objective / energy after each iteration (K,)")
+            write_array(g, "map_change", np.asarray(tr.map_change, np.float64), units="m", frame="world",
+                        doc="mean landmark displacement from the previous iteration (K,)")
+            write_array(g, "time_s", np.asarray(tr.time_s, np.float64), units="s", frame="-",
+                        doc="wall time of each iteration (K,)")
+            write_array(g, "landmarks_xy", np.asarray(tr.landmarks_xy, np.float64).reshape(-1, 2),
+                        units="m", frame="world", doc="landmarks of all iterations, flattened (M,2)")
+            write_array(g, "landmark_offsets", np.asarray(tr.landmark_offsets, np.int64), units="-",
+                        frame="-", doc="iteration k owns rows offsets[k]:offsets[k+1] (K+1,)")
+    return final
+
+
+def read_result(path: str | os.PathLike) -> SolverResult:
+    """Read and validate a result file; one-line :class:`SchemaError` naming the file and field otherwise.
+
+    Estimates must be finite unless ``status == "failed"`` (a failed solver may leave NaN placeholders).
+    """
+    with open_for_read(path) as r:
+        r.check_schema(RESULT_SCHEMA)
+        status_text = r.attr("/", "status", str)
+        try:
+            status = Status(status_text)
+        except ValueError:
+            known = ", ".join(s.value for s in Status)
+            raise r.fail("@status", f"unknown status {status_text!r} (known: {known})") from None
+        finite = status is not Status.FAILED
+        solver = r.attr("/", "solver", str)
+        solver_version = r.attr("/", "solver_version", str)
+        message = r.attr("/", "message", str)
+        wall = r.finite_attr("/", "wall_time_s")
+        if wall < 0:
+            raise r.fail("@wall_time_s", f"must be >= 0, got {wall}")
+        params = r.json_attr("/", "params_json")
+        if not isinstance(params, dict):
+            raise r.fail("@params_json", f"expected a JSON object, got {type(params).__name__}")
+        extra = r.json_attr("/", "extra_json", default={})
+        if not isinstance(extra, dict):
+            raise r.fail("@extra_json", f"expected a JSON object, got {type(extra).__name__}")
+        dataset_hash = r.attr("/", "dataset_hash", str)
+
+        poses = r.array("poses_xyt", dtype="f", shape=(None, 3), finite=finite)
+        lms = r.array("landmarks_xy", dtype="f", shape=(None, 2), finite=finite)
+        assoc = r.array("assoc", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+        L = lms.shape[0]
+        if assoc.size:
+            bad = np.flatnonzero((assoc < -1) | (assoc >= L))
+            if bad.size:
+                k = int(bad[0])
+                raise r.fail("assoc", f"label {int(assoc[k])} at row {k} out of range [-1, {L - 1}]")
+        pose_cov = None
+        if r.has("pose_cov"):
+            pose_cov = r.array("pose_cov", dtype="f", shape=(None, 3, 3), finite=finite)
+            r.expect_len("pose_cov", pose_cov, poses.shape[0], "len(poses_xyt)")
+        landmark_cov = None
+        if r.has("landmark_cov"):
+            landmark_cov = r.array("landmark_cov", dtype="f", shape=(None, 2, 2), finite=finite)
+            r.expect_len("landmark_cov", landmark_cov, L, "len(landmarks_xy)")
+        trace = _read_trace(r) if r.has("trace") else None
+    return SolverResult(
+        solver=solver,
+        solver_version=solver_version,
+        params=params,
+        status=status,
+        message=message,
+        poses_xyt=poses,
+        landmarks_xy=lms,
+        assoc=assoc,
+        pose_cov=pose_cov,
+        landmark_cov=landmark_cov,
+        trace=trace,
+        wall_time_s=wall,
+        dataset_hash=dataset_hash,
+        extra=extra,
+    )
+
+
+def _read_trace(r: Reader) -> IterationTrace:
+    r.group("trace")
+    obj = r.array("trace/objective", dtype="f", shape=(None,), finite=False)
+    K = obj.shape[0]
+    if np.isnan(obj).any():
+        raise r.fail("trace/objective", f"NaN at iteration {int(np.argmax(np.isnan(obj)))}")
+    change = r.array("trace/map_change", dtype="f", shape=(None,))
+    r.expect_len("trace/map_change", change, K, "len(trace/objective)")
+    time_s = r.array("trace/time_s", dtype="f", shape=(None,))
+    r.expect_len("trace/time_s", time_s, K, "len(trace/objective)")
+    lms = r.array("trace/landmarks_xy", dtype="f", shape=(None, 2))
+    offs = r.array("trace/landmark_offsets", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len("trace/landmark_offsets", offs, K + 1, "len(trace/objective) + 1")
+    if offs[0] != 0 or (np.diff(offs) < 0).any() or offs[-1] != lms.shape[0]:
+        raise r.fail("trace/landmark_offsets", f"must rise monotonically from 0 to {lms.shape[0]}, got "
+                                               f"[{int(offs[0])} .. {int(offs[-1])}]")
+    return IterationTrace(objective=obj, map_change=change, time_s=time_s, landmarks_xy=lms,
+                          landmark_offsets=offs)

@@ -1,0 +1,232 @@
+"""Shared pieces of the slamcli HDF5 schemas: names, versions, JSON attributes and a validating reader.
+
+Every schema violation becomes a :class:`~slamcli.errors.SchemaError` with ONE line of the form
+``<file>: <group/field>: <what is wrong>``. See ``docs/schema.md`` for the full layout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import math
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from slamcli.errors import SchemaError
+
+DATASET_SCHEMA = "slamcli.dataset"
+RESULT_SCHEMA = "slamcli.result"
+SCHEMA_VERSION = 1
+
+#: compression for every non-scalar, non-empty dataset (portable gzip + byte shuffle, see docs/schema.md)
+GZIP_LEVEL = 4
+#: chunk length along the first (time / row) axis
+CHUNK_ROWS = 16384
+
+
+def json_default(obj: Any) -> Any:
+    """``json.dumps`` fallback for numpy scalars/arrays, enums, paths and tuples-in-dataclasses."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if hasattr(obj, "value") and not isinstance(obj, (int, float, str, bool)):  # enum.Enum
+        return obj.value
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def to_json(obj: Any) -> str:
+    """Canonical JSON (sorted keys); ``inf``/``nan`` floats are kept (Python's json extension)."""
+    return json.dumps(obj, sort_keys=True, default=json_default)
+
+
+def utc_now() -> str:
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, frame: str, doc: str) -> None:
+    """Write one dataset with ``units``/``frame``/``doc`` attributes; gzip+shuffle, chunked along axis 0."""
+    data = np.asarray(data)
+    if data.ndim:
+        data = np.ascontiguousarray(data)  # (ascontiguousarray would turn a scalar into shape (1,))
+    kwargs: dict[str, Any] = {}
+    if data.ndim >= 1 and data.size > 0:
+        chunks = (min(data.shape[0], CHUNK_ROWS),) + data.shape[1:]
+        kwargs = {"chunks": chunks, "compression": "gzip", "compression_opts": GZIP_LEVEL, "shuffle": True}
+    ds = group.create_dataset(name, data=data, **kwargs)
+    ds.attrs["units"] = units
+    ds.attrs["frame"] = frame
+    ds.attrs["doc"] = doc
+
+
+def check_path(path: str | os.PathLike) -> Path:
+    """Raise a one-line SchemaError for a missing path, a directory, or a non-HDF5 file."""
+    p = Path(path)
+    if not p.exists():
+        raise SchemaError(f"{p}: no such file")
+    if p.is_dir():
+        raise SchemaError(f"{p}: is a directory, expected an HDF5 file")
+    try:
+        ok = h5py.is_hdf5(str(p))
+    except OSError as exc:
+        raise SchemaError(f"{p}: cannot read file ({_one_line(exc)})") from None
+    if not ok:
+        raise SchemaError(f"{p}: not an HDF5 file")
+    return p
+
+
+def _one_line(exc: BaseException) -> str:
+    s = str(exc).strip().splitlines()
+    return (s[0] if s else type(exc).__name__)[:200]
+
+
+class Reader:
+    """Validating accessor over an open HDF5 file; every failure names the file and the field."""
+
+    def __init__(self, f: h5py.File, path: Path) -> None:
+        self.f = f
+        self.path = path
+
+    def fail(self, where: str, what: str) -> SchemaError:
+        return SchemaError(f"{self.path}: {where}: {what}")
+
+    # -- attributes ---------------------------------------------------------------------------------
+    def attr(self, obj_path: str, key: str, kind: type | tuple[type, ...], *, default: Any = ...) -> Any:
+        obj = self.group(obj_path) if obj_path != "/" else self.f
+        where = f"{obj_path.rstrip('/')}@{key}" if obj_path != "/" else f"@{key}"
+        if key not in obj.attrs:
+            if default is not ...:
+                return default
+            raise self.fail(where, "missing attribute")
+        try:
+            v = obj.attrs[key]
+        except Exception as exc:  # noqa: BLE001 - corrupt attribute storage
+            raise self.fail(where, f"unreadable attribute ({_one_line(exc)})") from None
+        if isinstance(v, bytes):
+            v = v.decode("utf-8", "replace")
+        if isinstance(v, np.generic):
+            v = v.item()
+        if kind is float and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        if not isinstance(v, kind) or (isinstance(v, bool) and kind in (int, float)):
+            want = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
+            raise self.fail(where, f"expected {want}, got {type(v).__name__} {v!r}"[:200])
+        return v
+
+    def json_attr(self, obj_path: str, key: str, *, default: Any = ...) -> Any:
+        if default is ...:
+            text = self.attr(obj_path, key, str)
+        else:
+            text = self.attr(obj_path, key, str, default=None)
+            if text is None:
+                return default
+        where = f"@{key}" if obj_path == "/" else f"{obj_path}@{key}"
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise self.fail(where, f"invalid JSON ({exc.msg} at char {exc.pos})") from None
+
+    def finite_attr(self, obj_path: str, key: str, *, positive: bool = False, allow_inf: bool = False) -> float:
+        v = self.attr(obj_path, key, float)
+        where = f"@{key}" if obj_path == "/" else f"{obj_path}@{key}"
+        if math.isnan(v) or (math.isinf(v) and not allow_inf):
+            raise self.fail(where, f"must be finite, got {v}")
+        if positive and not v > 0:
+            raise self.fail(where, f"must be > 0, got {v}")
+        return v
+
+    def check_schema(self, expected: str) -> None:
+        schema = self.attr("/", "schema", str)
+        if schema != expected:
+            raise self.fail("@schema", f"expected {expected!r}, got {schema!r}")
+        version = self.attr("/", "schema_version", int)
+        if version != SCHEMA_VERSION:
+            raise self.fail(
+                "@schema_version", f"unsupported version {version} (this slamcli reads version {SCHEMA_VERSION})"
+            )
+
+    # -- groups / datasets --------------------------------------------------------------------------
+    def has(self, name: str) -> bool:
+        try:
+            return name in self.f
+        except Exception:  # noqa: BLE001
+            return False
+
+    def group(self, name: str) -> h5py.Group:
+        try:
+            g = self.f[name]
+        except KeyError:
+            raise self.fail(name, "missing group") from None
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail(name, f"unreadable ({_one_line(exc)})") from None
+        if not isinstance(g, h5py.Group):
+            raise self.fail(name, "expected a group, found a dataset")
+        return g
+
+    def array(
+        self,
+        name: str,
+        *,
+        dtype: str,
+        shape: tuple[int | None, ...],
+        finite: bool = True,
+    ) -> np.ndarray:
+        """Read ``name`` fully; check kind (``"f"`` float / ``"i"`` integer), rank/shape and finiteness.
+
+        ``shape`` entries of None are free; integers must match.
+        """
+        try:
+            obj = self.f[name]
+        except KeyError:
+            raise self.fail(name, "missing dataset") from None
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail(name, f"unreadable ({_one_line(exc)})") from None
+        if not isinstance(obj, h5py.Dataset):
+            raise self.fail(name, "expected a dataset, found a group")
+        try:
+            data = obj[()]
+        except Exception as exc:  # noqa: BLE001 - truncated/corrupt chunks surface here
+            raise self.fail(name, f"unreadable data, file truncated or corrupt ({_one_line(exc)})") from None
+        data = np.asarray(data)
+        kind = data.dtype.kind
+        if dtype == "f" and kind != "f":
+            raise self.fail(name, f"expected floating-point data, got dtype {data.dtype}")
+        if dtype == "i" and kind not in "iu":
+            raise self.fail(name, f"expected integer data, got dtype {data.dtype}")
+        if len(shape) != data.ndim or any(s is not None and s != d for s, d in zip(shape, data.shape)):
+            want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+            raise self.fail(name, f"expected shape {want}, got {data.shape}")
+        if finite and kind == "f" and data.size and not np.isfinite(data).all():
+            bad = np.argwhere(~np.isfinite(data))[0]
+            idx = tuple(int(i) for i in bad)
+            raise self.fail(name, f"non-finite value {data[idx]} at index {idx if len(idx) > 1 else idx[0]}")
+        return data
+
+    def expect_len(self, name: str, data: np.ndarray, n: int, what: str) -> None:
+        if data.shape[0] != n:
+            raise self.fail(name, f"length {data.shape[0]} does not match {what} ({n})")
+
+
+@contextlib.contextmanager
+def open_for_read(path: str | os.PathLike) -> Iterator[Reader]:
+    """Open ``path`` read-only as a :class:`Reader`; low-level HDF5 failures become one-line SchemaErrors."""
+    p = check_path(path)
+    try:
+        f = h5py.File(p, "r")
+    except Exception as exc:  # noqa: BLE001 - h5py raises OSError for truncated/corrupt files
+        raise SchemaError(f"{p}: cannot open HDF5 file, truncated or corrupt ({_one_line(exc)})") from None
+    try:
+        with f:
+            yield Reader(f, p)
+    except SchemaError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError) as exc:
+        raise SchemaError(f"{p}: corrupt HDF5 file ({_one_line(exc)})") from None
