@@ -1,0 +1,194 @@
+"""``odometry``: the dead-reckoning baseline (no correction, no covariances).
+
+Poses are the encoder odometry re-anchored at the known start pose ``x0`` (paper 000 §3 assumes it known)::
+
+    x̂_t = x0 ⊕ (x̃_0⁻¹ ⊕ x̃_t)            (= x0 chained with every increment d_k of eq. 16, k ≤ t)
+
+which equals ``odometry_xyt`` itself when the encoder frame starts at ``x0``.
+
+Landmarks come from inverse observations on those poses, ``m̂_i = h⁻¹(x̂_{t_i}, z_i)``, averaged per label::
+
+    m̂_j = (1/|A_j|) Σ_{i ∈ A_j} h⁻¹(x̂_{t_i}, z_i)
+
+Labels (association) are, in order of preference:
+
+1. the sensor-reported identity (``observations.reported_id ≥ 0``, a measurement, not ground truth), when
+   ``use_reported_ids`` is set and the row has one;
+2. otherwise greedy nearest neighbour in landmark space, in time order: a row joins the closest current
+   landmark (running mean) when the Euclidean distance is ≤ ``nn_threshold`` metres, else it creates a new
+   landmark. Rows that carry a reported id seed the landmark set first.
+
+Labels seen by fewer than ``min_support`` rows are dropped (their rows get −1), then labels are renumbered
+0..L'−1 in order of first sighting. This solver uses no randomness and ignores ``init``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamcli.models import se2
+from slamcli.models.observation import inverse_range_bearing
+from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.types import SlamInputs, SolverResult, Status
+
+
+@dataclass(frozen=True)
+class OdometryParams:
+    """Parameters of :class:`OdometrySolver`.
+
+    Attributes
+    ----------
+    use_reported_ids : bool, default True
+        Label rows by their sensor-reported id when they have one (``reported_id ≥ 0``).
+    nn_threshold : float, default 1.0
+        Greedy nearest-neighbour gate in metres (landmark space) for rows without a reported id.
+    min_support : int, default 1
+        Minimum number of rows a label needs to be kept as a landmark (2 or more drops single-shot clutter).
+    """
+
+    use_reported_ids: bool = True
+    nn_threshold: float = 1.0
+    min_support: int = 1
+
+    def __post_init__(self) -> None:
+        if not self.nn_threshold > 0:
+            raise ValueError(f"nn_threshold must be > 0, got {self.nn_threshold}")
+        if self.min_support < 1:
+            raise ValueError(f"min_support must be >= 1, got {self.min_support}")
+
+
+def dead_reckoning(x0: np.ndarray, odometry_xyt: np.ndarray) -> np.ndarray:
+    """Odometry poses re-anchored at ``x0``: ``x̂_t = x0 ⊕ (x̃_0⁻¹ ⊕ x̃_t)``, ``(T+1, 3)``."""
+    odo = np.asarray(odometry_xyt, float)
+    return se2.compose(np.asarray(x0, float), se2.between(odo[0], odo))
+
+
+def greedy_nearest_neighbour(
+    points_xy: np.ndarray,
+    threshold: float,
+    labels: np.ndarray | None = None,
+    progress: ProgressFn | None = None,
+) -> np.ndarray:
+    """Greedy NN labelling of landmark-space points in row order.
+
+    Parameters
+    ----------
+    points_xy : ndarray (N, 2)    inverse observations.
+    threshold : float             join the nearest running-mean landmark if its distance ≤ threshold.
+    labels : ndarray (N,) int64   optional pre-set labels (≥ 0 kept, −1 to be decided); pre-labelled rows
+                                  seed the landmark means before the greedy pass.
+
+    Returns
+    -------
+    ndarray (N,) int64, every row labelled.
+    """
+    pts = np.asarray(points_xy, float).reshape(-1, 2)
+    N = pts.shape[0]
+    out = np.full(N, -1, np.int64) if labels is None else np.asarray(labels, np.int64).copy()
+    seeded = out >= 0
+    K = int(out[seeded].max()) + 1 if seeded.any() else 0
+    cap = max(16, 2 * K)
+    sums = np.zeros((cap, 2))
+    counts = np.zeros(cap)
+    if K:
+        np.add.at(sums, out[seeded], pts[seeded])
+        counts[:K] = np.bincount(out[seeded], minlength=K)
+    thr2 = threshold * threshold
+    todo = np.flatnonzero(~seeded)
+    for n, i in enumerate(todo):
+        p = pts[i]
+        best = -1
+        if K:
+            live = counts[:K] > 0
+            means = sums[:K] / np.where(live, counts[:K], 1.0)[:, None]
+            d2 = np.where(live, ((means - p) ** 2).sum(axis=1), np.inf)
+            j = int(np.argmin(d2))
+            if d2[j] <= thr2:
+                best = j
+        if best < 0:
+            if K == cap:  # grow the buffers geometrically
+                cap *= 2
+                sums = np.resize(sums, (cap, 2))
+                sums[K:] = 0.0
+                counts = np.resize(counts, cap)
+                counts[K:] = 0.0
+            best = K
+            K += 1
+        out[i] = best
+        sums[best] += p
+        counts[best] += 1.0
+        if progress is not None and n % 2048 == 0:
+            progress(n, len(todo))
+    return out
+
+
+def compact(assoc: np.ndarray, min_support: int) -> np.ndarray:
+    """Drop labels with fewer than ``min_support`` rows and renumber 0..L'−1 by first sighting."""
+    assoc = np.asarray(assoc, np.int64)
+    out = np.full_like(assoc, -1)
+    ok = assoc >= 0
+    if not ok.any():
+        return out
+    labels, first, counts = np.unique(assoc[ok], return_index=True, return_counts=True)
+    keep = counts >= min_support
+    order = labels[keep][np.argsort(first[keep], kind="stable")]
+    lut = np.full(int(labels.max()) + 1, -1, np.int64)
+    lut[order] = np.arange(order.size)
+    out[ok] = lut[assoc[ok]]
+    return out
+
+
+class OdometrySolver(BaseSolver):
+    """Dead reckoning + averaged inverse observations (the no-SLAM baseline)."""
+
+    name = "odometry"
+    Params = OdometryParams
+
+    def solve(
+        self,
+        inputs: SlamInputs,
+        *,
+        init: SolverResult | None = None,
+        rng: np.random.Generator,
+        progress: ProgressFn | None = None,
+    ) -> SolverResult:
+        t0 = time.perf_counter()
+        p: OdometryParams = self.params
+        obs = inputs.observations
+        poses = dead_reckoning(inputs.x0, inputs.odometry_xyt)
+        m_hat = inverse_range_bearing(poses[obs.step], obs.z).reshape(-1, 2)  # (N, 2)
+
+        seed = np.full(len(obs), -1, np.int64)
+        n_reported = 0
+        if p.use_reported_ids and len(obs):
+            rid = np.asarray(obs.reported_id, np.int64)
+            has = rid >= 0
+            n_reported = int(has.sum())
+            if n_reported:
+                _, dense = np.unique(rid[has], return_inverse=True)
+                seed[has] = dense
+        raw = greedy_nearest_neighbour(m_hat, p.nn_threshold, seed, progress) if len(obs) else seed
+        assoc = compact(raw, p.min_support)
+        L = int(assoc.max()) + 1 if assoc.size and assoc.max() >= 0 else 0
+        ok = assoc >= 0
+        cnt = np.bincount(assoc[ok], minlength=L).astype(float)
+        landmarks = np.stack(
+            [np.bincount(assoc[ok], weights=m_hat[ok, 0], minlength=L) / np.maximum(cnt, 1.0),
+             np.bincount(assoc[ok], weights=m_hat[ok, 1], minlength=L) / np.maximum(cnt, 1.0)], -1
+        ).reshape(-1, 2)
+        if progress is not None:
+            progress(len(obs), len(obs))
+        source = "reported ids" if n_reported == len(obs) and len(obs) else (
+            f"greedy NN ≤ {p.nn_threshold:g} m" + (f" + {n_reported} reported ids" if n_reported else ""))
+        return self.make_result(
+            status=Status.COMPLETED,
+            poses_xyt=poses,
+            landmarks_xy=landmarks,
+            assoc=assoc,
+            t_start=t0,
+            message=f"dead reckoning; {L} landmarks from {int(ok.sum())}/{len(obs)} observations ({source})",
+            extra={"n_reported_rows": n_reported},
+        )

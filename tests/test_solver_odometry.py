@@ -1,0 +1,122 @@
+"""The ``odometry`` baseline against hand-computed and independent (model-chained) references."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from tiny_world import tiny_dataset
+
+from slamcli.models import motion, observation, se2
+from slamcli.solvers.odometry import (
+    OdometryParams,
+    OdometrySolver,
+    compact,
+    dead_reckoning,
+    greedy_nearest_neighbour,
+)
+from slamcli.types import Observations, Status
+
+
+def test_dead_reckoning_equals_chained_increments():
+    ds = tiny_dataset(T=60)
+    odo = ds.inputs.odometry_xyt
+    ref = motion.chain_increments(ds.inputs.x0, motion.odometry_increments(odo))
+    got = dead_reckoning(ds.inputs.x0, odo)
+    np.testing.assert_allclose(got, ref, atol=1e-12)
+    np.testing.assert_allclose(got, odo, atol=1e-12)  # odometry starts at x0 here
+
+
+def test_dead_reckoning_reanchors_a_shifted_encoder_frame():
+    ds = tiny_dataset(T=30)
+    odo = ds.inputs.odometry_xyt
+    shifted = se2.compose(np.array([10.0, -3.0, 2.0]), odo)  # same increments, other encoder frame
+    np.testing.assert_allclose(dead_reckoning(ds.inputs.x0, shifted), odo, atol=1e-10)
+
+
+def test_greedy_nn_hand_example():
+    pts = np.array([[0.0, 0.0], [0.5, 0.0], [5.0, 5.0], [0.2, 0.1], [5.4, 5.0]])
+    assert greedy_nearest_neighbour(pts, 1.0).tolist() == [0, 0, 1, 0, 1]
+    # threshold 0.3: (0.5,0) is 0.5 from (0,0) -> new; (0.2,0.1) is 0.224 from label 0 and 0.316 from
+    # label 1 -> 0; (5.4,5) is 0.4 from (5,5) -> new
+    assert greedy_nearest_neighbour(pts, 0.3).tolist() == [0, 1, 2, 0, 3]
+    # the running mean moves: after (0,0),(0.9,0) join (mean 0.45), (1.4,0) is 0.95 away -> joins
+    assert greedy_nearest_neighbour(np.array([[0.0, 0], [0.9, 0], [1.4, 0]]), 1.0).tolist() == [0, 0, 0]
+
+
+def test_greedy_nn_seeded_labels_and_buffer_growth():
+    pts = np.array([[0.0, 0.0], [10.0, 0.0], [0.1, 0.0], [9.9, 0.0]])
+    seeded = np.array([7, 3, -1, -1])
+    assert greedy_nearest_neighbour(pts, 0.5, seeded).tolist() == [7, 3, 7, 3]
+    many = np.column_stack([np.arange(100) * 10.0, np.zeros(100)])  # 100 distinct landmarks > buffer 16
+    assert greedy_nearest_neighbour(many, 1.0).tolist() == list(range(100))
+
+
+def test_compact_drops_rare_labels_and_renumbers_by_first_sighting():
+    assert compact(np.array([5, 2, 5, -1, 9, 2, 5]), 1).tolist() == [0, 1, 0, -1, 2, 1, 0]
+    assert compact(np.array([5, 2, 5, -1, 9, 2, 5]), 2).tolist() == [0, 1, 0, -1, -1, 1, 0]
+    assert compact(np.array([-1, -1]), 1).tolist() == [-1, -1]
+
+
+def noise_free(ds):
+    """Replace odometry and observations by exact values generated from the true poses."""
+    tr = ds.truth
+    obs = ds.inputs.observations
+    keep = tr.obs_landmark >= 0
+    step = obs.step[keep]
+    lab = tr.obs_landmark[keep]
+    z = observation.range_bearing(tr.poses_xyt[step], tr.landmarks_xy[lab])
+    new_obs = Observations(step=step, range_m=z[:, 0], bearing_rad=z[:, 1], sensor=obs.sensor[keep],
+                           reported_id=lab * 10 + 3,  # arbitrary sensor ids (not 0..L-1)
+                           offsets=Observations.offsets_from_steps(step, ds.inputs.n_poses))
+    inputs = dataclasses.replace(ds.inputs, odometry_xyt=tr.poses_xyt.copy(), observations=new_obs)
+    return inputs, lab
+
+
+@pytest.mark.parametrize("use_ids", [True, False])
+def test_noise_free_world_recovers_truth(use_ids):
+    ds = tiny_dataset(T=40)
+    inputs, lab = noise_free(ds)
+    res = OdometrySolver(OdometryParams(use_reported_ids=use_ids, nn_threshold=0.5)).solve(
+        inputs, rng=np.random.default_rng(0))
+    assert res.status is Status.COMPLETED and res.pose_cov is None
+    np.testing.assert_allclose(res.poses_xyt, ds.truth.poses_xyt, atol=1e-12)
+    # labels are a relabelling of the truth: map each estimated landmark to its true one
+    L = len(res.landmarks_xy)
+    assert L == len(np.unique(lab))
+    true_of_est = np.array([lab[res.assoc == k][0] for k in range(L)])
+    assert all((lab[res.assoc == k] == true_of_est[k]).all() for k in range(L))
+    np.testing.assert_allclose(res.landmarks_xy, ds.truth.landmarks_xy[true_of_est], atol=1e-9)
+
+
+def test_noisy_world_landmarks_are_mean_inverse_observations():
+    ds = tiny_dataset(T=40, report_ids=True, clutter_every=0)
+    res = OdometrySolver().solve(ds.inputs, rng=np.random.default_rng(0))
+    obs = ds.inputs.observations
+    m = observation.inverse_range_bearing(ds.inputs.odometry_xyt[obs.step], obs.z)
+    for k in range(len(res.landmarks_xy)):
+        np.testing.assert_allclose(res.landmarks_xy[k], m[res.assoc == k].mean(axis=0), atol=1e-12)
+    # with reported ids = true ids, the association is the truth up to renumbering
+    for k in range(len(res.landmarks_xy)):
+        assert len(np.unique(ds.truth.obs_landmark[res.assoc == k])) == 1
+    # errors stay at the noise level over a 4 m drive
+    err = np.linalg.norm(res.landmarks_xy - ds.truth.landmarks_xy[
+        [ds.truth.obs_landmark[res.assoc == k][0] for k in range(len(res.landmarks_xy))]], axis=1)
+    assert err.max() < 0.3
+
+
+def test_min_support_removes_clutter_singletons():
+    ds = tiny_dataset(T=40, clutter_every=7)
+    r1 = OdometrySolver(OdometryParams(min_support=1)).solve(ds.inputs, rng=np.random.default_rng(0))
+    r3 = OdometrySolver(OdometryParams(min_support=3)).solve(ds.inputs, rng=np.random.default_rng(0))
+    assert len(r3.landmarks_xy) < len(r1.landmarks_xy)
+    clutter = ds.truth.obs_landmark < 0
+    assert (r3.assoc[clutter] == -1).mean() > (r1.assoc[clutter] == -1).mean()
+
+
+def test_params_validation():
+    with pytest.raises(ValueError):
+        OdometryParams(nn_threshold=0.0)
+    with pytest.raises(ValueError):
+        OdometryParams(min_support=0)
