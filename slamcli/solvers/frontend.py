@@ -1,0 +1,196 @@
+"""Dataset-agnostic data association for batch solvers (graph SLAM, ICM post-processing).
+
+Three sources of correspondences, all returning ``assoc (N,) int64`` (row of the landmark table for every
+observation row, ``-1`` = not used) plus initial landmark positions ``landmarks_xy (L, 2)``:
+
+* :func:`associate_reported` — the sensor reports identities (``Observations.reported_id ≥ 0``; MRCLAM
+  barcodes, simulator option ``report_ids``). Identities are measurements, not ground truth.
+* :func:`associate_nearest_neighbour` — incremental nearest neighbour over time with a χ² gate on the
+  Mahalanobis distance between the inverse observation ``m̂ = h⁻¹(x_t, z)`` (landmark space) and the fused
+  estimate of each known landmark, on given (dead-reckoned or initial) poses; observations outside every
+  gate start a new landmark. Within one time step each landmark takes at most one observation (greedy in
+  order of distance), as in maximum-likelihood association (seed 002, §14.7).
+* :func:`associations_from_result` — copy the labels of another solver's result (``--init``).
+
+:func:`landmarks_from_observations` averages inverse observations per label (vectorised, ``np.bincount``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from slamcli.errors import SolverError
+from slamcli.models import observation
+from slamcli.types import Observations, SolverResult
+
+
+def gate_threshold(gate_prob: float) -> float:
+    """χ²₂ quantile: ``d² ≤ −2 ln(1 − p)`` (closed form of the 2-DoF χ² inverse CDF)."""
+    if not 0.0 < gate_prob < 1.0:
+        raise SolverError(f"gate_prob must be in (0, 1), got {gate_prob}")
+    return -2.0 * math.log1p(-gate_prob)
+
+
+def landmarks_from_observations(
+    poses_xyt: np.ndarray, obs: Observations, assoc: np.ndarray, n_landmarks: int
+) -> np.ndarray:
+    """Mean inverse observation ``m̂ = h⁻¹(x_t, z)`` of every label.
+
+    Parameters
+    ----------
+    poses_xyt : ndarray (T+1, 3)
+    obs : Observations (N rows)
+    assoc : ndarray (N,) int64, label per row, -1 ignored
+    n_landmarks : int, L
+
+    Returns
+    -------
+    ndarray (L, 2); NaN for labels without observations.
+    """
+    assoc = np.asarray(assoc, np.int64)
+    ok = assoc >= 0
+    m = observation.inverse_range_bearing(np.asarray(poses_xyt)[obs.step[ok]], obs.z[ok])
+    cnt = np.bincount(assoc[ok], minlength=n_landmarks).astype(float)
+    sx = np.bincount(assoc[ok], weights=m[:, 0], minlength=n_landmarks)
+    sy = np.bincount(assoc[ok], weights=m[:, 1], minlength=n_landmarks)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.stack([sx / cnt, sy / cnt], -1)
+
+
+def compact_labels(assoc: np.ndarray, min_obs: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Relabel ``assoc`` to ``0..L'-1`` in order of first appearance of the kept labels.
+
+    Labels with fewer than ``min_obs`` observations are dropped (their rows become -1; the paper's ς filter).
+
+    Returns
+    -------
+    assoc_new : ndarray (N,) int64
+    old_of_new : ndarray (L',) int64   original label of each new label
+    """
+    assoc = np.asarray(assoc, np.int64)
+    out = np.full_like(assoc, -1)
+    ok = assoc >= 0
+    if not ok.any():
+        return out, np.zeros(0, np.int64)
+    labels, first, counts = np.unique(assoc[ok], return_index=True, return_counts=True)
+    keep = counts >= min_obs
+    labels, first = labels[keep], first[keep]
+    old_of_new = labels[np.argsort(first, kind="stable")]
+    lut = np.full(int(assoc[ok].max()) + 1, -1, np.int64)
+    lut[old_of_new] = np.arange(old_of_new.size)
+    out[ok] = lut[assoc[ok]]
+    return out, old_of_new
+
+
+def associate_reported(obs: Observations) -> np.ndarray:
+    """Labels from sensor-reported identities (rows with ``reported_id < 0`` get -1), compacted.
+
+    Returns
+    -------
+    assoc : ndarray (N,) int64, labels ``0..L-1`` in order of first sighting.
+    """
+    assoc, _ = compact_labels(np.asarray(obs.reported_id, np.int64))
+    return assoc
+
+
+def associate_nearest_neighbour(
+    poses_xyt: np.ndarray,
+    obs: Observations,
+    obs_cov: np.ndarray,
+    *,
+    gate_prob: float = 0.99,
+    extra_std: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Incremental gated nearest-neighbour association on fixed poses.
+
+    Every observation gives ``m̂ = h⁻¹(x_t, z)`` with covariance ``C = M_z Σ_z M_zᵀ + σ_e² I`` (``M_z`` the
+    Jacobian of the inverse observation, ``σ_e = extra_std`` absorbs pose drift). Landmark ``j`` keeps an
+    information-fused estimate ``(μ_j, P_j)``. Observation ``k`` may join landmark ``j`` if
+
+        d²_kj = (m̂_k − μ_j)ᵀ (C_k + P_j)⁻¹ (m̂_k − μ_j) ≤ χ²₂(gate_prob)
+
+    and takes the closest admissible one (greedy over the pairs of one time step, each landmark at most
+    once); otherwise it creates a new landmark. Fusion: ``P⁺ = (P⁻¹ + C⁻¹)⁻¹, μ⁺ = P⁺(P⁻¹μ + C⁻¹m̂)``.
+
+    Parameters
+    ----------
+    poses_xyt : ndarray (T+1, 3)   poses the observations are projected from.
+    obs : Observations (N rows)
+    obs_cov : ndarray (2, 2)       covariance of ``[range, bearing]``.
+    gate_prob : float              χ² gate probability.
+    extra_std : float              σ_e, m.
+
+    Returns
+    -------
+    assoc : ndarray (N,) int64
+    landmarks_xy : ndarray (L, 2)  fused estimates.
+    """
+    thr = gate_threshold(gate_prob)
+    poses = np.asarray(poses_xyt, float)
+    N = len(obs)
+    assoc = np.full(N, -1, np.int64)
+    if N == 0:
+        return assoc, np.zeros((0, 2))
+    m_all = observation.inverse_range_bearing(poses[obs.step], obs.z)  # (N, 2)
+    _, Mz = observation.inverse_range_bearing_jacobians(poses[obs.step], obs.z)
+    C_all = Mz @ np.asarray(obs_cov, float) @ np.swapaxes(Mz, 1, 2) + extra_std**2 * np.eye(2)
+    cap = 64
+    mu = np.empty((cap, 2))
+    P = np.empty((cap, 2, 2))
+    L = 0
+    offsets = np.asarray(obs.offsets, np.int64)
+    for t in range(offsets.size - 1):  # sequential by nature: each step sees the map built so far
+        a, b = int(offsets[t]), int(offsets[t + 1])
+        if a == b:
+            continue
+        m, C = m_all[a:b], C_all[a:b]
+        n = b - a
+        taken_obs = np.zeros(n, bool)
+        if L:
+            diff = m[:, None, :] - mu[None, :L, :]  # (n, L, 2)
+            S = C[:, None] + P[None, :L]  # (n, L, 2, 2)
+            d2 = np.einsum("nli,nli->nl", diff, np.linalg.solve(S, diff[..., None])[..., 0])
+            cand = np.argwhere(d2 <= thr)
+            if cand.size:
+                order = np.argsort(d2[cand[:, 0], cand[:, 1]], kind="stable")
+                used_lm = set()
+                for i, j in cand[order]:
+                    if taken_obs[i] or j in used_lm:
+                        continue
+                    taken_obs[i] = True
+                    used_lm.add(int(j))
+                    assoc[a + i] = j
+                    Pi = np.linalg.inv(P[j])
+                    Ci = np.linalg.inv(C[i])
+                    Pn = np.linalg.inv(Pi + Ci)
+                    mu[j] = Pn @ (Pi @ mu[j] + Ci @ m[i])
+                    P[j] = Pn
+        new = np.flatnonzero(~taken_obs)
+        if new.size:
+            while L + new.size > cap:
+                cap *= 2
+                mu = np.resize(mu, (cap, 2))
+                P = np.resize(P, (cap, 2, 2))
+            mu[L : L + new.size] = m[new]
+            P[L : L + new.size] = C[new]
+            assoc[a + new] = np.arange(L, L + new.size)
+            L += new.size
+    return assoc, mu[:L].copy()
+
+
+def associations_from_result(init: SolverResult, n_obs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Labels and landmarks of another result, checked against the number of observation rows."""
+    assoc = np.asarray(init.assoc, np.int64)
+    if assoc.shape != (n_obs,):
+        raise SolverError(
+            f"init result ({init.solver}) has {assoc.shape[0]} association labels, dataset has {n_obs} "
+            "observations"
+        )
+    lm = np.asarray(init.landmarks_xy, float).reshape(-1, 2)
+    if assoc.size and assoc.max() >= lm.shape[0]:
+        raise SolverError(
+            f"init result ({init.solver}) labels up to {int(assoc.max())} but has {lm.shape[0]} landmarks"
+        )
+    return assoc, lm

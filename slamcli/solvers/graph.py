@@ -1,0 +1,621 @@
+"""Batch graph SLAM (``--method graph``): all poses ``x_0..x_T`` and landmarks ``m_0..m_{L-1}`` at once.
+
+Factors (``model="gtsam"``, default) are defined exactly as GTSAM's, so the optimum can be checked against
+``gtsam.LevenbergMarquardtOptimizer`` (``tests/test_graph_gtsam.py``)::
+
+    prior      e = Log(p⁻¹ ⊕ x_0)                               PriorFactorPose2,     Σ = diag(prior_std²)
+    odometry   e = Log(d_t⁻¹ ⊕ (x_{t-1}⁻¹ ⊕ x_t))                BetweenFactorPose2,   Σ = diag(odometry_std²)
+               d_t = between(x̃_{t-1}, x̃_t) (paper 000 eq. 16)
+    motion     same with d_t = [v dt, 0, ω dt] (DDMR, optional)   Σ = diag((σ_v dt)², σ_lat², (σ_ω dt)²)
+    bearing-   e = [‖m − p‖ − r,  wrap(∠(m − p) − θ − b)]        BearingRangeFactor2D, Σ = NoiseSpec.obs_cov
+    range                                                          (GTSAM orders it [bearing, range])
+    GPS        e = p_t − z_gps (optional)                         Σ = gps_std² I
+
+with ``Log`` the SE(2) logarithm (tangent ``[v_x, v_y, ω]``). The cost is GTSAM's ``graph.error``:
+``½ Σ eᵀ Σ⁻¹ e``.
+
+``model="paper"`` minimises the ICM-SLAM Gibbs energy of paper 000, eqs. (3)-(5) with (16), with the
+correspondences held fixed and ``x_0`` fixed at the known start pose (§3)::
+
+    E = Σ_t ‖g(x_{t-1}, u_{t-1}) − x_t‖²_R + Σ_t ‖τ(θ_{t-1})(x_t − x_{t-1}) − d_t‖²_S
+        + Σ_{t,i} ‖h⁻¹(x_t, z_{t,i}) − m_{c_{t,i}}‖²_Q ,      ‖a‖²_W = aᵀ W a
+
+(residuals from :mod:`slamcli.models.potentials`; a zero weight matrix drops its potential). See
+:func:`optimize_paper_energy` — the entry point the ICM solver uses to compare its final energy with the
+optimum of the same energy.
+
+The state is optimised in world coordinates ``[x, y, θ]`` (additive update, θ wrapped) with Jacobians in
+the same coordinates, so the Laplace marginals (``EVALUATION-METHOD.md`` §A2) are directly world-frame —
+GTSAM's body-frame Pose2 marginals equal ``J Σ_b Jᵀ`` with ``J = blkdiag(R(θ), 1)`` of ours. The optimiser
+is :mod:`slamcli.solvers.nls` (sparse GN / LM, optional Huber kernel on the observation factors).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from slamcli.errors import SolverError
+from slamcli.models import motion, observation, potentials, se2
+from slamcli.models.angles import wrap_angle
+from slamcli.solvers import frontend, nls
+from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
+
+
+@dataclass(frozen=True)
+class GraphParams:
+    """Parameters of :class:`GraphSlam`.
+
+    Attributes
+    ----------
+    model : "gtsam" | "paper"
+        Factor definitions (module docstring). Default ``"gtsam"``.
+    method : "lm" | "gn"
+        Levenberg-Marquardt (default) or Gauss-Newton.
+    max_iterations : int
+        Linear-solve budget (default 100).
+    rel_cost_tol : float
+        Stop when an accepted step lowers the cost by less than this fraction (default 1e-12).
+    step_tol : float
+        Stop when ``‖h‖ ≤ step_tol (‖x‖ + step_tol)`` (default 1e-12).
+    robust : "none" | "huber"
+        Kernel on the observation factors (default none).
+    huber_k : float
+        Huber threshold on the whitened residual norm (default 1.345).
+    association : "auto" | "init" | "reported" | "nn"
+        Correspondence source: ``init`` = labels of the ``--init`` result; ``reported`` = sensor identities;
+        ``nn`` = gated nearest neighbour on the initial poses; ``auto`` = init if given, else reported if
+        any row has one, else nn.
+    gate_prob : float
+        χ² gate probability of the nearest-neighbour front end (default 0.999).
+    nn_extra_std : float
+        Extra landmark-space σ (m) of the front end for pose drift (default 0.0).
+    min_obs : int
+        Landmarks with fewer associated observations are dropped (default 1 = keep all).
+    prior_std : tuple[float, float, float]
+        σ of the prior on x_0 at the known start pose (gauge), ``gtsam`` model (default 1e-4 m, m, rad).
+    use_odometry : bool
+        Odometry between-factors (default True).
+    use_controls : bool
+        Motion between-factors from the commanded controls (default False).
+    motion_lateral_std : float
+        σ of the lateral component of a motion factor (DDMR has none; default 0.01 m).
+    use_gps : bool
+        Position factors for GPS fixes when the dataset has them (default True).
+    paper_R, paper_S, paper_Q : tuple of rows or None
+        Weight matrices of the ``paper`` model (3×3, 3×3, 2×2). ``None`` → R = 0, S = ½ diag(σ_odo)⁻²,
+        Q = ½ σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).
+    init_from : "odometry" | "init"
+        Initial poses: chained odometry increments from x_0 (default) or the ``--init`` result's poses.
+    covariance : bool
+        Compute Laplace marginal covariances (default True).
+    """
+
+    model: Literal["gtsam", "paper"] = "gtsam"
+    method: Literal["lm", "gn"] = "lm"
+    max_iterations: int = 100
+    rel_cost_tol: float = 1e-12
+    step_tol: float = 1e-12
+    robust: Literal["none", "huber"] = "none"
+    huber_k: float = 1.345
+    association: Literal["auto", "init", "reported", "nn"] = "auto"
+    gate_prob: float = 0.999
+    nn_extra_std: float = 0.0
+    min_obs: int = 1
+    prior_std: tuple[float, float, float] = (1e-4, 1e-4, 1e-4)
+    use_odometry: bool = True
+    use_controls: bool = False
+    motion_lateral_std: float = 0.01
+    use_gps: bool = True
+    paper_R: tuple[tuple[float, ...], ...] | None = None
+    paper_S: tuple[tuple[float, ...], ...] | None = None
+    paper_Q: tuple[tuple[float, ...], ...] | None = None
+    init_from: Literal["odometry", "init"] = "odometry"
+    covariance: bool = True
+
+    def __post_init__(self) -> None:
+        if self.max_iterations < 1:
+            raise ValueError("max_iterations must be ≥ 1")
+        if self.huber_k <= 0:
+            raise ValueError("huber_k must be > 0")
+        if len(self.prior_std) != 3 or min(self.prior_std) <= 0:
+            raise ValueError("prior_std must be three positive numbers")
+        if self.min_obs < 1:
+            raise ValueError("min_obs must be ≥ 1")
+
+
+# ----------------------------------------------------------------------------------------------------------
+# GTSAM-exact factor errors and Jacobians (world coordinates [x, y, θ]), vectorised over factors
+# ----------------------------------------------------------------------------------------------------------
+def log_jacobian(p: np.ndarray) -> np.ndarray:
+    """Jacobian ``(..., 3, 3)`` of :func:`slamcli.models.se2.log` w.r.t. the pose coordinates ``[x, y, θ]``.
+
+    ``Log(x, y, θ) = [α x + (θ/2) y, −(θ/2) x + α y, θ]`` with ``α = (θ/2) cot(θ/2)``, hence
+    ``∂/∂(x, y, θ) = [[α, θ/2, α' x + y/2], [−θ/2, α, −x/2 + α' y], [0, 0, 1]]``,
+    ``α' = ½ cot(θ/2) − (θ/4) / sin²(θ/2)`` (series ``1 − θ²/12``, ``−θ/6 − θ³/180`` near 0).
+    """
+    p = np.asarray(p, float)
+    w = wrap_angle(p[..., 2])
+    small = np.abs(w) < 1e-4
+    ws = np.where(small, 1.0, w)
+    half = 0.5 * ws
+    cot = np.cos(half) / np.sin(half)
+    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
+    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / np.sin(half) ** 2)
+    x, y = p[..., 0], p[..., 1]
+    J = np.zeros(p.shape[:-1] + (3, 3))
+    J[..., 0, 0] = alpha
+    J[..., 0, 1] = 0.5 * w
+    J[..., 0, 2] = dalpha * x + 0.5 * y
+    J[..., 1, 0] = -0.5 * w
+    J[..., 1, 1] = alpha
+    J[..., 1, 2] = -0.5 * x + dalpha * y
+    J[..., 2, 2] = 1.0
+    return J
+
+
+def _compose_left_jacobian(a: np.ndarray) -> np.ndarray:
+    """``∂ compose(a, b) / ∂b = blkdiag(R(θ_a), 1)``, ``(..., 3, 3)``."""
+    a = np.asarray(a, float)
+    J = np.zeros(a.shape[:-1] + (3, 3))
+    J[..., :2, :2] = se2.rot2(a[..., 2])
+    J[..., 2, 2] = 1.0
+    return J
+
+
+def between_error(x_i, x_j, measured):
+    """GTSAM ``BetweenFactorPose2`` error ``e = Log(d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` and its Jacobians.
+
+    Parameters
+    ----------
+    x_i, x_j, measured : ndarray (F, 3)
+
+    Returns
+    -------
+    e : ndarray (F, 3);  J_i, J_j : ndarray (F, 3, 3)  (w.r.t. world coordinates of x_i, x_j)
+    """
+    d_inv = se2.inverse(measured)
+    b = se2.between(x_i, x_j)
+    p = se2.compose(d_inv, b)
+    e = se2.log(p)
+    A = log_jacobian(p) @ _compose_left_jacobian(d_inv)
+    Ba, Bb = se2.between_jacobians(x_i, x_j)
+    return e, A @ Ba, A @ Bb
+
+
+def prior_error(x, prior):
+    """GTSAM ``PriorFactorPose2`` error ``e = Log(p⁻¹ ⊕ x)`` and Jacobian ``(F, 3, 3)``."""
+    p_inv = se2.inverse(prior)
+    q = se2.compose(p_inv, x)
+    return se2.log(q), log_jacobian(q) @ _compose_left_jacobian(p_inv)
+
+
+def bearing_range_error(x, m, z):
+    """Range-bearing error ``e = [r̂ − r, wrap(b̂ − b)]`` (GTSAM's ``BearingRangeFactor2D`` up to row order).
+
+    Parameters
+    ----------
+    x : ndarray (F, 3);  m : ndarray (F, 2);  z : ndarray (F, 2) as ``[range, bearing]``
+
+    Returns
+    -------
+    e : ndarray (F, 2);  J_x : ndarray (F, 2, 3);  J_m : ndarray (F, 2, 2)
+    """
+    zh = observation.range_bearing(x, m)
+    e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
+    J_x, J_m = observation.range_bearing_jacobians(x, m)
+    return e, J_x, J_m
+
+
+# ----------------------------------------------------------------------------------------------------------
+# problem construction
+# ----------------------------------------------------------------------------------------------------------
+def _sqrt_info_from_cov(cov: np.ndarray) -> np.ndarray:
+    """``L`` with ``LᵀL = Σ⁻¹``."""
+    return np.linalg.cholesky(np.linalg.inv(np.asarray(cov, float))).T
+
+
+def _sqrt_of_weight(W: np.ndarray) -> np.ndarray | None:
+    """``L`` with ``LᵀL = 2W`` for a symmetric PSD weight ``W`` (so ``½‖L r‖² = rᵀ W r``); None if W = 0."""
+    W = np.asarray(W, float)
+    if not np.any(W):
+        return None
+    if not np.allclose(W, W.T, atol=1e-12 * max(1.0, np.abs(W).max())):
+        raise SolverError("paper weight matrices must be symmetric")
+    lam, V = np.linalg.eigh(0.5 * (W + W.T))
+    if lam.min() < -1e-12 * max(1.0, lam.max()):
+        raise SolverError("paper weight matrices must be positive semi-definite")
+    return (np.sqrt(2.0 * np.clip(lam, 0.0, None))[:, None] * V.T)
+
+
+@dataclass(frozen=True)
+class GraphProblem:
+    """A built factor graph plus the state layout.
+
+    Attributes
+    ----------
+    problem : nls.NlsProblem
+    x0 : ndarray (D,)          initial state: poses ``(T+1)·3`` then landmarks ``L·2``.
+    n_poses : int              T+1
+    n_landmarks : int          L
+    """
+
+    problem: nls.NlsProblem
+    x0: np.ndarray
+    n_poses: int
+    n_landmarks: int
+
+    def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(poses_xyt (T+1, 3), landmarks_xy (L, 2))`` views of a state vector."""
+        P = 3 * self.n_poses
+        return x[:P].reshape(-1, 3), x[P:].reshape(-1, 2)
+
+    def pose_cols(self) -> np.ndarray:
+        return np.arange(3 * self.n_poses, dtype=np.int64).reshape(-1, 3)
+
+    def landmark_cols(self) -> np.ndarray:
+        return 3 * self.n_poses + np.arange(2 * self.n_landmarks, dtype=np.int64).reshape(-1, 2)
+
+
+def pack_state(poses_xyt: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
+    return np.concatenate([np.asarray(poses_xyt, float).ravel(), np.asarray(landmarks_xy, float).ravel()])
+
+
+def build_gtsam_problem(
+    inputs: SlamInputs,
+    assoc: np.ndarray,
+    init_poses: np.ndarray,
+    init_landmarks: np.ndarray,
+    params: GraphParams | None = None,
+) -> GraphProblem:
+    """Factor graph of the ``gtsam`` model (module docstring) with observations labelled by ``assoc``.
+
+    Parameters
+    ----------
+    inputs : SlamInputs
+    assoc : ndarray (N,) int64      landmark row per observation, -1 = unused.
+    init_poses : ndarray (T+1, 3)
+    init_landmarks : ndarray (L, 2)
+    """
+    params = params or GraphParams()
+    n_poses = inputs.n_poses
+    L = int(np.asarray(init_landmarks).reshape(-1, 2).shape[0])
+    pc = np.arange(3 * n_poses, dtype=np.int64).reshape(-1, 3)
+    lc = 3 * n_poses + np.arange(2 * L, dtype=np.int64).reshape(-1, 2)
+    P = 3 * n_poses
+    blocks: list[nls.FactorBlock] = []
+
+    def poses_of(x):
+        return x[:P].reshape(-1, 3)
+
+    def lms_of(x):
+        return x[P:].reshape(-1, 2)
+
+    prior = np.asarray(inputs.x0, float)[None, :]
+
+    def ev_prior(x):
+        e, J = prior_error(poses_of(x)[:1], prior)
+        return e, J
+
+    blocks.append(
+        nls.FactorBlock("prior", pc[:1], ev_prior, _sqrt_info_from_cov(np.diag(np.square(params.prior_std))))
+    )
+
+    def between_block(name, meas, cov):
+        def ev(x):
+            p = poses_of(x)
+            e, Ji, Jj = between_error(p[:-1], p[1:], meas)
+            return e, np.concatenate([Ji, Jj], axis=2)
+
+        cols = np.concatenate([pc[:-1], pc[1:]], axis=1)
+        return nls.FactorBlock(name, cols, ev, _sqrt_info_from_cov(cov))
+
+    if n_poses > 1 and params.use_odometry:
+        d = motion.odometry_increments(inputs.odometry_xyt)
+        blocks.append(between_block("odometry", d, np.diag(np.square(inputs.noise.odometry_std))))
+    if n_poses > 1 and params.use_controls:
+        u = np.asarray(inputs.controls, float)
+        dt = inputs.dt
+        d = np.stack([u[:, 0] * dt, np.zeros(len(u)), u[:, 1] * dt], -1)
+        sv, sw = inputs.noise.motion_std
+        cov = np.diag([(sv * dt) ** 2, params.motion_lateral_std**2, (sw * dt) ** 2])
+        blocks.append(between_block("motion", d, cov))
+
+    obs = inputs.observations
+    assoc = np.asarray(assoc, np.int64)
+    rows = np.flatnonzero(assoc >= 0)
+    if rows.size:
+        steps = np.asarray(obs.step, np.int64)[rows]
+        labels = assoc[rows]
+        z = obs.z[rows]
+
+        def ev_obs(x):
+            e, Jx, Jm = bearing_range_error(poses_of(x)[steps], lms_of(x)[labels], z)
+            return e, np.concatenate([Jx, Jm], axis=2)
+
+        cols = np.concatenate([pc[steps], lc[labels]], axis=1)
+        blocks.append(
+            nls.FactorBlock("bearing_range", cols, ev_obs, _sqrt_info_from_cov(inputs.noise.obs_cov), robust=True)
+        )
+
+    if params.use_gps and np.asarray(inputs.gps_step).size:
+        gsteps = np.asarray(inputs.gps_step, np.int64)
+        gxy = np.asarray(inputs.gps_xy, float)
+
+        def ev_gps(x):
+            e = poses_of(x)[gsteps, :2] - gxy
+            J = np.zeros((gsteps.size, 2, 3))
+            J[:, 0, 0] = J[:, 1, 1] = 1.0
+            return e, J
+
+        blocks.append(nls.FactorBlock("gps", pc[gsteps], ev_gps, np.eye(2) / inputs.gps_std, robust=True))
+
+    problem = nls.NlsProblem(n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy())
+    return GraphProblem(problem, pack_state(init_poses, init_landmarks), n_poses, L)
+
+
+def default_paper_weights(inputs: SlamInputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``R = 0, S = ½ diag(σ_odo)⁻², Q = ½ σ_r⁻² I``."""
+    R = np.zeros((3, 3))
+    S = 0.5 * np.diag(1.0 / np.square(np.asarray(inputs.noise.odometry_std, float)))
+    Q = 0.5 / inputs.noise.range_std**2 * np.eye(2)
+    return R, S, Q
+
+
+def build_paper_problem(
+    inputs: SlamInputs,
+    assoc: np.ndarray,
+    R: np.ndarray,
+    S: np.ndarray,
+    Q: np.ndarray,
+    init_poses: np.ndarray,
+    init_landmarks: np.ndarray,
+) -> GraphProblem:
+    """Factor graph whose cost ``½ Σ ‖L r‖²`` equals the Gibbs energy of paper 000 (module docstring).
+
+    ``x_0`` is held fixed at ``init_poses[0]``; landmarks are held fixed when ``Q = 0`` (the energy does not
+    depend on them then).
+    """
+    n_poses = inputs.n_poses
+    L = int(np.asarray(init_landmarks).reshape(-1, 2).shape[0])
+    P = 3 * n_poses
+    pc = np.arange(P, dtype=np.int64).reshape(-1, 3)
+    lc = P + np.arange(2 * L, dtype=np.int64).reshape(-1, 2)
+    blocks: list[nls.FactorBlock] = []
+    LR, LS, LQ = _sqrt_of_weight(R), _sqrt_of_weight(S), _sqrt_of_weight(Q)
+    pair_cols = np.concatenate([pc[:-1], pc[1:]], axis=1)
+
+    def poses_of(x):
+        return x[:P].reshape(-1, 3)
+
+    if LR is not None and n_poses > 1:
+        u = np.asarray(inputs.controls, float)
+        dt = inputs.dt
+
+        def ev_motion(x):
+            p = poses_of(x)
+            r = potentials.motion_residual(p[:-1], u, p[1:], dt)
+            Ja, Jb = potentials.motion_residual_jacobians(p[:-1], u, p[1:], dt)
+            return r, np.concatenate([Ja, Jb], axis=2)
+
+        blocks.append(nls.FactorBlock("motion", pair_cols, ev_motion, LR))
+    if LS is not None and n_poses > 1:
+        odo = np.asarray(inputs.odometry_xyt, float)
+
+        def ev_odo(x):
+            p = poses_of(x)
+            r = potentials.odometry_residual(p[:-1], p[1:], odo[:-1], odo[1:])
+            Ja, Jb = potentials.odometry_residual_jacobians(p[:-1], p[1:])
+            return r, np.concatenate([Ja, Jb], axis=2)
+
+        blocks.append(nls.FactorBlock("odometry", pair_cols, ev_odo, LS))
+    obs = inputs.observations
+    assoc = np.asarray(assoc, np.int64)
+    rows = np.flatnonzero(assoc >= 0)
+    if LQ is not None and rows.size:
+        steps = np.asarray(obs.step, np.int64)[rows]
+        labels = assoc[rows]
+        z = obs.z[rows]
+
+        def ev_obs(x):
+            p = poses_of(x)[steps]
+            m = x[P:].reshape(-1, 2)[labels]
+            r = potentials.observation_residual(p, z, m)
+            Jx, Jm = potentials.observation_residual_jacobians(p, z)
+            return r, np.concatenate([Jx, Jm], axis=2)
+
+        blocks.append(nls.FactorBlock("observation", np.concatenate([pc[steps], lc[labels]], 1), ev_obs, LQ,
+                                      robust=True))
+    fixed = [pc[0]]
+    if LQ is None:
+        fixed.append(lc.ravel())
+    problem = nls.NlsProblem(
+        n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy(), fixed_cols=np.concatenate(fixed)
+    )
+    return GraphProblem(problem, pack_state(init_poses, init_landmarks), n_poses, L)
+
+
+def optimize_paper_energy(
+    inputs: SlamInputs,
+    assoc: np.ndarray,
+    R: np.ndarray,
+    S: np.ndarray,
+    Q: np.ndarray,
+    init_poses: np.ndarray,
+    init_landmarks: np.ndarray,
+    *,
+    method: Literal["lm", "gn"] = "lm",
+    max_iterations: int = 200,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Minimum of the paper-000 Gibbs energy for fixed correspondences (the reference for ICM).
+
+    ``E = Σ_t ‖g(x_{t-1},u_{t-1}) − x_t‖²_R + Σ_t ‖τ(θ_{t-1})(x_t − x_{t-1}) − d_t‖²_S
+    + Σ_{t,i} ‖h⁻¹(x_t, z_{t,i}) − m_{c_{t,i}}‖²_Q`` with ``‖a‖²_W = aᵀWa`` — no ½ and no map potential;
+    evaluated exactly by :mod:`slamcli.models.potentials`. ``x_0 = init_poses[0]`` stays fixed (the known
+    start pose); landmarks stay at ``init_landmarks`` if ``Q = 0``.
+
+    Parameters
+    ----------
+    inputs : SlamInputs
+    assoc : ndarray (N,) int64       landmark row of every observation, -1 = unused.
+    R : ndarray (3, 3); S : ndarray (3, 3); Q : ndarray (2, 2)   symmetric PSD weights (zero = dropped).
+    init_poses : ndarray (T+1, 3);  init_landmarks : ndarray (L, 2)
+
+    Returns
+    -------
+    poses_xyt : ndarray (T+1, 3);  landmarks_xy : ndarray (L, 2);  energy : float (E at the optimum)
+    """
+    gp = build_paper_problem(inputs, assoc, R, S, Q, init_poses, init_landmarks)
+    res = nls.solve(gp.problem, gp.x0, nls.NlsParams(method=method, max_iterations=max_iterations))
+    poses, lms = gp.unpack(res.x)
+    return poses.copy(), lms.copy(), float(res.cost)
+
+
+def paper_energy(inputs, assoc, R, S, Q, poses_xyt, landmarks_xy) -> float:
+    """The paper-000 energy (see :func:`optimize_paper_energy`) at given poses and landmarks."""
+    gp = build_paper_problem(inputs, assoc, R, S, Q, poses_xyt, landmarks_xy)
+    return nls.evaluate_cost(gp.problem, gp.x0)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# solver
+# ----------------------------------------------------------------------------------------------------------
+def odometry_initial_poses(inputs: SlamInputs) -> np.ndarray:
+    """Odometry increments chained from the known start pose, ``(T+1, 3)``."""
+    d = motion.odometry_increments(inputs.odometry_xyt)
+    poses = np.empty((inputs.n_poses, 3))
+    poses[0] = inputs.x0
+    # compose sequentially (cumulative heading first, then rotate increments: vectorised)
+    th = wrap_angle(inputs.x0[2] + np.concatenate([[0.0], np.cumsum(d[:, 2])]))
+    c, s = np.cos(th[:-1]), np.sin(th[:-1])
+    dx = c * d[:, 0] - s * d[:, 1]
+    dy = s * d[:, 0] + c * d[:, 1]
+    poses[1:, 0] = inputs.x0[0] + np.cumsum(dx)
+    poses[1:, 1] = inputs.x0[1] + np.cumsum(dy)
+    poses[:, 2] = th
+    return poses
+
+
+class GraphSlam(BaseSolver):
+    """Batch graph SLAM with sparse GN/LM and Laplace marginals (see module docstring)."""
+
+    name = "graph"
+    Params = GraphParams
+
+    def _associate(self, inputs: SlamInputs, init: SolverResult | None, poses: np.ndarray):
+        p = self.params
+        obs = inputs.observations
+        mode = p.association
+        if mode == "auto":
+            if init is not None:
+                mode = "init"
+            elif len(obs) and np.any(np.asarray(obs.reported_id) >= 0):
+                mode = "reported"
+            else:
+                mode = "nn"
+        if mode == "init":
+            if init is None:
+                raise SolverError("graph: association=init needs an --init result")
+            assoc, _ = frontend.associations_from_result(init, len(obs))
+        elif mode == "reported":
+            if not len(obs) or not np.any(np.asarray(obs.reported_id) >= 0):
+                raise SolverError("graph: association=reported but the observations carry no reported_id")
+            assoc = frontend.associate_reported(obs)
+        else:
+            assoc, _ = frontend.associate_nearest_neighbour(
+                poses, obs, inputs.noise.obs_cov, gate_prob=p.gate_prob, extra_std=p.nn_extra_std
+            )
+        assoc, old_of_new = frontend.compact_labels(assoc, p.min_obs)
+        return assoc, old_of_new, mode
+
+    def solve(
+        self,
+        inputs: SlamInputs,
+        *,
+        init: SolverResult | None = None,
+        rng: np.random.Generator,
+        progress: ProgressFn | None = None,
+    ) -> SolverResult:
+        t_start = time.perf_counter()
+        p = self.params
+        if p.init_from == "init":
+            if init is None:
+                raise SolverError("graph: init_from=init needs an --init result")
+            poses0 = np.asarray(init.poses_xyt, float)
+            if poses0.shape != (inputs.n_poses, 3):
+                raise SolverError(f"graph: init result has poses {poses0.shape}, dataset needs ({inputs.n_poses}, 3)")
+        else:
+            poses0 = odometry_initial_poses(inputs)
+        assoc, old_of_new, mode = self._associate(inputs, init, poses0)
+        L = old_of_new.size
+        lm0 = frontend.landmarks_from_observations(poses0, inputs.observations, assoc, L)
+        if mode == "init" and init is not None and p.init_from == "init":
+            lm0 = np.asarray(init.landmarks_xy, float).reshape(-1, 2)[old_of_new]
+
+        Q = None
+        if p.model == "gtsam":
+            gp = build_gtsam_problem(inputs, assoc, poses0, lm0, p)
+        else:
+            R0, S0, Q0 = default_paper_weights(inputs)
+            R = R0 if p.paper_R is None else np.asarray(p.paper_R, float)
+            S = S0 if p.paper_S is None else np.asarray(p.paper_S, float)
+            Q = Q0 if p.paper_Q is None else np.asarray(p.paper_Q, float)
+            if R.shape != (3, 3) or S.shape != (3, 3) or Q.shape != (2, 2):
+                raise SolverError("graph: paper_R and paper_S must be 3x3, paper_Q 2x2")
+            gp = build_paper_problem(inputs, assoc, R, S, Q, poses0, lm0)
+
+        lm_trace: list[np.ndarray] = []
+        change: list[float] = []
+
+        def on_iter(k, x, cost):
+            lm = gp.unpack(x)[1].copy()
+            change.append(0.0 if not lm_trace else float(np.mean(np.linalg.norm(lm - lm_trace[-1], axis=1)))
+                          if L else 0.0)
+            lm_trace.append(lm)
+            if progress is not None:
+                progress(min(k, p.max_iterations), p.max_iterations)
+
+        nparams = nls.NlsParams(
+            method=p.method,
+            max_iterations=p.max_iterations,
+            rel_cost_tol=p.rel_cost_tol,
+            step_tol=p.step_tol,
+            robust=p.robust,
+            huber_k=p.huber_k,
+        )
+        res = nls.solve(gp.problem, gp.x0, nparams, callback=on_iter)
+        poses, lms = gp.unpack(res.x)
+        pose_cov = landmark_cov = None
+        extra: dict = {"association": mode, "n_landmarks": int(L), "iterations": int(res.iterations),
+                       "final_cost": float(res.cost), "model": p.model}
+        if p.covariance and res.status != Status.FAILED:
+            factor = nls.factorize_information(res.information)
+            cov = nls.marginal_covariances(res.information, gp.pose_cols(), factor=factor)
+            if p.model == "paper":
+                cov[0] = 0.0  # x_0 is fixed
+            pose_cov = cov
+            if L:
+                landmark_cov = nls.marginal_covariances(res.information, gp.landmark_cols(), factor=factor)
+                if p.model == "paper" and not np.any(Q):
+                    landmark_cov = None  # landmarks were held fixed
+            else:
+                landmark_cov = np.zeros((0, 2, 2))
+        if progress is not None:
+            progress(p.max_iterations, p.max_iterations)
+        trace = IterationTrace.from_lists(res.cost_trace, change, res.time_trace, lm_trace)
+        return self.make_result(
+            status=res.status,
+            poses_xyt=poses.copy(),
+            landmarks_xy=lms.copy(),
+            assoc=assoc,
+            t_start=t_start,
+            message=res.message,
+            pose_cov=pose_cov,
+            landmark_cov=landmark_cov,
+            trace=trace,
+            extra=extra,
+        )

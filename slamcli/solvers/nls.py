@@ -1,0 +1,467 @@
+"""A small sparse nonlinear least-squares engine (Gauss-Newton / Levenberg-Marquardt) for factor graphs.
+
+The problem is a set of :class:`FactorBlock` s. A block holds ``F`` factors of one type; each factor has a
+residual of size ``k`` and touches ``n`` columns of the flat state vector ``x (D,)``. A block evaluates all
+of its factors at once (vectorised: ``r (F, k)``, ``J (F, k, n)``), and is whitened by a square-root
+information ``L`` with ``LᵀL = Λ`` (``Λ = Σ⁻¹`` for a Gaussian noise model)::
+
+    cost(x) = Σ_blocks Σ_f ρ(‖L r_f(x)‖)          ρ(s) = ½ s²  (or Huber, see below)
+
+which is exactly GTSAM's ``NonlinearFactorGraph.error`` for Gaussian (and robust) noise models.
+
+Normal equations (Gauss-Newton approximation of the Hessian; IRLS weights ``w_f`` for robust kernels)::
+
+    H = Σ_f w_f J̃_fᵀ J̃_f ,   g = Σ_f w_f J̃_fᵀ r̃_f ,   J̃ = L J,  r̃ = L r
+    (H + λ D) h = −g                                      (GN: λ = 0; LM: D = diag(H) or I)
+
+``H`` is assembled as a ``scipy.sparse.csc_matrix`` whose structure (the COO → CSC scatter map) is computed
+once per problem; every iteration is one vectorised evaluation per block and a ``np.bincount`` scatter — no
+Python loop over factors. Linear systems are solved with SuperLU (``scipy.sparse.linalg.splu``) in
+symmetric mode with a minimum-degree ordering of ``H`` (Cholesky-like fill).
+
+LM follows Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems* (2004), §3.2:
+gain ratio ``ϱ = (F(x) − F(x+h)) / (L(0) − L(h))`` with ``L(0) − L(h) = ½ hᵀ(λ D h − g)``; on success
+``λ ← λ · max(1/3, 1 − (2ϱ − 1)³), ν ← 2``; on failure ``λ ← λ ν, ν ← 2ν``; ``λ₀ = τ · max diag(H)`` for
+``D = I`` and ``λ₀ = τ`` for Marquardt's ``D = diag(H)``.
+
+Huber kernel (IRLS, per factor, on the whitened norm ``s = ‖r̃_f‖``, as GTSAM's ``mEstimator.Huber``)::
+
+    ρ(s) = ½ s²           if s ≤ k          w(s) = 1
+           k s − ½ k²     otherwise                k / s
+
+Marginal covariances (Laplace approximation at the optimum, see ``EVALUATION-METHOD.md`` §A2) are blocks of
+``H⁻¹`` obtained by solving ``H X = E`` only for the unit columns ``E`` of the requested variables, in
+batches, with one sparse factorisation (:func:`marginal_covariances`) — never a dense inverse.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Literal
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from slamcli.models.angles import wrap_angle
+from slamcli.types import Status
+
+EvaluateFn = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# problem description
+# ----------------------------------------------------------------------------------------------------------
+@dataclass
+class FactorBlock:
+    """``F`` factors of one type.
+
+    Attributes
+    ----------
+    name : str
+        Label used in cost breakdowns (``"odometry"``, ``"bearing_range"``, ...).
+    cols : ndarray (F, n) int64
+        State-vector column of each Jacobian column of each factor.
+    evaluate : callable ``x (D,) -> (r (F, k), J (F, k, n))``
+        Unwhitened residuals and their Jacobians w.r.t. the ``n`` columns in ``cols``.
+    sqrt_info : ndarray (k, k) or (F, k, k)
+        Whitening ``L`` with ``LᵀL = Λ`` (information of the residual).
+    robust : bool
+        Whether the problem's robust kernel (if any) applies to this block (observations: yes; priors and
+        odometry: usually no).
+    """
+
+    name: str
+    cols: np.ndarray
+    evaluate: EvaluateFn
+    sqrt_info: np.ndarray
+    robust: bool = False
+
+    @property
+    def n_factors(self) -> int:
+        return int(self.cols.shape[0])
+
+
+@dataclass
+class NlsProblem:
+    """A factor graph over a flat state vector ``x (D,)``.
+
+    Attributes
+    ----------
+    n_vars : int
+        ``D``, the state dimension.
+    blocks : list[FactorBlock]
+    angle_cols : ndarray (A,) int64
+        Columns holding headings; they are wrapped to ``[-pi, pi)`` after every update.
+    fixed_cols : ndarray (C,) int64
+        Columns held constant (their rows/columns of ``H`` become identity, their gradient zero, so every
+        step leaves them unchanged). Their "marginal covariance" is meaningless (identity).
+    retract : callable ``(x (D,), h (D,)) -> x (D,)`` or None
+        Manifold update; default ``x + h`` followed by wrapping ``angle_cols``.
+    """
+
+    n_vars: int
+    blocks: list[FactorBlock]
+    angle_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    fixed_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    retract: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+
+    def apply_step(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+        if self.retract is not None:
+            return self.retract(x, h)
+        out = x + h
+        if self.angle_cols.size:
+            out[self.angle_cols] = wrap_angle(out[self.angle_cols])
+        return out
+
+
+@dataclass(frozen=True)
+class NlsParams:
+    """Optimiser settings.
+
+    Attributes
+    ----------
+    method : "lm" | "gn"
+        Levenberg-Marquardt (default) or Gauss-Newton (with step halving when the cost rises).
+    max_iterations : int
+        Budget of linear solves (LM counts rejected steps too).
+    rel_cost_tol : float
+        Converged when an accepted step lowers the cost by less than ``rel_cost_tol · cost``.
+    abs_cost_tol : float
+        Converged when the cost is below this value.
+    step_tol : float
+        Converged when ``‖h‖ ≤ step_tol · (‖x‖ + step_tol)``.
+    lambda_init : float
+        ``τ``: ``λ₀ = τ`` with Marquardt scaling, ``λ₀ = τ · max diag(H)`` with ``D = I``.
+    damping : "marquardt" | "levenberg"
+        ``D = diag(H)`` (scale invariant) or ``D = I``.
+    robust : "none" | "huber"
+        Kernel applied to blocks with ``robust=True``.
+    huber_k : float
+        Huber threshold on the whitened residual norm.
+    """
+
+    method: Literal["lm", "gn"] = "lm"
+    max_iterations: int = 100
+    rel_cost_tol: float = 1e-12
+    abs_cost_tol: float = 1e-20
+    step_tol: float = 1e-12
+    lambda_init: float = 1e-5
+    damping: Literal["marquardt", "levenberg"] = "marquardt"
+    robust: Literal["none", "huber"] = "none"
+    huber_k: float = 1.345
+
+
+@dataclass(frozen=True)
+class NlsResult:
+    """Outcome of :func:`solve`.
+
+    Attributes
+    ----------
+    x : ndarray (D,)             the estimate.
+    cost : float                 final cost (½ Σ ρ).
+    status : Status              CONVERGED, MAX_ITERATIONS or FAILED.
+    message : str
+    iterations : int             linear solves performed.
+    cost_trace : ndarray (K+1,)  cost at the start and after every accepted step.
+    time_trace : ndarray (K+1,)  wall time of each accepted step (0 for the start), s.
+    information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` — for :func:`marginal_covariances`.
+    """
+
+    x: np.ndarray
+    cost: float
+    status: Status
+    message: str
+    iterations: int
+    cost_trace: np.ndarray
+    time_trace: np.ndarray
+    information: sp.csc_matrix
+
+
+# ----------------------------------------------------------------------------------------------------------
+# assembly
+# ----------------------------------------------------------------------------------------------------------
+class _Assembler:
+    """Sparse structure of ``H`` computed once; every call scatters new values with ``np.bincount``."""
+
+    def __init__(self, problem: NlsProblem) -> None:
+        D = problem.n_vars
+        self.problem = problem
+        rows, cols = [], []
+        for b in problem.blocks:
+            c = np.asarray(b.cols, np.int64)
+            n = c.shape[1]
+            rows.append(np.broadcast_to(c[:, :, None], (c.shape[0], n, n)).ravel())
+            cols.append(np.broadcast_to(c[:, None, :], (c.shape[0], n, n)).ravel())
+        diag = np.arange(D, dtype=np.int64)  # every variable has a diagonal slot (damping, empty rows)
+        rows.append(diag)
+        cols.append(diag)
+        r = np.concatenate(rows)
+        c = np.concatenate(cols)
+        key = c * D + r  # column-major order → CSC
+        ukey, inv = np.unique(key, return_inverse=True)
+        self.scatter = inv.astype(np.int64)
+        self.nnz = ukey.size
+        self.indices = (ukey % D).astype(np.int32)
+        ucol = ukey // D
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(ucol, minlength=D))]).astype(np.int32)
+        self.diag_pos = self.scatter[-D:]
+        self.D = D
+        self.cols_flat = [np.asarray(b.cols, np.int64).ravel() for b in problem.blocks]
+        fixed = np.asarray(problem.fixed_cols, np.int64)
+        self.fixed = fixed
+        if fixed.size:
+            is_fixed = np.zeros(D, bool)
+            is_fixed[fixed] = True
+            self.fixed_mask = is_fixed[self.indices] | np.repeat(is_fixed, np.diff(self.indptr))
+            self.fixed_diag = self.diag_pos[fixed]
+
+    def matrix(self, data: np.ndarray) -> sp.csc_matrix:
+        return sp.csc_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.D, self.D))
+
+    def cost(self, x: np.ndarray, params: NlsParams) -> float:
+        total = 0.0
+        for b in self.problem.blocks:
+            r, _ = b.evaluate(x)
+            total += float(np.sum(_rho(_whiten(b.sqrt_info, r), b.robust, params)[0]))
+        return total
+
+    def linearize(self, x: np.ndarray, params: NlsParams):
+        """Cost, ``H`` data (nnz,) and gradient ``g (D,)`` at ``x``."""
+        vals = []
+        g = np.zeros(self.D)
+        total = 0.0
+        for b, cflat in zip(self.problem.blocks, self.cols_flat):
+            r, J = b.evaluate(x)
+            rw = _whiten(b.sqrt_info, r)  # (F, k)
+            Jw = np.matmul(b.sqrt_info, J)  # (F, k, n)
+            rho, w = _rho(rw, b.robust, params)
+            total += float(np.sum(rho))
+            Jt = np.swapaxes(Jw, 1, 2)
+            if w is not None:
+                Jt = Jt * w[:, None, None]
+            vals.append(np.matmul(Jt, Jw).ravel())
+            g += np.bincount(cflat, weights=np.einsum("fnk,fk->fn", Jt, rw).ravel(), minlength=self.D)
+        vals.append(np.zeros(self.D))
+        data = np.bincount(self.scatter, weights=np.concatenate(vals), minlength=self.nnz)
+        if self.fixed.size:
+            data[self.fixed_mask] = 0.0
+            data[self.fixed_diag] = 1.0
+            g[self.fixed] = 0.0
+        return total, data, g
+
+
+def _whiten(L: np.ndarray, r: np.ndarray) -> np.ndarray:
+    if L.ndim == 2:
+        return r @ L.T
+    return np.einsum("fij,fj->fi", L, r)
+
+
+def _rho(rw: np.ndarray, robust: bool, params: NlsParams):
+    """Per-factor cost ``ρ (F,)`` and IRLS weight ``w (F,)`` (None = all ones)."""
+    s2 = np.einsum("fk,fk->f", rw, rw)
+    if not robust or params.robust == "none":
+        return 0.5 * s2, None
+    k = params.huber_k
+    s = np.sqrt(s2)
+    big = s > k
+    rho = np.where(big, k * s - 0.5 * k * k, 0.5 * s2)
+    w = np.where(big, k / np.where(big, s, 1.0), 1.0)
+    return rho, w
+
+
+def _factorize(H: sp.csc_matrix):
+    """Sparse LU of a symmetric positive (semi-)definite matrix, Cholesky-like: symmetric minimum-degree
+    ordering and no pivoting off the diagonal."""
+    return spla.splu(
+        H,
+        permc_spec="MMD_AT_PLUS_A",
+        diag_pivot_thresh=0.0,
+        options={"SymmetricMode": True},
+    )
+
+
+def _solve(H: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray | None:
+    try:
+        h = _factorize(H).solve(rhs)
+    except RuntimeError:  # exactly singular
+        return None
+    if not np.all(np.isfinite(h)):
+        return None
+    return h
+
+
+# ----------------------------------------------------------------------------------------------------------
+# optimiser
+# ----------------------------------------------------------------------------------------------------------
+def evaluate_cost(problem: NlsProblem, x: np.ndarray, params: NlsParams | None = None) -> float:
+    """``½ Σ ρ(‖L r‖)`` at ``x``."""
+    return _Assembler(problem).cost(np.asarray(x, float), params or NlsParams())
+
+
+def residual_vector(problem: NlsProblem, x: np.ndarray) -> np.ndarray:
+    """Stacked whitened residuals ``(Σ F k,)`` at ``x`` (``cost = ½‖·‖²`` without robust kernel)."""
+    return np.concatenate([_whiten(b.sqrt_info, b.evaluate(x)[0]).ravel() for b in problem.blocks])
+
+
+def jacobian_matrix(problem: NlsProblem, x: np.ndarray) -> sp.csr_matrix:
+    """Whitened sparse Jacobian ``(Σ F k, D)`` at ``x``."""
+    rows, cols, vals = [], [], []
+    off = 0
+    for b in problem.blocks:
+        r, J = b.evaluate(x)
+        F, k = r.shape
+        n = b.cols.shape[1]
+        Jw = np.matmul(b.sqrt_info, J)
+        rows.append((off + np.arange(F * k).reshape(F, k, 1) + np.zeros((1, 1, n), np.int64)).ravel())
+        cols.append(np.broadcast_to(np.asarray(b.cols)[:, None, :], (F, k, n)).ravel())
+        vals.append(Jw.ravel())
+        off += F * k
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(off, problem.n_vars)
+    )
+
+
+def solve(
+    problem: NlsProblem,
+    x0: np.ndarray,
+    params: NlsParams | None = None,
+    callback: Callable[[int, np.ndarray, float], None] | None = None,
+) -> NlsResult:
+    """Minimise the problem's cost from ``x0 (D,)``.
+
+    ``callback(k, x, cost)`` is called with the start (k = 0) and after every accepted step.
+    """
+    params = params or NlsParams()
+    asm = _Assembler(problem)
+    x = np.array(x0, dtype=float, copy=True)
+    if x.shape != (problem.n_vars,):
+        raise ValueError(f"x0 has shape {x.shape}, expected ({problem.n_vars},)")
+    cost, data, g = asm.linearize(x, params)
+    if not np.isfinite(cost):
+        return NlsResult(x, cost, Status.FAILED, "non-finite initial cost", 0, np.array([cost]),
+                         np.zeros(1), asm.matrix(data))
+    costs, times = [cost], [0.0]
+    if callback is not None:
+        callback(0, x, cost)
+    # λ₀: τ for Marquardt scaling (D = diag H is already scaled); τ · max diag(H) for D = I (Nielsen)
+    lam = params.lambda_init
+    if params.damping == "levenberg":
+        lam *= float(np.max(data[asm.diag_pos]))
+    nu = 2.0
+    status, message = Status.MAX_ITERATIONS, f"stopped after {params.max_iterations} iterations"
+    it = 0
+    t_last = time.perf_counter()
+    while it < params.max_iterations:
+        if cost <= params.abs_cost_tol:
+            status, message = Status.CONVERGED, "cost below abs_cost_tol"
+            break
+        it += 1
+        diag = data[asm.diag_pos]
+        if params.method == "lm":
+            Dvec = np.maximum(diag, 1e-12) if params.damping == "marquardt" else np.ones(asm.D)
+            damped = data.copy()
+            damped[asm.diag_pos] += lam * Dvec
+            h = _solve(asm.matrix(damped), -g)
+            if h is None:
+                lam *= nu
+                nu *= 2.0
+                continue
+        else:
+            h = _solve(asm.matrix(data), -g)
+            if h is None:
+                status, message = Status.FAILED, "singular normal equations (is every variable constrained?)"
+                break
+        if np.linalg.norm(h) <= params.step_tol * (np.linalg.norm(x) + params.step_tol):
+            status, message = Status.CONVERGED, "step norm below step_tol"
+            break
+        if params.method == "lm":
+            x_new = problem.apply_step(x, h)
+            new_cost = asm.cost(x_new, params)
+            pred = 0.5 * float(h @ (lam * Dvec * h - g))
+            rho = (cost - new_cost) / pred if pred > 0 else -1.0
+            if not (np.isfinite(new_cost) and rho > 0):
+                lam *= nu
+                nu *= 2.0
+                continue
+            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+        else:
+            x_new = problem.apply_step(x, h)
+            new_cost = asm.cost(x_new, params)
+            alpha = 1.0
+            while not (new_cost <= cost) and alpha > 1e-3:  # safeguard: halve the GN step
+                alpha *= 0.5
+                x_new = problem.apply_step(x, alpha * h)
+                new_cost = asm.cost(x_new, params)
+            if not new_cost <= cost:
+                status, message = Status.CONVERGED, "no decrease along the Gauss-Newton step"
+                break
+        decrease = cost - new_cost
+        x = x_new
+        cost, data, g = asm.linearize(x, params)
+        now = time.perf_counter()
+        costs.append(cost)
+        times.append(now - t_last)
+        t_last = now
+        if callback is not None:
+            callback(len(costs) - 1, x, cost)
+        if decrease <= params.rel_cost_tol * max(cost + decrease, 0.0):
+            status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
+            break
+    return NlsResult(
+        x=x,
+        cost=cost,
+        status=status,
+        message=message,
+        iterations=it,
+        cost_trace=np.asarray(costs),
+        time_trace=np.asarray(times),
+        information=asm.matrix(data),
+    )
+
+
+# ----------------------------------------------------------------------------------------------------------
+# marginals
+# ----------------------------------------------------------------------------------------------------------
+def factorize_information(information: sp.spmatrix):
+    """Sparse factorisation of ``H`` to share between several :func:`marginal_covariances` calls."""
+    return _factorize(sp.csc_matrix(information))
+
+
+def marginal_covariances(
+    information: sp.spmatrix, index_blocks: np.ndarray, batch_size: int = 512, factor=None
+) -> np.ndarray:
+    """Marginal covariance blocks ``(H⁻¹)[idx, idx]`` for each row of ``index_blocks (B, k)``.
+
+    One sparse factorisation of ``H``; the unit columns of all requested indices are solved in batches of
+    ``batch_size`` and only the ``k × k`` blocks are kept. Cost ``O(B k · nnz(factor))``, memory
+    ``O(D · batch_size)``. Pass ``factor`` (from :func:`factorize_information`) to reuse a factorisation.
+
+    Returns
+    -------
+    ndarray (B, k, k)
+    """
+    H = sp.csc_matrix(information)
+    idx = np.asarray(index_blocks, np.int64)
+    B, k = idx.shape
+    out = np.empty((B, k, k))
+    if B == 0:
+        return out
+    lu = _factorize(H) if factor is None else factor
+    D = H.shape[0]
+    flat = idx.ravel()
+    per = max(1, batch_size // k)  # blocks per batch
+    for start in range(0, B, per):
+        stop = min(B, start + per)
+        cols = flat[start * k : stop * k]
+        E = np.zeros((D, cols.size))
+        E[cols, np.arange(cols.size)] = 1.0
+        X = lu.solve(E)  # (D, nb·k): columns of H⁻¹
+        nb = stop - start
+        rows = idx[start:stop]  # (nb, k)
+        Xb = X.T.reshape(nb, k, D)  # Xb[b, j, :] = column idx[b, j] of H⁻¹
+        out[start:stop] = np.take_along_axis(Xb, np.broadcast_to(rows[:, None, :], (nb, k, k)), axis=2)
+    # symmetrise round-off
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
