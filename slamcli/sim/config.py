@@ -1,0 +1,385 @@
+"""Simulator configuration: frozen nested dataclasses with documented defaults and units.
+
+A :class:`ScenarioConfig` fully determines a simulated run together with the integer ``seed``. Named scenarios
+(``slamcli.sim.scenarios``) are factories returning a ``ScenarioConfig``; users change any leaf with dotted
+overrides (``sensor.max_range=10``, ``robot.actuation_std=0.05,0.02``, ``n_steps=2000``), validated by
+:func:`apply_overrides` with one-line :class:`~slamcli.errors.ConfigError` messages.
+
+Units: metres, seconds, radians — except ``sensor.fov_deg`` (degrees, as on a data sheet). Every standard
+deviation ``*_std`` is a 1-σ value of zero-mean Gaussian noise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from slamcli.errors import ConfigError
+from slamcli.params import _coerce
+
+
+def _check(cond: bool, message: str) -> None:
+    if not cond:
+        raise ConfigError(message)
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Landmark layout (drawn from the *world* random stream).
+
+    Attributes
+    ----------
+    layout : "rows" | "random" | "octagon" | "none"
+        ``rows``: ``n_rows`` rows at ``y = row_y0 + k·row_spacing``, landmarks every ``col_spacing`` m from
+        ``x_min`` to ``x_max`` (paper 000, Fig. 4/5 setting). ``random``: ``n_landmarks`` uniform in the box
+        ``[x_min, x_max] × [y_min, y_max]``, at least ``min_separation`` apart and ``path_clearance`` from the
+        waypoint polyline. ``octagon``: 8 points on a regular octagon of circumradius ``octagon_radius``
+        centred at the origin plus its centre (paper 000 §6). ``none``: only ``extra_landmarks``.
+    x_min, x_max, y_min, y_max : float   box of the layout, m.
+    n_rows : int                         rows of the ``rows`` layout.
+    row_y0, row_spacing : float          y of the first row and spacing between rows, m.
+    col_spacing : float                  spacing along a row, m.
+    n_landmarks : int                    count for the ``random`` layout.
+    min_separation : float               minimum landmark-landmark distance (``random``), m.
+    path_clearance : float               minimum landmark-path distance (``random``), m.
+    jitter : float                       σ of a Gaussian perturbation added to every generated position, m.
+    octagon_radius : float               circumradius of the octagon, m (paper 000 §6: 7.12 m).
+    extra_landmarks : tuple of float     additional fixed points ``x1,y1,x2,y2,...`` (m), appended last.
+    landmark_radius : float              radius of the disc a laser beam hits (cone, pole, person), m.
+    """
+
+    layout: Literal["rows", "random", "octagon", "none"] = "rows"
+    x_min: float = 5.0
+    x_max: float = 45.0
+    y_min: float = 5.0
+    y_max: float = 35.0
+    n_rows: int = 7
+    row_y0: float = 5.0
+    row_spacing: float = 5.0
+    col_spacing: float = 5.0
+    n_landmarks: int = 12
+    min_separation: float = 2.0
+    path_clearance: float = 1.0
+    jitter: float = 0.0
+    octagon_radius: float = 7.12
+    extra_landmarks: tuple[float, ...] = ()
+    landmark_radius: float = 0.15
+
+    def __post_init__(self) -> None:
+        _check(self.x_max > self.x_min and self.y_max > self.y_min, "world: need x_min < x_max and y_min < y_max")
+        _check(self.n_rows >= 0 and self.n_landmarks >= 0, "world: n_rows and n_landmarks must be >= 0")
+        _check(self.row_spacing > 0 and self.col_spacing > 0, "world: row_spacing and col_spacing must be > 0")
+        _check(self.jitter >= 0 and self.min_separation >= 0 and self.path_clearance >= 0,
+               "world: jitter, min_separation and path_clearance must be >= 0")
+        _check(self.octagon_radius > 0, "world.octagon_radius must be > 0")
+        _check(len(self.extra_landmarks) % 2 == 0, "world.extra_landmarks must be x,y pairs (even length)")
+        _check(self.landmark_radius > 0, "world.landmark_radius must be > 0")
+
+
+@dataclass(frozen=True)
+class PathConfig:
+    """Waypoints the robot's tracking controller follows.
+
+    Attributes
+    ----------
+    kind : "rect" | "serpentine" | "ellipse" | "explicit"
+        ``rect``: the corners of ``[x_min, x_max] × [y_min, y_max]`` counter-clockwise from ``(x_min, y_min)``.
+        ``serpentine``: lanes at the y values ``lanes`` driven alternately left→right and right→left between
+        ``x_min`` and ``x_max`` (a lawn-mower path among rows of landmarks). ``ellipse``: ``n_points`` points
+        on the ellipse inscribed in the box, counter-clockwise. ``explicit``: ``waypoints``.
+    x_min, x_max, y_min, y_max : float   box of the path, m.
+    lanes : tuple of float               lane y values for ``serpentine``, m.
+    n_points : int                       points on the ellipse.
+    spacing : float                      straight edges are subdivided into waypoints about this far apart
+                                         (m; 0 = corners only); with ``jitter`` this makes the path irregular.
+    jitter : float                       σ of a Gaussian perturbation of every waypoint (world stream), m.
+    waypoints : tuple of float           ``x1,y1,x2,y2,...`` for ``explicit``, m.
+    cyclic : bool                        start over at the first waypoint after the last one (else stop).
+    """
+
+    kind: Literal["rect", "serpentine", "ellipse", "explicit"] = "rect"
+    x_min: float = 0.0
+    x_max: float = 10.0
+    y_min: float = 0.0
+    y_max: float = 10.0
+    lanes: tuple[float, ...] = ()
+    n_points: int = 16
+    spacing: float = 0.0
+    jitter: float = 0.0
+    waypoints: tuple[float, ...] = ()
+    cyclic: bool = True
+
+    def __post_init__(self) -> None:
+        _check(self.x_max > self.x_min and self.y_max > self.y_min, "path: need x_min < x_max and y_min < y_max")
+        _check(self.spacing >= 0 and self.jitter >= 0, "path: spacing and jitter must be >= 0")
+        _check(self.n_points >= 3, "path.n_points must be >= 3")
+        _check(len(self.waypoints) % 2 == 0, "path.waypoints must be x,y pairs (even length)")
+        if self.kind == "explicit":
+            _check(len(self.waypoints) >= 4, "path.waypoints: kind=explicit needs at least 2 points")
+        if self.kind == "serpentine":
+            _check(len(self.lanes) >= 1, "path.lanes: kind=serpentine needs at least one lane")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Differential-drive robot (paper 000 §4) and its waypoint-tracking controller.
+
+    The controller computes the *commanded* control ``u_t = [v_t, ω_t]`` from the true pose::
+
+        e_t = wrap(atan2(w_y − y_t, w_x − x_t) − θ_t),   ω_t = clip(k_heading · e_t, ±w_max),
+        v_t = v_max · max(0, cos e_t)
+
+    and switches to the next waypoint within ``waypoint_tol``. The robot executes
+    ``u_t + n_t, n_t ~ N(0, diag(actuation_std²))`` through ``g(x, u)`` (``models.motion.ddmr_step``).
+
+    Attributes
+    ----------
+    start : tuple of float      ``x, y, θ`` of the start pose (m, m, rad); empty = first waypoint, facing the
+                                second one.
+    v_max : float               cruise speed, m/s.
+    w_max : float               maximum turn rate, rad/s.
+    k_heading : float           heading gain, 1/s.
+    waypoint_tol : float        waypoint switching radius, m.
+    actuation_std : (σ_v, σ_ω)  actuation noise on the commanded controls (m/s, rad/s).
+    """
+
+    start: tuple[float, ...] = ()
+    v_max: float = 0.5
+    w_max: float = 0.8
+    k_heading: float = 1.5
+    waypoint_tol: float = 0.5
+    actuation_std: tuple[float, float] = (0.02, 0.02)
+
+    def __post_init__(self) -> None:
+        _check(len(self.start) in (0, 3), "robot.start must be empty or x,y,theta")
+        _check(self.v_max > 0 and self.w_max > 0 and self.k_heading > 0, "robot: v_max, w_max, k_heading must be > 0")
+        _check(self.waypoint_tol > 0, "robot.waypoint_tol must be > 0")
+        _check(all(s >= 0 for s in self.actuation_std), "robot.actuation_std must be >= 0")
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    """Wheel-encoder odometry: noisy, optionally biased body-frame increments of the true motion (eq. 16).
+
+    ``d̃_t = [(1+scale_bias) d_x, (1+scale_bias) d_y, (1+turn_bias) d_θ] + n_t,  n_t ~ N(0, diag(std²))``,
+    chained from the true start pose.
+
+    Attributes
+    ----------
+    std : (σ_x, σ_y, σ_θ)   per-step noise of the increment (m, m, rad).
+    scale_bias : float      relative wheel-distance scale error (0.01 = odometry reads 1 % long).
+    turn_bias : float       relative heading-increment scale error.
+    """
+
+    std: tuple[float, float, float] = (0.002, 0.002, 0.002)
+    scale_bias: float = 0.0
+    turn_bias: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check(all(s >= 0 for s in self.std), "odometry.std must be >= 0")
+        _check(self.scale_bias > -1 and self.turn_bias > -1, "odometry: biases must be > -1")
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Range-bearing sensor (sensor index 0).
+
+    ``kind = "point"``: every landmark inside ``[min_range, max_range]`` and the field of view gives one
+    observation ``[r + n_r, wrap(b + n_b)]`` of its centre with probability ``detection_prob``.
+
+    ``kind = "laser"``: ``n_beams`` beams evenly over ``fov_deg`` (181 over 180° like the SICK LMS of paper
+    000 §5); each beam returns the nearest intersection with the landmark discs (``world.landmark_radius``),
+    so a landmark gives several returns on adjacent beams. A beam misses with probability
+    ``1 − detection_prob``. Range noise ``range_std``; the bearing is the beam angle plus ``bearing_std`` noise.
+    Preprocessing as in paper 000 §5: ``drop_max_range`` removes beams without a hit (otherwise they are
+    reported at ``max_range`` with truth id −1); ``drop_isolated`` removes a return unless a neighbouring beam
+    has a return within ``isolation_gap`` m in range.
+
+    Attributes
+    ----------
+    kind : "point" | "laser"
+    max_range : float        m.
+    min_range : float        m.
+    fov_deg : float          field of view centred straight ahead, degrees (360 = all round).
+    range_std : float        m.
+    bearing_std : float      rad.
+    detection_prob : float   probability that a visible landmark (point) / a hitting beam (laser) is reported.
+    report_ids : bool        the sensor reports the landmark identity (``Observations.reported_id``).
+    period_steps : int       scan every this many poses (pose 0 is scanned).
+    n_beams : int            laser beams.
+    drop_max_range : bool    laser preprocessing.
+    drop_isolated : bool     laser preprocessing.
+    isolation_gap : float    laser: neighbouring-return range difference still called "similar", m.
+    """
+
+    kind: Literal["point", "laser"] = "point"
+    max_range: float = 8.0
+    min_range: float = 0.1
+    fov_deg: float = 180.0
+    range_std: float = 0.05
+    bearing_std: float = 0.01
+    detection_prob: float = 1.0
+    report_ids: bool = False
+    period_steps: int = 1
+    n_beams: int = 181
+    drop_max_range: bool = True
+    drop_isolated: bool = True
+    isolation_gap: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self.max_range > 0 and math.isfinite(self.max_range), "sensor.max_range must be a finite number > 0")
+        _check(0 <= self.min_range < self.max_range, "sensor.min_range must be in [0, max_range)")
+        _check(0 < self.fov_deg <= 360, "sensor.fov_deg must be in (0, 360]")
+        _check(self.range_std >= 0 and self.bearing_std >= 0, "sensor: range_std and bearing_std must be >= 0")
+        _check(0 <= self.detection_prob <= 1, "sensor.detection_prob must be in [0, 1]")
+        _check(self.period_steps >= 1, "sensor.period_steps must be >= 1")
+        _check(self.n_beams >= 2, "sensor.n_beams must be >= 2")
+        _check(self.isolation_gap >= 0, "sensor.isolation_gap must be >= 0")
+
+    @property
+    def fov_rad(self) -> float:
+        return math.radians(self.fov_deg)
+
+
+@dataclass(frozen=True)
+class ClutterConfig:
+    """False returns (truth id −1), drawn from the *clutter* stream.
+
+    Attributes
+    ----------
+    rate : float   mean number of false returns per scan (Poisson), uniform in range ``[min_range, max_range]``
+                   and bearing over the field of view. For the laser they replace the reading of a random beam
+                   when nearer than its true return, so ``drop_isolated`` removes most of them (paper 000 §5).
+    """
+
+    rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check(self.rate >= 0, "clutter.rate must be >= 0")
+
+
+@dataclass(frozen=True)
+class GpsConfig:
+    """Optional position fixes ``p_t + n, n ~ N(0, std² I)`` every ``period_steps`` poses (off by default).
+
+    Attributes
+    ----------
+    enabled : bool
+    period_steps : int
+    std : float      m.
+    """
+
+    enabled: bool = False
+    period_steps: int = 10
+    std: float = 1.0
+
+    def __post_init__(self) -> None:
+        _check(self.period_steps >= 1, "gps.period_steps must be >= 1")
+        _check(self.std >= 0, "gps.std must be >= 0")
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """Everything that defines a simulated run (with the seed).
+
+    Attributes
+    ----------
+    name : str          scenario name (for metadata).
+    dt : float          sampling period Δt, s (paper 000: 0.1 s).
+    n_steps : int       number of controls T; the run has T+1 poses and lasts ``T·dt`` s.
+    world, path, robot, odometry, sensor, clutter, gps : sub-configurations.
+    """
+
+    name: str = "custom"
+    dt: float = 0.1
+    n_steps: int = 500
+    world: WorldConfig = field(default_factory=WorldConfig)
+    path: PathConfig = field(default_factory=PathConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    clutter: ClutterConfig = field(default_factory=ClutterConfig)
+    gps: GpsConfig = field(default_factory=GpsConfig)
+
+    def __post_init__(self) -> None:
+        _check(self.dt > 0 and math.isfinite(self.dt), "dt must be a finite number > 0")
+        _check(self.n_steps >= 1, "n_steps must be >= 1")
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_steps * self.dt
+
+
+_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps")
+
+
+def known_keys(cfg: ScenarioConfig | None = None) -> list[str]:
+    """All dotted override keys, e.g. ``["dt", "n_steps", "world.layout", ...]``."""
+    cfg = cfg or ScenarioConfig()
+    keys = [f.name for f in dataclasses.fields(cfg) if f.name not in _SECTIONS and f.name != "name"]
+    for sec in _SECTIONS:
+        keys += [f"{sec}.{f.name}" for f in dataclasses.fields(getattr(cfg, sec))]
+    return keys
+
+
+def apply_overrides(cfg: ScenarioConfig, overrides: dict[str, Any] | None, *, where: str = "--set") -> ScenarioConfig:
+    """Return ``cfg`` with dotted-key overrides applied (values may be strings, as from the command line).
+
+    Raises
+    ------
+    ConfigError
+        One line: unknown key (listing the known keys), a value of the wrong type, or an invalid value.
+    """
+    if not overrides:
+        return cfg
+    top: dict[str, Any] = {}
+    per_section: dict[str, dict[str, Any]] = {}
+    for key, value in overrides.items():
+        key = str(key).strip()
+        sec, _, leaf = key.rpartition(".")
+        if sec:
+            if sec not in _SECTIONS or leaf not in {f.name for f in dataclasses.fields(getattr(cfg, sec))}:
+                raise ConfigError(f"{where}: unknown key {key!r}; known: {', '.join(known_keys(cfg))}")
+            hints = typing.get_type_hints(type(getattr(cfg, sec)))
+            per_section.setdefault(sec, {})[leaf] = _coerce(value, hints[leaf], f"{where} {key}")
+        else:
+            if leaf not in ("dt", "n_steps"):
+                raise ConfigError(f"{where}: unknown key {key!r}; known: {', '.join(known_keys(cfg))}")
+            hints = typing.get_type_hints(ScenarioConfig)
+            top[leaf] = _coerce(value, hints[leaf], f"{where} {key}")
+    try:
+        changes: dict[str, Any] = dict(top)
+        for sec, vals in per_section.items():
+            changes[sec] = dataclasses.replace(getattr(cfg, sec), **vals)
+        return dataclasses.replace(cfg, **changes)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+
+
+def config_to_dict(cfg: ScenarioConfig) -> dict[str, Any]:
+    """JSON-serialisable nested dict of the resolved configuration (tuples become lists)."""
+
+    def conv(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: conv(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [conv(x) for x in v]
+        return v
+
+    return conv(dataclasses.asdict(cfg))
+
+
+def config_from_dict(d: dict[str, Any]) -> ScenarioConfig:
+    """Inverse of :func:`config_to_dict` (e.g. to re-simulate from a dataset's metadata)."""
+    flat: dict[str, Any] = {}
+    for k, v in d.items():
+        if k in _SECTIONS and isinstance(v, dict):
+            flat.update({f"{k}.{kk}": vv for kk, vv in v.items()})
+        elif k != "name":
+            flat[k] = v
+    return dataclasses.replace(apply_overrides(ScenarioConfig(), flat, where="config"), name=str(d.get("name", "custom")))

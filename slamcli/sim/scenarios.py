@@ -1,0 +1,122 @@
+"""Named scenarios. Each factory returns a :class:`ScenarioConfig`; ``resolve_scenario`` applies overrides.
+
+How they approximate paper 000 (whose simulations used MobileSim with a Pioneer P3-DX and its SICK laser,
+and whose experiment used a Pioneer 3-AT with an outdoor SICK laser):
+
+* ``loop`` — not from the paper: a small, fast world for tests (12 random landmarks in 20 m × 14 m, one
+  rectangular lap plus a bit, 500 steps, point sensor of 8 m range over 180°).
+* ``paper-sim1`` — Simulations 1 (Figs. 4-5): a ≈50 m × 40 m area with 7 rows of 9 landmarks (5 m apart,
+  slightly jittered), an irregular lawn-mower path along three lanes between rows (waypoints every 5 m,
+  jittered by 0.5 m), Δt = 0.1 s, a 181-beam laser over 180° at full range. MobileSim simulates the
+  Pioneer's SICK LMS-200 with ≈30 m range; landmarks are 0.15 m-radius posts, so a post gives several returns
+  on adjacent beams. Odometry noise is small (the paper: "odometry error in MobileSim is almost negligible
+  over short distances"). Max-range and isolated returns are dropped as in the paper; a little clutter
+  (0.2 false returns per scan) stands in for MobileSim's sensing errors.
+* ``paper-sim2`` — Simulation 2 (Fig. 7): ``paper-sim1`` with a 10 m laser.
+* ``octagon`` — the outdoor experiment of §6 (Figs. 8-9): 8 cones on a regular octagon of radius 7.12 m, a cone
+  at its centre and two static people (teleoperator and videographer; positions assumed, the paper gives
+  none), 11 points; the robot circles the octagon on a jittered ≈10.5 m-radius path for 183 s at Δt = 0.1 s
+  (1830 steps) with an outdoor laser (30 m, 181 beams over 180°), noisier skid-steer odometry with a small
+  turn bias, and more clutter (grass, uneven ground).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from slamcli.errors import ConfigError
+from slamcli.sim.config import (
+    ClutterConfig,
+    OdometryConfig,
+    PathConfig,
+    RobotConfig,
+    ScenarioConfig,
+    SensorConfig,
+    WorldConfig,
+    apply_overrides,
+)
+
+
+def _loop() -> ScenarioConfig:
+    return ScenarioConfig(
+        name="loop",
+        dt=0.1,
+        n_steps=500,
+        world=WorldConfig(
+            layout="random", x_min=0.0, x_max=20.0, y_min=0.0, y_max=14.0, n_landmarks=12,
+            min_separation=2.0, path_clearance=1.0,
+        ),
+        path=PathConfig(kind="rect", x_min=3.0, x_max=17.0, y_min=3.0, y_max=11.0, cyclic=True),
+        robot=RobotConfig(v_max=1.0, w_max=1.0, k_heading=2.0, waypoint_tol=0.5, actuation_std=(0.05, 0.02)),
+        odometry=OdometryConfig(std=(0.005, 0.005, 0.002)),
+        sensor=SensorConfig(kind="point", max_range=8.0, min_range=0.1, fov_deg=180.0, range_std=0.05,
+                            bearing_std=0.01, detection_prob=0.95),
+        clutter=ClutterConfig(rate=0.0),
+    )
+
+
+def _paper_sim(max_range: float, name: str) -> ScenarioConfig:
+    return ScenarioConfig(
+        name=name,
+        dt=0.1,
+        n_steps=3250,
+        world=WorldConfig(
+            layout="rows", x_min=5.0, x_max=45.0, n_rows=7, row_y0=5.0, row_spacing=5.0, col_spacing=5.0,
+            jitter=0.3, landmark_radius=0.15,
+        ),
+        path=PathConfig(
+            kind="serpentine", x_min=2.5, x_max=47.5, y_min=0.0, y_max=40.0, lanes=(7.5, 17.5, 27.5),
+            spacing=5.0, jitter=0.5, cyclic=False,
+        ),
+        robot=RobotConfig(v_max=0.5, w_max=0.6, k_heading=1.5, waypoint_tol=0.5, actuation_std=(0.02, 0.02)),
+        odometry=OdometryConfig(std=(0.001, 0.001, 0.0005)),
+        sensor=SensorConfig(kind="laser", max_range=max_range, min_range=0.1, fov_deg=180.0, n_beams=181,
+                            range_std=0.01, bearing_std=0.0, detection_prob=1.0, drop_max_range=True,
+                            drop_isolated=True, isolation_gap=0.5),
+        clutter=ClutterConfig(rate=0.2),
+    )
+
+
+def _octagon() -> ScenarioConfig:
+    return ScenarioConfig(
+        name="octagon",
+        dt=0.1,
+        n_steps=1830,
+        world=WorldConfig(layout="octagon", octagon_radius=7.12, extra_landmarks=(-11.0, 13.0, 9.0, 15.5),
+                          landmark_radius=0.15),
+        path=PathConfig(kind="ellipse", x_min=-10.5, x_max=10.5, y_min=-10.5, y_max=10.5, n_points=16,
+                        jitter=0.4, cyclic=True),
+        robot=RobotConfig(v_max=0.5, w_max=0.6, k_heading=1.5, waypoint_tol=0.5, actuation_std=(0.03, 0.03)),
+        odometry=OdometryConfig(std=(0.003, 0.003, 0.003), turn_bias=0.01),
+        sensor=SensorConfig(kind="laser", max_range=30.0, min_range=0.1, fov_deg=180.0, n_beams=181,
+                            range_std=0.02, bearing_std=0.0, detection_prob=0.98),
+        clutter=ClutterConfig(rate=1.0),
+    )
+
+
+SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
+    "loop": (_loop, "small fast world for tests: 12 random landmarks, rectangular loop, point sensor, 500 steps"),
+    "paper-sim1": (lambda: _paper_sim(30.0, "paper-sim1"),
+                   "paper 000 Sim. 1: 50×40 m, 7 rows of landmarks, irregular path, 30 m 181-beam laser"),
+    "paper-sim2": (lambda: _paper_sim(10.0, "paper-sim2"), "paper 000 Sim. 2: as paper-sim1 with a 10 m laser"),
+    "octagon": (_octagon, "paper 000 §6: 8 cones on a 7.12 m octagon + centre cone + 2 people, 183 s, laser"),
+}
+
+
+def list_scenarios() -> list[tuple[str, str]]:
+    """``[(name, one-line description)]``."""
+    return [(k, v[1]) for k, v in SCENARIOS.items()]
+
+
+def resolve_scenario(name: str, overrides: dict[str, Any] | None = None) -> ScenarioConfig:
+    """The named scenario with dotted-key ``overrides`` applied (e.g. ``{"sensor.max_range": 10}``).
+
+    Raises
+    ------
+    ConfigError
+        Unknown scenario (listing the names) or a bad override.
+    """
+    if name not in SCENARIOS:
+        raise ConfigError(f"--scenario: unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
+    return apply_overrides(SCENARIOS[name][0](), overrides)
