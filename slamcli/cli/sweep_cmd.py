@@ -1,0 +1,139 @@
+"""``slamcli sweep``: expand an experiment file into runs and execute them (resumable, fail-soft, parallel)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from slamcli.cli.app import app, fail, handle_errors, stderr_console, stdout_console
+
+
+@app.command("sweep")
+def sweep_command(
+    experiment: Annotated[Path, typer.Argument(help="Experiment file (TOML), e.g. experiments/compare.toml.")],
+    workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
+    executor: Annotated[str, typer.Option("--executor", help="local (process pool, spawn) or dask.")] = "local",
+    scheduler: Annotated[
+        str | None,
+        typer.Option("--scheduler", help="Existing Dask scheduler (tcp://host:8786); default: a LocalCluster."),
+    ] = None,
+    resume: Annotated[bool, typer.Option("--resume/--no-resume", help="Skip runs completed on disk.")] = True,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="List the runs and what is done; run nothing.")] = False,
+    quick: Annotated[bool, typer.Option("--quick", help="Apply the file's [quick] table (few seeds).")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Results root; runs go to OUT/<experiment>/.")] = Path(
+        "results"
+    ),
+) -> None:
+    """Run every configuration of an experiment: results/<experiment>/<run_id>/ + manifest.csv + results.csv."""
+    with handle_errors():
+        from slamcli.sweep.config import load_experiment, quick_variant
+        from slamcli.sweep.expand import expand
+
+        if executor not in ("local", "dask"):
+            fail(f"--executor: {executor!r} is not one of local, dask")
+        if workers < 1:
+            fail(f"--workers: must be >= 1, got {workers}")
+        cfg = load_experiment(experiment)
+        if quick:
+            cfg = quick_variant(cfg)
+        expansion = expand(cfg)
+        if dry_run:
+            _print_dry_run(expansion, out)
+            return
+        summary = _run(expansion, out, workers, executor, scheduler, resume, quiet)
+        _print_summary(summary)
+        if not summary.ok:
+            raise typer.Exit(1)
+
+
+def _run(expansion, out, workers, executor, scheduler, resume, quiet):
+    from slamcli.sweep.runner import run_sweep
+
+    if quiet:
+        return run_sweep(
+            expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume
+        )
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("[green]{task.fields[done]} done[/] [red]{task.fields[failed]} failed[/] "
+                   "[dim]{task.fields[skipped]} skipped[/]"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=stderr_console(),
+    ) as prog:
+        from rich.markup import escape
+
+        task = prog.add_task(escape(f"sweep {expansion.experiment.name}"), total=len(expansion.runs),
+                             done=0, failed=0, skipped=0)
+        started = {"skipped": None}
+
+        def update(c) -> None:
+            if started["skipped"] is None:
+                # skipped runs are not work: restart the ETA clock from what remains
+                started["skipped"] = c.skipped
+                prog.reset(task, total=c.total - c.skipped, done=0, failed=0, skipped=c.skipped)
+            prog.update(task, completed=c.done + c.failed, done=c.done, failed=c.failed, skipped=c.skipped)
+
+        return run_sweep(
+            expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume,
+            progress=update,
+        )
+
+
+def _print_dry_run(expansion, out) -> None:
+    from rich.table import Table
+
+    from slamcli.sweep.runner import run_status
+
+    exp_dir = Path(out) / expansion.experiment.name
+    table = Table(title=f"{expansion.experiment.name}: {len(expansion.runs)} runs, "
+                        f"{len(expansion.datasets)} datasets → {exp_dir}")
+    for col in ("run_id", "solver", "replicate", "dataset", *expansion.axes, "on disk"):
+        table.add_column(col)
+    n_done = 0
+    for r in expansion.runs:
+        st = run_status(exp_dir, r.run_id)
+        n_done += st == "completed"
+        table.add_row(r.run_id, r.label, str(r.replicate), r.dataset.dataset_id,
+                      *[str(r.point.get(a, "—")) for a in expansion.axes], st)
+    con = stdout_console()
+    con.print(table)
+    con.print(f"{n_done} completed, {len(expansion.runs) - n_done} to run")
+
+
+def _print_summary(summary) -> None:
+    from rich.markup import escape
+    from rich.table import Table
+
+    c = summary.counts
+    con = stderr_console()
+    con.print(
+        f"{summary.experiment}: {c.done} done, {c.failed} failed, {c.skipped} skipped of {c.total} "
+        f"in {summary.wall_time_s:.1f} s → {escape(str(summary.exp_dir))}"
+    )
+    for name, path in summary.tables.items():
+        con.print(f"  {name}: {escape(str(path))}")
+    if summary.failures:
+        t = Table(title=f"{len(summary.failures)} failed runs (traceback in <run_id>/status.json and run.log)")
+        for col in ("run_id", "solver", "replicate", "error"):
+            t.add_column(col)
+        for f in summary.failures[:25]:
+            t.add_row(f["run_id"], f["label"], str(f["replicate"]), escape(str(f.get("error") or "")))
+        con.print(t)
+        if len(summary.failures) > 25:
+            con.print(f"... and {len(summary.failures) - 25} more (see manifest.csv)")

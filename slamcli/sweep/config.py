@@ -1,0 +1,423 @@
+"""Experiment files: TOML (stdlib :mod:`tomllib`) → validated, frozen :class:`ExperimentConfig`.
+
+An experiment file::
+
+    [experiment]
+    name = "ekf-vs-odometry"          # results/<name>/...; letters, digits, '.', '_', '-'
+    description = "..."               # optional
+    root_seed = 0                     # optional, int >= 0 (default 0)
+
+    [scenario]
+    name = "loop"                     # a registered simulator scenario
+    [scenario.parameters]             # dotted keys of the simulator config
+    sensor.max_range = 10.0
+
+    [[solver]]                        # one table per solver configuration
+    method = "ekf"                    # registered solver name (entry point)
+    label = "ekf"                     # optional, unique per file (default: method)
+    seed = 0                          # optional, extra solver stream id (default 0)
+    oracle_association = false        # optional: hand the solver the true association (recorded)
+    [solver.params]                   # optional, validated against the solver's Params dataclass
+    gate_chi2 = 9.21
+
+    [evaluate]                        # optional keyword options for slamcli.api.evaluate.evaluate_files
+    ospa_cutoff = 1.0
+
+    [sweep]                           # optional; without it the experiment is one point
+    replicates = 50                   # int N (= 0..N-1), a list of ints, or "range(a, b[, step])"
+    grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_chi2" = [5.99, 9.21] }
+    zip = { "scenario.noise.range_std" = [0.01, 0.05], "scenario.noise.bearing_std" = [0.01, 0.05] }
+
+    [quick]                           # optional fixed overrides for `reproduce --quick` / `sweep --quick`
+    replicates = 2
+    "scenario.duration" = 30.0
+
+Sweep keys live in three namespaces: ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
+``evaluate.<option>``. ``grid`` is a cartesian product (first key varies slowest); ``zip`` holds equal-length
+lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
+``seed``) are the Monte-Carlo replicate ids that feed the seed derivation of :mod:`slamcli.sweep.expand`.
+
+Every error is one line naming the file and the key (``ConfigError``).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from slamcli.errors import ConfigError
+
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+_RANGE_RE = re.compile(r"^\s*range\(\s*(-?\d+)\s*(?:,\s*(-?\d+)\s*)?(?:,\s*(-?\d+)\s*)?\)\s*$")
+
+TOP_KEYS = ("experiment", "scenario", "solver", "evaluate", "sweep", "quick")
+EXPERIMENT_KEYS = ("name", "description", "root_seed")
+SCENARIO_KEYS = ("name", "parameters")
+SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
+SWEEP_KEYS = ("grid", "zip", "replicates", "seed")
+NAMESPACES = ("scenario", "solver", "evaluate")
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    """One ``[[solver]]`` table.
+
+    Attributes
+    ----------
+    label : str                 unique name inside the experiment (used in sweep keys and tables).
+    method : str                registered solver name.
+    params : dict               parameter overrides as written (resolved against ``Params`` at expansion).
+    seed : int                  extra solver stream id (see :func:`slamcli.sweep.expand.solver_seed`).
+    oracle_association : bool   give the solver the true data association (ground truth; recorded).
+    """
+
+    label: str
+    method: str
+    params: dict[str, Any] = field(default_factory=dict)
+    seed: int = 0
+    oracle_association: bool = False
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """The ``[sweep]`` table.
+
+    Attributes
+    ----------
+    grid : tuple of (key, values)          cartesian axes in file order.
+    zips : tuple of tuple of (key, values) zipped groups; each group's lists have one common length.
+    replicates : tuple of int              replicate ids.
+    """
+
+    grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()
+    zips: tuple[tuple[tuple[str, tuple[Any, ...]], ...], ...] = ()
+    replicates: tuple[int, ...] = (0,)
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """A validated experiment file."""
+
+    name: str
+    source: str  # file the config came from (for error messages)
+    scenario: str
+    scenario_params: dict[str, Any]  # flat dotted keys
+    solvers: tuple[SolverSpec, ...]
+    evaluate: dict[str, Any] = field(default_factory=dict)
+    sweep: SweepSpec = field(default_factory=SweepSpec)
+    root_seed: int = 0
+    description: str = ""
+    quick: dict[str, Any] = field(default_factory=dict)
+
+    def solver(self, label: str) -> SolverSpec:
+        for s in self.solvers:
+            if s.label == label:
+                return s
+        raise KeyError(label)
+
+    def err(self, key: str, message: str) -> ConfigError:
+        return ConfigError(f"{self.source}: {key}: {message}")
+
+
+# -- helpers ------------------------------------------------------------------------------------------------
+
+
+def flatten(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"sensor": {"max_range": 10}}`` → ``{"sensor.max_range": 10}`` (TOML dotted keys are nested tables)."""
+    out: dict[str, Any] = {}
+    for k, v in table.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _type_name(v: Any) -> str:
+    return {bool: "boolean", int: "integer", float: "float", str: "string", list: "array", dict: "table"}.get(
+        type(v), type(v).__name__
+    )
+
+
+def parse_range(text: str) -> list[int] | None:
+    """``"range(0, 50)"`` → ``[0, ..., 49]`` (Python semantics); None when ``text`` is not a range()."""
+    m = _RANGE_RE.match(text)
+    if not m:
+        return None
+    a, b, c = m.groups()
+    if b is None:
+        return list(range(int(a)))
+    return list(range(int(a), int(b), int(c) if c is not None else 1))
+
+
+class _Checker:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, key: str, message: str) -> ConfigError:
+        return ConfigError(f"{self.source}: {key}: {message}")
+
+    def table(self, value: Any, key: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.fail(key, f"expected a table, got {_type_name(value)}")
+        return value
+
+    def known(self, table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
+        for k in table:
+            if k not in allowed:
+                raise self.fail(f"{where}.{k}" if where else k, f"unknown key; allowed: {', '.join(allowed)}")
+
+    def string(self, value: Any, key: str) -> str:
+        if not isinstance(value, str):
+            raise self.fail(key, f"expected a string, got {_type_name(value)}")
+        return value
+
+    def name(self, value: Any, key: str) -> str:
+        s = self.string(value, key)
+        if not _NAME_RE.match(s):
+            raise self.fail(key, f"{s!r} must start with a letter/digit and use only letters, digits, '.', '_', '-'")
+        return s
+
+    def nonneg_int(self, value: Any, key: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(key, f"expected an integer, got {_type_name(value)}")
+        if value < 0:
+            raise self.fail(key, f"must be >= 0, got {value}")
+        return value
+
+    def boolean(self, value: Any, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.fail(key, f"expected a boolean, got {_type_name(value)}")
+        return value
+
+    def values(self, value: Any, key: str) -> tuple[Any, ...]:
+        """A sweep axis: a non-empty array, or a ``"range(...)"`` string."""
+        if isinstance(value, str):
+            r = parse_range(value)
+            if r is None:
+                raise self.fail(key, f"expected an array of values or 'range(a, b[, step])', got {value!r}")
+            value = r
+        if not isinstance(value, list):
+            raise self.fail(key, f"expected an array of values, got {_type_name(value)}")
+        if not value:
+            raise self.fail(key, "empty list: a sweep axis needs at least one value")
+        return tuple(value)
+
+    def replicates(self, value: Any, key: str) -> tuple[int, ...]:
+        if isinstance(value, bool):
+            raise self.fail(key, "expected an integer count, an array of integers or 'range(a, b)'")
+        if isinstance(value, int):
+            if value < 1:
+                raise self.fail(key, f"must be >= 1, got {value}")
+            return tuple(range(value))
+        vals = self.values(value, key)
+        for v in vals:
+            self.nonneg_int(v, key)
+        if len(set(vals)) != len(vals):
+            raise self.fail(key, "replicate ids must be unique")
+        return tuple(vals)
+
+    def sweep_key(self, key: str, where: str, labels: set[str]) -> None:
+        parts = key.split(".")
+        ns = parts[0]
+        if ns not in NAMESPACES or len(parts) < 2 or not all(parts):
+            raise self.fail(
+                f"{where} {key!r}",
+                "keys must be scenario.<dotted key>, solver.<label>.<param> or evaluate.<option>",
+            )
+        if ns == "solver":
+            if len(parts) != 3:
+                raise self.fail(f"{where} {key!r}", "solver keys are solver.<label>.<param>")
+            if parts[1] not in labels:
+                raise self.fail(
+                    f"{where} {key!r}", f"no [[solver]] labelled {parts[1]!r}; labels: {', '.join(sorted(labels))}"
+                )
+
+
+# -- loading ------------------------------------------------------------------------------------------------
+
+
+def load_experiment(path: str | Path) -> ExperimentConfig:
+    """Read and validate an experiment file; :class:`ConfigError` (one line, file + key) on any problem."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: experiment file not found")
+    try:
+        with p.open("rb") as fh:
+            raw = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read: {exc.strerror}") from None
+    return parse_experiment(raw, source=str(p))
+
+
+def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> ExperimentConfig:
+    """Validate the parsed TOML document ``raw`` (see the module docstring for the schema)."""
+    c = _Checker(source)
+    c.known(raw, TOP_KEYS, "")
+
+    if "experiment" not in raw:
+        raise c.fail("[experiment]", "missing table")
+    exp = c.table(raw["experiment"], "[experiment]")
+    c.known(exp, EXPERIMENT_KEYS, "experiment")
+    if "name" not in exp:
+        raise c.fail("experiment.name", "missing")
+    name = c.name(exp["name"], "experiment.name")
+    description = c.string(exp.get("description", ""), "experiment.description")
+    root_seed = c.nonneg_int(exp.get("root_seed", 0), "experiment.root_seed")
+
+    if "scenario" not in raw:
+        raise c.fail("[scenario]", "missing table")
+    scen = c.table(raw["scenario"], "[scenario]")
+    c.known(scen, SCENARIO_KEYS, "scenario")
+    if "name" not in scen:
+        raise c.fail("scenario.name", "missing")
+    scenario = c.string(scen["name"], "scenario.name")
+    scenario_params = flatten(c.table(scen.get("parameters", {}), "scenario.parameters"))
+
+    if "solver" not in raw:
+        raise c.fail("[[solver]]", "missing: give at least one [[solver]] table")
+    solvers_raw = raw["solver"]
+    if not isinstance(solvers_raw, list) or not all(isinstance(s, dict) for s in solvers_raw):
+        raise c.fail("solver", "expected [[solver]] tables (an array of tables)")
+    if not solvers_raw:
+        raise c.fail("[[solver]]", "empty: give at least one [[solver]] table")
+    solvers: list[SolverSpec] = []
+    labels: set[str] = set()
+    for i, s in enumerate(solvers_raw):
+        where = f"solver[{i}]"
+        c.known(s, SOLVER_KEYS, where)
+        if "method" not in s:
+            raise c.fail(f"{where}.method", "missing")
+        method = c.string(s["method"], f"{where}.method")
+        label = c.string(s.get("label", method), f"{where}.label")
+        if not _NAME_RE.match(label) or "." in label:
+            raise c.fail(f"{where}.label", f"{label!r} must use only letters, digits, '_', '-' (no dots)")
+        if label in labels:
+            raise c.fail(f"{where}.label", f"duplicate label {label!r}; give each [[solver]] a unique label")
+        labels.add(label)
+        params = c.table(s.get("params", {}), f"{where}.params")
+        solvers.append(
+            SolverSpec(
+                label=label,
+                method=method,
+                params=dict(params),
+                seed=c.nonneg_int(s.get("seed", 0), f"{where}.seed"),
+                oracle_association=c.boolean(s.get("oracle_association", False), f"{where}.oracle_association"),
+            )
+        )
+
+    evaluate = dict(c.table(raw.get("evaluate", {}), "[evaluate]"))
+
+    sweep = SweepSpec()
+    if "sweep" in raw:
+        sw = c.table(raw["sweep"], "[sweep]")
+        c.known(sw, SWEEP_KEYS, "sweep")
+        if "replicates" in sw and "seed" in sw:
+            raise c.fail("sweep.seed", "give either sweep.replicates or sweep.seed, not both")
+        rep_key = "replicates" if "replicates" in sw else "seed"
+        replicates = c.replicates(sw[rep_key], f"sweep.{rep_key}") if rep_key in sw else (0,)
+        grid_raw = c.table(sw.get("grid", {}), "sweep.grid")
+        if "grid" in sw and not grid_raw:
+            raise c.fail("sweep.grid", "empty grid: give at least one key = [values]")
+        grid_raw = flatten(grid_raw)
+        grid = []
+        for k, v in grid_raw.items():
+            c.sweep_key(k, "sweep.grid", labels)
+            grid.append((k, c.values(v, f"sweep.grid {k!r}")))
+        zips = []
+        if "zip" in sw:
+            groups = sw["zip"] if isinstance(sw["zip"], list) else [sw["zip"]]
+            for gi, g in enumerate(groups):
+                where = "sweep.zip" if not isinstance(sw["zip"], list) else f"sweep.zip[{gi}]"
+                g = flatten(c.table(g, where))
+                if not g:
+                    raise c.fail(where, "empty zip group: give at least one key = [values]")
+                group = []
+                for k, v in g.items():
+                    c.sweep_key(k, where, labels)
+                    group.append((k, c.values(v, f"{where} {k!r}")))
+                lengths = {k: len(v) for k, v in group}
+                if len(set(lengths.values())) != 1:
+                    listing = ", ".join(f"{k}={n}" for k, n in lengths.items())
+                    raise c.fail(where, f"zipped lists must have equal lengths, got {listing}")
+                zips.append(tuple(group))
+        all_keys = [k for k, _ in grid] + [k for g in zips for k, _ in g]
+        dup = sorted({k for k in all_keys if all_keys.count(k) > 1})
+        if dup:
+            raise c.fail("[sweep]", f"key {dup[0]!r} is swept more than once")
+        sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates)
+
+    quick: dict[str, Any] = {}
+    if "quick" in raw:
+        q = flatten(c.table(raw["quick"], "[quick]"))
+        for k, v in q.items():
+            if k in ("replicates", "seed"):
+                quick["replicates"] = c.replicates(v, f"quick.{k}")
+            else:
+                c.sweep_key(k, "quick", labels)
+                quick[k] = v
+
+    return ExperimentConfig(
+        name=name,
+        source=source,
+        scenario=scenario,
+        scenario_params=scenario_params,
+        solvers=tuple(solvers),
+        evaluate=evaluate,
+        sweep=sweep,
+        root_seed=root_seed,
+        description=description,
+        quick=quick,
+    )
+
+
+def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates: tuple[int, ...] | None = None):
+    """A copy of ``cfg`` with fixed overrides in sweep-key form (``scenario.x``, ``solver.<label>.p``, ...).
+
+    A fixed override of a key that is also swept replaces that axis (the axis is dropped).
+    """
+    import dataclasses
+
+    scenario_params = dict(cfg.scenario_params)
+    evaluate = dict(cfg.evaluate)
+    solvers = {s.label: dict(s.params) for s in cfg.solvers}
+    for key, value in overrides.items():
+        ns, _, rest = key.partition(".")
+        if ns == "scenario":
+            scenario_params[rest] = value
+        elif ns == "evaluate":
+            evaluate[rest] = value
+        elif ns == "solver":
+            label, _, param = rest.partition(".")
+            if label not in solvers:
+                raise cfg.err(key, f"no [[solver]] labelled {label!r}")
+            solvers[label][param] = value
+        else:
+            raise cfg.err(key, "override keys must be scenario.*, solver.<label>.* or evaluate.*")
+    grid = tuple((k, v) for k, v in cfg.sweep.grid if k not in overrides)
+    zips = tuple(
+        g2 for g2 in (tuple((k, v) for k, v in g if k not in overrides) for g in cfg.sweep.zips) if g2
+    )
+    sweep = dataclasses.replace(
+        cfg.sweep, grid=grid, zips=zips, replicates=replicates if replicates is not None else cfg.sweep.replicates
+    )
+    return dataclasses.replace(
+        cfg,
+        scenario_params=scenario_params,
+        evaluate=evaluate,
+        solvers=tuple(dataclasses.replace(s, params=solvers[s.label]) for s in cfg.solvers),
+        sweep=sweep,
+    )
+
+
+def quick_variant(cfg: ExperimentConfig) -> ExperimentConfig:
+    """Apply the file's ``[quick]`` table (few replicates, short runs) for smoke checks."""
+    q = dict(cfg.quick)
+    reps = q.pop("replicates", None)
+    return apply_fixed(cfg, q, replicates=reps)

@@ -1,0 +1,349 @@
+"""Expand an :class:`~slamcli.sweep.config.ExperimentConfig` into resolved runs with content-hash ids.
+
+Order (deterministic, independent of execution order)::
+
+    for point in grid (cartesian, first key slowest) × zip groups (advanced together):
+        for replicate in replicates:
+            for solver in [[solver]] tables (file order):
+                RunSpec
+
+A point's ``solver.<label>.*`` axes only apply to the solver with that label; for every other solver they are
+irrelevant, so those runs resolve to the same configuration and are de-duplicated by their run id (the first
+occurrence is kept). Each run records only the axis values that apply to it (``RunSpec.point``).
+
+Seeds (EVALUATION-METHOD.md B5; NumPy's list form, varying id first, never ``root + i``)::
+
+    dataset seed = default_rng([STREAM_SIMULATION, replicate, root_seed]).integers(2**63 - 1)
+    solver seed  = default_rng([STREAM_SOLVER + solver.seed, replicate, root_seed]).integers(2**63 - 1)
+
+The dataset seed does not depend on the solver, so every solver of a replicate sees the *same* dataset
+(common random numbers; one dataset file per (scenario config, replicate), shared by all its runs).
+
+Run id = the first 12 hex digits of SHA-256 over the canonical JSON (sorted keys, no whitespace, floats by
+``repr``) of the fully resolved run configuration, which includes the slamcli and file-schema versions.
+Output paths are not part of it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from slamcli.errors import ConfigError, SlamcliError
+from slamcli.sweep.config import ExperimentConfig
+
+STREAM_SIMULATION = 0
+STREAM_SOLVER = 1
+ID_LENGTH = 12
+
+
+# -- canonical hashing --------------------------------------------------------------------------------------
+
+
+def _canonical(obj: Any) -> Any:
+    """JSON-ready copy: tuples → lists, numpy scalars/arrays → Python, enums → values; NaN/inf rejected."""
+    if isinstance(obj, dict):
+        return {str(k): _canonical(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_canonical(v) for v in obj]
+    if isinstance(obj, bool) or obj is None or isinstance(obj, (int, str)):
+        return obj
+    if isinstance(obj, float):
+        if not math.isfinite(obj):
+            return repr(obj)  # JSON has no inf/NaN; keep them distinguishable
+        return obj
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars
+        return _canonical(obj.tolist())
+    if hasattr(obj, "value") and not isinstance(obj, type):  # enum
+        return _canonical(obj.value)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return _canonical(dataclasses.asdict(obj))
+    return str(obj)
+
+
+def canonical_json(obj: Any) -> str:
+    """Sorted keys, no whitespace, floats written by ``repr`` (Python's json does that)."""
+    return json.dumps(_canonical(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def content_hash(obj: Any, length: int = ID_LENGTH) -> str:
+    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:length]
+
+
+def versions() -> dict[str, Any]:
+    """The package and file-schema versions that enter every run id."""
+    import slamcli
+    from slamcli.io.schema import SCHEMA_VERSION
+
+    return {"slamcli": slamcli.__version__, "schema": SCHEMA_VERSION}
+
+
+# -- seeds --------------------------------------------------------------------------------------------------
+
+
+def derive_seed(stream: int, replicate: int, root_seed: int) -> int:
+    """``default_rng([stream, replicate, root_seed])`` → one 63-bit integer seed for a component."""
+    import numpy as np
+
+    return int(np.random.default_rng([stream, replicate, root_seed]).integers(0, 2**63 - 1))
+
+
+def dataset_seed(replicate: int, root_seed: int) -> int:
+    return derive_seed(STREAM_SIMULATION, replicate, root_seed)
+
+
+def solver_seed(replicate: int, root_seed: int, solver_stream: int = 0) -> int:
+    return derive_seed(STREAM_SOLVER + solver_stream, replicate, root_seed)
+
+
+# -- resolution of scenario / solver parameters ---------------------------------------------------------------
+
+
+class Resolver(Protocol):
+    def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]: ...
+
+    def solver(self, method: str, params: dict[str, Any], where: str) -> dict[str, Any]: ...
+
+
+class RegistryResolver:
+    """Resolve against the real simulator scenarios and the registered solvers' ``Params`` dataclasses."""
+
+    def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
+        from slamcli.sim import resolve_scenario
+
+        try:
+            cfg = resolve_scenario(name, dict(overrides))
+        except SlamcliError as exc:
+            raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
+        return _canonical(dataclasses.asdict(cfg) if dataclasses.is_dataclass(cfg) else cfg)
+
+    def solver(self, method: str, params: dict[str, Any], where: str) -> dict[str, Any]:
+        from slamcli.params import build_params
+        from slamcli.solvers import registry
+        from slamcli.solvers.base import params_to_dict
+
+        try:
+            cls = registry.load(method)
+            p = build_params(cls.Params, dict(params), where=where)
+        except SlamcliError as exc:
+            raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
+        return _canonical(params_to_dict(p))
+
+
+class LiteralResolver:
+    """No resolution: the overrides as written (tests, or dry runs before the simulator exists)."""
+
+    def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
+        return _canonical(dict(overrides))
+
+    def solver(self, method: str, params: dict[str, Any], where: str) -> dict[str, Any]:
+        return _canonical(dict(params))
+
+
+# -- run specifications -------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """One simulated dataset, shared by every run with the same scenario configuration and replicate.
+
+    Attributes
+    ----------
+    dataset_id : str            content hash of ``config()``.
+    scenario : str              scenario name.
+    overrides : dict            flat dotted overrides as given (what ``simulate_to_file`` receives).
+    resolved : dict             the fully resolved scenario configuration.
+    replicate : int
+    seed : int                  simulator seed (stream ``STREAM_SIMULATION``).
+    """
+
+    dataset_id: str
+    scenario: str
+    overrides: dict[str, Any]
+    resolved: dict[str, Any]
+    replicate: int
+    seed: int
+
+    def config(self) -> dict[str, Any]:
+        return {"scenario": self.scenario, "resolved": self.resolved, "replicate": self.replicate, "seed": self.seed}
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One (dataset, solver configuration) run of an experiment.
+
+    Attributes
+    ----------
+    run_id : str                content hash of ``config()`` (without the id itself).
+    experiment : str
+    label, method : str         the ``[[solver]]`` label and registered method.
+    params : dict               fully resolved solver parameters.
+    param_overrides : dict      the parameters as written / swept (what the solver receives).
+    seed : int                  solver seed (stream ``STREAM_SOLVER + solver_stream``).
+    solver_stream : int         the ``[[solver]] seed`` value.
+    oracle_association : bool
+    evaluate : dict             options for ``evaluate_files``.
+    dataset : DatasetSpec
+    point : dict                the sweep-axis values that apply to this run (key → value).
+    versions : dict             slamcli / schema versions (part of the hash).
+    """
+
+    run_id: str
+    experiment: str
+    label: str
+    method: str
+    params: dict[str, Any]
+    param_overrides: dict[str, Any]
+    seed: int
+    solver_stream: int
+    oracle_association: bool
+    evaluate: dict[str, Any]
+    dataset: DatasetSpec
+    point: dict[str, Any] = field(default_factory=dict)
+    versions: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def replicate(self) -> int:
+        return self.dataset.replicate
+
+    def config(self) -> dict[str, Any]:
+        """The resolved configuration that defines the run (what is hashed; ``config.json`` adds the id)."""
+        return {
+            "dataset": {"id": self.dataset.dataset_id, **self.dataset.config()},
+            "solver": {
+                "label": self.label,
+                "method": self.method,
+                "params": self.params,
+                "seed": self.seed,
+                "stream": self.solver_stream,
+                "oracle_association": self.oracle_association,
+            },
+            "evaluate": self.evaluate,
+            "versions": self.versions,
+        }
+
+
+@dataclass(frozen=True)
+class RunGroup:
+    """The runs that share one dataset (executed together by one worker: simulate once, solve many)."""
+
+    dataset: DatasetSpec
+    runs: tuple[RunSpec, ...]
+
+
+@dataclass(frozen=True)
+class Expansion:
+    experiment: ExperimentConfig
+    runs: tuple[RunSpec, ...]
+    axes: tuple[str, ...]  # swept keys, grid then zip order
+
+    @property
+    def datasets(self) -> tuple[DatasetSpec, ...]:
+        seen: dict[str, DatasetSpec] = {}
+        for r in self.runs:
+            seen.setdefault(r.dataset.dataset_id, r.dataset)
+        return tuple(seen.values())
+
+    def groups(self, runs: tuple[RunSpec, ...] | list[RunSpec] | None = None) -> list[RunGroup]:
+        """``runs`` (default all) grouped by dataset, in first-appearance order."""
+        by_ds: dict[str, list[RunSpec]] = {}
+        ds: dict[str, DatasetSpec] = {}
+        for r in self.runs if runs is None else runs:
+            by_ds.setdefault(r.dataset.dataset_id, []).append(r)
+            ds[r.dataset.dataset_id] = r.dataset
+        return [RunGroup(ds[k], tuple(v)) for k, v in by_ds.items()]
+
+
+def sweep_points(cfg: ExperimentConfig) -> list[dict[str, Any]]:
+    """The sweep points (key → value dicts): grid product × each zip group, in deterministic order."""
+    factors: list[list[dict[str, Any]]] = []
+    for key, values in cfg.sweep.grid:
+        factors.append([{key: v} for v in values])
+    for group in cfg.sweep.zips:
+        n = len(group[0][1])
+        factors.append([{k: vals[i] for k, vals in group} for i in range(n)])
+    points = []
+    for combo in itertools.product(*factors):
+        p: dict[str, Any] = {}
+        for part in combo:
+            p.update(part)
+        points.append(p)
+    return points
+
+
+def expand(
+    cfg: ExperimentConfig,
+    *,
+    resolver: Resolver | None = None,
+    run_versions: dict[str, Any] | None = None,
+) -> Expansion:
+    """Every run of the experiment, resolved and hashed (see the module docstring for order and seeds)."""
+    resolver = resolver if resolver is not None else RegistryResolver()
+    vers = run_versions if run_versions is not None else versions()
+    axes = tuple(k for k, _ in cfg.sweep.grid) + tuple(k for g in cfg.sweep.zips for k, _ in g)
+    scen_cache: dict[str, dict[str, Any]] = {}
+    solver_cache: dict[str, dict[str, Any]] = {}
+    runs: dict[str, RunSpec] = {}
+    for point in sweep_points(cfg):
+        scen_over = dict(cfg.scenario_params)
+        evaluate = dict(cfg.evaluate)
+        solver_over = {s.label: dict(s.params) for s in cfg.solvers}
+        for key, value in point.items():
+            ns, _, rest = key.partition(".")
+            if ns == "scenario":
+                scen_over[rest] = value
+            elif ns == "evaluate":
+                evaluate[rest] = value
+            else:
+                label, _, param = rest.partition(".")
+                solver_over[label][param] = value
+        skey = canonical_json([cfg.scenario, scen_over])
+        if skey not in scen_cache:
+            scen_cache[skey] = resolver.scenario(cfg.scenario, scen_over, f"{cfg.source}: [scenario]")
+        resolved_scen = scen_cache[skey]
+        for rep in cfg.sweep.replicates:
+            seed = dataset_seed(rep, cfg.root_seed)
+            ds_cfg = {"scenario": cfg.scenario, "resolved": resolved_scen, "replicate": rep, "seed": seed}
+            ds = DatasetSpec(
+                dataset_id=content_hash({"dataset": ds_cfg, "versions": vers}),
+                scenario=cfg.scenario,
+                overrides=_canonical(scen_over),
+                resolved=resolved_scen,
+                replicate=rep,
+                seed=seed,
+            )
+            for s in cfg.solvers:
+                pkey = canonical_json([s.method, solver_over[s.label]])
+                if pkey not in solver_cache:
+                    solver_cache[pkey] = resolver.solver(
+                        s.method, solver_over[s.label], f"{cfg.source}: solver {s.label!r} params"
+                    )
+                relevant = {
+                    k: v
+                    for k, v in point.items()
+                    if not k.startswith("solver.") or k.startswith(f"solver.{s.label}.")
+                }
+                spec = RunSpec(
+                    run_id="",
+                    experiment=cfg.name,
+                    label=s.label,
+                    method=s.method,
+                    params=solver_cache[pkey],
+                    param_overrides=_canonical(solver_over[s.label]),
+                    seed=solver_seed(rep, cfg.root_seed, s.seed),
+                    solver_stream=s.seed,
+                    oracle_association=s.oracle_association,
+                    evaluate=_canonical(evaluate),
+                    dataset=ds,
+                    point=_canonical(relevant),
+                    versions=vers,
+                )
+                rid = content_hash(spec.config())
+                if rid not in runs:
+                    runs[rid] = dataclasses.replace(spec, run_id=rid)
+    return Expansion(experiment=cfg, runs=tuple(runs.values()), axes=axes)
