@@ -98,7 +98,7 @@ def make_world(
         ),
         max_range=max_range,
     )
-    return inputs, dict(poses=poses, landmarks=landmarks_xy, obs_landmark=ids)
+    return inputs, {"poses": poses, "landmarks": landmarks_xy, "obs_landmark": ids}
 
 
 def association_accuracy(assoc, true_lm):
@@ -286,7 +286,7 @@ def test_bad_params_rejected():
 def test_known_and_ml_agree_when_landmarks_far_apart_and_noise_small(motion_input):
     ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
     lms = np.stack([9.0 * np.cos(ang), 5.0 + 9.0 * np.sin(ang)], -1)  # ≥ 6.9 m apart
-    inputs, truth = make_world(
+    inputs, _ = make_world(
         9, T=250, landmarks_xy=lms, max_range=8.0, motion_std=(0.01, 0.005), odometry_std=(0.005, 0.005, 0.002),
         range_std=0.01, bearing_std=0.002,
     )

@@ -117,7 +117,7 @@ class EkfParams:
 class _Candidate:
     """A provisional landmark (paper 002 §14.1): position, 2×2 covariance, sightings."""
 
-    __slots__ = ("m", "C", "hits", "first_step", "rows")
+    __slots__ = ("C", "first_step", "hits", "m", "rows")
 
     def __init__(self, m, C, step, row):
         self.m = m
@@ -283,7 +283,7 @@ class EkfSlam(BaseSolver):
                 x, P, y, S = update(st.x, st.P, z, j, R)
                 st.set(x, P)
                 assoc[i] = j
-                nis_sum += float(y @ np.linalg.solve(S, y))
+                nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
 
             if p.provisional and candidates:
@@ -471,11 +471,13 @@ def update(x, P, z, j, R):
     k = 3 + 2 * j
     idx = np.array([0, 1, 2, k, k + 1])
     H_r, H_m = range_bearing_jacobians(x[:3], x[k : k + 2])
-    Hs = np.hstack([H_r, H_m])  # (2, 5): the nonzero columns of H
+    Hs = np.empty((2, 5))  # the nonzero columns of H
+    Hs[:, :3] = H_r
+    Hs[:, 3:] = H_m
     y = measurement_residual(z, range_bearing(x[:3], x[k : k + 2]))
     PHt = P[:, idx] @ Hs.T  # (n, 2) = P Hᵀ
     S = Hs @ PHt[idx] + R  # (2, 2)
-    K = np.linalg.solve(S, PHt.T).T  # (n, 2); S symmetric so K = (S⁻¹ (P Hᵀ)ᵀ)ᵀ
+    K = PHt @ _inv2(S)  # (n, 2) = P Hᵀ S⁻¹ (closed-form 2×2 inverse of the SPD S)
     x_new = x + K @ y
     x_new[2] = wrap_angle(x_new[2])
     # Joseph form, exploiting the sparsity of H:
@@ -487,6 +489,12 @@ def update(x, P, z, j, R):
     P_new = B + K @ R @ K.T
     P_new = 0.5 * (P_new + P_new.T)  # remove round-off asymmetry
     return x_new, P_new, y, S
+
+
+def _inv2(S):
+    """Inverse of a 2×2 matrix, ``adj(S) / det(S)``."""
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    return np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
 
 
 def landmark_init(x, P, z, R):
