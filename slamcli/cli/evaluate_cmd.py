@@ -1,0 +1,83 @@
+"""``slamcli evaluate``: metrics of one result file against its dataset's ground truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from slamcli.cli.app import app, handle_errors, stdout_console
+
+# (label, key in metrics.json, unit) in display order; missing keys are skipped.
+_ROWS = [
+    ("ATE RMSE (unaligned)", "ate_rmse_m", "m"),
+    ("ATE RMSE (SE(2)-aligned)", "aligned_ate_rmse_m", "m"),
+    ("heading RMSE (unaligned)", "heading_rmse_rad", "rad"),
+    ("odometry ATE RMSE", "odometry_ate_rmse_m", "m"),
+    ("RPE translation RMSE", "rpe_trans_rmse_m", "m"),
+    ("RPE rotation RMSE", "rpe_rot_rmse_rad", "rad"),
+    ("landmarks true / estimated", ("n_landmarks_true", "n_landmarks_est"), ""),
+    ("paper NN error min / mean / max", ("paper_err_min_m", "paper_err_mean_m", "paper_err_max_m"), "m"),
+    ("paper NN error near path (mean)", "paper_err_mean_near_path_m", "m"),
+    ("matched / missed / spurious", ("lm_n_matched", "lm_n_missed", "lm_n_spurious"), ""),
+    ("matched landmark RMSE", "lm_rmse_matched_m", "m"),
+    ("matched landmark RMSE (aligned)", "lm_aligned_rmse_matched_m", "m"),
+    ("OSPA", "lm_ospa_m", "m"),
+    ("GOSPA (α=2)", "lm_gospa_m", "m"),
+    ("pose NEES (time mean, E = 3)", "pose_nees_mean", ""),
+    ("landmark NEES (mean, E = 2)", "landmark_nees_mean", ""),
+    ("iterations in trace", "n_iterations", ""),
+]
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+@app.command("evaluate")
+def evaluate_command(
+    result: Annotated[Path, typer.Argument(help="Result file (HDF5) written by `slamcli solve`.")],
+    data: Annotated[Path | None, typer.Option(
+        "--data", "-d", help="Dataset file; default: the path recorded in the result (hash-checked).")] = None,
+    out_dir: Annotated[Path | None, typer.Option(
+        "-o", "--out-dir", help="Directory for metrics.json and CSVs; default: <result stem>_eval/ beside it.")] = None,
+    cutoff: Annotated[float, typer.Option(help="Landmark assignment / OSPA / GOSPA cut-off c, m.")] = 1.0,
+    near_path: Annotated[float | None, typer.Option(
+        help="Also report the paper's error over landmarks within this distance of the true path, m.")] = None,
+    rpe_delta: Annotated[float, typer.Option(help="RPE pair separation (see --rpe-unit).")] = 1.0,
+    rpe_unit: Annotated[str, typer.Option(help="RPE separation unit: steps or m.")] = "steps",
+    no_hash_check: Annotated[bool, typer.Option(
+        "--no-hash-check", help="Do not require the dataset hash to match the result's record.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing; just write the files.")] = False,
+) -> None:
+    """Compute trajectory, map and consistency metrics; write metrics.json + per_{iteration,step,landmark}.csv."""
+    with handle_errors():
+        from slamcli.api.evaluate import evaluate_files
+
+        out = out_dir if out_dir is not None else result.parent / f"{result.stem}_eval"
+        m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
+                           rpe_unit=rpe_unit, check_hash=not no_hash_check)
+        if quiet:
+            return
+        from rich.table import Table
+
+        table = Table(title=f"{result.name}: solver {m.get('solver')} ({m.get('status')}), cut-off {cutoff:g} m")
+        table.add_column("metric")
+        table.add_column("value", justify="right")
+        table.add_column("unit")
+        for label, key, unit in _ROWS:
+            keys = key if isinstance(key, tuple) else (key,)
+            if not all(k in m for k in keys):
+                continue
+            table.add_row(label, " / ".join(_fmt(m[k]) for k in keys), unit)
+        con = stdout_console()
+        con.print(table)
+        for note in ("pose_nees_note", "landmark_nees_note", "per_iteration_note"):
+            if str(m.get(note, "")).startswith("not available"):
+                con.print(f"{note.removesuffix('_note').replace('_', ' ')}: {m[note]}", markup=False)
+        con.print(f"wrote {out}/metrics.json and per_iteration.csv, per_step.csv, per_landmark.csv", markup=False)

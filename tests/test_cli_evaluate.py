@@ -1,0 +1,146 @@
+"""End-to-end: a small dataset + result written with slamcli.io, evaluated through the API and the CLI."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from slamcli.cli import app
+from slamcli.errors import SlamcliError
+from slamcli.io import dataset_hash, read_result, write_dataset, write_result
+from slamcli.models.motion import integrate
+from slamcli.models.observation import range_bearing
+from slamcli.types import (
+    Dataset,
+    GroundTruth,
+    IterationTrace,
+    NoiseSpec,
+    Observations,
+    SlamInputs,
+    SolverResult,
+    Status,
+)
+
+runner = CliRunner()
+
+
+def make_dataset(seed=0, T=40):
+    """A circle-ish drive past 6 landmarks; every landmark within 8 m is observed without noise."""
+    rng = np.random.default_rng(seed)
+    dt = 0.5
+    controls = np.column_stack([np.full(T, 1.0), np.full(T, 0.15)])
+    true = integrate(np.zeros(3), controls, dt)
+    odo = integrate(np.zeros(3), controls + rng.normal(0, [0.05, 0.02], (T, 2)), dt)
+    lms = np.array([[2.0, 3.0], [6.0, -1.0], [8.0, 5.0], [3.0, 9.0], [-2.0, 6.0], [5.0, 12.0]])
+    steps, z, ids = [], [], []
+    for t in range(T + 1):
+        zz = range_bearing(true[t][None], lms)
+        for j in np.flatnonzero(zz[:, 0] < 8.0):
+            steps.append(t)
+            z.append(zz[j])
+            ids.append(j)
+    steps = np.array(steps, np.int64)
+    z = np.array(z)
+    obs = Observations(steps, z[:, 0], z[:, 1], np.zeros(len(steps), np.int16), np.full(len(steps), -1, np.int64),
+                       Observations.offsets_from_steps(steps, T + 1))
+    noise = NoiseSpec(np.array([0.05, 0.02]), np.array([0.02, 0.02, 0.01]), 0.1, 0.02)
+    inputs = SlamInputs(dt, np.arange(T + 1) * dt, np.zeros(3), controls, odo, obs, noise, 8.0)
+    truth = GroundTruth(true, lms, np.array(ids, np.int64))
+    return Dataset(inputs, truth, {"seed": seed, "scenario": "test-circle"})
+
+
+def make_result(ds, data_path, *, offset=(0.0, 0.2), covariances=True, rng_seed=1):
+    rng = np.random.default_rng(rng_seed)
+    T1 = len(ds.truth.poses_xyt)
+    est = ds.truth.poses_xyt.copy()
+    est[:, :2] += offset
+    lm = ds.truth.landmarks_xy[:5] + rng.normal(0, 0.05, (5, 2))  # landmark 5 missed
+    trace = IterationTrace.from_lists([3.0, 2.0, 1.0], [0.0, 0.0, 0.0], [0.1, 0.1, 0.1],
+                                      [lm + 0.4, lm + 0.1, lm])
+    pc = lc = None
+    if covariances:
+        pc = np.broadcast_to(np.diag([0.04, 0.04, 0.01]), (T1, 3, 3)).copy()
+        lc = np.broadcast_to(np.eye(2) * 0.0025, (5, 2, 2)).copy()
+    return SolverResult("toy", "0", {}, Status.CONVERGED, "", est, lm, np.full(len(ds.inputs.observations), -1),
+                        pose_cov=pc, landmark_cov=lc, trace=trace, dataset_hash=dataset_hash(ds),
+                        extra={"dataset_path": str(data_path)})
+
+
+@pytest.fixture()
+def files(tmp_path):
+    ds = make_dataset()
+    data = tmp_path / "data.h5"
+    write_dataset(data, ds)
+    res = tmp_path / "res.h5"
+    write_result(res, make_result(ds, data))
+    return ds, data, res
+
+
+def test_evaluate_files_writes_tidy_outputs(files, tmp_path):
+    from slamcli.api.evaluate import evaluate_files
+
+    ds, _data, res = files
+    out = tmp_path / "ev"
+    m = evaluate_files(res, None, out, cutoff=1.0)  # dataset found from the recorded path
+    assert m["ate_rmse_m"] == pytest.approx(0.2, abs=1e-12)
+    assert m["aligned_ate_rmse_m"] < 1e-9
+    assert (m["lm_n_matched"], m["lm_n_missed"], m["lm_n_spurious"]) == (5, 1, 0)
+    assert m["pose_nees_mean"] == pytest.approx(1.0, abs=1e-12)  # 0.2² / 0.04 at every step
+    assert m["n_iterations"] == 3
+    on_disk = json.loads((out / "metrics.json").read_text())
+    assert on_disk["ate_rmse_m"] == m["ate_rmse_m"] and on_disk["dataset_hash"].startswith("sha256:")
+    it = pd.read_csv(out / "per_iteration.csv")
+    assert list(it["iteration"]) == [0, 1, 2]
+    assert it["err_mean_m"].iloc[0] > it["err_mean_m"].iloc[2]
+    assert len(pd.read_csv(out / "per_step.csv")) == len(ds.truth.poses_xyt)
+    lm = pd.read_csv(out / "per_landmark.csv")
+    assert len(lm) == 5 and set(lm["assigned_true"]) == {0, 1, 2, 3, 4}
+    assert not list(out.glob(".*tmp*"))
+
+
+def test_hash_mismatch_is_a_clear_error(files, tmp_path):
+    from slamcli.api.evaluate import evaluate_files
+
+    _, _, res = files
+    other = tmp_path / "other.h5"
+    write_dataset(other, make_dataset(seed=5))
+    with pytest.raises(SlamcliError, match="hash"):
+        evaluate_files(res, other)
+    r = runner.invoke(app, ["evaluate", str(res), "--data", str(other), "-o", str(tmp_path / "x")])
+    assert r.exit_code == 1
+    assert r.output.startswith("error:") and "hash" in r.output and "Traceback" not in r.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_missing_recorded_dataset(files, tmp_path):
+    _ds, data, res = files
+    data.rename(tmp_path / "moved.h5")
+    r = runner.invoke(app, ["evaluate", str(res)])
+    assert r.exit_code == 1 and "--data" in r.output
+    r = runner.invoke(app, ["evaluate", str(res), "--data", str(tmp_path / "moved.h5"), "-q"])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "res_eval" / "metrics.json").is_file()
+
+
+def test_cli_evaluate_table_and_not_available(tmp_path):
+    ds = make_dataset()
+    data = tmp_path / "d.h5"
+    write_dataset(data, ds)
+    res = tmp_path / "r.h5"
+    write_result(res, make_result(ds, data, covariances=False))
+    assert read_result(res).pose_cov is None
+    r = runner.invoke(app, ["evaluate", str(res), "-o", str(tmp_path / "out"), "--cutoff", "0.5"])
+    assert r.exit_code == 0, r.output
+    assert "ATE RMSE (unaligned)" in r.output and "OSPA" in r.output
+    assert "not available" in r.output
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["pose_nees_mean"] is None and m["pose_nees_note"].startswith("not available")
+    assert m["cutoff_m"] == 0.5
+
+
+def test_bad_cutoff(files):
+    _, _, res = files
+    r = runner.invoke(app, ["evaluate", str(res), "--cutoff", "0"])
+    assert r.exit_code == 1 and "cutoff" in r.output
