@@ -37,11 +37,27 @@ from slamcli.io.schema import (
 )
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
-#: metadata keys promoted to their own root attributes (dicts as ``<key>_json``); everything in
-#: ``Dataset.metadata`` also round-trips through ``@metadata_json``.
+#: metadata keys promoted to their own root attributes (dicts as ``<key>_json``, see
+#: :func:`promoted_sections`); everything in ``Dataset.metadata`` also round-trips through ``@metadata_json``.
 PROMOTED_KEYS = ("seed", "scenario", "scenario_params", "sensor", "robot")
 
 _BEARING_TOL = 1e-9  # bearings must lie in [-pi, pi] up to rounding
+
+
+def promoted_sections(meta: dict[str, Any]) -> dict[str, Any]:
+    """``scenario_params``/``sensor``/``robot`` sections for the root attributes.
+
+    Taken from the metadata keys of the same name, else from the resolved scenario configuration
+    ``metadata["config"]`` (the simulator's nested dict: the whole config, its ``sensor`` and ``robot``).
+    """
+    config = meta.get("config") if isinstance(meta.get("config"), dict) else {}
+    out = {}
+    for key, fallback in (("scenario_params", config or None), ("sensor", config.get("sensor")),
+                          ("robot", config.get("robot"))):
+        value = meta.get(key, fallback)
+        if value is not None:
+            out[key] = value
+    return out
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -76,9 +92,8 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
             a["seed"] = int(meta["seed"])
         if meta.get("scenario") is not None:
             a["scenario"] = str(meta["scenario"])
-        for key in ("scenario_params", "sensor", "robot"):
-            if meta.get(key) is not None:
-                a[f"{key}_json"] = to_json(meta[key])
+        for key, value in promoted_sections(meta).items():
+            a[f"{key}_json"] = to_json(value)
 
         g = f.create_group("inputs")
         g.attrs["doc"] = "everything a solver may see (slamcli.types.SlamInputs)"
