@@ -177,7 +177,7 @@ class ParticleSet:
     log_w: np.ndarray
 
     @classmethod
-    def create(cls, x0: np.ndarray, n_particles: int, capacity: int) -> "ParticleSet":
+    def create(cls, x0: np.ndarray, n_particles: int, capacity: int) -> ParticleSet:
         P, C = n_particles, max(int(capacity), 1)
         return cls(
             x=np.tile(np.asarray(x0, float), (P, 1)),
@@ -197,7 +197,7 @@ class ParticleSet:
     def capacity(self) -> int:
         return int(self.mu.shape[1])
 
-    def take(self, idx: np.ndarray) -> "ParticleSet":
+    def take(self, idx: np.ndarray) -> ParticleSet:
         """Resampled copy: new particle ``j`` is old particle ``idx[j]``; weights reset to uniform.
 
         Fancy indexing allocates fresh arrays, so copies of one ancestor never share landmark storage.
@@ -330,7 +330,9 @@ class FastSlam(BaseSolver):
         z_all = obs.z
         N = len(obs)
         if len(obs.offsets) != T1 + 1:
-            raise SolverError(f"observations.offsets: length {len(obs.offsets)}, expected n_poses+1 = {T1 + 1}")
+            raise SolverError(
+                f"observations.offsets: length {len(obs.offsets)}, expected n_poses+1 = {T1 + 1}"
+            )
 
         # ---- correspondences -----------------------------------------------------------------------------
         known = p.association == "known"
@@ -356,7 +358,9 @@ class FastSlam(BaseSolver):
         # ---- motion model --------------------------------------------------------------------------------
         if p.motion_source == "controls":
             if inputs.controls.shape[0] < T:
-                raise SolverError(f"controls: {inputs.controls.shape[0]} rows, need {T} for motion_source=controls")
+                raise SolverError(
+                    f"controls: {inputs.controls.shape[0]} rows, need {T} for motion_source=controls"
+                )
             M_std = np.asarray(inputs.noise.motion_std, float) * p.motion_noise_scale
             increments = None
         else:
@@ -369,7 +373,8 @@ class FastSlam(BaseSolver):
         # ---- records -------------------------------------------------------------------------------------
         mean_xyt = np.empty((T1, 3))
         pose_cov = np.zeros((T1, 3, 3))
-        anc = np.empty((T1, P), np.int32)  # anc[t][j]: pre-resampling particle at t that post-resampling j copies
+        # anc[t][j]: the pre-resampling particle at t that post-resampling particle j copies
+        anc = np.empty((T1, P), np.int32)
         keep_path = p.output == "best"
         pose_hist = np.empty((T1, P, 3)) if keep_path else None
         assoc_hist = np.full((N, P), -1, np.int32)  # slot per particle of every observation (pre-resampling)
