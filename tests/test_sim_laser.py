@@ -122,12 +122,13 @@ def test_paper_scenarios_laser_consistency():
     assert t.landmarks_xy.shape == (63, 2)
     assert t.landmarks_xy[:, 0].max() - t.landmarks_xy[:, 0].min() > 38
     assert np.all(t.obs_landmark >= 0) and len(o) > 1000
+    rad = cfg.world.landmark_radius
     hits = inverse_range_bearing(t.poses_xyt[o.step], o.z)
-    np.testing.assert_allclose(np.hypot(*(hits - t.landmarks_xy[t.obs_landmark]).T), R, atol=1e-9)
+    np.testing.assert_allclose(np.hypot(*(hits - t.landmarks_xy[t.obs_landmark]).T), rad, atol=1e-9)
     # each kept return has an adjacent-beam companion, as in the paper's preprocessing
     per_scan_lm = np.unique(np.column_stack([o.step, t.obs_landmark]), axis=0, return_counts=True)[1]
     assert per_scan_lm.min() >= 1 and np.mean(per_scan_lm >= 2) > 0.95
-    assert ds.inputs.noise.range_std == pytest.approx(R)  # hypot(0, R): surface returns, not centres
+    assert ds.inputs.noise.range_std == pytest.approx(rad)  # hypot(0, R): surface returns, not centres
     sim2 = resolve_scenario("paper-sim2")
     assert sim2.sensor.max_range == 10.0 and resolve_scenario("paper-sim1").sensor.max_range == 30.0
     d2 = simulate(dataclasses.replace(cfg, sensor=dataclasses.replace(cfg.sensor, max_range=10.0)), seed=2)

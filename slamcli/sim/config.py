@@ -188,7 +188,7 @@ class SensorConfig:
     """Range-bearing sensor (sensor index 0).
 
     ``kind = "point"``: every landmark inside ``[min_range, max_range]`` and the field of view gives one
-    observation ``[r + n_r, wrap(b + n_b)]`` of its centre with probability ``detection_prob``.
+    observation ``[r + n_r, wrap(b + n_b)]`` (range clipped to [0, max_range]) of its centre with probability ``detection_prob``.
 
     ``kind = "laser"``: ``n_beams`` beams evenly over ``fov_deg`` (181 over 180° like the SICK LMS of paper
     000 §5); each beam returns the nearest intersection with the landmark discs (``world.landmark_radius``),

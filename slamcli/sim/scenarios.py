@@ -8,8 +8,9 @@ and whose experiment used a Pioneer 3-AT with an outdoor SICK laser):
 * ``paper-sim1`` — Simulations 1 (Figs. 4-5): a ≈50 m × 40 m area with 7 rows of 9 landmarks (5 m apart,
   slightly jittered), an irregular lawn-mower path along three lanes between rows (waypoints every 5 m,
   jittered by 0.5 m), Δt = 0.1 s, a 181-beam laser over 180° at full range. MobileSim simulates the
-  Pioneer's SICK LMS-200 with ≈30 m range; landmarks are 0.15 m-radius posts, so a post gives several returns
-  on adjacent beams. Odometry noise is small (the paper: "odometry error in MobileSim is almost negligible
+  Pioneer's SICK LMS-200 with ≈30 m range; landmarks are 0.25 m-radius posts (assumed), so a post gives
+  several returns on adjacent 1° beams up to ≈28 m and the full-range laser really sees far, coarsely
+  resolved landmarks (the source of the poor initial maps of Fig. 5(a)). Odometry noise is small (the paper: "odometry error in MobileSim is almost negligible
   over short distances"). Max-range and isolated returns are dropped as in the paper; a little clutter
   (0.2 false returns per scan) stands in for MobileSim's sensing errors.
 * ``paper-sim2`` — Simulation 2 (Fig. 7): ``paper-sim1`` with a 10 m laser.
@@ -63,7 +64,7 @@ def _paper_sim(max_range: float, name: str) -> ScenarioConfig:
         n_steps=3250,
         world=WorldConfig(
             layout="rows", x_min=5.0, x_max=45.0, n_rows=7, row_y0=5.0, row_spacing=5.0, col_spacing=5.0,
-            jitter=0.3, landmark_radius=0.15,
+            jitter=0.3, landmark_radius=0.25,
         ),
         path=PathConfig(
             kind="serpentine", x_min=2.5, x_max=47.5, y_min=0.0, y_max=40.0, lanes=(7.5, 17.5, 27.5),

@@ -95,7 +95,7 @@ def point_scans(
     """Point range-bearing sensor: one noisy observation of each visible landmark centre.
 
     Visible: ``min_range ≤ r ≤ max_range`` and ``|b| ≤ fov/2``; reported with probability ``detection_prob``;
-    ``z = [max(0, r + σ_r n₁), wrap(b + σ_b n₂)]``.
+    ``z = [clip(r + σ_r n₁, 0, max_range), wrap(b + σ_b n₂)]`` (a sensor never reads beyond its max range).
     """
     L = len(landmarks_xy)
     half = cfg.fov_rad / 2
@@ -117,7 +117,7 @@ def point_scans(
         parts.append(
             Returns(
                 steps[si],
-                np.maximum(r[si, li] + cfg.range_std * n[:, 0], 0.0),
+                np.clip(r[si, li] + cfg.range_std * n[:, 0], 0.0, cfg.max_range),
                 wrap_angle(brg[si, li] + cfg.bearing_std * n[:, 1]),
                 li.astype(np.int64),
             )
@@ -225,7 +225,7 @@ def laser_scans(
         n = rng_sensor.standard_normal((len(key), 2))
         keep = u < cfg.detection_prob
         key, lm, n = key[keep], lm[keep], n[keep]
-        rng_m = np.maximum(t[keep] + cfg.range_std * n[:, 0], 0.0)
+        rng_m = np.clip(t[keep] + cfg.range_std * n[:, 0], 0.0, cfg.max_range)  # a sensor never reads > max
         brg_noise = cfg.bearing_std * n[:, 1]
         # clutter beams: Poisson(rate) per scan, a random beam reads a uniform range if nearer than its return
         if clutter.rate > 0:
