@@ -80,4 +80,4 @@ def evaluate_command(
         for note in ("pose_nees_note", "landmark_nees_note", "per_iteration_note"):
             if str(m.get(note, "")).startswith("not available"):
                 con.print(f"{note.removesuffix('_note').replace('_', ' ')}: {m[note]}", markup=False)
-        con.print(f"wrote {out}/metrics.json and per_iteration.csv, per_step.csv, per_landmark.csv", markup=False)
+        con.print(f"wrote {out}/ (metrics.json, per_iteration.csv, per_step.csv, per_landmark.csv)", markup=False, soft_wrap=True)

@@ -6,6 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def legend_below(ax, ncol: int = 3):
+    """Legend under the axis so it never hides data (constrained layout makes room)."""
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=ncol, fontsize="small", frameon=False)
+
+
 def plot_error_curves(ax, iterations, err_min_m, err_mean_m, err_max_m, title: str | None = None):
     """Minimum / mean / maximum nearest-true-landmark error per iteration (paper convention)."""
     ax.plot(iterations, err_max_m, "-", color="tab:red", lw=1.2, label="Maximum error")
@@ -17,7 +22,7 @@ def plot_error_curves(ax, iterations, err_min_m, err_mean_m, err_max_m, title: s
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
-    ax.legend(loc="best", fontsize="small")
+    legend_below(ax, ncol=3)
     return ax
 
 
@@ -26,14 +31,16 @@ def plot_map_change(ax, iterations, map_change_m, title: str | None = None, labe
     it = np.asarray(iterations)
     mc = np.asarray(map_change_m, float)
     keep = it > 0  # iteration 0 has no predecessor
-    ax.plot(it[keep], mc[keep] * 1000.0, "o-", ms=3, lw=1.2, color="tab:blue", label=label or "Map change")
+    ax.plot(it[keep], mc[keep] * 1000.0, "o-", ms=3, lw=1.2, label=label or "Map change")
     ax.set_xlabel("Iteration")
-    ax.set_ylabel("Mean landmark displacement from previous iteration (mm)")
-    ax.set_ylim(bottom=0)
+    ax.set_ylabel("Map change per iteration (mm)")
+    # y from 0 to the largest value of every series drawn so far (several calls may overlay results)
+    tops = [np.nanmax(np.asarray(ln.get_ydata(), float), initial=0.0) for ln in ax.lines]
+    ax.set_ylim(0, 1.05 * max(max(tops, default=0.0), 1e-9))
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
-    ax.legend(loc="best", fontsize="small")
+    legend_below(ax, ncol=2)
     return ax
 
 
@@ -55,5 +62,5 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
-    ax.legend(loc="upper left", fontsize="small")
+    legend_below(ax, ncol=2)
     return ax

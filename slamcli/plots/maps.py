@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from slamcli.plots.curves import legend_below
+
 
 def covariance_ellipse(cov_2x2, n_sigma: float = 2.0):
     """Width, height (m) and angle (deg) of the ``n_sigma`` ellipse of a 2×2 covariance (drawing geometry)."""
@@ -68,5 +70,5 @@ def plot_map(ax, true_landmarks_xy=None, est_landmarks_xy=None, true_path_xy=Non
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
-    ax.legend(loc="best", fontsize="small", framealpha=0.85)
+    legend_below(ax, ncol=3)
     return ax
