@@ -144,3 +144,36 @@ def test_bad_cutoff(files):
     _, _, res = files
     r = runner.invoke(app, ["evaluate", str(res), "--cutoff", "0"])
     assert r.exit_code == 1 and "cutoff" in r.output
+
+
+def test_end_to_end_simulate_solve_evaluate(tmp_path):
+    """Real pipeline: loop scenario → odometry solver → evaluate. The odometry solver's path is the dead-reckoned
+    odometry, so its ATE must equal the reference odometry ATE computed from the dataset."""
+    sim = pytest.importorskip("slamcli.sim")
+    from slamcli.api.solve import solve_file
+
+    data = tmp_path / "loop.h5"
+    write_dataset(data, sim.simulate_scenario("loop", seed=3))
+    res = tmp_path / "odo.h5"
+    solve_file(data, "odometry", None, res, seed=0)
+    r = runner.invoke(app, ["evaluate", str(res), "-o", str(tmp_path / "ev"), "--rpe-delta", "2", "--rpe-unit", "m"])
+    assert r.exit_code == 0, r.output
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert m["ate_rmse_m"] == pytest.approx(m["odometry_ate_rmse_m"], rel=1e-9)
+    assert m["aligned_ate_rmse_m"] <= m["ate_rmse_m"] + 1e-12
+    assert m["rpe_unit"] == "m" and m["rpe_pairs"] > 0
+    assert m["pose_nees_mean"] is None  # odometry stores no covariances
+
+
+def test_plot_nees_prints_summary(tmp_path):
+    paths = []
+    for k in range(2):
+        ds = make_dataset(seed=k)
+        d = tmp_path / f"d{k}.h5"
+        write_dataset(d, ds)
+        paths.append(tmp_path / f"r{k}.h5")
+        write_result(paths[-1], make_result(ds, d))
+    r = runner.invoke(app, ["plot", "nees", *map(str, paths), "-o", str(tmp_path / "n.pdf")])
+    assert r.exit_code == 0, r.output
+    # every step has error 0.2 m in y with σ² = 0.04 → NEES exactly 1 in both runs; N = 2, d = 3 band
+    assert "average pose NEES 1.000" in r.output and "N = 2 runs" in r.output

@@ -109,3 +109,6 @@ def _nees(ax, result_paths, data_paths, check, title):
         raise SlamcliError(f"plot nees: {why}")
     plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
               title=title or f"Pose NEES over {a.n_runs} runs")
+    n_finite = int(np.isfinite(a.anees).sum())
+    typer.echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}); {100 * a.fraction_inside:.1f}% of "
+               f"{n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}] for N = {a.n_runs} runs")
