@@ -1,0 +1,653 @@
+"""The ICM-SLAM Gibbs energy (paper 000, eqs. 3-5, 16) and its conditional modes.
+
+Energy of a configuration (poses ``x``, map ``m``, matchings ``c``), with diagonal weight matrices R, S, Q
+and ``‖a‖²_Σ = aᵀ Σ a``::
+
+    H(x, m, c) = Σ_{t=1..T} ‖g(x_{t-1}, u_{t-1}) − x_t‖²_R                         motion, eq. (3)
+               + Σ_{t=1..T} ‖τ(θ_{t-1})(x_t − x_{t-1}) − τ(θ̃_{t-1})(x̃_t − x̃_{t-1})‖²_S   odometry, eq. (16)
+               + Σ_{t,i: c_{t,i} ≥ 0} ‖h⁻¹(x_t, z_{t,i}) − m_{c_{t,i}}‖²_Q        observations, eq. (5)
+
+(the map potential Φ_m is a feasibility constraint — no two map points within ϑ — enforced by the map step,
+see :mod:`slamcli.solvers.icm_map`). Observations labelled ``-1`` (removed by the ς count filter) are out of the
+energy. A zero weight drops its potential (paper §3.1).
+
+Three independent evaluations of the same function live here:
+
+* :func:`energy_terms` — vectorised, built on :mod:`slamcli.models.potentials` (the reference);
+* :func:`cond_cost` / :func:`cond_system` — the 3-D conditional of one pose (eq. 14), written once in plain
+  arithmetic so it runs on Python floats (sequential ICM) *and* on numpy arrays (parallel coding scheme). The
+  observation part uses per-step sufficient statistics, so a pose update is O(1) whatever the number of
+  observations at that step;
+* :func:`joint_system` — the whole-problem whitened Jacobian (sparse), used by the joint Gauss-Newton step,
+  the MAP reference and the Laplace covariances.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from slamcli.models import observation, potentials, se2
+from slamcli.models.angles import wrap_angle
+from slamcli.types import SlamInputs
+
+PI = math.pi
+TWO_PI = 2.0 * math.pi
+
+
+def _wrap(a):
+    """Angle wrap to [-pi, pi) that works on floats and arrays alike (``%`` is non-negative for both)."""
+    return (a + PI) % TWO_PI - PI
+
+
+# ------------------------------------------------------------------------------------------------------------
+# problem data
+# ------------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Weights:
+    """Diagonals of the design matrices R (3,), S (3,), Q (2,) (paper §3.1)."""
+
+    R: tuple[float, float, float]
+    S: tuple[float, float, float]
+    Q: tuple[float, float]
+
+    @staticmethod
+    def from_params(R, S, Q) -> "Weights":
+        """Each argument: one value (scalar × identity) or the full diagonal."""
+
+        def diag(v, k, name):
+            v = tuple(float(a) for a in v) if isinstance(v, (tuple, list)) else (float(v),)
+            if len(v) == 1:
+                v = v * k
+            if len(v) != k:
+                raise ValueError(f"{name} needs 1 or {k} diagonal values, got {len(v)}")
+            if any(a < 0 or not math.isfinite(a) for a in v):
+                raise ValueError(f"{name} must be finite and non-negative, got {v}")
+            return v
+
+        return Weights(diag(R, 3, "R"), diag(S, 3, "S"), diag(Q, 2, "Q"))
+
+    @property
+    def flat(self) -> tuple[float, ...]:
+        """``(r0, r1, r2, s0, s1, s2, q0, q1)``."""
+        return self.R + self.S + self.Q
+
+    @property
+    def use_motion(self) -> bool:
+        return any(self.R)
+
+    @property
+    def use_odometry(self) -> bool:
+        return any(self.S)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Inputs of the energy in solver-friendly arrays.
+
+    Attributes
+    ----------
+    T : int                      number of motion steps (poses are 0..T).
+    dt : float
+    x0 : ndarray (3,)            known start pose (fixed).
+    controls : ndarray (T, 2)    u_{t-1} drives x_{t-1} → x_t.
+    odo_inc : ndarray (T, 3)     τ(θ̃_{t-1})(x̃_t − x̃_{t-1}) (eq. 16), row t-1 for step t.
+    step : ndarray (N,) int64    pose index of each observation.
+    z : ndarray (N, 2)           [range, bearing].
+    v_body : ndarray (N, 2)      r·[cos b, sin b]: the observation in the robot frame, h⁻¹(x, z) = p + R(θ) v.
+    offsets : ndarray (T+2,)     CSR rows of pose t.
+    """
+
+    T: int
+    dt: float
+    x0: np.ndarray
+    controls: np.ndarray
+    odo_inc: np.ndarray
+    step: np.ndarray
+    z: np.ndarray
+    v_body: np.ndarray
+    offsets: np.ndarray
+
+    @staticmethod
+    def from_inputs(inputs: SlamInputs) -> "Problem":
+        obs = inputs.observations
+        z = obs.z
+        v = np.stack([z[:, 0] * np.cos(z[:, 1]), z[:, 0] * np.sin(z[:, 1])], -1)
+        odo = np.asarray(inputs.odometry_xyt, float)
+        return Problem(
+            T=int(inputs.n_poses - 1),
+            dt=float(inputs.dt),
+            x0=np.asarray(inputs.x0, float).copy(),
+            controls=np.asarray(inputs.controls, float),
+            odo_inc=se2.between(odo[:-1], odo[1:]),
+            step=np.asarray(obs.step, np.int64),
+            z=z,
+            v_body=v,
+            offsets=np.asarray(obs.offsets, np.int64),
+        )
+
+    @property
+    def n_obs(self) -> int:
+        return int(self.step.shape[0])
+
+    def landmark_points(self, poses_xyt: np.ndarray) -> np.ndarray:
+        """``h⁻¹(x_t, z_{t,i}) (N, 2)`` for every observation."""
+        return observation.inverse_range_bearing(poses_xyt[self.step], self.z)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# reference energy (vectorised, from slamcli.models.potentials)
+# ------------------------------------------------------------------------------------------------------------
+def energy_terms(prob: Problem, W: Weights, poses_xyt, landmarks_xy, labels) -> dict[str, float]:
+    """The three sums of H (eq. 5) and their total.
+
+    Parameters
+    ----------
+    poses_xyt : ndarray (T+1, 3)    row 0 is the fixed start pose.
+    landmarks_xy : ndarray (L, 2)
+    labels : ndarray (N,) int64     c_{t,i}; ``-1`` = out of the energy.
+    """
+    poses = np.asarray(poses_xyt, float)
+    out = {"motion": 0.0, "odometry": 0.0, "observation": 0.0}
+    if W.use_motion and prob.T > 0:
+        r = potentials.motion_residual(poses[:-1], prob.controls, poses[1:], prob.dt)
+        out["motion"] = potentials.weighted_sq(r, np.diag(W.R))
+    if W.use_odometry and prob.T > 0:
+        r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)
+        out["odometry"] = potentials.weighted_sq(r, np.diag(W.S))
+    ok = np.asarray(labels) >= 0
+    if ok.any():
+        r = potentials.observation_residual(
+            poses[prob.step[ok]], prob.z[ok], np.asarray(landmarks_xy, float)[np.asarray(labels)[ok]]
+        )
+        out["observation"] = potentials.weighted_sq(r, np.diag(W.Q))
+    out["total"] = out["motion"] + out["odometry"] + out["observation"]
+    return out
+
+
+def wrap_angle_last(e):
+    e = np.array(e, float, copy=True)
+    e[..., 2] = wrap_angle(e[..., 2])
+    return e
+
+
+def energy(prob: Problem, W: Weights, poses_xyt, landmarks_xy, labels) -> float:
+    """Total energy H (eq. 5 without the constant map potential)."""
+    return energy_terms(prob, W, poses_xyt, landmarks_xy, labels)["total"]
+
+
+def observation_energy(points_xy, labels, landmarks_xy, Q) -> float:
+    """``Σ_{c ≥ 0} ‖p_i − m_{c_i}‖²_Q`` for precomputed points ``h⁻¹(x_t, z_{t,i}) (N, 2)``."""
+    ok = labels >= 0
+    d = points_xy[ok] - landmarks_xy[labels[ok]]
+    return float(Q[0] * np.sum(d[:, 0] ** 2) + Q[1] * np.sum(d[:, 1] ** 2))
+
+
+# ------------------------------------------------------------------------------------------------------------
+# per-step sufficient statistics of the observation potential
+# ------------------------------------------------------------------------------------------------------------
+def step_stats(prob: Problem, labels, landmarks_xy) -> np.ndarray:
+    """Sufficient statistics ``(14, T+1)`` of the observation part of the pose conditional.
+
+    With ``e_i = p + R(θ) v_i − m_{c_i}`` (v_i = observation in the robot frame), the sum
+    ``Σ_i e_iᵀ Q e_i`` over the observations at pose t depends on the data only through the rows
+    ``n, Σv_x, Σv_y, Σm_x, Σm_y, Σv_x², Σv_xv_y, Σv_y², Σv_xm_x, Σv_xm_y, Σv_ym_x, Σv_ym_y, Σm_x², Σm_y²``.
+    Observations with ``labels < 0`` are left out.
+    """
+    labels = np.asarray(labels)
+    ok = labels >= 0
+    st = prob.step[ok]
+    v = prob.v_body[ok]
+    m = np.asarray(landmarks_xy, float)[labels[ok]]
+    vx, vy, mx, my = v[:, 0], v[:, 1], m[:, 0], m[:, 1]
+    K = prob.T + 1
+    cols = [None, vx, vy, mx, my, vx * vx, vx * vy, vy * vy, vx * mx, vx * my, vy * mx, vy * my, mx * mx, my * my]
+    out = np.empty((14, K))
+    for k, w in enumerate(cols):
+        out[k] = np.bincount(st, weights=w, minlength=K)[:K]
+    return out
+
+
+# ------------------------------------------------------------------------------------------------------------
+# 3-D conditional of one pose (eq. 14; eq. 11 with has_next = 0) — floats or arrays
+# ------------------------------------------------------------------------------------------------------------
+def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
+    """Value of the terms of H that involve pose x_t = (x, y, th).
+
+    ``ctx = (px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2)``:
+    previous pose, its motion prediction g(x_{t-1}, u_{t-1}), odometry increment of step t, ``hn`` = 1 if a next
+    pose exists (0 drops every t+1 term, eq. 11), the next pose, the control u_t and the odometry increment of
+    step t+1. ``st`` = the 14 sufficient statistics of :func:`step_stats` at t. ``Wf = Weights.flat``.
+    """
+    px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2 = ctx
+    r0, r1, r2, s0, s1, s2, q0, q1 = Wf
+    n, V1x, V1y, M1x, M1y, Sxx, Sxy, Syy, Axx, Axy, Ayx, Ayy, Cmx, Cmy = st
+    # motion t (eq. 3): g(x_{t-1}, u_{t-1}) − x_t
+    a0 = gx - x
+    a1 = gy - y
+    a2 = _wrap(gth - th)
+    cost = r0 * a0 * a0 + r1 * a1 * a1 + r2 * a2 * a2
+    # odometry t (eq. 16): τ(θ_{t-1})(x_t − x_{t-1}) − d̃_t
+    cp, sp = cos(pth), sin(pth)
+    dx, dy = x - px, y - py
+    b0 = cp * dx + sp * dy - d0
+    b1 = -sp * dx + cp * dy - d1
+    b2 = _wrap(th - pth - d2)
+    cost = cost + s0 * b0 * b0 + s1 * b1 * b1 + s2 * b2 * b2
+    c, s = cos(th), sin(th)
+    # motion t+1: g(x_t, u_t) − x_{t+1}
+    f0 = x + dt * v1 * c - nx
+    f1 = y + dt * v1 * s - ny
+    f2 = _wrap(th + dt * w1 - nth)
+    # odometry t+1: τ(θ_t)(x_{t+1} − x_t) − d̃_{t+1}
+    ex, ey = nx - x, ny - y
+    h0 = c * ex + s * ey - e0
+    h1 = -s * ex + c * ey - e1
+    h2 = _wrap(nth - th - e2)
+    cost = cost + hn * (r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2)
+    # observations at t: Σ‖p + R(θ)v_i − m_i‖²_Q from the sufficient statistics
+    RVx = c * V1x - s * V1y
+    RVy = s * V1x + c * V1y
+    Sxx_r = c * c * Sxx - 2.0 * c * s * Sxy + s * s * Syy
+    Syy_r = s * s * Sxx + 2.0 * c * s * Sxy + c * c * Syy
+    RxMx = c * Axx - s * Ayx
+    RyMy = s * Axy + c * Ayy
+    ex2 = n * x * x + Sxx_r + Cmx + 2.0 * x * RVx - 2.0 * x * M1x - 2.0 * RxMx
+    ey2 = n * y * y + Syy_r + Cmy + 2.0 * y * RVy - 2.0 * y * M1y - 2.0 * RyMy
+    return cost + q0 * ex2 + q1 * ey2
+
+
+def cond_step(x, y, th, ctx, st, Wf, dt, cos, sin):
+    """Gauss-Newton step ``δ = −(JᵀWJ)⁻¹ JᵀWe`` of the pose conditional at (x, y, th).
+
+    Returns ``(δx, δy, δθ)`` (floats or arrays). Every Jacobian below is the analytic derivative of the
+    corresponding residual in :func:`cond_cost` (tested against finite differences).
+    """
+    px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2 = ctx
+    r0, r1, r2, s0, s1, s2, q0, q1 = Wf
+    n, V1x, V1y, M1x, M1y, Sxx, Sxy, Syy, Axx, Axy, Ayx, Ayy, Cmx, Cmy = st
+    # motion t: J = −I
+    a0 = gx - x
+    a1 = gy - y
+    a2 = _wrap(gth - th)
+    H00 = r0
+    H11 = r1
+    H22 = r2
+    H01 = 0.0
+    H02 = 0.0
+    H12 = 0.0
+    g0 = -r0 * a0
+    g1 = -r1 * a1
+    g2 = -r2 * a2
+    # odometry t: J = [[cp, sp, 0], [−sp, cp, 0], [0, 0, 1]]
+    cp, sp = cos(pth), sin(pth)
+    dx, dy = x - px, y - py
+    b0 = cp * dx + sp * dy - d0
+    b1 = -sp * dx + cp * dy - d1
+    b2 = _wrap(th - pth - d2)
+    H00 = H00 + s0 * cp * cp + s1 * sp * sp
+    H01 = H01 + (s0 - s1) * cp * sp
+    H11 = H11 + s0 * sp * sp + s1 * cp * cp
+    H22 = H22 + s2
+    g0 = g0 + cp * s0 * b0 - sp * s1 * b1
+    g1 = g1 + sp * s0 * b0 + cp * s1 * b1
+    g2 = g2 + s2 * b2
+    c, s = cos(th), sin(th)
+    # motion t+1: J = [[1, 0, −dt v s], [0, 1, dt v c], [0, 0, 1]]
+    f0 = x + dt * v1 * c - nx
+    f1 = y + dt * v1 * s - ny
+    f2 = _wrap(th + dt * w1 - nth)
+    j02 = -dt * v1 * s
+    j12 = dt * v1 * c
+    H00 = H00 + hn * r0
+    H11 = H11 + hn * r1
+    H02 = H02 + hn * r0 * j02
+    H12 = H12 + hn * r1 * j12
+    H22 = H22 + hn * (r0 * j02 * j02 + r1 * j12 * j12 + r2)
+    g0 = g0 + hn * r0 * f0
+    g1 = g1 + hn * r1 * f1
+    g2 = g2 + hn * (r0 * j02 * f0 + r1 * j12 * f1 + r2 * f2)
+    # odometry t+1: J = [[−c, −s, k02], [s, −c, k12], [0, 0, −1]]
+    ex, ey = nx - x, ny - y
+    h0 = c * ex + s * ey - e0
+    h1 = -s * ex + c * ey - e1
+    h2 = _wrap(nth - th - e2)
+    k02 = -s * ex + c * ey
+    k12 = -c * ex - s * ey
+    H00 = H00 + hn * (s0 * c * c + s1 * s * s)
+    H01 = H01 + hn * (s0 - s1) * c * s
+    H11 = H11 + hn * (s0 * s * s + s1 * c * c)
+    H02 = H02 + hn * (-c * s0 * k02 + s * s1 * k12)
+    H12 = H12 + hn * (-s * s0 * k02 - c * s1 * k12)
+    H22 = H22 + hn * (s0 * k02 * k02 + s1 * k12 * k12 + s2)
+    g0 = g0 + hn * (-c * s0 * h0 + s * s1 * h1)
+    g1 = g1 + hn * (-s * s0 * h0 - c * s1 * h1)
+    g2 = g2 + hn * (k02 * s0 * h0 + k12 * s1 * h1 - s2 * h2)
+    # observations: J_i = [[1, 0, −(Rv)_y], [0, 1, (Rv)_x]]
+    RVx = c * V1x - s * V1y
+    RVy = s * V1x + c * V1y
+    Sxx_r = c * c * Sxx - 2.0 * c * s * Sxy + s * s * Syy
+    Syy_r = s * s * Sxx + 2.0 * c * s * Sxy + c * c * Syy
+    Sxy_r = c * s * (Sxx - Syy) + (c * c - s * s) * Sxy
+    RxMy = c * Axy - s * Ayy
+    RyMx = s * Axx + c * Ayx
+    H00 = H00 + n * q0
+    H11 = H11 + n * q1
+    H02 = H02 - q0 * RVy
+    H12 = H12 + q1 * RVx
+    H22 = H22 + q0 * Syy_r + q1 * Sxx_r
+    g0 = g0 + q0 * (n * x + RVx - M1x)
+    g1 = g1 + q1 * (n * y + RVy - M1y)
+    g2 = g2 - q0 * (x * RVy - RyMx + Sxy_r) + q1 * (y * RVx - RxMy + Sxy_r)
+    # solve the symmetric 3×3 system (cofactors), tiny relative damping against singular conditionals
+    mu = 1e-12 * (H00 + H11 + H22) + 1e-300
+    H00 = H00 + mu
+    H11 = H11 + mu
+    H22 = H22 + mu
+    C00 = H11 * H22 - H12 * H12
+    C01 = H02 * H12 - H01 * H22
+    C02 = H01 * H12 - H02 * H11
+    C11 = H00 * H22 - H02 * H02
+    C12 = H01 * H02 - H00 * H12
+    C22 = H00 * H11 - H01 * H01
+    det = H00 * C00 + H01 * C01 + H02 * C02
+    inv = -1.0 / det
+    return (
+        inv * (C00 * g0 + C01 * g1 + C02 * g2),
+        inv * (C01 * g0 + C11 * g1 + C12 * g2),
+        inv * (C02 * g0 + C12 * g1 + C22 * g2),
+    )
+
+
+def cond_minimise_scalar(x, y, th, ctx, st, Wf, dt, iters: int, tol: float):
+    """Conditional mode of one pose by ≤ ``iters`` Gauss-Newton steps with step halving (plain floats).
+
+    Every accepted step lowers the conditional cost, hence the energy. Returns the new ``(x, y, th)``.
+    """
+    cos, sin = math.cos, math.sin
+    f = cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin)
+    for _ in range(iters):
+        dx, dy, dth = cond_step(x, y, th, ctx, st, Wf, dt, cos, sin)
+        if not (math.isfinite(dx) and math.isfinite(dy) and math.isfinite(dth)):
+            break
+        alpha = 1.0
+        accepted = False
+        for _h in range(6):
+            xn, yn, thn = x + alpha * dx, y + alpha * dy, _wrap(th + alpha * dth)
+            fn = cond_cost(xn, yn, thn, ctx, st, Wf, dt, cos, sin)
+            if fn <= f:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            break
+        x, y, th, f_old, f = xn, yn, thn, f, fn
+        if alpha * (abs(dx) + abs(dy) + abs(dth)) < tol or f_old - f <= 1e-15 * (1.0 + f_old):
+            break
+    return x, y, th
+
+
+def cond_minimise_batch(xs, ctx, st, Wf, dt, iters: int):
+    """Vectorised :func:`cond_minimise_scalar` for poses that are conditionally independent.
+
+    ``xs (K, 3)``; ``ctx`` / ``st`` are tuples of ``(K,)`` arrays. Backtracking is per pose (masked).
+    """
+    x, y, th = xs[:, 0].copy(), xs[:, 1].copy(), xs[:, 2].copy()
+    cos, sin = np.cos, np.sin
+    f = cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin)
+    for _ in range(iters):
+        dx, dy, dth = cond_step(x, y, th, ctx, st, Wf, dt, cos, sin)
+        bad = ~(np.isfinite(dx) & np.isfinite(dy) & np.isfinite(dth))
+        dx[bad] = 0.0
+        dy[bad] = 0.0
+        dth[bad] = 0.0
+        alpha = np.ones_like(x)
+        done = bad.copy()
+        xn, yn, thn, fn = x.copy(), y.copy(), th.copy(), f.copy()
+        for _h in range(6):
+            tx, ty, tth = x + alpha * dx, y + alpha * dy, _wrap(th + alpha * dth)
+            ft = cond_cost(tx, ty, tth, ctx, st, Wf, dt, cos, sin)
+            ok = (ft <= f) & ~done
+            xn[ok], yn[ok], thn[ok], fn[ok] = tx[ok], ty[ok], tth[ok], ft[ok]
+            done |= ok
+            if done.all():
+                break
+            alpha = np.where(done, alpha, 0.5 * alpha)
+        x, y, th, f = xn, yn, thn, fn
+    return np.stack([x, y, th], -1)
+
+
+def pose_contexts(prob: Problem, poses, idx):
+    """Contexts of :func:`cond_cost` for the poses ``idx (K,)`` (all ≥ 1) as a tuple of ``(K,)`` arrays."""
+    T = prob.T
+    idx = np.asarray(idx, np.int64)
+    prev = poses[idx - 1]
+    g = _motion(prev, prob.controls[idx - 1], prob.dt)
+    d = prob.odo_inc[idx - 1]
+    hn = (idx < T).astype(float)
+    jn = np.minimum(idx + 1, T)
+    nxt = poses[jn]
+    un = prob.controls[np.minimum(idx, T - 1)]
+    en = prob.odo_inc[np.minimum(idx, T - 1)]
+    return (
+        prev[:, 0], prev[:, 1], prev[:, 2], g[:, 0], g[:, 1], g[:, 2], d[:, 0], d[:, 1], d[:, 2], hn,
+        nxt[:, 0], nxt[:, 1], nxt[:, 2], un[:, 0], un[:, 1], en[:, 0], en[:, 1], en[:, 2],
+    )
+
+
+def _motion(x, u, dt):
+    """g(x, u) without the heading wrap (residuals wrap themselves)."""
+    return np.stack([x[:, 0] + dt * u[:, 0] * np.cos(x[:, 2]), x[:, 1] + dt * u[:, 0] * np.sin(x[:, 2]),
+                     x[:, 2] + dt * u[:, 1]], -1)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# sweeps over the poses
+# ------------------------------------------------------------------------------------------------------------
+def sweep_poses_sequential(prob: Problem, W: Weights, poses, stats, iters: int = 3, tol: float = 1e-10):
+    """Paper-exact visit x_1, x_2, …, x_T (eq. 14), each pose moved to its conditional mode in place.
+
+    ``poses (T+1, 3)`` is modified in place; ``stats (14, T+1)`` from :func:`step_stats`.
+    """
+    T, dt = prob.T, prob.dt
+    Wf = W.flat
+    P = poses.tolist()
+    U = prob.controls.tolist()
+    D = prob.odo_inc.tolist()
+    ST = stats.T.tolist()
+    cos, sin = math.cos, math.sin
+    for t in range(1, T + 1):
+        px, py, pth = P[t - 1]
+        v0, w0 = U[t - 1]
+        gx, gy, gth = px + dt * v0 * cos(pth), py + dt * v0 * sin(pth), pth + dt * w0
+        d = D[t - 1]
+        if t < T:
+            nx, ny, nth = P[t + 1]
+            v1, w1 = U[t]
+            e = D[t]
+            ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 1.0, nx, ny, nth, v1, w1, e[0], e[1], e[2])
+        else:
+            ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        x, y, th = P[t]
+        P[t] = list(cond_minimise_scalar(x, y, th, ctx, ST[t], Wf, dt, iters, tol))
+    poses[:] = P
+    return poses
+
+
+def sweep_poses_parallel(prob: Problem, W: Weights, poses, stats, iters: int = 3):
+    """Coding-scheme sweep: all odd poses at once, then all even poses (each colour class is conditionally
+    independent given the map, the matchings and the other colour). In place."""
+    T = prob.T
+    for first in (1, 2):
+        idx = np.arange(first, T + 1, 2)
+        if idx.size == 0:
+            continue
+        ctx = pose_contexts(prob, poses, idx)
+        st = tuple(stats[:, idx])
+        poses[idx] = cond_minimise_batch(poses[idx], ctx, st, W.flat, prob.dt, iters)
+    return poses
+
+
+# ------------------------------------------------------------------------------------------------------------
+# joint problem over all poses and the map (fixed matchings): whitened residuals and sparse Jacobian
+# ------------------------------------------------------------------------------------------------------------
+def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jacobian: bool = True):
+    """Whitened residual vector ``r`` (so that ``‖r‖² = H``) and its sparse Jacobian w.r.t.
+    ``[x_1 … x_T (3T), m (2L)]`` (x_0 is fixed).
+
+    Returns ``(r (M,), J (M, 3T+2L) csr or None)``.
+    """
+    T = prob.T
+    L = landmarks.shape[0]
+    n_var = 3 * T + 2 * L
+    res, rows, cols, vals = [], [], [], []
+    row0 = 0
+
+    def add_block(r, sw, blocks):
+        # r (K, k) residuals; sw (k,) sqrt-weights; blocks: list of (J (K, k, d), col_index (K, d))
+        nonlocal row0
+        K, k = r.shape
+        res.append((r * sw).ravel())
+        if jacobian:
+            ridx = row0 + np.arange(K * k).reshape(K, k)
+            for Jb, cidx in blocks:
+                valid = cidx[:, 0] >= 0
+                Jw = Jb[valid] * sw[None, :, None]
+                d = Jb.shape[2]
+                rows.append(np.repeat(ridx[valid][:, :, None], d, axis=2).ravel())
+                cols.append(np.repeat(cidx[valid][:, None, :], k, axis=1).ravel())
+                vals.append(Jw.ravel())
+        row0 += K * k
+
+    t = np.arange(1, T + 1)
+    pose_cols = lambda tt: np.where(tt[:, None] >= 1, 3 * (tt[:, None] - 1) + np.arange(3)[None, :], -1)  # noqa: E731
+    if W.use_motion and T > 0:
+        r = potentials.motion_residual(poses[:-1], prob.controls, poses[1:], prob.dt)
+        Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
+        add_block(r, np.sqrt(W.R), [(Ja, pose_cols(t - 1)), (Jb, pose_cols(t))])
+    if W.use_odometry and T > 0:
+        r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)
+        Ja, Jb = potentials.odometry_residual_jacobians(poses[:-1], poses[1:])
+        add_block(r, np.sqrt(W.S), [(Ja, pose_cols(t - 1)), (Jb, pose_cols(t))])
+    ok = np.asarray(labels) >= 0
+    if ok.any():
+        st = prob.step[ok]
+        lab = np.asarray(labels)[ok]
+        r = potentials.observation_residual(poses[st], prob.z[ok], landmarks[lab])
+        Jx, Jm = potentials.observation_residual_jacobians(poses[st], prob.z[ok])
+        mcols = 3 * T + 2 * lab[:, None] + np.arange(2)[None, :]
+        add_block(r, np.sqrt(W.Q), [(Jx, pose_cols(st)), (Jm, mcols)])
+    rvec = np.concatenate(res) if res else np.zeros(0)
+    if not jacobian:
+        return rvec, None
+    J = sp.csr_matrix(
+        (np.concatenate(vals) if vals else np.zeros(0),
+         (np.concatenate(rows) if rows else np.zeros(0, int), np.concatenate(cols) if cols else np.zeros(0, int))),
+        shape=(row0, n_var),
+    )
+    return rvec, J
+
+
+def pack(poses, landmarks) -> np.ndarray:
+    return np.concatenate([poses[1:].ravel(), landmarks.ravel()])
+
+
+def unpack(prob: Problem, vec, L: int):
+    T = prob.T
+    poses = np.empty((T + 1, 3))
+    poses[0] = prob.x0
+    poses[1:] = vec[: 3 * T].reshape(T, 3)
+    poses[1:, 2] = wrap_angle(poses[1:, 2])
+    return poses, vec[3 * T:].reshape(L, 2).copy()
+
+
+def joint_gn_step(prob: Problem, W: Weights, poses, landmarks, labels, *, max_halvings: int = 12):
+    """One joint Gauss-Newton step over all poses and the map with fixed matchings, with backtracking.
+
+    Returns ``(poses, landmarks, energy, accepted)``; when no step length lowers H the input is returned
+    unchanged (so every accepted step is a strict decrease of the same energy ICM minimises).
+    """
+    L = landmarks.shape[0]
+    r, J = joint_residuals(prob, W, poses, landmarks, labels)
+    f0 = float(r @ r)
+    H = (J.T @ J).tocsc()
+    g = J.T @ r
+    n = H.shape[0]
+    # unobserved landmarks / unconstrained poses make H singular: a tiny diagonal keeps the solve defined
+    diag = H.diagonal()
+    H = H + sp.diags(1e-9 * (diag + (diag == 0)), format="csc")
+    try:
+        delta = -spla.spsolve(H, g)
+    except Exception:  # noqa: BLE001 - singular system: no step
+        return poses, landmarks, f0, False
+    if not np.all(np.isfinite(delta)) or n == 0:
+        return poses, landmarks, f0, False
+    base = pack(poses, landmarks)
+    alpha = 1.0
+    for _ in range(max_halvings):
+        p_new, m_new = unpack(prob, base + alpha * delta, L)
+        f_new = energy(prob, W, p_new, m_new, labels)
+        if f_new < f0:
+            return p_new, m_new, f_new, True
+        alpha *= 0.5
+    return poses, landmarks, f0, False
+
+
+def map_energy_fixed_assoc(prob: Problem, W: Weights, poses, landmarks, labels, *, max_iters: int = 100,
+                           rtol: float = 1e-13):
+    """MAP optimum of H over all poses and the map for fixed matchings, by joint Gauss-Newton from the given
+    point. Returns ``(poses, landmarks, energy, iterations)``."""
+    f = energy(prob, W, poses, landmarks, labels)
+    for it in range(1, max_iters + 1):
+        poses, landmarks, f_new, ok = joint_gn_step(prob, W, poses, landmarks, labels)
+        if not ok:
+            return poses, landmarks, f, it
+        done = f - f_new <= rtol * max(f, 1e-300)
+        f = f_new
+        if done:
+            return poses, landmarks, f, it
+    return poses, landmarks, f, max_iters
+
+
+def laplace_covariances(prob: Problem, W: Weights, poses, landmarks, labels, *, chunk: int = 512):
+    """Marginal covariances from the Laplace approximation ``Σ = (JᵀJ)⁻¹`` at the estimate (fixed matchings).
+
+    The weight matrices are read as information matrices (Gibbs temperature 2, so P ∝ exp(−H/2) is the
+    Gaussian with information JᵀJ). Returns ``pose_cov (T+1, 3, 3)`` (zero at the fixed x_0) and
+    ``landmark_cov (L, 2, 2)``: the diagonal blocks of the inverse — marginals, not the conditional curvature
+    ICM uses internally. Columns of the inverse are solved in chunks with one sparse LU factorisation.
+    """
+    T, L = prob.T, landmarks.shape[0]
+    _, J = joint_residuals(prob, W, poses, landmarks, labels)
+    H = (J.T @ J).tocsc()
+    n = H.shape[0]
+    diag = H.diagonal()
+    H = H + sp.diags(1e-12 * (diag + (diag == 0)), format="csc")
+    lu = spla.splu(H)
+    starts = np.concatenate([3 * np.arange(T), 3 * T + 2 * np.arange(L)]).astype(int)
+    sizes = np.concatenate([np.full(T, 3), np.full(L, 2)]).astype(int)
+    diag_blocks = np.zeros((n, 3))  # row i: inverse entries (i, start_of_its_block + 0..k-1)
+    b0 = 0
+    while b0 < len(starts):
+        b1 = b0
+        while b1 < len(starts) and starts[b1] + sizes[b1] - starts[b0] <= chunk:
+            b1 += 1
+        b1 = max(b1, b0 + 1)
+        c0, c1 = int(starts[b0]), int(starts[b1 - 1] + sizes[b1 - 1])
+        E = np.zeros((n, c1 - c0))
+        E[np.arange(c0, c1), np.arange(c1 - c0)] = 1.0
+        X = lu.solve(E)
+        for b in range(b0, b1):
+            s0, k = int(starts[b]), int(sizes[b])
+            diag_blocks[s0:s0 + k, :k] = X[s0:s0 + k, s0 - c0:s0 - c0 + k]
+        b0 = b1
+    pose_cov = np.zeros((T + 1, 3, 3))
+    pose_cov[1:] = diag_blocks[: 3 * T].reshape(T, 3, 3)
+    lm_cov = diag_blocks[3 * T:, :2].reshape(L, 2, 2)
+    pose_cov = 0.5 * (pose_cov + np.swapaxes(pose_cov, 1, 2))
+    lm_cov = 0.5 * (lm_cov + np.swapaxes(lm_cov, 1, 2))
+    return pose_cov, lm_cov
