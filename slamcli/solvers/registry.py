@@ -52,16 +52,19 @@ def load(name: str) -> type:
     if name not in eps:
         listing = ", ".join(sorted(eps)) or "none"
         raise PluginError(f"unknown solver {name!r}; available solvers: {listing}")
+    listing = ", ".join(sorted(eps))
     try:
         cls = eps[name].load()
     except Exception as exc:  # noqa: BLE001 - any import failure of a plugin is reported the same way
+        first = (str(exc).strip().splitlines() or [""])[0]
         raise PluginError(
-            f"solver plugin {name!r} ({eps[name].value}) failed to load: {type(exc).__name__}: {exc}"
+            f"solver plugin {name!r} ({eps[name].value}) failed to load: {type(exc).__name__}: {first} "
+            f"(available solvers: {listing})"
         ) from None
     params_cls = getattr(cls, "Params", None)
     if not (callable(getattr(cls, "solve", None)) and params_cls and dataclasses.is_dataclass(params_cls)):
         raise PluginError(
             f"solver plugin {name!r} ({eps[name].value}) does not follow the solver contract "
-            "(needs a Params dataclass and a solve() method)"
+            f"(needs a Params dataclass and a solve() method; available solvers: {listing})"
         )
     return cls
