@@ -226,7 +226,7 @@ def test_api_rejects_a_dataset_instead_of_inputs():
 # -- real processes --------------------------------------------------------------------------------------
 def cli(*args):
     return subprocess.run([sys.executable, "-m", "slamcli", *map(str, args)], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, check=False)
 
 
 def test_subprocess_solve_and_corrupt_input(data, tmp_path):

@@ -87,7 +87,7 @@ def test_odometry_params_through_build_params():
 
 
 def test_describe_params():
-    rows = dict((n, (t, d)) for n, t, d in describe_params(OdometryParams))
+    rows = {n: (t, d) for n, t, d in describe_params(OdometryParams)}
     assert rows == {"use_reported_ids": ("bool", "True"), "nn_threshold": ("float", "1.0"),
                     "min_support": ("int", "1")}
-    assert dict((n, d) for n, _t, d in describe_params(P))["kernel"] == "none"
+    assert {n: d for n, _t, d in describe_params(P)}["kernel"] == "none"
