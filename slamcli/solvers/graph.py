@@ -229,7 +229,7 @@ def _sqrt_of_weight(W: np.ndarray) -> np.ndarray | None:
     lam, V = np.linalg.eigh(0.5 * (W + W.T))
     if lam.min() < -1e-12 * max(1.0, lam.max()):
         raise SolverError("paper weight matrices must be positive semi-definite")
-    return (np.sqrt(2.0 * np.clip(lam, 0.0, None))[:, None] * V.T)
+    return np.sqrt(2.0 * np.clip(lam, 0.0, None))[:, None] * V.T
 
 
 @dataclass(frozen=True)
@@ -339,7 +339,9 @@ def build_gtsam_problem(
 
         cols = np.concatenate([pc[steps], lc[labels]], axis=1)
         blocks.append(
-            nls.FactorBlock("bearing_range", cols, ev_obs, _sqrt_info_from_cov(inputs.noise.obs_cov), robust=True)
+            nls.FactorBlock(
+                "bearing_range", cols, ev_obs, _sqrt_info_from_cov(inputs.noise.obs_cov), robust=True
+            )
         )
 
     if params.use_gps and np.asarray(inputs.gps_step).size:
@@ -354,7 +356,7 @@ def build_gtsam_problem(
 
         blocks.append(nls.FactorBlock("gps", pc[gsteps], ev_gps, np.eye(2) / inputs.gps_std, robust=True))
 
-    problem = nls.NlsProblem(n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy())
+    problem = nls.NlsProblem(n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3))
     return GraphProblem(problem, pack_state(init_poses, init_landmarks), n_poses, L)
 
 
@@ -428,13 +430,20 @@ def build_paper_problem(
             Jx, Jm = potentials.observation_residual_jacobians(p, z)
             return r, np.concatenate([Jx, Jm], axis=2)
 
-        blocks.append(nls.FactorBlock("observation", np.concatenate([pc[steps], lc[labels]], 1), ev_obs, LQ,
-                                      robust=True))
+        blocks.append(
+            nls.FactorBlock(
+                "observation", np.concatenate([pc[steps], lc[labels]], 1), ev_obs, LQ, robust=True
+            )
+        )
     fixed = [pc[0]]
     if LQ is None:
         fixed.append(lc.ravel())
     problem = nls.NlsProblem(
-        n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy(), fixed_cols=np.concatenate(fixed)
+        n_vars=P + 2 * L,
+        blocks=blocks,
+        angle_cols=pc[:, 2].copy(),
+        fixed_cols=np.concatenate(fixed),
+        chain=(n_poses, 3),
     )
     return GraphProblem(problem, pack_state(init_poses, init_landmarks), n_poses, L)
 
@@ -479,6 +488,26 @@ def paper_energy(inputs, assoc, R, S, Q, poses_xyt, landmarks_xy) -> float:
     """The paper-000 energy (see :func:`optimize_paper_energy`) at given poses and landmarks."""
     gp = build_paper_problem(inputs, assoc, R, S, Q, poses_xyt, landmarks_xy)
     return nls.evaluate_cost(gp.problem, gp.x0)
+
+
+def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.ndarray]:
+    """World-frame marginal covariances ``pose_cov (T+1, 3, 3)`` and ``landmark_cov (L, 2, 2)`` at the optimum.
+
+    ``H`` is block tridiagonal over the pose chain (every pose-pose factor links consecutive poses or is
+    unary), so :func:`slamcli.solvers.nls.marginals_chain_border` eliminates the chain with a banded
+    Cholesky and inverts only the ``2L × 2L`` landmark Schur complement; otherwise the general sparse
+    column solve :func:`slamcli.solvers.nls.marginal_covariances` is used.
+    """
+    L = gp.n_landmarks
+    if nls.is_block_tridiagonal(information, gp.n_poses, 3):
+        pose_cov, border = nls.marginals_chain_border(information, gp.n_poses, 3)
+        j = np.arange(L)
+        lm_cov = border.reshape(L, 2, L, 2)[j, :, j, :] if L else np.zeros((0, 2, 2))
+        return pose_cov, np.ascontiguousarray(lm_cov)
+    factor = nls.factorize_information(information)
+    pose_cov = nls.marginal_covariances(information, gp.pose_cols(), factor=factor)
+    lm_cov = nls.marginal_covariances(information, gp.landmark_cols(), factor=factor)
+    return pose_cov, lm_cov
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -547,7 +576,9 @@ class GraphSlam(BaseSolver):
                 raise SolverError("graph: init_from=init needs an --init result")
             poses0 = np.asarray(init.poses_xyt, float)
             if poses0.shape != (inputs.n_poses, 3):
-                raise SolverError(f"graph: init result has poses {poses0.shape}, dataset needs ({inputs.n_poses}, 3)")
+                raise SolverError(
+                    f"graph: init result has poses {poses0.shape}, dataset needs ({inputs.n_poses}, 3)"
+                )
         else:
             poses0 = odometry_initial_poses(inputs)
         assoc, old_of_new, mode = self._associate(inputs, init, poses0)
@@ -573,8 +604,13 @@ class GraphSlam(BaseSolver):
 
         def on_iter(k, x, cost):
             lm = gp.unpack(x)[1].copy()
-            change.append(0.0 if not lm_trace else float(np.mean(np.linalg.norm(lm - lm_trace[-1], axis=1)))
-                          if L else 0.0)
+            change.append(
+                0.0
+                if not lm_trace
+                else float(np.mean(np.linalg.norm(lm - lm_trace[-1], axis=1)))
+                if L
+                else 0.0
+            )
             lm_trace.append(lm)
             if progress is not None:
                 progress(min(k, p.max_iterations), p.max_iterations)
@@ -590,20 +626,19 @@ class GraphSlam(BaseSolver):
         res = nls.solve(gp.problem, gp.x0, nparams, callback=on_iter)
         poses, lms = gp.unpack(res.x)
         pose_cov = landmark_cov = None
-        extra: dict = {"association": mode, "n_landmarks": int(L), "iterations": int(res.iterations),
-                       "final_cost": float(res.cost), "model": p.model}
+        extra: dict = {
+            "association": mode,
+            "n_landmarks": int(L),
+            "iterations": int(res.iterations),
+            "final_cost": float(res.cost),
+            "model": p.model,
+        }
         if p.covariance and res.status != Status.FAILED:
-            factor = nls.factorize_information(res.information)
-            cov = nls.marginal_covariances(res.information, gp.pose_cols(), factor=factor)
+            pose_cov, landmark_cov = laplace_marginals(gp, res.information)
             if p.model == "paper":
-                cov[0] = 0.0  # x_0 is fixed
-            pose_cov = cov
-            if L:
-                landmark_cov = nls.marginal_covariances(res.information, gp.landmark_cols(), factor=factor)
-                if p.model == "paper" and not np.any(Q):
+                pose_cov[0] = 0.0  # x_0 is held fixed
+                if not np.any(Q):
                     landmark_cov = None  # landmarks were held fixed
-            else:
-                landmark_cov = np.zeros((0, 2, 2))
         if progress is not None:
             progress(p.max_iterations, p.max_iterations)
         trace = IterationTrace.from_lists(res.cost_trace, change, res.time_trace, lm_trace)

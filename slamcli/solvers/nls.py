@@ -37,8 +37,9 @@ batches, with one sparse factorisation (:func:`marginal_covariances`) — never 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Literal
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -97,6 +98,11 @@ class NlsProblem:
     fixed_cols : ndarray (C,) int64
         Columns held constant (their rows/columns of ``H`` become identity, their gradient zero, so every
         step leaves them unchanged). Their "marginal covariance" is meaningless (identity).
+    chain : (n_chain, k) or None
+        Declares that the first ``n_chain·k`` columns are a chain of ``k``-blocks whose block of ``H`` is
+        block tridiagonal (a pose chain); linear systems are then solved by banded Cholesky of the chain and
+        a dense Schur complement on the remaining (border) columns (:class:`_ChainSolver`) when the border
+        has at most ``NlsParams.max_border`` columns; otherwise SuperLU.
     retract : callable ``(x (D,), h (D,)) -> x (D,)`` or None
         Manifold update; default ``x + h`` followed by wrapping ``angle_cols``.
     """
@@ -105,6 +111,7 @@ class NlsProblem:
     blocks: list[FactorBlock]
     angle_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     fixed_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    chain: tuple[int, int] | None = None
     retract: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
     def apply_step(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -140,6 +147,8 @@ class NlsParams:
         Kernel applied to blocks with ``robust=True``.
     huber_k : float
         Huber threshold on the whitened residual norm.
+    max_border : int
+        Largest border (non-chain) dimension for the chain/Schur linear solver (see ``NlsProblem.chain``).
     """
 
     method: Literal["lm", "gn"] = "lm"
@@ -151,6 +160,7 @@ class NlsParams:
     damping: Literal["marquardt", "levenberg"] = "marquardt"
     robust: Literal["none", "huber"] = "none"
     huber_k: float = 1.345
+    max_border: int = 1500
 
 
 @dataclass(frozen=True)
@@ -217,6 +227,15 @@ class _Assembler:
             self.fixed_mask = is_fixed[self.indices] | np.repeat(is_fixed, np.diff(self.indptr))
             self.fixed_diag = self.diag_pos[fixed]
 
+    def linear_solver(self, params: NlsParams):
+        """``solve(data (nnz,), rhs (D,)) -> h (D,) | None`` for ``H(data) h = rhs``."""
+        ch = self.problem.chain
+        if ch is not None and self.D - ch[0] * ch[1] <= params.max_border:
+            cs = _ChainSolver(self, ch[0], ch[1])
+            if cs.ok:
+                return cs.solve
+        return lambda data, rhs: _solve(self.matrix(data), rhs)
+
     def matrix(self, data: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.D, self.D))
 
@@ -250,6 +269,76 @@ class _Assembler:
             data[self.fixed_diag] = 1.0
             g[self.fixed] = 0.0
         return total, data, g
+
+
+class _ChainSolver:
+    """Solve ``H h = b`` for ``H = [[A, B], [Bᵀ, C]]`` with ``A`` block tridiagonal (``n_chain`` blocks of
+    size ``k``) and a small dense border ``C`` (``m × m``), by a block Cholesky factorisation::
+
+        A = UᵀU                          banded Cholesky (LAPACK pbtrf), half-bandwidth 2k − 1
+        [V, y] = U⁻ᵀ [B, b_A]            banded triangular solve (tbtrs)
+        S = C − VᵀV                      Schur complement (dense, m × m), Cholesky
+        S h_C = b_C − Vᵀ y ,  h_A = U⁻¹ (y − V h_C)
+
+    The scatter from the CSC data of ``H`` into the banded storage of ``A``, dense ``B`` and dense ``C`` is
+    computed once; ``ok`` is False when the sparsity pattern is not chain + border.
+    """
+
+    def __init__(self, asm: _Assembler, n_chain: int, k: int) -> None:
+        D = asm.D
+        n = n_chain * k
+        self.n, self.m, self.u = n, D - n, 2 * k - 1
+        rows = asm.indices.astype(np.int64)
+        cols = np.repeat(np.arange(D, dtype=np.int64), np.diff(asm.indptr))
+        in_a = (rows < n) & (cols < n)
+        self.ok = bool(np.all(np.abs(rows[in_a] // k - cols[in_a] // k) <= 1))
+        if not self.ok:
+            return
+        up = in_a & (rows <= cols)
+        self.sel_ab = np.flatnonzero(up)
+        self.pos_ab = (self.u + rows[up] - cols[up]) * n + cols[up]  # flat index into ab (u+1, n)
+        in_b = (rows < n) & (cols >= n)
+        self.sel_b = np.flatnonzero(in_b)
+        self.pos_b = rows[in_b] * (self.m + 1) + (cols[in_b] - n)  # into [B | b_A] (n, m+1)
+        in_c = (rows >= n) & (cols >= n)
+        self.sel_c = np.flatnonzero(in_c)
+        self.pos_c = (rows[in_c] - n) * self.m + (cols[in_c] - n)
+
+    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
+        import scipy.linalg as sla
+        from scipy.linalg import lapack
+
+        n, m, u = self.n, self.m, self.u
+        ab = np.zeros((u + 1) * n)
+        ab[self.pos_ab] = data[self.sel_ab]
+        try:
+            cb = sla.cholesky_banded(ab.reshape(u + 1, n), lower=False, check_finite=False)
+        except np.linalg.LinAlgError:
+            return None
+        if m == 0:
+            return sla.cho_solve_banded((cb, False), rhs, check_finite=False)
+        R = np.zeros(n * (m + 1))
+        R[self.pos_b] = data[self.sel_b]
+        R = R.reshape(n, m + 1)
+        R[:, m] = rhs[:n]
+        Vy, info = lapack.dtbtrs(cb, R, uplo="U", trans="T")
+        if info != 0:
+            return None
+        V, y = Vy[:, :m], Vy[:, m]
+        C = np.zeros(m * m)
+        C[self.pos_c] = data[self.sel_c]
+        S = C.reshape(m, m) - V.T @ V
+        try:
+            hc = sla.cho_solve(
+                sla.cho_factor(0.5 * (S + S.T), check_finite=False), rhs[n:] - V.T @ y, check_finite=False
+            )
+        except np.linalg.LinAlgError:
+            return None
+        ha, info = lapack.dtbtrs(cb, (y - V @ hc)[:, None], uplo="U", trans="N")
+        if info != 0:
+            return None
+        h = np.concatenate([ha[:, 0], hc])
+        return h if np.all(np.isfinite(h)) else None
 
 
 def _whiten(L: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -338,10 +427,19 @@ def solve(
     x = np.array(x0, dtype=float, copy=True)
     if x.shape != (problem.n_vars,):
         raise ValueError(f"x0 has shape {x.shape}, expected ({problem.n_vars},)")
+    lin_solve = asm.linear_solver(params)
     cost, data, g = asm.linearize(x, params)
     if not np.isfinite(cost):
-        return NlsResult(x, cost, Status.FAILED, "non-finite initial cost", 0, np.array([cost]),
-                         np.zeros(1), asm.matrix(data))
+        return NlsResult(
+            x,
+            cost,
+            Status.FAILED,
+            "non-finite initial cost",
+            0,
+            np.array([cost]),
+            np.zeros(1),
+            asm.matrix(data),
+        )
     costs, times = [cost], [0.0]
     if callback is not None:
         callback(0, x, cost)
@@ -363,13 +461,13 @@ def solve(
             Dvec = np.maximum(diag, 1e-12) if params.damping == "marquardt" else np.ones(asm.D)
             damped = data.copy()
             damped[asm.diag_pos] += lam * Dvec
-            h = _solve(asm.matrix(damped), -g)
+            h = lin_solve(damped, -g)
             if h is None:
                 lam *= nu
                 nu *= 2.0
                 continue
         else:
-            h = _solve(asm.matrix(data), -g)
+            h = lin_solve(data, -g)
             if h is None:
                 status, message = Status.FAILED, "singular normal equations (is every variable constrained?)"
                 break
@@ -465,3 +563,85 @@ def marginal_covariances(
         out[start:stop] = np.take_along_axis(Xb, np.broadcast_to(rows[:, None, :], (nb, k, k)), axis=2)
     # symmetrise round-off
     return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
+def is_block_tridiagonal(information: sp.spmatrix, n_chain: int, k: int) -> bool:
+    """Whether the leading ``(n_chain·k)²`` block of ``H`` only couples neighbouring ``k``-blocks."""
+    A = sp.coo_matrix(sp.csc_matrix(information)[: n_chain * k, : n_chain * k])
+    return bool(np.all(np.abs(A.row // k - A.col // k) <= 1))
+
+
+def marginals_chain_border(information: sp.spmatrix, n_chain: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Marginal covariances for a "chain + border" information matrix (pose chain + landmarks).
+
+    ``H = [[A, B], [Bᵀ, C]]`` where ``A`` (``n_chain`` blocks of size ``k``, e.g. SE(2) poses) is block
+    tridiagonal — true whenever pose-pose factors only link consecutive poses (odometry, motion) or are
+    unary (prior, GPS) — and the border (landmarks, ``m`` columns) is arbitrary. Eliminating the chain:
+
+        W = A⁻¹ B                  (banded Cholesky of A, ``scipy.linalg.cho_solve_banded``)
+        S = C − Bᵀ W               (Schur complement, m × m)      Σ_CC = S⁻¹
+        Σ_ii = (A⁻¹)_ii + W_i Σ_CC W_iᵀ
+
+    and the diagonal blocks of ``A⁻¹`` come from the block-tridiagonal (Rauch-Tung-Striebel-type)
+    recursion — forward ``S_0 = D_0, S_i = D_i − E_{i−1}ᵀ S_{i−1}⁻¹ E_{i−1}``; backward
+    ``Σ_n = S_n⁻¹, Σ_i = S_i⁻¹ + G_i Σ_{i+1} G_iᵀ, G_i = S_i⁻¹ E_i`` (``D_i``, ``E_i = A_{i,i+1}`` blocks).
+    Cost ``O(n_chain (k³ + k m + k m²) + m³)`` — no factorisation of all of ``H``, no dense ``H⁻¹``.
+
+    Returns
+    -------
+    chain_cov : ndarray (n_chain, k, k)   marginal blocks of the chain variables.
+    border_cov : ndarray (m, m)           joint marginal covariance of all border variables.
+    """
+    import scipy.linalg as sla
+
+    H = sp.csc_matrix(information)
+    n = n_chain * k
+    if not is_block_tridiagonal(H, n_chain, k):
+        raise ValueError("the chain block of H is not block tridiagonal")
+    A = H[:n, :n].tocsr()
+    Bm = H[:n, n:].toarray()
+    Cm = H[n:, n:].toarray()
+    # banded upper storage of A (half-bandwidth u = 2k − 1)
+    u = 2 * k - 1
+    Au = sp.triu(A).tocoo()
+    ab = np.zeros((u + 1, n))
+    ab[u + Au.row - Au.col, Au.col] = Au.data
+    cb = sla.cholesky_banded(ab, lower=False)
+    m = Bm.shape[1]
+    if m:
+        W = sla.cho_solve_banded((cb, False), Bm)  # (n, m)
+        Sch = Cm - Bm.T @ W
+        Sch = 0.5 * (Sch + Sch.T)
+        cf = sla.cho_factor(Sch)
+        border_cov = sla.cho_solve(cf, np.eye(m))
+        border_cov = 0.5 * (border_cov + border_cov.T)
+    else:
+        W = np.zeros((n, 0))
+        border_cov = np.zeros((0, 0))
+    # block-tridiagonal selected inverse of A
+    idx = np.arange(n_chain)[:, None] * k + np.arange(k)[None, :]  # (n_chain, k)
+    Dblk = _gather_blocks(A, idx, idx)
+    Eblk = _gather_blocks(A, idx[:-1], idx[1:])
+    Sinv = np.empty((n_chain, k, k))
+    S = Dblk[0]
+    Sinv[0] = np.linalg.inv(S)
+    for i in range(1, n_chain):  # sequential recursion; O(k³) numpy work per block
+        S = Dblk[i] - Eblk[i - 1].T @ Sinv[i - 1] @ Eblk[i - 1]
+        Sinv[i] = np.linalg.inv(S)
+    G = Sinv[:-1] @ Eblk  # (n_chain-1, k, k)
+    cov = np.empty((n_chain, k, k))
+    cov[-1] = Sinv[-1]
+    for i in range(n_chain - 2, -1, -1):
+        cov[i] = Sinv[i] + G[i] @ cov[i + 1] @ G[i].T
+    if m:
+        Wb = W.reshape(n_chain, k, m)
+        cov += np.einsum("nka,ab,nlb->nkl", Wb, border_cov, Wb, optimize=True)
+    return 0.5 * (cov + np.swapaxes(cov, 1, 2)), border_cov
+
+
+def _gather_blocks(A: sp.csr_matrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Dense ``(B, k, k)`` blocks ``A[rows[b]][:, cols[b]]`` of a sparse matrix (vectorised lookup)."""
+    B, k = rows.shape
+    r = np.broadcast_to(rows[:, :, None], (B, k, k)).ravel()
+    c = np.broadcast_to(cols[:, None, :], (B, k, k)).ravel()
+    return np.asarray(A[r, c]).reshape(B, k, k)

@@ -1,0 +1,287 @@
+"""The sparse NLS engine and the graph factors, checked against finite differences, scipy and dense algebra."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.optimize as so
+from tiny_world import tiny_dataset
+
+from slamcli.models import se2
+from slamcli.solvers import graph, nls
+from slamcli.types import Status
+
+
+def _num_jac(f, x, eps=1e-6):
+    """Central differences of ``f: (n,) -> (m,)`` at ``x``."""
+    x = np.asarray(x, float)
+    cols = []
+    for i in range(x.size):
+        d = np.zeros_like(x)
+        d[i] = eps
+        cols.append((f(x + d) - f(x - d)) / (2 * eps))
+    return np.stack(cols, -1)
+
+
+def _small_problem(model="gtsam", T=25, n_landmarks=5, seed=3, **kw):
+    ds = tiny_dataset(T=T, n_landmarks=n_landmarks, seed=seed, report_ids=True, clutter_every=0, **kw)
+    inp = ds.inputs
+    from slamcli.solvers import frontend
+
+    assoc = frontend.associate_reported(inp.observations)
+    L = int(assoc.max()) + 1
+    p0 = graph.odometry_initial_poses(inp)
+    lm0 = frontend.landmarks_from_observations(p0, inp.observations, assoc, L)
+    if model == "gtsam":
+        gp = graph.build_gtsam_problem(inp, assoc, p0, lm0, graph.GraphParams(use_controls=True))
+    else:
+        R = np.diag([2.0, 3.0, 5.0])
+        S = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]])
+        Q = np.array([[1.5, 0.2], [0.2, 1.0]])
+        gp = graph.build_paper_problem(inp, assoc, R, S, Q, p0, lm0)
+    return ds, gp
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Jacobians
+# ---------------------------------------------------------------------------------------------------------
+def test_log_jacobian_matches_finite_differences_including_small_angles():
+    rng = np.random.default_rng(0)
+    # (finite differences of se2.log are only trustworthy where its (1−cos w)/w is: |w| ≫ 1e-6 or w ≈ 0)
+    pts = np.column_stack([rng.normal(0, 2, 8), rng.normal(0, 2, 8), np.r_[rng.uniform(-3, 3, 6), 0.0, 2e-8]])
+    for p in pts:
+        Jn = _num_jac(se2.log, p, eps=1e-7 if abs(p[2]) > 1e-3 else 1e-9)
+        np.testing.assert_allclose(graph.log_jacobian(p), Jn, atol=2e-7)
+    # the small-angle series branch joins the closed form continuously at its switch (|w| = 1e-4)
+    lo = graph.log_jacobian(np.array([1.3, -0.7, 0.999999e-4]))
+    hi = graph.log_jacobian(np.array([1.3, -0.7, 1.000001e-4]))
+    np.testing.assert_allclose(lo, hi, atol=1e-10)
+
+
+def _fd_wrt(fun, args, which):
+    """Central-difference Jacobian of ``fun(*args)[0][0]`` w.r.t. ``args[which][0]`` (single-factor arrays)."""
+
+    def f(v):
+        a = list(args)
+        a[which] = v[None]
+        return fun(*a)[0][0]
+
+    return _num_jac(f, args[which][0])
+
+
+def test_factor_error_jacobians_match_finite_differences():
+    rng = np.random.default_rng(1)
+    F = 6
+    xi = np.column_stack([rng.normal(0, 3, F), rng.normal(0, 3, F), rng.uniform(-3, 3, F)])
+    xj = np.column_stack([rng.normal(0, 3, F), rng.normal(0, 3, F), rng.uniform(-3, 3, F)])
+    meas = np.column_stack([rng.normal(0, 1, F), rng.normal(0, 1, F), rng.uniform(-1, 1, F)])
+    m = rng.normal(0, 4, (F, 2))
+    z = np.column_stack([rng.uniform(1, 5, F), rng.uniform(-3, 3, F)])
+    _, Ji, Jj = graph.between_error(xi, xj, meas)
+    _, Jp = graph.prior_error(xi, meas)
+    _, Jx, Jm = graph.bearing_range_error(xi, m, z)
+    for f in range(F):
+        s = slice(f, f + 1)
+        np.testing.assert_allclose(Ji[f], _fd_wrt(graph.between_error, (xi[s], xj[s], meas[s]), 0), atol=1e-6)
+        np.testing.assert_allclose(Jj[f], _fd_wrt(graph.between_error, (xi[s], xj[s], meas[s]), 1), atol=1e-6)
+        np.testing.assert_allclose(Jp[f], _fd_wrt(graph.prior_error, (xi[s], meas[s]), 0), atol=1e-6)
+        np.testing.assert_allclose(
+            Jx[f], _fd_wrt(graph.bearing_range_error, (xi[s], m[s], z[s]), 0), atol=1e-6
+        )
+        np.testing.assert_allclose(
+            Jm[f], _fd_wrt(graph.bearing_range_error, (xi[s], m[s], z[s]), 1), atol=1e-6
+        )
+
+
+def test_between_error_is_zero_at_the_measurement_and_equals_log():
+    xi = np.array([[1.0, 2.0, 0.3]])
+    d = np.array([[0.5, -0.2, 0.4]])
+    xj = se2.compose(xi, d)
+    e, _, _ = graph.between_error(xi, xj, d)
+    np.testing.assert_allclose(e, 0.0, atol=1e-12)
+    # a known non-zero: measured identity → error is Log(between)
+    e, _, _ = graph.between_error(xi, xj, np.zeros((1, 3)))
+    np.testing.assert_allclose(e, se2.log(d), atol=1e-12)
+
+
+@pytest.mark.parametrize("model", ["gtsam", "paper"])
+def test_every_block_jacobian_matches_finite_differences(model):
+    _, gp = _small_problem(model, T=12, n_landmarks=4, gps_every=4)
+    x = gp.x0 + np.random.default_rng(2).normal(0, 0.05, gp.x0.size)
+    names = set()
+    for b in gp.problem.blocks:
+        names.add(b.name)
+        _, J = b.evaluate(x)
+        for f in range(0, b.n_factors, max(1, b.n_factors // 7)):
+            cols = b.cols[f]
+
+            def rf(v, f=f, cols=cols, b=b):
+                xx = x.copy()
+                xx[cols] = v
+                return b.evaluate(xx)[0][f]
+
+            np.testing.assert_allclose(J[f], _num_jac(rf, x[cols]), atol=2e-6, err_msg=f"{b.name} factor {f}")
+    expected = (
+        {"prior", "odometry", "motion", "bearing_range", "gps"}
+        if model == "gtsam"
+        else {"motion", "odometry", "observation"}
+    )
+    assert names == expected
+
+
+# ---------------------------------------------------------------------------------------------------------
+# optimiser
+# ---------------------------------------------------------------------------------------------------------
+def test_lm_and_gn_reach_the_same_optimum_and_it_equals_scipy_least_squares():
+    _, gp = _small_problem("gtsam", T=20, n_landmarks=5)
+    lm = nls.solve(gp.problem, gp.x0, nls.NlsParams(method="lm"))
+    gn = nls.solve(gp.problem, gp.x0, nls.NlsParams(method="gn"))
+    assert lm.status == Status.CONVERGED and gn.status == Status.CONVERGED
+    assert lm.cost_trace[0] > 1.5 * lm.cost  # it actually optimised something
+    assert np.all(np.diff(lm.cost_trace) <= 1e-9 * lm.cost_trace[0])  # LM only accepts decreases
+    np.testing.assert_allclose(lm.x, gn.x, atol=1e-8)
+    assert abs(lm.cost - gn.cost) <= 1e-10 * lm.cost
+
+    ref = so.least_squares(
+        lambda v: nls.residual_vector(gp.problem, v),
+        gp.x0,
+        jac=lambda v: nls.jacobian_matrix(gp.problem, v).toarray(),
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
+    assert abs(ref.cost - lm.cost) <= 1e-9 * lm.cost
+    np.testing.assert_allclose(lm.x, ref.x, atol=1e-7)
+
+
+def test_paper_model_cost_is_the_weighted_energy_and_lm_matches_scipy():
+    ds, gp = _small_problem("paper", T=15, n_landmarks=4)
+    res = nls.solve(gp.problem, gp.x0)
+    assert res.status == Status.CONVERGED
+    free = np.setdiff1d(np.arange(gp.x0.size), gp.problem.fixed_cols)
+    assert free.size == gp.x0.size - 3  # x_0 is held fixed (known start pose)
+
+    def full(v):
+        x = gp.x0.copy()
+        x[free] = v
+        return x
+
+    ref = so.least_squares(
+        lambda v: nls.residual_vector(gp.problem, full(v)),
+        gp.x0[free],
+        jac=lambda v: nls.jacobian_matrix(gp.problem, full(v)).toarray()[:, free],
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
+    np.testing.assert_array_equal(res.x[:3], gp.x0[:3])
+    assert abs(ref.cost - res.cost) <= 1e-9 * res.cost
+    np.testing.assert_allclose(res.x[free], ref.x, atol=1e-7)
+    # the cost is the paper's energy Σ rᵀWr computed independently from slamcli.models.potentials
+    from slamcli.models import potentials
+    from slamcli.solvers import frontend
+
+    inp = ds.inputs
+    P, lm = gp.unpack(res.x)
+    assoc = frontend.associate_reported(inp.observations)
+    R = np.diag([2.0, 3.0, 5.0])
+    S = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]])
+    Q = np.array([[1.5, 0.2], [0.2, 1.0]])
+    obs = inp.observations
+    E = (
+        potentials.weighted_sq(potentials.motion_residual(P[:-1], inp.controls, P[1:], inp.dt), R)
+        + potentials.weighted_sq(
+            potentials.odometry_residual(P[:-1], P[1:], inp.odometry_xyt[:-1], inp.odometry_xyt[1:]), S
+        )
+        + potentials.weighted_sq(potentials.observation_residual(P[obs.step], obs.z, lm[assoc]), Q)
+    )
+    assert res.cost == pytest.approx(E, rel=1e-12)
+    assert graph.paper_energy(inp, assoc, R, S, Q, P, lm) == pytest.approx(E, rel=1e-12)
+
+
+def test_huber_irls_equals_scipy_huber_loss_on_scalar_residuals():
+    """Robust line fit y = a + b t with outliers; scalar residuals → per-factor Huber = scipy's 'huber'."""
+    rng = np.random.default_rng(4)
+    t = np.linspace(0, 10, 60)
+    y = 1.0 + 0.5 * t + rng.normal(0, 0.1, t.size)
+    y[::9] += 5.0
+    sigma, k = 0.1, 1.345
+
+    def ev(x):
+        r = (x[0] + x[1] * t - y)[:, None]
+        J = np.stack([np.ones_like(t), t], -1)[:, None, :]
+        return r, J
+
+    block = nls.FactorBlock("line", np.tile([0, 1], (t.size, 1)), ev, np.array([[1.0 / sigma]]), robust=True)
+    prob = nls.NlsProblem(2, [block])
+    res = nls.solve(prob, np.zeros(2), nls.NlsParams(robust="huber", huber_k=k, max_iterations=200))
+    assert res.status == Status.CONVERGED
+    ref = so.least_squares(
+        lambda x: (x[0] + x[1] * t - y) / sigma,
+        np.zeros(2),
+        loss="huber",
+        f_scale=k,
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
+    np.testing.assert_allclose(res.x, ref.x, atol=1e-7)
+    assert res.cost == pytest.approx(ref.cost, rel=1e-9)
+    # the plain L2 fit is pulled by the outliers; Huber is close to the truth
+    l2 = nls.solve(prob, np.zeros(2))
+    assert abs(res.x[0] - 1.0) < abs(l2.x[0] - 1.0)
+
+
+def test_fixed_columns_do_not_move():
+    _, gp = _small_problem("gtsam", T=10, n_landmarks=3)
+    prob = gp.problem
+    fixed = np.array([3, 4, 5, 3 * gp.n_poses])  # pose 1 and landmark 0's x
+    prob2 = nls.NlsProblem(prob.n_vars, prob.blocks, prob.angle_cols, fixed_cols=fixed, chain=prob.chain)
+    x0 = gp.x0.copy()
+    res = nls.solve(prob2, x0)
+    np.testing.assert_array_equal(res.x[fixed], x0[fixed])
+    free = nls.solve(prob, x0)
+    assert res.cost >= free.cost - 1e-9
+
+
+# ---------------------------------------------------------------------------------------------------------
+# linear algebra: chain/Schur solver and marginals vs dense
+# ---------------------------------------------------------------------------------------------------------
+def test_chain_solver_equals_dense_solve():
+    _, gp = _small_problem("gtsam", T=30, n_landmarks=6)
+    asm = nls._Assembler(gp.problem)
+    _, data, g = asm.linearize(gp.x0, nls.NlsParams())
+    cs = nls._ChainSolver(asm, gp.n_poses, 3)
+    assert cs.ok
+    H = asm.matrix(data).toarray()
+    np.testing.assert_allclose(cs.solve(data, -g), np.linalg.solve(H, -g), rtol=1e-9, atol=1e-12)
+
+
+def test_marginal_covariances_equal_blocks_of_the_dense_inverse():
+    _, gp = _small_problem("gtsam", T=30, n_landmarks=6)
+    res = nls.solve(gp.problem, gp.x0)
+    H = res.information
+    Hinv = np.linalg.inv(H.toarray())
+    ip, il = gp.pose_cols(), gp.landmark_cols()
+    ref_p = Hinv[ip[:, :, None], ip[:, None, :]]
+    ref_l = Hinv[il[:, :, None], il[:, None, :]]
+    scale_p, scale_l = np.abs(ref_p).max(), np.abs(ref_l).max()
+    # general sparse column solves (small batches exercise the batching)
+    mp = nls.marginal_covariances(H, ip, batch_size=16)
+    ml = nls.marginal_covariances(H, il, batch_size=16)
+    assert np.abs(mp - ref_p).max() <= 1e-10 * scale_p
+    assert np.abs(ml - ref_l).max() <= 1e-10 * scale_l
+    # chain + border elimination
+    cp, border = nls.marginals_chain_border(H, gp.n_poses, 3)
+    assert np.abs(cp - ref_p).max() <= 1e-10 * scale_p
+    n = 3 * gp.n_poses
+    assert np.abs(border - Hinv[n:, n:]).max() <= 1e-10 * np.abs(Hinv[n:, n:]).max()
+    # and the graph helper picks these blocks
+    pose_cov, lm_cov = graph.laplace_marginals(gp, H)
+    assert np.abs(pose_cov - ref_p).max() <= 1e-10 * scale_p
+    assert np.abs(lm_cov - ref_l).max() <= 1e-10 * scale_l
+    # marginal ≠ conditional: the conditional (H_ii)⁻¹ is smaller (overconfident)
+    cond = np.linalg.inv(H.toarray()[ip[-1][:, None], ip[-1][None, :]])
+    assert np.trace(pose_cov[-1]) > 2 * np.trace(cond)
