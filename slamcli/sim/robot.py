@@ -19,12 +19,6 @@ _TWO_PI = 2.0 * math.pi
 _PROGRESS_EVERY = 20_000
 
 
-def _wrap(a: float) -> float:
-    """Scalar twin of :func:`slamcli.models.angles.wrap_angle` (same floor-mod formula, [-π, π))."""
-    w = (a + math.pi) % _TWO_PI - math.pi
-    return w - _TWO_PI if w >= math.pi else w
-
-
 def start_pose(cfg: RobotConfig, waypoints_xy: np.ndarray) -> np.ndarray:
     """Start pose ``(3,)``: ``cfg.start`` or the first waypoint facing the second."""
     if cfg.start:
@@ -75,12 +69,12 @@ def drive(
     x, y, th = float(x0[0]), float(x0[1]), float(x0[2])
     poses = [(x, y, th)]
     u_cmd: list[tuple[float, float]] = []
-    u_exe: list[tuple[float, float]] = []
     i = 1 if K > 1 and math.hypot(wp[0][0] - x, wp[0][1] - y) < tol else 0
     if i == 1:
         reached[0] = 0
     done = False
-    cos, sin, atan2, hypot = math.cos, math.sin, math.atan2, math.hypot
+    cos, sin, atan2, hypot, pi, two_pi = math.cos, math.sin, math.atan2, math.hypot, math.pi, _TWO_PI
+    next_report = _PROGRESS_EVERY - 1 if progress is not None else -1
     for t in range(T):
         if not done:
             wx, wy = wp[i]
@@ -100,23 +94,30 @@ def drive(
         if done:
             v = w = 0.0
         else:
-            e = _wrap(atan2(wy - y, wx - x) - th)
+            e = (atan2(wy - y, wx - x) - th + pi) % two_pi - pi  # wrap_angle's formula, inlined: [-π, π)
+            if e >= pi:
+                e -= two_pi
             w = k_h * e
-            w = w_max if w > w_max else (max(w, -w_max))
+            w = w_max if w > w_max else (-w_max if w < -w_max else w)  # noqa: FURB136 (hot loop: no call)
             c = cos(e)
             v = v_max * c if c > 0.0 else 0.0
         nv, nw = noise[t]
-        ve, we = v + nv, w + nw
+        ve = v + nv
         # g(x, u) = x + dt·[v cos θ, v sin θ, ω]  (heading wrapped)
-        x, y, th = x + dt * ve * cos(th), y + dt * ve * sin(th), _wrap(th + dt * we)
+        x += dt * ve * cos(th)
+        y += dt * ve * sin(th)
+        th = (th + dt * (w + nw) + pi) % two_pi - pi
+        if th >= pi:
+            th -= two_pi
         u_cmd.append((v, w))
-        u_exe.append((ve, we))
         poses.append((x, y, th))
-        if progress is not None and (t + 1) % _PROGRESS_EVERY == 0:
-            progress(t + 1, T)
+        if t == next_report:
+            progress(t + 1, T)  # type: ignore[misc]
+            next_report += _PROGRESS_EVERY
+    controls = np.array(u_cmd, float).reshape(T, 2)
     return (
-        np.array(u_cmd, float).reshape(T, 2),
-        np.array(u_exe, float).reshape(T, 2),
+        controls,
+        controls + np.asarray(actuation_noise, float).reshape(T, 2),  # bit-identical to v + n_v in the loop
         np.array(poses, float).reshape(T + 1, 3),
         np.array(reached, np.int64),
     )
