@@ -177,3 +177,24 @@ def test_plot_nees_prints_summary(tmp_path):
     assert r.exit_code == 0, r.output
     # every step has error 0.2 m in y with σ² = 0.04 → NEES exactly 1 in both runs; N = 2, d = 3 band
     assert "average pose NEES 1.000" in r.output and "N = 2 runs" in r.output
+
+
+def test_metrics_json_is_strict_json_with_nan_as_null(tmp_path):
+    from slamcli.api.evaluate import evaluate_files
+
+    ds = make_dataset()
+    data = tmp_path / "d.h5"
+    write_dataset(data, ds)
+    r = make_result(ds, data)
+    one = SolverResult(r.solver, r.solver_version, {}, r.status, "", r.poses_xyt, r.landmarks_xy[:1], r.assoc,
+                       dataset_hash=r.dataset_hash, extra=r.extra)  # 1 landmark: no SE(2) map alignment possible
+    write_result(tmp_path / "one.h5", one)
+    evaluate_files(tmp_path / "one.h5", out_dir=tmp_path / "ev")
+
+    def reject(name):
+        raise AssertionError(f"non-standard JSON constant {name}")
+
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text(), parse_constant=reject)
+    assert m["lm_aligned_rmse_matched_m"] is None and m["lm_n_matched"] == 1
+    assert m["per_iteration_note"].startswith("not available")
+    assert pd.read_csv(tmp_path / "ev" / "per_iteration.csv").empty
