@@ -260,3 +260,16 @@ def test_random_layout_respects_clearance_and_separation():
     d = np.hypot(*(lm[:, None] - lm[None]).transpose(2, 0, 1))
     assert np.min(d[np.triu_indices(12, 1)]) >= 2.0
     assert np.min(world._dist_to_polyline(lm, wp, True)) >= 1.0
+
+
+def test_fixed_world_seed_keeps_map_and_path_across_run_seeds():
+    ov = {"world.seed": 11, "path.jitter": 0.5}
+    a = simulate_scenario("loop", seed=1, overrides=ov)
+    b = simulate_scenario("loop", seed=2, overrides=ov)
+    np.testing.assert_array_equal(a.truth.landmarks_xy, b.truth.landmarks_xy)
+    assert not np.array_equal(a.truth.poses_xyt, b.truth.poses_xyt)  # motion noise still differs
+    assert a.metadata["world_seed"] == b.metadata["world_seed"] == 11
+    c = simulate_scenario("loop", seed=11, overrides={"path.jitter": 0.5})
+    np.testing.assert_array_equal(a.truth.landmarks_xy, c.truth.landmarks_xy)
+    with pytest.raises(ConfigError, match="seed"):
+        simulate(resolve_scenario("loop"), seed=-1)

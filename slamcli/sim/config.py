@@ -49,6 +49,8 @@ class WorldConfig:
     octagon_radius : float               circumradius of the octagon, m (paper 000 §6: 7.12 m).
     extra_landmarks : tuple of float     additional fixed points ``x1,y1,x2,y2,...`` (m), appended last.
     landmark_radius : float              radius of the disc a laser beam hits (cone, pole, person), m.
+    seed : int                           seed of the world stream (landmarks and path jitter); −1 = the run's
+                                         seed. Fix it for Monte-Carlo runs over one map (NEES averages).
     """
 
     layout: Literal["rows", "random", "octagon", "none"] = "rows"
@@ -67,6 +69,7 @@ class WorldConfig:
     octagon_radius: float = 7.12
     extra_landmarks: tuple[float, ...] = ()
     landmark_radius: float = 0.15
+    seed: int = -1
 
     def __post_init__(self) -> None:
         _check(self.x_max > self.x_min and self.y_max > self.y_min, "world: need x_min < x_max and y_min < y_max")
@@ -77,6 +80,7 @@ class WorldConfig:
         _check(self.octagon_radius > 0, "world.octagon_radius must be > 0")
         _check(len(self.extra_landmarks) % 2 == 0, "world.extra_landmarks must be x,y pairs (even length)")
         _check(self.landmark_radius > 0, "world.landmark_radius must be > 0")
+        _check(self.seed >= -1, "world.seed must be >= 0 (or -1 = the run's seed)")
 
 
 @dataclass(frozen=True)

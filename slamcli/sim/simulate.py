@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 import slamcli
+from slamcli.errors import ConfigError
 from slamcli.sim import robot, sensors, world
 from slamcli.sim.config import ScenarioConfig, config_to_dict
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
@@ -57,7 +58,7 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     ----------
     config : ScenarioConfig
     seed : int
-        Root seed of every stream.
+        Root seed (≥ 0) of every stream (the world stream uses ``config.world.seed`` when that is ≥ 0).
     progress : callable(done, total), optional
         Called during the drive loop and once per stage with ``total = n_steps``.
 
@@ -71,9 +72,12 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     cfg = config
     T = int(cfg.n_steps)
     seed = int(seed)
+    if seed < 0:
+        raise ConfigError(f"--seed: must be >= 0, got {seed}")
 
     # 1) world: waypoints, then landmarks (a random layout keeps clear of the path)
-    rng_w = stream("world", seed)
+    world_seed = seed if cfg.world.seed < 0 else int(cfg.world.seed)
+    rng_w = stream("world", world_seed)
     waypoints = world.make_waypoints(cfg.path, rng_w)
     landmarks = world.make_landmarks(cfg.world, waypoints, cfg.path.cyclic, rng_w)
 
@@ -132,6 +136,7 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
         "slamcli_version": slamcli.__version__,
         "scenario": cfg.name,
         "seed": seed,
+        "world_seed": world_seed,
         "dt": float(cfg.dt),
         "n_steps": T,
         "sensor_kind": cfg.sensor.kind,
