@@ -56,7 +56,7 @@ class Weights:
     Q: tuple[float, float]
 
     @staticmethod
-    def from_params(R, S, Q) -> "Weights":
+    def from_params(R, S, Q) -> Weights:
         """Each argument: one value (scalar × identity) or the full diagonal."""
 
         def diag(v, k, name):
@@ -113,7 +113,7 @@ class Problem:
     offsets: np.ndarray
 
     @staticmethod
-    def from_inputs(inputs: SlamInputs) -> "Problem":
+    def from_inputs(inputs: SlamInputs) -> Problem:
         obs = inputs.observations
         z = obs.z
         v = np.stack([z[:, 0] * np.cos(z[:, 1]), z[:, 0] * np.sin(z[:, 1])], -1)
@@ -269,7 +269,7 @@ def cond_step(x, y, th, ctx, st, Wf, dt, cos, sin):
     """
     px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2 = ctx
     r0, r1, r2, s0, s1, s2, q0, q1 = Wf
-    n, V1x, V1y, M1x, M1y, Sxx, Sxy, Syy, Axx, Axy, Ayx, Ayy, Cmx, Cmy = st
+    n, V1x, V1y, M1x, M1y, Sxx, Sxy, Syy, Axx, Axy, Ayx, Ayy, _Cmx, _Cmy = st
     # motion t: J = −I
     a0 = gx - x
     a1 = gy - y
@@ -524,7 +524,7 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
         row0 += K * k
 
     t = np.arange(1, T + 1)
-    pose_cols = lambda tt: np.where(tt[:, None] >= 1, 3 * (tt[:, None] - 1) + np.arange(3)[None, :], -1)  # noqa: E731
+    pose_cols = lambda tt: np.where(tt[:, None] >= 1, 3 * (tt[:, None] - 1) + np.arange(3)[None, :], -1)
     if W.use_motion and T > 0:
         r = potentials.motion_residual(poses[:-1], prob.controls, poses[1:], prob.dt)
         Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
@@ -552,6 +552,34 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
     return rvec, J
 
 
+def solve_normal_schur(J, r, n_pose: int, damping: float = 1e-9) -> np.ndarray:
+    """Gauss-Newton step ``δ = −(JᵀJ)⁻¹Jᵀr`` by the Schur complement on the map.
+
+    The pose block of JᵀJ is block-tridiagonal (motion/odometry chain + per-pose observation blocks), so it is
+    factorised with a banded (natural-order) sparse LU; the reduced map system ``S = H_mm − H_mp H_pp⁻¹ H_pm``
+    is dense ``(2L, 2L)``. A tiny relative diagonal keeps unobserved variables solvable.
+    """
+    H = (J.T @ J).tocsc()
+    g = J.T @ r
+    n = H.shape[0]
+    diag = H.diagonal()
+    H = (H + sp.diags(damping * (diag + (diag == 0)), format="csc")).tocsc()
+    P = slice(0, n_pose)
+    M = slice(n_pose, n)
+    Hpp = H[P, P].tocsc()
+    lu = spla.splu(Hpp, permc_spec="NATURAL")
+    if n == n_pose:
+        return -lu.solve(g)
+    Hpm = H[P, M].toarray()
+    Hmm = H[M, M].toarray()
+    X = lu.solve(Hpm)  # H_pp⁻¹ H_pm
+    y = lu.solve(g[P])  # H_pp⁻¹ g_p
+    S = Hmm - Hpm.T @ X
+    dm = np.linalg.solve(S, -(g[M] - Hpm.T @ y))
+    dp = -(y + X @ dm)
+    return np.concatenate([dp, dm])
+
+
 def pack(poses, landmarks) -> np.ndarray:
     return np.concatenate([poses[1:].ravel(), landmarks.ravel()])
 
@@ -574,17 +602,11 @@ def joint_gn_step(prob: Problem, W: Weights, poses, landmarks, labels, *, max_ha
     L = landmarks.shape[0]
     r, J = joint_residuals(prob, W, poses, landmarks, labels)
     f0 = float(r @ r)
-    H = (J.T @ J).tocsc()
-    g = J.T @ r
-    n = H.shape[0]
-    # unobserved landmarks / unconstrained poses make H singular: a tiny diagonal keeps the solve defined
-    diag = H.diagonal()
-    H = H + sp.diags(1e-9 * (diag + (diag == 0)), format="csc")
     try:
-        delta = -spla.spsolve(H, g)
+        delta = solve_normal_schur(J, r, 3 * prob.T)
     except Exception:  # noqa: BLE001 - singular system: no step
         return poses, landmarks, f0, False
-    if not np.all(np.isfinite(delta)) or n == 0:
+    if delta.size == 0 or not np.all(np.isfinite(delta)):
         return poses, landmarks, f0, False
     base = pack(poses, landmarks)
     alpha = 1.0
