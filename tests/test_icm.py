@@ -36,12 +36,23 @@ def small_world(seed=0, T=60, n_lm=8, noise=True, max_range=6.0):
             ids.append(j)
     steps = np.array(steps, np.int64)
     zs = np.array(zs)
-    obs = Observations(step=steps, range_m=zs[:, 0], bearing_rad=zs[:, 1], sensor=np.zeros(len(steps), np.int16),
-                       reported_id=np.array(ids, np.int64),
-                       offsets=Observations.offsets_from_steps(steps, T + 2)[: T + 2])
-    inputs = SlamInputs(dt=dt, timestamps=dt * np.arange(T + 1), x0=x0, controls=u, odometry_xyt=odo,
-                        observations=obs, noise=NoiseSpec(np.array([0.05, 0.02]), np.array([0.01, 0.01, 0.005]),
-                                                          0.03, 0.01))
+    obs = Observations(
+        step=steps,
+        range_m=zs[:, 0],
+        bearing_rad=zs[:, 1],
+        sensor=np.zeros(len(steps), np.int16),
+        reported_id=np.array(ids, np.int64),
+        offsets=Observations.offsets_from_steps(steps, T + 2)[: T + 2],
+    )
+    inputs = SlamInputs(
+        dt=dt,
+        timestamps=dt * np.arange(T + 1),
+        x0=x0,
+        controls=u,
+        odometry_xyt=odo,
+        observations=obs,
+        noise=NoiseSpec(np.array([0.05, 0.02]), np.array([0.01, 0.01, 0.005]), 0.03, 0.01),
+    )
     return inputs, truth, lm, np.array(ids)
 
 
@@ -97,7 +108,7 @@ def test_conditional_mode_is_stationary_and_batch_matches_scalar(world):
         x = np.array(en.cond_minimise_scalar(*poses[t], c, st, W3.flat, prob.dt, 30, 0.0))
         np.testing.assert_allclose(x, batch[k], atol=1e-8)
 
-        def f(v):
+        def f(v, c=c, st=st):
             return en.cond_cost(v[0], v[1], v[2], c, st, W3.flat, prob.dt, math.cos, math.sin)
 
         h = 1e-6
@@ -184,13 +195,21 @@ def test_map_reference_agrees_with_scipy_least_squares(world):
 
 
 def test_icm_known_correspondences_reaches_map_energy(world):
-    inputs, truth, lm, ids = world
-    params = IcmParams(R=(2.0, 1.5, 3.0), S=(0.7, 1.1, 0.4), Q=(1.3, 0.8), correspondences="reported",
-                       max_sweeps=400, energy_rtol=1e-12, map_tol=0.0)
+    inputs, _truth, _lm, _ids = world
+    params = IcmParams(
+        R=(2.0, 1.5, 3.0),
+        S=(0.7, 1.1, 0.4),
+        Q=(1.3, 0.8),
+        correspondences="reported",
+        max_sweeps=400,
+        energy_rtol=1e-12,
+        map_tol=0.0,
+    )
     res = IcmSlam(params).solve(inputs, rng=np.random.default_rng(0))
     prob = en.Problem.from_inputs(inputs)
-    _, _, E_map, _ = en.map_energy_fixed_assoc(prob, params.weights, res.poses_xyt.copy(),
-                                               res.landmarks_xy.copy(), res.assoc)
+    _, _, E_map, _ = en.map_energy_fixed_assoc(
+        prob, params.weights, res.poses_xyt.copy(), res.landmarks_xy.copy(), res.assoc
+    )
     E_icm = res.trace.objective[-1]
     assert E_icm == pytest.approx(en.energy(prob, params.weights, res.poses_xyt, res.landmarks_xy, res.assoc))
     assert E_map <= E_icm <= 1.01 * E_map
@@ -201,12 +220,22 @@ def test_icm_known_correspondences_reaches_map_energy(world):
 def test_icm_matches_graph_solver_paper_model(world):
     """Cross-check with the graph helper's optimiser of the same energy (fixed correspondences)."""
     graph = pytest.importorskip("slamcli.solvers.graph")
-    inputs, truth, lm, ids = world
-    params = IcmParams(R=(1.0,), S=(1.0,), Q=(1.0,), correspondences="reported", max_sweeps=400,
-                       energy_rtol=1e-12, map_tol=0.0, accelerate="joint", accelerate_every=3)
+    inputs, _truth, _lm, _ids = world
+    params = IcmParams(
+        R=(1.0,),
+        S=(1.0,),
+        Q=(1.0,),
+        correspondences="reported",
+        max_sweeps=400,
+        energy_rtol=1e-12,
+        map_tol=0.0,
+        accelerate="joint",
+        accelerate_every=3,
+    )
     res = IcmSlam(params).solve(inputs, rng=np.random.default_rng(0))
-    _, _, E_graph = graph.optimize_paper_energy(inputs, res.assoc, np.eye(3), np.eye(3), np.eye(2),
-                                                res.poses_xyt, res.landmarks_xy)
+    _, _, E_graph = graph.optimize_paper_energy(
+        inputs, res.assoc, np.eye(3), np.eye(3), np.eye(2), res.poses_xyt, res.landmarks_xy
+    )
     assert E_graph == pytest.approx(res.trace.objective[-1], rel=0.01)
     assert res.trace.objective[-1] <= 1.01 * E_graph
 
@@ -225,7 +254,7 @@ def test_online_init_noise_free_recovers_world():
 
 
 def test_kinematic_init_uses_motion_model_only():
-    inputs, truth, lm, ids = small_world(seed=4)
+    inputs, _truth, _lm, _ids = small_world(seed=4)
     prob = en.Problem.from_inputs(inputs)
     W = en.Weights.from_params(1.0, 0.0, 1.0)
     poses, labels, landmarks, _ = online_init(prob, W, radius=1.0, kinematic=True)
@@ -233,10 +262,18 @@ def test_kinematic_init_uses_motion_model_only():
     assert labels.min() >= 0 and len(landmarks) >= 1
 
 
-@pytest.mark.parametrize("kw", [dict(), dict(init="kinematic"), dict(schedule="parallel"),
-                                dict(accelerate="joint", accelerate_every=2), dict(S=(1.0,), min_observations=3)])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {},
+        {"init": "kinematic"},
+        {"schedule": "parallel"},
+        {"accelerate": "joint", "accelerate_every": 2},
+        {"S": (1.0,), "min_observations": 3},
+    ],
+)
 def test_energy_never_increases_across_sweeps(world, kw):
-    inputs, truth, lm, ids = world
+    inputs, _truth, _lm, _ids = world
     res = IcmSlam(IcmParams(max_sweeps=25, **kw)).solve(inputs, rng=np.random.default_rng(0))
     obj = res.trace.objective
     assert len(obj) >= 2
@@ -251,7 +288,7 @@ def test_energy_never_increases_across_sweeps(world, kw):
 
 
 def test_unknown_correspondences_map_close_to_truth(world):
-    inputs, truth, lm, ids = world
+    inputs, _truth, lm, ids = world
     res = IcmSlam(IcmParams(S=(1.0,), Q=(100.0,), R=(100.0,))).solve(inputs, rng=np.random.default_rng(0))
     seen = np.unique(ids)
     from scipy.spatial import cKDTree
@@ -262,15 +299,23 @@ def test_unknown_correspondences_map_close_to_truth(world):
 
 
 def test_post_processing_never_worsens_energy(world):
-    inputs, truth, lm, ids = world
+    inputs, _truth, _lm, ids = world
     rng = np.random.default_rng(7)
     poses = inputs.odometry_xyt + rng.normal(0, 0.05, inputs.odometry_xyt.shape)
     prob = en.Problem.from_inputs(inputs)
     labels = reported_labels(ids)
     L = labels.max() + 1
     means, _ = mp.label_means(prob.landmark_points(poses), labels, L)
-    prev = SolverResult(solver="odometry", solver_version="0", params={}, status=Status.COMPLETED, message="",
-                        poses_xyt=poses, landmarks_xy=means, assoc=labels)
+    prev = SolverResult(
+        solver="odometry",
+        solver_version="0",
+        params={},
+        status=Status.COMPLETED,
+        message="",
+        poses_xyt=poses,
+        landmarks_xy=means,
+        assoc=labels,
+    )
     params = IcmParams(S=(1.0,), max_sweeps=15)
     poses0 = poses.copy()
     poses0[0] = inputs.x0
@@ -309,7 +354,7 @@ def test_laplace_covariances_match_dense_inverse(world):
     C = np.linalg.inv((J.T @ J).toarray())
     T = prob.T
     np.testing.assert_allclose(pc[5], C[12:15, 12:15], rtol=1e-6, atol=1e-12)
-    np.testing.assert_allclose(lc[2], C[3 * T + 4:3 * T + 6, 3 * T + 4:3 * T + 6], rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(lc[2], C[3 * T + 4 : 3 * T + 6, 3 * T + 4 : 3 * T + 6], rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(pc[0], 0.0)
 
 

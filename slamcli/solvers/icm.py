@@ -37,7 +37,7 @@ from typing import Literal
 import numpy as np
 
 from slamcli.models.angles import wrap_angle
-from slamcli.models.motion import ddmr_step, integrate
+from slamcli.models.motion import integrate
 from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers import icm_energy as en
 from slamcli.solvers import icm_map as mp
@@ -99,7 +99,9 @@ class IcmParams:
             raise ValueError(f"min_observations must be >= 0, got {self.min_observations}")
         for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every"):
             if getattr(self, name) < (0 if name == "max_sweeps" else 1):
-                raise ValueError(f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}")
+                raise ValueError(
+                    f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
+                )
         if self.map_tol < 0 or self.energy_rtol < 0:
             raise ValueError("map_tol and energy_rtol must be >= 0")
 
@@ -122,8 +124,15 @@ def reported_labels(reported_id) -> np.ndarray:
     return out
 
 
-def online_init(prob: en.Problem, W: en.Weights, *, radius: float, kinematic: bool = False, iters: int = 5,
-                fixed_labels: np.ndarray | None = None):
+def online_init(
+    prob: en.Problem,
+    W: en.Weights,
+    *,
+    radius: float,
+    kinematic: bool = False,
+    iters: int = 5,
+    fixed_labels: np.ndarray | None = None,
+):
     """Algorithm 2, step 1 (eqs. 9-11), run causally over t = 0..T.
 
     Parameters
@@ -162,8 +171,13 @@ def online_init(prob: en.Problem, W: en.Weights, *, radius: float, kinematic: bo
         else:
             px, py, pth = poses[t - 1]
             v0, w0 = U[t - 1]
-            xh = np.array([px + prob.dt * v0 * math.cos(pth), py + prob.dt * v0 * math.sin(pth),
-                           wrap_angle(pth + prob.dt * w0)])
+            xh = np.array(
+                [
+                    px + prob.dt * v0 * math.cos(pth),
+                    py + prob.dt * v0 * math.sin(pth),
+                    wrap_angle(pth + prob.dt * w0),
+                ]
+            )
         n_t = b - a
         match = np.full(n_t, -1, np.int64)
         if n_t:
@@ -184,8 +198,29 @@ def online_init(prob: en.Problem, W: en.Weights, *, radius: float, kinematic: bo
             px, py, pth = poses[t - 1]
             g = (xh[0], xh[1], pth + prob.dt * U[t - 1][1])
             d = D[t - 1]
-            ctx = (px, py, pth, g[0], g[1], g[2], d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-            x = np.array(en.cond_minimise_scalar(xh[0], xh[1], xh[2], ctx, st, Wf, prob.dt, iters, 1e-10))  # (11)
+            ctx = (
+                px,
+                py,
+                pth,
+                g[0],
+                g[1],
+                g[2],
+                d[0],
+                d[1],
+                d[2],
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            )
+            x = np.array(
+                en.cond_minimise_scalar(xh[0], xh[1], xh[2], ctx, st, Wf, prob.dt, iters, 1e-10)
+            )  # (11)
         poses[t] = x
         if n_t:
             pts = inverse_range_bearing(x, prob.z[a:b])
@@ -223,9 +258,22 @@ def _stats_one(v, m):
     if v.shape[0] == 0:
         return (0.0,) * 14
     vx, vy, mx, my = v[:, 0], v[:, 1], m[:, 0], m[:, 1]
-    return (float(v.shape[0]), float(vx.sum()), float(vy.sum()), float(mx.sum()), float(my.sum()),
-            float(vx @ vx), float(vx @ vy), float(vy @ vy), float(vx @ mx), float(vx @ my), float(vy @ mx),
-            float(vy @ my), float(mx @ mx), float(my @ my))
+    return (
+        float(v.shape[0]),
+        float(vx.sum()),
+        float(vy.sum()),
+        float(mx.sum()),
+        float(my.sum()),
+        float(vx @ vx),
+        float(vx @ vy),
+        float(vy @ vy),
+        float(vx @ mx),
+        float(vx @ my),
+        float(vy @ mx),
+        float(vy @ my),
+        float(mx @ mx),
+        float(my @ my),
+    )
 
 
 class IcmSlam(BaseSolver):
@@ -258,7 +306,11 @@ class IcmSlam(BaseSolver):
             extra["init"] = f"result:{init.solver}"
         else:
             poses, labels, landmarks, step_s = online_init(
-                prob, W, radius=p.fusion_radius, kinematic=p.init == "kinematic", iters=p.init_pose_iters,
+                prob,
+                W,
+                radius=p.fusion_radius,
+                kinematic=p.init == "kinematic",
+                iters=p.init_pose_iters,
                 fixed_labels=fixed,
             )
             extra["init"] = p.init
@@ -344,9 +396,16 @@ class IcmSlam(BaseSolver):
             pose_cov, lm_cov = en.laplace_covariances(prob, W, poses, landmarks, labels)
         trace = IterationTrace.from_lists(objective, changes, times, lms)
         return self.make_result(
-            status=status, poses_xyt=poses, landmarks_xy=landmarks, assoc=labels, t_start=t_start,
+            status=status,
+            poses_xyt=poses,
+            landmarks_xy=landmarks,
+            assoc=labels,
+            t_start=t_start,
             message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}",
-            pose_cov=pose_cov, landmark_cov=lm_cov, trace=trace, extra=extra,
+            pose_cov=pose_cov,
+            landmark_cov=lm_cov,
+            trace=trace,
+            extra=extra,
         )
 
     # -- helpers ---------------------------------------------------------------------------------------------
@@ -364,7 +423,9 @@ class IcmSlam(BaseSolver):
 
         poses = np.array(init.poses_xyt, float)
         if poses.shape != (prob.T + 1, 3):
-            raise ConfigError(f"--init: result has poses of shape {poses.shape}, dataset needs ({prob.T + 1}, 3)")
+            raise ConfigError(
+                f"--init: result has poses of shape {poses.shape}, dataset needs ({prob.T + 1}, 3)"
+            )
         poses[0] = prob.x0
         landmarks = np.asarray(init.landmarks_xy, float).reshape(-1, 2)
         if fixed is not None:

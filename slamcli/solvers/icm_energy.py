@@ -205,7 +205,22 @@ def step_stats(prob: Problem, labels, landmarks_xy) -> np.ndarray:
     m = np.asarray(landmarks_xy, float)[labels[ok]]
     vx, vy, mx, my = v[:, 0], v[:, 1], m[:, 0], m[:, 1]
     K = prob.T + 1
-    cols = [None, vx, vy, mx, my, vx * vx, vx * vy, vy * vy, vx * mx, vx * my, vy * mx, vy * my, mx * mx, my * my]
+    cols = [
+        None,
+        vx,
+        vy,
+        mx,
+        my,
+        vx * vx,
+        vx * vy,
+        vy * vy,
+        vx * mx,
+        vx * my,
+        vy * mx,
+        vy * my,
+        mx * mx,
+        my * my,
+    ]
     out = np.empty((14, K))
     for k, w in enumerate(cols):
         out[k] = np.bincount(st, weights=w, minlength=K)[:K]
@@ -248,7 +263,9 @@ def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     h0 = c * ex + s * ey - e0
     h1 = -s * ex + c * ey - e1
     h2 = _wrap(nth - th - e2)
-    cost = cost + hn * (r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2)
+    cost = cost + hn * (
+        r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2
+    )
     # observations at t: Σ‖p + R(θ)v_i − m_i‖²_Q from the sufficient statistics
     RVx = c * V1x - s * V1y
     RVy = s * V1x + c * V1y
@@ -434,15 +451,37 @@ def pose_contexts(prob: Problem, poses, idx):
     un = prob.controls[np.minimum(idx, T - 1)]
     en = prob.odo_inc[np.minimum(idx, T - 1)]
     return (
-        prev[:, 0], prev[:, 1], prev[:, 2], g[:, 0], g[:, 1], g[:, 2], d[:, 0], d[:, 1], d[:, 2], hn,
-        nxt[:, 0], nxt[:, 1], nxt[:, 2], un[:, 0], un[:, 1], en[:, 0], en[:, 1], en[:, 2],
+        prev[:, 0],
+        prev[:, 1],
+        prev[:, 2],
+        g[:, 0],
+        g[:, 1],
+        g[:, 2],
+        d[:, 0],
+        d[:, 1],
+        d[:, 2],
+        hn,
+        nxt[:, 0],
+        nxt[:, 1],
+        nxt[:, 2],
+        un[:, 0],
+        un[:, 1],
+        en[:, 0],
+        en[:, 1],
+        en[:, 2],
     )
 
 
 def _motion(x, u, dt):
     """g(x, u) without the heading wrap (residuals wrap themselves)."""
-    return np.stack([x[:, 0] + dt * u[:, 0] * np.cos(x[:, 2]), x[:, 1] + dt * u[:, 0] * np.sin(x[:, 2]),
-                     x[:, 2] + dt * u[:, 1]], -1)
+    return np.stack(
+        [
+            x[:, 0] + dt * u[:, 0] * np.cos(x[:, 2]),
+            x[:, 1] + dt * u[:, 0] * np.sin(x[:, 2]),
+            x[:, 2] + dt * u[:, 1],
+        ],
+        -1,
+    )
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -545,8 +584,13 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
     if not jacobian:
         return rvec, None
     J = sp.csr_matrix(
-        (np.concatenate(vals) if vals else np.zeros(0),
-         (np.concatenate(rows) if rows else np.zeros(0, int), np.concatenate(cols) if cols else np.zeros(0, int))),
+        (
+            np.concatenate(vals) if vals else np.zeros(0),
+            (
+                np.concatenate(rows) if rows else np.zeros(0, int),
+                np.concatenate(cols) if cols else np.zeros(0, int),
+            ),
+        ),
         shape=(row0, n_var),
     )
     return rvec, J
@@ -590,7 +634,7 @@ def unpack(prob: Problem, vec, L: int):
     poses[0] = prob.x0
     poses[1:] = vec[: 3 * T].reshape(T, 3)
     poses[1:, 2] = wrap_angle(poses[1:, 2])
-    return poses, vec[3 * T:].reshape(L, 2).copy()
+    return poses, vec[3 * T :].reshape(L, 2).copy()
 
 
 def joint_gn_step(prob: Problem, W: Weights, poses, landmarks, labels, *, max_halvings: int = 12):
@@ -619,8 +663,9 @@ def joint_gn_step(prob: Problem, W: Weights, poses, landmarks, labels, *, max_ha
     return poses, landmarks, f0, False
 
 
-def map_energy_fixed_assoc(prob: Problem, W: Weights, poses, landmarks, labels, *, max_iters: int = 100,
-                           rtol: float = 1e-13):
+def map_energy_fixed_assoc(
+    prob: Problem, W: Weights, poses, landmarks, labels, *, max_iters: int = 100, rtol: float = 1e-13
+):
     """MAP optimum of H over all poses and the map for fixed matchings, by joint Gauss-Newton from the given
     point. Returns ``(poses, landmarks, energy, iterations)``."""
     f = energy(prob, W, poses, landmarks, labels)
@@ -665,11 +710,11 @@ def laplace_covariances(prob: Problem, W: Weights, poses, landmarks, labels, *, 
         X = lu.solve(E)
         for b in range(b0, b1):
             s0, k = int(starts[b]), int(sizes[b])
-            diag_blocks[s0:s0 + k, :k] = X[s0:s0 + k, s0 - c0:s0 - c0 + k]
+            diag_blocks[s0 : s0 + k, :k] = X[s0 : s0 + k, s0 - c0 : s0 - c0 + k]
         b0 = b1
     pose_cov = np.zeros((T + 1, 3, 3))
     pose_cov[1:] = diag_blocks[: 3 * T].reshape(T, 3, 3)
-    lm_cov = diag_blocks[3 * T:, :2].reshape(L, 2, 2)
+    lm_cov = diag_blocks[3 * T :, :2].reshape(L, 2, 2)
     pose_cov = 0.5 * (pose_cov + np.swapaxes(pose_cov, 1, 2))
     lm_cov = 0.5 * (lm_cov + np.swapaxes(lm_cov, 1, 2))
     return pose_cov, lm_cov

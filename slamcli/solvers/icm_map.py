@@ -70,7 +70,11 @@ def fusion_components(means_xy, radius: float) -> np.ndarray:
     L = means_xy.shape[0]
     if L == 0:
         return np.zeros(0, np.int64)
-    pairs = cKDTree(means_xy).query_pairs(r=radius, output_type="ndarray") if radius > 0 else np.zeros((0, 2), int)
+    pairs = (
+        cKDTree(means_xy).query_pairs(r=radius, output_type="ndarray")
+        if radius > 0
+        else np.zeros((0, 2), int)
+    )
     if pairs.shape[0] == 0:
         return np.arange(L, dtype=np.int64)
     A = coo_matrix((np.ones(pairs.shape[0]), (pairs[:, 0], pairs[:, 1])), shape=(L, L))
