@@ -63,7 +63,7 @@ def simulate_command(
         path_len = float(np.sum(np.hypot(*np.diff(tr.poses_xyt[:, :2], axis=0).T))) if tr is not None else 0.0
         stdout_console().print(
             f"{scenario} seed {seed}: {inp.controls.shape[0]} steps ({inp.controls.shape[0] * inp.dt:.1f} s), "
-            f"{len(tr.landmarks_xy)} landmarks, {n_obs} observations ({n_clutter} false), "
+            f"{len(tr.landmarks_xy)} landmarks, {n_obs} observations ({n_clutter} not from a landmark), "
             f"path {path_len:.1f} m → {out}",
             highlight=False,
             markup=False,
