@@ -62,14 +62,8 @@ import numpy as np
 from slamcli.errors import SolverError
 from slamcli.models import se2
 from slamcli.models.angles import circular_mean, wrap_angle
-from slamcli.models.motion import ddmr_jacobians, ddmr_step
-from slamcli.models.observation import (
-    inverse_range_bearing,
-    inverse_range_bearing_jacobians,
-    measurement_residual,
-    range_bearing,
-    range_bearing_jacobians,
-)
+from slamcli.models.motion import ddmr_step
+from slamcli.models.observation import range_bearing
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.resampling import RESAMPLERS, effective_sample_size, normalise_log_weights
 from slamcli.types import SlamInputs, SolverResult, Status
@@ -228,28 +222,100 @@ class ParticleSet:
 
 
 # ---------------------------------------------------------------------------------------------------------
-# Small batched linear algebra (explicit 2×2 inverses are much faster than np.linalg.inv on small batches)
+# Component-wise kernels. Every quantity is an array over particles (and, for ML candidates, landmarks);
+# explicit 2×2 / 3×3 algebra on component arrays is ~10× faster than np.matmul on stacks of tiny matrices.
 # ---------------------------------------------------------------------------------------------------------
-def _inv2(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse and determinant of symmetric-or-not 2×2 matrices ``(..., 2, 2)``."""
-    a, b, c, d = A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1]
-    det = a * d - b * c
-    inv = np.empty_like(A)
-    inv[..., 0, 0] = d / det
-    inv[..., 0, 1] = -b / det
-    inv[..., 1, 0] = -c / det
-    inv[..., 1, 1] = a / det
-    return inv, det
+@dataclasses.dataclass
+class _ObsTerms:
+    """Linearised range-bearing prediction of landmark(s) ``m`` from pose(s) ``x`` (component arrays).
+
+    ``ν = z − h(x, m)`` (bearing wrapped), ``H_m = [[h11, h12], [h21, h22]] = ∂h/∂m`` (``H_x[:, :2] = −H_m``,
+    ``H_x[1, 2] = −1``, see :func:`slamcli.models.observation.range_bearing_jacobians`), ``P = Σ H_mᵀ`` and
+    ``S = H_m Σ H_mᵀ + Q`` (eq. 14.29; symmetric, ``S12 = S21``).
+    """
+
+    nu_r: np.ndarray
+    nu_b: np.ndarray
+    h11: np.ndarray
+    h12: np.ndarray
+    h21: np.ndarray
+    h22: np.ndarray
+    p11: np.ndarray
+    p12: np.ndarray
+    p21: np.ndarray
+    p22: np.ndarray
+    S11: np.ndarray
+    S12: np.ndarray
+    S22: np.ndarray
+
+
+def _obs_terms(x, y, th, mx, my, a, b, c, zr, zb, qr, qb) -> _ObsTerms:
+    """Pose ``(x, y, θ)``, landmark mean ``(mx, my)`` and covariance ``[[a, b], [b, c]]``; measurement
+    ``(zr, zb)``; noise variances ``qr, qb``."""
+    dx = mx - x
+    dy = my - y
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    nu_r = zr - r
+    nu_b = wrap_angle(zb - np.arctan2(dy, dx) + th)  # = wrap(z_b − wrap(atan2 − θ))
+    h11, h12 = dx / r, dy / r
+    h21, h22 = -dy / q, dx / q
+    p11, p12 = a * h11 + b * h12, a * h21 + b * h22
+    p21, p22 = b * h11 + c * h12, b * h21 + c * h22
+    S11 = h11 * p11 + h12 * p21 + qr
+    S12 = h11 * p12 + h12 * p22
+    S22 = h21 * p12 + h22 * p22 + qb
+    return _ObsTerms(nu_r, nu_b, h11, h12, h21, h22, p11, p12, p21, p22, S11, S12, S22)
+
+
+def _inv_sym2(S11, S12, S22):
+    """``S⁻¹`` components ``(i11, i12, i22)`` and ``det S`` of symmetric 2×2 matrices."""
+    det = S11 * S22 - S12 * S12
+    return S22 / det, -S12 / det, S11 / det, det
+
+
+def _loglik(nu_r, nu_b, i11, i12, i22, det):
+    """``log N(ν; 0, S) = −½ νᵀS⁻¹ν − log 2π − ½ log det S``."""
+    maha = i11 * nu_r * nu_r + 2.0 * i12 * nu_r * nu_b + i22 * nu_b * nu_b
+    return -0.5 * maha - LOG_2PI - 0.5 * np.log(det)
+
+
+def _ekf_terms(o: _ObsTerms, mx, my, a, b, c):
+    """Landmark EKF update from :class:`_ObsTerms` (eqs. 14.22-14.24, 14.28).
+
+    ``K = Σ H_mᵀ S⁻¹``, ``μ' = μ + K ν``, ``Σ' = Σ − K S Kᵀ = Σ − K (Σ H_mᵀ)ᵀ`` (the symmetric form of
+    ``(I − K H) Σ``); returns ``(mx', my', a', b', c', log N(ν; 0, S))``.
+    """
+    i11, i12, i22, det = _inv_sym2(o.S11, o.S12, o.S22)
+    K11 = o.p11 * i11 + o.p12 * i12
+    K12 = o.p11 * i12 + o.p12 * i22
+    K21 = o.p21 * i11 + o.p22 * i12
+    K22 = o.p21 * i12 + o.p22 * i22
+    mx_n = mx + K11 * o.nu_r + K12 * o.nu_b
+    my_n = my + K21 * o.nu_r + K22 * o.nu_b
+    a_n = a - (K11 * o.p11 + K12 * o.p12)
+    b_n = b - (K11 * o.p21 + K12 * o.p22)
+    c_n = c - (K21 * o.p21 + K22 * o.p22)
+    return mx_n, my_n, a_n, b_n, c_n, _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
+
+
+def _proposal_terms(o: _ObsTerms, Sx):
+    """FastSLAM 2.0 pose-proposal terms for pose covariance ``Sx (3, 3, ...)``.
+
+    ``U = Σ_x H_xᵀ (3, 2, ...)`` and the predictive covariance ``S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + Q``.
+    Returns ``(U, S11, S12, S22)``.
+    """
+    U = np.empty((3, 2) + np.broadcast_shapes(Sx.shape[2:], o.h11.shape))
+    U[:, 0] = -(Sx[:, 0] * o.h11 + Sx[:, 1] * o.h12)  # H_x row 0 = [−h11, −h12, 0]
+    U[:, 1] = -(Sx[:, 0] * o.h21 + Sx[:, 1] * o.h22 + Sx[:, 2])  # H_x row 1 = [−h21, −h22, −1]
+    S11 = o.S11 - (o.h11 * U[0, 0] + o.h12 * U[1, 0])
+    S12 = o.S12 - (o.h11 * U[0, 1] + o.h12 * U[1, 1])
+    S22 = o.S22 - (o.h21 * U[0, 1] + o.h22 * U[1, 1] + U[2, 1])
+    return U, S11, S12, S22
 
 
 def _mT(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(A, -1, -2)
-
-
-def _gauss_loglik(nu: np.ndarray, S_inv: np.ndarray, S_det: np.ndarray) -> np.ndarray:
-    """``log N(ν; 0, S) = −½ νᵀS⁻¹ν − log 2π − ½ log det S`` for 2-D innovations ``ν (..., 2)``."""
-    maha = np.einsum("...i,...ij,...j->...", nu, S_inv, nu)
-    return -0.5 * maha - LOG_2PI - 0.5 * np.log(S_det)
 
 
 def landmark_ekf_update(x, mu, sig, z, Q):
@@ -259,48 +325,99 @@ def landmark_ekf_update(x, mu, sig, z, Q):
     ----------
     x : ndarray (..., 3)      particle poses.
     mu : ndarray (..., 2)     landmark means before the update.
-    sig : ndarray (..., 2, 2) landmark covariances before the update.
+    sig : ndarray (..., 2, 2) landmark covariances before the update (symmetric).
     z : ndarray (2,)          measurement [range, bearing].
-    Q : ndarray (2, 2)        measurement noise covariance.
+    Q : ndarray (2, 2)        measurement noise covariance (diagonal).
 
     Returns
     -------
     mu_new : ndarray (..., 2)       ``μ + K ν``, ``ν = z − h(x, μ)`` with the bearing wrapped.
-    sig_new : ndarray (..., 2, 2)   Joseph form ``(I − K H) Σ (I − K H)ᵀ + K Q Kᵀ`` (= ``(I − K H) Σ``).
+    sig_new : ndarray (..., 2, 2)   ``(I − K H) Σ``.
     log_lik : ndarray (...)         ``log N(ν; 0, H Σ Hᵀ + Q)`` — the FastSLAM 1.0 importance weight.
     """
-    z_hat = range_bearing(x, mu)
-    _, H = range_bearing_jacobians(x, mu)
-    nu = measurement_residual(z, z_hat)
-    S = H @ sig @ _mT(H) + Q  # eq. 14.29
-    S_inv, S_det = _inv2(S)
-    K = sig @ _mT(H) @ S_inv  # eq. 14.22
-    mu_new = mu + np.einsum("...ij,...j->...i", K, nu)  # eq. 14.23
-    IKH = np.eye(2) - K @ H
-    sig_new = IKH @ sig @ _mT(IKH) + K @ Q @ _mT(K)  # eq. 14.24, Joseph form keeps Σ symmetric PSD
-    sig_new = 0.5 * (sig_new + _mT(sig_new))
-    return mu_new, sig_new, _gauss_loglik(nu, S_inv, S_det)
+    x = np.asarray(x, float)
+    mu = np.asarray(mu, float)
+    sig = np.asarray(sig, float)
+    o = _obs_terms(
+        x[..., 0], x[..., 1], x[..., 2], mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1],
+        z[0], z[1], Q[0, 0], Q[1, 1],
+    )  # fmt: skip
+    mx, my, a, b, c, ll = _ekf_terms(
+        o, mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1]
+    )
+    sig_new = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
+    return np.stack([mx, my], -1), sig_new, ll
+
+
+def _init_terms(x, y, th, zr, zb, qr, qb):
+    """Landmark initialisation ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` as components ``(mx, my, a, b, c)``;
+    ``M_z = [[cos φ, −r sin φ], [sin φ, r cos φ]]``, ``φ = θ + b`` (the pose is given within a particle)."""
+    phi = th + zb
+    cp, sp = np.cos(phi), np.sin(phi)
+    r2qb = zr * zr * qb
+    return (
+        x + zr * cp,
+        y + zr * sp,
+        cp * cp * qr + sp * sp * r2qb,
+        cp * sp * (qr - r2qb),
+        sp * sp * qr + cp * cp * r2qb,
+    )
 
 
 def init_landmark(x, z, Q):
     """Initialise landmark Gaussians from poses ``x (..., 3)`` and one measurement ``z (2,)``:
-    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` (the pose is given within a particle)."""
-    z_b = np.broadcast_to(np.asarray(z, float), np.shape(x)[:-1] + (2,))
-    mu = inverse_range_bearing(x, z_b)
-    _, Mz = inverse_range_bearing_jacobians(x, z_b)
-    return mu, Mz @ Q @ _mT(Mz)
+    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ``. Returns ``mu (..., 2)``, ``sig (..., 2, 2)``."""
+    x = np.asarray(x, float)
+    mx, my, a, b, c = _init_terms(x[..., 0], x[..., 1], x[..., 2], z[0], z[1], Q[0, 0], Q[1, 1])
+    return np.stack([mx, my], -1), np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
 
 
-def sample_gaussian(mean: np.ndarray, cov: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Draw one sample per row from ``N(mean (P, d), cov (P, d, d))``; ``cov`` may be singular (PSD).
+def sample_pose(mean: np.ndarray, Sx: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Draw ``x ~ N(mean (P, 3), Sx (3, 3, P))``; ``Sx`` may be singular (PSD).
 
-    Uses the symmetric square root ``V diag(√λ) Vᵀ`` so rank-deficient motion noise (the DDMR model has no
-    lateral noise) is handled exactly.
+    Component-wise Cholesky ``Sx = L Lᵀ`` in which a (numerically) zero pivot zeroes its column — exact for
+    PSD matrices, so the rank-2 motion noise of the DDMR model (no lateral slip) is sampled correctly.
     """
-    lam, V = np.linalg.eigh(0.5 * (cov + _mT(cov)))
-    L = V * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]
-    eps = rng.standard_normal(mean.shape)
-    return mean + np.einsum("...ij,...j->...i", L, eps)
+    tiny = 1e-12
+
+    def piv(v, scale):
+        return np.sqrt(np.where(v > tiny * scale, v, 0.0))
+
+    def div(n, d):
+        return np.where(d > 0.0, n / np.where(d > 0.0, d, 1.0), 0.0)
+
+    s00, s01, s02, s11, s12, s22 = Sx[0, 0], Sx[0, 1], Sx[0, 2], Sx[1, 1], Sx[1, 2], Sx[2, 2]
+    L00 = piv(s00, s00)
+    L10, L20 = div(s01, L00), div(s02, L00)
+    L11 = piv(s11 - L10 * L10, s11)
+    L21 = div(s12 - L20 * L10, L11)
+    L22 = piv(s22 - L20 * L20 - L21 * L21, s22)
+    e = rng.standard_normal((3, mean.shape[0]))
+    out = mean.copy()
+    out[:, 0] += L00 * e[0]
+    out[:, 1] += L10 * e[0] + L11 * e[1]
+    out[:, 2] = wrap_angle(out[:, 2] + L20 * e[0] + L21 * e[1] + L22 * e[2])
+    return out
+
+
+def _motion_cov_controls(th, dt, std_v, std_w):
+    """``R = G_u diag(σ_v², σ_ω²) G_uᵀ`` as ``(3, 3, P)``, ``G_u = dt·[[cos θ, 0], [sin θ, 0], [0, 1]]``."""
+    c, s = np.cos(th), np.sin(th)
+    kv, kw = (dt * std_v) ** 2, (dt * std_w) ** 2
+    R = np.zeros((3, 3, th.shape[0]))
+    R[0, 0], R[1, 1], R[2, 2] = kv * c * c, kv * s * s, kw
+    R[0, 1] = R[1, 0] = kv * c * s
+    return R
+
+
+def _motion_cov_odometry(th, std):
+    """``R = J diag(σ_x², σ_y², σ_θ²) Jᵀ`` as ``(3, 3, P)``, ``J = ∂(x ⊕ d)/∂d = blkdiag(R(θ), 1)``."""
+    c, s = np.cos(th), np.sin(th)
+    vx, vy = std[0] ** 2, std[1] ** 2
+    R = np.zeros((3, 3, th.shape[0]))
+    R[0, 0], R[1, 1], R[2, 2] = c * c * vx + s * s * vy, s * s * vx + c * c * vy, std[2] ** 2
+    R[0, 1] = R[1, 0] = c * s * (vx - vy)
+    return R
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -369,6 +486,8 @@ class FastSlam(BaseSolver):
 
         ps = ParticleSet.create(inputs.x0, P, capacity)
         resample = RESAMPLERS[p.resampling]
+        self._log_p0 = log_p0
+        self._Q = Q
 
         # ---- records -------------------------------------------------------------------------------------
         mean_xyt = np.empty((T1, 3))
@@ -385,49 +504,37 @@ class FastSlam(BaseSolver):
         every = max(1, T1 // 100)
 
         for t in range(T1):
-            # ---- 1. proposal prior -----------------------------------------------------------------------
+            # ---- 1. proposal prior: sample (1.0) or linearise (2.0) the motion model --------------------------
+            R = None
             if t == 0:
                 x_hat = ps.x.copy()
-                R = np.zeros((P, 3, 3))
             elif p.motion_source == "controls":
                 u = inputs.controls[t - 1]
-                if p.version == 1:  # eq. 14.18: sample the motion model directly
-                    u_k = u + M_std * rng.standard_normal((P, 2))
-                    x_hat = ddmr_step(ps.x, u_k, inputs.dt)
+                if p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
+                    x_hat = ddmr_step(ps.x, u + M_std * rng.standard_normal((P, 2)), inputs.dt)
                 else:
                     x_hat = ddmr_step(ps.x, u, inputs.dt)
-                    _, G_u = ddmr_jacobians(ps.x, u, inputs.dt)
-                    R = G_u @ np.diag(M_std**2) @ _mT(G_u)
+                    R = _motion_cov_controls(ps.x[:, 2], inputs.dt, M_std[0], M_std[1])
             else:
                 d = increments[t - 1]
-                if p.version == 1:
+                if p.version == 1:  # x_t = x_{t-1} ⊕ (d + ε), ε ~ N(0, diag(odometry_std²))
                     x_hat = se2.compose(ps.x, d + M_std * rng.standard_normal((P, 3)))
                 else:
                     x_hat = se2.compose(ps.x, d)
-                    J = np.zeros((P, 3, 3))  # ∂(x ⊕ d)/∂d = blkdiag(R(θ), 1)
-                    J[:, :2, :2] = se2.rot2(ps.x[:, 2])
-                    J[:, 2, 2] = 1.0
-                    R = J @ np.diag(M_std**2) @ _mT(J)
+                    R = _motion_cov_odometry(ps.x[:, 2], M_std)
 
             rows = range(int(obs.offsets[t]), int(obs.offsets[t + 1]))
             # NaN from unused slots of particles that start a new landmark is masked out with np.where.
             with np.errstate(divide="ignore", invalid="ignore"):
-                if p.version == 1 or t == 0:
+                if R is None:  # FastSLAM 1.0, or step 0 (x0 known)
                     ps.x = x_hat
-                    step_slots, step_new = self._associate_and_weight_v1(
-                        ps, z_all, rows, slot_of_obs, Q, log_p0
-                    )
+                    step_slots, step_new = self._measure_v1(ps, z_all, rows, slot_of_obs)
                 else:
-                    step_slots, step_new = self._proposal_v2(
-                        ps, x_hat, R, z_all, rows, slot_of_obs, Q, log_p0, rng
-                    )
-
-            # ---- 3. landmark EKFs (v2: at the sampled pose; v1 already done) -------------------------------
-            if p.version == 2 and t > 0:
-                for i, n in enumerate(rows):
-                    if step_slots[i] is None:
-                        continue
-                    self._update_or_init(ps, step_slots[i], step_new[i], z_all[n], Q, weight=False)
+                    step_slots, step_new = self._proposal_v2(ps, x_hat, R, z_all, rows, slot_of_obs, rng)
+                    # ---- landmark EKFs at the sampled pose ------------------------------------------------
+                    for i, n in enumerate(rows):
+                        if step_slots[i] is not None:
+                            self._update_or_init(ps, step_slots[i], step_new[i], z_all[n], weight=False)
             for i, n in enumerate(rows):
                 if step_slots[i] is not None:
                     assoc_hist[n] = step_slots[i]
@@ -437,13 +544,13 @@ class FastSlam(BaseSolver):
             if not known and p.remove_unsupported and len(rows) > 0:
                 self._negative_evidence(ps, step_slots, inputs.max_range)
 
-            # ---- estimate at t (weights before resampling) -------------------------------------------------
+            # ---- estimate at t (weights before resampling), EVALUATION-METHOD §A2 ---------------------------
             w = normalise_log_weights(ps.log_w)
             mean_xyt[t, :2] = w @ ps.x[:, :2]
             mean_xyt[t, 2] = circular_mean(ps.x[:, 2], w)
             e = ps.x - mean_xyt[t]
             e[:, 2] = wrap_angle(e[:, 2])
-            pose_cov[t] = (w[:, None] * e).T @ e  # EVALUATION-METHOD §A2
+            pose_cov[t] = (w[:, None] * e).T @ e
             if keep_path:
                 pose_hist[t] = ps.x
             ess = effective_sample_size(w)
@@ -474,11 +581,10 @@ class FastSlam(BaseSolver):
         assoc_slots = assoc_hist[np.arange(N), lineage[obs_step]] if N else np.zeros(0, np.int64)
         poses = pose_hist[np.arange(T1), lineage] if keep_path else mean_xyt
 
+        live = ps.exists[best]
         if known:
-            live = ps.exists[best]
             lm_xy, lm_cov = moment_matched_landmarks(ps.mu[:, live], ps.sig[:, live], w)
         else:
-            live = ps.exists[best]
             lm_xy, lm_cov = ps.mu[best, live], ps.sig[best, live]
         row_of_slot = np.cumsum(live) - 1
         alive = (assoc_slots >= 0) & live[np.clip(assoc_slots, 0, None)]
@@ -506,141 +612,161 @@ class FastSlam(BaseSolver):
         )
 
     # -----------------------------------------------------------------------------------------------------
-    def _ml_candidates(self, ps: ParticleSet, x, Sx, z, Q):
+    @staticmethod
+    def _index(ps: ParticleSet, slots):
+        """Index tuple selecting one landmark slot per particle: a basic slice for a shared slot (known
+        association: views, no copies) or ``(arange(P), slots)`` fancy indexing."""
+        if isinstance(slots, (int, np.integer)):
+            return (slice(None), int(slots))
+        return (np.arange(ps.n_particles), slots)
+
+    def _gather_terms(self, ps: ParticleSet, idx, x, z):
+        mu, sig = ps.mu[idx], ps.sig[idx]
+        Q = self._Q
+        comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
+        o = _obs_terms(x[:, 0], x[:, 1], x[:, 2], *comps, z[0], z[1], Q[0, 0], Q[1, 1])
+        return o, comps
+
+    def _ml_candidates(self, ps: ParticleSet, x, Sx, z):
         """Per-particle log-likelihood ``(P, C)`` of measurement ``z`` for every live landmark (eq. 14.30),
         with predictive covariance ``H_m Σ H_mᵀ + Q`` (+ ``H_x Σ_x H_xᵀ`` for the 2.0 proposal)."""
         live = ps.exists
-        mu = np.where(live[..., None], ps.mu, x[:, None, :2] + 1.0)  # dummy position away from the pose
+        Q = self._Q
         xb = x[:, None, :]
-        z_hat = range_bearing(xb, mu)
-        Hx, Hm = range_bearing_jacobians(xb, mu)
-        S = Hm @ ps.sig @ _mT(Hm) + Q
+        o = _obs_terms(
+            xb[..., 0], xb[..., 1], xb[..., 2], ps.mu[..., 0], ps.mu[..., 1],
+            ps.sig[..., 0, 0], ps.sig[..., 0, 1], ps.sig[..., 1, 1], z[0], z[1], Q[0, 0], Q[1, 1],
+        )  # fmt: skip
+        S11, S12, S22 = o.S11, o.S12, o.S22
         if Sx is not None:
-            S = S + Hx @ Sx[:, None] @ _mT(Hx)
-        S = np.where(live[..., None, None], S, np.eye(2))
-        S_inv, S_det = _inv2(S)
-        ll = _gauss_loglik(measurement_residual(z, z_hat), S_inv, S_det)
-        return np.where(live, ll, -np.inf)
+            _, S11, S12, S22 = _proposal_terms(o, Sx[..., None])
+        i11, i12, i22, det = _inv_sym2(S11, S12, S22)
+        ll = _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
+        return np.where(live & np.isfinite(ll), ll, -np.inf)
 
-    def _associate(self, ps: ParticleSet, n: int, slot_of_obs, x, Sx, z, Q, log_p0):
-        """Slots ``(P,)`` and new-landmark mask ``(P,)`` for observation row ``n``; allocates ML slots.
+    def _associate(self, ps: ParticleSet, n: int, slot_of_obs, x, Sx, z):
+        """Slot(s) and new-landmark mask ``(P,)`` for observation row ``n``; allocates ML slots.
 
-        Returns ``(slots, new, log_lik_or_None)``; ``None`` slots = observation not used (no reported id)."""
-        P = ps.n_particles
+        Returns ``(slots, new)``: ``slots`` is an int (known association, shared by all particles), a
+        ``(P,)`` array (ML), or ``None`` when the row is not used (no reported id)."""
         if slot_of_obs is not None:
             s = int(slot_of_obs[n])
             if s < 0:
-                return None, None, None
-            slots = np.full(P, s, np.int64)
-            return slots, ~ps.exists[:, s], None
-        ll = self._ml_candidates(ps, x, Sx, z, Q)
+                return None, None
+            return s, ~ps.exists[:, s]
+        ll = self._ml_candidates(ps, x, Sx, z)
         j = np.argmax(ll, axis=1)
-        ll_best = ll[np.arange(P), j]
-        new = ~(ll_best >= log_p0)
+        new = ~(ll[np.arange(ps.n_particles), j] >= self._log_p0)
         if new.any():
             ps.ensure_capacity(int(ps.n_slots.max()) + 1)
             j = np.where(new, ps.n_slots, j)
             ps.n_slots = ps.n_slots + new
-        return j, new, ll_best
+        return j, new
 
-    def _update_or_init(self, ps: ParticleSet, slots, new, z, Q, *, weight: bool):
-        """EKF-update existing landmarks / initialise new ones in ``slots (P,)``; optionally add the 1.0
-        weight ``log N(ν; 0, Q_n)`` for the updated particles."""
-        ar = np.arange(ps.n_particles)
+    def _update_or_init(self, ps: ParticleSet, slots, new, z, *, weight: bool):
+        """EKF-update existing landmarks / initialise new ones in ``slots``; optionally add the 1.0 weight
+        ``log N(ν; 0, Q_n)`` (eq. 14.28) of the updated particles."""
+        idx = self._index(ps, slots)
+        x = ps.x
+        Q = self._Q
         any_new = bool(new.any())
         if not new.all():
-            with np.errstate(divide="ignore", invalid="ignore"):  # unused slots of new particles give NaN
-                mu_u, sig_u, ll = landmark_ekf_update(ps.x, ps.mu[ar, slots], ps.sig[ar, slots], z, Q)
+            o, comps = self._gather_terms(ps, idx, x, z)
+            mx, my, a, b, c, ll = _ekf_terms(o, *comps)
         else:
-            mu_u, sig_u, ll = ps.mu[ar, slots], ps.sig[ar, slots], np.zeros(ps.n_particles)
+            mx = my = a = b = c = ll = None
         if any_new:
-            mu_i, sig_i = init_landmark(ps.x, z, Q)
-            mu_u = np.where(new[:, None], mu_i, mu_u)
-            sig_u = np.where(new[:, None, None], sig_i, sig_u)
-        ps.mu[ar, slots] = mu_u
-        ps.sig[ar, slots] = sig_u
-        ps.count[ar, slots] = np.where(new, 1, ps.count[ar, slots] + 1)
-        ps.exists[ar, slots] = True
-        if weight:
+            init = _init_terms(x[:, 0], x[:, 1], x[:, 2], z[0], z[1], Q[0, 0], Q[1, 1])
+            if mx is None:
+                mx, my, a, b, c = init
+            else:
+                mx, my, a, b, c = (np.where(new, i, u) for i, u in zip(init, (mx, my, a, b, c)))
+        mu, sig = ps.mu, ps.sig
+        mu[idx + (0,)] = mx
+        mu[idx + (1,)] = my
+        sig[idx + (0, 0)] = a
+        sig[idx + (0, 1)] = b
+        sig[idx + (1, 0)] = b
+        sig[idx + (1, 1)] = c
+        ps.count[idx] = np.where(new, 1, ps.count[idx] + 1)
+        ps.exists[idx] = True
+        if weight and ll is not None:
             ps.log_w += np.where(new, 0.0, ll)
-        return ll
 
-    def _associate_and_weight_v1(self, ps, z_all, rows, slot_of_obs, Q, log_p0):
+    def _measure_v1(self, ps, z_all, rows, slot_of_obs):
         """FastSLAM 1.0 measurement step at the already-sampled poses ``ps.x``."""
         slots_l, new_l = [], []
         for n in rows:
             z = z_all[n]
-            slots, new, _ = self._associate(ps, n, slot_of_obs, ps.x, None, z, Q, log_p0)
+            slots, new = self._associate(ps, n, slot_of_obs, ps.x, None, z)
             slots_l.append(slots)
             new_l.append(new)
             if slots is None:
                 continue
-            self._update_or_init(ps, slots, new, z, Q, weight=True)
+            self._update_or_init(ps, slots, new, z, weight=True)
             if slot_of_obs is None:
-                ps.log_w += np.where(new, log_p0, 0.0)  # new-landmark likelihood p0
+                ps.log_w += np.where(new, self._log_p0, 0.0)  # new-landmark likelihood p0
         return slots_l, new_l
 
-    def _proposal_v2(self, ps, x_hat, R, z_all, rows, slot_of_obs, Q, log_p0, rng):
-        """FastSLAM 2.0: refine ``N(x̂, Σ_x)`` with every observation of a mapped landmark, weight by the
-        predictive likelihood, then sample the new poses into ``ps.x``."""
+    def _proposal_v2(self, ps, x_hat, Sx, z_all, rows, slot_of_obs, rng):
+        """FastSLAM 2.0: refine ``N(x̂, Σ_x)`` (``Σ_x (3, 3, P)``) with every observation of a mapped landmark,
+        weight by the predictive likelihood, then SAMPLE the new poses into ``ps.x``."""
         P = ps.n_particles
         ar = np.arange(P)
-        Sx = R.copy()
         x_hat = x_hat.copy()
+        Sx = Sx.copy()
+        Q = self._Q
         slots_l, new_l = [], []
         born_now = np.zeros_like(ps.exists)  # landmarks created this step carry no prior information yet
         for n in rows:
             z = z_all[n]
-            slots, new, _ = self._associate(ps, n, slot_of_obs, x_hat, Sx, z, Q, log_p0)
+            slots, new = self._associate(ps, n, slot_of_obs, x_hat, Sx, z)
             slots_l.append(slots)
             new_l.append(new)
             if slots is None:
                 continue
             if born_now.shape != ps.exists.shape:  # capacity grew
                 born_now = np.pad(born_now, ((0, 0), (0, ps.capacity - born_now.shape[1])))
-            mu_j, sig_j = ps.mu[ar, slots], ps.sig[ar, slots]
-            with np.errstate(divide="ignore", invalid="ignore"):  # unused slots of new particles give NaN
-                z_hat = range_bearing(x_hat, mu_j)
-                Hx, Hm = range_bearing_jacobians(x_hat, mu_j)
-                nu = measurement_residual(z, z_hat)
-                Qn = Hm @ sig_j @ _mT(Hm) + Q
-                S = Hx @ Sx @ _mT(Hx) + Qn
-                S_inv, S_det = _inv2(S)
-                ll = _gauss_loglik(nu, S_inv, S_det)
-            K = Sx @ _mT(Hx) @ S_inv  # (P, 3, 2)
-            # Landmarks born earlier in this step carry no prior information yet: no proposal update.
-            upd = ~new & ~born_now[ar, slots]
-            dx = np.einsum("pij,pj->pi", K, nu)
-            x_new = x_hat + dx
-            x_new[:, 2] = wrap_angle(x_new[:, 2])
-            IKH = np.eye(3) - K @ Hx
-            Sx_new = IKH @ Sx @ _mT(IKH) + K @ Qn @ _mT(K)
-            Sx_new = 0.5 * (Sx_new + _mT(Sx_new))
-            x_hat = np.where(upd[:, None], x_new, x_hat)
-            Sx = np.where(upd[:, None, None], Sx_new, Sx)
-            ps.log_w += np.where(upd, ll, 0.0)
+            idx = self._index(ps, slots)
+            upd = ~new & ~born_now[idx]
+            if upd.any():
+                o, _ = self._gather_terms(ps, idx, x_hat, z)
+                U, S11, S12, S22 = _proposal_terms(o, Sx)
+                i11, i12, i22, det = _inv_sym2(S11, S12, S22)
+                K0 = U[:, 0] * i11 + U[:, 1] * i12  # K = U S⁻¹, (3, 2, P) as two columns
+                K1 = U[:, 0] * i12 + U[:, 1] * i22
+                dx = K0 * o.nu_r + K1 * o.nu_b  # (3, P)
+                x_new = x_hat + dx.T
+                x_new[:, 2] = wrap_angle(x_new[:, 2])
+                Sx_new = Sx - (K0[:, None] * U[None, :, 0] + K1[:, None] * U[None, :, 1])  # Σ_x − U S⁻¹ Uᵀ
+                ll = _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
+                x_hat = np.where(upd[:, None], x_new, x_hat)
+                Sx = np.where(upd, Sx_new, Sx)
+                ps.log_w += np.where(upd, ll, 0.0)
             if slot_of_obs is None:
-                ps.log_w += np.where(new, log_p0, 0.0)  # new-landmark likelihood p0
+                ps.log_w += np.where(new, self._log_p0, 0.0)  # new-landmark likelihood p0
             if new.any():
                 # Provisional landmark at the proposal mean so later rows of this step can associate with it;
-                # it is re-initialised from the sampled pose in the landmark pass.
-                mu_i, sig_i = init_landmark(x_hat, z, Q)
-                sn = slots[new]
-                ps.mu[ar[new], sn] = mu_i[new]
-                ps.sig[ar[new], sn] = sig_i[new]
-                ps.exists[ar[new], sn] = True
-                born_now[ar[new], sn] = True
-        ps.x = sample_gaussian(x_hat, Sx, rng)
-        ps.x[:, 2] = wrap_angle(ps.x[:, 2])
-        # Landmarks born this step are initialised in the landmark pass: undo the provisional state there by
-        # treating the first observation of each as "new".
+                # it is initialised from the sampled pose in the landmark pass.
+                sel = ar[new]
+                sn = np.broadcast_to(np.asarray(slots), (P,))[new]
+                xs = x_hat[new]
+                mx, my, a, b, c = _init_terms(xs[:, 0], xs[:, 1], xs[:, 2], z[0], z[1], Q[0, 0], Q[1, 1])
+                ps.mu[sel, sn, 0], ps.mu[sel, sn, 1] = mx, my
+                ps.sig[sel, sn, 0, 0], ps.sig[sel, sn, 1, 1] = a, c
+                ps.sig[sel, sn, 0, 1] = ps.sig[sel, sn, 1, 0] = b
+                ps.exists[sel, sn] = True
+                born_now[sel, sn] = True
+        ps.x = sample_pose(x_hat, Sx, rng)  # SAMPLE from the proposal, not its mean
+        # Landmarks born this step are initialised in the landmark pass: the first row of each is "new".
         seen = np.zeros_like(born_now)
         for i, slots in enumerate(slots_l):
             if slots is None:
                 continue
-            first = born_now[ar, slots] & ~seen[ar, slots]
+            idx = self._index(ps, slots)
+            first = born_now[idx] & ~seen[idx]
             new_l[i] = first
-            seen[ar, slots] |= first
+            seen[idx] |= first
         return slots_l, new_l
 
     def _negative_evidence(self, ps: ParticleSet, step_slots, max_range: float) -> None:
