@@ -1,0 +1,200 @@
+"""The ``graph`` solver end to end, its front end, and the paper-energy entry point used by ICM."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.stats
+from tiny_world import tiny_dataset
+
+from slamcli.errors import SolverError
+from slamcli.params import build_params
+from slamcli.solvers import frontend, graph
+from slamcli.types import Status
+
+
+def _solve(inputs, init=None, **kw):
+    return graph.GraphSlam(graph.GraphParams(**kw)).solve(inputs, init=init, rng=np.random.default_rng(0))
+
+
+@pytest.fixture(scope="module")
+def world():
+    return tiny_dataset(T=80, n_landmarks=6, seed=2, report_ids=True)
+
+
+def test_reported_ids_result_shapes_trace_and_accuracy(world):
+    inp, truth = world.inputs, world.truth
+    res = _solve(inp)
+    assert res.solver == "graph" and res.status == Status.CONVERGED
+    assert res.extra["association"] == "reported"
+    T1, N = inp.n_poses, len(inp.observations)
+    assert res.poses_xyt.shape == (T1, 3) and res.landmarks_xy.shape == (6, 2)
+    assert res.assoc.shape == (N,)
+    np.testing.assert_array_equal(res.assoc < 0, truth.obs_landmark < 0)  # clutter has no reported id
+    assert res.pose_cov.shape == (T1, 3, 3) and res.landmark_cov.shape == (6, 2, 2)
+    assert np.all(np.linalg.eigvalsh(res.pose_cov) > 0) and np.all(np.linalg.eigvalsh(res.landmark_cov) > 0)
+    # trace: one entry per accepted iteration plus the start, cost decreasing, landmarks per iteration
+    tr = res.trace
+    assert len(tr) == len(tr.landmark_offsets) - 1 >= 2
+    assert np.all(np.diff(tr.objective) <= 0) and tr.objective[-1] == pytest.approx(res.extra["final_cost"])
+    np.testing.assert_array_equal(tr.landmarks_at(len(tr) - 1), res.landmarks_xy)
+    assert tr.map_change[0] == 0.0 and tr.map_change[1] > 0.0
+    # accuracy vs the truth: labels are in order of first sighting, map them back through the reported ids
+    obs = inp.observations
+    ok = res.assoc >= 0
+    true_of_label = np.zeros(6, np.int64)
+    true_of_label[res.assoc[ok]] = obs.reported_id[ok]
+    lm_err = np.linalg.norm(res.landmarks_xy - truth.landmarks_xy[true_of_label], axis=1)
+    assert lm_err.max() < 0.05
+    pos_err = np.linalg.norm(res.poses_xyt[:, :2] - truth.poses_xyt[:, :2], axis=1)
+    odo_err = np.linalg.norm(inp.odometry_xyt[:, :2] - truth.poses_xyt[:, :2], axis=1)
+    assert pos_err.max() < 0.06 and pos_err.mean() < odo_err.mean()
+    # the start pose is pinned by the prior (gauge)
+    np.testing.assert_allclose(res.poses_xyt[0], inp.x0, atol=1e-6)
+    assert np.all(np.diag(res.pose_cov[0]) < 1e-7)
+
+
+def test_same_input_same_result_and_lm_equals_gn(world):
+    a, b = _solve(world.inputs), _solve(world.inputs)
+    np.testing.assert_array_equal(a.poses_xyt, b.poses_xyt)
+    np.testing.assert_array_equal(a.pose_cov, b.pose_cov)
+    gn = _solve(world.inputs, method="gn")
+    np.testing.assert_allclose(gn.poses_xyt, a.poses_xyt, atol=1e-8)
+    assert gn.extra["final_cost"] == pytest.approx(a.extra["final_cost"], rel=1e-10)
+
+
+def test_params_parse_from_cli_strings():
+    p = build_params(
+        graph.GraphParams, ["method=gn", "robust=huber", "prior_std=1e-3,1e-3,1e-2", "model=paper"]
+    )
+    assert (
+        p.method == "gn" and p.robust == "huber" and p.prior_std == (1e-3, 1e-3, 1e-2) and p.model == "paper"
+    )
+    p = build_params(graph.GraphParams, ["paper_Q=[[1,0],[0,1]]"])
+    assert p.paper_Q == ((1.0, 0.0), (0.0, 1.0))
+
+
+def test_chi2_gate_equals_scipy_quantile():
+    for p in (0.9, 0.99, 0.999):
+        assert frontend.gate_threshold(p) == pytest.approx(scipy.stats.chi2.ppf(p, 2), rel=1e-12)
+    with pytest.raises(SolverError):
+        frontend.gate_threshold(1.0)
+
+
+def test_compact_labels_order_and_min_obs():
+    assoc = np.array([7, 3, 7, -1, 3, 9, 7])
+    out, old = frontend.compact_labels(assoc)
+    np.testing.assert_array_equal(out, [0, 1, 0, -1, 1, 2, 0])
+    np.testing.assert_array_equal(old, [7, 3, 9])
+    out, old = frontend.compact_labels(assoc, min_obs=2)
+    np.testing.assert_array_equal(out, [0, 1, 0, -1, 1, -1, 0])
+
+
+def test_nearest_neighbour_front_end_recovers_identities_and_rejects_clutter():
+    ds = tiny_dataset(T=80, n_landmarks=6, seed=5, report_ids=False, clutter_every=5)
+    inp, truth = ds.inputs, ds.truth
+    res = _solve(inp, association="nn", min_obs=3)
+    assert res.extra["association"] == "nn" and res.status == Status.CONVERGED
+    tl = truth.obs_landmark
+    ok = res.assoc >= 0
+    # clutter returns are isolated → dropped by min_obs
+    assert np.all(res.assoc[tl < 0] == -1)
+    # purity: every kept label is one true landmark, and nearly every real return is kept
+    for lab in np.unique(res.assoc[ok]):
+        assert len(np.unique(tl[res.assoc == lab])) == 1
+    assert ok[tl >= 0].mean() > 0.97
+    # landmarks of the main labels are accurate
+    for lab in np.unique(res.assoc[ok]):
+        j = tl[res.assoc == lab][0]
+        assert np.linalg.norm(res.landmarks_xy[lab] - truth.landmarks_xy[j]) < 0.1
+
+
+def test_init_association_reproduces_the_labelled_optimum(world):
+    inp = world.inputs
+    ref = _solve(inp)
+    # relabel: reverse the landmark order in a fake "init" result
+    perm = np.arange(6)[::-1]
+    init = dataclasses.replace(
+        ref,
+        assoc=np.where(ref.assoc >= 0, perm[np.maximum(ref.assoc, 0)], -1),
+        landmarks_xy=ref.landmarks_xy[::-1],
+    )
+    res = _solve(inp, init=init)
+    assert res.extra["association"] == "init"
+    assert res.extra["final_cost"] == pytest.approx(ref.extra["final_cost"], rel=1e-10)
+    np.testing.assert_allclose(res.poses_xyt, ref.poses_xyt, atol=1e-8)
+    # labels are compacted in order of first sighting, so they come back identical
+    np.testing.assert_array_equal(res.assoc, ref.assoc)
+    # start from the init result's poses as well
+    res2 = _solve(inp, init=init, init_from="init")
+    assert res2.extra["final_cost"] == pytest.approx(ref.extra["final_cost"], rel=1e-10)
+    assert len(res2.trace) <= 3  # already at the optimum
+
+
+def test_bad_init_and_missing_ids_are_one_line_errors(world):
+    with pytest.raises(SolverError, match="needs an --init"):
+        _solve(world.inputs, association="init")
+    ref = _solve(world.inputs)
+    short = dataclasses.replace(ref, assoc=ref.assoc[:-3])
+    with pytest.raises(SolverError, match="association labels"):
+        _solve(world.inputs, init=short)
+    no_ids = tiny_dataset(T=10, n_landmarks=4, seed=0, report_ids=False)
+    with pytest.raises(SolverError, match="reported_id"):
+        _solve(no_ids.inputs, association="reported")
+
+
+def test_huber_limits_the_damage_of_wrong_associations():
+    ds = tiny_dataset(T=80, n_landmarks=6, seed=3, report_ids=True, clutter_every=0)
+    inp, truth = ds.inputs, ds.truth
+    obs = inp.observations
+    rng = np.random.default_rng(0)
+    bad = rng.choice(len(obs), size=len(obs) // 12, replace=False)
+    rid = obs.reported_id.copy()
+    rid[bad] = (rid[bad] + rng.integers(1, 6, bad.size)) % 6  # 8 % of the labels point at a wrong landmark
+    corrupted = dataclasses.replace(inp, observations=dataclasses.replace(obs, reported_id=rid))
+    errs = {}
+    for robust in ("none", "huber"):
+        res = _solve(corrupted, robust=robust, huber_k=1.0, covariance=False)
+        assert res.status == Status.CONVERGED
+        errs[robust] = np.linalg.norm(res.poses_xyt[:, :2] - truth.poses_xyt[:, :2], axis=1).mean()
+    assert errs["huber"] < 0.5 * errs["none"]
+
+
+def test_paper_energy_optimum_is_a_minimum_of_the_potentials_energy(world):
+    inp = world.inputs
+    assoc = frontend.associate_reported(inp.observations)
+    p0 = graph.odometry_initial_poses(inp)
+    lm0 = frontend.landmarks_from_observations(p0, inp.observations, assoc, 6)
+    R, S, Q = np.eye(3), np.eye(3) * 4.0, np.eye(2)
+    poses, lms, E = graph.optimize_paper_energy(inp, assoc, R, S, Q, p0, lm0)
+    np.testing.assert_array_equal(poses[0], p0[0])  # x_0 is the known start pose
+    assert E == pytest.approx(graph.paper_energy(inp, assoc, R, S, Q, poses, lms), rel=1e-12)
+    assert E < graph.paper_energy(inp, assoc, R, S, Q, p0, lm0)
+    # a stationary minimum: no single-coordinate perturbation lowers it
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        P, M = poses.copy(), lms.copy()
+        if rng.random() < 0.5:
+            P[rng.integers(1, len(P)), rng.integers(0, 3)] += rng.choice([-1, 1]) * 1e-4
+        else:
+            M[rng.integers(0, 6), rng.integers(0, 2)] += rng.choice([-1, 1]) * 1e-4
+        assert graph.paper_energy(inp, assoc, R, S, Q, P, M) >= E - 1e-12 * E
+    # a zero weight drops its potential (S = 0 ≠ S = 4I optimum)
+    _, _, E0 = graph.optimize_paper_energy(inp, assoc, R, np.zeros((3, 3)), Q, p0, lm0)
+    assert E0 < E
+
+
+def test_paper_model_through_the_solver(world):
+    res = _solve(
+        world.inputs, model="paper", paper_R=((1, 0, 0), (0, 1, 0), (0, 0, 1)), paper_Q=((1, 0), (0, 1))
+    )
+    assert res.status == Status.CONVERGED and res.extra["model"] == "paper"
+    np.testing.assert_array_equal(res.poses_xyt[0], world.inputs.x0)
+    assert np.all(res.pose_cov[0] == 0.0) and np.all(np.linalg.eigvalsh(res.pose_cov[1:]) > 0)
+    assoc = res.assoc
+    R, Q = np.eye(3), np.eye(2)
+    S = graph.default_paper_weights(world.inputs)[1]
+    E = graph.paper_energy(world.inputs, assoc, R, S, Q, res.poses_xyt, res.landmarks_xy)
+    assert res.extra["final_cost"] == pytest.approx(E, rel=1e-12)
