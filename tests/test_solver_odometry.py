@@ -45,6 +45,19 @@ def test_greedy_nn_hand_example():
     assert greedy_nearest_neighbour(np.array([[0.0, 0], [0.9, 0], [1.4, 0]]), 1.0).tolist() == [0, 0, 0]
 
 
+def test_greedy_nn_per_step_batches():
+    pts = np.array([[0.0, 0.0], [0.5, 0.0], [6.0, 0.0], [1.2, 0.0], [6.5, 0.0], [5.8, 0.3]])
+    steps = np.array([0, 0, 0, 1, 2, 2])
+    # step 0: (0,0) new 0, (0.5,0) joins 0 within the step, (6,0) new 1; step 1: (1.2,0) is 0.95 from the
+    # mean (0.25,0) -> 0; step 2: both rows match landmark 1 as it stood after step 1
+    assert greedy_nearest_neighbour(pts, 1.0, steps=steps).tolist() == [0, 0, 1, 0, 1, 1]
+    # one row per step is the purely sequential algorithm
+    rng = np.random.default_rng(1)
+    cloud = rng.uniform(0, 20, (300, 2))
+    np.testing.assert_array_equal(greedy_nearest_neighbour(cloud, 1.5, steps=np.arange(300)),
+                                  greedy_nearest_neighbour(cloud, 1.5))
+
+
 def test_greedy_nn_seeded_labels_and_buffer_growth():
     pts = np.array([[0.0, 0.0], [10.0, 0.0], [0.1, 0.0], [9.9, 0.0]])
     seeded = np.array([7, 3, -1, -1])

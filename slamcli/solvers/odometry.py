@@ -14,9 +14,10 @@ Labels (association) are, in order of preference:
 
 1. the sensor-reported identity (``observations.reported_id ≥ 0``, a measurement, not ground truth), when
    ``use_reported_ids`` is set and the row has one;
-2. otherwise greedy nearest neighbour in landmark space, in time order: a row joins the closest current
-   landmark (running mean) when the Euclidean distance is ≤ ``nn_threshold`` metres, else it creates a new
-   landmark. Rows that carry a reported id seed the landmark set first.
+2. otherwise greedy nearest neighbour in landmark space, in time order: a row joins the closest landmark
+   (running mean of its inverse observations up to the previous step) when the Euclidean distance is
+   ≤ ``nn_threshold`` metres, else it starts a new landmark (which later rows of the same step may join; see
+   :func:`greedy_nearest_neighbour`). Rows that carry a reported id seed the landmark set first.
 
 Labels seen by fewer than ``min_support`` rows are dropped (their rows get −1), then labels are renumbered
 0..L'−1 in order of first sighting. This solver uses no randomness and ignores ``init``.
@@ -70,16 +71,24 @@ def greedy_nearest_neighbour(
     points_xy: np.ndarray,
     threshold: float,
     labels: np.ndarray | None = None,
+    steps: np.ndarray | None = None,
     progress: ProgressFn | None = None,
 ) -> np.ndarray:
-    """Greedy NN labelling of landmark-space points in row order.
+    """Greedy NN labelling of landmark-space points, in time order.
+
+    Rows are processed one time step at a time. Each row of a step joins the nearest landmark as it stood at the
+    end of the previous step (running mean of its points) if that is within ``threshold``. The remaining rows of
+    the step are clustered greedily in row order: each joins the nearest landmark created earlier in the same
+    step within ``threshold``, or creates a new one. Without ``steps`` every row is its own step (purely
+    sequential greedy NN).
 
     Parameters
     ----------
     points_xy : ndarray (N, 2)    inverse observations.
-    threshold : float             join the nearest running-mean landmark if its distance ≤ threshold.
-    labels : ndarray (N,) int64   optional pre-set labels (≥ 0 kept, −1 to be decided); pre-labelled rows
+    threshold : float             gate in metres.
+    labels : ndarray (N,) int64   optional pre-set labels (≥ 0 kept, −1 to be decided). Pre-labelled rows
                                   seed the landmark means before the greedy pass.
+    steps : ndarray (N,) int64    optional, sorted time step of each row.
 
     Returns
     -------
@@ -98,30 +107,47 @@ def greedy_nearest_neighbour(
         counts[:K] = np.bincount(out[seeded], minlength=K)
     thr2 = threshold * threshold
     todo = np.flatnonzero(~seeded)
-    for n, i in enumerate(todo):
-        p = pts[i]
-        best = -1
+    if steps is None:
+        bounds = np.arange(todo.size + 1)
+    else:
+        st = np.asarray(steps)[todo]
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(st)) + 1, [todo.size]])
+    for g in range(bounds.size - 1):
+        rows = todo[bounds[g] : bounds[g + 1]]
+        P = pts[rows]
+        matched = np.zeros(rows.size, bool)
         if K:
             live = counts[:K] > 0
             means = sums[:K] / np.where(live, counts[:K], 1.0)[:, None]
-            d2 = np.where(live, ((means - p) ** 2).sum(axis=1), np.inf)
-            j = int(np.argmin(d2))
-            if d2[j] <= thr2:
-                best = j
-        if best < 0:
-            if K == cap:  # grow the buffers geometrically
-                cap *= 2
-                sums = np.resize(sums, (cap, 2))
-                sums[K:] = 0.0
-                counts = np.resize(counts, cap)
-                counts[K:] = 0.0
-            best = K
-            K += 1
-        out[i] = best
-        sums[best] += p
-        counts[best] += 1.0
-        if progress is not None and n % 2048 == 0:
-            progress(n, len(todo))
+            d2 = ((P[:, None, :] - means[None, :, :]) ** 2).sum(-1)  # (g, K)
+            d2[:, ~live] = np.inf
+            j = np.argmin(d2, axis=1)
+            matched = d2[np.arange(rows.size), j] <= thr2
+            out[rows[matched]] = j[matched]
+        first_new = K
+        for i in rows[~matched]:  # rows outside every gate: greedy among this step's new landmarks
+            best = -1
+            if K > first_new:
+                nm = sums[first_new:K] / counts[first_new:K, None]
+                d2n = ((nm - pts[i]) ** 2).sum(axis=1)
+                k = int(np.argmin(d2n))
+                if d2n[k] <= thr2:
+                    best = first_new + k
+            if best < 0:
+                if K == cap:  # grow the buffers geometrically
+                    cap *= 2
+                    sums = np.concatenate([sums, np.zeros_like(sums)])
+                    counts = np.concatenate([counts, np.zeros_like(counts)])
+                best = K
+                K += 1
+            out[i] = best
+            sums[best] += pts[i]
+            counts[best] += 1.0
+        if matched.any():
+            np.add.at(sums, out[rows[matched]], P[matched])
+            np.add.at(counts, out[rows[matched]], 1.0)
+        if progress is not None and g % 256 == 0:
+            progress(int(bounds[g]), int(todo.size))
     return out
 
 
@@ -170,7 +196,7 @@ class OdometrySolver(BaseSolver):
             if n_reported:
                 _, dense = np.unique(rid[has], return_inverse=True)
                 seed[has] = dense
-        raw = greedy_nearest_neighbour(m_hat, p.nn_threshold, seed, progress) if len(obs) else seed
+        raw = greedy_nearest_neighbour(m_hat, p.nn_threshold, seed, obs.step, progress) if len(obs) else seed
         assoc = compact(raw, p.min_support)
         L = int(assoc.max()) + 1 if assoc.size and assoc.max() >= 0 else 0
         ok = assoc >= 0
