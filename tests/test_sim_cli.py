@@ -50,6 +50,7 @@ def test_cli_simulate_writes_file_equal_to_library_run(tmp_path):
         (["--set", "nokeyvalue"], "error: --set: expected key=value"),
         (["--set", "sensor.detection_prob=2"], "detection_prob must be in [0, 1]"),
         (["--seed", "-3"], "error: --seed: must be >= 0"),
+        (["--set", "world.n_landmarks=500"], "error: world: cannot place 500 random landmarks"),
     ],
 )
 def test_cli_bad_input_one_line_exit_1_no_file(tmp_path, args, message):
@@ -80,5 +81,5 @@ def test_simulate_to_file_validates_before_writing(tmp_path):
     assert not out.exists()
     calls = []
     ds = simulate_to_file("loop", 1, {"n_steps": 50}, out, progress=lambda d, t: calls.append((d, t)))
-    assert out.exists() and calls[-1] == (50, 50)
+    assert out.exists() and calls == [(0, 50), (50, 50)]
     _same(ds, read_dataset(out))

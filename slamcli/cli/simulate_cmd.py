@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import typer
@@ -51,7 +52,15 @@ def simulate_command(
             return
         if out is None:
             fail("-o/--out is required")
-        with progress_bar(f"simulate {scenario}", quiet=quiet) as progress:
+        # The bar opens on the first progress report (after the world is built), so errors print one line.
+        with contextlib.ExitStack() as stack:
+            bar: list = []
+
+            def progress(done: int, total: int) -> None:
+                if not bar:
+                    bar.append(stack.enter_context(progress_bar(f"simulate {scenario}", quiet=quiet)))
+                bar[0](done, total)
+
             ds = simulate_to_file(scenario, seed, overrides, out, progress=progress)
         if quiet:
             return

@@ -60,7 +60,8 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     seed : int
         Root seed (≥ 0) of every stream (the world stream uses ``config.world.seed`` when that is ≥ 0).
     progress : callable(done, total), optional
-        Called during the drive loop and once per stage with ``total = n_steps``.
+        Called with ``(0, T)`` once the world is built, every 20 000 steps of the drive loop and with
+        ``(T, T)`` at the end.
 
     Returns
     -------
@@ -80,6 +81,9 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     rng_w = stream("world", world_seed)
     waypoints = world.make_waypoints(cfg.path, rng_w)
     landmarks = world.make_landmarks(cfg.world, waypoints, cfg.path.cyclic, rng_w)
+
+    if progress is not None:
+        progress(0, T)  # the world is valid: the run starts
 
     # 2) robot: commanded controls from the tracking controller, executed with actuation noise
     x0 = robot.start_pose(cfg.robot, waypoints)

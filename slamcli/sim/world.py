@@ -98,9 +98,11 @@ def _random_layout(cfg: WorldConfig, waypoints_xy: np.ndarray, cyclic: bool, rng
     """Rejection sampling in batches: uniform in the box, ``min_separation`` apart, ``path_clearance`` from
     the path. Deterministic given ``rng``."""
     out: list[np.ndarray] = []
+    stale = 0  # consecutive batches that placed nothing: the box is (practically) full
     for _ in range(200):
-        if len(out) >= cfg.n_landmarks:
+        if len(out) >= cfg.n_landmarks or stale >= 10:
             break
+        n_before = len(out)
         cand = np.stack(
             [rng.uniform(cfg.x_min, cfg.x_max, 256), rng.uniform(cfg.y_min, cfg.y_max, 256)], -1
         )
@@ -110,6 +112,7 @@ def _random_layout(cfg: WorldConfig, waypoints_xy: np.ndarray, cyclic: bool, rng
                 break
             if not out or np.min(np.hypot(*(np.asarray(out) - c).T)) >= cfg.min_separation:
                 out.append(c)
+        stale = stale + 1 if len(out) == n_before else 0
     if len(out) < cfg.n_landmarks:
         raise ConfigError(
             f"world: cannot place {cfg.n_landmarks} random landmarks with min_separation={cfg.min_separation} "
