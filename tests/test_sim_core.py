@@ -279,3 +279,14 @@ def test_progress_callback_reports_during_long_runs():
     calls = []
     simulate(resolve_scenario("loop", {"n_steps": 45_000}), seed=0, progress=lambda d, t: calls.append((d, t)))
     assert calls == [(0, 45_000), (20_000, 45_000), (40_000, 45_000), (45_000, 45_000)]
+
+
+def test_scan_period_and_laser_report_ids():
+    ds = simulate_scenario("loop", seed=1, overrides={"sensor.period_steps": 5, "clutter.rate": 1.0})
+    o = ds.inputs.observations
+    assert np.all(o.step % 5 == 0) and len(np.unique(o.step)) > 50
+    assert np.all(np.diff(o.offsets)[np.arange(501) % 5 != 0] == 0)
+    las = simulate_scenario("loop", seed=1, overrides={"sensor.kind": "laser", "sensor.report_ids": True,
+                                                       "world.landmark_radius": 0.3, "clutter.rate": 2.0})
+    np.testing.assert_array_equal(las.inputs.observations.reported_id, las.truth.obs_landmark)
+    assert np.sum(las.truth.obs_landmark >= 0) > 1000
