@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from slamcli.errors import SchemaError
+from slamcli.errors import SchemaError, SlamcliError
 from slamcli.io import read_result, write_result
 from slamcli.io import result as io_result
 from slamcli.types import IterationTrace, SolverResult, Status
@@ -95,9 +95,19 @@ def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
         return real(*a, **k)
 
     monkeypatch.setattr(io_result, "write_array", flaky)
-    with pytest.raises(OSError):
+    with pytest.raises(SlamcliError, match=r"r\.h5: cannot write file \(disk full\)"):
         write_result(tmp_path / "r.h5", make_result())
     assert os.listdir(tmp_path) == []
+
+
+def test_unwritable_destinations_are_one_line_errors(tmp_path):
+    (tmp_path / "adir").mkdir()
+    with pytest.raises(SlamcliError, match="adir: is a directory"):
+        write_result(tmp_path / "adir", make_result())
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(SlamcliError, match="cannot write file"):
+        write_result(tmp_path / "afile" / "r.h5", make_result())
+    assert sorted(os.listdir(tmp_path)) == ["adir", "afile"] and os.listdir(tmp_path / "adir") == []
 
 
 def test_unserialisable_params(tmp_path):

@@ -21,15 +21,14 @@ import os
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 
 from slamcli.errors import SchemaError
-from slamcli.io.atomic import atomic_path
 from slamcli.io.schema import (
     DATASET_SCHEMA,
     SCHEMA_VERSION,
     Reader,
+    create_h5,
     open_for_read,
     to_json,
     utc_now,
@@ -79,7 +78,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         metadata_json = to_json(meta)
     except (TypeError, ValueError) as exc:
         raise SchemaError(f"{final}: metadata: not JSON-serialisable ({exc})") from None
-    with atomic_path(final) as tmp, h5py.File(tmp, "w") as f:
+    with create_h5(final) as f:
         a = f.attrs
         a["schema"] = DATASET_SCHEMA
         a["schema_version"] = SCHEMA_VERSION

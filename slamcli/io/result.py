@@ -15,15 +15,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from slamcli.errors import SchemaError
-from slamcli.io.atomic import atomic_path
 from slamcli.io.schema import (
     RESULT_SCHEMA,
     SCHEMA_VERSION,
     Reader,
+    create_h5,
     open_for_read,
     to_json,
     utc_now,
@@ -46,7 +45,7 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
     except (TypeError, ValueError) as exc:
         raise SchemaError(f"{final}: params/extra: not JSON-serialisable ({exc})") from None
     status = Status(result.status)
-    with atomic_path(final) as tmp, h5py.File(tmp, "w") as f:
+    with create_h5(final) as f:
         a = f.attrs
         a["schema"] = RESULT_SCHEMA
         a["schema_version"] = SCHEMA_VERSION

@@ -18,7 +18,8 @@ from typing import Any
 import h5py
 import numpy as np
 
-from slamcli.errors import SchemaError
+from slamcli.errors import SchemaError, SlamcliError
+from slamcli.io.atomic import atomic_path
 
 DATASET_SCHEMA = "slamcli.dataset"
 RESULT_SCHEMA = "slamcli.result"
@@ -65,6 +66,22 @@ def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, f
     ds.attrs["units"] = units
     ds.attrs["frame"] = frame
     ds.attrs["doc"] = doc
+
+
+@contextlib.contextmanager
+def create_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
+    """Open a new HDF5 file for writing at ``path`` atomically (see :func:`~slamcli.io.atomic.atomic_path`).
+
+    Operating-system failures (directory in the way, permission denied, disk full) become a one-line
+    :class:`SlamcliError` naming the file; nothing is left behind.
+    """
+    if Path(path).is_dir():
+        raise SlamcliError(f"{path}: is a directory, expected a file name")
+    try:
+        with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+            yield f
+    except OSError as exc:
+        raise SlamcliError(f"{path}: cannot write file ({_one_line(exc)})") from None
 
 
 def check_path(path: str | os.PathLike) -> Path:
