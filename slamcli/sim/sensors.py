@@ -55,14 +55,6 @@ def _chunks(n_scans: int, n_landmarks: int):
         yield a, min(n_scans, a + size)
 
 
-def _geometry(poses_xyt: np.ndarray, landmarks_xy: np.ndarray):
-    """Centre range and bearing ``(S, L)`` of every landmark from every pose — the broadcast form of
-    :func:`slamcli.models.observation.range_bearing`: ``[‖m − p‖, wrap(atan2(Δy, Δx) − θ)]``."""
-    dx = landmarks_xy[None, :, 0] - poses_xyt[:, None, 0]
-    dy = landmarks_xy[None, :, 1] - poses_xyt[:, None, 1]
-    return np.hypot(dx, dy), wrap_angle(np.arctan2(dy, dx) - poses_xyt[:, None, 2])
-
-
 def _clutter(
     scan_steps: np.ndarray, cfg: SensorConfig, clutter: ClutterConfig, rng: np.random.Generator
 ) -> Returns:
@@ -104,11 +96,11 @@ def point_scans(
         if L == 0:
             break
         steps = scan_steps[a:b]
-        r, brg = _geometry(poses_xyt[steps], landmarks_xy)
-        vis = (r >= cfg.min_range) & (r <= cfg.max_range)
+        si, li, r_v, b_v = _candidates(poses_xyt[steps], landmarks_xy, cfg.min_range, cfg.max_range)
+        vis = np.ones(len(si), bool)
         if cfg.fov_deg < 360:
-            vis &= np.abs(brg) <= half
-        si, li = np.nonzero(vis)
+            vis &= np.abs(b_v) <= half
+        si, li, r_v, b_v = si[vis], li[vis], r_v[vis], b_v[vis]
         # Draw for every visible pair, whatever detection_prob and the noise levels are (stream stability).
         u = rng_sensor.random(len(si))
         n = rng_sensor.standard_normal((len(si), 2))
@@ -117,8 +109,8 @@ def point_scans(
         parts.append(
             Returns(
                 steps[si],
-                np.clip(r[si, li] + cfg.range_std * n[:, 0], 0.0, cfg.max_range),
-                wrap_angle(brg[si, li] + cfg.bearing_std * n[:, 1]),
+                np.clip(r_v[keep] + cfg.range_std * n[:, 0], 0.0, cfg.max_range),
+                wrap_angle(b_v[keep] + cfg.bearing_std * n[:, 1]),
                 li.astype(np.int64),
             )
         )
@@ -137,8 +129,24 @@ def beam_angles(cfg: SensorConfig) -> tuple[np.ndarray, float]:
     return -cfg.fov_rad / 2 + delta * np.arange(B), delta
 
 
-def _ray_hits(r: np.ndarray, brg: np.ndarray, radius: float, cfg: SensorConfig):
-    """All (scan, beam, landmark) ray–disc intersections of one chunk.
+def _candidates(poses_xyt: np.ndarray, landmarks_xy: np.ndarray, r_min: float, r_max: float):
+    """(scan row, landmark) pairs with ``r_min ≤ ‖m − p‖ ≤ r_max`` and their centre range and bearing — the
+    gathered form of :func:`slamcli.models.observation.range_bearing`, ``[‖m − p‖, wrap(atan2(Δy, Δx) − θ)]``.
+    A squared-distance gate runs first, so ``atan2`` is evaluated only for pairs in range."""
+    dx = landmarks_xy[None, :, 0] - poses_xyt[:, None, 0]
+    dy = landmarks_xy[None, :, 1] - poses_xyt[:, None, 1]
+    d2 = dx * dx + dy * dy
+    si, li = np.nonzero((d2 >= r_min * r_min) & (d2 <= r_max * r_max))
+    dx, dy = dx[si, li], dy[si, li]
+    r = np.hypot(dx, dy)
+    ok = (r >= r_min) & (r <= r_max)
+    si, li, dx, dy, r = si[ok], li[ok], dx[ok], dy[ok], r[ok]
+    return si, li, r, wrap_angle(np.arctan2(dy, dx) - poses_xyt[si, 2])
+
+
+def _ray_hits(si: np.ndarray, li: np.ndarray, d: np.ndarray, b: np.ndarray, radius: float, cfg: SensorConfig):
+    """All (scan, beam, landmark) ray–disc intersections of one chunk, from candidate pairs (scan row ``si``,
+    landmark ``li``) with centre range ``d > radius`` and bearing ``b``.
 
     A beam at bearing α meets the disc of radius R whose centre is at range d, bearing b, iff
     ``|δ| ≤ β = asin(R/d)`` with ``δ = α − b``; the first intersection is at
@@ -148,10 +156,6 @@ def _ray_hits(r: np.ndarray, brg: np.ndarray, radius: float, cfg: SensorConfig):
     """
     alpha0, delta = -math.pi if cfg.fov_deg >= 360 else -cfg.fov_rad / 2, beam_angles(cfg)[1]
     B = cfg.n_beams
-    cand = (r > radius) & (r - radius <= cfg.max_range)
-    si, li = np.nonzero(cand)
-    d = r[si, li]
-    b = brg[si, li]
     beta = np.arcsin(np.minimum(radius / d, 1.0))
     rows_s, rows_k, rows_t, rows_l = [], [], [], []
     for shift in (-2 * math.pi, 0.0, 2 * math.pi):  # a disc straddling ±π can meet beams on both sides
@@ -214,8 +218,10 @@ def laser_scans(
         steps = scan_steps[a:b]
         S = len(steps)
         if L:
-            r, brg = _geometry(poses_xyt[steps], landmarks_xy)
-            s_i, k_i, t_i, l_i = _ray_hits(r, brg, landmark_radius, cfg)
+            # the robot inside a disc sees nothing of it; a disc farther than max_range + R cannot be hit
+            ci, cl, cd, cb = _candidates(poses_xyt[steps], landmarks_xy, landmark_radius * (1 + 1e-12),
+                                         cfg.max_range + landmark_radius)
+            s_i, k_i, t_i, l_i = _ray_hits(ci, cl, cd, cb, landmark_radius, cfg)
         else:
             s_i = k_i = l_i = np.zeros(0, np.int64)
             t_i = np.zeros(0)
