@@ -19,7 +19,7 @@ from slamcli.models import motion, observation
 from slamcli.types import NoiseSpec, Observations, SlamInputs
 
 
-def make_problem(n_poses: int = 2001, n_landmarks: int = 50, seed: int = 0, max_range: float = 7.0):
+def make_problem(n_poses: int = 2001, n_landmarks: int = 50, seed: int = 0, max_range: float = 7.5):
     """A ``SlamInputs`` with reported landmark identities (a lap around a rounded rectangle).
 
     Returns
@@ -116,6 +116,41 @@ def gtsam_poses(values, n_poses: int) -> np.ndarray:
 
 
 def run(quick: bool = False) -> list[dict]:
+    """One row per BLAS threading setting, each measured in a fresh child process.
+
+    OpenBLAS's thread pool is set when numpy loads, so the setting needs its own process. On a loaded
+    machine multi-threaded OpenBLAS can make a 6000×100 GEMM ~100× slower than single-threaded; GTSAM is
+    unaffected by this variable (Eigen + TBB), so the ``blas_threads=1`` row is the like-for-like one.
+    """
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    rows = []
+    for threads in ("1", "default"):
+        env = dict(os.environ)
+        if threads == "1":
+            env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+        cmd = [sys.executable, "-m", "benchmarks.bench_graph"] + (["--quick"] if quick else [])
+        out = subprocess.run(
+            cmd,
+            env=env,
+            cwd=Path(__file__).resolve().parent.parent,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        for line in out.stdout.splitlines():
+            if line.startswith("{"):
+                row = json.loads(line)
+                rows.append({"blas_threads": threads, **row})
+    return rows
+
+
+def run_here(quick: bool = False) -> list[dict]:
+    """The measurement itself, in this process."""
     import gtsam
 
     from slamcli.solvers import frontend, graph, nls
@@ -183,5 +218,5 @@ if __name__ == "__main__":  # pragma: no cover
     import json
     import sys
 
-    for row in run(quick="--quick" in sys.argv):
+    for row in run_here(quick="--quick" in sys.argv):
         print(json.dumps(row))
