@@ -368,3 +368,11 @@ def test_params_validation_and_weights():
 
     p = build_params(IcmParams, ["R=1,1,2", "schedule=parallel", "fusion_radius=0.5"])
     assert p.weights.R == (1.0, 1.0, 2.0) and p.schedule == "parallel"
+
+
+def test_chain_energy_matches_reference(world):
+    inputs, truth, lm, ids = world
+    prob = en.Problem.from_inputs(inputs)
+    poses, landmarks, _ = _random_config(inputs, truth, lm, ids, np.random.default_rng(9))
+    ref = en.energy_terms(prob, W3, poses, landmarks, np.full(len(ids), -1))
+    assert en.chain_energy(prob, W3, poses) == pytest.approx(ref["motion"] + ref["odometry"], rel=1e-12)

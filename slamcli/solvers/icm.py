@@ -294,7 +294,7 @@ class IcmSlam(BaseSolver):
         p: IcmParams = self.params
         W = p.weights
         prob = en.Problem.from_inputs(inputs)
-        T, N = prob.T, prob.n_obs
+        T = prob.T
         reported = p.correspondences == "reported"
         fixed = reported_labels(inputs.observations.reported_id) if reported else None
         extra: dict = {"schedule": p.schedule, "accelerate": p.accelerate}
@@ -352,7 +352,7 @@ class IcmSlam(BaseSolver):
                 en.sweep_poses_sequential(prob, W, poses, stats, p.pose_iters)
             # m (eq. 15): three-step map update + ς filter
             pts = prob.landmark_points(poses)
-            E_pose = en.energy_terms(prob, W, poses, landmarks, np.full(N, -1))["total"]
+            E_pose = en.chain_energy(prob, W, poses)
             if reported:
                 new_landmarks = self._means_keep(prob, poses, labels, landmarks)
                 new_labels = labels

@@ -180,6 +180,31 @@ def energy(prob: Problem, W: Weights, poses_xyt, landmarks_xy, labels) -> float:
     return energy_terms(prob, W, poses_xyt, landmarks_xy, labels)["total"]
 
 
+def chain_energy(prob: Problem, W: Weights, poses) -> float:
+    """Motion + odometry part of H (eqs. 3, 16) in direct arithmetic (the sweep's fast path; equals the
+    corresponding terms of :func:`energy_terms`)."""
+    if prob.T == 0:
+        return 0.0
+    p0, p1 = poses[:-1], poses[1:]
+    out = 0.0
+    th = p0[:, 2]
+    c, s = np.cos(th), np.sin(th)
+    if W.use_motion:
+        u = prob.controls
+        a0 = p0[:, 0] + prob.dt * u[:, 0] * c - p1[:, 0]
+        a1 = p0[:, 1] + prob.dt * u[:, 0] * s - p1[:, 1]
+        a2 = _wrap(th + prob.dt * u[:, 1] - p1[:, 2])
+        out += W.R[0] * (a0 @ a0) + W.R[1] * (a1 @ a1) + W.R[2] * (a2 @ a2)
+    if W.use_odometry:
+        dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
+        d = prob.odo_inc
+        b0 = c * dx + s * dy - d[:, 0]
+        b1 = -s * dx + c * dy - d[:, 1]
+        b2 = _wrap(p1[:, 2] - th - d[:, 2])
+        out += W.S[0] * (b0 @ b0) + W.S[1] * (b1 @ b1) + W.S[2] * (b2 @ b2)
+    return float(out)
+
+
 def observation_energy(points_xy, labels, landmarks_xy, Q) -> float:
     """``Σ_{c ≥ 0} ‖p_i − m_{c_i}‖²_Q`` for precomputed points ``h⁻¹(x_t, z_{t,i}) (N, 2)``."""
     ok = labels >= 0
