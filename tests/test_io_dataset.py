@@ -386,3 +386,35 @@ def test_group_where_dataset_expected(good):
         del f["inputs/x0"]
         f.create_group("inputs/x0")
     expect_error(good, "inputs/x0", "expected a dataset, found a group")
+
+
+def test_random_byte_corruption_gives_schema_error_or_valid_data(good):
+    """Overwrite 16 random bytes at 80 random offsets: reading either succeeds (unused or plain data bytes)
+    or raises a one-line SchemaError, never another exception or a traceback-worthy crash."""
+    raw = good.read_bytes()
+    rng = np.random.default_rng(0)
+    outcomes = {"ok": 0, "schema": 0}
+    for _ in range(80):
+        b = bytearray(raw)
+        off = int(rng.integers(0, len(b) - 16))
+        b[off : off + 16] = rng.integers(0, 256, 16, dtype=np.uint8).tobytes()
+        good.write_bytes(bytes(b))
+        try:
+            read_dataset(good)
+            outcomes["ok"] += 1
+        except SchemaError as exc:
+            assert "\n" not in str(exc) and str(good) in str(exc)
+            outcomes["schema"] += 1
+    assert outcomes["schema"] > 0
+
+
+def test_checksum_detects_a_flipped_data_byte(good):
+    with h5py.File(good, "r") as f:
+        d = f["inputs/observations/range_m"]
+        assert d.fletcher32
+        info = d.id.get_chunk_info(0)
+        where = info.byte_offset + info.size // 2
+    b = bytearray(good.read_bytes())
+    b[where] ^= 0x01
+    good.write_bytes(bytes(b))
+    expect_error(good, "inputs/observations/range_m", "unreadable data, file truncated or corrupt")

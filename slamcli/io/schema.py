@@ -61,7 +61,8 @@ def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, f
     kwargs: dict[str, Any] = {}
     if data.ndim >= 1 and data.size > 0:
         chunks = (min(data.shape[0], CHUNK_ROWS),) + data.shape[1:]
-        kwargs = {"chunks": chunks, "compression": "gzip", "compression_opts": GZIP_LEVEL, "shuffle": True}
+        kwargs = {"chunks": chunks, "compression": "gzip", "compression_opts": GZIP_LEVEL, "shuffle": True,
+                  "fletcher32": True}
     ds = group.create_dataset(name, data=data, **kwargs)
     ds.attrs["units"] = units
     ds.attrs["frame"] = frame
