@@ -3,7 +3,8 @@
 * constructed from params only (``cls()`` and ``cls(cls.Params())``), Params a frozen dataclass with defaults;
 * ``solve(inputs, *, init=None, rng, progress=None)``;
 * same seed → bit-identical result arrays; shapes ``poses (T+1,3)``, ``assoc (N,)``, ``landmarks (L',2)``;
-  labels index the landmark table; status is a :class:`Status`; the result survives a write/read round trip;
+  labels index the landmark table; status is a :class:`Status`; the inputs are not modified; the result
+  survives a write/read round trip;
 * no ground truth reachable: solvers get only :class:`SlamInputs`, and no module of ``slamcli.solvers``
   references ``GroundTruth``/``Dataset``/``truth``/``obs_landmark`` or imports io/sim/metrics/h5py/typer/rich
   (AST scan, so docstrings do not count), checked again in a fresh interpreter via ``sys.modules``.
@@ -92,12 +93,26 @@ def same_array(a, b) -> bool:
     return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
 
 
+def snapshot(inputs: SlamInputs) -> dict[str, np.ndarray]:
+    obs = inputs.observations
+    arrays = {f"obs.{f.name}": getattr(obs, f.name) for f in dataclasses.fields(obs)}
+    arrays.update({f.name: getattr(inputs, f.name) for f in dataclasses.fields(inputs)
+                   if isinstance(getattr(inputs, f.name), np.ndarray)})
+    arrays["noise.motion_std"] = inputs.noise.motion_std
+    arrays["noise.odometry_std"] = inputs.noise.odometry_std
+    return {k: np.array(v, copy=True) for k, v in arrays.items()}
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_contract_on_tiny_world(name, inputs, tmp_path):
     load_or_xfail(name)
+    before = snapshot(inputs)
     calls = []
     r1 = solve_dataset(inputs, name, {}, seed=7, progress=lambda d, t: calls.append((d, t)))
     r2 = solve_dataset(inputs, name, {}, seed=7)
+    after = snapshot(inputs)
+    for key in before:
+        assert np.array_equal(before[key], after[key]), f"{name} modified its inputs ({key})"
     assert isinstance(r1, SolverResult) and isinstance(r1.status, Status)
     assert r1.solver == name
     T1, N = inputs.n_poses, len(inputs.observations)
