@@ -12,7 +12,8 @@ and whose experiment used a Pioneer 3-AT with an outdoor SICK laser):
   several returns on adjacent 1° beams up to ≈28 m and the full-range laser really sees far, coarsely
   resolved landmarks (the source of the poor initial maps of Fig. 5(a)). Odometry noise is small (the paper: "odometry error in MobileSim is almost negligible
   over short distances"). Max-range and isolated returns are dropped as in the paper; a little clutter
-  (0.2 false returns per scan) stands in for MobileSim's sensing errors.
+  (0.2 false returns per scan) stands in for MobileSim's sensing errors. 3250 steps cover the ≈155 m path at
+  0.5 m/s (the robot stops at the last waypoint near step 3150 and keeps scanning).
 * ``paper-sim2`` — Simulation 2 (Fig. 7): ``paper-sim1`` with a 10 m laser.
 * ``octagon`` — the outdoor experiment of §6 (Figs. 8-9): 8 cones on a regular octagon of radius 7.12 m, a cone
   at its centre and two static people (teleoperator and videographer; positions assumed, the paper gives
