@@ -58,8 +58,11 @@ def dataset_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str
         rows.append(("observations", f"{n_obs}  ({n_obs / max(inp.n_poses, 1):.2f} per pose)"))
     n_ids = int((obs.reported_id >= 0).sum())
     rows.append(("reported ids", f"{n_ids} of {n_obs} rows" if n_ids else "none"))
-    rows.append(("sensors", ", ".join(f"#{s}: {c}" for s, c in zip(*np.unique(obs.sensor, return_counts=True)))
-                 or "—"))
+    sensor_cfg = hdr.get("sensor_json") if isinstance(hdr.get("sensor_json"), dict) else {}
+    kind = ds.metadata.get("sensor_kind") or sensor_cfg.get("kind")
+    rows.append(("sensors", (f"{kind}; " if kind else "")
+                 + (", ".join(f"#{s}: {c} rows" for s, c in zip(*np.unique(obs.sensor, return_counts=True)))
+                    or "no rows")))
     if n_obs:
         rows.append(("range min / max", f"{_fmt(float(obs.range_m.min()))} / {_fmt(float(obs.range_m.max()), 'm')}"))
     rows.append(("max range", _fmt(inp.max_range, "m")))
