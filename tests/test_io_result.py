@@ -222,3 +222,7 @@ def test_negative_wall_time(good):
     with h5py.File(good, "r+") as f:
         f.attrs["wall_time_s"] = -1.0
     expect_error(good, "@wall_time_s", ">= 0")
+
+
+def test_missing_result_file(tmp_path):
+    expect_error(tmp_path / "none.h5", "no such file")
