@@ -53,6 +53,7 @@ and its own EKF covariances are returned. ``assoc``: the best particle's associa
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from typing import Literal
@@ -429,6 +430,13 @@ class FastSlam(BaseSolver):
     name = "fastslam"
     Params = FastSlamParams
 
+    @classmethod
+    @functools.cache
+    def version(cls) -> str:
+        """Cached: the distribution lookup in :meth:`BaseSolver.version` scans every installed package
+        (~0.3 s), which would dominate short runs and sweeps."""
+        return super().version()
+
     def solve(
         self,
         inputs: SlamInputs,
@@ -740,9 +748,13 @@ class FastSlam(BaseSolver):
                 x_new[:, 2] = wrap_angle(x_new[:, 2])
                 Sx_new = Sx - (K0[:, None] * U[None, :, 0] + K1[:, None] * U[None, :, 1])  # Σ_x − U S⁻¹ Uᵀ
                 ll = _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
-                x_hat = np.where(upd[:, None], x_new, x_hat)
-                Sx = np.where(upd, Sx_new, Sx)
-                ps.log_w += np.where(upd, ll, 0.0)
+                if upd.all():
+                    x_hat, Sx = x_new, Sx_new
+                    ps.log_w += ll
+                else:
+                    x_hat = np.where(upd[:, None], x_new, x_hat)
+                    Sx = np.where(upd, Sx_new, Sx)
+                    ps.log_w += np.where(upd, ll, 0.0)
             if slot_of_obs is None:
                 ps.log_w += np.where(new, self._log_p0, 0.0)  # new-landmark likelihood p0
             if new.any():
