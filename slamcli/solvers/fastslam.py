@@ -24,10 +24,12 @@ One step ``t`` (pose ``t-1`` → ``t``, observations ``z_{t,1..n}``):
   2. per observation associated with an already-mapped landmark, a Kalman update of the *pose* proposal::
 
          S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + Q,   K = Σ_x H_xᵀ S⁻¹
-         x̂ ← x̂ + K (z − h(x̂, μ)),             Σ_x ← (I − K H_x) Σ_x (I − K H_x)ᵀ + K Q_n Kᵀ
+         x̂ ← x̂ + K (z − h(x̂, μ)),             Σ_x ← Σ_x − K S Kᵀ   (= (Σ_x⁻¹ + H_xᵀ Q_n⁻¹ H_x)⁻¹)
 
-     and the importance weight is multiplied by the linearised predictive likelihood ``N(z; h(x̂, μ), S)``
-     — the ratio target / proposal ``p(z_t | x_{t-1}^[k], u_t, m^[k])`` of the improved proposal;
+     (the Kalman form also works for the rank-2 DDMR motion noise, whose ``R`` has no inverse), and the
+     importance weight is multiplied by the linearised predictive likelihood ``N(z; h(x̂, μ), S)`` — the ratio
+     target / proposal, ``p(z_t | x_{t-1}^[k], u_t, m^[k])``, of the improved proposal. Several observations
+     of one step are folded in sequentially, each linearised at the current proposal mean;
   3. SAMPLE ``x_t^[k] ~ N(x̂, Σ_x)`` (not its mean), then update the landmark EKFs at the sampled pose as in 1.0.
 
 **Correspondences** (§14.4.2): ``association="known"`` uses ``observations.reported_id`` (a sensor-reported
