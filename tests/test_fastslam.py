@@ -395,7 +395,7 @@ def test_solve_dataset_by_name_with_string_params():
     """The ``--method fastslam -p k=v`` path: registry lookup, string overrides, result contract."""
     from slamcli.api.solve import solve_dataset
 
-    inputs, poses, lms, lab = make_world(51, T=60)
+    inputs, poses, _, lab = make_world(51, T=60)
     r = solve_dataset(inputs, "fastslam", ["n_particles=20", "version=1", "output=best"], seed=3)
     assert r.solver == "fastslam" and r.status is Status.COMPLETED
     assert r.params["n_particles"] == 20 and r.params["version"] == 1 and r.params["output"] == "best"
