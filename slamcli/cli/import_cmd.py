@@ -1,0 +1,122 @@
+"""``slamcli import <format>``: turn a public real-world recording into a slamcli dataset file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from slamcli.cli.app import app, fail, handle_errors, stdout_console
+
+import_app = typer.Typer(
+    help="Import a public recording as a slamcli dataset (schema v1): then solve/evaluate/plot work on it.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+app.add_typer(import_app, name="import")
+
+
+@import_app.command("mrclam")
+def import_mrclam_command(
+    directory: Annotated[
+        Path, typer.Argument(help="MRCLAM dataset folder (Barcodes.dat, RobotN_*.dat, ...).")
+    ],
+    robot: Annotated[int, typer.Option("--robot", "-r", help="Robot number N (RobotN_*.dat).")] = 1,
+    dt: Annotated[float, typer.Option(help="Sampling period of the dataset, s.")] = 0.1,
+    start: Annotated[
+        float, typer.Option(help="Start, s after the first moment with both odometry and ground truth.")
+    ] = 0.0,
+    duration: Annotated[float | None, typer.Option(help="Window length, s (default: to the end).")] = None,
+    non_landmark: Annotated[
+        str,
+        typer.Option(
+            help="Rows that see another robot or an unknown barcode: drop, or clutter (reported_id -1)."
+        ),
+    ] = "drop",
+    control_delay: Annotated[
+        float,
+        typer.Option(
+            help="Seconds added to the odometry stamps (Dataset 7 truth lags the log by ~0.15-0.2 s)."
+        ),
+    ] = 0.0,
+    range_std: Annotated[float | None, typer.Option(help="σ_r to store, m (default 0.15).")] = None,
+    bearing_std: Annotated[float | None, typer.Option(help="σ_b to store, rad (default 0.02).")] = None,
+    v_std: Annotated[
+        float | None, typer.Option(help="σ_v of the controls to store, m/s (default 0.015).")
+    ] = None,
+    omega_std: Annotated[
+        float | None, typer.Option(help="σ_ω of the controls to store, rad/s (default 0.07).")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
+    out: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
+    ] = None,
+) -> None:
+    """Import robot --robot of a UTIAS MRCLAM dataset: controls resampled to --dt, barcode ids as reported ids,
+    motion-capture ground truth for evaluation."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        import dataclasses
+
+        import numpy as np
+
+        from slamcli.datasets.mrclam import default_noise, import_mrclam
+        from slamcli.io import write_dataset
+
+        if non_landmark not in ("drop", "clutter"):
+            fail(f"--non-landmark: must be drop or clutter, got {non_landmark!r}")
+        for name, v in (
+            ("--range-std", range_std),
+            ("--bearing-std", bearing_std),
+            ("--v-std", v_std),
+            ("--omega-std", omega_std),
+        ):
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                fail(f"{name}: must be a finite number >= 0, got {v}")
+        noise = None
+        if any(v is not None for v in (range_std, bearing_std, v_std, omega_std)):
+            if not (np.isfinite(dt) and dt > 0):
+                fail(f"--dt: must be a finite number > 0, got {dt}")
+            base = default_noise(dt)
+            m = base.motion_std.copy()
+            o = base.odometry_std.copy()
+            if v_std is not None:
+                m[0], o[0] = v_std, v_std * dt
+            if omega_std is not None:
+                m[1], o[2] = omega_std, omega_std * dt
+            noise = dataclasses.replace(
+                base,
+                motion_std=m,
+                odometry_std=o,
+                range_std=base.range_std if range_std is None else float(range_std),
+                bearing_std=base.bearing_std if bearing_std is None else float(bearing_std),
+            )
+        ds = import_mrclam(
+            directory,
+            robot,
+            dt=dt,
+            start=start,
+            duration=duration,
+            non_landmark=non_landmark,
+            noise=noise,
+            control_delay=control_delay,
+        )
+        write_dataset(out, ds)
+        if quiet:
+            return
+        inp, md = ds.inputs, ds.metadata
+        T = inp.n_poses - 1
+        path_len = float(np.sum(np.hypot(*np.diff(ds.truth.poses_xyt[:, :2], axis=0).T)))
+        n_clutter = int(np.sum(inp.observations.reported_id < 0))
+        stdout_console().print(
+            f"MRCLAM {directory.name} robot {robot}: {T} steps ({T * inp.dt:.1f} s from {inp.timestamps[0]:g} s, "
+            f"dt {inp.dt:g} s), {len(ds.truth.landmarks_xy)} landmarks, {len(inp.observations)} observations "
+            f"({n_clutter} clutter; {md['n_robot_rows_in_window']} robot and "
+            f"{md['n_unknown_barcode_rows_in_window']} unknown-barcode rows {'kept' if non_landmark == 'clutter' else 'dropped'}), "
+            f"true path {path_len:.1f} m → {out}",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )
