@@ -160,7 +160,7 @@ def _require_rows(arr: np.ndarray, path: Path, minimum: int = 1) -> None:
 def _require_integers(col: np.ndarray, lines: np.ndarray, path: Path, name: str) -> np.ndarray:
     bad = np.flatnonzero(col != np.round(col))
     if bad.size:
-        raise DatasetImportError(f"{path}:{lines[bad[0]]}: {name} must be an integer, got {col[bad[0]]!r}")
+        raise DatasetImportError(f"{path}:{lines[bad[0]]}: {name} must be an integer, got {float(col[bad[0]]):g}")
     return col.astype(np.int64)
 
 
@@ -168,7 +168,7 @@ def _require_sorted(t: np.ndarray, lines: np.ndarray, path: Path) -> None:
     bad = np.flatnonzero(np.diff(t) < 0)
     if bad.size:
         raise DatasetImportError(
-            f"{path}:{lines[bad[0] + 1]}: time goes backwards ({t[bad[0] + 1]!r} after {t[bad[0]]!r})"
+            f"{path}:{lines[bad[0] + 1]}: time goes backwards ({float(t[bad[0] + 1]):.3f} after {float(t[bad[0]]):.3f})"
         )
 
 
@@ -225,7 +225,7 @@ def load_mrclam(directory: str | Path, robot: int) -> MrclamRaw:
     meas[:, 1] = _require_integers(meas[:, 1], ln, p_meas, "barcode")
     neg = np.flatnonzero(meas[:, 2] < 0)
     if neg.size:
-        raise DatasetImportError(f"{p_meas}:{ln[neg[0]]}: range must be >= 0, got {meas[neg[0], 2]!r}")
+        raise DatasetImportError(f"{p_meas}:{ln[neg[0]]}: range must be >= 0, got {float(meas[neg[0], 2]):g}")
     gt, ln = read_table(p_gt, ("time", "x", "y", "theta"))
     _require_rows(gt, p_gt, 2)
     _require_sorted(gt[:, 0], ln, p_gt)
