@@ -109,6 +109,8 @@ class Resolver(Protocol):
 
     def solver(self, method: str, params: dict[str, Any], where: str) -> dict[str, Any]: ...
 
+    def evaluate(self, options: dict[str, Any], where: str) -> dict[str, Any]: ...
+
 
 class RegistryResolver:
     """Resolve against the real simulator scenarios and the registered solvers' ``Params`` dataclasses."""
@@ -134,6 +136,27 @@ class RegistryResolver:
             raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
         return _canonical(params_to_dict(p))
 
+    def evaluate(self, options: dict[str, Any], where: str) -> dict[str, Any]:
+        """Check ``[evaluate]`` keys and types against ``evaluate_files``' keyword options; fill defaults."""
+        import inspect
+
+        from slamcli.api.evaluate import evaluate_files
+
+        internal = {"result_path", "data_path", "out_dir", "check_hash", "return_tables"}
+        sig = {n: p.default for n, p in inspect.signature(evaluate_files).parameters.items() if n not in internal}
+        out = dict(sig)
+        for key, value in options.items():
+            if key not in sig:
+                raise ConfigError(f"{where}: unknown option {key!r}; known: {', '.join(sorted(sig))}")
+            default = sig[key]
+            if isinstance(default, (int, float)) and not isinstance(default, bool) or key.endswith("_m"):
+                if isinstance(value, bool) or not (isinstance(value, (int, float)) or value is None):
+                    raise ConfigError(f"{where}: {key}: expected a number, got {value!r}")
+            elif isinstance(default, str) and not isinstance(value, str):
+                raise ConfigError(f"{where}: {key}: expected a string, got {value!r}")
+            out[key] = value
+        return _canonical(out)
+
 
 class LiteralResolver:
     """No resolution: the overrides as written (tests, or dry runs before the simulator exists)."""
@@ -143,6 +166,9 @@ class LiteralResolver:
 
     def solver(self, method: str, params: dict[str, Any], where: str) -> dict[str, Any]:
         return _canonical(dict(params))
+
+    def evaluate(self, options: dict[str, Any], where: str) -> dict[str, Any]:
+        return _canonical(dict(options))
 
 
 # -- run specifications -------------------------------------------------------------------------------------
@@ -306,6 +332,7 @@ def expand(
         if skey not in scen_cache:
             scen_cache[skey] = resolver.scenario(cfg.scenario, scen_over, f"{cfg.source}: [scenario]")
         resolved_scen = scen_cache[skey]
+        resolved_eval = resolver.evaluate(evaluate, f"{cfg.source}: [evaluate]")
         for rep in cfg.sweep.replicates:
             seed = dataset_seed(rep, cfg.root_seed)
             ds_cfg = {"scenario": cfg.scenario, "resolved": resolved_scen, "replicate": rep, "seed": seed}
@@ -338,7 +365,7 @@ def expand(
                     seed=solver_seed(rep, cfg.root_seed, s.seed),
                     solver_stream=s.seed,
                     oracle_association=s.oracle_association,
-                    evaluate=_canonical(evaluate),
+                    evaluate=resolved_eval,
                     dataset=ds,
                     point=_canonical(relevant),
                     versions=vers,

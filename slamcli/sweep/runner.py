@@ -77,7 +77,9 @@ class WorkflowPipeline:
     def simulate(self, dataset: DatasetSpec, out_path: Path) -> None:
         from slamcli.api.simulate import simulate_to_file
 
-        simulate_to_file(dataset.scenario, out_path, seed=dataset.seed, overrides=dict(dataset.overrides))
+        simulate_to_file(
+            scenario=dataset.scenario, seed=dataset.seed, overrides=dict(dataset.overrides), out_path=out_path
+        )
 
     def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> None:
         from slamcli.api.solve import solve_file
@@ -94,8 +96,7 @@ class WorkflowPipeline:
     def evaluate(self, run: RunSpec, dataset_path: Path, result_path: Path, out_dir: Path) -> dict[str, Any]:
         from slamcli.api.evaluate import evaluate_files
 
-        ev = evaluate_files(result_path, dataset_path, out_dir, params=dict(run.evaluate))
-        return dict(getattr(ev, "scalars", ev))
+        return dict(evaluate_files(result_path, dataset_path, out_dir, **dict(run.evaluate)))
 
 
 # -- small file helpers -----------------------------------------------------------------------------------------
@@ -246,6 +247,10 @@ def execute_run(
             rlog.info("solve (%s) took %.3f s", run.method, t2 - t1)
             metrics = pipeline.evaluate(run, dataset_path, tmp / "result.h5", tmp)
             rlog.info("evaluate took %.3f s", time.perf_counter() - t2)
+            # paths that point into the temporary directory must name the final one
+            metrics = {
+                k: v.replace(str(tmp), str(final)) if isinstance(v, str) else v for k, v in metrics.items()
+            }
             write_json(tmp / "metrics.json", metrics)
             status.update(status=COMPLETED, solve_time_s=t2 - t1)
         except Exception as exc:  # noqa: BLE001 - fail-soft by design
