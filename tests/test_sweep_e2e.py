@@ -78,7 +78,7 @@ def test_real_pipeline_completes_and_shares_one_dataset_per_replicate(swept):
 
 
 def test_cli_resume_skips_everything_and_keeps_numbers(swept):
-    root, path, exp, _ = swept
+    root, path, _exp, _ = swept
     before = pd.read_csv(root / "results" / "e2e" / "results.csv")
     res = CliRunner().invoke(app, ["sweep", str(path), "--out", str(root / "results"), "--quiet"])
     assert res.exit_code == 0, res.output

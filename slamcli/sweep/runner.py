@@ -186,16 +186,20 @@ def _run_log(path: Path) -> Iterator[logging.Logger]:
         handler.close()
 
 
-def _ensure_dataset(group: RunGroup, exp_dir: Path, pipeline: Pipeline, fresh: bool) -> tuple[Path, str | None]:
-    """Simulate the group's dataset unless it exists; returns (path, traceback text or None)."""
+def dataset_path(exp_dir: Path, dataset: DatasetSpec) -> Path:
+    return exp_dir / "datasets" / f"{dataset.dataset_id}.h5"
+
+
+def _ensure_dataset(dataset: DatasetSpec, exp_dir: Path, pipeline: Pipeline, fresh: bool) -> tuple[Path, str | None]:
+    """Simulate ``dataset`` unless its file exists; returns (path, traceback text or None)."""
     ds_dir = exp_dir / "datasets"
     ds_dir.mkdir(parents=True, exist_ok=True)
-    path = ds_dir / f"{group.dataset.dataset_id}.h5"
+    path = dataset_path(exp_dir, dataset)
     if path.exists() and not fresh:
         return path, None
     tmp = ds_dir / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
-        pipeline.simulate(group.dataset, tmp)
+        pipeline.simulate(dataset, tmp)
         os.replace(tmp, path)
         return path, None
     except Exception:  # noqa: BLE001 - fail-soft: every run of the group records this failure
@@ -269,8 +273,19 @@ def execute_run(
 def execute_group(group: RunGroup, exp_dir: str, pipeline: Pipeline, fresh_dataset: bool = False) -> list[dict]:
     """Worker entry point: simulate the shared dataset once (unless present), then run every solver on it."""
     exp = Path(exp_dir)
-    ds_path, ds_error = _ensure_dataset(group, exp, pipeline, fresh_dataset)
+    ds_path, ds_error = _ensure_dataset(group.dataset, exp, pipeline, fresh_dataset)
     return [execute_run(r, exp, ds_path, pipeline, ds_error) for r in group.runs]
+
+
+def simulate_dataset(dataset: DatasetSpec, exp_dir: str, pipeline: Pipeline, fresh: bool = False) -> str | None:
+    """Worker entry point (parallel phase 1): make sure the dataset file exists; traceback text on failure."""
+    return _ensure_dataset(dataset, Path(exp_dir), pipeline, fresh)[1]
+
+
+def execute_single(run: RunSpec, exp_dir: str, pipeline: Pipeline, dataset_error: str | None = None) -> dict:
+    """Worker entry point (parallel phase 2): one run on its (already simulated) dataset."""
+    exp = Path(exp_dir)
+    return execute_run(run, exp, dataset_path(exp, run.dataset), pipeline, dataset_error)
 
 
 # -- coordinator side -------------------------------------------------------------------------------------------------
@@ -421,10 +436,9 @@ def run_sweep(
         if progress:
             progress(counts)
 
-    def group_failed(group: RunGroup, exc: BaseException) -> list[dict]:
-        # the worker itself died (e.g. killed, unpicklable result): record every run of the group
-        msg = f"{type(exc).__name__}: {exc}"
-        return [{"run_id": r.run_id, "status": FAILED, "error": f"worker failed: {msg}"} for r in group.runs]
+    def run_failed(run: RunSpec, exc: BaseException) -> dict:
+        # the worker itself died (killed, out of memory, broken pool): the run is recorded as failed
+        return {"run_id": run.run_id, "status": FAILED, "error": f"worker failed: {type(exc).__name__}: {exc}"}
 
     try:
         with make_executor(executor, workers, scheduler) as ex:
@@ -432,13 +446,35 @@ def run_sweep(
                 for g in groups:
                     record(execute_group(g, str(exp_dir), pipeline, not resume))
             else:
-                futures = {ex.submit(execute_group, g, str(exp_dir), pipeline, not resume): g for g in groups}
+                # Phase 1 simulates each shared dataset once; as soon as one exists, its runs are submitted
+                # one task each, so the runs of a single dataset still spread over every worker.
+                futures: dict[cf.Future, tuple[str, Any]] = {}
+
+                def submit_run(r: RunSpec, ds_error: str | None) -> None:
+                    try:
+                        futures[ex.submit(execute_single, r, str(exp_dir), pipeline, ds_error)] = ("run", r)
+                    except Exception as exc:  # noqa: BLE001 - e.g. a broken pool
+                        record([run_failed(r, exc)])
+
+                for g in groups:
+                    futures[ex.submit(simulate_dataset, g.dataset, str(exp_dir), pipeline, not resume)] = ("sim", g)
                 try:
-                    for fut in cf.as_completed(futures):
-                        try:
-                            record(fut.result())
-                        except Exception as exc:  # noqa: BLE001
-                            record(group_failed(futures[fut], exc))
+                    while futures:
+                        done, _ = cf.wait(list(futures), return_when=cf.FIRST_COMPLETED)
+                        for fut in done:
+                            kind, obj = futures.pop(fut)
+                            if kind == "sim":
+                                try:
+                                    ds_error = fut.result()
+                                except Exception as exc:  # noqa: BLE001
+                                    ds_error = f"worker failed: {type(exc).__name__}: {exc}"
+                                for r in obj.runs:
+                                    submit_run(r, ds_error)
+                            else:
+                                try:
+                                    record([fut.result()])
+                                except Exception as exc:  # noqa: BLE001
+                                    record([run_failed(obj, exc)])
                 except BaseException:
                     for f in futures:
                         f.cancel()
