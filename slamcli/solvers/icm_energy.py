@@ -424,6 +424,8 @@ def cond_minimise_scalar(x, y, th, ctx, st, Wf, dt, iters: int, tol: float):
             if fn <= f:
                 accepted = True
                 break
+            if abs(dx) + abs(dy) + abs(dth) < 1e-6:  # failed tiny step: rounding noise, the mode is reached
+                break
             alpha *= 0.5
         if not accepted:
             break
@@ -443,19 +445,25 @@ def cond_minimise_batch(xs, ctx, st, Wf, dt, iters: int):
     f = cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin)
     for _ in range(iters):
         dx, dy, dth = cond_step(x, y, th, ctx, st, Wf, dt, cos, sin)
-        bad = ~(np.isfinite(dx) & np.isfinite(dy) & np.isfinite(dth))
-        dx[bad] = 0.0
-        dy[bad] = 0.0
-        dth[bad] = 0.0
+        # non-finite or negligible steps: that pose stays (its conditional mode is reached)
+        done = ~(np.isfinite(dx) & np.isfinite(dy) & np.isfinite(dth))
+        mag = np.abs(dx) + np.abs(dy) + np.abs(dth)
+        done |= mag < 1e-9
+        if done.all():
+            break
+        dx[done] = 0.0
+        dy[done] = 0.0
+        dth[done] = 0.0
         alpha = np.ones_like(x)
-        done = bad.copy()
         xn, yn, thn, fn = x.copy(), y.copy(), th.copy(), f.copy()
-        for _h in range(6):
+        for _h in range(5):
             tx, ty, tth = x + alpha * dx, y + alpha * dy, _wrap(th + alpha * dth)
             ft = cond_cost(tx, ty, tth, ctx, st, Wf, dt, cos, sin)
             ok = (ft <= f) & ~done
             xn[ok], yn[ok], thn[ok], fn[ok] = tx[ok], ty[ok], tth[ok], ft[ok]
             done |= ok
+            if _h == 0:  # a failed full step below 1e-6 is rounding noise of the cost: the mode is reached
+                done |= mag < 1e-6
             if done.all():
                 break
             alpha = np.where(done, alpha, 0.5 * alpha)
