@@ -376,3 +376,31 @@ def test_chain_energy_matches_reference(world):
     poses, landmarks, _ = _random_config(inputs, truth, lm, ids, np.random.default_rng(9))
     ref = en.energy_terms(prob, W3, poses, landmarks, np.full(len(ids), -1))
     assert en.chain_energy(prob, W3, poses) == pytest.approx(ref["motion"] + ref["odometry"], rel=1e-12)
+
+
+def test_laplace_covariances_through_solver_and_paper_exact_map_step(world):
+    inputs, _truth, _lm, _ids = world
+    params = IcmParams(S=(1.0,), correspondences="reported", covariance=True, max_sweeps=5)
+    res = IcmSlam(params).solve(inputs, rng=np.random.default_rng(0))
+    T, L = inputs.n_poses - 1, len(res.landmarks_xy)
+    assert res.pose_cov.shape == (T + 1, 3, 3) and res.landmark_cov.shape == (L, 2, 2)
+    assert np.all(np.linalg.eigvalsh(res.pose_cov[1:]) > 0)
+    assert np.all(np.linalg.eigvalsh(res.landmark_cov) > 0)
+    # paper-exact map step (no safeguard) runs and keeps the bookkeeping consistent
+    res2 = IcmSlam(IcmParams(monotone=False, max_sweeps=5)).solve(inputs, rng=np.random.default_rng(0))
+    prob = en.Problem.from_inputs(inputs)
+    E = en.energy(prob, IcmParams().weights, res2.poses_xyt, res2.landmarks_xy, res2.assoc)
+    assert res2.trace.objective[-1] == pytest.approx(E, rel=1e-9)
+
+
+def test_reported_correspondences_need_ids(world):
+    from dataclasses import replace
+
+    from slamcli.errors import ConfigError
+
+    inputs, _truth, _lm, _ids = world
+    obs = replace(inputs.observations, reported_id=np.full(len(inputs.observations), -1, np.int64))
+    with pytest.raises(ConfigError, match="reported"):
+        IcmSlam(IcmParams(correspondences="reported")).solve(
+            replace(inputs, observations=obs), rng=np.random.default_rng(0)
+        )

@@ -294,9 +294,13 @@ class IcmSlam(BaseSolver):
         p: IcmParams = self.params
         W = p.weights
         prob = en.Problem.from_inputs(inputs)
-        T = prob.T
+        T, N = prob.T, prob.n_obs
         reported = p.correspondences == "reported"
         fixed = reported_labels(inputs.observations.reported_id) if reported else None
+        if reported and N and not np.any(fixed >= 0):
+            from slamcli.errors import ConfigError
+
+            raise ConfigError("icm: correspondences=reported needs sensor-reported ids, the dataset has none")
         extra: dict = {"schedule": p.schedule, "accelerate": p.accelerate}
 
         # ---- step 1: initialisation ----------------------------------------------------------------------
