@@ -86,7 +86,8 @@ class FastSlamParams:
     version : 1 | 2
         1 = proposal from the motion model; 2 = proposal improved by the observations (sampled, not its mean).
     association : "known" | "ml"
-        ``known`` uses ``observations.reported_id``; ``ml`` = per-particle maximum likelihood (eq. 14.30).
+        ``known`` uses ``observations.reported_id`` (rows with id −1 are ignored, assoc −1); ``ml`` =
+        per-particle maximum likelihood (eq. 14.30; keeps an ``(N_obs, P)`` int32 association history).
     motion_source : "controls" | "odometry"
         Motion model used for the proposal: commanded controls with ``noise.motion_std`` (DDMR, paper 000
         §4), or the encoder odometry increments (eq. 16) with ``noise.odometry_std``.
@@ -506,7 +507,9 @@ class FastSlam(BaseSolver):
         anc = np.empty((T1, P), np.int32)
         keep_path = p.output == "best"
         pose_hist = np.empty((T1, P, 3)) if keep_path else None
-        assoc_hist = np.full((N, P), -1, np.int32)  # slot per particle of every observation (pre-resampling)
+        # Slot of every observation: shared by all particles with known association (N,), per particle with
+        # ML association (N, P) (pre-resampling; traced back through ``anc`` for the best particle).
+        assoc_hist = np.full((N,) if known else (N, P), -1, np.int32)
         arP = np.arange(P)
         n_updates = 0
         n_resample = 0
@@ -588,7 +591,10 @@ class FastSlam(BaseSolver):
             if t > 0:
                 j = int(anc[t - 1][j])
         obs_step = np.asarray(obs.step, np.int64)
-        assoc_slots = assoc_hist[np.arange(N), lineage[obs_step]] if N else np.zeros(0, np.int64)
+        if known or N == 0:
+            assoc_slots = assoc_hist.reshape(N, -1)[:, 0] if N else np.zeros(0, np.int64)
+        else:
+            assoc_slots = assoc_hist[np.arange(N), lineage[obs_step]]
         poses = pose_hist[np.arange(T1), lineage] if keep_path else mean_xyt
 
         live = ps.exists[best]
@@ -746,8 +752,7 @@ class FastSlam(BaseSolver):
                 K0 = U[:, 0] * i11 + U[:, 1] * i12  # K = U S⁻¹, (3, 2, P) as two columns
                 K1 = U[:, 0] * i12 + U[:, 1] * i22
                 dx = K0 * o.nu_r + K1 * o.nu_b  # (3, P)
-                x_new = x_hat + dx.T
-                x_new[:, 2] = wrap_angle(x_new[:, 2])
+                x_new = x_hat + dx.T  # heading wrapped once, after sampling (only cos/sin/ν use it here)
                 Sx_new = Sx - (K0[:, None] * U[None, :, 0] + K1[:, None] * U[None, :, 1])  # Σ_x − U S⁻¹ Uᵀ
                 ll = _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
                 if upd.all():
