@@ -12,6 +12,7 @@ from slamcli.cli import info_cmd  # noqa: E402,F401
 from slamcli.cli import evaluate_cmd  # noqa: E402,F401
 from slamcli.cli import plot_cmd  # noqa: E402,F401
 from slamcli.cli import sweep_cmd  # noqa: E402,F401
+from slamcli.cli import reproduce_cmd  # noqa: E402,F401
 from slamcli.cli import import_cmd  # noqa: E402,F401
 
 

@@ -1,0 +1,38 @@
+"""``slamcli reproduce``: the paper's figures and ``REPORT.md`` from the experiments in ``experiments/``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from slamcli.cli.app import app, fail, handle_errors, stderr_console
+
+
+@app.command("reproduce")
+def reproduce_command(
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory (REPORT.md, figures/, runs/).")] = Path(
+        "results/reproduce"
+    ),
+    quick: Annotated[bool, typer.Option("--quick", help="Few seeds, short runs: a smoke check (< 3 min).")] = False,
+    workers: Annotated[
+        int | None, typer.Option("--workers", "-j", help="Parallel workers (default: 1 with --quick, else 2).")
+    ] = None,
+    experiments: Annotated[
+        Path | None, typer.Option("--experiments", help="Directory of experiment files (default: ./experiments).")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress messages.")] = False,
+) -> None:
+    """Run the paper experiments (Figs. 5, 6, 7, 9, solver comparison, Monte-Carlo NEES) and write REPORT.md."""
+    with handle_errors():
+        from slamcli.sweep.reproduce import reproduce
+
+        if workers is not None and workers < 1:
+            fail(f"--workers: must be >= 1, got {workers}")
+        con = stderr_console()
+        report = reproduce(
+            out, quick=quick, workers=workers, experiments_dir=experiments,
+            log=(lambda s: None) if quiet else (lambda s: con.print(s, markup=False)),
+        )
+        con.print(f"report: {report}", markup=False)
