@@ -1,0 +1,65 @@
+"""Sweep throughput: runs per minute of a 100-run EKF sweep (quick: 12 runs) for 1 vs 2 workers.
+
+Every run is the real pipeline (simulate ``loop`` with 200 steps → EKF-SLAM with the true association → evaluate
+→ per-run files), one replicate per run, so each run also simulates its own dataset. Rows:
+
+* ``local`` 1 worker — in-process, serial (what ``slamcli sweep`` does with ``--workers 1``);
+* ``local`` 2 workers — spawn ``ProcessPoolExecutor``;
+* ``dask`` 2 workers — a throw-away ``LocalCluster`` (full mode only; includes its start-up).
+
+``speedup`` is runs/min relative to the 1-worker row measured in the same invocation. On a machine with two
+idle cores the ideal is 2; spawn start-up (each worker imports numpy/scipy/h5py once) and the coordinator's
+table writing are the overheads. Results: ``benchmarks/results/sweep.csv``.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+
+from slamcli.sweep.config import parse_experiment
+from slamcli.sweep.expand import expand
+from slamcli.sweep.runner import run_sweep
+
+
+def _experiment(n_runs: int):
+    return parse_experiment(
+        {
+            "experiment": {"name": "bench-sweep", "root_seed": 1},
+            "scenario": {"name": "loop", "parameters": {"n_steps": 200}},
+            "solver": [{"method": "ekf", "oracle_association": True}],
+            "sweep": {"replicates": n_runs},
+        },
+        source="bench_sweep",
+    )
+
+
+def run(quick: bool = False) -> list[dict]:
+    n_runs = 12 if quick else 100
+    expansion = expand(_experiment(n_runs))
+    configs = [("local", 1), ("local", 2)] + ([] if quick else [("dask", 2)])
+    rows: list[dict] = []
+    base = None
+    for executor, workers in configs:
+        with tempfile.TemporaryDirectory(prefix="bench-sweep-") as tmp:
+            t0 = time.perf_counter()
+            summary = run_sweep(expansion, tmp, executor=executor, workers=workers, resume=False)
+            wall = time.perf_counter() - t0
+        rate = 60.0 * summary.counts.done / wall
+        if base is None:
+            base = rate
+        rows.append(
+            {
+                "executor": executor,
+                "workers": workers,
+                "runs": n_runs,
+                "completed": summary.counts.done,
+                "failed": summary.counts.failed,
+                "wall_s": wall,
+                "runs_per_min": rate,
+                "speedup": rate / base if base else float("nan"),
+                "cpu_count": os.cpu_count(),
+            }
+        )
+    return rows
