@@ -102,6 +102,8 @@ def associate_nearest_neighbour(
     *,
     gate_prob: float = 0.99,
     extra_std: float = 0.0,
+    odometry_std: np.ndarray | None = None,
+    segment_dist: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Incremental gated nearest-neighbour association on fixed poses.
 
@@ -112,7 +114,20 @@ def associate_nearest_neighbour(
         d²_kj = (m̂_k − μ_j)ᵀ (C_k + P_j)⁻¹ (m̂_k − μ_j) ≤ χ²₂(gate_prob)
 
     and takes the closest admissible one (greedy over the pairs of one time step, each landmark at most
-    once); otherwise it creates a new landmark. Fusion: ``P⁺ = (P⁻¹ + C⁻¹)⁻¹, μ⁺ = P⁺(P⁻¹μ + C⁻¹m̂)``.
+    once); otherwise it creates a new landmark. With ``segment_dist > 0`` the unit of association is a
+    detection (:func:`segment_returns`): its mean inverse observation, with one return's covariance. Fusion: ``P⁺ = (P⁻¹ + C⁻¹)⁻¹, μ⁺ = P⁺(P⁻¹μ + C⁻¹m̂)``.
+
+    Drift (``odometry_std`` given): landmark estimates live in the frame of the dead-reckoned poses, which
+    drifts. Before landmark ``j`` (last updated at pose ``a``) is compared with an observation at pose ``t``,
+    its covariance is inflated by the odometry drift accumulated between ``a`` and ``t``, mapped to the
+    landmark: ``P_j ← P_j + M Σ_rel(a, t) Mᵀ`` with ``M = [I₂, J(μ_j − p_t)]`` (``J`` = 90° rotation) and
+
+        Σ_rel(a, t) = Σ_{k=a}^{t−1} G_k Q G_kᵀ ,   G_k = [[R(θ_k), J(p_t − p_{k+1})], [0, 1]] ,
+        Q = diag(odometry_std²)
+
+    (the world-frame covariance of ``x_t`` given ``x_a`` under dead reckoning), evaluated in O(1) per pair
+    from prefix sums. Revisited landmarks after a long loop then gate with the loop's drift instead of
+    spawning duplicates, while continuously tracked landmarks keep tight gates.
 
     Parameters
     ----------
@@ -121,6 +136,11 @@ def associate_nearest_neighbour(
     obs_cov : ndarray (2, 2)       covariance of ``[range, bearing]``.
     gate_prob : float              χ² gate probability.
     extra_std : float              σ_e, m.
+    odometry_std : ndarray (3,) or None   per-step odometry σ for the drift model (None = no drift).
+    segment_dist : float           rows of one pose that are adjacent in bearing (≤ 0.035 rad apart) and
+                                   whose inverse observations are closer than this (m) form one detection (a
+                                   laser hitting one post returns several surface points); 0 = every row is
+                                   its own detection.
 
     Returns
     -------
@@ -136,48 +156,132 @@ def associate_nearest_neighbour(
     m_all = observation.inverse_range_bearing(poses[obs.step], obs.z)  # (N, 2)
     _, Mz = observation.inverse_range_bearing_jacobians(poses[obs.step], obs.z)
     C_all = Mz @ np.asarray(obs_cov, float) @ np.swapaxes(Mz, 1, 2) + extra_std**2 * np.eye(2)
+    drift = _DriftModel(poses, odometry_std) if odometry_std is not None else None
     cap = 64
     mu = np.empty((cap, 2))
     P = np.empty((cap, 2, 2))
+    last = np.zeros(cap, np.int64)
     L = 0
     offsets = np.asarray(obs.offsets, np.int64)
+    bearings = np.asarray(obs.bearing_rad, float)
     for t in range(offsets.size - 1):  # sequential by nature: each step sees the map built so far
         a, b = int(offsets[t]), int(offsets[t + 1])
         if a == b:
             continue
-        m, C = m_all[a:b], C_all[a:b]
-        n = b - a
-        taken_obs = np.zeros(n, bool)
+        seg = segment_returns(m_all[a:b], bearings[a:b], segment_dist)  # (n,) detection of each row
+        ns = int(seg.max()) + 1
+        cnt = np.bincount(seg, minlength=ns).astype(float)
+        m = np.stack([np.bincount(seg, m_all[a:b, i], ns) for i in range(2)], -1) / cnt[:, None]
+        C = (
+            np.stack(
+                [np.bincount(seg, C_all[a:b, i, j], ns) for i in range(2) for j in range(2)], -1
+            ).reshape(ns, 2, 2)
+            / cnt[:, None, None]
+        )  # one return's covariance (spread on a disc is systematic)
+        lab = np.full(ns, -1, np.int64)
+        if L and drift is not None:
+            P[:L] += drift.landmark_cov(last[:L], t, mu[:L])
+            last[:L] = t
         if L:
-            diff = m[:, None, :] - mu[None, :L, :]  # (n, L, 2)
-            S = C[:, None] + P[None, :L]  # (n, L, 2, 2)
+            diff = m[:, None, :] - mu[None, :L, :]  # (ns, L, 2)
+            S = C[:, None] + P[None, :L]  # (ns, L, 2, 2)
             d2 = np.einsum("nli,nli->nl", diff, np.linalg.solve(S, diff[..., None])[..., 0])
             cand = np.argwhere(d2 <= thr)
             if cand.size:
                 order = np.argsort(d2[cand[:, 0], cand[:, 1]], kind="stable")
                 used_lm = set()
                 for i, j in cand[order]:
-                    if taken_obs[i] or j in used_lm:
+                    if lab[i] >= 0 or j in used_lm:
                         continue
-                    taken_obs[i] = True
                     used_lm.add(int(j))
-                    assoc[a + i] = j
+                    lab[i] = j
                     Pi = np.linalg.inv(P[j])
                     Ci = np.linalg.inv(C[i])
                     Pn = np.linalg.inv(Pi + Ci)
                     mu[j] = Pn @ (Pi @ mu[j] + Ci @ m[i])
                     P[j] = Pn
-        new = np.flatnonzero(~taken_obs)
+        new = np.flatnonzero(lab < 0)
         if new.size:
             while L + new.size > cap:
                 cap *= 2
                 mu = np.resize(mu, (cap, 2))
                 P = np.resize(P, (cap, 2, 2))
+                last = np.resize(last, cap)
             mu[L : L + new.size] = m[new]
             P[L : L + new.size] = C[new]
-            assoc[a + new] = np.arange(L, L + new.size)
+            last[L : L + new.size] = t
+            lab[new] = np.arange(L, L + new.size)
             L += new.size
+        assoc[a:b] = lab[seg]
     return assoc, mu[:L].copy()
+
+
+class _DriftModel:
+    """Prefix sums for the dead-reckoning drift covariance ``Σ_rel(a, t)`` (see
+    :func:`associate_nearest_neighbour`)."""
+
+    _J = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+    def __init__(self, poses_xyt: np.ndarray, odometry_std: np.ndarray) -> None:
+        q = np.square(np.asarray(odometry_std, float))
+        p = np.asarray(poses_xyt, float)
+        T = p.shape[0] - 1
+        c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
+        A = np.empty((T, 2, 2))  # R(θ_k) diag(q_x, q_y) R(θ_k)ᵀ
+        A[:, 0, 0] = q[0] * c * c + q[1] * s * s
+        A[:, 1, 1] = q[0] * s * s + q[1] * c * c
+        A[:, 0, 1] = A[:, 1, 0] = (q[0] - q[1]) * c * s
+        nxt = p[1:, :2]
+        z2 = np.zeros((1, 2))
+        self.cA = np.concatenate([np.zeros((1, 2, 2)), np.cumsum(A, 0)])
+        self.c0 = q[2] * np.arange(T + 1, dtype=float)
+        self.c1 = np.concatenate([z2, np.cumsum(q[2] * nxt, 0)])
+        self.c2 = np.concatenate(
+            [np.zeros((1, 2, 2)), np.cumsum(q[2] * nxt[:, :, None] * nxt[:, None, :], 0)]
+        )
+        self.p = p
+
+    def landmark_cov(self, a: np.ndarray, t: int, mu: np.ndarray) -> np.ndarray:
+        """``M Σ_rel(a_j, t) Mᵀ (L, 2, 2)`` for landmarks ``mu (L, 2)`` last updated at poses ``a (L,)``."""
+        J = self._J
+        pt = self.p[t, :2]
+        SA = self.cA[t] - self.cA[a]
+        n0 = self.c0[t] - self.c0[a]
+        s1 = self.c1[t] - self.c1[a]
+        s2 = self.c2[t] - self.c2[a]
+        W = n0[:, None, None] * np.outer(pt, pt) - pt[None, :, None] * s1[:, None, :]
+        W = W - s1[:, :, None] * pt[None, None, :] + s2
+        Spp = SA + J @ W @ J.T
+        Spt = (n0[:, None] * pt - s1) @ J.T  # (L, 2) = J (n0 p_t − s1)
+        v = (mu - pt) @ J.T  # J (μ − p_t)
+        return (
+            Spp
+            + Spt[:, :, None] * v[:, None, :]
+            + v[:, :, None] * Spt[:, None, :]
+            + n0[:, None, None] * v[:, :, None] * v[:, None, :]
+        )
+
+
+def segment_returns(
+    points_xy: np.ndarray, bearing: np.ndarray, dist: float, max_dbearing: float = 0.1
+) -> np.ndarray:
+    """Split the returns of one pose into detections.
+
+    Returns are ordered by bearing; neighbours at most ``max_dbearing`` rad apart in bearing (adjacent
+    beams) whose points ``(n, 2)`` are closer than ``dist`` m share a detection (a scan segment). Returns
+    ``seg (n,) int64`` with detections numbered ``0..K-1``.
+    """
+    n = points_xy.shape[0]
+    if dist <= 0 or n < 2:
+        return np.arange(n, dtype=np.int64)
+    order = np.argsort(bearing, kind="stable")
+    gaps = (np.linalg.norm(np.diff(points_xy[order], axis=0), axis=1) > dist) | (
+        np.diff(bearing[order]) > max_dbearing
+    )
+    seg_sorted = np.concatenate([[0], np.cumsum(gaps)])
+    seg = np.empty(n, np.int64)
+    seg[order] = seg_sorted
+    return seg
 
 
 def associations_from_result(init: SolverResult, n_obs: int) -> tuple[np.ndarray, np.ndarray]:

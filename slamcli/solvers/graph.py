@@ -73,9 +73,21 @@ class GraphParams:
     gate_prob : float
         χ² gate probability of the nearest-neighbour front end (default 0.999).
     nn_extra_std : float
-        Extra landmark-space σ (m) of the front end for pose drift (default 0.0).
+        Extra landmark-space σ (m) added to every inverse observation in the front end (default 0.0).
+    nn_drift : bool
+        Inflate the front end's landmark covariances by the dead-reckoning drift since their last sighting
+        (odometry σ of the NoiseSpec), so revisits after a loop gate correctly (default True).
+    nn_segment_dist : float
+        Returns of one pose that are adjacent in bearing (≤ 2°) and closer than this (m) are one detection,
+        e.g. the several laser hits on one post (default 0.5; 0 = every row separately).
     min_obs : int
         Landmarks with fewer associated observations are dropped (default 1 = keep all).
+    merge_rounds : int
+        With ``nn`` association: after each optimisation, merge landmark pairs that pass the correspondence
+        test of :func:`merge_candidates` (same χ² gate) and re-optimise, at most this many times (default 3;
+        0 = off). Closes loops the incremental front end missed because of dead-reckoning drift.
+    merge_dist : float
+        Never co-observed labels closer than this (m) are merged too (paper 000's ϑ; default 1.0).
     prior_std : tuple[float, float, float]
         σ of the prior on x_0 at the known start pose (gauge), ``gtsam`` model (default 1e-4 m, m, rad).
     use_odometry : bool
@@ -86,6 +98,10 @@ class GraphParams:
         σ of the lateral component of a motion factor (DDMR has none; default 0.01 m).
     use_gps : bool
         Position factors for GPS fixes when the dataset has them (default True).
+    group_returns : bool
+        ``gtsam`` model: one bearing-range factor per (pose, landmark) pair at the mean range and
+        circular-mean bearing of its rows (:func:`group_returns`; a laser's several hits on one post).
+        Point sensors have one row per pair, so this changes nothing for them (default True).
     paper_R, paper_S, paper_Q : tuple of rows or None
         Weight matrices of the ``paper`` model (3×3, 3×3, 2×2). ``None`` → R = 0, S = ½ diag(σ_odo)⁻²,
         Q = ½ σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).
@@ -105,12 +121,17 @@ class GraphParams:
     association: Literal["auto", "init", "reported", "nn"] = "auto"
     gate_prob: float = 0.999
     nn_extra_std: float = 0.0
+    nn_drift: bool = True
+    nn_segment_dist: float = 0.5
     min_obs: int = 1
+    merge_rounds: int = 3
+    merge_dist: float = 1.0
     prior_std: tuple[float, float, float] = (1e-4, 1e-4, 1e-4)
     use_odometry: bool = True
     use_controls: bool = False
     motion_lateral_std: float = 0.01
     use_gps: bool = True
+    group_returns: bool = True
     paper_R: tuple[tuple[float, ...], ...] | None = None
     paper_S: tuple[tuple[float, ...], ...] | None = None
     paper_Q: tuple[tuple[float, ...], ...] | None = None
@@ -124,6 +145,8 @@ class GraphParams:
             raise ValueError("huber_k must be > 0")
         if len(self.prior_std) != 3 or min(self.prior_std) <= 0:
             raise ValueError("prior_std must be three positive numbers")
+        if self.merge_rounds < 0:
+            raise ValueError("merge_rounds must be ≥ 0")
         if self.min_obs < 1:
             raise ValueError("min_obs must be ≥ 1")
 
@@ -332,6 +355,8 @@ def build_gtsam_problem(
         steps = np.asarray(obs.step, np.int64)[rows]
         labels = assoc[rows]
         z = obs.z[rows]
+        if params.group_returns:
+            steps, labels, z = group_returns(steps, labels, z, L)
 
         def ev_obs(x):
             e, Jx, Jm = bearing_range_error(poses_of(x)[steps], lms_of(x)[labels], z)
@@ -358,6 +383,28 @@ def build_gtsam_problem(
 
     problem = nls.NlsProblem(n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3))
     return GraphProblem(problem, pack_state(init_poses, init_landmarks), n_poses, L)
+
+
+def group_returns(steps: np.ndarray, labels: np.ndarray, z: np.ndarray, n_landmarks: int):
+    """One measurement per (pose, landmark) pair: mean range and circular-mean bearing of its rows.
+
+    A laser gives several returns from one post at one pose (surface points spread over the post's width);
+    treating each as an independent point measurement of the centre would overweight that pose-landmark pair
+    and put the spread into the bearing residuals. Point sensors have one row per pair, so nothing changes.
+
+    Returns
+    -------
+    steps (G,), labels (G,), z (G, 2) of the groups, ordered by (step, label).
+    """
+    key = steps * max(n_landmarks, 1) + labels
+    ukey, inv = np.unique(key, return_inverse=True)
+    if ukey.size == key.size:
+        order = np.argsort(key, kind="stable")
+        return steps[order], labels[order], z[order]
+    cnt = np.bincount(inv).astype(float)
+    r = np.bincount(inv, z[:, 0]) / cnt
+    b = np.arctan2(np.bincount(inv, np.sin(z[:, 1])), np.bincount(inv, np.cos(z[:, 1])))
+    return ukey // max(n_landmarks, 1), ukey % max(n_landmarks, 1), np.stack([r, wrap_angle(b)], -1)
 
 
 def default_paper_weights(inputs: SlamInputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -510,6 +557,89 @@ def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.nda
     return pose_cov, lm_cov
 
 
+def landmark_joint_covariance(gp: GraphProblem, information) -> np.ndarray:
+    """Joint marginal covariance ``(2L, 2L)`` of all landmarks (Laplace, chain + border elimination).
+
+    Falls back to the block-diagonal of the marginals (cross-covariances 0) when the pose block is not
+    block tridiagonal.
+    """
+    L = gp.n_landmarks
+    if nls.is_block_tridiagonal(information, gp.n_poses, 3):
+        return nls.marginals_chain_border(information, gp.n_poses, 3)[1]
+    blocks = nls.marginal_covariances(information, gp.landmark_cols())
+    out = np.zeros((2 * L, 2 * L))
+    for j in range(L):
+        out[2 * j : 2 * j + 2, 2 * j : 2 * j + 2] = blocks[j]
+    return out
+
+
+def merge_candidates(
+    gp: GraphProblem,
+    information,
+    landmarks_xy: np.ndarray,
+    obs,
+    assoc: np.ndarray,
+    gate_prob: float,
+    merge_dist: float = 0.0,
+) -> np.ndarray:
+    """Landmark pairs that pass GraphSLAM's correspondence test (Thrun, Burgard & Fox, *Probabilistic
+    Robotics*, §11.5 "correspondence test"; seed 002, graph SLAM with unknown correspondences).
+
+    For labels ``i < j`` never observed at the same pose, the difference ``Δ = m_i − m_j`` has the Laplace
+    covariance ``Σ_Δ = Σ_ii + Σ_jj − Σ_ij − Σ_ji`` (joint marginal at the optimum, so drift between the two
+    sightings is accounted for); the pair is a candidate if ``Δᵀ Σ_Δ⁻¹ Δ ≤ χ²₂(gate_prob)``. Pairs are taken
+    greedily by increasing distance, each label at most once per call. Pairs closer than ``merge_dist`` (m)
+    are candidates as well (paper 000's label fusion radius ϑ), again only if never co-observed — two
+    distinct landmarks that close are almost always seen together, which protects them.
+
+    Parameters
+    ----------
+    gp : GraphProblem;  information : sparse (D, D) H at the optimum;  landmarks_xy : ndarray (L, 2) optimum
+    obs : Observations;  assoc : ndarray (N,) labels;  gate_prob : float;  merge_dist : float, m
+
+    Returns
+    -------
+    ndarray (K, 2) int64 of ``(keep, drop)`` label pairs, ``keep < drop``.
+    """
+    import scipy.sparse as sp
+
+    L = gp.n_landmarks
+    none = np.zeros((0, 2), np.int64)
+    if L < 2:
+        return none
+    thr = frontend.gate_threshold(gate_prob)
+    ok = assoc >= 0
+    M = sp.csr_matrix((np.ones(int(ok.sum())), (np.asarray(obs.step)[ok], assoc[ok])), shape=(gp.n_poses, L))
+    co_seen = (M.T @ M).toarray() > 0
+    iu, ju = np.triu_indices(L, 1)
+    keep = ~co_seen[iu, ju]
+    iu, ju = iu[keep], ju[keep]
+    if not iu.size:
+        return none
+    cov = landmark_joint_covariance(gp, information).reshape(L, 2, L, 2)  # cov[i, :, j, :] = Σ_ij
+    Sii = cov[iu, :, iu, :]
+    Sjj = cov[ju, :, ju, :]
+    Sij = cov[iu, :, ju, :]
+    Sd = Sii + Sjj - Sij - np.swapaxes(Sij, 1, 2)  # (K, 2, 2)
+    d = landmarks_xy[iu] - landmarks_xy[ju]  # (K, 2)
+    det = Sd[:, 0, 0] * Sd[:, 1, 1] - Sd[:, 0, 1] * Sd[:, 1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d2 = (
+            Sd[:, 1, 1] * d[:, 0] ** 2 - 2 * Sd[:, 0, 1] * d[:, 0] * d[:, 1] + Sd[:, 0, 0] * d[:, 1] ** 2
+        ) / det
+    close = np.einsum("ki,ki->k", d, d) <= merge_dist**2
+    cand = np.flatnonzero(((det > 0) & (d2 <= thr)) | close)
+    used: set[int] = set()
+    out = []
+    for c in cand[np.argsort(d2[cand], kind="stable")]:  # greedy, O(K log K); K is small after gating
+        i, j = int(iu[c]), int(ju[c])
+        if i in used or j in used:
+            continue
+        used.update((i, j))
+        out.append((i, j))
+    return np.asarray(out, np.int64).reshape(-1, 2)
+
+
 # ----------------------------------------------------------------------------------------------------------
 # solver
 # ----------------------------------------------------------------------------------------------------------
@@ -556,7 +686,13 @@ class GraphSlam(BaseSolver):
             assoc = frontend.associate_reported(obs)
         else:
             assoc, _ = frontend.associate_nearest_neighbour(
-                poses, obs, inputs.noise.obs_cov, gate_prob=p.gate_prob, extra_std=p.nn_extra_std
+                poses,
+                obs,
+                inputs.noise.obs_cov,
+                gate_prob=p.gate_prob,
+                extra_std=p.nn_extra_std,
+                odometry_std=inputs.noise.odometry_std if p.nn_drift else None,
+                segment_dist=p.nn_segment_dist,
             )
         assoc, old_of_new = frontend.compact_labels(assoc, p.min_obs)
         return assoc, old_of_new, mode
@@ -588,32 +724,33 @@ class GraphSlam(BaseSolver):
             lm0 = np.asarray(init.landmarks_xy, float).reshape(-1, 2)[old_of_new]
 
         Q = None
-        if p.model == "gtsam":
-            gp = build_gtsam_problem(inputs, assoc, poses0, lm0, p)
-        else:
+        if p.model == "paper":
             R0, S0, Q0 = default_paper_weights(inputs)
             R = R0 if p.paper_R is None else np.asarray(p.paper_R, float)
             S = S0 if p.paper_S is None else np.asarray(p.paper_S, float)
             Q = Q0 if p.paper_Q is None else np.asarray(p.paper_Q, float)
             if R.shape != (3, 3) or S.shape != (3, 3) or Q.shape != (2, 2):
                 raise SolverError("graph: paper_R and paper_S must be 3x3, paper_Q 2x2")
-            gp = build_paper_problem(inputs, assoc, R, S, Q, poses0, lm0)
 
+        def build(assoc, poses_init, lm_init):
+            if p.model == "gtsam":
+                return build_gtsam_problem(inputs, assoc, poses_init, lm_init, p)
+            return build_paper_problem(inputs, assoc, R, S, Q, poses_init, lm_init)
+
+        objective: list[float] = []
+        times: list[float] = []
         lm_trace: list[np.ndarray] = []
         change: list[float] = []
+        budget = p.max_iterations * (1 + (p.merge_rounds if mode == "nn" else 0))
+        done_iters = 0
 
         def on_iter(k, x, cost):
             lm = gp.unpack(x)[1].copy()
-            change.append(
-                0.0
-                if not lm_trace
-                else float(np.mean(np.linalg.norm(lm - lm_trace[-1], axis=1)))
-                if L
-                else 0.0
-            )
+            same = lm_trace and lm_trace[-1].shape == lm.shape and lm.size
+            change.append(float(np.mean(np.linalg.norm(lm - lm_trace[-1], axis=1))) if same else 0.0)
             lm_trace.append(lm)
             if progress is not None:
-                progress(min(k, p.max_iterations), p.max_iterations)
+                progress(min(done_iters + k, budget), budget)
 
         nparams = nls.NlsParams(
             method=p.method,
@@ -623,16 +760,43 @@ class GraphSlam(BaseSolver):
             robust=p.robust,
             huber_k=p.huber_k,
         )
-        res = nls.solve(gp.problem, gp.x0, nparams, callback=on_iter)
+        merged_total = 0
+        rounds = p.merge_rounds if mode == "nn" else 0
+        x_init_poses, x_init_lms = poses0, lm0
+        for rnd in range(rounds + 1):
+            gp = build(assoc, x_init_poses, x_init_lms)
+            res = nls.solve(gp.problem, gp.x0, nparams, callback=on_iter)
+            objective.extend(res.cost_trace.tolist())
+            times.extend(res.time_trace.tolist())
+            done_iters += res.iterations
+            if rnd == rounds or res.status == Status.FAILED or gp.n_landmarks < 2:
+                break
+            poses_r, lms_r = gp.unpack(res.x)
+            pairs = merge_candidates(
+                gp, res.information, lms_r, inputs.observations, assoc, p.gate_prob, p.merge_dist
+            )
+            if not pairs.size:
+                break
+            lut = np.arange(gp.n_landmarks)
+            lut[pairs[:, 1]] = pairs[:, 0]
+            new_lms = lms_r.copy()
+            new_lms[pairs[:, 0]] = 0.5 * (lms_r[pairs[:, 0]] + lms_r[pairs[:, 1]])
+            relabelled = np.where(assoc >= 0, lut[np.maximum(assoc, 0)], -1)
+            assoc, old_of_new = frontend.compact_labels(relabelled)
+            x_init_poses, x_init_lms = poses_r.copy(), new_lms[old_of_new]
+            merged_total += int(pairs.shape[0])
         poses, lms = gp.unpack(res.x)
+        L = gp.n_landmarks
         pose_cov = landmark_cov = None
         extra: dict = {
             "association": mode,
             "n_landmarks": int(L),
-            "iterations": int(res.iterations),
+            "iterations": int(done_iters),
             "final_cost": float(res.cost),
             "model": p.model,
         }
+        if rounds:
+            extra["merged_landmarks"] = merged_total
         if p.covariance and res.status != Status.FAILED:
             pose_cov, landmark_cov = laplace_marginals(gp, res.information)
             if p.model == "paper":
@@ -640,8 +804,8 @@ class GraphSlam(BaseSolver):
                 if not np.any(Q):
                     landmark_cov = None  # landmarks were held fixed
         if progress is not None:
-            progress(p.max_iterations, p.max_iterations)
-        trace = IterationTrace.from_lists(res.cost_trace, change, res.time_trace, lm_trace)
+            progress(budget, budget)
+        trace = IterationTrace.from_lists(objective, change, times, lm_trace)
         return self.make_result(
             status=res.status,
             poses_xyt=poses.copy(),
