@@ -84,7 +84,8 @@ def test_barcodes_map_to_landmark_index_and_robots_are_dropped_or_clutter():
     assert n_robot == 11 == clut.metadata["n_robot_rows_in_window"] == drop.metadata["n_robot_rows_in_window"]
     assert len(drop.inputs.observations) == len(clut.inputs.observations) - n_robot == 259
     np.testing.assert_array_equal(drop.inputs.observations.reported_id, expect[expect >= 0])
-    assert np.all(drop.inputs.observations.reported_id == drop.truth.obs_landmark)
+    assert np.all(drop.inputs.observations.reported_id == drop.truth.obs_landmark)  # no misreads here
+    assert drop.metadata["n_misread_rows"] == 0
     # e.g. barcode 54 is subject 13 = landmark index 7; barcode 14 is robot 2 (the only robot seen here)
     assert set(np.unique(m[inside, 1]).astype(int)) == {7, 14, 18, 27, 45, 54, 63, 70, 81}
     np.testing.assert_array_equal(np.unique(clut.inputs.observations.reported_id[m[inside, 1] == 54]), [7])
@@ -154,7 +155,7 @@ def tiny(tmp_path):
         "100.06 81 4.1 0.24",  # subject 7 -> index 1, step 1
         "100.11 14 1.0 0.1",   # robot 2 -> clutter/drop, step 1
         "100.26 99 3.0 -0.2",  # unknown barcode, step 3
-        "100.37 63 1.9 3.15",  # bearing > π is wrapped; step 4 (last step; 0.37 → 3.7 → 4)
+        "100.37 63 1.9 3.15",  # bearing > π is wrapped; step 4 (0.37 → 3.7 → 4); a misread (true ≈ −0.16)
         "100.50 63 1.8 0.0",   # nearest step 5 > T = 4: outside the window
     ])
     return d
@@ -177,7 +178,10 @@ def test_tiny_recording_end_to_end_arithmetic(tiny):
     obs = inp.observations
     np.testing.assert_array_equal(obs.step, [0, 1, 1, 3, 4])
     np.testing.assert_array_equal(obs.reported_id, [0, 1, -1, -1, 0])
-    np.testing.assert_array_equal(tr.obs_landmark, [0, 1, -1, -1, 0])
+    np.testing.assert_array_equal(tr.obs_landmark, [0, 1, -1, -1, -1])  # the sensor says 0, the truth disagrees
+    assert ds.metadata["n_misread_rows"] == 1
+    unchecked = import_mrclam(tiny, 1, dt=0.1, non_landmark="clutter", misread_gate=np.inf)
+    np.testing.assert_array_equal(unchecked.truth.obs_landmark, [0, 1, -1, -1, 0])
     np.testing.assert_array_equal(obs.offsets, [0, 1, 3, 3, 4, 5])
     assert obs.bearing_rad[4] == pytest.approx(3.15 - 2 * np.pi)
     assert ds.metadata["observed_max_timing_error_s"] == pytest.approx(0.04)
@@ -186,6 +190,7 @@ def test_tiny_recording_end_to_end_arithmetic(tiny):
     dropped = import_mrclam(tiny, 1, dt=0.1)
     np.testing.assert_array_equal(dropped.inputs.observations.step, [0, 1, 4])
     np.testing.assert_array_equal(dropped.inputs.observations.reported_id, [0, 1, 0])
+    np.testing.assert_array_equal(dropped.truth.obs_landmark, [0, 1, -1])
     # --start / --duration cut the window on the same axis
     part = import_mrclam(tiny, 1, dt=0.1, start=0.1, duration=0.2)
     np.testing.assert_allclose(part.inputs.timestamps, [0.1, 0.2, 0.3], atol=1e-12)
