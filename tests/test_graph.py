@@ -198,3 +198,114 @@ def test_paper_model_through_the_solver(world):
     S = graph.default_paper_weights(world.inputs)[1]
     E = graph.paper_energy(world.inputs, assoc, R, S, Q, res.poses_xyt, res.landmarks_xy)
     assert res.extra["final_cost"] == pytest.approx(E, rel=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# front end: drift model, segmentation, grouping, loop closure by merging
+# ---------------------------------------------------------------------------------------------------------
+def test_drift_covariance_equals_the_dead_reckoning_chain_jacobians():
+    """Σ_rel(a, t) from prefix sums = Σ_k (∂x_t/∂d_k) Q (∂x_t/∂d_k)ᵀ with the Jacobians by finite differences
+    of the chained composition, mapped to a landmark by ∂h⁻¹/∂x of slamcli.models.observation."""
+    from slamcli.models import motion, observation
+
+    rng = np.random.default_rng(0)
+    T = 12
+    d = np.column_stack([rng.uniform(0.5, 1.0, T), rng.normal(0, 0.1, T), rng.normal(0.2, 0.3, T)])
+    poses = motion.chain_increments(np.array([1.0, -2.0, 0.4]), d)
+    q_std = np.array([0.02, 0.01, 0.005])
+    model = frontend._DriftModel(poses, q_std)
+    a, t = 3, 11
+
+    def x_t(flat):
+        return motion.chain_increments(poses[a], flat.reshape(-1, 3))[-1]
+
+    base = d[a:t].ravel()
+    Jn = np.stack(
+        [(x_t(base + e) - x_t(base - e)) / 2e-6 for e in 1e-6 * np.eye(base.size)], -1
+    )  # (3, 3(t-a))
+    Sigma = Jn @ np.kron(np.eye(t - a), np.diag(q_std**2)) @ Jn.T
+    mu = np.array([[4.0, 3.0], [-1.0, 2.5]])
+    z = observation.range_bearing(poses[t], mu)
+    Mx, _ = observation.inverse_range_bearing_jacobians(np.broadcast_to(poses[t], (2, 3)), z)
+    ref = Mx @ Sigma @ np.swapaxes(Mx, 1, 2)
+    got = model.landmark_cov(np.array([a, a]), t, mu)
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-14)
+    assert np.all(model.landmark_cov(np.array([t]), t, mu[:1]) == 0.0)
+
+
+def test_segment_returns_groups_adjacent_close_returns_only():
+    pts = np.array([[3.0, 0.0], [3.0, 0.05], [3.0, 0.1], [3.0, 2.0], [0.0, 3.0]])
+    brg = np.array([0.0, 0.0167, 0.0333, 0.59, 1.57])
+    np.testing.assert_array_equal(frontend.segment_returns(pts, brg, 0.5), [0, 0, 0, 1, 2])
+    np.testing.assert_array_equal(frontend.segment_returns(pts, brg, 0.0), [0, 1, 2, 3, 4])
+    # close in space but far apart in bearing: not one detection
+    np.testing.assert_array_equal(frontend.segment_returns(pts[:2], np.array([0.0, 0.3]), 0.5), [0, 1])
+
+
+def test_group_returns_averages_range_and_circular_bearing():
+    steps = np.array([4, 4, 4, 2])
+    labels = np.array([1, 1, 0, 1])
+    z = np.array([[3.0, np.pi - 0.01], [3.2, -np.pi + 0.03], [5.0, 0.2], [1.0, 0.1]])
+    s, lab, zz = graph.group_returns(steps, labels, z, 2)
+    np.testing.assert_array_equal(s, [2, 4, 4])
+    np.testing.assert_array_equal(lab, [1, 0, 1])
+    np.testing.assert_allclose(zz[2], [3.1, -np.pi + 0.01], atol=1e-12)  # mean across the ±π seam
+    np.testing.assert_allclose(zz[:2], [[1.0, 0.1], [5.0, 0.2]])
+
+
+def test_loop_closure_by_drift_gating_and_by_merging():
+    from slamcli.sim import simulate_scenario
+
+    ds = simulate_scenario("loop", seed=0)
+    inp, tl = ds.inputs, ds.truth.obs_landmark
+    n_true = ds.truth.landmarks_xy.shape[0]
+
+    def run(**kw):
+        res = _solve(inp, covariance=False, **kw)
+        labels = range(res.extra["n_landmarks"])
+        pure = all(len(np.unique(tl[res.assoc == lab])) == 1 for lab in labels)
+        return res, pure
+
+    plain, pure = run(nn_drift=False, merge_rounds=0)
+    assert pure and plain.extra["n_landmarks"] > n_true + 5  # dead-reckoning drift → duplicates on revisit
+    merged, pure = run(nn_drift=False)
+    assert pure and merged.extra["n_landmarks"] == n_true and merged.extra["merged_landmarks"] > 5
+    full, pure = run()
+    assert pure and full.extra["n_landmarks"] == n_true
+    assert full.extra["final_cost"] == pytest.approx(merged.extra["final_cost"], rel=1e-8)
+
+
+def test_co_observed_labels_are_never_merged(world):
+    from slamcli.solvers import nls
+    from slamcli.types import Observations
+
+    inp = world.inputs
+    obs = inp.observations
+    assoc = frontend.associate_reported(obs)
+    # label 6: an exact copy of every row of landmark 0 → same position, but co-observed at every pose
+    rows0 = np.flatnonzero(assoc == 0)
+    idx = np.concatenate([np.arange(len(obs)), rows0])
+    lab = np.concatenate([assoc, np.full(rows0.size, 6)])
+    order = np.argsort(obs.step[idx], kind="stable")
+    idx, lab = idx[order], lab[order]
+    obs2 = Observations(
+        step=obs.step[idx],
+        range_m=obs.range_m[idx],
+        bearing_rad=obs.bearing_rad[idx],
+        sensor=obs.sensor[idx],
+        reported_id=obs.reported_id[idx],
+        offsets=Observations.offsets_from_steps(obs.step[idx], inp.n_poses),
+    )
+    inp2 = dataclasses.replace(inp, observations=obs2)
+    # label 7: the second half (in time) of landmark 1's rows → same landmark, never co-observed
+    rows1 = np.flatnonzero(lab == 1)
+    lab[rows1[rows1.size // 2 :]] = 7
+    p0 = graph.odometry_initial_poses(inp2)
+    lm0 = frontend.landmarks_from_observations(p0, obs2, lab, 8)
+    gp = graph.build_gtsam_problem(inp2, lab, p0, lm0, graph.GraphParams(group_returns=False))
+    res = nls.solve(gp.problem, gp.x0)
+    lms = gp.unpack(res.x)[1]
+    assert np.linalg.norm(lms[0] - lms[6]) < 1e-9  # identical data → identical estimates
+    pairs = graph.merge_candidates(gp, res.information, lms, obs2, lab, 0.999, merge_dist=1.0).tolist()
+    assert [1, 7] in pairs
+    assert [0, 6] not in pairs
