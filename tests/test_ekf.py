@@ -383,3 +383,36 @@ def test_scalar_hot_loop_twins_match_the_models():
         np.testing.assert_allclose(G_u, G_ref, atol=1e-15)
     for a in (np.pi, -np.pi, 3 * np.pi, 2 * np.pi, 1e-17, -7.5):
         assert _wrap(a) == pytest.approx(float(wrap_angle(a)), abs=1e-15)
+
+
+def test_noise_free_sensor_is_a_clear_error():
+    import dataclasses
+
+    inputs, _ = make_world(15, T=10)
+    bad = dataclasses.replace(inputs, noise=dataclasses.replace(inputs.noise, bearing_std=0.0))
+    with pytest.raises(SolverError, match="bearing_std=0.0"):
+        EkfSlam(EkfParams()).solve(bad, rng=np.random.default_rng(0))
+
+
+def test_ml_handles_several_returns_per_landmark_per_step():
+    # a laser sees one post on adjacent beams: duplicate rows of the same landmark in one step must fuse into
+    # one landmark (exclusive_per_step=False, the default), not spawn duplicates
+    inputs, truth = make_world(16, T=150, report_ids=False)
+    o = inputs.observations
+    rep = np.repeat(np.arange(len(o)), 2)
+    rng = np.random.default_rng(0)
+    # a second, independent return per row: noise-free measurement from the truth + fresh noise
+    z_true = observation.range_bearing(truth["poses"][o.step], truth["landmarks"][truth["obs_landmark"]])
+    z = z_true[rep] + rng.normal(0, [inputs.noise.range_std, inputs.noise.bearing_std], size=(rep.size, 2))
+    import dataclasses
+
+    obs2 = dataclasses.replace(
+        o, step=o.step[rep], range_m=z[:, 0], bearing_rad=np.mod(z[:, 1] + np.pi, 2 * np.pi) - np.pi,
+        sensor=o.sensor[rep], reported_id=o.reported_id[rep],
+        offsets=Observations.offsets_from_steps(o.step[rep], inputs.n_poses),
+    )
+    res = EkfSlam(EkfParams(association="ml")).solve(dataclasses.replace(inputs, observations=obs2),
+                                                      rng=np.random.default_rng(0))
+    n_seen = np.unique(truth["obs_landmark"]).size
+    assert res.landmarks_xy.shape[0] <= n_seen + 1
+    assert association_accuracy(res.assoc, truth["obs_landmark"][rep]) >= 0.95

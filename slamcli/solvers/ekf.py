@@ -76,7 +76,8 @@ class EkfParams:
     provisional_window : int
         Steps after its first sighting within which a candidate must be confirmed; otherwise dropped.
     exclusive_per_step : bool
-        ml only: one landmark explains at most one row per (step, sensor).
+        ml only: one landmark explains at most one row per (step, sensor). Off by default: a laser gives
+        several returns on adjacent beams from one post, which must all go to the same landmark.
     obs_std_scale : float
         Stabilising noise: factor on σ_r and σ_b used by the filter (paper 001 §III uses ≈10).
     motion_std_scale : float
@@ -94,7 +95,7 @@ class EkfParams:
     provisional: bool = False
     provisional_min_hits: int = 3
     provisional_window: int = 10
-    exclusive_per_step: bool = True
+    exclusive_per_step: bool = False
     obs_std_scale: float = 1.0
     motion_std_scale: float = 1.0
     stabilising_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -211,6 +212,11 @@ class EkfSlam(BaseSolver):
             gate = new_thr = np.inf
 
         noise = inputs.noise
+        if not (noise.range_std * p.obs_std_scale > 0 and noise.bearing_std * p.obs_std_scale > 0):
+            raise SolverError(
+                f"noise: range_std={noise.range_std} and bearing_std={noise.bearing_std} must both be > 0 for the "
+                "EKF (a noise-free sensor makes the innovation covariance S singular)"
+            )
         R = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
         Q_stab = np.diag(np.square(np.asarray(p.stabilising_pose_std, float)))
         if p.motion_input == "controls":
@@ -309,6 +315,10 @@ class EkfSlam(BaseSolver):
 
         L = (st.n - 3) // 2
         P = st.P
+        if not (np.all(np.isfinite(poses)) and np.all(np.isfinite(P))):
+            status, message = Status.FAILED, "non-finite state or covariance (numerical breakdown)"
+        else:
+            status, message = Status.COMPLETED, f"filtered {T + 1} steps, {n_upd} updates, {L} landmarks"
         landmarks = st.x[3:].reshape(L, 2).copy()
         idx = 3 + 2 * np.arange(L)
         landmark_cov = np.empty((L, 2, 2))
@@ -316,12 +326,12 @@ class EkfSlam(BaseSolver):
             for b in range(2):
                 landmark_cov[:, a, b] = P[idx + a, idx + b]
         return self.make_result(
-            status=Status.COMPLETED,
+            status=status,
             poses_xyt=poses,
             landmarks_xy=landmarks,
             assoc=assoc,
             t_start=t_start,
-            message=f"filtered {T + 1} steps, {n_upd} updates, {L} landmarks",
+            message=message,
             pose_cov=pose_cov,
             landmark_cov=landmark_cov,
             extra={
@@ -583,7 +593,13 @@ def innovation_stats(x, P, z, R):
 
     ::
 
-        S_k = H_r P_rr H_rᵀ + H_r P_rk H_mᵀ + H_m P_kr H_rᵀ + H_m P_kk H_mᵀ + R
+        J_k = [H_r | H_m]  (2, 5),   P_k = [[P_rr, P_rk], [P_kr, P_kk]]  (5, 5)
+        S_k = J_k P_k J_kᵀ + R
+            = H_r P_rr H_rᵀ + H_r P_rk H_mᵀ + H_m P_kr H_rᵀ + H_m P_kk H_mᵀ + R
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,);  R : ndarray (2, 2)
 
     Returns
     -------
@@ -593,21 +609,24 @@ def innovation_stats(x, P, z, R):
     P = np.asarray(P, float)
     L = (x.shape[0] - 3) // 2
     m = x[3:].reshape(L, 2)
-    H_r, H_m = range_bearing_jacobians(x[None, :3], m)  # (L,2,3), (L,2,2)
-    y = measurement_residual(z[None, :], range_bearing(x[None, :3], m))  # (L, 2)
-    P_rr = P[:3, :3]
-    P_rk = P[:3, 3:].reshape(3, L, 2).transpose(1, 0, 2)  # (L, 3, 2)
-    ii = 3 + 2 * np.arange(L)
-    P_kk = np.stack([np.stack([P[ii, ii], P[ii, ii + 1]], -1), np.stack([P[ii + 1, ii], P[ii + 1, ii + 1]], -1)], -2)
-    cross = np.einsum("lab,lbc,ldc->lad", H_r, P_rk, H_m)  # H_r P_rk H_mᵀ
-    S = (
-        np.einsum("lab,bc,ldc->lad", H_r, P_rr, H_r)
-        + cross
-        + cross.transpose(0, 2, 1)
-        + np.einsum("lab,lbc,ldc->lad", H_m, P_kk, H_m)
-        + R
-    )
+    dx = m[:, 0] - x[0]
+    dy = m[:, 1] - x[1]
+    q = dx * dx + dy * dy
+    sq = np.sqrt(q)
+    a, c, e, f = dx / sq, dy / sq, dy / q, dx / q
+    J = np.zeros((L, 2, 5))  # [H_r | H_m], H_r = [[−a, −c, 0], [e, −f, −1]], H_m = −H_r[:, :2]
+    J[:, 0, 0], J[:, 0, 1], J[:, 0, 3], J[:, 0, 4] = -a, -c, a, c
+    J[:, 1, 0], J[:, 1, 1], J[:, 1, 2], J[:, 1, 3], J[:, 1, 4] = e, -f, -1.0, -e, f
+    Pk = np.empty((L, 5, 5))
+    Pk[:, :3, :3] = P[:3, :3]
+    Pk[:, :3, 3:] = P[:3, 3:].reshape(3, L, 2).transpose(1, 0, 2)
+    Pk[:, 3:, :3] = Pk[:, :3, 3:].transpose(0, 2, 1)
+    diag = P[3:, 3:].reshape(L, 2, L, 2)
+    ar = np.arange(L)
+    Pk[:, 3:, 3:] = diag[ar, :, ar, :]
+    S = J @ Pk @ J.transpose(0, 2, 1) + R
+    y0 = z[0] - sq
+    y1 = np.mod(z[1] - (np.arctan2(dy, dx) - x[2]) + np.pi, 2 * np.pi) - np.pi  # wrap to [-π, π)
     # 2×2 solve in closed form: S⁻¹ = adj(S)/det(S)
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-    a, b, c = S[:, 1, 1], -S[:, 0, 1], S[:, 0, 0]
-    return (a * y[:, 0] ** 2 + 2 * b * y[:, 0] * y[:, 1] + c * y[:, 1] ** 2) / det
+    return (S[:, 1, 1] * y0**2 - (S[:, 0, 1] + S[:, 1, 0]) * y0 * y1 + S[:, 0, 0] * y1**2) / det
