@@ -301,20 +301,25 @@ def test_kill_9_leaves_no_half_run_and_resume_finishes(tmp_path):
     assert set(pd.read_csv(exp_dir / "manifest.csv")["status"]) == {"completed"}
 
 
-def test_dask_local_cluster_gives_the_same_numbers(tmp_path):
+def test_dask_existing_cluster_gives_the_same_numbers(tmp_path):
+    """The sweep runs unchanged on an existing Dask cluster (here a LocalCluster reached by its address)."""
     pytest.importorskip("dask.distributed")
     import cloudpickle
+    from dask.distributed import LocalCluster
+
     import test_sweep_helpers
 
     cloudpickle.register_pickle_by_value(test_sweep_helpers)  # workers cannot import the tests directory
     try:
         exp = _expand(fake_experiment(replicates=2))
         run_sweep(exp, tmp_path / "serial", pipeline=test_sweep_helpers.FakePipeline())
-        summary = run_sweep(exp, tmp_path / "dask", pipeline=test_sweep_helpers.FakePipeline(),
-                            executor="dask", workers=2)
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+            summary = run_sweep(exp, tmp_path / "dask", pipeline=test_sweep_helpers.FakePipeline(),
+                                executor="dask", scheduler=cluster.scheduler_address)
     finally:
         cloudpickle.unregister_pickle_by_value(test_sweep_helpers)
     assert summary.ok and summary.counts.done == 4
     s = pd.read_csv(tmp_path / "serial" / "fake" / "results.csv")
     d = pd.read_csv(tmp_path / "dask" / "fake" / "results.csv")
     np.testing.assert_array_equal(s["value"].to_numpy(), d["value"].to_numpy())
+    assert (d["nested.pid"] != os.getpid()).all()  # computed in the cluster's worker processes
