@@ -428,7 +428,11 @@ def _motion_cov_odometry(th, std):
 # The solver
 # ---------------------------------------------------------------------------------------------------------
 class FastSlam(BaseSolver):
-    """FastSLAM 1.0 / 2.0 with known or maximum-likelihood correspondences (see the module docstring)."""
+    """FastSLAM 1.0 / 2.0 with known or maximum-likelihood correspondences (see the module docstring).
+
+    A one-pass filter: ``solve`` ignores ``init`` (there is nothing to warm-start) and always ends COMPLETED;
+    every random draw (motion noise, proposal samples, resampling) comes from ``rng``.
+    """
 
     name = "fastslam"
     Params = FastSlamParams
