@@ -276,7 +276,8 @@ def test_process_pool_matches_serial_and_survives_a_dying_worker(tmp_path):
     assert summary.counts.failed == 1 and "worker failed" in summary.failures[0]["error"]
 
 
-def test_kill_9_leaves_no_half_run_and_resume_finishes(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["kill-9", "ctrl-c"])
+def test_interrupt_leaves_no_half_run_and_resume_finishes(tmp_path, sig):
     env = dict(os.environ, PYTHONPATH=str(HERE) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     code = f"import test_sweep_helpers as h; h.main({str(tmp_path)!r}, 0.4)"
     proc = subprocess.Popen([sys.executable, "-c", code], env=env, start_new_session=True)
@@ -287,12 +288,14 @@ def test_kill_9_leaves_no_half_run_and_resume_finishes(tmp_path):
         if len(done) >= 2:
             break
         time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)  # the coordinator and its workers, mid-sweep
-    proc.wait()
+    os.killpg(proc.pid, sig)  # the coordinator and its workers, mid-sweep
+    proc.wait(timeout=30)
     visible = [p for p in exp_dir.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "datasets"]
     assert 2 <= len(visible) < 6
     for d in visible:  # every visible run directory is complete
         assert run_status(exp_dir, d.name) == "completed"
+    if sig == signal.SIGINT:  # a Ctrl-C still writes the tables of what finished
+        assert "missing" in set(pd.read_csv(exp_dir / "manifest.csv")["status"])
     cfg = fake_experiment("killme", replicates=6, solvers=[{"method": "a", "params": {"gain": 1.0, "sleep": 0.4}}])
     exp = _expand(cfg)
     summary = run_sweep(exp, tmp_path, pipeline=FakePipeline(), workers=1)
