@@ -184,22 +184,28 @@ def associate_nearest_neighbour(
             last[:L] = t
         if L:
             diff = m[:, None, :] - mu[None, :L, :]  # (ns, L, 2)
-            S = C[:, None] + P[None, :L]  # (ns, L, 2, 2)
-            d2 = np.einsum("nli,nli->nl", diff, np.linalg.solve(S, diff[..., None])[..., 0])
+            Sinv = _inv2(C[:, None] + P[None, :L])  # (ns, L, 2, 2)
+            d2 = np.einsum("nli,nlij,nlj->nl", diff, Sinv, diff)
             cand = np.argwhere(d2 <= thr)
             if cand.size:
                 order = np.argsort(d2[cand[:, 0], cand[:, 1]], kind="stable")
                 used_lm = set()
-                for i, j in cand[order]:
+                for i, j in cand[order]:  # greedy exclusive choice; candidates ≈ detections of the step
                     if lab[i] >= 0 or j in used_lm:
                         continue
                     used_lm.add(int(j))
                     lab[i] = j
-                    Pi = np.linalg.inv(P[j])
-                    Ci = np.linalg.inv(C[i])
-                    Pn = np.linalg.inv(Pi + Ci)
-                    mu[j] = Pn @ (Pi @ mu[j] + Ci @ m[i])
-                    P[j] = Pn
+                hit = np.flatnonzero(lab >= 0)
+                if hit.size:  # information fusion of all matched pairs at once
+                    js = lab[hit]
+                    Pi, Ci = _inv2(P[js]), _inv2(C[hit])
+                    Pn = _inv2(Pi + Ci)
+                    mu[js] = np.einsum(
+                        "kij,kj->ki",
+                        Pn,
+                        np.einsum("kij,kj->ki", Pi, mu[js]) + np.einsum("kij,kj->ki", Ci, m[hit]),
+                    )
+                    P[js] = Pn
         new = np.flatnonzero(lab < 0)
         if new.size:
             while L + new.size > cap:
@@ -260,6 +266,17 @@ class _DriftModel:
             + v[:, :, None] * Spt[:, None, :]
             + n0[:, None, None] * v[:, :, None] * v[:, None, :]
         )
+
+
+def _inv2(A: np.ndarray) -> np.ndarray:
+    """Closed-form inverse of 2×2 matrices ``(..., 2, 2)``."""
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    out = np.empty_like(A)
+    out[..., 0, 0] = A[..., 1, 1] / det
+    out[..., 1, 1] = A[..., 0, 0] / det
+    out[..., 0, 1] = -A[..., 0, 1] / det
+    out[..., 1, 0] = -A[..., 1, 0] / det
+    return out
 
 
 def segment_returns(
