@@ -50,6 +50,8 @@ of the particle poses about the weighted mean, full 3×3 (EVALUATION-METHOD §A2
 association the weighted moment-matched mixture ``μ̄ = Σ w μ``, ``Σ̄ = Σ w [Σ + (μ − μ̄)(μ − μ̄)ᵀ]``
 over particles; with ML association particles do not share landmark identities, so the best particle's map
 and its own EKF covariances are returned. ``assoc``: the best particle's association of every observation.
+``extra["mean_nis"]``: mean normalised innovation squared over all particle updates (χ²(2) ⇒ ≈ 2; 1.0: the
+landmark update at the sampled pose, 2.0: the predictive innovation of the proposal).
 """
 
 from __future__ import annotations
@@ -278,17 +280,21 @@ def _inv_sym2(S11, S12, S22):
     return S22 / det, -S12 / det, S11 / det, det
 
 
+def _maha(nu_r, nu_b, i11, i12, i22):
+    """Normalised innovation squared ``νᵀS⁻¹ν`` (NIS, χ²(2) for a consistent filter)."""
+    return i11 * nu_r * nu_r + 2.0 * i12 * nu_r * nu_b + i22 * nu_b * nu_b
+
+
 def _loglik(nu_r, nu_b, i11, i12, i22, det):
     """``log N(ν; 0, S) = −½ νᵀS⁻¹ν − log 2π − ½ log det S``."""
-    maha = i11 * nu_r * nu_r + 2.0 * i12 * nu_r * nu_b + i22 * nu_b * nu_b
-    return -0.5 * maha - LOG_2PI - 0.5 * np.log(det)
+    return -0.5 * _maha(nu_r, nu_b, i11, i12, i22) - LOG_2PI - 0.5 * np.log(det)
 
 
 def _ekf_terms(o: _ObsTerms, mx, my, a, b, c):
     """Landmark EKF update from :class:`_ObsTerms` (eqs. 14.22-14.24, 14.28).
 
     ``K = Σ H_mᵀ S⁻¹``, ``μ' = μ + K ν``, ``Σ' = Σ − K S Kᵀ = Σ − K (Σ H_mᵀ)ᵀ`` (the symmetric form of
-    ``(I − K H) Σ``); returns ``(mx', my', a', b', c', log N(ν; 0, S))``.
+    ``(I − K H) Σ``); returns ``(mx', my', a', b', c', log N(ν; 0, S), νᵀS⁻¹ν)``.
     """
     i11, i12, i22, det = _inv_sym2(o.S11, o.S12, o.S22)
     K11 = o.p11 * i11 + o.p12 * i12
@@ -300,7 +306,8 @@ def _ekf_terms(o: _ObsTerms, mx, my, a, b, c):
     a_n = a - (K11 * o.p11 + K12 * o.p12)
     b_n = b - (K11 * o.p21 + K12 * o.p22)
     c_n = c - (K21 * o.p21 + K22 * o.p22)
-    return mx_n, my_n, a_n, b_n, c_n, _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
+    maha = _maha(o.nu_r, o.nu_b, i11, i12, i22)
+    return mx_n, my_n, a_n, b_n, c_n, -0.5 * maha - LOG_2PI - 0.5 * np.log(det), maha
 
 
 def _proposal_terms(o: _ObsTerms, Sx):
@@ -346,7 +353,7 @@ def landmark_ekf_update(x, mu, sig, z, Q):
         x[..., 0], x[..., 1], x[..., 2], mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1],
         z[0], z[1], Q[0, 0], Q[1, 1],
     )  # fmt: skip
-    mx, my, a, b, c, ll = _ekf_terms(
+    mx, my, a, b, c, ll, _ = _ekf_terms(
         o, mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1]
     )
     sig_new = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
@@ -503,6 +510,7 @@ class FastSlam(BaseSolver):
         resample = RESAMPLERS[p.resampling]
         self._log_p0 = log_p0
         self._Q = Q
+        self._nis_sum, self._nis_n = 0.0, 0
 
         # ---- records -------------------------------------------------------------------------------------
         mean_xyt = np.empty((T1, 3))
@@ -617,6 +625,7 @@ class FastSlam(BaseSolver):
             "mean_ess": ess_sum / T1,
             "particle_landmark_updates": int(n_updates),
             "best_particle_weight": float(w[best]),
+            "mean_nis": self._nis_sum / self._nis_n if self._nis_n else float("nan"),
             "landmark_cov_kind": "moment_matched" if known else "best_particle",
         }
         return self.make_result(
@@ -692,7 +701,10 @@ class FastSlam(BaseSolver):
         any_new = bool(new.any())
         if not new.all():
             o, comps = self._gather_terms(ps, idx, x, z)
-            mx, my, a, b, c, ll = _ekf_terms(o, *comps)
+            mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
+            if weight:  # 1.0: NIS of the measurement update (pose given)
+                self._nis_sum += float(np.sum(nis, where=~new))
+                self._nis_n += int(np.count_nonzero(~new))
         else:
             mx = my = a = b = c = ll = None
         if any_new:
@@ -758,7 +770,10 @@ class FastSlam(BaseSolver):
                 dx = K0 * o.nu_r + K1 * o.nu_b  # (3, P)
                 x_new = x_hat + dx.T  # heading wrapped once, after sampling (only cos/sin/ν use it here)
                 Sx_new = Sx - (K0[:, None] * U[None, :, 0] + K1[:, None] * U[None, :, 1])  # Σ_x − U S⁻¹ Uᵀ
-                ll = _loglik(o.nu_r, o.nu_b, i11, i12, i22, det)
+                nis = _maha(o.nu_r, o.nu_b, i11, i12, i22)  # 2.0: NIS of the predictive (pose + map)
+                ll = -0.5 * nis - LOG_2PI - 0.5 * np.log(det)
+                self._nis_sum += float(np.sum(nis, where=upd))
+                self._nis_n += int(np.count_nonzero(upd))
                 if upd.all():
                     x_hat, Sx = x_new, Sx_new
                     ps.log_w += ll
