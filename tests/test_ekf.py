@@ -416,3 +416,36 @@ def test_ml_handles_several_returns_per_landmark_per_step():
     n_seen = np.unique(truth["obs_landmark"]).size
     assert res.landmarks_xy.shape[0] <= n_seen + 1
     assert association_accuracy(res.assoc, truth["obs_landmark"][rep]) >= 0.95
+
+
+def test_gps_update_matches_dense_kalman_update_and_is_used():
+    from slamcli.solvers.ekf import update_position
+
+    rng = np.random.default_rng(17)
+    n = 3 + 2 * 3
+    x = rng.normal(size=n)
+    P = random_spd(rng, n) * 0.1
+    R = 0.3**2 * np.eye(2)
+    z = x[:2] + np.array([0.2, -0.1])
+    H = np.zeros((2, n))
+    H[0, 0] = H[1, 1] = 1.0
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    I_KH = np.eye(n) - K @ H
+    x_new, P_new = update_position(x, P, z, R)
+    np.testing.assert_allclose(x_new, x + K @ (z - x[:2]), atol=1e-12)
+    np.testing.assert_allclose(P_new, I_KH @ P @ I_KH.T + K @ R @ K.T, atol=1e-12)
+    # in the solver: fixes shrink the position covariance at their steps
+    import dataclasses
+
+    inputs, truth = make_world(18, T=60)
+    steps = np.arange(0, 61, 10)
+    with_gps = dataclasses.replace(inputs, gps_step=steps, gps_xy=truth["poses"][steps, :2], gps_std=0.05)
+    a = EkfSlam(EkfParams()).solve(with_gps, rng=np.random.default_rng(0))
+    b = EkfSlam(EkfParams(use_gps=False)).solve(with_gps, rng=np.random.default_rng(0))
+    tr = lambda r: np.trace(r.pose_cov[steps[1:], :2, :2], axis1=1, axis2=2)
+    assert np.all(tr(a) < tr(b))
+
+
+def test_provisional_requires_ml():
+    with pytest.raises(ValueError, match="provisional"):
+        EkfParams(association="known", provisional=True)

@@ -86,6 +86,8 @@ class EkfParams:
         Extra additive pose noise [σ_x m, σ_y m, σ_θ rad] per step (world frame), 0 = off.
     init_pose_std : tuple[float, float, float]
         Prior standard deviation of the start pose ``x0`` (0 = known exactly, fixes the gauge).
+    use_gps : bool
+        Fuse the dataset's GPS position fixes (if any) with a linear update ``H = [I₂ 0]``, σ = ``gps_std``.
     """
 
     association: Literal["known", "ml"] = "known"
@@ -100,8 +102,11 @@ class EkfParams:
     motion_std_scale: float = 1.0
     stabilising_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
     init_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    use_gps: bool = True
 
     def __post_init__(self) -> None:
+        if self.provisional and self.association != "ml":
+            raise ValueError("provisional=true needs association=ml (known ids need no provisional list)")
         if not 0.0 < self.gate_prob < 1.0:
             raise ValueError(f"gate_prob must be in (0, 1), got {self.gate_prob}")
         if not self.gate_prob <= self.new_landmark_prob < 1.0:
@@ -177,6 +182,7 @@ class EkfSlam(BaseSolver):
     ``landmarks_xy (L', 2)`` final map (rows in order of creation), ``assoc (N,)`` landmark row per
     observation (−1 = discarded / unconfirmed), ``pose_cov (T+1, 3, 3)`` filtered pose block at every step,
     ``landmark_cov (L', 2, 2)`` final landmark blocks, ``extra`` with the mean NIS and counters.
+    A one-pass filter: ``init`` is ignored and ``rng`` is not used (the filter is deterministic).
     """
 
     name = "ekf"
@@ -203,7 +209,7 @@ class EkfSlam(BaseSolver):
                     "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
                     "(use --param association=ml)"
                 )
-        if p.association == "ml" or p.provisional:
+        if p.association == "ml":
             from scipy.stats import chi2
 
             gate = float(chi2.ppf(p.gate_prob, 2))
@@ -227,6 +233,13 @@ class EkfSlam(BaseSolver):
         else:
             Sigma_d = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
             incr = odometry_increments(inputs.odometry_xyt)
+
+        gps_at: dict[int, np.ndarray] = {}
+        if p.use_gps and len(inputs.gps_step):
+            if not inputs.gps_std > 0:
+                raise SolverError(f"gps_std={inputs.gps_std}: GPS fixes need a positive σ (or --param use_gps=false)")
+            gps_at = {int(k): np.asarray(v, float) for k, v in zip(inputs.gps_step, inputs.gps_xy)}
+            R_gps = inputs.gps_std**2 * np.eye(2)
 
         st = _GrowingState(np.asarray(inputs.x0, float), np.diag(np.square(np.asarray(p.init_pose_std, float))))
         poses = np.empty((T + 1, 3))
@@ -253,6 +266,11 @@ class EkfSlam(BaseSolver):
                     pose_new = compose(x_r, d)
                     Q = G @ Sigma_d @ G.T
                 x, P = predict(st.x, st.P, pose_new, F, Q + Q_stab)
+                st.set(x, P)
+
+            # ---------------- GPS position fix (linear update) ----------------
+            if t in gps_at:
+                x, P = update_position(st.x, st.P, gps_at[t], R_gps)
                 st.set(x, P)
 
             # ---------------- update with the rows of step t ----------------
@@ -335,7 +353,7 @@ class EkfSlam(BaseSolver):
             pose_cov=pose_cov,
             landmark_cov=landmark_cov,
             extra={
-                "mean_nis": nis_sum / n_upd if n_upd else float("nan"),
+                "mean_nis": nis_sum / n_upd if n_upd else None,
                 "n_updates": n_upd,
                 "n_new_landmarks": n_new,
                 "n_discarded": n_disc,
@@ -564,6 +582,35 @@ def _inv2(S):
     """Inverse of a 2×2 matrix, ``adj(S) / det(S)``."""
     det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
     return np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
+
+
+def update_position(x, P, z_xy, R):
+    """Linear position-fix update (GPS), Joseph form, O(n²).
+
+    ::
+
+        H = [I₂, 0 … 0]  (2, n),   y = z − p,   S = P_pp + R,   K = P Hᵀ S⁻¹ = P[:, :2] S⁻¹
+        x = x + K y,   P = (I − KH) P (I − KH)ᵀ + K R Kᵀ
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+
+    Returns
+    -------
+    x, P : ndarray (n,), ndarray (n, n)  new arrays.
+    """
+    x = np.asarray(x, float)
+    P = np.asarray(P, float)
+    y = np.asarray(z_xy, float) - x[:2]
+    PHt = P[:, :2]  # (n, 2)
+    S = PHt[:2] + R
+    K = PHt @ _inv2(S)
+    x_new = x + K @ y
+    A = P - K @ PHt.T  # (I − KH) P
+    B = A - A[:, :2] @ K.T  # A (I − KH)ᵀ
+    P_new = B + K @ R @ K.T
+    return x_new, 0.5 * (P_new + P_new.T)
 
 
 def landmark_init(x, P, z, R):
