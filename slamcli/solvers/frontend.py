@@ -137,7 +137,7 @@ def associate_nearest_neighbour(
     gate_prob : float              χ² gate probability.
     extra_std : float              σ_e, m.
     odometry_std : ndarray (3,) or None   per-step odometry σ for the drift model (None = no drift).
-    segment_dist : float           rows of one pose that are adjacent in bearing (≤ 0.035 rad apart) and
+    segment_dist : float           rows of one pose that are adjacent in bearing (≤ 0.1 rad apart) and
                                    whose inverse observations are closer than this (m) form one detection (a
                                    laser hitting one post returns several surface points); 0 = every row is
                                    its own detection.

@@ -78,7 +78,7 @@ class GraphParams:
         Inflate the front end's landmark covariances by the dead-reckoning drift since their last sighting
         (odometry σ of the NoiseSpec), so revisits after a loop gate correctly (default True).
     nn_segment_dist : float
-        Returns of one pose that are adjacent in bearing (≤ 2°) and closer than this (m) are one detection,
+        Returns of one pose that are adjacent in bearing (≤ 0.1 rad) and closer than this (m) are one detection,
         e.g. the several laser hits on one post (default 0.5; 0 = every row separately).
     min_obs : int
         Landmarks with fewer associated observations are dropped (default 1 = keep all).
@@ -660,7 +660,20 @@ def odometry_initial_poses(inputs: SlamInputs) -> np.ndarray:
 
 
 class GraphSlam(BaseSolver):
-    """Batch graph SLAM with sparse GN/LM and Laplace marginals (see module docstring)."""
+    """Batch graph SLAM with sparse GN/LM and Laplace marginals (see module docstring).
+
+    Pipeline: initial poses (chained odometry, or the ``--init`` result's) → correspondences (``init`` /
+    ``reported`` / gated nearest neighbour, :mod:`slamcli.solvers.frontend`) → landmarks from the mean
+    inverse observation → optimisation → (``nn`` only) merge landmark pairs passing the correspondence test
+    and re-optimise, up to ``merge_rounds`` times → marginal covariances at the optimum.
+
+    Result: ``poses_xyt``, ``landmarks_xy``, ``assoc`` (rows of ``landmarks_xy``, in order of first
+    sighting), ``pose_cov`` / ``landmark_cov`` (world frame; zero for the fixed ``x_0`` of the paper model),
+    ``trace`` (cost — GTSAM's ``½ Σ‖e‖²_Σ`` or the paper energy — and landmarks after every accepted step;
+    with merge rounds the rounds are concatenated, each starting with its re-initialised cost),
+    ``status`` CONVERGED / MAX_ITERATIONS (of the last round) / FAILED, and ``extra`` with ``association``,
+    ``n_landmarks``, ``iterations``, ``final_cost``, ``model`` (and ``merged_landmarks``).
+    """
 
     name = "graph"
     Params = GraphParams
