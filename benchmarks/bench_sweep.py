@@ -9,12 +9,16 @@ Every run is the real pipeline (simulate ``loop`` with 200 steps → EKF-SLAM wi
 
 ``speedup`` is runs/min relative to the 1-worker row measured in the same invocation. On a machine with two
 idle cores the ideal is 2; spawn start-up (each worker imports numpy/scipy/h5py once) and the coordinator's
-table writing are the overheads. Results: ``benchmarks/results/sweep.csv``.
+table writing are the overheads. ``cpu_utilisation`` (CPU seconds of this process and its finished children
+per wall second) and the 1-minute load average show whether the cores were actually available: on a shared
+machine a speedup below 1 with utilisation near 1 means the other processes, not the runner, took the cores.
+Results: ``benchmarks/results/sweep.csv``.
 """
 
 from __future__ import annotations
 
 import os
+import resource
 import tempfile
 import time
 
@@ -35,6 +39,13 @@ def _experiment(n_runs: int):
     )
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process plus its finished child processes (the pool's workers)."""
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + ch.ru_utime + ch.ru_stime
+
+
 def run(quick: bool = False) -> list[dict]:
     n_runs = 12 if quick else 100
     expansion = expand(_experiment(n_runs))
@@ -43,9 +54,11 @@ def run(quick: bool = False) -> list[dict]:
     base = None
     for executor, workers in configs:
         with tempfile.TemporaryDirectory(prefix="bench-sweep-") as tmp:
+            c0 = _cpu_s()
             t0 = time.perf_counter()
             summary = run_sweep(expansion, tmp, executor=executor, workers=workers, resume=False)
             wall = time.perf_counter() - t0
+            cpu = _cpu_s() - c0
         rate = 60.0 * summary.counts.done / wall
         if base is None:
             base = rate
@@ -59,6 +72,9 @@ def run(quick: bool = False) -> list[dict]:
                 "wall_s": wall,
                 "runs_per_min": rate,
                 "speedup": rate / base if base else float("nan"),
+                "cpu_s": cpu,
+                "cpu_utilisation": cpu / wall,  # ≈ workers when the cores are ours alone
+                "load_avg_1min": os.getloadavg()[0],
                 "cpu_count": os.cpu_count(),
             }
         )
