@@ -309,3 +309,34 @@ def test_co_observed_labels_are_never_merged(world):
     pairs = graph.merge_candidates(gp, res.information, lms, obs2, lab, 0.999, merge_dist=1.0).tolist()
     assert [1, 7] in pairs
     assert [0, 6] not in pairs
+
+
+def test_laplace_covariances_are_consistent_monte_carlo():
+    """30 independent tiny worlds (known ids): the average NEES of the last pose (3 DoF, world frame) and of
+    the first-seen landmark (2 DoF) lie inside the two-sided 95 % χ² band of the 30-run average
+    (EVALUATION-METHOD §A1/§A2). Uses ground truth — as a metric only."""
+    from slamcli.models.angles import wrap_pose_error
+    from slamcli.solvers import nls
+
+    n_runs = 30
+    pose_nees, lm_nees = [], []
+    for s in range(n_runs):
+        ds = tiny_dataset(T=40, n_landmarks=5, seed=300 + s, report_ids=True, clutter_every=0)
+        inp = ds.inputs
+        # the solver's own pipeline without its result bookkeeping (keeps 30 runs fast)
+        assoc = frontend.associate_reported(inp.observations)
+        p0 = graph.odometry_initial_poses(inp)
+        lm0 = frontend.landmarks_from_observations(p0, inp.observations, assoc, int(assoc.max()) + 1)
+        gp = graph.build_gtsam_problem(inp, assoc, p0, lm0)
+        opt = nls.solve(gp.problem, gp.x0)
+        poses, lms = gp.unpack(opt.x)
+        pose_cov, lm_cov = graph.laplace_marginals(gp, opt.information)
+        e = wrap_pose_error(poses[-1] - ds.truth.poses_xyt[-1])
+        pose_nees.append(e @ np.linalg.solve(pose_cov[-1], e))
+        first = int(inp.observations.reported_id[assoc == 0][0])  # label 0 = first sighted
+        el = lms[0] - ds.truth.landmarks_xy[first]
+        lm_nees.append(el @ np.linalg.solve(lm_cov[0], el))
+    lo3, hi3 = scipy.stats.chi2.ppf([0.025, 0.975], 3 * n_runs) / n_runs
+    lo2, hi2 = scipy.stats.chi2.ppf([0.025, 0.975], 2 * n_runs) / n_runs
+    assert lo3 < np.mean(pose_nees) < hi3
+    assert lo2 < np.mean(lm_nees) < hi2
