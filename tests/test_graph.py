@@ -340,3 +340,28 @@ def test_laplace_covariances_are_consistent_monte_carlo():
     lo2, hi2 = scipy.stats.chi2.ppf([0.025, 0.975], 2 * n_runs) / n_runs
     assert lo3 < np.mean(pose_nees) < hi3
     assert lo2 < np.mean(lm_nees) < hi2
+
+
+def test_edge_cases_single_pose_no_observations_and_bad_weights():
+    from slamcli.types import Observations
+
+    one = tiny_dataset(T=0, n_landmarks=4, seed=0, report_ids=True).inputs
+    res = _solve(one)
+    assert res.poses_xyt.shape == (1, 3) and res.pose_cov.shape == (1, 3, 3)
+    np.testing.assert_allclose(res.pose_cov[0], np.diag(np.square(graph.GraphParams().prior_std)), rtol=1e-9)
+    inp = tiny_dataset(T=15, n_landmarks=4, seed=0).inputs
+    empty = Observations(
+        step=np.zeros(0, np.int64),
+        range_m=np.zeros(0),
+        bearing_rad=np.zeros(0),
+        sensor=np.zeros(0, np.int16),
+        reported_id=np.zeros(0, np.int64),
+        offsets=np.zeros(inp.n_poses + 1, np.int64),
+    )
+    res = _solve(dataclasses.replace(inp, observations=empty))
+    assert res.landmarks_xy.shape == (0, 2) and res.status == Status.CONVERGED
+    # odometry only: the optimum is the chained odometry itself, covariance grows along the chain
+    np.testing.assert_allclose(res.poses_xyt, graph.odometry_initial_poses(inp), atol=1e-9)
+    assert np.all(np.diff(np.trace(res.pose_cov, axis1=1, axis2=2)) > 0)
+    with pytest.raises(SolverError, match="paper Q must be symmetric"):
+        _solve(inp, model="paper", paper_Q=((1, 2), (3, 4)))

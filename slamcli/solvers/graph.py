@@ -242,16 +242,18 @@ def _sqrt_info_from_cov(cov: np.ndarray) -> np.ndarray:
     return np.linalg.cholesky(np.linalg.inv(np.asarray(cov, float))).T
 
 
-def _sqrt_of_weight(W: np.ndarray) -> np.ndarray | None:
+def _sqrt_of_weight(W: np.ndarray, name: str = "weight") -> np.ndarray | None:
     """``L`` with ``LᵀL = 2W`` for a symmetric PSD weight ``W`` (so ``½‖L r‖² = rᵀ W r``); None if W = 0."""
     W = np.asarray(W, float)
+    if not np.all(np.isfinite(W)):
+        raise SolverError(f"graph: paper {name} has non-finite entries")
     if not np.any(W):
         return None
     if not np.allclose(W, W.T, atol=1e-12 * max(1.0, np.abs(W).max())):
-        raise SolverError("paper weight matrices must be symmetric")
+        raise SolverError(f"graph: paper {name} must be symmetric, got {W.tolist()}")
     lam, V = np.linalg.eigh(0.5 * (W + W.T))
     if lam.min() < -1e-12 * max(1.0, lam.max()):
-        raise SolverError("paper weight matrices must be positive semi-definite")
+        raise SolverError(f"graph: paper {name} must be positive semi-definite (eigenvalues {lam.tolist()})")
     return np.sqrt(2.0 * np.clip(lam, 0.0, None))[:, None] * V.T
 
 
@@ -435,7 +437,7 @@ def build_paper_problem(
     pc = np.arange(P, dtype=np.int64).reshape(-1, 3)
     lc = P + np.arange(2 * L, dtype=np.int64).reshape(-1, 2)
     blocks: list[nls.FactorBlock] = []
-    LR, LS, LQ = _sqrt_of_weight(R), _sqrt_of_weight(S), _sqrt_of_weight(Q)
+    LR, LS, LQ = _sqrt_of_weight(R, "R"), _sqrt_of_weight(S, "S"), _sqrt_of_weight(Q, "Q")
     pair_cols = np.concatenate([pc[:-1], pc[1:]], axis=1)
 
     def poses_of(x):
@@ -743,7 +745,9 @@ class GraphSlam(BaseSolver):
             S = S0 if p.paper_S is None else np.asarray(p.paper_S, float)
             Q = Q0 if p.paper_Q is None else np.asarray(p.paper_Q, float)
             if R.shape != (3, 3) or S.shape != (3, 3) or Q.shape != (2, 2):
-                raise SolverError("graph: paper_R and paper_S must be 3x3, paper_Q 2x2")
+                raise SolverError(
+                    f"graph: paper_R and paper_S must be 3x3 and paper_Q 2x2, got {R.shape}, {S.shape}, {Q.shape}"
+                )
 
         def build(assoc, poses_init, lm_init):
             if p.model == "gtsam":

@@ -642,6 +642,8 @@ def marginals_chain_border(information: sp.spmatrix, n_chain: int, k: int) -> tu
 def _gather_blocks(A: sp.csr_matrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Dense ``(B, k, k)`` blocks ``A[rows[b]][:, cols[b]]`` of a sparse matrix (vectorised lookup)."""
     B, k = rows.shape
+    if B == 0:
+        return np.zeros((0, k, k))
     r = np.broadcast_to(rows[:, :, None], (B, k, k)).ravel()
     c = np.broadcast_to(cols[:, None, :], (B, k, k)).ravel()
     return np.asarray(A[r, c]).reshape(B, k, k)
