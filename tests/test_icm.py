@@ -410,3 +410,15 @@ def test_reported_correspondences_need_ids(world):
         IcmSlam(IcmParams(correspondences="reported")).solve(
             replace(inputs, observations=obs), rng=np.random.default_rng(0)
         )
+
+
+def test_nearest_labels_bound_is_exact():
+    rng = np.random.default_rng(0)
+    lms = rng.uniform(0, 10, (30, 2))
+    pts = rng.uniform(-1, 11, (2000, 2))
+    for Q in ((1.0, 1.0), (1.0, 0.2)):
+        ref = mp.nearest_labels(pts, lms, Q)
+        d2 = Q[0] * (pts[:, None, 0] - lms[None, :, 0]) ** 2 + Q[1] * (pts[:, None, 1] - lms[None, :, 1]) ** 2
+        np.testing.assert_array_equal(ref, d2.argmin(1))
+        prev = np.where(rng.random(2000) < 0.7, ref, rng.integers(-1, 30, 2000))  # mostly right, some stale
+        np.testing.assert_array_equal(mp.nearest_labels(pts, lms, Q, prev), ref)

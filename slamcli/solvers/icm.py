@@ -343,7 +343,7 @@ class IcmSlam(BaseSolver):
                 pts = prob.landmark_points(poses)
                 act = ~out_model
                 labels = labels.copy()
-                labels[act] = mp.nearest_labels(pts[act], landmarks, W.Q)
+                labels[act] = mp.nearest_labels(pts[act], landmarks, W.Q, labels[act])
             if p.accelerate == "joint" and n % p.accelerate_every == 0:
                 poses, landmarks, _, ok = en.joint_gn_step(prob, W, poses, landmarks, labels)
                 joint_accepted += int(ok)

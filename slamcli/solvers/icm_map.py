@@ -14,14 +14,19 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 
-def nearest_labels(points_xy, landmarks_xy, Q) -> np.ndarray:
+def nearest_labels(points_xy, landmarks_xy, Q, prev_labels=None) -> np.ndarray:
     """``argmin_l ‖p_i − m_l‖²_Q`` for every point (eqs. 12-13), via a KD-tree in Q-scaled coordinates.
+
+    With ``prev_labels`` (the matchings of the previous sweep, indexing the same map) the exact triangle-
+    inequality bound of Elkan's k-means is used first: if ``‖p − m_c‖ ≤ ½ min_{l≠c} ‖m_c − m_l‖`` then ``c`` is
+    the nearest label, so only the remaining points go to the KD-tree. The result is identical.
 
     Parameters
     ----------
     points_xy : ndarray (N, 2)      h⁻¹(x_t, z_{t,i}).
     landmarks_xy : ndarray (L, 2)
     Q : (q0, q1)                    diagonal weights (Q = 0 is treated as identity for the matching).
+    prev_labels : ndarray (N,) int64 or None
 
     Returns
     -------
@@ -29,12 +34,29 @@ def nearest_labels(points_xy, landmarks_xy, Q) -> np.ndarray:
     """
     points_xy = np.asarray(points_xy, float).reshape(-1, 2)
     landmarks_xy = np.asarray(landmarks_xy, float).reshape(-1, 2)
-    if landmarks_xy.shape[0] == 0 or points_xy.shape[0] == 0:
-        return np.full(points_xy.shape[0], -1, np.int64)
-    scale = np.sqrt(np.asarray(Q, float)) if any(Q) else np.ones(2)
-    tree = cKDTree(landmarks_xy * scale)
-    _, idx = tree.query(points_xy * scale)
-    return np.asarray(idx, np.int64)
+    N, L = points_xy.shape[0], landmarks_xy.shape[0]
+    if L == 0 or N == 0:
+        return np.full(N, -1, np.int64)
+    iso = not any(Q) or Q[0] == Q[1]
+    scale = np.ones(2) if iso else np.sqrt(np.asarray(Q, float))
+    lm = landmarks_xy if iso else landmarks_xy * scale
+    pts = points_xy if iso else points_xy * scale
+    tree = cKDTree(lm)
+    out = np.empty(N, np.int64)
+    todo = np.ones(N, bool)
+    if prev_labels is not None and L > 1:
+        prev = np.asarray(prev_labels, np.int64)
+        ok = (prev >= 0) & (prev < L)
+        half = 0.5 * tree.query(lm, k=2)[0][:, 1]  # ½ distance to the nearest other map point
+        c = np.where(ok, prev, 0)
+        d = np.hypot(pts[:, 0] - lm[c, 0], pts[:, 1] - lm[c, 1])
+        sure = ok & (d <= half[c])
+        out[sure] = prev[sure]
+        todo = ~sure
+    if todo.any():
+        _, idx = tree.query(pts[todo])
+        out[todo] = idx
+    return out
 
 
 def label_means(points_xy, labels, n_labels: int):
