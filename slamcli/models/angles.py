@@ -19,10 +19,13 @@ def wrap_angle(a):
     -------
     float or ndarray (...), same shape, in ``[-pi, pi)``.
     """
-    w = np.mod(np.asarray(a, dtype=float) + np.pi, TWO_PI) - np.pi
-    # np.mod can return TWO_PI - eps rounding to exactly pi after the shift; keep the half-open interval.
+    a = np.asarray(a, dtype=float)
+    # floor-based reduction: several times faster than np.mod on large arrays (hot in particle filters)
+    w = a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+    # rounding can leave exactly pi (or a hair below -pi); keep the half-open interval [-pi, pi).
     w = np.where(w >= np.pi, w - TWO_PI, w)
-    return float(w) if np.ndim(w) == 0 else w
+    w = np.where(w < -np.pi, w + TWO_PI, w)
+    return float(w) if w.ndim == 0 else w
 
 
 def angle_diff(a, b):
