@@ -365,3 +365,21 @@ def test_edge_cases_single_pose_no_observations_and_bad_weights():
     assert np.all(np.diff(np.trace(res.pose_cov, axis1=1, axis2=2)) > 0)
     with pytest.raises(SolverError, match="paper Q must be symmetric"):
         _solve(inp, model="paper", paper_Q=((1, 2), (3, 4)))
+
+
+def test_range_bias_estimate_recovers_a_constant_range_offset():
+    ds = tiny_dataset(T=250, n_landmarks=6, seed=7, report_ids=True, clutter_every=0)  # one full circle
+    inp, truth = ds.inputs, ds.truth
+    obs = inp.observations
+    shifted = dataclasses.replace(inp, observations=dataclasses.replace(obs, range_m=obs.range_m - 0.15))
+    plain = _solve(shifted)
+    est = _solve(shifted, estimate_range_bias=True)
+    assert "range_bias" not in plain.extra
+    assert est.extra["range_bias"] == pytest.approx(0.15, abs=0.01)
+    ok = est.assoc >= 0
+    true_of = np.zeros(6, np.int64)
+    true_of[est.assoc[ok]] = obs.reported_id[ok]
+    err_est = np.linalg.norm(est.landmarks_xy - truth.landmarks_xy[true_of], axis=1).mean()
+    err_plain = np.linalg.norm(plain.landmarks_xy - truth.landmarks_xy[true_of], axis=1).mean()
+    assert err_est < 0.05 < err_plain
+    assert est.landmark_cov.shape == (6, 2, 2) and est.pose_cov.shape == (inp.n_poses, 3, 3)

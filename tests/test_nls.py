@@ -33,7 +33,9 @@ def _small_problem(model="gtsam", T=25, n_landmarks=5, seed=3, **kw):
     p0 = graph.odometry_initial_poses(inp)
     lm0 = frontend.landmarks_from_observations(p0, inp.observations, assoc, L)
     if model == "gtsam":
-        gp = graph.build_gtsam_problem(inp, assoc, p0, lm0, graph.GraphParams(use_controls=True))
+        gp = graph.build_gtsam_problem(
+            inp, assoc, p0, lm0, graph.GraphParams(use_controls=True, estimate_range_bias=True)
+        )
     else:
         R = np.diag([2.0, 3.0, 5.0])
         S = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]])
@@ -132,7 +134,7 @@ def test_every_block_jacobian_matches_finite_differences(model):
 # ---------------------------------------------------------------------------------------------------------
 # optimiser
 # ---------------------------------------------------------------------------------------------------------
-def test_lm_and_gn_reach_the_same_optimum_and_it_equals_scipy_least_squares():
+def test_lm_and_gn_reach_the_same_optimum_and_it_equals_scipy_least_squares():  # incl. a range-bias variable
     _, gp = _small_problem("gtsam", T=20, n_landmarks=5)
     lm = nls.solve(gp.problem, gp.x0, nls.NlsParams(method="lm"))
     gn = nls.solve(gp.problem, gp.x0, nls.NlsParams(method="gn"))

@@ -102,6 +102,10 @@ class GraphParams:
         ``gtsam`` model: one bearing-range factor per (pose, landmark) pair at the mean range and
         circular-mean bearing of its rows (:func:`group_returns`; a laser's several hits on one post).
         Point sensors have one row per pair, so this changes nothing for them (default True).
+    estimate_range_bias : bool
+        ``gtsam`` model: add one unknown range offset ``b`` to the state, ``r̂ = ‖m − p‖ − b`` (default
+        False). A laser measures the surface of a post, on average ≈ π/4 · radius nearer than its centre;
+        estimating ``b`` recovers the centres. Reported as ``extra["range_bias"]``.
     paper_R, paper_S, paper_Q : tuple of rows or None
         Weight matrices of the ``paper`` model (3×3, 3×3, 2×2). ``None`` → R = 0, S = ½ diag(σ_odo)⁻²,
         Q = ½ σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).
@@ -132,6 +136,7 @@ class GraphParams:
     motion_lateral_std: float = 0.01
     use_gps: bool = True
     group_returns: bool = True
+    estimate_range_bias: bool = False
     paper_R: tuple[tuple[float, ...], ...] | None = None
     paper_S: tuple[tuple[float, ...], ...] | None = None
     paper_Q: tuple[tuple[float, ...], ...] | None = None
@@ -264,7 +269,8 @@ class GraphProblem:
     Attributes
     ----------
     problem : nls.NlsProblem
-    x0 : ndarray (D,)          initial state: poses ``(T+1)·3`` then landmarks ``L·2``.
+    x0 : ndarray (D,)          initial state: poses ``(T+1)·3``, landmarks ``L·2`` (then the range bias,
+                               if estimated, at ``range_bias_col``).
     n_poses : int              T+1
     n_landmarks : int          L
     """
@@ -273,11 +279,12 @@ class GraphProblem:
     x0: np.ndarray
     n_poses: int
     n_landmarks: int
+    range_bias_col: int | None = None
 
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(poses_xyt (T+1, 3), landmarks_xy (L, 2))`` views of a state vector."""
         P = 3 * self.n_poses
-        return x[:P].reshape(-1, 3), x[P:].reshape(-1, 2)
+        return x[:P].reshape(-1, 3), x[P : P + 2 * self.n_landmarks].reshape(-1, 2)
 
     def pose_cols(self) -> np.ndarray:
         return np.arange(3 * self.n_poses, dtype=np.int64).reshape(-1, 3)
@@ -318,7 +325,9 @@ def build_gtsam_problem(
         return x[:P].reshape(-1, 3)
 
     def lms_of(x):
-        return x[P:].reshape(-1, 2)
+        return x[P : P + 2 * L].reshape(-1, 2)
+
+    bias_col = P + 2 * L if params.estimate_range_bias else None
 
     prior = np.asarray(inputs.x0, float)[None, :]
 
@@ -362,9 +371,16 @@ def build_gtsam_problem(
 
         def ev_obs(x):
             e, Jx, Jm = bearing_range_error(poses_of(x)[steps], lms_of(x)[labels], z)
-            return e, np.concatenate([Jx, Jm], axis=2)
+            if bias_col is None:
+                return e, np.concatenate([Jx, Jm], axis=2)
+            e[:, 0] -= x[bias_col]  # r̂ = ‖m − p‖ − b
+            Jb = np.zeros((e.shape[0], 2, 1))
+            Jb[:, 0, 0] = -1.0
+            return e, np.concatenate([Jx, Jm, Jb], axis=2)
 
         cols = np.concatenate([pc[steps], lc[labels]], axis=1)
+        if bias_col is not None:
+            cols = np.concatenate([cols, np.full((cols.shape[0], 1), bias_col, np.int64)], axis=1)
         blocks.append(
             nls.FactorBlock(
                 "bearing_range", cols, ev_obs, _sqrt_info_from_cov(inputs.noise.obs_cov), robust=True
@@ -383,8 +399,14 @@ def build_gtsam_problem(
 
         blocks.append(nls.FactorBlock("gps", pc[gsteps], ev_gps, np.eye(2) / inputs.gps_std, robust=True))
 
-    problem = nls.NlsProblem(n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3))
-    return GraphProblem(problem, pack_state(init_poses, init_landmarks), n_poses, L)
+    n_vars = P + 2 * L + (bias_col is not None)
+    if bias_col is not None and not rows.size:
+        raise SolverError("graph: estimate_range_bias needs associated observations")
+    problem = nls.NlsProblem(n_vars=n_vars, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3))
+    x0 = pack_state(init_poses, init_landmarks)
+    if bias_col is not None:
+        x0 = np.concatenate([x0, [0.0]])
+    return GraphProblem(problem, x0, n_poses, L, bias_col)
 
 
 def group_returns(steps: np.ndarray, labels: np.ndarray, z: np.ndarray, n_landmarks: int):
@@ -551,6 +573,7 @@ def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.nda
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
         pose_cov, border = nls.marginals_chain_border(information, gp.n_poses, 3)
         j = np.arange(L)
+        border = border[: 2 * L, : 2 * L]
         lm_cov = border.reshape(L, 2, L, 2)[j, :, j, :] if L else np.zeros((0, 2, 2))
         return pose_cov, np.ascontiguousarray(lm_cov)
     factor = nls.factorize_information(information)
@@ -567,7 +590,7 @@ def landmark_joint_covariance(gp: GraphProblem, information) -> np.ndarray:
     """
     L = gp.n_landmarks
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
-        return nls.marginals_chain_border(information, gp.n_poses, 3)[1]
+        return nls.marginals_chain_border(information, gp.n_poses, 3)[1][: 2 * L, : 2 * L]
     blocks = nls.marginal_covariances(information, gp.landmark_cols())
     out = np.zeros((2 * L, 2 * L))
     for j in range(L):
@@ -814,6 +837,8 @@ class GraphSlam(BaseSolver):
         }
         if rounds:
             extra["merged_landmarks"] = merged_total
+        if gp.range_bias_col is not None:
+            extra["range_bias"] = float(res.x[gp.range_bias_col])
         if p.covariance and res.status != Status.FAILED:
             pose_cov, landmark_cov = laplace_marginals(gp, res.information)
             if p.model == "paper":
