@@ -206,7 +206,8 @@ def test_sweep_writes_artefacts_tables_and_shares_datasets(tmp_path):
         cfg = json.loads((d / "config.json").read_text())
         assert cfg["run_id"] == r.run_id and content_hash({k: v for k, v in cfg.items()
                                                            if k not in ("run_id", "point")}) == r.run_id
-        assert json.loads((d / "status.json").read_text())["status"] == "completed"
+        st = json.loads((d / "status.json").read_text())
+        assert st["status"] == "completed" and st["run_id"] == r.run_id and {"git", "host", "wall_time_s"} <= set(st)
         assert os.path.samefile(d / "dataset.h5", exp_dir / "datasets" / f"{r.dataset.dataset_id}.h5")
     # paired comparison: b with gain 2 is exactly twice a's signal on the same dataset (up to the 1e-3 solver noise)
     tidy = pd.read_csv(exp_dir / "results.csv")
@@ -308,9 +309,8 @@ def test_dask_existing_cluster_gives_the_same_numbers(tmp_path):
     """The sweep runs unchanged on an existing Dask cluster (here a LocalCluster reached by its address)."""
     pytest.importorskip("dask.distributed")
     import cloudpickle
-    from dask.distributed import LocalCluster
-
     import test_sweep_helpers
+    from dask.distributed import LocalCluster
 
     cloudpickle.register_pickle_by_value(test_sweep_helpers)  # workers cannot import the tests directory
     try:

@@ -23,7 +23,6 @@ import dataclasses
 import datetime as _dt
 import math
 import os
-import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -90,18 +89,6 @@ def _md_table(header: list[str], rows: list[list[Any]]) -> str:
     out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
     return "\n".join(out)
-
-
-def _git_sha() -> str:
-    try:
-        here = Path(__file__).resolve().parent
-        sha = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True,
-                             timeout=5, check=False).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=5, check=False).stdout.strip()
-        return f"{sha}{' (dirty)' if dirty else ''}" if sha else "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 def available_solvers() -> tuple[list[str], dict[str, str]]:
@@ -516,6 +503,7 @@ def reproduce(
 ) -> Path:
     """Run every section, write figures and ``REPORT.md`` into ``out_dir``; returns the report path."""
     from slamcli.io import atomic_path
+    from slamcli.sweep.runner import git_revision
 
     t0 = time.perf_counter()
     if workers is None:
@@ -560,7 +548,7 @@ def reproduce(
         "",
         (
             f"Generated {_dt.datetime.now(_dt.UTC).isoformat(timespec='seconds')} by "
-            f"`slamcli reproduce{' --quick' if quick else ''}` (slamcli {slamcli.__version__}, git {_git_sha()}), "
+            f"`slamcli reproduce{' --quick' if quick else ''}` (slamcli {slamcli.__version__}, git {git_revision()}), "
             f"{workers} worker(s), {elapsed:.0f} s. Runs: `runs/<experiment>/<run_id>/` (config, dataset, "
             "result, metrics, status, log); tables: `runs/<experiment>/results.csv`."
         ),

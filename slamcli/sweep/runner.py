@@ -29,12 +29,14 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
+import functools
 import json
 import logging
 import math
 import os
 import platform
 import shutil
+import subprocess
 import time
 import traceback
 import uuid
@@ -100,6 +102,20 @@ class WorkflowPipeline:
 
 
 # -- small file helpers -----------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=1)
+def git_revision() -> str:
+    """``<short sha>`` of the slamcli checkout, ``+dirty`` when tracked files differ; "unknown" outside git."""
+    here = Path(__file__).resolve().parent
+    try:
+        sha = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True,
+                             timeout=5, check=False).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5, check=False).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return f"{sha}{'+dirty' if dirty else ''}" if sha else "unknown"
 
 
 def _utc_now() -> str:
@@ -235,6 +251,8 @@ def execute_run(
         "started_utc": started,
         "host": platform.node(),
         "pid": os.getpid(),
+        "python": platform.python_version(),
+        "git": git_revision(),  # not part of the run id (the slamcli version is); recorded for provenance
     }
     write_json(tmp / "config.json", {"run_id": run.run_id, "point": run.point, **run.config()})
     with _run_log(tmp / "run.log") as rlog:
