@@ -8,8 +8,11 @@ observation row, ``-1`` = not used) plus initial landmark positions ``landmarks_
 * :func:`associate_nearest_neighbour` — incremental nearest neighbour over time with a χ² gate on the
   Mahalanobis distance between the inverse observation ``m̂ = h⁻¹(x_t, z)`` (landmark space) and the fused
   estimate of each known landmark, on given (dead-reckoned or initial) poses; observations outside every
-  gate start a new landmark. Within one time step each landmark takes at most one observation (greedy in
-  order of distance), as in maximum-likelihood association (seed 002, §14.7).
+  gate start a new landmark. Within one time step each landmark takes at most one detection (greedy in
+  order of distance), as in maximum-likelihood association (seed 002, §14.7). Landmark covariances are
+  inflated by the dead-reckoning drift since their last sighting (loop revisits gate correctly), and a
+  laser's several returns from one post can be grouped into one detection (:func:`segment_returns`).
+  Duplicates that remain are merged after optimisation by ``graph.merge_candidates``.
 * :func:`associations_from_result` — copy the labels of another solver's result (``--init``).
 
 :func:`landmarks_from_observations` averages inverse observations per label (vectorised, ``np.bincount``).
