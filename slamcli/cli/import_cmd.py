@@ -120,3 +120,48 @@ def import_mrclam_command(
             markup=False,
             soft_wrap=True,
         )
+
+
+@import_app.command("g2o")
+def import_g2o_command(
+    path: Annotated[
+        Path,
+        typer.Argument(
+            help="Landmark graph file: g2o (EDGE_SE2/EDGE_SE2_XY) or GTSAM text "
+            "(ODOMETRY/LANDMARK), e.g. dlr.g2o or victoria_park.txt."
+        ),
+    ],
+    dt: Annotated[float, typer.Option(help="Nominal sampling period, s (a graph has no time).")] = 1.0,
+    forward: Annotated[
+        str,
+        typer.Option(
+            help="Forward axis of the file's body frame: auto (largest summed motion), x, y, -x or -y."
+        ),
+    ] = "auto",
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
+    out: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
+    ] = None,
+) -> None:
+    """Import a landmark pose graph: the odometry chain, landmark sightings as range-bearing rows with the
+    file's landmark ids as reported ids, median noise. No ground truth (solvers run; evaluate cannot)."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        from slamcli.datasets.g2o import import_graph
+        from slamcli.io import write_dataset
+
+        ds = import_graph(path, dt=dt, forward=forward)
+        write_dataset(out, ds)
+        if quiet:
+            return
+        inp, md = ds.inputs, ds.metadata
+        n = inp.noise
+        stdout_console().print(
+            f"{path.name}: {inp.n_poses} poses, {md['n_landmarks']} landmarks, {len(inp.observations)} observations, "
+            f"forward axis {md['forward_axis']}; median σ odometry {[round(float(s), 5) for s in n.odometry_std]}, "
+            f"range {n.range_std:.4g} m, bearing {n.bearing_std:.4g} rad; no ground truth → {out}",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )
