@@ -339,18 +339,20 @@ def test_cli_import_solve_evaluate_ekf_beats_dead_reckoning(tmp_path):
 def test_cli_import_options_and_errors(tmp_path):
     out = tmp_path / "a.h5"
     res = run("import", "mrclam", EXCERPT, "--start", "5", "--duration", "10", "--dt", "0.02",
-              "--non-landmark", "clutter", "--range-std", "0.1", "--omega-std", "0.05", "-q", "-o", out)
+              "--non-landmark", "clutter", "--range-std", "0.1", "--omega-std", "0.05", "--max-range", "8", "-q", "-o", out)
     assert res.exit_code == 0, res.output
     ds = read_dataset(out)
     assert ds.inputs.n_poses == 501 and ds.inputs.timestamps[0] == pytest.approx(5.0)
     assert ds.inputs.noise.range_std == 0.1 and ds.inputs.noise.bearing_std == default_noise(0.02).bearing_std
     np.testing.assert_allclose(ds.inputs.noise.motion_std, [default_noise(0.02).motion_std[0], 0.05])
     assert ds.inputs.noise.odometry_std[2] == pytest.approx(0.05 * 0.02)
+    assert ds.inputs.max_range == 8.0 and ds.metadata["sensor"]["file_range_min_max_m"] == [1.084, 5.452]
     for args, fragment in [
         (("mrclam", tmp_path / "nope", "-o", tmp_path / "b.h5"), "not a directory"),
         (("mrclam", EXCERPT, "--robot", "3", "-o", tmp_path / "b.h5"), "Robot3_Odometry.dat: file not found"),
         (("mrclam", EXCERPT, "--duration", "100", "-o", tmp_path / "b.h5"), "--duration"),
         (("mrclam", EXCERPT, "--non-landmark", "x", "-o", tmp_path / "b.h5"), "--non-landmark"),
+        (("mrclam", EXCERPT, "--max-range", "0", "-o", tmp_path / "b.h5"), "--max-range: must be > 0"),
         (("mrclam", EXCERPT), "-o/--out is required"),
     ]:
         res = run("import", *args)

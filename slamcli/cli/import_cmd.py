@@ -40,6 +40,10 @@ def import_mrclam_command(
             help="Seconds added to the odometry stamps (Dataset 7 truth lags the log by ~0.15-0.2 s)."
         ),
     ] = 0.0,
+    max_range: Annotated[
+        float,
+        typer.Option(help="Sensor max range to store, m (default inf; Dataset 7 ranges reach 7.2-8.4 m)."),
+    ] = float("inf"),
     range_std: Annotated[float | None, typer.Option(help="σ_r to store, m (default 0.15).")] = None,
     bearing_std: Annotated[float | None, typer.Option(help="σ_b to store, rad (default 0.02).")] = None,
     v_std: Annotated[
@@ -102,6 +106,7 @@ def import_mrclam_command(
             non_landmark=non_landmark,
             noise=noise,
             control_delay=control_delay,
+            max_range=max_range,
         )
         write_dataset(out, ds)
         if quiet:

@@ -353,7 +353,7 @@ def import_mrclam(
     if non_landmark not in ("drop", "clutter"):
         raise DatasetImportError(f"non_landmark: must be 'drop' or 'clutter', got {non_landmark!r}")
     if not max_range > 0:
-        raise DatasetImportError(f"max_range: must be > 0, got {max_range}")
+        raise DatasetImportError(f"--max-range: must be > 0, got {max_range}")
     if not misread_gate > 0:
         raise DatasetImportError(f"misread_gate: must be > 0, got {misread_gate}")
     if not (math.isfinite(control_delay) and abs(control_delay) <= 5.0):
@@ -477,6 +477,13 @@ def import_mrclam(
             "reports_ids": True,
             "max_range": float(max_range),
             "landmark_subjects": raw.landmark_subjects.tolist(),
+            # what the whole measurement file shows (the camera has no published range or field of view)
+            "file_range_min_max_m": [float(raw.measurements[:, 2].min()), float(raw.measurements[:, 2].max())]
+            if len(raw.measurements)
+            else [],
+            "file_abs_bearing_max_rad": float(np.abs(raw.measurements[:, 3]).max())
+            if len(raw.measurements)
+            else 0.0,
         },
         "time_origin_unix_s": float(t_ref),
         "window_unix_s": [float(t_ref + timestamps[0]), float(t_ref + timestamps[-1])],
