@@ -39,8 +39,8 @@ Conversion to the fixed-rate schema (``dt``; pose k at time ``t_k = t_start + k�
 * **Truth** – poses are the motion-capture track interpolated at ``t_k``: x, y linearly, the heading on
   the circle (``θ_i + w·angle_diff(θ_{i+1}, θ_i)``). Landmarks come from ``Landmark_Groundtruth.dat``.
 
-Time axis: ``timestamps`` are seconds since ``t_ref = max(first odometry stamp, first ground-truth stamp)``
-(the first moment both the controls and the start pose are known; Unix time in
+Time axis: ``timestamps`` are seconds since ``t_ref = max(first odometry stamp + control_delay, first
+ground-truth stamp)``, the first moment both the controls and the start pose are known (Unix time in
 ``metadata["time_origin_unix_s"]``). ``start`` and ``duration`` are measured on that axis.
 
 Noise (``NoiseSpec``) defaults: see :func:`default_noise` and :func:`residual_noise`, which measures them
@@ -63,9 +63,12 @@ from slamcli.models.observation import range_bearing
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
 #: Standard deviations a solver may assume for MRCLAM, measured with :func:`residual_noise` against the
-#: motion-capture truth on Dataset 7 (all five robots, whole run, dt = 0.1 s; robust σ = 1.4826·MAD) and
-#: rounded up to the largest robot: range σ 0.07-0.18 m (robot 1: 0.066, median bias +0.045 m), bearing σ
-#: 0.006-0.019 rad, velocity error of the step-averaged controls σ_v 0.009-0.015 m/s, σ_ω 0.034-0.070 rad/s.
+#: motion-capture truth on Dataset 7 (each of the five robots over its whole run, dt = 0.1 s; robust
+#: σ = 1.4826·MAD): range σ 0.066-0.18 m (robot 1: 0.066 with a median bias of +0.045 m; robots 2 and 4:
+#: 0.18), bearing σ 0.006-0.019 rad, error of the step-averaged controls σ_v 0.009-0.015 m/s and σ_ω
+#: 0.034-0.070 rad/s. The defaults sit at the upper end of those ranges (range slightly below the worst
+#: robot). Measured at dt = 0.02 s the control σ look larger (σ_v 0.026, σ_ω 0.12 for robot 1) because
+#: differencing the motion capture over 20 ms amplifies its own noise; the defaults do not depend on dt.
 DEFAULT_RANGE_STD = 0.15
 DEFAULT_BEARING_STD = 0.02
 DEFAULT_MOTION_STD = (0.015, 0.07)
