@@ -446,6 +446,19 @@ class Reproduction:
             rows.append(cells)
         sec.add(_md_table(["solver", "completed", "paper error mean (m)", "OSPA c=1 m (m)", "matched RMSE (m)",
                            "missed", "spurious", "ATE RMSE (m)", "wall time (s)"], rows))
+        done = t[t["status"] == "completed"] if len(t) else t
+        labels = [s.label for s in outcome.cfg.solvers if len(done) and (done["label"] == s.label).any()]
+        if labels:
+            fig, axes = self._figure(2, width=5.5)
+            for ax, col, ylabel in ((axes[0], "ate_rmse_m", "ATE RMSE, unaligned (m)"),
+                                    (axes[1], "lm_ospa_m", "landmark OSPA, c = 1 m (m)")):
+                data = [done[done["label"] == lb][col].astype(float).dropna().to_numpy() for lb in labels]
+                ax.boxplot(data, tick_labels=labels, showmeans=True)
+                ax.set_ylabel(ylabel)
+                ax.set_ylim(bottom=0)
+                ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+                ax.set_title(f"{len(reps)} replicates, same datasets for every solver")
+            self._save(sec, fig, "compare")
         return sec
 
     def nees_section(self) -> Section:
