@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -87,6 +88,10 @@ def test_load_good_file(tmp_path):
     q = quick_variant(cfg)
     assert q.sweep.replicates == (0,) and q.scenario_params["duration"] == 10.0
     assert q.sweep.grid == cfg.sweep.grid
+    # a fixed override of a swept key replaces that axis
+    q2 = quick_variant(dataclasses.replace(cfg, quick={"solver.ekf.gate": 7.0}))
+    assert q2.sweep.grid == (("scenario.sensor.max_range", (5.0, 10.0)),) and q2.solvers[0].params["gate"] == 7.0
+    assert q2.sweep.replicates == cfg.sweep.replicates
 
 
 @pytest.mark.parametrize(
