@@ -20,9 +20,12 @@ and ``os.replace``-d. Leftover temporary entries are removed when the next sweep
 Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id and every
 artefact exists. Failed and missing runs are (re)done. ``resume=False`` redoes everything.
 
-Workers never share an open HDF5 file: each group of runs (one dataset) is executed by one worker, which opens
-its own files; the local pool uses the ``spawn`` start method (EVALUATION-METHOD.md B7). The coordinator opens
-no HDF5 file; it only reads the small JSON files to build the tables.
+Parallel execution has two phases: each shared dataset is simulated once (one task per dataset, written under
+a temporary name and renamed), and as soon as it exists its runs are submitted one task each, so the runs of
+one dataset spread over every worker. Workers never share an open HDF5 file: each task opens its own files
+(the dataset read-only, its result under a temporary directory); the local pool uses the ``spawn`` start
+method (EVALUATION-METHOD.md B7). The coordinator opens no HDF5 file; it only reads the small JSON files to
+build the tables.
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError
-from slamcli.sweep.expand import DatasetSpec, Expansion, RunGroup, RunSpec, canonical_json
+from slamcli.sweep.expand import DatasetSpec, Expansion, RunSpec, canonical_json
 
 ARTEFACTS = ("config.json", "dataset.h5", "result.h5", "metrics.json", "status.json", "run.log")
 COMPLETED = "completed"
@@ -288,13 +291,6 @@ def execute_run(
     return {k: status.get(k) for k in ("run_id", "status", "error", "wall_time_s")}
 
 
-def execute_group(group: RunGroup, exp_dir: str, pipeline: Pipeline, fresh_dataset: bool = False) -> list[dict]:
-    """Worker entry point: simulate the shared dataset once (unless present), then run every solver on it."""
-    exp = Path(exp_dir)
-    ds_path, ds_error = _ensure_dataset(group.dataset, exp, pipeline, fresh_dataset)
-    return [execute_run(r, exp, ds_path, pipeline, ds_error) for r in group.runs]
-
-
 def simulate_dataset(dataset: DatasetSpec, exp_dir: str, pipeline: Pipeline, fresh: bool = False) -> str | None:
     """Worker entry point (parallel phase 1): make sure the dataset file exists; traceback text on failure."""
     return _ensure_dataset(dataset, Path(exp_dir), pipeline, fresh)[1]
@@ -461,8 +457,10 @@ def run_sweep(
     try:
         with make_executor(executor, workers, scheduler) as ex:
             if ex is None:
-                for g in groups:
-                    record(execute_group(g, str(exp_dir), pipeline, not resume))
+                for g in groups:  # in this process: simulate once, then record run by run (progress per run)
+                    ds_path, ds_error = _ensure_dataset(g.dataset, exp_dir, pipeline, not resume)
+                    for r in g.runs:
+                        record([execute_run(r, exp_dir, ds_path, pipeline, ds_error)])
             else:
                 # Phase 1 simulates each shared dataset once; as soon as one exists, its runs are submitted
                 # one task each, so the runs of a single dataset still spread over every worker.
