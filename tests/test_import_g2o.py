@@ -185,6 +185,12 @@ def test_cli_import_g2o_solve_and_evaluate_says_no_truth(tmp_path):
     ds = read_dataset(data)
     assert ds.truth is None
     np.testing.assert_array_equal(ds.inputs.odometry_xyt, import_graph(VP).inputs.odometry_xyt)
+    res = runner.invoke(app, ["import", "g2o", str(VP), "--bearing-std", "0.2", "-q", "-o", str(tmp_path / "v2.h5")])
+    assert res.exit_code == 0, res.output
+    v2 = read_dataset(tmp_path / "v2.h5").inputs.noise
+    assert v2.bearing_std == 0.2 and v2.range_std == ds.inputs.noise.range_std
+    res = runner.invoke(app, ["import", "g2o", str(VP), "--range-std", "-1", "-o", str(tmp_path / "v3.h5")])
+    assert res.exit_code == 1 and "--range-std: must be a finite number >= 0" in res.stderr
     res = runner.invoke(app, ["solve", str(data), "--method", "graph", "--param", "association=reported",
                               "-o", str(tmp_path / "r.h5")])
     assert res.exit_code == 0, res.output

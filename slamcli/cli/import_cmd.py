@@ -143,6 +143,14 @@ def import_g2o_command(
             help="Forward axis of the file's body frame: auto (largest summed motion), x, y, -x or -y."
         ),
     ] = "auto",
+    range_std: Annotated[
+        float | None,
+        typer.Option(help="σ_r to store, m (default: median of the propagated landmark covariances)."),
+    ] = None,
+    bearing_std: Annotated[
+        float | None,
+        typer.Option(help="σ_b to store, rad (default: median of the propagated landmark covariances)."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -156,7 +164,7 @@ def import_g2o_command(
         from slamcli.datasets.g2o import import_graph
         from slamcli.io import write_dataset
 
-        ds = import_graph(path, dt=dt, forward=forward)
+        ds = import_graph(path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std)
         write_dataset(out, ds)
         if quiet:
             return
