@@ -7,6 +7,8 @@ with :func:`slamcli.io.write_dataset` (``slamcli import <format> ...`` does both
 * :mod:`slamcli.datasets.mrclam`: UTIAS Multi-Robot Cooperative Localization and Mapping (MRCLAM) datasets
   (Leung et al., IJRR 2011): one robot's velocity log, barcode range-bearing measurements and motion-capture
   ground truth.
+* :mod:`slamcli.datasets.g2o`: landmark pose-graph files (g2o ``EDGE_SE2``/``EDGE_SE2_XY``, GTSAM
+  ``ODOMETRY``/``LANDMARK``), e.g. the DLR graph and GTSAM's Victoria Park: solver inputs only, no ground truth.
 
 Every problem with the input files (missing file, malformed row, no overlap in time) raises
 :class:`DatasetImportError` (a :class:`~slamcli.errors.SlamcliError`) with one line naming the file.
