@@ -449,3 +449,29 @@ def test_gps_update_matches_dense_kalman_update_and_is_used():
 def test_provisional_requires_ml():
     with pytest.raises(ValueError, match="provisional"):
         EkfParams(association="known", provisional=True)
+
+
+# ------------------------------------------------------------------------------------------------ sim scenario
+def test_ml_association_accuracy_on_sim_loop_scenario():
+    from slamcli.sim import simulate_scenario
+
+    for seed in (0, 1, 2):
+        ds = simulate_scenario("loop", seed=seed)  # clutter off, no reported ids
+        assert np.all(ds.inputs.observations.reported_id < 0)
+        res = EkfSlam(EkfParams(association="ml")).solve(ds.inputs, rng=np.random.default_rng(0))
+        acc = association_accuracy(res.assoc, ds.truth.obs_landmark)  # measured 0.990, 0.990, 0.991
+        assert acc >= 0.95, (seed, acc)
+        assert res.landmarks_xy.shape[0] == np.unique(ds.truth.obs_landmark).size
+
+
+def test_provisional_list_on_sim_loop_with_clutter():
+    from slamcli.sim import simulate_scenario
+
+    ds = simulate_scenario("loop", seed=0, overrides={"clutter.rate": 0.3, "n_steps": 200})
+    true_lm = ds.truth.obs_landmark
+    off = EkfSlam(EkfParams(association="ml")).solve(ds.inputs, rng=np.random.default_rng(0))
+    on = EkfSlam(EkfParams(association="ml", provisional=True)).solve(ds.inputs, rng=np.random.default_rng(0))
+    s_off = n_spurious(off.assoc, true_lm, off.landmarks_xy.shape[0])  # measured 83
+    s_on = n_spurious(on.assoc, true_lm, on.landmarks_xy.shape[0])  # measured 0
+    assert s_off > 30 and s_on <= 0.1 * s_off, (s_on, s_off)
+    assert association_accuracy(on.assoc, true_lm) >= 0.95
