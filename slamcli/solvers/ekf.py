@@ -17,13 +17,16 @@ paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
 * **association**: ``known`` uses the sensor-reported ids (``observations.reported_id``); ``ml`` is
   maximum-likelihood (nearest neighbour in Mahalanobis distance of the innovation) with a χ² gate, new
   landmark creation beyond a second χ² threshold and an optional provisional list (paper 002 §14.1: wait
-  several sightings before a landmark enters the state, against "fake" landmarks);
+  several sightings before a landmark enters the state, against "fake" landmarks). Paper 002 Fig. 14.5 takes
+  the argmax of the likelihood ``det(2πS)^-½ exp(−½ d²)``; we take the smallest ``d²`` (the usual gated
+  nearest neighbour) so that the gate and the choice use the same statistic;
+* optional GPS position fixes (linear update ``H = [I₂ 0]``);
 * optional **stabilising noise** (paper 001 §III: the sensor noise assumed by the EKF is "pumped up by a
   factor of approximately 10 ... to maintain consistency"): ``obs_std_scale`` multiplies σ_r, σ_b,
   ``motion_std_scale`` the process noise σ's, and ``stabilising_pose_std`` adds a per-step pose noise.
 
 The numerical core is a set of pure functions under the class (:func:`predict`, :func:`update`,
-:func:`landmark_init`, :func:`innovation_stats`), each returning new arrays, so the class is a thin
+:func:`update_position`, :func:`landmark_init`, :func:`innovation_stats`), each returning new arrays, so the class is a thin
 driver and the functions can be tested against hand-written Kalman algebra.
 """
 
