@@ -475,3 +475,38 @@ def test_provisional_list_on_sim_loop_with_clutter():
     s_on = n_spurious(on.assoc, true_lm, on.landmarks_xy.shape[0])  # measured 0
     assert s_off > 30 and s_on <= 0.1 * s_off, (s_on, s_off)
     assert association_accuracy(on.assoc, true_lm) >= 0.95
+
+
+def _duplicated_returns(seed):
+    """The make_world data with every row observed twice (two independent returns of the same landmark)."""
+    import dataclasses
+
+    inputs, truth = make_world(seed, T=120)
+    o = inputs.observations
+    rep = np.repeat(np.arange(len(o)), 2)
+    rng = np.random.default_rng(seed + 100)
+    z_true = observation.range_bearing(truth["poses"][o.step], truth["landmarks"][truth["obs_landmark"]])
+    z = z_true[rep] + rng.normal(0, [inputs.noise.range_std, inputs.noise.bearing_std], size=(rep.size, 2))
+    z[:, 1] = wrap_angle(z[:, 1])
+    obs2 = dataclasses.replace(
+        o, step=o.step[rep], range_m=z[:, 0], bearing_rad=z[:, 1], sensor=o.sensor[rep],
+        reported_id=o.reported_id[rep], offsets=Observations.offsets_from_steps(o.step[rep], inputs.n_poses),
+    )
+    # the same data pre-averaged by hand: mean range, circular-mean bearing of each pair, + range offset
+    zp = z.reshape(-1, 2, 2)
+    z_avg = np.stack([zp[:, :, 0].mean(1), np.arctan2(np.sin(zp[:, :, 1]).sum(1), np.cos(zp[:, :, 1]).sum(1))], -1)
+    obs_avg = dataclasses.replace(o, range_m=z_avg[:, 0] + 0.1, bearing_rad=z_avg[:, 1])
+    return dataclasses.replace(inputs, observations=obs2), dataclasses.replace(inputs, observations=obs_avg), rep
+
+
+@pytest.mark.parametrize("association", ["known", "ml"])
+def test_group_returns_equals_filtering_the_averaged_measurements(association):
+    dup, avg, rep = _duplicated_returns(19)
+    grouped = EkfSlam(EkfParams(association=association, group_returns=True, range_offset=0.1)).solve(
+        dup, rng=np.random.default_rng(0)
+    )
+    ref = EkfSlam(EkfParams(association=association)).solve(avg, rng=np.random.default_rng(0))
+    np.testing.assert_allclose(grouped.poses_xyt, ref.poses_xyt, atol=1e-12)
+    np.testing.assert_allclose(grouped.pose_cov, ref.pose_cov, atol=1e-15)
+    np.testing.assert_allclose(grouped.landmarks_xy, ref.landmarks_xy, atol=1e-12)
+    np.testing.assert_array_equal(grouped.assoc, ref.assoc[rep])  # both rows of a pair get the pair's label

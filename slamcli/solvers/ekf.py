@@ -91,6 +91,15 @@ class EkfParams:
         Prior standard deviation of the start pose ``x0`` (0 = known exactly, fixes the gauge).
     use_gps : bool
         Fuse the dataset's GPS position fixes (if any) with a linear update ``H = [I₂ 0]``, σ = ``gps_std``.
+    group_returns : bool
+        Merge the returns of one landmark at one step into one measurement (mean range, circular-mean
+        bearing) before the update — for a laser's several hits on one post. Point sensors: no effect.
+    group_dist : float
+        ml + group_returns: returns whose landmark-space points are closer than this (m, single linkage) are
+        one detection.
+    range_offset : float
+        Added to every measured range (m). A laser measures a post's surface, on average ≈ π/4 · radius
+        nearer than its centre; ``range_offset`` ≈ π/4 · radius re-centres those returns.
     """
 
     association: Literal["known", "ml"] = "known"
@@ -106,6 +115,9 @@ class EkfParams:
     stabilising_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
     init_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
     use_gps: bool = True
+    group_returns: bool = False
+    group_dist: float = 0.5
+    range_offset: float = 0.0
 
     def __post_init__(self) -> None:
         if self.provisional and self.association != "ml":
@@ -129,12 +141,12 @@ class _Candidate:
 
     __slots__ = ("C", "first_step", "hits", "m", "rows")
 
-    def __init__(self, m, C, step, row):
+    def __init__(self, m, C, step, rows):
         self.m = m
         self.C = C
         self.hits = 1
         self.first_step = step
-        self.rows = [row]
+        self.rows = list(rows)
 
 
 class _GrowingState:
@@ -205,13 +217,12 @@ class EkfSlam(BaseSolver):
         z_all = obs.z  # (N, 2)
         N = z_all.shape[0]
         sensor = np.asarray(obs.sensor)
-        if p.association == "known":
-            rid = np.asarray(obs.reported_id, np.int64)
-            if N > 0 and np.all(rid < 0):
-                raise SolverError(
-                    "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
-                    "(use --param association=ml)"
-                )
+        rid = np.asarray(obs.reported_id, np.int64)
+        if p.association == "known" and N > 0 and np.all(rid < 0):
+            raise SolverError(
+                "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
+                "(use --param association=ml)"
+            )
         if p.association == "ml":
             from scipy.stats import chi2
 
@@ -277,21 +288,22 @@ class EkfSlam(BaseSolver):
                 st.set(x, P)
 
             # ---------------- update with the rows of step t ----------------
-            rows = range(int(obs.offsets[t]), int(obs.offsets[t + 1]))
+            lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
             used: set[tuple[int, int]] = set()
-            for i in rows:
-                z = z_all[i]
+            for z, g in _detections(z_all, sensor, rid, lo, hi, st.x[:3], p):
+                # z (2,): the measurement of one detection; g: its observation rows (several when grouped)
+                i = int(g[0])
                 if p.association == "known":
                     key = int(rid[i])
                     if key < 0:
-                        n_disc += 1
+                        n_disc += len(g)
                         continue
                     j = id_to_lm.get(key)
                     if j is None:
                         j = _add_landmark(st, z, R)
                         id_to_lm[key] = j
                         n_new += 1
-                        assoc[i] = j
+                        assoc[g] = j
                         continue
                 else:
                     j, d2 = _ml_best(st, z, R, exclude=[lm for (s, lm) in used if s == sensor[i]]
@@ -299,23 +311,23 @@ class EkfSlam(BaseSolver):
                     if j < 0 or d2 > new_thr:
                         # no plausible state landmark: start a new one (or a provisional candidate)
                         if p.provisional:
-                            j = _provisional_step(st, candidates, z, R, t, i, gate, p, assoc)
+                            j = _provisional_step(st, candidates, z, R, t, g, gate, p, assoc)
                             if j >= 0:
                                 n_new += 1
                                 used.add((int(sensor[i]), j))
                         else:
                             j = _add_landmark(st, z, R)
                             n_new += 1
-                            assoc[i] = j
+                            assoc[g] = j
                             used.add((int(sensor[i]), j))
                         continue
                     if d2 > gate:
-                        n_disc += 1  # ambiguous: neither clearly this landmark nor clearly a new one
+                        n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
                         continue
                     used.add((int(sensor[i]), j))
                 x, P, y, S = update(st.x, st.P, z, j, R)
                 st.set(x, P)
-                assoc[i] = j
+                assoc[g] = j
                 nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
 
@@ -376,6 +388,48 @@ def _cached_version(cls) -> str:
 
 
 
+def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
+    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order.
+
+    Without ``group_returns`` every row is its own detection. With it, the rows of one landmark are merged
+    into one measurement at their mean range and circular-mean bearing (a laser hits one post on several
+    adjacent beams; fusing each hit as an independent measurement of the centre overweights that pose-landmark
+    pair): ``known`` groups by (sensor, reported id); ``ml`` by single-linkage clusters of the inverse
+    observations ``h⁻¹(x_r, z)`` closer than ``group_dist`` (same sensor).
+    ``range_offset`` is added to every range first.
+    """
+    z = z_all[lo:hi]
+    if p.range_offset:
+        z = z + np.array([p.range_offset, 0.0])
+    rows = np.arange(lo, hi, dtype=np.int64)
+    if not p.group_returns or hi - lo < 2:
+        return [(z[k], rows[k : k + 1]) for k in range(hi - lo)]
+    s = np.asarray(sensor[lo:hi], np.int64)
+    if p.association == "known":
+        r = np.asarray(rid[lo:hi], np.int64)
+        # rows without an id stay single (they are discarded anyway)
+        key = np.where(r >= 0, s * (int(r.max()) + 2) + r, -1 - np.arange(hi - lo))
+    else:
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        # single-linkage clusters of the landmark-space points m̂ = h⁻¹(x_r, z) of one sensor: O(k²), k ≲ 10²
+        pts = inverse_range_bearing(np.asarray(x_r, float)[None, :], z)
+        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < p.group_dist
+        near &= s[:, None] == s[None, :]
+        _, key = connected_components(csr_matrix(near), directed=False)
+    out = []
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    for k in np.argsort(first, kind="stable"):
+        g = np.flatnonzero(inv == k)
+        if g.size == 1:
+            out.append((z[g[0]], rows[g]))
+        else:
+            b = math.atan2(float(np.sin(z[g, 1]).sum()), float(np.cos(z[g, 1]).sum()))
+            out.append((np.array([float(z[g, 0].mean()), b]), rows[g]))
+    return out
+
+
 def _add_landmark(st: _GrowingState, z, R) -> int:
     m, P_mx, P_mm = landmark_init(st.x, st.P, z, R)
     return st.append_landmark(m, P_mx, P_mm)
@@ -393,7 +447,7 @@ def _ml_best(st: _GrowingState, z, R, exclude) -> tuple[int, float]:
     return (j, float(d2[j])) if np.isfinite(d2[j]) else (-1, np.inf)
 
 
-def _provisional_step(st, candidates, z, R, t, row, gate, p: EkfParams, assoc) -> int:
+def _provisional_step(st, candidates, z, R, t, rows, gate, p: EkfParams, assoc) -> int:
     """Match ``z`` against the provisional list; promote a candidate on its ``min_hits``-th sighting.
 
     Returns the new state landmark index if one was promoted, else −1 (the row stays unassociated until
@@ -412,7 +466,7 @@ def _provisional_step(st, candidates, z, R, t, row, gate, p: EkfParams, assoc) -
     if best is None or best_d2 > gate:
         M_x, M_z = inverse_range_bearing_jacobians(x_r, z)
         C = M_x @ P_rr @ M_x.T + M_z @ R @ M_z.T
-        candidates.append(_Candidate(inverse_range_bearing(x_r, z), C, t, row))
+        candidates.append(_Candidate(inverse_range_bearing(x_r, z), C, t, rows))
         if p.provisional_min_hits > 1:
             return -1
         best = candidates[-1]
@@ -427,7 +481,7 @@ def _provisional_step(st, candidates, z, R, t, row, gate, p: EkfParams, assoc) -
         I_KH = np.eye(2) - K @ H_m
         best.C = I_KH @ best.C @ I_KH.T + K @ R_eff @ K.T
         best.hits += 1
-        best.rows.append(row)
+        best.rows.extend(rows)
     if best.hits < p.provisional_min_hits:
         return -1
     # confirmed: initialise in the state from the current sighting, label every sighting of the candidate
