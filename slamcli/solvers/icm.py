@@ -57,7 +57,9 @@ class IcmParams:
     fusion_radius : float        ϑ, m: labels whose points are closer than ϑ are fused (§4); also the radius
                                  within which the on-line init matches an existing label.
     min_observations : int       ς: map points seen fewer times are removed (§4; paper: 500 for its laser data
-                                 with many returns per landmark per scan — scale it to the data).
+                                 with many returns per landmark per scan — scale it to the data; the simulated
+                                 paper-sim1/octagon lasers give 800-3000 returns per landmark, so 500 fits).
+                                 Default 1 keeps every map point.
     init : "online" | "kinematic"  Algorithm 2 step 1 as written, or poses from g(x, u) only (Fig. 6).
     correspondences : "nearest" | "reported"  nearest-map-point matchings (eqs. 9-13), or fixed labels from the
                                  sensor-reported ids (known correspondences; no fusion, no filter).
