@@ -422,3 +422,24 @@ def test_nearest_labels_bound_is_exact():
         np.testing.assert_array_equal(ref, d2.argmin(1))
         prev = np.where(rng.random(2000) < 0.7, ref, rng.integers(-1, 30, 2000))  # mostly right, some stale
         np.testing.assert_array_equal(mp.nearest_labels(pts, lms, Q, prev), ref)
+
+
+def test_parallel_coding_scheme_leaves_even_poses_at_their_modes(world):
+    """Odd poses first, then even poses: after the sweep every even pose is at its conditional mode given the
+    (already updated) odd poses — the coding scheme is a valid ICM visit order."""
+    inputs, truth, lm, ids = world
+    prob = en.Problem.from_inputs(inputs)
+    poses, landmarks, labels = _random_config(inputs, truth, lm, ids, np.random.default_rng(10))
+    stats = en.step_stats(prob, labels, landmarks)
+    E0 = en.energy(prob, W3, poses, landmarks, labels)
+    en.sweep_poses_parallel(prob, W3, poses, stats, iters=20)
+    assert en.energy(prob, W3, poses, landmarks, labels) < E0
+    for t in (2, 30, 60):
+        c = _ctx_for(prob, poses, t)
+
+        def f(v, c=c, t=t):
+            return en.cond_cost(v[0], v[1], v[2], c, tuple(stats[:, t]), W3.flat, prob.dt, math.cos, math.sin)
+
+        h = 1e-6
+        g = [(f(poses[t] + h * e) - f(poses[t] - h * e)) / (2 * h) for e in np.eye(3)]
+        assert np.max(np.abs(g)) < 1e-5
