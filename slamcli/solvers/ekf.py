@@ -32,7 +32,6 @@ driver and the functions can be tested against hand-written Kalman algebra.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass
@@ -202,12 +201,6 @@ class EkfSlam(BaseSolver):
 
     name = "ekf"
     Params = EkfParams
-
-    @classmethod
-    def version(cls) -> str:
-        """Distribution version, looked up once per process (``BaseSolver.version`` scans all installed
-        distributions, ≈0.3 s — more than a whole filter run on small worlds)."""
-        return _cached_version(cls)
 
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator, progress=None) -> SolverResult:
         t_start = time.perf_counter()
@@ -381,10 +374,6 @@ class EkfSlam(BaseSolver):
 # helpers of the driver
 # ------------------------------------------------------------------------------------------------------
 
-
-@functools.cache
-def _cached_version(cls) -> str:
-    return BaseSolver.version.__func__(cls)
 
 
 

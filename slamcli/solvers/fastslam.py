@@ -57,7 +57,6 @@ landmark update at the sampled pose, 2.0: the predictive innovation of the propo
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import time
 from typing import Literal
@@ -443,13 +442,6 @@ class FastSlam(BaseSolver):
 
     name = "fastslam"
     Params = FastSlamParams
-
-    @classmethod
-    @functools.cache
-    def version(cls) -> str:
-        """Cached: the distribution lookup in :meth:`BaseSolver.version` scans every installed package
-        (~0.3 s), which would dominate short runs and sweeps."""
-        return super().version()
 
     def solve(
         self,
