@@ -383,3 +383,78 @@ def test_range_bias_estimate_recovers_a_constant_range_offset():
     err_plain = np.linalg.norm(plain.landmarks_xy - truth.landmarks_xy[true_of], axis=1).mean()
     assert err_est < 0.05 < err_plain
     assert est.landmark_cov.shape == (6, 2, 2) and est.pose_cov.shape == (inp.n_poses, 3, 3)
+
+
+def _with_gross_outliers(ds, landmark, steps, range_m=5.0):
+    """``ds`` plus misread rows at ``steps`` reporting ``landmark`` at ``range_m`` on the OPPOSITE side
+    (true bearing + π) — like MRCLAM robot 5's misread barcodes."""
+    from slamcli.models import observation
+    from slamcli.types import Observations
+
+    obs = ds.inputs.observations
+    tb = observation.range_bearing(ds.truth.poses_xyt[steps], ds.truth.landmarks_xy[[landmark] * len(steps)])
+    step = np.concatenate([obs.step, steps])
+    order = np.argsort(step, kind="stable")
+    n = len(steps)
+    new = Observations(
+        step=step[order],
+        range_m=np.concatenate([obs.range_m, np.full(n, range_m)])[order],
+        bearing_rad=np.concatenate([obs.bearing_rad, np.mod(tb[:, 1] + 2 * np.pi, 2 * np.pi) - np.pi])[order],
+        sensor=np.concatenate([obs.sensor, np.zeros(n, np.int16)])[order],
+        reported_id=np.concatenate([obs.reported_id, np.full(n, landmark)])[order],
+        offsets=Observations.offsets_from_steps(step[order], ds.inputs.n_poses),
+    )
+    return dataclasses.replace(ds.inputs, observations=new)
+
+
+def test_gross_outliers_that_pull_a_landmark_onto_a_pose_give_no_covariances_not_a_crash(world):
+    """Regression (MRCLAM robot 5, ``LinAlgError: leading minor not positive definite`` in
+    ``cholesky_banded``): landmark 1 passes 0.55 m from pose 59; five misread rows at poses 57-61 see it 5 m
+    away on the opposite side. The bearing residuals pull the landmark through the pose, where the bearing
+    Jacobian ∝ 1/r explodes: LM ends with landmark 1 within 1e-9 m of a pose and H is not numerically
+    positive definite there. The solve must finish with finite poses, and report no covariances (never
+    invalid ones) with the reason in ``message`` and ``extra``."""
+    truth = world.truth
+    d = np.linalg.norm(truth.poses_xyt[:, :2] - truth.landmarks_xy[1], axis=1)
+    assert d.argmin() == 59 and d.min() == pytest.approx(0.5535, abs=1e-3)
+    inp = _with_gross_outliers(world, 1, np.arange(57, 62))
+    res = _solve(inp)
+    assert res.status == Status.CONVERGED
+    assert np.all(np.isfinite(res.poses_xyt)) and np.all(np.isfinite(res.landmarks_xy))
+    lab = res.assoc[np.flatnonzero(inp.observations.reported_id == 1)[0]]
+    gap = np.linalg.norm(res.poses_xyt[:, :2] - res.landmarks_xy[lab], axis=1)
+    assert gap.min() < 1e-9  # the near-singular configuration this test is about
+    assert res.pose_cov is None and res.landmark_cov is None
+    assert "no covariances" in res.message and "not numerically positive definite" in res.message
+    assert res.extra["covariance_error"] in res.message
+    # the factorisation broke down at one of the two variables that coincide
+    assert any(
+        f"{v}:" in res.extra["covariance_error"] for v in (f"pose {int(gap.argmin())}", f"landmark {lab}")
+    )
+    # the outliers cost accuracy, but the trajectory is still an estimate, not garbage
+    assert np.abs(res.poses_xyt[:, :2] - truth.poses_xyt[:, :2]).max() < 0.6
+    # Gauss-Newton and Huber on the same data complete as well; Huber keeps the landmark off the pose and
+    # then has valid covariances
+    gn = _solve(inp, method="gn")
+    assert gn.status != Status.FAILED and np.all(np.isfinite(gn.poses_xyt))
+    hub = _solve(inp, robust="huber")
+    assert hub.pose_cov is not None and np.all(np.linalg.eigvalsh(hub.pose_cov) > 0)
+    assert np.abs(hub.poses_xyt[:, :2] - truth.poses_xyt[:, :2]).max() < 0.1
+
+
+def test_message_status_trace_and_progress_agree_on_the_iteration_count(world):
+    """Victoria Park printed "71 iterations" (trace) next to "stopped after 100 iterations" (status): the
+    budget counted LM's rejected trial steps too. Now an iteration is an accepted step everywhere. The
+    outlier world makes LM reject trial steps early (before the fix: "stopped after 5 iterations" with
+    two accepted steps in the trace)."""
+    inp = _with_gross_outliers(world, 1, np.arange(57, 62))
+    seen = []
+    res = graph.GraphSlam(graph.GraphParams(max_iterations=5, covariance=False)).solve(
+        inp, rng=np.random.default_rng(0), progress=lambda done, total: seen.append((done, total))
+    )
+    assert res.extra["iterations"] == 5 == len(res.trace) - 1  # trace row 0 is the start
+    assert res.status == Status.MAX_ITERATIONS
+    assert res.message == "stopped after 5 iterations (max_iterations)"
+    assert [d for d, _ in seen] == [0, 1, 2, 3, 4, 5, 5] and {t for _, t in seen} == {5}
+    full = _solve(world.inputs)
+    assert full.status == Status.CONVERGED and full.extra["iterations"] == len(full.trace) - 1

@@ -287,3 +287,98 @@ def test_marginal_covariances_equal_blocks_of_the_dense_inverse():
     # marginal ≠ conditional: the conditional (H_ii)⁻¹ is smaller (overconfident)
     cond = np.linalg.inv(H.toarray()[ip[-1][:, None], ip[-1][None, :]])
     assert np.trace(pose_cov[-1]) > 2 * np.trace(cond)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# numerically indefinite normal equations (MRCLAM robot 5: a landmark estimated on top of a pose makes the
+# bearing Jacobian ∝ 1/r explode, H gets entries of 1e24 next to 1e4 and the banded Cholesky breaks down)
+# ---------------------------------------------------------------------------------------------------------
+def _exploding_chain(n=6, d0=1e-24):
+    """Chain ``x_0..x_{n-1}`` (k = 1): prior ``x_0 = 0``, odometry ``x_{i+1} − x_i = 1`` and one nonlinear
+    factor ``r = √|x_2 − x_1| − 1`` whose Jacobian ``±1 / (2√|x_2 − x_1|)`` explodes as the gap closes — as a
+    bearing does at range → 0. Started with a gap ``d0 = 1e-24`` it puts ``≈ 2.5e23`` into the 2×2 block
+    of ``H`` next to entries of order 1: in double precision the block is rank 1 and the banded Cholesky
+    meets a zero pivot, although ``J`` has full column rank. The optimum is ``x_i = i`` (zero cost)."""
+
+    def ev_prior(x):
+        return x[:1, None], np.ones((1, 1, 1))
+
+    def ev_odo(x):
+        return (x[1:] - x[:-1] - 1.0)[:, None], np.tile(np.array([[[-1.0, 1.0]]]), (n - 1, 1, 1))
+
+    def ev_gap(x):
+        d = x[2] - x[1]
+        dr = np.sign(d) / (2.0 * np.sqrt(abs(d)))
+        return np.array([[np.sqrt(abs(d)) - 1.0]]), np.array([[[-dr, dr]]])
+
+    blocks = [
+        nls.FactorBlock("prior", np.array([[0]]), ev_prior, np.eye(1)),
+        nls.FactorBlock("odometry", np.column_stack([np.arange(n - 1), np.arange(1, n)]), ev_odo, np.eye(1)),
+        nls.FactorBlock("gap", np.array([[1, 2]]), ev_gap, np.eye(1)),
+    ]
+    x0 = np.zeros(n)
+    x0[2] = d0
+    return nls.NlsProblem(n_vars=n, blocks=blocks, chain=(n, 1)), x0
+
+
+def test_banded_cholesky_breakdown_falls_back_and_gauss_newton_takes_damped_steps():
+    prob, x0 = _exploding_chain()
+    asm = nls._Assembler(prob)
+    _, data, g = asm.linearize(x0, nls.NlsParams())
+    assert nls._ChainSolver(asm, 6, 1).solve(data, -g) is None  # the breakdown this test is about
+    # before the fix GN stopped at x0 with FAILED "singular normal equations"
+    gn = nls.solve(prob, x0, nls.NlsParams(method="gn"))
+    assert gn.status == Status.CONVERGED and np.all(np.isfinite(gn.x))
+    np.testing.assert_allclose(gn.x, np.arange(6.0), atol=1e-8)
+    assert any("banded Cholesky" in n for n in gn.notes) and any("damped" in n for n in gn.notes)
+    lm = nls.solve(prob, x0, nls.NlsParams(method="lm"))
+    assert lm.status == Status.CONVERGED
+    np.testing.assert_allclose(lm.x, np.arange(6.0), atol=1e-8)
+
+
+def test_iterations_are_accepted_steps_and_the_message_says_so():
+    """An iteration = one accepted step (GTSAM's count); rejected LM trials do not use up the budget.
+    Before the fix the budget counted linear solves, so a run could say "stopped after 5 iterations" with
+    one accepted step in its trace (Victoria Park: "71 iterations" in the trace vs "stopped after 100")."""
+
+    def ev(x):  # Rosenbrock: LM from (−1.2, 1) with λ₀ = 1e-5 rejects many trial steps
+        return np.array([[10 * (x[1] - x[0] ** 2), 1 - x[0]]]), np.array([[[-20 * x[0], 10.0], [-1.0, 0.0]]])
+
+    prob = nls.NlsProblem(n_vars=2, blocks=[nls.FactorBlock("rosenbrock", np.array([[0, 1]]), ev, np.eye(2))])
+    seen = []
+    res = nls.solve(
+        prob, np.array([-1.2, 1.0]), nls.NlsParams(max_iterations=5), callback=lambda k, x, c: seen.append(k)
+    )
+    assert res.status == Status.MAX_ITERATIONS and res.message.startswith("stopped after 5 iterations")
+    assert res.iterations == 5 == len(res.cost_trace) - 1 == len(res.time_trace) - 1
+    assert seen == [0, 1, 2, 3, 4, 5]
+    assert res.linear_solves > res.iterations  # rejected steps happened and were not counted
+    assert np.all(np.diff(res.cost_trace) < 0)
+    full = nls.solve(prob, np.array([-1.2, 1.0]))
+    assert full.status == Status.CONVERGED and full.iterations == len(full.cost_trace) - 1
+    np.testing.assert_allclose(full.x, [1.0, 1.0], atol=1e-8)
+
+
+def test_marginals_refuse_an_indefinite_information_matrix():
+    prob, x0 = _exploding_chain()
+    asm = nls._Assembler(prob)
+    H = asm.matrix(asm.linearize(x0, nls.NlsParams())[1])  # H at the near-singular start
+    with pytest.raises(nls.NotPositiveDefiniteError) as exc:
+        nls.marginals_chain_border(H, 6, 1)
+    assert exc.value.column == 2  # x_2: the 2×2 block of the gap factor is numerically rank 1
+    with pytest.raises(np.linalg.LinAlgError):
+        nls.factorize_information(H, require_positive_definite=True)
+    # at the optimum the same problem is well conditioned and its marginals are those of the dense inverse
+    Hopt = nls.solve(prob, x0).information
+    cov, _ = nls.marginals_chain_border(Hopt, 6, 1)
+    np.testing.assert_allclose(cov[:, 0, 0], np.diag(np.linalg.inv(Hopt.toarray())), rtol=1e-12)
+    # covariance blocks: accepted only if finite and positive definite
+    good = np.array([[[2.0, 0.5], [0.5, 1.0]]] * 3)
+    nls.check_covariance_blocks(good, "landmark")
+    bad = good.copy()
+    bad[1] = [[1.0, 2.0], [2.0, 1.0]]  # eigenvalues 3, −1
+    with pytest.raises(np.linalg.LinAlgError, match=r"landmark 1: .*eigenvalue -1 ≤ 0"):
+        nls.check_covariance_blocks(bad, "landmark")
+    bad[1] = np.nan
+    with pytest.raises(np.linalg.LinAlgError, match="landmark 1: non-finite"):
+        nls.check_covariance_blocks(bad, "landmark")

@@ -566,20 +566,57 @@ def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.nda
 
     ``H`` is block tridiagonal over the pose chain (every pose-pose factor links consecutive poses or is
     unary), so :func:`slamcli.solvers.nls.marginals_chain_border` eliminates the chain with a banded
-    Cholesky and inverts only the ``2L × 2L`` landmark Schur complement; otherwise the general sparse
-    column solve :func:`slamcli.solvers.nls.marginal_covariances` is used.
+    Cholesky and inverts only the ``2L × 2L`` landmark Schur complement. When that is not possible (other
+    structure, or the banded Cholesky meets a pivot ≤ 0 because ``H`` is badly scaled — e.g. a landmark
+    estimated on top of a pose, whose bearing Jacobian ``∝ 1/r`` explodes), the general sparse column solve
+    :func:`slamcli.solvers.nls.marginal_covariances` is used, on a SuperLU factorisation that must be a
+    symmetric elimination with positive pivots. Every block is checked to be finite and positive definite
+    (:func:`slamcli.solvers.nls.check_covariance_blocks`).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``H`` is not numerically positive definite: no factorisation gives valid marginals. The message
+        names the pose or landmark where the factorisation broke down.
     """
     L = gp.n_landmarks
+    first_error = None
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
-        pose_cov, border = nls.marginals_chain_border(information, gp.n_poses, 3)
-        j = np.arange(L)
-        border = border[: 2 * L, : 2 * L]
-        lm_cov = border.reshape(L, 2, L, 2)[j, :, j, :] if L else np.zeros((0, 2, 2))
-        return pose_cov, np.ascontiguousarray(lm_cov)
-    factor = nls.factorize_information(information)
-    pose_cov = nls.marginal_covariances(information, gp.pose_cols(), factor=factor)
-    lm_cov = nls.marginal_covariances(information, gp.landmark_cols(), factor=factor)
+        try:
+            pose_cov, border = nls.marginals_chain_border(information, gp.n_poses, 3)
+            j = np.arange(L)
+            border = border[: 2 * L, : 2 * L]
+            lm_cov = border.reshape(L, 2, L, 2)[j, :, j, :] if L else np.zeros((0, 2, 2))
+            lm_cov = np.ascontiguousarray(lm_cov)
+            nls.check_covariance_blocks(pose_cov, "pose")
+            nls.check_covariance_blocks(lm_cov, "landmark")
+            return pose_cov, lm_cov
+        except np.linalg.LinAlgError as exc:  # try the general sparse factorisation (another ordering)
+            first_error = _located(gp, exc)
+    try:
+        factor = nls.factorize_information(information, require_positive_definite=True)
+        pose_cov = nls.marginal_covariances(information, gp.pose_cols(), factor=factor)
+        lm_cov = nls.marginal_covariances(information, gp.landmark_cols(), factor=factor)
+        nls.check_covariance_blocks(pose_cov, "pose")
+        nls.check_covariance_blocks(lm_cov, "landmark")
+    except np.linalg.LinAlgError as exc:
+        raise np.linalg.LinAlgError(first_error or _located(gp, exc)) from None
     return pose_cov, lm_cov
+
+
+def _located(gp: GraphProblem, exc: np.linalg.LinAlgError) -> str:
+    """The message of ``exc``, prefixed with the variable (``pose t`` / ``landmark j``) it names, if any."""
+    c = getattr(exc, "column", None)
+    if c is None:
+        return str(exc)
+    P = 3 * gp.n_poses
+    if c < P:
+        what = f"pose {c // 3}"
+    elif c < P + 2 * gp.n_landmarks:
+        what = f"landmark {(c - P) // 2}"
+    else:
+        what = "range bias"
+    return f"{what}: {exc}"
 
 
 def landmark_joint_covariance(gp: GraphProblem, information) -> np.ndarray:
@@ -587,11 +624,21 @@ def landmark_joint_covariance(gp: GraphProblem, information) -> np.ndarray:
 
     Falls back to the block-diagonal of the marginals (cross-covariances 0) when the pose block is not
     block tridiagonal.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``H`` is not numerically positive definite (a factorisation fails or gives an invalid block).
     """
     L = gp.n_landmarks
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
-        return nls.marginals_chain_border(information, gp.n_poses, 3)[1][: 2 * L, : 2 * L]
-    blocks = nls.marginal_covariances(information, gp.landmark_cols())
+        cov = nls.marginals_chain_border(information, gp.n_poses, 3)[1][: 2 * L, : 2 * L]
+        j = np.arange(L)
+        nls.check_covariance_blocks(cov.reshape(L, 2, L, 2)[j, :, j, :], "landmark")
+        return cov
+    factor = nls.factorize_information(information, require_positive_definite=True)
+    blocks = nls.marginal_covariances(information, gp.landmark_cols(), factor=factor)
+    nls.check_covariance_blocks(blocks, "landmark")
     out = np.zeros((2 * L, 2 * L))
     for j in range(L):
         out[2 * j : 2 * j + 2, 2 * j : 2 * j + 2] = blocks[j]
@@ -697,7 +744,10 @@ class GraphSlam(BaseSolver):
     ``trace`` (cost — GTSAM's ``½ Σ‖e‖²_Σ`` or the paper energy — and landmarks after every accepted step;
     with merge rounds the rounds are concatenated, each starting with its re-initialised cost),
     ``status`` CONVERGED / MAX_ITERATIONS (of the last round) / FAILED, and ``extra`` with ``association``,
-    ``n_landmarks``, ``iterations``, ``final_cost``, ``model`` (and ``merged_landmarks``).
+    ``n_landmarks``, ``iterations`` (accepted steps of all rounds), ``final_cost``, ``model`` (and
+    ``merged_landmarks``; ``numerical_notes`` when the optimiser needed a numerical fallback;
+    ``covariance_error`` when ``H`` at the estimate is not numerically positive definite — the result then
+    has no covariances and says so in ``message``).
     """
 
     name = "graph"
@@ -803,18 +853,26 @@ class GraphSlam(BaseSolver):
         merged_total = 0
         rounds = p.merge_rounds if mode == "nn" else 0
         x_init_poses, x_init_lms = poses0, lm0
+        notes: list[str] = []
         for rnd in range(rounds + 1):
             gp = build(assoc, x_init_poses, x_init_lms)
             res = nls.solve(gp.problem, gp.x0, nparams, callback=on_iter)
             objective.extend(res.cost_trace.tolist())
             times.extend(res.time_trace.tolist())
             done_iters += res.iterations
+            notes.extend(f"round {rnd}: {n}" if rounds else n for n in res.notes)
             if rnd == rounds or res.status == Status.FAILED or gp.n_landmarks < 2:
                 break
             poses_r, lms_r = gp.unpack(res.x)
-            pairs = merge_candidates(
-                gp, res.information, lms_r, inputs.observations, assoc, p.gate_prob, p.merge_dist
-            )
+            try:
+                pairs = merge_candidates(
+                    gp, res.information, lms_r, inputs.observations, assoc, p.gate_prob, p.merge_dist
+                )
+            except np.linalg.LinAlgError as exc:
+                notes.append(
+                    f"merging stopped after round {rnd}: no landmark covariances for the test ({exc})"
+                )
+                break
             if not pairs.size:
                 break
             lut = np.arange(gp.n_landmarks)
@@ -839,12 +897,26 @@ class GraphSlam(BaseSolver):
             extra["merged_landmarks"] = merged_total
         if gp.range_bias_col is not None:
             extra["range_bias"] = float(res.x[gp.range_bias_col])
+        message = res.message
+        if rnd:  # the status is that of the last round; the trace holds every round (each with its start)
+            message += (
+                f" (in optimisation round {rnd + 1}, after landmark merges; {done_iters} iterations in all)"
+            )
         if p.covariance and res.status != Status.FAILED:
-            pose_cov, landmark_cov = laplace_marginals(gp, res.information)
-            if p.model == "paper":
-                pose_cov[0] = 0.0  # x_0 is held fixed
-                if not np.any(Q):
-                    landmark_cov = None  # landmarks were held fixed
+            try:
+                pose_cov, landmark_cov = laplace_marginals(gp, res.information)
+            except np.linalg.LinAlgError as exc:
+                # never report covariances from a factorisation that broke down; the estimate itself stands
+                why = f"the information matrix is not numerically positive definite at the estimate ({exc})"
+                extra["covariance_error"] = why
+                message += f"; no covariances: {why}"
+            else:
+                if p.model == "paper":
+                    pose_cov[0] = 0.0  # x_0 is held fixed
+                    if not np.any(Q):
+                        landmark_cov = None  # landmarks were held fixed
+        if notes:
+            extra["numerical_notes"] = notes
         if progress is not None:
             progress(budget, budget)
         trace = IterationTrace.from_lists(objective, change, times, lm_trace)
@@ -854,7 +926,7 @@ class GraphSlam(BaseSolver):
             landmarks_xy=lms.copy(),
             assoc=assoc,
             t_start=t_start,
-            message=res.message,
+            message=message,
             pose_cov=pose_cov,
             landmark_cov=landmark_cov,
             trace=trace,

@@ -17,7 +17,17 @@ Normal equations (Gauss-Newton approximation of the Hessian; IRLS weights ``w_f`
 ``H`` is assembled as a ``scipy.sparse.csc_matrix`` whose structure (the COO → CSC scatter map) is computed
 once per problem; every iteration is one vectorised evaluation per block and a ``np.bincount`` scatter — no
 Python loop over factors. Linear systems are solved with SuperLU (``scipy.sparse.linalg.splu``) in
-symmetric mode with a minimum-degree ordering of ``H`` (Cholesky-like fill).
+symmetric mode with a minimum-degree ordering of ``H`` (Cholesky-like fill), or by the chain solver
+(:class:`_ChainSolver`, banded Cholesky) with SuperLU as the fallback when the banded factorisation breaks
+down. ``H`` is positive semi-definite in exact arithmetic, but not always numerically: a landmark that sits
+(almost) on a pose has a bearing Jacobian ``∝ 1/r`` and puts entries of 1e24 next to entries of 1e4 into
+``H`` (seen on MRCLAM robot 5 with its misread barcodes), and Cholesky then meets a non-positive pivot.
+Gauss-Newton falls back to a damped (LM) step whenever the undamped system cannot be solved or its
+solution is not a descent direction.
+
+Iterations are counted as GTSAM counts them: one iteration linearises once and ends with one accepted step;
+the LM steps rejected on the way (λ raised, system solved again) belong to the same iteration. So
+``iterations == len(cost_trace) − 1`` and ``NlsParams.max_iterations`` bounds the accepted steps.
 
 LM follows Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems* (2004), §3.2:
 gain ratio ``ϱ = (F(x) − F(x+h)) / (L(0) − L(h))`` with ``L(0) − L(h) = ½ hᵀ(λ D h − g)``; on success
@@ -130,9 +140,11 @@ class NlsParams:
     Attributes
     ----------
     method : "lm" | "gn"
-        Levenberg-Marquardt (default) or Gauss-Newton (with step halving when the cost rises).
+        Levenberg-Marquardt (default) or Gauss-Newton (with step halving when the cost rises, and a damped
+        step when the undamped normal equations cannot be solved or give no descent direction).
     max_iterations : int
-        Budget of linear solves (LM counts rejected steps too).
+        Budget of iterations = accepted steps (an LM iteration may solve several damped systems, as in
+        GTSAM's ``LevenbergMarquardtOptimizer``).
     rel_cost_tol : float
         Converged when an accepted step lowers the cost by less than ``rel_cost_tol · cost``.
     abs_cost_tol : float
@@ -149,6 +161,10 @@ class NlsParams:
         Huber threshold on the whitened residual norm.
     max_border : int
         Largest border (non-chain) dimension for the chain/Schur linear solver (see ``NlsProblem.chain``).
+    lambda_max : float
+        Largest damping: LM (and the damped fallback of GN) gives up raising λ beyond
+        ``lambda_max · λ_scale`` (``λ_scale = 1`` for Marquardt, ``max diag H`` at the start for
+        Levenberg); LM then stops as converged (no decrease possible), like GTSAM's ``lambdaUpperBound``.
     """
 
     method: Literal["lm", "gn"] = "lm"
@@ -161,6 +177,7 @@ class NlsParams:
     robust: Literal["none", "huber"] = "none"
     huber_k: float = 1.345
     max_border: int = 1500
+    lambda_max: float = 1e16
 
 
 @dataclass(frozen=True)
@@ -173,10 +190,13 @@ class NlsResult:
     cost : float                 final cost (½ Σ ρ).
     status : Status              CONVERGED, MAX_ITERATIONS or FAILED.
     message : str
-    iterations : int             linear solves performed.
+    iterations : int             accepted steps ``K`` (``len(cost_trace) − 1``).
     cost_trace : ndarray (K+1,)  cost at the start and after every accepted step.
     time_trace : ndarray (K+1,)  wall time of each accepted step (0 for the start), s.
     information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` — for :func:`marginal_covariances`.
+    linear_solves : int          linear systems solved (accepted + rejected steps + GN damping retries).
+    notes : tuple[str, ...]      numerical fallbacks that were taken (SuperLU instead of the banded
+                                 Cholesky, damped Gauss-Newton steps); empty when none were needed.
     """
 
     x: np.ndarray
@@ -187,6 +207,8 @@ class NlsResult:
     cost_trace: np.ndarray
     time_trace: np.ndarray
     information: sp.csc_matrix
+    linear_solves: int = 0
+    notes: tuple[str, ...] = ()
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -227,13 +249,27 @@ class _Assembler:
             self.fixed_mask = is_fixed[self.indices] | np.repeat(is_fixed, np.diff(self.indptr))
             self.fixed_diag = self.diag_pos[fixed]
 
-    def linear_solver(self, params: NlsParams):
-        """``solve(data (nnz,), rhs (D,)) -> h (D,) | None`` for ``H(data) h = rhs``."""
+    def linear_solver(self, params: NlsParams, stats: dict | None = None):
+        """``solve(data (nnz,), rhs (D,)) -> h (D,) | None`` for ``H(data) h = rhs``.
+
+        With a chain layout, the banded-Cholesky chain solver; when its factorisation breaks down (a pivot
+        ≤ 0 from round-off in a badly scaled ``H``), the same system goes to SuperLU and
+        ``stats["chain_fallbacks"]`` is incremented. None if no factorisation gave a finite solution.
+        """
         ch = self.problem.chain
         if ch is not None and self.D - ch[0] * ch[1] <= params.max_border:
             cs = _ChainSolver(self, ch[0], ch[1])
             if cs.ok:
-                return cs.solve
+
+                def chain_then_lu(data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
+                    h = cs.solve(data, rhs)
+                    if h is None:
+                        if stats is not None:
+                            stats["chain_fallbacks"] = stats.get("chain_fallbacks", 0) + 1
+                        h = _solve(self.matrix(data), rhs)
+                    return h
+
+                return chain_then_lu
         return lambda data, rhs: _solve(self.matrix(data), rhs)
 
     def matrix(self, data: np.ndarray) -> sp.csc_matrix:
@@ -420,14 +456,20 @@ def solve(
 ) -> NlsResult:
     """Minimise the problem's cost from ``x0 (D,)``.
 
-    ``callback(k, x, cost)`` is called with the start (k = 0) and after every accepted step.
+    ``callback(k, x, cost)`` is called with the start (k = 0) and after every accepted step (k = iteration).
     """
     params = params or NlsParams()
     asm = _Assembler(problem)
     x = np.array(x0, dtype=float, copy=True)
     if x.shape != (problem.n_vars,):
         raise ValueError(f"x0 has shape {x.shape}, expected ({problem.n_vars},)")
-    lin_solve = asm.linear_solver(params)
+    stats: dict = {"chain_fallbacks": 0, "damped_gn": 0, "solves": 0}
+    chain_or_lu = asm.linear_solver(params, stats)
+
+    def lin_solve(data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
+        stats["solves"] += 1
+        return chain_or_lu(data, rhs)
+
     cost, data, g = asm.linearize(x, params)
     if not np.isfinite(cost):
         return NlsResult(
@@ -444,58 +486,89 @@ def solve(
     if callback is not None:
         callback(0, x, cost)
     # λ₀: τ for Marquardt scaling (D = diag H is already scaled); τ · max diag(H) for D = I (Nielsen)
-    lam = params.lambda_init
-    if params.damping == "levenberg":
-        lam *= float(np.max(data[asm.diag_pos]))
+    lam_scale = 1.0 if params.damping == "marquardt" else float(np.max(data[asm.diag_pos]))
+    lam_cap = params.lambda_max * lam_scale
+    lam = params.lambda_init * lam_scale
     nu = 2.0
-    status, message = Status.MAX_ITERATIONS, f"stopped after {params.max_iterations} iterations"
+    status = Status.MAX_ITERATIONS
+    message = f"stopped after {params.max_iterations} iterations (max_iterations)"
     it = 0
     t_last = time.perf_counter()
     while it < params.max_iterations:
         if cost <= params.abs_cost_tol:
             status, message = Status.CONVERGED, "cost below abs_cost_tol"
             break
-        it += 1
         diag = data[asm.diag_pos]
+        Dvec = np.maximum(diag, 1e-12) if params.damping == "marquardt" else np.ones(asm.D)
+        stop = None  # (status, message) that ends the optimisation inside this iteration
         if params.method == "lm":
-            Dvec = np.maximum(diag, 1e-12) if params.damping == "marquardt" else np.ones(asm.D)
-            damped = data.copy()
-            damped[asm.diag_pos] += lam * Dvec
-            h = lin_solve(damped, -g)
-            if h is None:
-                lam *= nu
-                nu *= 2.0
-                continue
+            # one iteration: raise λ until a step is accepted (GTSAM's inner loop)
+            h = None
+            while True:
+                if lam > lam_cap:
+                    if h is None:  # the last system tried could not be solved
+                        stop = (
+                            Status.FAILED,
+                            f"normal equations unsolvable even with damping λ > {lam_cap:.3g}",
+                        )
+                    else:
+                        stop = (Status.CONVERGED, f"no cost decrease even with damping λ > {lam_cap:.3g}")
+                    break
+                damped = data.copy()
+                damped[asm.diag_pos] += lam * Dvec
+                h = lin_solve(damped, -g)
+                if h is None:
+                    lam *= nu
+                    nu *= 2.0
+                    continue
+                if np.linalg.norm(h) <= params.step_tol * (np.linalg.norm(x) + params.step_tol):
+                    stop = (Status.CONVERGED, "step norm below step_tol")
+                    break
+                x_new = problem.apply_step(x, h)
+                new_cost = asm.cost(x_new, params)
+                pred = 0.5 * float(h @ (lam * Dvec * h - g))
+                rho = (cost - new_cost) / pred if pred > 0 else -1.0
+                if not (np.isfinite(new_cost) and rho > 0):
+                    lam *= nu
+                    nu *= 2.0
+                    continue
+                lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                break
         else:
             h = lin_solve(data, -g)
-            if h is None:
-                status, message = Status.FAILED, "singular normal equations (is every variable constrained?)"
-                break
-        if np.linalg.norm(h) <= params.step_tol * (np.linalg.norm(x) + params.step_tol):
-            status, message = Status.CONVERGED, "step norm below step_tol"
-            break
-        if params.method == "lm":
-            x_new = problem.apply_step(x, h)
-            new_cost = asm.cost(x_new, params)
-            pred = 0.5 * float(h @ (lam * Dvec * h - g))
-            rho = (cost - new_cost) / pred if pred > 0 else -1.0
-            if not (np.isfinite(new_cost) and rho > 0):
-                lam *= nu
-                nu *= 2.0
-                continue
-            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
-        else:
-            x_new = problem.apply_step(x, h)
-            new_cost = asm.cost(x_new, params)
-            alpha = 1.0
-            while not (new_cost <= cost) and alpha > 1e-3:  # safeguard: halve the GN step
-                alpha *= 0.5
-                x_new = problem.apply_step(x, alpha * h)
+            if h is not None and np.linalg.norm(h) <= params.step_tol * (np.linalg.norm(x) + params.step_tol):
+                stop = (Status.CONVERGED, "step norm below step_tol")
+            elif h is None or not float(g @ h) < 0.0:
+                # H numerically not positive definite: damped step (H + λD) h = −g, λ raised ×10 until the
+                # system is solvable and h points downhill (for λ → ∞, h → −D⁻¹g, a descent direction)
+                stats["damped_gn"] += 1
+                lam_gn = params.lambda_init * lam_scale
+                h = None
+                while lam_gn <= lam_cap:
+                    damped = data.copy()
+                    damped[asm.diag_pos] += lam_gn * Dvec
+                    h = lin_solve(damped, -g)
+                    if h is not None and float(g @ h) < 0.0:
+                        break
+                    h = None
+                    lam_gn *= 10.0
+                if h is None:
+                    stop = (Status.FAILED, "singular normal equations (is every variable constrained?)")
+            if stop is None:
+                x_new = problem.apply_step(x, h)
                 new_cost = asm.cost(x_new, params)
-            if not new_cost <= cost:
-                status, message = Status.CONVERGED, "no decrease along the Gauss-Newton step"
-                break
+                alpha = 1.0
+                while not (new_cost <= cost) and alpha > 1e-3:  # safeguard: halve the GN step
+                    alpha *= 0.5
+                    x_new = problem.apply_step(x, alpha * h)
+                    new_cost = asm.cost(x_new, params)
+                if not new_cost <= cost:
+                    stop = (Status.CONVERGED, "no decrease along the Gauss-Newton step")
+        if stop is not None:
+            status, message = stop
+            break
+        it += 1
         decrease = cost - new_cost
         x = x_new
         cost, data, g = asm.linearize(x, params)
@@ -504,10 +577,21 @@ def solve(
         times.append(now - t_last)
         t_last = now
         if callback is not None:
-            callback(len(costs) - 1, x, cost)
+            callback(it, x, cost)
         if decrease <= params.rel_cost_tol * max(cost + decrease, 0.0):
             status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
             break
+    notes = []
+    if stats["chain_fallbacks"]:
+        notes.append(
+            f"banded Cholesky of the pose chain failed {stats['chain_fallbacks']}× (H not numerically positive "
+            "definite); solved with SuperLU instead"
+        )
+    if stats["damped_gn"]:
+        notes.append(
+            f"{stats['damped_gn']} Gauss-Newton step(s) damped: the undamped normal equations were not solvable "
+            "or gave no descent direction"
+        )
     return NlsResult(
         x=x,
         cost=cost,
@@ -517,15 +601,52 @@ def solve(
         cost_trace=np.asarray(costs),
         time_trace=np.asarray(times),
         information=asm.matrix(data),
+        linear_solves=int(stats["solves"]),
+        notes=tuple(notes),
     )
 
 
 # ----------------------------------------------------------------------------------------------------------
 # marginals
 # ----------------------------------------------------------------------------------------------------------
-def factorize_information(information: sp.spmatrix):
-    """Sparse factorisation of ``H`` to share between several :func:`marginal_covariances` calls."""
-    return _factorize(sp.csc_matrix(information))
+class NotPositiveDefiniteError(np.linalg.LinAlgError):
+    """``H`` is not numerically positive definite; ``column`` is the state column whose pivot was ≤ 0."""
+
+    def __init__(self, message: str, column: int) -> None:
+        super().__init__(message)
+        self.column = int(column)
+
+
+def factorize_information(information: sp.spmatrix, require_positive_definite: bool = False):
+    """Sparse factorisation of ``H`` to share between several :func:`marginal_covariances` calls.
+
+    With ``require_positive_definite``, the factorisation must be a symmetric elimination (row order =
+    column order, i.e. SuperLU never left the diagonal) with every pivot ``> 0`` — then it is the
+    ``LDLᵀ`` of a numerically positive definite ``H`` and its inverse is a valid covariance. Otherwise
+    :class:`NotPositiveDefiniteError` names the column of the most negative pivot (or a plain LinAlgError
+    says that a zero pivot forced SuperLU off the diagonal); this costs nothing beyond the factorisation,
+    unlike solving for the columns of ``H⁻¹`` and finding invalid blocks afterwards.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError   (exactly) singular ``H``;  NotPositiveDefiniteError, see above.
+    """
+    try:
+        lu = _factorize(sp.csc_matrix(information))
+    except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+        raise np.linalg.LinAlgError(f"information matrix is singular ({exc})") from None
+    if require_positive_definite:
+        piv = lu.U.diagonal()
+        col_at = np.argsort(lu.perm_c)  # col_at[k] = column of H eliminated k-th
+        if not np.array_equal(lu.perm_r, lu.perm_c):  # a zero pivot: SuperLU left the diagonal
+            raise np.linalg.LinAlgError("the sparse elimination of H met a zero pivot (left the diagonal)")
+        bad = np.flatnonzero(~(piv > 0.0))
+        if bad.size:
+            k = int(bad[np.argmin(piv[bad])])
+            raise NotPositiveDefiniteError(
+                f"{bad.size} pivot(s) ≤ 0 in the sparse LDLᵀ of H (smallest {piv[k]:.3g})", col_at[k]
+            )
+    return lu
 
 
 def marginal_covariances(
@@ -565,6 +686,27 @@ def marginal_covariances(
     return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
+def check_covariance_blocks(cov: np.ndarray, what: str) -> None:
+    """Raise ``numpy.linalg.LinAlgError`` unless every block of ``cov (B, k, k)`` is finite and positive
+    definite — the property every marginal of a positive definite ``H`` has. A factorisation of an ``H``
+    that is not numerically positive definite returns blocks that violate it; they must not be reported.
+
+    ``what`` names the variable kind in the message (``"pose"`` → ``"pose 17: ..."``).
+    """
+    cov = np.asarray(cov, float)
+    if not cov.shape[0]:
+        return
+    finite = np.all(np.isfinite(cov.reshape(cov.shape[0], -1)), axis=1)
+    if not np.all(finite):
+        raise np.linalg.LinAlgError(
+            f"{what} {int(np.flatnonzero(~finite)[0])}: non-finite marginal covariance"
+        )
+    low = np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, 1, 2)))[:, 0]
+    bad = int(np.argmin(low))
+    if low[bad] <= 0.0:
+        raise np.linalg.LinAlgError(f"{what} {bad}: marginal covariance has eigenvalue {low[bad]:.3g} ≤ 0")
+
+
 def is_block_tridiagonal(information: sp.spmatrix, n_chain: int, k: int) -> bool:
     """Whether the leading ``(n_chain·k)²`` block of ``H`` only couples neighbouring ``k``-blocks."""
     A = sp.coo_matrix(sp.csc_matrix(information)[: n_chain * k, : n_chain * k])
@@ -591,8 +733,14 @@ def marginals_chain_border(information: sp.spmatrix, n_chain: int, k: int) -> tu
     -------
     chain_cov : ndarray (n_chain, k, k)   marginal blocks of the chain variables.
     border_cov : ndarray (m, m)           joint marginal covariance of all border variables.
+
+    Raises
+    ------
+    NotPositiveDefiniteError   the banded Cholesky of ``A`` or the Cholesky of ``S`` met a pivot ≤ 0
+                               (``column`` = the column of ``H`` where it happened).
     """
     import scipy.linalg as sla
+    from scipy.linalg import lapack
 
     H = sp.csc_matrix(information)
     n = n_chain * k
@@ -606,14 +754,23 @@ def marginals_chain_border(information: sp.spmatrix, n_chain: int, k: int) -> tu
     Au = sp.triu(A).tocoo()
     ab = np.zeros((u + 1, n))
     ab[u + Au.row - Au.col, Au.col] = Au.data
-    cb = sla.cholesky_banded(ab, lower=False)
+    cb, info = lapack.dpbtrf(ab, lower=0)
+    if info != 0:
+        raise NotPositiveDefiniteError(
+            f"banded Cholesky of the pose chain: leading minor {info} of H is not positive definite", info - 1
+        )
     m = Bm.shape[1]
     if m:
         W = sla.cho_solve_banded((cb, False), Bm)  # (n, m)
         Sch = Cm - Bm.T @ W
         Sch = 0.5 * (Sch + Sch.T)
-        cf = sla.cho_factor(Sch)
-        border_cov = sla.cho_solve(cf, np.eye(m))
+        cS, info = lapack.dpotrf(Sch, lower=0, clean=1)
+        if info != 0:
+            raise NotPositiveDefiniteError(
+                f"Cholesky of the border Schur complement: leading minor {info} is not positive definite",
+                n + info - 1,
+            )
+        border_cov = sla.cho_solve((cS, False), np.eye(m))
         border_cov = 0.5 * (border_cov + border_cov.T)
     else:
         W = np.zeros((n, 0))
