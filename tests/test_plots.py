@@ -104,3 +104,61 @@ def test_plot_cli_errors(runs, tmp_path):
     r = runner.invoke(app, ["plot", "nees", str(runs[0]), str(nc), "-o", str(tmp_path / "n.png")])
     assert r.exit_code == 1 and "not available" in r.output
     assert not (tmp_path / "n.png").exists() and not (tmp_path / "x.png").exists()
+
+
+def test_plot_map_legend_without_ground_truth():
+    _fig, ax = new_figure()
+    path = np.column_stack([np.linspace(0, 3, 10), np.zeros(10)])
+    plot_map(ax, None, np.array([[1.0, 1.0]]), None, path + 0.1, path, legend_note="No ground truth in dataset")
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["Odometry", "Estimated trajectory", "Estimated locations", "No ground truth in dataset"]
+
+
+@pytest.fixture()
+def truthless(tmp_path):
+    """The DLR excerpt imported from g2o (no ground truth) and solved by the graph solver, via the CLI."""
+    from pathlib import Path
+
+    g2o = Path(__file__).parent / "data" / "dlr_excerpt.g2o"
+    data, res = tmp_path / "dlr.h5", tmp_path / "dlr_graph.h5"
+    r = runner.invoke(app, ["import", "g2o", str(g2o), "-q", "-o", str(data)])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["solve", str(data), "--method", "graph", "-q", "-o", str(res)])
+    assert r.exit_code == 0, r.output
+    return data, res
+
+
+def test_plot_map_without_ground_truth_draws_estimate_and_odometry(truthless, tmp_path):
+    from slamcli.cli.plot_cmd import _map
+    from slamcli.io import read_dataset, read_result
+
+    data, res_path = truthless
+    ds, res = read_dataset(data), read_result(res_path)
+    assert ds.truth is None
+    out = tmp_path / "map.png"
+    r = runner.invoke(app, ["plot", "map", str(res_path), "--ellipses", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:4] == b"\x89PNG" and out.stat().st_size > 1000
+    assert f"{data} has no ground truth; drew the estimate and odometry only" in r.stdout
+    # what the command draws: estimate and odometry from the files, no truth, and the legend says so
+    _fig, ax = new_figure()
+    _map(ax, res_path, None, True, False, 0, None)
+    lines = {ln.get_label(): ln for ln in ax.lines}
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["Odometry", "Estimated trajectory", "Estimated locations", "No ground truth in dataset"]
+    np.testing.assert_array_equal(lines["Estimated trajectory"].get_xydata(), res.poses_xyt[:, :2])
+    np.testing.assert_array_equal(lines["Odometry"].get_xydata(), ds.inputs.odometry_xyt[:, :2])
+    np.testing.assert_array_equal(lines["Estimated locations"].get_xydata(), res.landmarks_xy)
+
+
+def test_truth_metrics_on_a_truthless_dataset_are_one_line_errors(truthless, tmp_path):
+    data, res_path = truthless
+    for args in (["evaluate", str(res_path), "-o", str(tmp_path / "ev")],
+                 ["plot", "errors", str(res_path), "-o", str(tmp_path / "e.png")],
+                 ["plot", "nees", str(res_path), "-o", str(tmp_path / "n.png")]):
+        r = runner.invoke(app, args)
+        lines = r.stderr.strip().splitlines()
+        assert r.exit_code == 1 and len(lines) == 1, (args, r.output)
+        assert lines[0].startswith("error: ") and str(data) in lines[0] and "no ground truth" in lines[0]
+        assert "Traceback" not in r.output
+    assert not (tmp_path / "ev").exists() and not (tmp_path / "e.png").exists() and not (tmp_path / "n.png").exists()

@@ -34,7 +34,7 @@ def _resolve_dataset_path(result_path: Path, recorded: str) -> Path:
     raise SlamcliError(f"{result_path}: recorded dataset {recorded!r} not found; pass the dataset with --data")
 
 
-def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = True):
+def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = True, require_truth: bool = True):
     """Read a result and the dataset it was computed on.
 
     Returns
@@ -43,7 +43,8 @@ def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = T
 
     Raises
     ------
-    SlamcliError  missing dataset, dataset without ground truth, or dataset hash ≠ the result's record.
+    SlamcliError  missing dataset, dataset without ground truth (unless ``require_truth=False``, e.g. for a
+                  map of a real recording), or dataset hash ≠ the result's record.
     """
     from slamcli.io import dataset_hash, read_dataset, read_result
 
@@ -58,7 +59,7 @@ def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = T
         if h != result.dataset_hash:
             raise SlamcliError(f"{result_path}: computed on dataset {result.dataset_hash[:19]}…, but {data_path} "
                                f"has hash {h[:19]}… (wrong or modified dataset)")
-    if dataset.truth is None:
+    if require_truth and dataset.truth is None:
         raise SlamcliError(f"{data_path}: dataset has no ground truth; nothing to evaluate against")
     return result, dataset, data_path
 

@@ -57,11 +57,16 @@ def _map(ax, result_path, data_path, check, ellipses, every, title):
     from slamcli.api.evaluate import load_result_and_dataset
     from slamcli.plots.maps import plot_map
 
-    res, ds, _ = load_result_and_dataset(result_path, data_path, check_hash=check)
-    plot_map(ax, ds.truth.landmarks_xy, res.landmarks_xy, ds.truth.poses_xyt[:, :2], ds.inputs.odometry_xyt[:, :2],
-             res.poses_xyt[:, :2], landmark_cov=res.landmark_cov if ellipses else None,
-             pose_cov=res.pose_cov if ellipses else None, ellipse_every=every,
-             title=title or f"{res.solver}: {Path(result_path).name}")
+    # real recordings and imported graphs have no ground truth: then estimate and odometry only
+    res, ds, data_path = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
+    truth = ds.truth
+    plot_map(ax, truth.landmarks_xy if truth else None, res.landmarks_xy, truth.poses_xyt[:, :2] if truth else None,
+             ds.inputs.odometry_xyt[:, :2], res.poses_xyt[:, :2],
+             landmark_cov=res.landmark_cov if ellipses else None, pose_cov=res.pose_cov if ellipses else None,
+             ellipse_every=every, title=title or f"{res.solver}: {Path(result_path).name}",
+             legend_note=None if truth else "No ground truth in dataset")
+    if truth is None:
+        typer.echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
 
 
 def _errors(ax, result_path, data_path, check, title):

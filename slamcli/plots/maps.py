@@ -18,7 +18,7 @@ def covariance_ellipse(cov_2x2, n_sigma: float = 2.0):
 
 def plot_map(ax, true_landmarks_xy=None, est_landmarks_xy=None, true_path_xy=None, odometry_path_xy=None,
              est_path_xy=None, landmark_cov=None, pose_cov=None, n_sigma: float = 2.0, ellipse_every: int = 0,
-             title: str | None = None):
+             title: str | None = None, legend_note: str | None = None):
     """Draw a SLAM map.
 
     Parameters
@@ -30,6 +30,8 @@ def plot_map(ax, true_landmarks_xy=None, est_landmarks_xy=None, true_path_xy=Non
                                                   black solid, grey dashed, blue solid.
     landmark_cov : ndarray (L', 2, 2) | None      ``n_sigma`` ellipses around the estimated landmarks.
     pose_cov : ndarray (T+1, 3, 3) | None         ``n_sigma`` position ellipses every ``ellipse_every`` poses.
+    legend_note : str | None                      extra legend line without a symbol, e.g. "No ground truth in
+                                                  dataset" when the true path and landmarks are absent.
     """
     from matplotlib.patches import Ellipse
 
@@ -70,5 +72,7 @@ def plot_map(ax, true_landmarks_xy=None, est_landmarks_xy=None, true_path_xy=Non
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
+    if legend_note:
+        ax.plot([], [], ls="none", label=legend_note)
     legend_below(ax, ncol=3)
     return ax
