@@ -458,3 +458,25 @@ def test_message_status_trace_and_progress_agree_on_the_iteration_count(world):
     assert [d for d, _ in seen] == [0, 1, 2, 3, 4, 5, 5] and {t for _, t in seen} == {5}
     full = _solve(world.inputs)
     assert full.status == Status.CONVERGED and full.extra["iterations"] == len(full.trace) - 1
+
+
+def test_solve_and_info_print_the_same_iteration_count_as_the_status(world, tmp_path):
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+    from slamcli.io import write_dataset
+
+    data, out = tmp_path / "d.h5", tmp_path / "r.h5"
+    write_dataset(
+        data, dataclasses.replace(world, inputs=_with_gross_outliers(world, 1, np.arange(57, 62)), truth=None)
+    )
+    runner = CliRunner()
+    r = runner.invoke(app, ["solve", str(data), "-m", "graph", "-p", "max_iterations=5", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.stdout.split())
+    assert (
+        "max_iterations graph" in text and ", 5 iterations:" in text and "stopped after 5 iterations" in text
+    )
+    r = runner.invoke(app, ["info", str(out)])
+    row = next(ln for ln in r.stdout.splitlines() if "│ iterations " in ln)
+    assert row.split("│")[2].strip() == "5"

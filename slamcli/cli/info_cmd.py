@@ -91,7 +91,8 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
         ("solver", f"{res.solver} {res.solver_version}"),
         ("status", res.status.value + (f" — {res.message}" if res.message else "")),
         ("wall time", _fmt(res.wall_time_s, "s")),
-        ("iterations", str(len(res.trace)) if res.trace is not None else "— (no trace)"),
+        ("iterations", str(res.extra["iterations"]) if "iterations" in res.extra  # the solver's own count
+         else str(len(res.trace)) if res.trace is not None else "— (no trace)"),
         ("poses", str(len(res.poses_xyt))),
         ("landmarks", str(len(res.landmarks_xy))),
         ("associated obs.", f"{n_assoc} of {len(res.assoc)}"),

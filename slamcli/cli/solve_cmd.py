@@ -55,6 +55,8 @@ def solve_command(
             return
         n_assoc = int((result.assoc >= 0).sum())
         iters = f", {len(result.trace)} iterations" if result.trace is not None else ""
+        if "iterations" in result.extra:  # the solver's own count; graph's trace adds a start row per round
+            iters = f", {result.extra['iterations']} iterations"
         style = "red" if result.status.value == "failed" else "green"
         console = stdout_console()
         console.print(
