@@ -113,9 +113,13 @@ class Problem:
     offsets: np.ndarray
 
     @staticmethod
-    def from_inputs(inputs: SlamInputs) -> Problem:
+    def from_inputs(inputs: SlamInputs, range_offset: float = 0.0) -> Problem:
+        """``range_offset`` (m) is added to every measured range (beyond the paper: laser returns from the
+        surface of a post, see :attr:`slamcli.solvers.icm.IcmParams.range_offset`)."""
         obs = inputs.observations
         z = obs.z
+        if range_offset:
+            z = z + np.array([float(range_offset), 0.0])
         v = np.stack([z[:, 0] * np.cos(z[:, 1]), z[:, 0] * np.sin(z[:, 1])], -1)
         odo = np.asarray(inputs.odometry_xyt, float)
         return Problem(

@@ -77,9 +77,9 @@ def label_means(points_xy, labels, n_labels: int):
 def relabel_compact(labels, keep_mask):
     """Drop labels not in ``keep_mask``, renumber the rest 0.. in their old order. Returns ``(labels, old_of_new)``."""
     old_of_new = np.flatnonzero(keep_mask)
-    new_of_old = np.full(keep_mask.shape[0], -1, np.int64)
+    new_of_old = np.full(keep_mask.shape[0] + 1, -1, np.int64)  # last entry: the -1 labels (also when L = 0)
     new_of_old[old_of_new] = np.arange(old_of_new.size)
-    out = np.where(labels >= 0, new_of_old[np.maximum(labels, 0)], -1)
+    out = new_of_old[np.where(labels >= 0, labels, keep_mask.shape[0])]
     return out.astype(np.int64), old_of_new
 
 
