@@ -324,6 +324,22 @@ def _proposal_terms(o: _ObsTerms, Sx):
     return U, S11, S12, S22
 
 
+def _shift_terms(o: _ObsTerms, dx: np.ndarray) -> _ObsTerms:
+    """Terms of :func:`_obs_terms` moved from the linearisation pose ``x_lin`` to ``x = x_lin + dx``
+    (``dx (P, 3)``, heading difference wrapped here) to first order: ``ν(x) = ν(x_lin) − H_x dx`` with
+    ``H_x = [[−h11, −h12, 0], [−h21, −h22, −1]]``; ``H_m``, ``Σ H_mᵀ`` and ``H_m Σ H_mᵀ + Q`` are kept.
+
+    FastSLAM 2.0 samples ``x`` from a proposal whose spread is ~σ of the measurement, so the neglected
+    second-order terms (``|dx|² / r``) are far below the sensor noise; the landmark update then costs no
+    ``sqrt``/``arctan2`` — the proposal's linearisation is reused (Montemerlo et al. 2003 use one
+    linearisation for proposal, landmark update and weight).
+    """
+    dth = wrap_angle(dx[:, 2])
+    nu_r = o.nu_r + o.h11 * dx[:, 0] + o.h12 * dx[:, 1]
+    nu_b = o.nu_b + o.h21 * dx[:, 0] + o.h22 * dx[:, 1] + dth
+    return dataclasses.replace(o, nu_r=nu_r, nu_b=nu_b)
+
+
 def _mT(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(A, -1, -2)
 
@@ -547,11 +563,12 @@ class FastSlam(BaseSolver):
                     ps.x = x_hat
                     step_slots, step_new = self._measure_v1(ps, z_all, rows, slot_of_obs)
                 else:
-                    step_slots, step_new = self._proposal_v2(ps, x_hat, R, z_all, rows, slot_of_obs, rng)
+                    step_slots, step_new, lin = self._proposal_v2(ps, x_hat, R, z_all, rows, slot_of_obs, rng)
                     # ---- landmark EKFs at the sampled pose ------------------------------------------------
                     for i, n in enumerate(rows):
                         if step_slots[i] is not None:
-                            self._update_or_init(ps, step_slots[i], step_new[i], z_all[n], weight=False)
+                            terms = None if lin[i] is None else _shift_terms(lin[i][1], ps.x - lin[i][0])
+                            self._update_or_init(ps, step_slots[i], step_new[i], z_all[n], weight=False, terms=terms)
             for i, n in enumerate(rows):
                 if step_slots[i] is not None:
                     assoc_hist[n] = step_slots[i]
@@ -684,14 +701,20 @@ class FastSlam(BaseSolver):
             ps.n_slots = ps.n_slots + new
         return j, new
 
-    def _update_or_init(self, ps: ParticleSet, slots, new, z, *, weight: bool):
+    def _update_or_init(self, ps: ParticleSet, slots, new, z, *, weight: bool, terms: _ObsTerms | None = None):
         """EKF-update existing landmarks / initialise new ones in ``slots``; optionally add the 1.0 weight
-        ``log N(ν; 0, Q_n)`` (eq. 14.28) of the updated particles."""
+        ``log N(ν; 0, Q_n)`` (eq. 14.28) of the updated particles. ``terms``: the linearisation at the poses
+        ``ps.x`` when the caller already has it (FastSLAM 2.0, :func:`_shift_terms`; then ``new`` is all
+        False)."""
         idx = self._index(ps, slots)
         x = ps.x
         Q = self._Q
         any_new = bool(new.any())
-        if not new.all():
+        if terms is not None:
+            mu, sig = ps.mu[idx], ps.sig[idx]
+            comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
+            mx, my, a, b, c, ll, _ = _ekf_terms(terms, *comps)
+        elif not new.all():
             o, comps = self._gather_terms(ps, idx, x, z)
             mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
             if weight:  # 1.0: NIS of the measurement update (pose given)
@@ -741,36 +764,49 @@ class FastSlam(BaseSolver):
         Sx = Sx.copy()
         Q = self._Q
         slots_l, new_l = [], []
+        # lin[i] = (x_lin (P, 3), terms at x_lin) when row i's landmark EKF can reuse the proposal's
+        # linearisation (every particle updates an existing landmark no earlier row of this step touched).
+        lin: list[tuple[np.ndarray, _ObsTerms] | None] = []
+        touched = np.zeros_like(ps.exists)
         born_now = np.zeros_like(ps.exists)  # landmarks created this step carry no prior information yet
         for n in rows:
             z = z_all[n]
             slots, new = self._associate(ps, n, slot_of_obs, x_hat, Sx, z)
             slots_l.append(slots)
             new_l.append(new)
+            lin.append(None)
             if slots is None:
                 continue
+            if touched.shape != ps.exists.shape:  # capacity grew
+                touched = np.pad(touched, ((0, 0), (0, ps.capacity - touched.shape[1])))
             if born_now.shape != ps.exists.shape:  # capacity grew
                 born_now = np.pad(born_now, ((0, 0), (0, ps.capacity - born_now.shape[1])))
             idx = self._index(ps, slots)
             upd = ~new & ~born_now[idx]
             if upd.any():
                 o, _ = self._gather_terms(ps, idx, x_hat, z)
+                if upd.all() and not touched[idx].any():
+                    lin[-1] = (x_hat, o)
+                touched[idx] = True
                 U, S11, S12, S22 = _proposal_terms(o, Sx)
                 i11, i12, i22, det = _inv_sym2(S11, S12, S22)
                 K0 = U[:, 0] * i11 + U[:, 1] * i12  # K = U S⁻¹, (3, 2, P) as two columns
                 K1 = U[:, 0] * i12 + U[:, 1] * i22
                 dx = K0 * o.nu_r + K1 * o.nu_b  # (3, P)
-                x_new = x_hat + dx.T  # heading wrapped once, after sampling (only cos/sin/ν use it here)
-                Sx_new = Sx - (K0[:, None] * U[None, :, 0] + K1[:, None] * U[None, :, 1])  # Σ_x − U S⁻¹ Uᵀ
                 nis = _maha(o.nu_r, o.nu_b, i11, i12, i22)  # 2.0: NIS of the predictive (pose + map)
                 ll = -0.5 * nis - LOG_2PI - 0.5 * np.log(det)
                 self._nis_sum += float(np.sum(nis, where=upd))
                 self._nis_n += int(np.count_nonzero(upd))
+                # x̂ ← x̂ + K ν (heading wrapped once, after sampling: only cos/sin/ν use it here; a new array,
+                # the old x̂ stays the linearisation point in ``lin``); Σ_x ← Σ_x − K Uᵀ = Σ_x − U S⁻¹ Uᵀ.
                 if upd.all():
-                    x_hat, Sx = x_new, Sx_new
+                    x_hat = x_hat + dx.T
+                    Sx -= K0[:, None] * U[None, :, 0]  # in place: Sx is this call's own copy
+                    Sx -= K1[:, None] * U[None, :, 1]
                     ps.log_w += ll
                 else:
-                    x_hat = np.where(upd[:, None], x_new, x_hat)
+                    x_hat = np.where(upd[:, None], x_hat + dx.T, x_hat)
+                    Sx_new = Sx - (K0[:, None] * U[None, :, 0] + K1[:, None] * U[None, :, 1])
                     Sx = np.where(upd, Sx_new, Sx)
                     ps.log_w += np.where(upd, ll, 0.0)
             if slot_of_obs is None:
@@ -797,7 +833,7 @@ class FastSlam(BaseSolver):
             first = born_now[idx] & ~seen[idx]
             new_l[i] = first
             seen[idx] |= first
-        return slots_l, new_l
+        return slots_l, new_l, lin
 
     def _negative_evidence(self, ps: ParticleSet, step_slots, max_range: float) -> None:
         """Decrement support of live landmarks predicted inside range/FOV but not observed; drop if < 0."""
