@@ -305,9 +305,11 @@ def _single_landmark_inputs(seed: int, T: int = 6):
         odometry_xyt=motion.integrate(x0, controls, dt),
         observations=obs,
         noise=NoiseSpec(
-            motion_std=motion_std, odometry_std=np.array([0.05, 0.05, 0.02]), range_std=range_std,
+            motion_std=motion_std,
+            odometry_std=np.array([0.05, 0.05, 0.02]),
+            range_std=range_std,
             bearing_std=bearing_std,
-        ),  # fmt: skip
+        ),
     )
 
 

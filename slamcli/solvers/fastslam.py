@@ -568,7 +568,9 @@ class FastSlam(BaseSolver):
                     for i, n in enumerate(rows):
                         if step_slots[i] is not None:
                             terms = None if lin[i] is None else _shift_terms(lin[i][1], ps.x - lin[i][0])
-                            self._update_or_init(ps, step_slots[i], step_new[i], z_all[n], weight=False, terms=terms)
+                            self._update_or_init(
+                                ps, step_slots[i], step_new[i], z_all[n], weight=False, terms=terms
+                            )
             for i, n in enumerate(rows):
                 if step_slots[i] is not None:
                     assoc_hist[n] = step_slots[i]
@@ -701,7 +703,9 @@ class FastSlam(BaseSolver):
             ps.n_slots = ps.n_slots + new
         return j, new
 
-    def _update_or_init(self, ps: ParticleSet, slots, new, z, *, weight: bool, terms: _ObsTerms | None = None):
+    def _update_or_init(
+        self, ps: ParticleSet, slots, new, z, *, weight: bool, terms: _ObsTerms | None = None
+    ):
         """EKF-update existing landmarks / initialise new ones in ``slots``; optionally add the 1.0 weight
         ``log N(ν; 0, Q_n)`` (eq. 14.28) of the updated particles. ``terms``: the linearisation at the poses
         ``ps.x`` when the caller already has it (FastSLAM 2.0, :func:`_shift_terms`; then ``new`` is all
