@@ -233,6 +233,22 @@ def _one_step_inputs(z_rows, motion_std=(0.1, 0.05), odometry_std=(0.05, 0.03, 0
     )
 
 
+def test_v2_motion_prior_is_ddmr_step_and_gu_m_gut():
+    """The fused 2.0 prior: ``x̂ = g(x, u)`` and ``R = G_u M G_uᵀ`` (models.motion Jacobians), per particle."""
+    from slamcli.solvers.fastslam import _predict_controls
+
+    rng = np.random.default_rng(0)
+    x = np.column_stack([rng.normal(size=5), rng.normal(size=5), rng.uniform(-np.pi, np.pi, 5)])
+    x[0, 2] = np.pi - 1e-3  # the heading wraps
+    u, dt, std = np.array([0.8, 0.5]), 0.1, np.array([0.05, 0.02])
+    R_buf = np.zeros((3, 3, 5))
+    x_hat, R = _predict_controls(x, u, dt, std[0], std[1], R_buf)
+    np.testing.assert_allclose(x_hat, motion.ddmr_step(x, u, dt), rtol=1e-14, atol=1e-15)
+    _, G_u = motion.ddmr_jacobians(x, u, dt)
+    R_ref = G_u @ np.diag(std**2) @ np.swapaxes(G_u, 1, 2)
+    np.testing.assert_allclose(np.moveaxis(R, 2, 0), R_ref, rtol=1e-12, atol=1e-18)
+
+
 def test_v1_samples_the_motion_model():
     """No observations: particles of step 1 are g(x0, u + ε) — mean g(x0, u), covariance G_u M G_uᵀ."""
     inputs = _one_step_inputs(np.zeros((0, 4)))

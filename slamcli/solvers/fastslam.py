@@ -289,11 +289,12 @@ def _loglik(nu_r, nu_b, i11, i12, i22, det):
     return -0.5 * _maha(nu_r, nu_b, i11, i12, i22) - LOG_2PI - 0.5 * np.log(det)
 
 
-def _ekf_terms(o: _ObsTerms, mx, my, a, b, c):
+def _ekf_terms(o: _ObsTerms, mx, my, a, b, c, with_ll: bool = True):
     """Landmark EKF update from :class:`_ObsTerms` (eqs. 14.22-14.24, 14.28).
 
     ``K = Σ H_mᵀ S⁻¹``, ``μ' = μ + K ν``, ``Σ' = Σ − K S Kᵀ = Σ − K (Σ H_mᵀ)ᵀ`` (the symmetric form of
-    ``(I − K H) Σ``); returns ``(mx', my', a', b', c', log N(ν; 0, S), νᵀS⁻¹ν)``.
+    ``(I − K H) Σ``); returns ``(mx', my', a', b', c', log N(ν; 0, S), νᵀS⁻¹ν)`` (the last two ``None``
+    unless ``with_ll``: FastSLAM 2.0 weights by the proposal's predictive likelihood instead).
     """
     i11, i12, i22, det = _inv_sym2(o.S11, o.S12, o.S22)
     K11 = o.p11 * i11 + o.p12 * i12
@@ -305,6 +306,8 @@ def _ekf_terms(o: _ObsTerms, mx, my, a, b, c):
     a_n = a - (K11 * o.p11 + K12 * o.p12)
     b_n = b - (K11 * o.p21 + K12 * o.p22)
     c_n = c - (K21 * o.p21 + K22 * o.p22)
+    if not with_ll:
+        return mx_n, my_n, a_n, b_n, c_n, None, None
     maha = _maha(o.nu_r, o.nu_b, i11, i12, i22)
     return mx_n, my_n, a_n, b_n, c_n, -0.5 * maha - LOG_2PI - 0.5 * np.log(det), maha
 
@@ -426,14 +429,24 @@ def sample_pose(mean: np.ndarray, Sx: np.ndarray, rng: np.random.Generator) -> n
     return out
 
 
-def _motion_cov_controls(th, dt, std_v, std_w):
-    """``R = G_u diag(σ_v², σ_ω²) G_uᵀ`` as ``(3, 3, P)``, ``G_u = dt·[[cos θ, 0], [sin θ, 0], [0, 1]]``."""
+def _predict_controls(x, u, dt, std_v, std_w, R):
+    """FastSLAM 2.0 prior from the controls in one pass: ``x̂ = g(x, u)`` (:func:`ddmr_step`, Euler DDMR) and
+    ``R = G_u diag(σ_v², σ_ω²) G_uᵀ`` written into the nonzero entries of the buffer ``R (3, 3, P)`` (its
+    other entries must be 0); ``cos θ``, ``sin θ`` computed once for both."""
+    th = x[:, 2]
     c, s = np.cos(th), np.sin(th)
-    kv, kw = (dt * std_v) ** 2, (dt * std_w) ** 2
-    R = np.zeros((3, 3, th.shape[0]))
-    R[0, 0], R[1, 1], R[2, 2] = kv * c * c, kv * s * s, kw
-    R[0, 1] = R[1, 0] = kv * c * s
-    return R
+    x_hat = np.empty_like(x)
+    dv = dt * u[0]
+    x_hat[:, 0] = x[:, 0] + dv * c
+    x_hat[:, 1] = x[:, 1] + dv * s
+    x_hat[:, 2] = wrap_angle(th + dt * u[1])
+    kv = (dt * std_v) ** 2
+    np.multiply(c * c, kv, out=R[0, 0])
+    np.multiply(s * s, kv, out=R[1, 1])
+    np.multiply(c * s, kv, out=R[0, 1])
+    R[1, 0] = R[0, 1]
+    R[2, 2] = (dt * std_w) ** 2
+    return x_hat, R
 
 
 def _motion_cov_odometry(th, std):
@@ -531,6 +544,7 @@ class FastSlam(BaseSolver):
         # ML association (N, P) (pre-resampling; traced back through ``anc`` for the best particle).
         assoc_hist = np.full((N,) if known else (N, P), -1, np.int32)
         arP = np.arange(P)
+        R_buf = np.zeros((3, 3, P))  # 2.0 motion covariance, rewritten each step (the proposal copies it)
         n_updates = 0
         n_resample = 0
         ess_sum = 0.0
@@ -546,8 +560,7 @@ class FastSlam(BaseSolver):
                 if p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
                     x_hat = ddmr_step(ps.x, u + M_std * rng.standard_normal((P, 2)), inputs.dt)
                 else:
-                    x_hat = ddmr_step(ps.x, u, inputs.dt)
-                    R = _motion_cov_controls(ps.x[:, 2], inputs.dt, M_std[0], M_std[1])
+                    x_hat, R = _predict_controls(ps.x, u, inputs.dt, M_std[0], M_std[1], R_buf)
             else:
                 d = increments[t - 1]
                 if p.version == 1:  # x_t = x_{t-1} ⊕ (d + ε), ε ~ N(0, diag(odometry_std²))
@@ -717,7 +730,7 @@ class FastSlam(BaseSolver):
         if terms is not None:
             mu, sig = ps.mu[idx], ps.sig[idx]
             comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
-            mx, my, a, b, c, ll, _ = _ekf_terms(terms, *comps)
+            mx, my, a, b, c, ll, _ = _ekf_terms(terms, *comps, with_ll=weight)
         elif not new.all():
             o, comps = self._gather_terms(ps, idx, x, z)
             mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
