@@ -20,6 +20,9 @@ Beyond the paper (separate options, default off):
   given the other, the map and the matchings, so a class is updated at once, vectorised.
 * ``accelerate="joint"`` — every ``accelerate_every`` sweeps, one joint Gauss-Newton step over all poses and the
   map with the current matchings, accepted only if it lowers the same energy (backtracking).
+* ``range_offset`` — added to every range before h⁻¹: a laser measures a post's surface, not its centre; the
+  bias of the paper-exact inverse observation pulls map points towards the robot and drags the poses with them
+  (``benchmarks/bench_icm_study.py``).
 
 Energy bookkeeping: observations whose label the ς filter removed are out of the model for good (the paper's
 clutter); the map step is the paper's three-step procedure, and with ``monotone=True`` (default) it is kept
