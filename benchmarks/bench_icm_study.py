@@ -32,8 +32,8 @@ Measured (full run, seed 0, 3250 steps; ``benchmarks/results/icm_study.csv``):
 * S = I vs S = 0: the same error and 15 vs 16 sweeps — weight 1 on odometry is negligible next to ≈135 000
   unit-weight observation terms, and the on-line initialisation is already within 0.01 m of the final error.
 * kinematic initialisation (Fig. 6): stuck at ≈1.18 m with 12 duplicates; each duplicate keeps 610-1710
-  returns (far above ς) and lies 1.0-5.5 m from its twin (> ϑ; 4.8-5.5 m = one row spacing for the top row,
-  whose two sightings are associated one row apart), so neither the ς filter nor fusion, both
+  returns (far above ς) and lies 1.0-5.5 m from its twin (> ϑ; the 4.8-5.5 m pairs are in the far row at y = 35 m,
+  6.5 m beyond the path, one landmark spacing apart), so neither the ς filter nor fusion, both
   applied after every re-association, can remove it — a local minimum of ICM, not a missing step.
 """
 
