@@ -33,6 +33,10 @@ def write_rows(name: str, rows: list[dict]) -> Path:
     return path
 
 
+def _fmt(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks")
     ap.add_argument("names", nargs="*", help=f"benchmarks to run (default: all of {', '.join(discover())})")
@@ -44,7 +48,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: unknown benchmark(s) {', '.join(unknown)}; available: {', '.join(discover())}", file=sys.stderr)
         return 2
     from rich.console import Console
-    from rich.table import Table
 
     console = Console()
     for name in names:
@@ -52,15 +55,12 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         rows = mod.run(quick=args.quick)
         path = write_rows(name, rows)
-        table = Table(title=f"{name}  ({time.perf_counter() - t0:.1f} s, {path.relative_to(HERE.parent)})")
-        keys: list[str] = []
-        for r in rows:
-            keys += [k for k in r if k not in keys]
-        for k in keys:
-            table.add_column(k)
-        for r in rows:
-            table.add_row(*[f"{r[k]:.4g}" if isinstance(r.get(k), float) else str(r.get(k, "")) for k in keys])
-        console.print(table)
+        console.rule(f"[bold]{name}[/]  {time.perf_counter() - t0:.1f} s  →  {path.relative_to(HERE.parent)}")
+        # Benchmark rows are wide (many measured columns): print one "key = value" block per row so that the
+        # summary stays readable in any terminal; the CSV holds the same numbers for machines.
+        for i, r in enumerate(rows):
+            cells = [f"{k}={_fmt(v)}" for k, v in r.items() if v not in ("", None)]
+            console.print(f"[{i}] " + "  ".join(cells), highlight=False, soft_wrap=False)
     return 0
 
 
