@@ -51,7 +51,7 @@ open field; neither the MobileSim world nor the logs are available, so they cann
 
 * `paper-sim1`: ≈ 50 m × 40 m, 7 rows of 9 landmarks 5 m apart (slightly jittered) as in Fig. 4, an
   irregular lawn-mower path along three lanes between the rows, Δt = 0.1 s, a differential-drive robot
-  following waypoints with a tracking controller, a 181-beam / 180° laser at full range hitting 0.15 m posts
+  following waypoints with a tracking controller, a 181-beam / 180° laser at full range hitting 0.25 m-radius posts
   (several returns per landmark per scan), max-range and isolated returns dropped as in §5, small odometry
   noise ("almost negligible over short distances") and a little clutter for sensing errors.
 * `paper-sim2`: the same world with a 10 m laser (Fig. 7).
