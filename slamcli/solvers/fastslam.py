@@ -30,7 +30,10 @@ One step ``t`` (pose ``t-1`` → ``t``, observations ``z_{t,1..n}``):
      importance weight is multiplied by the linearised predictive likelihood ``N(z; h(x̂, μ), S)`` — the ratio
      target / proposal, ``p(z_t | x_{t-1}^[k], u_t, m^[k])``, of the improved proposal. Several observations
      of one step are folded in sequentially, each linearised at the current proposal mean;
-  3. SAMPLE ``x_t^[k] ~ N(x̂, Σ_x)`` (not its mean), then update the landmark EKFs at the sampled pose as in 1.0.
+  3. SAMPLE ``x_t^[k] ~ N(x̂, Σ_x)`` (not its mean), then update the landmark EKFs at the sampled pose as in 1.0,
+     reusing the proposal's linearisation (``H_m``, ``Σ H_mᵀ``, ``H_m Σ H_mᵀ + Q``) with the innovation moved
+     to the sampled pose to first order, ``ν(x_t) = ν(x̂) − H_x (x_t − x̂)`` (:func:`_shift_terms`; exact
+     recomputation when a landmark is seen twice in one step or only some particles update it).
 
 **Correspondences** (§14.4.2): ``association="known"`` uses ``observations.reported_id`` (a sensor-reported
 identity; the caller may have filled it from ground truth with ``--oracle-association``, which the result
