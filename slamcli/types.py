@@ -166,6 +166,11 @@ class IterationTrace:
     time_s : ndarray (K,)             wall time of each iteration, s.
     landmarks_xy : ndarray (M, 2)     landmark estimates of all iterations, flattened ...
     landmark_offsets : ndarray (K+1,) ... iteration k owns rows ``landmark_offsets[k]:landmark_offsets[k+1]``.
+    poses_xyt : ndarray (P, T+1, 3) | None   optional pose estimates of P <= K recorded iterations (a solver
+                                      may record only some iterations to bound memory: P·(T+1)·3 floats).
+    pose_iterations : ndarray (P,) int64 | None  the iteration of each ``poses_xyt`` row, strictly increasing
+                                      in [0, K-1]; None together with ``poses_xyt`` = every iteration
+                                      (``arange(K)``, then P = K).
     """
 
     objective: np.ndarray
@@ -173,6 +178,8 @@ class IterationTrace:
     time_s: np.ndarray
     landmarks_xy: np.ndarray
     landmark_offsets: np.ndarray
+    poses_xyt: np.ndarray | None = None
+    pose_iterations: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.objective.shape[0])
@@ -181,9 +188,26 @@ class IterationTrace:
         """Landmark estimates ``(L_k, 2)`` after iteration ``k``."""
         return self.landmarks_xy[self.landmark_offsets[k] : self.landmark_offsets[k + 1]]
 
+    def poses_at(self, k: int) -> np.ndarray | None:
+        """Pose estimates ``(T+1, 3)`` after iteration ``k``, or None when iteration ``k`` was not recorded."""
+        if self.poses_xyt is None:
+            return None
+        k = int(k) % len(self) if k < 0 else int(k)
+        if self.pose_iterations is None:
+            return self.poses_xyt[k] if k < self.poses_xyt.shape[0] else None
+        i = int(np.searchsorted(self.pose_iterations, k))
+        if i < len(self.pose_iterations) and int(self.pose_iterations[i]) == k:
+            return self.poses_xyt[i]
+        return None
+
     @staticmethod
-    def from_lists(objective, map_change, time_s, landmarks_per_iter) -> "IterationTrace":
-        """Build a trace from per-iteration Python lists (landmarks: list of ``(L_k, 2)`` arrays)."""
+    def from_lists(objective, map_change, time_s, landmarks_per_iter, poses_per_iter=None,
+                   pose_iterations=None) -> "IterationTrace":
+        """Build a trace from per-iteration Python lists (landmarks: list of ``(L_k, 2)`` arrays).
+
+        ``poses_per_iter`` (optional): list of ``(T+1, 3)`` arrays, one per iteration in ``pose_iterations``
+        (default: one per iteration, ``0..K-1``).
+        """
         counts = [len(m) for m in landmarks_per_iter]
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         lm = (
@@ -197,6 +221,11 @@ class IterationTrace:
             time_s=np.asarray(time_s, float),
             landmarks_xy=lm,
             landmark_offsets=offsets,
+            poses_xyt=(np.stack([np.asarray(x, float).reshape(-1, 3) for x in poses_per_iter])
+                       if poses_per_iter is not None and len(poses_per_iter) else None),
+            pose_iterations=(np.asarray(pose_iterations, np.int64)
+                             if pose_iterations is not None and poses_per_iter is not None
+                             and len(poses_per_iter) else None),
         )
 
 

@@ -25,6 +25,8 @@ def make_result(*, full: bool = True, status: Status = Status.CONVERGED) -> Solv
         map_change=[0.0, 0.3, 0.01],
         time_s=[0.001, 0.002, 0.002],
         landmarks_per_iter=[rng.normal(size=(3, 2)), rng.normal(size=(4, 2)), rng.normal(size=(4, 2))],
+        poses_per_iter=[rng.normal(size=(T1, 3)), rng.normal(size=(T1, 3))],
+        pose_iterations=[0, 2],
     )
     return SolverResult(
         solver="graph",
@@ -57,6 +59,9 @@ def test_round_trip_full(tmp_path):
     for name in ("objective", "map_change", "time_s", "landmarks_xy", "landmark_offsets"):
         assert same(getattr(back.trace, name), getattr(res.trace, name)), name
     assert back.trace.landmarks_at(1).shape == (4, 2)
+    for name in ("poses_xyt", "pose_iterations"):
+        assert same(getattr(back.trace, name), getattr(res.trace, name)), name
+    assert same(back.trace.poses_at(2), res.trace.poses_xyt[1]) and back.trace.poses_at(1) is None
     assert back.status is Status.CONVERGED
     assert (back.solver, back.solver_version, back.message) == (res.solver, res.solver_version, res.message)
     assert back.params == res.params
@@ -210,6 +215,56 @@ def test_trace_length_mismatch(good):
 def test_trace_offsets_bad(good):
     replace(good, "trace/landmark_offsets", np.array([0, 3, 2, 11]))
     expect_error(good, "trace/landmark_offsets", "must rise monotonically")
+
+
+def test_trace_poses_every_iteration_chunked_per_iteration(tmp_path):
+    res = make_result()
+    rng = np.random.default_rng(8)
+    poses = rng.normal(size=(3, res.poses_xyt.shape[0], 3))
+    tr = dataclasses.replace(res.trace, poses_xyt=poses, pose_iterations=None)  # None = every iteration
+    path = write_result(tmp_path / "r.h5", dataclasses.replace(res, trace=tr))
+    with h5py.File(path, "r") as f:
+        ds = f["trace/poses_xyt"]
+        assert ds.chunks == (1, 21, 3) and ds.compression == "gzip" and ds.shuffle
+        np.testing.assert_array_equal(f["trace/pose_iterations"][()], [0, 1, 2])
+    back = read_result(path)
+    assert same(back.trace.poses_xyt, poses)
+    for k in range(3):
+        assert same(back.trace.poses_at(k), poses[k])
+
+
+def test_trace_without_poses_reads(tmp_path):
+    res = make_result()
+    tr = dataclasses.replace(res.trace, poses_xyt=None, pose_iterations=None)
+    path = write_result(tmp_path / "r.h5", dataclasses.replace(res, trace=tr))
+    with h5py.File(path, "r") as f:
+        assert "poses_xyt" not in f["trace"] and "pose_iterations" not in f["trace"]
+    back = read_result(path)
+    assert back.trace.poses_xyt is None and back.trace.poses_at(0) is None
+
+
+def test_trace_poses_bad_shape(good):
+    replace(good, "trace/poses_xyt", np.zeros((2, 21, 2)))
+    expect_error(good, "trace/poses_xyt", "expected shape (*, *, 3)")
+
+
+def test_trace_poses_wrong_pose_count(good):
+    replace(good, "trace/poses_xyt", np.zeros((2, 20, 3)))
+    expect_error(good, "trace/poses_xyt", "expected shape (*, 21, 3)")
+
+
+def test_trace_poses_non_finite(good):
+    p = make_result().trace.poses_xyt.copy()
+    p[1, 4, 2] = np.inf
+    replace(good, "trace/poses_xyt", p)
+    expect_error(good, "trace/poses_xyt", "non-finite value inf at index (1, 4, 2)")
+
+
+def test_trace_pose_iterations_bad(good):
+    replace(good, "trace/pose_iterations", np.array([0, 3]))
+    expect_error(good, "trace/pose_iterations", "must rise strictly within [0, 2]")
+    replace(good, "trace/pose_iterations", np.array([0]))
+    expect_error(good, "trace/pose_iterations", "does not match len(trace/poses_xyt)")
 
 
 def test_params_json_invalid(good):

@@ -8,6 +8,7 @@ Layout (``T+1`` poses, ``L'`` estimated landmarks, ``N`` observations, ``K`` tra
     poses_xyt (T+1,3)   landmarks_xy (L',2)   assoc (N,)   [pose_cov (T+1,3,3)]  [landmark_cov (L',2,2)]
     /trace/      (iterative solvers only) objective (K,) map_change (K,) time_s (K,)
                  landmarks_xy (M,2) landmark_offsets (K+1,)
+                 [poses_xyt (P,T+1,3) pose_iterations (P,)]  (optional; one chunk per recorded iteration)
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 from slamcli.errors import SchemaError
 from slamcli.io.schema import (
+    GZIP_LEVEL,
     RESULT_SCHEMA,
     SCHEMA_VERSION,
     Reader,
@@ -87,7 +89,28 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
                         units="m", frame="world", doc="landmarks of all iterations, flattened (M,2)")
             write_array(g, "landmark_offsets", np.asarray(tr.landmark_offsets, np.int64), units="-",
                         frame="-", doc="iteration k owns rows offsets[k]:offsets[k+1] (K+1,)")
+            if tr.poses_xyt is not None:
+                _write_trace_poses(g, tr)
     return final
+
+
+def _write_trace_poses(g, tr: IterationTrace) -> None:
+    """``trace/poses_xyt`` (P, T+1, 3), one gzip+shuffle chunk per recorded iteration, + ``pose_iterations``."""
+    poses = np.ascontiguousarray(np.asarray(tr.poses_xyt, np.float64))
+    if poses.ndim != 3 or poses.shape[2] != 3:
+        raise SchemaError(f"trace.poses_xyt: expected shape (P, T+1, 3), got {poses.shape}")
+    iters = (np.arange(poses.shape[0], dtype=np.int64) if tr.pose_iterations is None
+             else np.asarray(tr.pose_iterations, np.int64))
+    kwargs = {}
+    if poses.size:  # chunk = one iteration's (T+1, 3) block: reading one snapshot decompresses only it
+        kwargs = {"chunks": (1,) + poses.shape[1:], "compression": "gzip", "compression_opts": GZIP_LEVEL,
+                  "shuffle": True, "fletcher32": True}
+    ds = g.create_dataset("poses_xyt", data=poses, **kwargs)
+    ds.attrs["units"] = "m,m,rad"
+    ds.attrs["frame"] = "world"
+    ds.attrs["doc"] = "pose estimates of the recorded iterations (P,T+1,3)"
+    write_array(g, "pose_iterations", iters, units="-", frame="-",
+                doc="iteration of each poses_xyt row, strictly increasing in [0, K-1] (P,)")
 
 
 def read_result(path: str | os.PathLike) -> SolverResult:
@@ -135,7 +158,7 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         if r.has("landmark_cov"):
             landmark_cov = r.array("landmark_cov", dtype="f", shape=(None, 2, 2), finite=finite)
             r.expect_len("landmark_cov", landmark_cov, L, "len(landmarks_xy)")
-        trace = _read_trace(r) if r.has("trace") else None
+        trace = _read_trace(r, finite) if r.has("trace") else None
     return SolverResult(
         solver=solver,
         solver_version=solver_version,
@@ -154,7 +177,7 @@ def read_result(path: str | os.PathLike) -> SolverResult:
     )
 
 
-def _read_trace(r: Reader) -> IterationTrace:
+def _read_trace(r: Reader, finite: bool = True) -> IterationTrace:
     r.group("trace")
     obj = r.array("trace/objective", dtype="f", shape=(None,), finite=False)
     K = obj.shape[0]
@@ -170,5 +193,16 @@ def _read_trace(r: Reader) -> IterationTrace:
     if offs[0] != 0 or (np.diff(offs) < 0).any() or offs[-1] != lms.shape[0]:
         raise r.fail("trace/landmark_offsets", f"must rise monotonically from 0 to {lms.shape[0]}, got "
                                                f"[{int(offs[0])} .. {int(offs[-1])}]")
+    poses = iters = None
+    if r.has("trace/poses_xyt"):
+        poses = r.array("trace/poses_xyt", dtype="f", shape=(None, None, 3), finite=finite)
+        iters = r.array("trace/pose_iterations", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+        r.expect_len("trace/pose_iterations", iters, poses.shape[0], "len(trace/poses_xyt)")
+        if iters.size and (iters[0] < 0 or iters[-1] >= K or (np.diff(iters) <= 0).any()):
+            raise r.fail("trace/pose_iterations", f"must rise strictly within [0, {K - 1}], got "
+                                                  f"[{int(iters[0])} .. {int(iters[-1])}]")
+        if r.has("poses_xyt") and poses.shape[1] != r.f["poses_xyt"].shape[0]:
+            raise r.fail("trace/poses_xyt", f"expected shape (*, {r.f['poses_xyt'].shape[0]}, 3) "
+                                            f"(T+1 = len(poses_xyt)), got {poses.shape}")
     return IterationTrace(objective=obj, map_change=change, time_s=time_s, landmarks_xy=lms,
-                          landmark_offsets=offs)
+                          landmark_offsets=offs, poses_xyt=poses, pose_iterations=iters)
