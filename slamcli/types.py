@@ -202,7 +202,7 @@ class IterationTrace:
 
     @staticmethod
     def from_lists(objective, map_change, time_s, landmarks_per_iter, poses_per_iter=None,
-                   pose_iterations=None) -> "IterationTrace":
+                   pose_iterations=None) -> IterationTrace:
         """Build a trace from per-iteration Python lists (landmarks: list of ``(L_k, 2)`` arrays).
 
         ``poses_per_iter`` (optional): list of ``(T+1, 3)`` arrays, one per iteration in ``pose_iterations``

@@ -494,3 +494,30 @@ def test_filter_removing_every_map_point_keeps_running(world):
     res = IcmSlam(IcmParams(min_observations=10**6, max_sweeps=3)).solve(inputs, rng=np.random.default_rng(0))
     assert res.landmarks_xy.shape == (0, 2) and np.all(res.assoc == -1)
     assert mp.relabel_compact(np.array([-1, -1]), np.zeros(0, bool))[0].tolist() == [-1, -1]
+
+
+def test_trace_poses_first_every_kth_and_last(world):
+    inputs, _truth, _lm, _ids = world
+    kw = {"init": "kinematic", "map_tol": 0.0, "energy_rtol": 0.0}  # tolerances 0: all 7 sweeps run
+    rng = np.random.default_rng(0)
+    res = IcmSlam(IcmParams(max_sweeps=7, trace_poses_every=3, **kw)).solve(inputs, rng=rng)
+    tr = res.trace
+    assert len(tr) == 8
+    np.testing.assert_array_equal(tr.pose_iterations, [0, 3, 6, 7])
+    assert tr.poses_xyt.shape == (4, len(inputs.controls) + 1, 3)
+    # iteration 0 = the kinematic initialisation, x_t = g(x_{t-1}, u_{t-1}) (independent reference)
+    kinematic = motion.integrate(inputs.x0, inputs.controls, inputs.dt)
+    np.testing.assert_allclose(tr.poses_at(0), kinematic, atol=1e-12)
+    np.testing.assert_array_equal(tr.poses_at(7), res.poses_xyt)  # last = the result
+    assert tr.poses_at(2) is None
+    # a middle snapshot is the state after that sweep: a run stopped there ends at the same poses
+    short = IcmSlam(IcmParams(max_sweeps=3, **kw)).solve(inputs, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(tr.poses_at(3), short.poses_xyt)
+    assert not np.allclose(tr.poses_at(3), tr.poses_at(0))
+    # default: every iteration; 0 = none
+    np.testing.assert_array_equal(short.trace.poses_at(3), short.poses_xyt)
+    assert short.trace.poses_xyt.shape == (4, len(inputs.controls) + 1, 3)
+    none = IcmSlam(IcmParams(max_sweeps=2, trace_poses_every=0)).solve(inputs, rng=np.random.default_rng(0))
+    assert none.trace.poses_xyt is None and none.trace.poses_at(0) is None
+    with pytest.raises(ValueError, match="trace_poses_every"):
+        IcmParams(trace_poses_every=-1)

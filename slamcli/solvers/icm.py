@@ -83,6 +83,11 @@ class IcmParams:
                                  s uniform in [−ρ, ρ], so ``range_offset = π/4 · ρ`` re-centres the returns of
                                  a post of known radius ρ (use ρ itself for a sensor that returns the nearest
                                  surface point). See ``benchmarks/bench_icm_study.py``.
+    trace_poses_every : int      record the poses of iteration 0 (the initialisation), of every k-th iteration
+                                 and of the last one in ``result.trace`` (paper Figs 5b-d / 6b / 9b-c draw the
+                                 trajectory after iterations 10, 20, 30, …); 0 = no poses in the trace. Memory:
+                                 24·(T+1) bytes per recorded iteration (paper-sim2, T = 3250, 100 sweeps, k = 1:
+                                 7.8 MB); raise k for very long runs.
     """
 
     R: tuple[float, ...] = (1.0,)
@@ -103,6 +108,7 @@ class IcmParams:
     monotone: bool = True
     covariance: bool = False
     range_offset: float = 0.0
+    trace_poses_every: int = 1
 
     def __post_init__(self) -> None:
         en.Weights.from_params(self.R, self.S, self.Q)  # validates lengths and signs
@@ -119,6 +125,8 @@ class IcmParams:
             raise ValueError("map_tol and energy_rtol must be >= 0")
         if not (self.range_offset >= 0 and math.isfinite(self.range_offset)):
             raise ValueError(f"range_offset must be a finite number >= 0, got {self.range_offset}")
+        if self.trace_poses_every < 0:
+            raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
 
     @property
     def weights(self) -> en.Weights:
@@ -343,6 +351,8 @@ class IcmSlam(BaseSolver):
         out_model = labels < 0  # observations outside the model (filtered / unlabelled); stays so
         E = en.energy(prob, W, poses, landmarks, labels)
         objective, changes, times, lms = [E], [0.0], [time.perf_counter() - t0], [landmarks.copy()]
+        every = p.trace_poses_every
+        pose_iters, pose_snaps = ([0], [poses.copy()]) if every else ([], [])
         extra["init_s"] = times[0]
 
         # ---- step 2: ICM sweeps ----------------------------------------------------------------------------
@@ -392,6 +402,9 @@ class IcmSlam(BaseSolver):
             changes.append(change)
             times.append(time.perf_counter() - t0)
             lms.append(landmarks.copy())
+            if every and n % every == 0:
+                pose_iters.append(n)
+                pose_snaps.append(poses.copy())
             if progress is not None:
                 progress(n, p.max_sweeps)
             rel = (E_start - E) / max(abs(E_start), 1e-300)
@@ -413,7 +426,13 @@ class IcmSlam(BaseSolver):
         pose_cov = lm_cov = None
         if p.covariance and landmarks.shape[0] + T > 0:
             pose_cov, lm_cov = en.laplace_covariances(prob, W, poses, landmarks, labels)
-        trace = IterationTrace.from_lists(objective, changes, times, lms)
+        K = len(objective)
+        if every and pose_iters[-1] != K - 1:  # the last iteration is always recorded
+            pose_iters.append(K - 1)
+            pose_snaps.append(poses.copy())
+        trace = IterationTrace.from_lists(objective, changes, times, lms,
+                                          poses_per_iter=pose_snaps if every else None,
+                                          pose_iterations=pose_iters if every else None)
         return self.make_result(
             status=status,
             poses_xyt=poses,
