@@ -6,6 +6,7 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from typer.testing import CliRunner
@@ -83,3 +84,41 @@ def test_missing_solver_is_reported_not_faked(tmp_path):
     text = "\n".join(sec.markdown)
     assert "Not run: `icm`" in text and "not-a-solver" in text and "not produced" in text
     assert not sec.figures and "| max per-iteration map change" not in text
+
+
+def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_path):
+    from slamcli.io import read_result
+    from slamcli.sweep.reproduce import Section, snapshot_path_xy
+
+    out, report = quick_report
+    fig5 = pd.read_csv(out / "runs" / "fig5-sim1" / "results.csv")
+    row = fig5[fig5.status == "completed"].iloc[0]
+    result = read_result(Path(row["path"]) / "result.h5")
+    assert result.trace.poses_xyt is not None and len(result.trace) >= 3  # ICM records every iteration
+    rep = Reproduction(tmp_path / "out", quick=True, workers=1, experiments_dir=EXPERIMENTS, log=lambda s: None)
+    sec = Section("t", "t")
+    panels = rep._snapshots(sec, "t", row, (0, 1, 10_000), "test")
+    last = len(result.trace) - 1
+    assert sorted(panels) == [0, 1, last]
+    for k, ax in panels.items():
+        lines = {ln.get_label(): ln for ln in ax.get_lines()}
+        drawn = lines["Estimated trajectory"].get_xydata()
+        np.testing.assert_array_equal(drawn, result.trace.poses_at(k)[:, :2])
+        np.testing.assert_array_equal(drawn, snapshot_path_xy(result, k))
+    np.testing.assert_array_equal(panels[last].get_lines()[2].get_xydata(), result.poses_xyt[:, :2])
+    assert not np.array_equal(result.trace.poses_at(0), result.trace.poses_at(1))  # panels really differ
+    text = "\n".join(sec.markdown)
+    assert "stores no poses" not in text and "trajectory of each panel come from" in text
+    assert "trace stores no poses" not in report
+
+
+def test_snapshot_path_without_trace_poses_only_on_last_panel():
+    from slamcli.sweep.reproduce import snapshot_path_xy
+    from slamcli.types import IterationTrace, SolverResult, Status
+
+    poses = np.arange(12.0).reshape(4, 3)
+    trace = IterationTrace.from_lists([3.0, 2.0, 1.0], [0.0, 0.1, 0.1], [0.0] * 3, [np.zeros((1, 2))] * 3)
+    res = SolverResult(solver="icm", solver_version="0", params={}, status=Status.CONVERGED, message="",
+                       poses_xyt=poses, landmarks_xy=np.zeros((1, 2)), assoc=np.zeros(0, np.int64), trace=trace)
+    assert snapshot_path_xy(res, 0) is None and snapshot_path_xy(res, 1) is None
+    np.testing.assert_array_equal(snapshot_path_xy(res, 2), poses[:, :2])

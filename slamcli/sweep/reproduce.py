@@ -133,6 +133,15 @@ class SweepOutcome:
     missing: dict[str, str]  # label -> why the solver is not run
 
 
+def snapshot_path_xy(result, k: int):
+    """Estimated path ``(T+1, 2)`` after iteration ``k`` of ``result.trace``: the trace's poses of that
+    iteration when recorded, the final poses for the last iteration, else None (nothing honest to draw)."""
+    poses = result.trace.poses_at(k) if result.trace is not None else None
+    if poses is None and result.trace is not None and k == len(result.trace) - 1:
+        poses = result.poses_xyt
+    return None if poses is None else poses[:, :2]
+
+
 class Reproduction:
     """Runs the sections and assembles the report."""
 
@@ -348,7 +357,8 @@ class Reproduction:
             r("ATE RMSE, unaligned (m)", "—", col("ate_rmse_m")),
         ]
 
-    def _snapshots(self, sec: Section, key: str, row, snapshots: tuple[int, ...], what: str) -> None:
+    def _snapshots(self, sec: Section, key: str, row, snapshots: tuple[int, ...], what: str) -> dict:
+        """Map panels after the requested iterations; returns ``{iteration: axes}`` of the saved figure."""
         from slamcli.io import read_dataset, read_result
         from slamcli.plots.maps import plot_map
 
@@ -359,20 +369,29 @@ class Reproduction:
         n_trace = len(result.trace) if result.trace is not None else 0
         if n_trace == 0:
             sec.add("_The result has no iteration trace; map snapshots are not available._")
-            return
+            return {}
         ks = sorted({min(k, n_trace - 1) for k in snapshots})
         fig, axes = self._figure(len(ks), width=4.6, height=4.4)
+        paths = {k: snapshot_path_xy(result, k) for k in ks}
         for ax, k in zip(axes, ks):
             plot_map(ax, true_landmarks_xy=truth.landmarks_xy, est_landmarks_xy=result.trace.landmarks_at(k),
                      true_path_xy=truth.poses_xyt[:, :2], odometry_path_xy=dataset.inputs.odometry_xyt[:, :2],
-                     est_path_xy=result.poses_xyt[:, :2] if k == n_trace - 1 else None,
+                     est_path_xy=paths[k],
                      title=f"{'initialisation' if k == 0 else f'iteration {k}'} ({what})")
         self._save(sec, fig, f"{key}_maps")
         clipped = [k for k in snapshots if k > n_trace - 1]
         note = (f" Requested iterations {clipped} do not exist (the run stopped after {n_trace - 1}); the last "
                 "iteration is shown instead." if clipped else "")
-        sec.add("Landmark estimates per iteration come from the result's trace; the trace stores no poses per "
-                "iteration, so the estimated trajectory is drawn on the last panel only." + note)
+        no_path = [k for k in ks if paths[k] is None]
+        if no_path:
+            how = ("the trace stores no poses per iteration" if result.trace.poses_xyt is None
+                   else "the trace holds no poses for these iterations (the solver recorded only some)")
+            sec.add(f"Landmark estimates per iteration come from the result's trace; {how}, so panels {no_path} "
+                    "show no estimated trajectory." + note)
+        else:
+            sec.add("Landmark estimates and the estimated trajectory of each panel come from the result's "
+                    "per-iteration trace." + note)
+        return dict(zip(ks, axes))
 
     def octagon_section(self) -> Section:
         sec = Section("fig9", "Fig. 9: octagon world, map change per iteration")
