@@ -74,5 +74,5 @@ def plot_map(ax, true_landmarks_xy=None, est_landmarks_xy=None, true_path_xy=Non
         ax.set_title(title)
     if legend_note:
         ax.plot([], [], ls="none", label=legend_note)
-    legend_below(ax, ncol=3)
+    legend_below(ax, ncol=2)  # 3 columns overflow a ~4.6 in snapshot panel into its neighbour's legend
     return ax
