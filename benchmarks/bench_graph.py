@@ -45,15 +45,7 @@ def make_problem(n_poses: int = 2001, n_landmarks: int = 50, seed: int = 0, max_
     z = observation.range_bearing(truth[:, None, :], landmarks[None, :, :])  # (T+1, L, 2)
     t_idx, l_idx = np.nonzero(z[..., 0] <= max_range)
     zz = z[t_idx, l_idx] + rng.normal(0.0, 1.0, (t_idx.size, 2)) * [range_std, bearing_std]
-    zz[:, 1] = (zz[:, 1] + np.pi) % (2 * np.pi) - np.pi
-    obs = Observations(
-        step=t_idx.astype(np.int64),
-        range_m=zz[:, 0].copy(),
-        bearing_rad=zz[:, 1].copy(),
-        sensor=np.zeros(t_idx.size, np.int16),
-        reported_id=l_idx.astype(np.int64),
-        offsets=Observations.offsets_from_steps(t_idx, T + 1),
-    )
+    obs = Observations.from_rows(t_idx, zz, T + 1, reported_id=l_idx)
     inputs = SlamInputs(
         dt=dt,
         timestamps=np.arange(T + 1) * dt,

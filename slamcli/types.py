@@ -77,6 +77,41 @@ class Observations:
         return slice(int(self.offsets[t]), int(self.offsets[t + 1]))
 
     @staticmethod
+    def from_rows(
+        step,
+        z,
+        n_poses: int,
+        *,
+        reported_id=None,
+        sensor=None,
+    ) -> Observations:
+        """Build the table from time-ordered rows.
+
+        Parameters
+        ----------
+        step : array (N,)            pose index of each row (non-decreasing).
+        z : array (N, 2)             ``[range, bearing]``; bearings are wrapped here with the one wrap helper.
+        n_poses : int                T+1 (sets the length of ``offsets``).
+        reported_id : array (N,)     sensor-reported ids; default all -1 (the sensor reports none).
+        sensor : array (N,)          sensor index; default all 0.
+        """
+        from slamcli.models.angles import wrap_angle
+
+        step = np.asarray(step, np.int64).reshape(-1)
+        z = np.asarray(z, float).reshape(-1, 2)
+        n = step.shape[0]
+        return Observations(
+            step=step,
+            range_m=z[:, 0].copy(),
+            bearing_rad=np.asarray(wrap_angle(z[:, 1]), float).reshape(-1),
+            sensor=np.zeros(n, np.int16) if sensor is None else np.asarray(sensor, np.int16).copy(),
+            reported_id=(
+                np.full(n, -1, np.int64) if reported_id is None else np.asarray(reported_id, np.int64).copy()
+            ),
+            offsets=Observations.offsets_from_steps(step, n_poses),
+        )
+
+    @staticmethod
     def offsets_from_steps(step: np.ndarray, n_poses: int) -> np.ndarray:
         """CSR offsets ``(n_poses+1,)`` for a sorted step column."""
         counts = np.bincount(np.asarray(step, dtype=np.int64), minlength=n_poses)

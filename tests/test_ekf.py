@@ -73,17 +73,8 @@ def make_world(
             zs.append([rng.uniform(0.5, max_range), rng.uniform(-np.pi, np.pi)])
             ids.append(-1)
     zs = np.asarray(zs, float).reshape(-1, 2)
-    zs[:, 1] = observation.measurement_residual(np.zeros_like(zs), -zs)[:, 1]  # wrap bearings
-    steps = np.asarray(steps, np.int64)
     ids = np.asarray(ids, np.int64)
-    obs = Observations(
-        step=steps,
-        range_m=zs[:, 0],
-        bearing_rad=zs[:, 1],
-        sensor=np.zeros(len(steps), np.int16),
-        reported_id=ids.copy() if report_ids else np.full(len(steps), -1, np.int64),
-        offsets=Observations.offsets_from_steps(steps, T + 1),
-    )
+    obs = Observations.from_rows(steps, zs, T + 1, reported_id=ids if report_ids else None)
     inputs = SlamInputs(
         dt=dt,
         timestamps=dt * np.arange(T + 1),

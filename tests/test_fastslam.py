@@ -68,17 +68,8 @@ def make_world(
             steps.append(t)
             zs.append([rng.uniform(0.5, max_range), rng.uniform(-np.pi, np.pi)])
             labels.append(-1)
-    step = np.asarray(steps, np.int64)
-    z = np.asarray(zs, float).reshape(-1, 2)
     lab = np.asarray(labels, np.int64)
-    obs = Observations(
-        step=step,
-        range_m=z[:, 0].copy(),
-        bearing_rad=z[:, 1].copy(),
-        sensor=np.zeros(len(step), np.int16),
-        reported_id=lab.copy() if report_ids else np.full(len(step), -1, np.int64),
-        offsets=Observations.offsets_from_steps(step, T + 1),
-    )
+    obs = Observations.from_rows(steps, zs, T + 1, reported_id=lab if report_ids else None)
     inputs = SlamInputs(
         dt=dt,
         timestamps=np.arange(T + 1) * dt,

@@ -41,7 +41,6 @@ def tiny_dataset(
         z = observation.range_bearing(truth_poses[t], landmarks)
         for j in np.flatnonzero(z[:, 0] <= max_range):
             zn = z[j] + rng.normal(0.0, 1.0, 2) * [range_std, bearing_std]
-            zn[1] = (zn[1] + np.pi) % (2 * np.pi) - np.pi
             steps.append(t)
             z_rows.append(zn)
             labels.append(j)
@@ -49,16 +48,9 @@ def tiny_dataset(
             steps.append(t)
             z_rows.append([rng.uniform(0.5, max_range), rng.uniform(-np.pi, np.pi)])
             labels.append(-1)
-    step = np.asarray(steps, np.int64)
-    z_arr = np.asarray(z_rows, float).reshape(-1, 2)
     labels_arr = np.asarray(labels, np.int64)
-    obs = Observations(
-        step=step,
-        range_m=z_arr[:, 0].copy(),
-        bearing_rad=z_arr[:, 1].copy(),
-        sensor=np.zeros(len(step), np.int16),
-        reported_id=labels_arr.copy() if report_ids else np.full(len(step), -1, np.int64),
-        offsets=Observations.offsets_from_steps(step, T + 1),
+    obs = Observations.from_rows(
+        steps, z_rows, T + 1, reported_id=labels_arr if report_ids else None
     )
     if gps_every:
         gps_step = np.arange(0, T + 1, gps_every, dtype=np.int64)
