@@ -15,7 +15,7 @@ from slamcli.solvers import frontend, graph
 from slamcli.types import Status
 
 gtsam = pytest.importorskip("gtsam")
-from gtsam.symbol_shorthand import L, X
+from gtsam.symbol_shorthand import L, X  # noqa: E402 - after the importorskip guard
 
 
 def _dataset():

@@ -67,4 +67,4 @@ def solve_command(
         )
         if result.message:
             console.print(f"  {result.message}", highlight=False, markup=False)
-        console.print(f"  wrote {out}", highlight=False, markup=False)
+        console.print(f"  wrote {out}", highlight=False, markup=False, soft_wrap=True)

@@ -98,7 +98,7 @@ def drive(
             if e >= pi:
                 e -= two_pi
             w = k_h * e
-            w = w_max if w > w_max else (-w_max if w < -w_max else w)  # noqa: FURB136 (hot loop: no call)
+            w = w_max if w > w_max else (-w_max if w < -w_max else w)
             c = cos(e)
             v = v_max * c if c > 0.0 else 0.0
         nv, nw = noise[t]
