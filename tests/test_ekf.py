@@ -398,7 +398,7 @@ def test_ml_handles_several_returns_per_landmark_per_step():
     import dataclasses
 
     obs2 = dataclasses.replace(
-        o, step=o.step[rep], range_m=z[:, 0], bearing_rad=np.mod(z[:, 1] + np.pi, 2 * np.pi) - np.pi,
+        o, step=o.step[rep], range_m=z[:, 0], bearing_rad=observation.wrap_angle(z[:, 1]),
         sensor=o.sensor[rep], reported_id=o.reported_id[rep],
         offsets=Observations.offsets_from_steps(o.step[rep], inputs.n_poses),
     )

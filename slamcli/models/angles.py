@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 TWO_PI = 2.0 * np.pi
@@ -26,6 +28,15 @@ def wrap_angle(a):
     w = np.where(w >= np.pi, w - TWO_PI, w)
     w = np.where(w < -np.pi, w + TWO_PI, w)
     return float(w) if w.ndim == 0 else w
+
+
+def wrap_angle_fast(a):
+    """Hot-path form of :func:`wrap_angle` for Python floats (or arrays): ``(a + pi) % 2pi - pi``.
+
+    Same interval ``[-pi, pi)``; it skips numpy's scalar overhead (≈1 µs) in per-pose inner loops (ICM pose
+    conditionals, the simulator's controller). Use :func:`wrap_angle` everywhere else.
+    """
+    return (a + math.pi) % TWO_PI - math.pi
 
 
 def angle_diff(a, b):

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from slamcli.models import motion
-from slamcli.models.angles import wrap_angle
+from slamcli.models.angles import wrap_angle, wrap_angle_fast
 from slamcli.sim.config import OdometryConfig, RobotConfig
 
 _TWO_PI = 2.0 * math.pi
@@ -74,6 +74,7 @@ def drive(
         reached[0] = 0
     done = False
     cos, sin, atan2, hypot, pi, two_pi = math.cos, math.sin, math.atan2, math.hypot, math.pi, _TWO_PI
+    wrap = wrap_angle_fast
     next_report = _PROGRESS_EVERY - 1 if progress is not None else -1
     for t in range(T):
         if not done:
@@ -94,8 +95,8 @@ def drive(
         if done:
             v = w = 0.0
         else:
-            e = (atan2(wy - y, wx - x) - th + pi) % two_pi - pi  # wrap_angle's formula, inlined: [-π, π)
-            if e >= pi:
+            e = wrap(atan2(wy - y, wx - x) - th)
+            if e >= pi:  # rounding guard of the half-open interval
                 e -= two_pi
             w = k_h * e
             w = w_max if w > w_max else (-w_max if w < -w_max else w)
@@ -106,7 +107,7 @@ def drive(
         # g(x, u) = x + dt·[v cos θ, v sin θ, ω]  (heading wrapped)
         x += dt * ve * cos(th)
         y += dt * ve * sin(th)
-        th = (th + dt * (w + nw) + pi) % two_pi - pi
+        th = wrap(th + dt * (w + nw))
         if th >= pi:
             th -= two_pi
         u_cmd.append((v, w))

@@ -40,6 +40,7 @@ from typing import Literal
 import numpy as np
 
 from slamcli.errors import SolverError
+from slamcli.models.angles import wrap_angle, wrap_angle_fast
 from slamcli.models.motion import odometry_increments
 from slamcli.models.observation import (
     inverse_range_bearing,
@@ -618,10 +619,7 @@ def _ddmr_predict(x_r, u, dt: float):
     return pose, F, G_u
 
 
-def _wrap(a: float) -> float:
-    """Scalar twin of :func:`slamcli.models.angles.wrap_angle` (same formula, [-π, π))."""
-    w = (a + math.pi) % (2.0 * math.pi) - math.pi
-    return w - 2.0 * math.pi if w >= math.pi else w
+_wrap = wrap_angle_fast  # scalar heading wrap in the per-step prediction (no numpy scalar overhead)
 
 
 def _inv2(S):
@@ -719,7 +717,7 @@ def innovation_stats(x, P, z, R):
     Pk[:, 3:, 3:] = diag[ar, :, ar, :]
     S = J @ Pk @ J.transpose(0, 2, 1) + R
     y0 = z[0] - sq
-    y1 = np.mod(z[1] - (np.arctan2(dy, dx) - x[2]) + np.pi, 2 * np.pi) - np.pi  # wrap to [-π, π)
+    y1 = wrap_angle(z[1] - (np.arctan2(dy, dx) - x[2]))
     # 2×2 solve in closed form: S⁻¹ = adj(S)/det(S)
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
     return (S[:, 1, 1] * y0**2 - (S[:, 0, 1] + S[:, 1, 0]) * y0 * y1 + S[:, 0, 0] * y1**2) / det

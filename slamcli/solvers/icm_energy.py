@@ -32,16 +32,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from slamcli.models import observation, potentials, se2
-from slamcli.models.angles import wrap_angle
+from slamcli.models.angles import wrap_angle, wrap_angle_fast
 from slamcli.types import SlamInputs
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
 
 
-def _wrap(a):
-    """Angle wrap to [-pi, pi) that works on floats and arrays alike (``%`` is non-negative for both)."""
-    return (a + PI) % TWO_PI - PI
+_wrap = wrap_angle_fast  # floats and arrays alike, no numpy scalar overhead in the per-pose loops
 
 
 # ------------------------------------------------------------------------------------------------------------
