@@ -377,13 +377,15 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
     )
 
 
-def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates: tuple[int, ...] | None = None):
-    """A copy of ``cfg`` with fixed overrides in sweep-key form (``scenario.x``, ``solver.<label>.p``, ...).
+def route_overrides(
+    cfg: ExperimentConfig, overrides: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, dict[str, Any]]]:
+    """Apply sweep-key overrides (``scenario.x``, ``solver.<label>.p``, ``evaluate.k``) on copies of the
+    experiment's scenario parameters, evaluate options and per-solver parameters.
 
-    A fixed override of a key that is also swept replaces that axis (the axis is dropped).
+    Returns ``(scenario_params, evaluate, {label: params})``; an unknown namespace or solver label raises a
+    one-line :class:`ConfigError` naming the file and key.
     """
-    import dataclasses
-
     scenario_params = dict(cfg.scenario_params)
     evaluate = dict(cfg.evaluate)
     solvers = {s.label: dict(s.params) for s in cfg.solvers}
@@ -400,6 +402,17 @@ def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates:
             solvers[label][param] = value
         else:
             raise cfg.err(key, "override keys must be scenario.*, solver.<label>.* or evaluate.*")
+    return scenario_params, evaluate, solvers
+
+
+def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates: tuple[int, ...] | None = None):
+    """A copy of ``cfg`` with fixed overrides in sweep-key form (``scenario.x``, ``solver.<label>.p``, ...).
+
+    A fixed override of a key that is also swept replaces that axis (the axis is dropped).
+    """
+    import dataclasses
+
+    scenario_params, evaluate, solvers = route_overrides(cfg, overrides)
     grid = tuple((k, v) for k, v in cfg.sweep.grid if k not in overrides)
     zips = tuple(
         g2 for g2 in (tuple((k, v) for k, v in g if k not in overrides) for g in cfg.sweep.zips) if g2

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError, SlamcliError
-from slamcli.sweep.config import ExperimentConfig
+from slamcli.sweep.config import ExperimentConfig, route_overrides
 
 STREAM_SIMULATION = 0
 STREAM_SOLVER = 1
@@ -316,18 +316,7 @@ def expand(
     solver_cache: dict[str, dict[str, Any]] = {}
     runs: dict[str, RunSpec] = {}
     for point in sweep_points(cfg):
-        scen_over = dict(cfg.scenario_params)
-        evaluate = dict(cfg.evaluate)
-        solver_over = {s.label: dict(s.params) for s in cfg.solvers}
-        for key, value in point.items():
-            ns, _, rest = key.partition(".")
-            if ns == "scenario":
-                scen_over[rest] = value
-            elif ns == "evaluate":
-                evaluate[rest] = value
-            else:
-                label, _, param = rest.partition(".")
-                solver_over[label][param] = value
+        scen_over, evaluate, solver_over = route_overrides(cfg, point)
         skey = canonical_json([cfg.scenario, scen_over])
         if skey not in scen_cache:
             scen_cache[skey] = resolver.scenario(cfg.scenario, scen_over, f"{cfg.source}: [scenario]")
