@@ -45,6 +45,7 @@ from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers import icm_energy as en
 from slamcli.solvers import icm_map as mp
 from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.solvers.frontend import compact_labels
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
@@ -135,16 +136,7 @@ class IcmParams:
 
 def reported_labels(reported_id) -> np.ndarray:
     """Labels 0.. by order of first appearance of each sensor-reported id; ``-1`` stays ``-1``."""
-    rid = np.asarray(reported_id, np.int64)
-    out = np.full(rid.shape[0], -1, np.int64)
-    ok = rid >= 0
-    if ok.any():
-        uniq, first = np.unique(rid[ok], return_index=True)
-        order = np.argsort(first, kind="stable")
-        rank = np.empty_like(order)
-        rank[order] = np.arange(order.size)
-        out[ok] = rank[np.searchsorted(uniq, rid[ok])]
-    return out
+    return compact_labels(reported_id)[0]
 
 
 def online_init(

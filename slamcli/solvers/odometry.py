@@ -33,6 +33,7 @@ import numpy as np
 from slamcli.models import se2
 from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.solvers.frontend import compact_labels
 from slamcli.types import SlamInputs, SolverResult, Status
 
 
@@ -153,18 +154,7 @@ def greedy_nearest_neighbour(
 
 def compact(assoc: np.ndarray, min_support: int) -> np.ndarray:
     """Drop labels with fewer than ``min_support`` rows and renumber 0..L'−1 by first sighting."""
-    assoc = np.asarray(assoc, np.int64)
-    out = np.full_like(assoc, -1)
-    ok = assoc >= 0
-    if not ok.any():
-        return out
-    labels, first, counts = np.unique(assoc[ok], return_index=True, return_counts=True)
-    keep = counts >= min_support
-    order = labels[keep][np.argsort(first[keep], kind="stable")]
-    lut = np.full(int(labels.max()) + 1, -1, np.int64)
-    lut[order] = np.arange(order.size)
-    out[ok] = lut[assoc[ok]]
-    return out
+    return compact_labels(assoc, min_support)[0]
 
 
 class OdometrySolver(BaseSolver):
