@@ -289,14 +289,7 @@ def import_graph(
     else:
         step = rid = np.zeros(0, np.int64)
         rng = brg = sr = sb = np.zeros(0)
-    obs = Observations(
-        step=step,
-        range_m=rng,
-        bearing_rad=brg,
-        sensor=np.zeros(len(step), np.int16),
-        reported_id=rid,
-        offsets=Observations.offsets_from_steps(step, T + 1),
-    )
+    obs = Observations.from_rows(step, np.column_stack([rng, brg]), T + 1, reported_id=rid)
 
     s_inc = np.sqrt(np.diagonal(cov_inc, axis1=1, axis2=2))  # (T, 3)
     odo_std = np.median(s_inc, axis=0)

@@ -425,14 +425,7 @@ def import_mrclam(
     keep_row = in_window & ((lm_index >= 0) | (non_landmark == "clutter"))
     step, m, m_t, lm_index = step[keep_row], m[keep_row], m_t[keep_row], lm_index[keep_row]
     timing_err = np.abs(m_t - timestamps[step]) if len(step) else np.zeros(0)
-    obs = Observations(
-        step=step,
-        range_m=m[:, 2].copy(),
-        bearing_rad=wrap_angle(m[:, 3]) if len(m) else np.zeros(0),
-        sensor=np.zeros(len(step), np.int16),
-        reported_id=lm_index.copy(),
-        offsets=Observations.offsets_from_steps(step, T + 1),
-    )
+    obs = Observations.from_rows(step, m[:, 2:4], T + 1, reported_id=lm_index)
 
     noise = default_noise(dt) if noise is None else noise
     inputs = SlamInputs(

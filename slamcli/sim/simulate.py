@@ -105,13 +105,8 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     else:
         ret = sensors.point_scans(poses, landmarks, scan_steps, cfg.sensor, cfg.clutter, rng_s, rng_c)
     reported = np.where(ret.landmark >= 0, ret.landmark, -1) if cfg.sensor.report_ids else np.full(len(ret.step), -1)
-    obs = Observations(
-        step=ret.step.astype(np.int64),
-        range_m=ret.range_m.astype(float),
-        bearing_rad=ret.bearing_rad.astype(float),
-        sensor=np.zeros(len(ret.step), np.int16),
-        reported_id=reported.astype(np.int64),
-        offsets=Observations.offsets_from_steps(ret.step, T + 1),
+    obs = Observations.from_rows(
+        ret.step, np.column_stack([ret.range_m, ret.bearing_rad]), T + 1, reported_id=reported
     )
 
     # 5) optional GPS
