@@ -10,6 +10,9 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
         noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
+        constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
+                           between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
+                           [observation_info (N,2,2) @model]
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
 """
@@ -34,7 +37,7 @@ from slamcli.io.schema import (
     utc_now,
     write_array,
 )
-from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
+from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, PoseConstraints, SlamInputs
 
 #: metadata keys promoted to their own root attributes (dicts as ``<key>_json``, see
 #: :func:`promoted_sections`); everything in ``Dataset.metadata`` also round-trips through ``@metadata_json``.
@@ -142,6 +145,9 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
             write_array(g, "gps_std", np.float64(inp.gps_std), units="m", frame="world",
                         doc="sigma of one GPS fix")
 
+        if inp.constraints is not None:
+            _write_constraints(g, inp.constraints)
+
         if dataset.truth is not None:
             tr = dataset.truth
             gt = f.create_group("truth")
@@ -153,6 +159,81 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
             write_array(gt, "obs_landmark", np.asarray(tr.obs_landmark, np.int64), units="-", frame="-",
                         doc="true landmark index of each observation row, -1 = clutter (N,)")
     return final
+
+
+OBSERVATION_MODELS = ("range_bearing", "xy")
+
+
+def _write_constraints(g, c: PoseConstraints) -> None:
+    """``/inputs/constraints``: pose-pose constraints and per-edge information matrices (all optional)."""
+    gc = g.create_group("constraints")
+    gc.attrs["doc"] = ("per-edge constraints with their own information matrices (slamcli.types.PoseConstraints): "
+                       "pose-pose between-factors (loop closures, any two poses) and per-edge information")
+    ij = np.asarray(c.between_ij, np.int64).reshape(-1, 2)
+    write_array(gc, "between_i", ij[:, 0].copy(), units="-", frame="-", doc="first pose index i (B,)")
+    write_array(gc, "between_j", ij[:, 1].copy(), units="-", frame="-", doc="second pose index j (B,)")
+    write_array(gc, "between_xyt", np.asarray(c.between_xyt, np.float64).reshape(-1, 3), units="m,m,rad",
+                frame="body", doc="measured pose of j in the body frame of i [dx, dy, dtheta] (B,3)")
+    write_array(gc, "between_info", np.asarray(c.between_info, np.float64).reshape(-1, 3, 3), units="1/m2,1/m2,1/rad2",
+                frame="body", doc="information (inverse covariance) of the SE(2) log error of each constraint (B,3,3)")
+    if c.odometry_info is not None:
+        write_array(gc, "odometry_info", np.asarray(c.odometry_info, np.float64).reshape(-1, 3, 3),
+                    units="1/m2,1/m2,1/rad2", frame="body",
+                    doc="information of each odometry increment t -> t+1 (T,3,3)")
+    if c.observation_info is not None:
+        write_array(gc, "observation_info", np.asarray(c.observation_info, np.float64).reshape(-1, 2, 2),
+                    units="per model", frame="body",
+                    doc="information of each observation row in the model named by @model (N,2,2)")
+        gc["observation_info"].attrs["model"] = str(c.observation_model)
+
+
+def _read_info(r: Reader, name: str, arr: np.ndarray) -> None:
+    """Every matrix of ``arr (n, k, k)`` must be symmetric positive definite."""
+    if not arr.shape[0]:
+        return
+    asym = np.abs(arr - np.swapaxes(arr, 1, 2)).max(axis=(1, 2)) > 1e-9 * np.maximum(1.0, np.abs(arr).max(axis=(1, 2)))
+    if asym.any():
+        raise r.fail(name, f"matrix {int(np.argmax(asym))} is not symmetric")
+    low = np.linalg.eigvalsh(arr)[:, 0]
+    if (low <= 0).any():
+        k = int(np.argmax(low <= 0))
+        raise r.fail(name, f"matrix {k} is not positive definite (smallest eigenvalue {low[k]:.3g})")
+
+
+def _read_constraints(r: Reader, n_poses: int, n_obs: int) -> PoseConstraints | None:
+    g = "inputs/constraints"
+    if not r.has(g):
+        return None
+    r.group(g)
+    bi = r.array(f"{g}/between_i", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    B = bi.shape[0]
+    bj = r.array(f"{g}/between_j", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len(f"{g}/between_j", bj, B, f"len({g}/between_i)")
+    xyt = r.array(f"{g}/between_xyt", dtype="f", shape=(None, 3))
+    r.expect_len(f"{g}/between_xyt", xyt, B, f"len({g}/between_i)")
+    info = r.array(f"{g}/between_info", dtype="f", shape=(None, 3, 3))
+    r.expect_len(f"{g}/between_info", info, B, f"len({g}/between_i)")
+    _check_index_range(r, f"{g}/between_i", bi, 0, n_poses - 1)
+    _check_index_range(r, f"{g}/between_j", bj, 0, n_poses - 1)
+    if B and (bi == bj).any():
+        raise r.fail(f"{g}/between_j", f"constraint {int(np.argmax(bi == bj))} links a pose to itself")
+    _read_info(r, f"{g}/between_info", info)
+    odo_info = None
+    if r.has(f"{g}/odometry_info"):
+        odo_info = r.array(f"{g}/odometry_info", dtype="f", shape=(None, 3, 3))
+        r.expect_len(f"{g}/odometry_info", odo_info, n_poses - 1, "T = len(timestamps) - 1")
+        _read_info(r, f"{g}/odometry_info", odo_info)
+    obs_info, model = None, "range_bearing"
+    if r.has(f"{g}/observation_info"):
+        obs_info = r.array(f"{g}/observation_info", dtype="f", shape=(None, 2, 2))
+        r.expect_len(f"{g}/observation_info", obs_info, n_obs, "number of observations")
+        _read_info(r, f"{g}/observation_info", obs_info)
+        model = r.f[f"{g}/observation_info"].attrs.get("model", "")
+        model = model.decode() if isinstance(model, bytes) else str(model)
+        if model not in OBSERVATION_MODELS:
+            raise r.fail(f"{g}/observation_info", f"@model must be one of {OBSERVATION_MODELS}, got {model!r}")
+    return PoseConstraints(between_ij=np.stack([bi, bj], axis=1), between_xyt=xyt, between_info=info,
+                           odometry_info=odo_info, observation_info=obs_info, observation_model=model)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -246,6 +327,7 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
         gps_step=gps_step,
         gps_xy=gps_xy,
         gps_std=gps_std,
+        constraints=_read_constraints(r, n_poses, len(observations)),
     )
 
 
@@ -380,6 +462,16 @@ def dataset_hash(dataset: Dataset) -> str:
     _feed(h, "gps_step", inp.gps_step, np.int64)
     _feed(h, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), np.float64)
     _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
+    c = inp.constraints
+    if c is not None:  # fed only when present, so the hash of a dataset without constraints is unchanged
+        _feed(h, "constraints.between_ij", np.asarray(c.between_ij, np.int64).reshape(-1, 2), np.int64)
+        _feed(h, "constraints.between_xyt", np.asarray(c.between_xyt, np.float64).reshape(-1, 3), np.float64)
+        _feed(h, "constraints.between_info", np.asarray(c.between_info, np.float64).reshape(-1, 3, 3), np.float64)
+        if c.odometry_info is not None:
+            _feed(h, "constraints.odometry_info", c.odometry_info, np.float64)
+        if c.observation_info is not None:
+            _feed(h, "constraints.observation_info", c.observation_info, np.float64)
+            h.update(f"constraints.observation_model|{c.observation_model}|".encode())
     if dataset.truth is not None:
         t = dataset.truth
         _feed(h, "truth.poses_xyt", np.asarray(t.poses_xyt, np.float64).reshape(-1, 3), np.float64)
