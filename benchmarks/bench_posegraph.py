@@ -157,10 +157,25 @@ def run_one(name: str, init: str) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
+    """One child process per dataset with single-threaded BLAS (like-for-like with GTSAM's Eigen, and
+    OpenBLAS's thread pool is fixed when numpy loads; see bench_graph)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     rows = []
     for name in QUICK if quick else NAMES:
-        for init in ("odometry", "chordal"):
-            rows.append(run_one(name, init))
+        out = subprocess.run(
+            [sys.executable, "-m", "benchmarks.bench_posegraph", name],
+            env=env,
+            cwd=Path(__file__).resolve().parent.parent,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        rows += [json.loads(ln) for ln in out.stdout.splitlines() if ln.startswith("{")]
     return rows
 
 

@@ -77,9 +77,13 @@ def spanning_tree_poses(
 
 
 def _solve_normal(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
-    """Least squares ``min ‖A x − b‖`` through the normal equations (sparse LU of ``AᵀA``)."""
+    """Least squares ``min ‖A x − b‖`` through the normal equations ``AᵀA x = Aᵀb`` (symmetric positive
+    definite: SuperLU in symmetric mode, minimum-degree ordering, no off-diagonal pivoting = sparse Cholesky)."""
     At = A.T.tocsr()
-    return spla.splu((At @ A).tocsc(), permc_spec="MMD_AT_PLUS_A").solve(At @ b)
+    lu = spla.splu(
+        (At @ A).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
+    return lu.solve(At @ b)
 
 
 def chordal_poses(
