@@ -5,7 +5,9 @@ from __future__ import annotations
 # Each module registers its commands on ``app`` when imported; they import only typer at module level.
 from slamcli.cli import (
     evaluate_cmd,  # noqa: F401
+    export_cmd,  # noqa: F401
     import_cmd,  # noqa: F401
+    import_trajectory_cmd,  # noqa: F401
     info_cmd,  # noqa: F401
     plot_cmd,  # noqa: F401
     reproduce_cmd,  # noqa: F401
