@@ -44,8 +44,7 @@ def export_file(src: str | os.PathLike, fmt: str, out: str | os.PathLike, *, dat
     from slamcli.io import DATASET_SCHEMA, RESULT_SCHEMA, read_dataset
     from slamcli.io import export as ex
 
-    fmt = fmt.lower()
-    if fmt not in ex.FORMATS:
+    if fmt.lower() not in ex.FORMATS:
         raise ConfigError(f"--format: {fmt!r} is not one of {', '.join(ex.FORMATS)}")
     src, out = Path(src), Path(out)
     if out.exists() and src.exists() and out.resolve() == src.resolve():
@@ -55,17 +54,39 @@ def export_file(src: str | os.PathLike, fmt: str, out: str | os.PathLike, *, dat
         from slamcli.api.evaluate import load_result_and_dataset
 
         res, ds, _ = load_result_and_dataset(src, data, check_hash=check_hash, require_truth=False)
-        kind, poses, lms, assoc = "result", res.poses_xyt, res.landmarks_xy, res.assoc
-        pose_cov, lm_cov = res.pose_cov, res.landmark_cov
-    elif schema == DATASET_SCHEMA:
+        return export_objects(fmt, out, ds, res)
+    if schema == DATASET_SCHEMA:
         ds = read_dataset(src)
         if ds.truth is None:
             raise SlamcliError(f"{src}: dataset has no ground truth to export (export a result instead)")
-        kind, poses, lms, assoc = "dataset", ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark
-        pose_cov = lm_cov = None
+        return export_objects(fmt, out, ds)
+    raise SchemaError(f"{src}: not a slamcli result or dataset (schema {schema!r})")
+
+
+def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> dict:
+    """Export ``result``'s estimate (on ``dataset``), or with ``result=None`` the dataset's ground truth.
+
+    Time stamps, odometry, observations and noise come from ``dataset.inputs``; the g2o landmark edges
+    follow the result's association (or the true association for ground truth). Returns the summary dict
+    of :func:`export_file`.
+    """
+    from slamcli.io import export as ex
+
+    fmt = fmt.lower()
+    if fmt not in ex.FORMATS:
+        raise ConfigError(f"--format: {fmt!r} is not one of {', '.join(ex.FORMATS)}")
+    if result is not None:
+        kind, poses, lms, assoc = "result", result.poses_xyt, result.landmarks_xy, result.assoc
+        pose_cov, lm_cov = result.pose_cov, result.landmark_cov
     else:
-        raise SchemaError(f"{src}: not a slamcli result or dataset (schema {schema!r})")
-    inp = ds.inputs
+        if dataset.truth is None:
+            raise SlamcliError("the dataset has no ground truth to export")
+        t = dataset.truth
+        kind, poses, lms, assoc = "dataset", t.poses_xyt, t.landmarks_xy, t.obs_landmark
+        pose_cov = lm_cov = None
+    inp = dataset.inputs
+    if len(poses) != inp.n_poses:
+        raise SlamcliError(f"{len(poses)} poses but the dataset has {inp.n_poses} (wrong dataset)")
     summary = {"kind": kind, "format": fmt, "n_poses": int(len(poses)), "n_landmarks": int(len(lms))}
     if fmt == "tum":
         ex.write_tum(out, inp.timestamps, poses)

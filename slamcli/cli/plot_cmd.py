@@ -76,76 +76,53 @@ def plot_command(
 
 def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.echo):
     from slamcli.api.evaluate import load_result_and_dataset
-    from slamcli.plots.maps import plot_map
+    from slamcli.plots.figures import draw_map
 
     # real recordings and imported graphs have no ground truth: then estimate and odometry only
     res, ds, data_path = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
-    truth = ds.truth
-    plot_map(ax, truth.landmarks_xy if truth else None, res.landmarks_xy, truth.poses_xyt[:, :2] if truth else None,
-             ds.inputs.odometry_xyt[:, :2], res.poses_xyt[:, :2],
-             landmark_cov=res.landmark_cov if ellipses else None, pose_cov=res.pose_cov if ellipses else None,
-             ellipse_every=every, title=title or f"{res.solver}: {Path(result_path).name}",
-             legend_note=None if truth else "No ground truth in dataset")
-    if truth is None:
+    draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every,
+             title=title or f"{res.solver}: {Path(result_path).name}")
+    if ds.truth is None:
         echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
 
 
 def _errors(result_path, data_path, check, title, size, n_sigma, echo):
     """Landmark error per iteration for a result with an iteration trace (paper Figs 5e/f); otherwise the
     per-step pose error with ±nσ bands from the result's pose covariances (or without bands)."""
-    import numpy as np
-
     from slamcli.api.evaluate import load_result_and_dataset
     from slamcli.errors import SlamcliError
-    from slamcli.models.angles import angle_diff
     from slamcli.plots import new_figure
+    from slamcli.plots.figures import draw_landmark_errors, draw_pose_errors
 
     res, ds, _ = load_result_and_dataset(result_path, data_path, check_hash=check)
     if res.trace is not None and len(res.trace) > 0:
-        from slamcli.metrics.landmarks import paper_error_per_iteration
-        from slamcli.plots.curves import plot_error_curves
-
         fig, ax = new_figure(*size)
-        df = paper_error_per_iteration(res.trace, ds.truth.landmarks_xy)
-        plot_error_curves(ax, df["iteration"], df["err_min_m"], df["err_mean_m"], df["err_max_m"],
-                          title=title or f"{res.solver}: landmark error per iteration")
+        draw_landmark_errors(ax, res, ds, title)
         return fig
-    from slamcli.plots.curves import plot_pose_errors
-
-    est, true = np.asarray(res.poses_xyt, float), np.asarray(ds.truth.poses_xyt, float)
-    if est.shape != true.shape:
-        raise SlamcliError(f"{result_path}: {len(est)} estimated poses but {len(true)} true poses")
-    err = np.column_stack([est[:, :2] - true[:, :2], angle_diff(est[:, 2], true[:, 2])])
-    sig = inside = None
-    if res.pose_cov is not None:
-        sig = np.sqrt(np.clip(np.diagonal(res.pose_cov, axis1=1, axis2=2), 0.0, None))
-        inside = np.mean(np.abs(err) <= n_sigma * sig, axis=0)
+    fig, axes = new_figure(size[0], max(size[1], 5.5), nrows=3, sharex=True)
+    try:
+        inside = draw_pose_errors(axes, res, ds, n_sigma, title)
+    except ValueError as exc:
+        raise SlamcliError(f"{result_path}: {exc}") from None
+    if inside is not None:
         echo("steps inside ±{:g}σ: x {:.1f}%, y {:.1f}%, heading {:.1f}%".format(n_sigma, *(100 * inside)))
     else:
         echo(f"note: {result_path} stores no pose covariances; drew the error without σ bands")
-    fig, axes = new_figure(size[0], max(size[1], 5.5), nrows=3, sharex=True)
-    plot_pose_errors(axes, np.arange(len(err)), err, sig, n_sigma, inside,
-                     title=title or f"{res.solver}: pose error per step")
     return fig
 
 
 def _mapchange(ax, result_paths, title, log=True):
-    import numpy as np
-
     from slamcli.errors import SlamcliError
     from slamcli.io import read_result
-    from slamcli.metrics.landmarks import map_change
-    from slamcli.plots.curves import plot_map_change
+    from slamcli.plots.figures import draw_mapchange
 
-    for rp in result_paths:
-        res = read_result(rp)
-        tr = res.trace
-        if tr is None or len(tr) < 2:
-            raise SlamcliError(f"{rp}: no iteration trace with ≥ 2 iterations (solver {res.solver!r})")
-        mc = [0.0] + [map_change(tr.landmarks_at(k - 1), tr.landmarks_at(k)) for k in range(1, len(tr))]
-        label = f"{res.solver}: {Path(rp).name}" if len(result_paths) > 1 else None
-        plot_map_change(ax, np.arange(len(tr)), np.asarray(mc), label=label, log=log)
-    ax.set_title(title or "Map change between iterations")
+    results = [read_result(rp) for rp in result_paths]
+    labels = [f"{r.solver}: {Path(rp).name}" for r, rp in zip(results, result_paths)] if len(results) > 1 else None
+    try:
+        draw_mapchange(ax, results, labels, log=log, title=title)
+    except ValueError as exc:
+        bad = next(rp for rp, r in zip(result_paths, results) if r.trace is None or len(r.trace) < 2)
+        raise SlamcliError(f"{bad}: {exc}") from None
 
 
 def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
@@ -153,16 +130,15 @@ def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
 
     from slamcli.api.evaluate import monte_carlo_nees_files
     from slamcli.errors import SlamcliError
-    from slamcli.plots.curves import plot_nees
+    from slamcli.plots.figures import draw_nees
 
     a, why = monte_carlo_nees_files(result_paths, data_paths, check_hash=check)
     if a is None:
         raise SlamcliError(f"plot nees: {why}")
-    plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
-              title=title or f"Pose NEES over {a.n_runs} runs", log=log)
+    draw_nees(ax, a, log=log, title=title)
     n_finite = int(np.isfinite(a.anees).sum())
     echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}); {100 * a.fraction_inside:.1f}% of "
-               f"{n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}] for N = {a.n_runs} runs")
+         f"{n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}] for N = {a.n_runs} runs")
 
 
 def _compare(ax, exp_dir, metric, by, title, echo):
