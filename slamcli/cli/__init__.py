@@ -17,7 +17,9 @@ from slamcli.cli import (
     solvers_cmd,  # noqa: F401
     sweep_cmd,  # noqa: F401
 )
-from slamcli.cli.app import app
+from slamcli.cli.app import app, polish_help
+
+polish_help(app)  # one-line command summaries that are never cut mid-word
 
 
 def main() -> None:

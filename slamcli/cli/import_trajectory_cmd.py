@@ -24,8 +24,10 @@ def import_trajectory_command(
     name: Annotated[str | None, typer.Option(help="Solver name to record (default imported:<format>).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
 ) -> None:
-    """Match a foreign trajectory to the dataset's time stamps (interpolating between samples) and write a
-    result file that evaluate, plot and sweeps can score."""
+    """Import another estimator's TUM/KITTI trajectory as a result.
+
+    The trajectory is matched to the dataset's time stamps (interpolated between samples); the result file
+    can then be evaluated, plotted and used in sweeps like any slamcli result."""
     with handle_errors():
         from slamcli.api.interop import import_trajectory_file
 

@@ -100,6 +100,8 @@ class FastSlamParams:
     motion_noise_scale : float
         Multiplies the motion noise standard deviations (``>1`` = stabilising noise; 1 = as specified).
     resampling : "systematic" | "multinomial"
+        Resampling scheme (:mod:`slamcli.solvers.resampling`): systematic (one uniform draw, lower variance)
+        or multinomial (P independent draws).
     resample_threshold : float
         Resample when ``ESS < resample_threshold · P`` (0 = never, 1 = every step).
     output : "mean" | "best"
