@@ -28,7 +28,7 @@ def _pair(r, ds):
     return result, _dataset(ds)
 
 
-def map(r, ds=None, *, ax=None, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None):  # noqa: A001 - the figure's name
+def map(r, ds=None, *, ax=None, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None):
     """Paper-style map: true and estimated landmarks and paths (+ covariance ellipses)."""
     from slamcli.plots.figures import draw_map
 

@@ -27,7 +27,7 @@ class SlamcliGroup(TyperGroup):
         except typer.Abort:
             typer.echo("aborted", err=True)
             sys.exit(1)
-        except Exception as exc:  # noqa: BLE001 - click's exceptions (vendored by typer ≥ 0.20) are re-raised otherwise
+        except Exception as exc:  # click exceptions (typer may vendor click): matched by class name below
             names = {c.__name__ for c in type(exc).__mro__}
             if "ClickException" not in names:
                 raise
