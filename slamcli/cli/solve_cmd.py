@@ -59,11 +59,13 @@ def solve_command(
         style = "red" if result.status.value == "failed" else "green"
         console = stdout_console()
         console.print(
-            f"[{style}]{result.status.value}[/{style}] {result.solver} in {result.wall_time_s:.3f} s{iters}: "
-            f"{len(result.landmarks_xy)} landmarks, {n_assoc}/{len(result.assoc)} obs. associated"
-            + (" [yellow](oracle association)[/yellow]" if oracle_association else ""),
+            f"[{style}]{result.status.value}[/{style}] {result.solver} in {result.wall_time_s:.2f} s{iters}: "
+            f"{len(result.landmarks_xy)} landmarks, {n_assoc}/{len(result.assoc)} obs. associated",
             highlight=False,
         )
+        if oracle_association:
+            console.print("  [yellow]oracle association[/yellow]: the true data association was used",
+                          highlight=False)
         if result.message:
             console.print(f"  {result.message}", highlight=False, markup=False)
         console.print(f"  wrote {out}", highlight=False, markup=False, soft_wrap=True)

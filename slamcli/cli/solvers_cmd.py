@@ -24,14 +24,14 @@ def solvers_command(
 
             table = Table(title="slamcli solvers (slamcli solvers NAME explains the parameters)",
                           title_justify="left")
-            for col in ("name", "package", "version", "parameters"):
+            from slamcli.params import describe_params
+
+            for col in ("name", "package", "version", "parameters (default)"):
                 table.add_column(col, overflow="fold")
             for info in infos:
                 cls = registry.load(info.name)
-                import dataclasses
-
-                table.add_row(info.name, info.package, info.version,
-                              ", ".join(f.name for f in dataclasses.fields(cls.Params)) or "—")
+                params = ", ".join(f"{n}={d}" for n, _t, d in describe_params(cls.Params))
+                table.add_row(info.name, info.package, info.version, params or "—")
             stdout_console().print(table)
             return
         cls = registry.load(name)  # raises PluginError listing the names when unknown
