@@ -166,6 +166,9 @@ def test_config_docstring_example_is_valid():
     (("rpe_unit =", "rpe_units ="), "evaluate.rpe_units: unknown option 'rpe_units'; did you mean 'rpe_unit'?"),
     (('name = "loop"', 'name = "lop"'), "scenario.name: unknown scenario 'lop'; did you mean 'loop'?"),
     (("[evaluate]", "[evalute]"), "evalute: unknown key; did you mean 'evaluate'?"),
+    (("n_steps = 300", 'n_steps = "300 steps"'), "scenario.parameters.n_steps: expected an integer, got '300 steps'"),
+    (('association = "ml"', 'association = "mle"'), "solver[1].params.association: 'mle' is not one of auto, known, ml"),
+    (("[0.95, 0.99]", '[0.95, "high"]'), "sweep.grid 'solver.ekf-ml.gate_prob': expected a number, got 'high'"),
 ])
 def test_toml_errors_name_toml_keys_with_did_you_mean(tmp_path, edit, message):
     text = _toml_block((ROOT / "docs" / "experiments.md").read_text())

@@ -154,14 +154,17 @@ def did_you_mean(key: str, known, prefix: str = "") -> str:
     return f"; did you mean {' or '.join(repr(prefix + c) for c in close)}?" if close else ""
 
 
-def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], list[str] | None]) -> None:
+def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     """Check every key of ``cfg`` against the real scenario / solver / evaluate key sets, naming the TOML key.
 
-    ``known(kind, name)`` returns the known keys: ``("scenario", scenario name)`` → dotted simulator keys,
-    ``("solver", method)`` → the solver's Params fields, ``("evaluate", "")`` → evaluation options; None =
+    ``known(kind, name)`` returns the known keys: ``("scenario", scenario name)`` → ``{dotted simulator key:
+    type}``, ``("solver", method)`` → ``{Params field: type}``, ``("evaluate", "")`` → option names; None =
     cannot tell (unknown plugin: the resolver reports that). Unknown scenario names and keys raise a one-line
-    :class:`ConfigError` ``"<file>: <TOML key>: unknown ...; did you mean '...'?"``.
+    :class:`ConfigError` ``"<file>: <TOML key>: unknown ...; did you mean '...'?"``; a value (every value of a
+    sweep axis) whose type does not fit its key raises ``"<file>: <TOML key>: expected ..."``. Checks that
+    involve several keys together stay with the resolution.
     """
+    from slamcli.params import _coerce
     from slamcli.sim.scenarios import SCENARIOS
 
     c = _Checker(cfg.source)
@@ -171,38 +174,49 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], list[str] | No
     scen = known("scenario", cfg.scenario) or []
     methods = {s.label: s.method for s in cfg.solvers}
 
-    def check(ns_key: str, toml_key: str) -> None:
+    def typed(values: tuple, tp: Any, toml_key: str) -> None:
+        for v in values:
+            try:
+                _coerce(v, tp, "\0")
+            except ConfigError as exc:
+                raise c.fail(toml_key, str(exc).split("\0", 1)[-1].lstrip(": ")) from None
+
+    def check(ns_key: str, toml_key: str, values: tuple) -> None:
         ns, _, rest = ns_key.partition(".")
         if ns == "scenario":
             if scen and rest not in scen:
                 raise c.fail(toml_key, f"unknown scenario key {rest!r}{did_you_mean(rest, scen)} "
                                        f"(`slamcli simulate --keys` lists them)")
+            if isinstance(scen, dict):
+                typed(values, scen[rest], toml_key)
         elif ns == "solver":
             label, _, param = rest.partition(".")
             fields = known("solver", methods[label]) if label in methods else None
             if fields is not None and param not in fields:
                 raise c.fail(toml_key, f"unknown parameter {param!r} of {methods[label]}"
                                        f"{did_you_mean(param, fields)} (`slamcli solvers {methods[label]}` lists them)")
+            if isinstance(fields, dict):
+                typed(values, fields[param], toml_key)
         elif ns == "evaluate":
             opts = known("evaluate", "") or []
             if opts and rest not in opts:
                 raise c.fail(toml_key, f"unknown option {rest!r}{did_you_mean(rest, opts)} (known: {', '.join(opts)})")
 
-    for k in cfg.scenario_params:
-        check(f"scenario.{k}", f"scenario.parameters.{k}")
+    for k, v in cfg.scenario_params.items():
+        check(f"scenario.{k}", f"scenario.parameters.{k}", (v,))
     for i, s in enumerate(cfg.solvers):
-        for k in s.params:
-            check(f"solver.{s.label}.{k}", f"solver[{i}].params.{k}")
-    for k in cfg.evaluate:
-        check(f"evaluate.{k}", f"evaluate.{k}")
-    for k, _ in cfg.sweep.grid:
-        check(k, f"sweep.grid {k!r}")
+        for k, v in s.params.items():
+            check(f"solver.{s.label}.{k}", f"solver[{i}].params.{k}", (v,))
+    for k, v in cfg.evaluate.items():
+        check(f"evaluate.{k}", f"evaluate.{k}", (v,))
+    for k, vals in cfg.sweep.grid:
+        check(k, f"sweep.grid {k!r}", vals)
     for g in cfg.sweep.zips:
-        for k, _ in g:
-            check(k, f"sweep.zip {k!r}")
-    for k in cfg.quick:
+        for k, vals in g:
+            check(k, f"sweep.zip {k!r}", vals)
+    for k, v in cfg.quick.items():
         if k != "replicates":
-            check(k, f"quick {k!r}")
+            check(k, f"quick {k!r}", (v,))
 
 
 def parse_range(text: str) -> list[int] | None:

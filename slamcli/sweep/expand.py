@@ -115,20 +115,28 @@ class Resolver(Protocol):
 class RegistryResolver:
     """Resolve against the real simulator scenarios and the registered solvers' ``Params`` dataclasses."""
 
-    def known_keys(self, kind: str, name: str) -> list[str] | None:
-        """Known keys for :func:`slamcli.sweep.config.check_keys` (None = unknown solver plugin)."""
+    def known_keys(self, kind: str, name: str) -> dict[str, Any] | list[str] | None:
+        """Known keys for :func:`slamcli.sweep.config.check_keys`: ``{key: type}`` for a scenario or a solver,
+        the option names for ``evaluate``; None = unknown solver plugin (reported on resolution)."""
         import inspect
+        import typing
 
         if kind == "scenario":
             from slamcli.sim import resolve_scenario
             from slamcli.sim.config import known_keys
 
-            return known_keys(resolve_scenario(name))
+            cfg = resolve_scenario(name)
+            top = typing.get_type_hints(type(cfg))
+            out = {}
+            for key in known_keys(cfg):
+                sec, _, leaf = key.rpartition(".")
+                out[key] = typing.get_type_hints(type(getattr(cfg, sec)))[leaf] if sec else top[leaf]
+            return out
         if kind == "solver":
             from slamcli.solvers import registry
 
             try:
-                return [f.name for f in dataclasses.fields(registry.load(name).Params)]
+                return typing.get_type_hints(registry.load(name).Params)
             except SlamcliError:
                 return None
         from slamcli.api.evaluate import evaluate_files
