@@ -237,3 +237,27 @@ def test_nees_and_mapchange_use_log_axes_with_band_visible():
     plot_map_change(ax, np.arange(5), [0.0, 2.0, 1.5, 1.2, 1.1], label="slow", log=True)
     assert ax.get_yscale() == "log"
     np.testing.assert_allclose(ax.lines[0].get_ydata(), [1000.0, 10.0, 0.1])  # zeros left out, in mm
+
+
+def test_command_output_fits_80_columns(loop, tmp_path):
+    d = str(tmp_path)
+    ekf = tmp_path / "ekf.h5"
+    solve_file(loop / "loop.h5", "ekf", {}, ekf)
+    commands = [
+        ["simulate", "--list"],
+        ["simulate", "-s", "loop", "--seed", "4", "--set", "n_steps=50", "-o", f"{d}/s.h5"],
+        ["solvers"], ["solvers", "graph"],
+        ["evaluate", str(ekf), "-o", f"{d}/ev"],
+        ["info", str(ekf)],
+        ["plot", "nees", str(ekf), "-o", f"{d}/n.png"],
+        ["plot", "errors", str(ekf), "-o", f"{d}/e.png"],
+        ["export", str(ekf), "-f", "g2o", "-o", f"{d}/e.g2o"],
+        ["export", str(ekf), "-f", "tum", "-o", f"{d}/e.tum"],
+        ["import", "trajectory", f"{d}/e.tum", "--data", str(loop / "loop.h5"), "-o", f"{d}/imp.h5"],
+        ["--help"], ["plot", "--help"], ["export", "--help"], ["aggregate", "--help"], ["import", "--help"],
+    ]
+    for args in commands:
+        r = runner.invoke(app, args, env=W80)
+        assert r.exit_code == 0, (args, r.output)
+        long = [ln for ln in r.output.splitlines() if len(ln) > 80 and d not in ln and str(loop) not in ln]
+        assert not long, (args, long)

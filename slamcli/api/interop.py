@@ -214,8 +214,7 @@ def import_trajectory_file(path: str | os.PathLike, data_path: str | os.PathLike
         solver_version="",
         params={"source": str(path), "format": fmt, "time_offset": float(time_offset), "extrapolate": extrapolate},
         status=Status.COMPLETED,
-        message=f"imported from {path.name}: {n_exact} stamps matched, {n - n_exact - n_held} interpolated, "
-                f"{n_held} held",
+        message=f"{n_exact} poses matched, {n - n_exact - n_held} interpolated, {n_held} held",
         poses_xyt=poses,
         landmarks_xy=np.zeros((0, 2)),
         assoc=np.full(len(ds.inputs.observations), -1, np.int64),

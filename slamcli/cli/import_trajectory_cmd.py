@@ -34,4 +34,4 @@ def import_trajectory_command(
         r = import_trajectory_file(path, data, output, fmt=fmt, times=times, time_offset=time_offset,
                                    extrapolate=extrapolate, name=name)
         if not quiet:
-            typer.echo(f"wrote {output} ({r.solver}: {r.message})")
+            typer.echo(f"{r.solver} from {path.name}: {r.message}\n  wrote {output}")

@@ -137,8 +137,8 @@ def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
         raise SlamcliError(f"plot nees: {why}")
     draw_nees(ax, a, log=log, title=title)
     n_finite = int(np.isfinite(a.anees).sum())
-    echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}); {100 * a.fraction_inside:.1f}% of "
-         f"{n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}] for N = {a.n_runs} runs")
+    echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}) over N = {a.n_runs} runs;\n"
+         f"{100 * a.fraction_inside:.1f}% of {n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}]")
 
 
 def _compare(ax, exp_dir, metric, by, title, echo):
