@@ -7,7 +7,8 @@ widths 1.345 / 2.3849 / 1.0; the kernel acts on the observation factors, never o
   see another robot or an unknown barcode dropped), sensor-reported barcode ids as the association
   (``association = auto`` → ``reported``). Misread barcodes are the outliers.
 * **Simulator with clutter** — scenario ``loop`` with ``clutter.rate = 0.5`` false returns per scan, no reported
-  ids (gated nearest-neighbour association, ``association = auto`` → ``nn``), seeds 1-3.
+  ids (gated nearest-neighbour association, ``association = auto`` → ``nn``), seeds 1-3; and the same with
+  ``sensor.report_ids = true`` (correct ids, clutter rows carry none: the Gaussian model is right there).
 
 Per row: unaligned and SE(2)-aligned ATE RMSE against the ground truth (benchmark only; solvers never see it),
 landmark RMSE (each estimated landmark against the true landmark most of its rows belong to), final cost,
@@ -45,10 +46,12 @@ def _import_mrclam(robot: int, out: Path):
     return read_dataset(out)
 
 
-def _simulate(seed: int):
+def _simulate(seed: int, report_ids: bool = False):
     from slamcli.sim import simulate_scenario
 
-    return simulate_scenario("loop", seed=seed, overrides={"clutter.rate": CLUTTER_RATE, "sensor.report_ids": False})
+    return simulate_scenario(
+        "loop", seed=seed, overrides={"clutter.rate": CLUTTER_RATE, "sensor.report_ids": report_ids}
+    )
 
 
 def _map_rmse(res, truth) -> float:
@@ -134,47 +137,67 @@ def measure(quick: bool = False) -> list[dict]:
     for s in seeds:
         ds = _simulate(s)
         rows += [_row(f"sim-loop-clutter{CLUTTER_RATE:g}/seed{s}", ds, k) for k in KERNELS]
+    for s in seeds:
+        ds = _simulate(s, report_ids=True)
+        rows += [_row(f"sim-loop-ids-clutter{CLUTTER_RATE:g}/seed{s}", ds, k) for k in KERNELS]
     return rows
 
 
-def decide(rows: list[dict]) -> list[str]:
-    """The default-kernel decision, every sentence computed from ``rows`` with the condition that makes it true."""
+def decide(rows: list[dict], tolerance: float = 0.10) -> list[str]:
+    """The default-kernel decision, every sentence computed from ``rows`` with the condition that makes it true.
+
+    Rule: on real data (MRCLAM) take the kernel with the lowest mean unaligned ATE among those whose worst case
+    is at most ``tolerance`` worse than ``none`` (ratio of ATEs per robot); it becomes the default only for ids
+    read by a real sensor (``robust=auto``), because the outliers it removes are misread ids. On simulated ids
+    (correct by construction) the kernel is only kept if it is not worse than none on average.
+    """
     out = []
-    kinds = {"real": [r for r in rows if r["case"].startswith("mrclam")],
-             "sim": [r for r in rows if r["case"].startswith("sim")]}
+
+    def sel(prefix):
+        return [r for r in rows if r["case"].startswith(prefix)]
 
     def mean_ate(rs, k):
         v = [r["ate_rmse_m"] for r in rs if r["robust"] == k]
         return float(np.mean(v)) if v else float("nan")
 
     def worst_ratio(rs, k):
-        """max over cases of ATE(k) / ATE(none)."""
-        cases = sorted({r["case"] for r in rs})
-        ratios = []
-        for c in cases:
+        """max over cases of ATE(k) / ATE(none), and the case."""
+        best = (float("nan"), "")
+        for c in sorted({r["case"] for r in rs}):
             a = {r["robust"]: r["ate_rmse_m"] for r in rs if r["case"] == c}
-            if k in a and "none" in a and a["none"] > 0:
-                ratios.append(a[k] / a["none"])
-        return max(ratios) if ratios else float("nan")
+            if k in a and a.get("none", 0) > 0:
+                q = a[k] / a["none"]
+                if not best[0] >= q:
+                    best = (q, c)
+        return best
 
-    real, sim = kinds["real"], kinds["sim"]
+    real = sel("mrclam")
     means = {k: mean_ate(real, k) for k in KERNELS}
-    best = min((k for k in KERNELS if np.isfinite(means[k])), key=lambda k: means[k])
-    out.append("mean unaligned ATE over the MRCLAM robots: " + ", ".join(f"{k} {means[k]:.3f} m" for k in KERNELS))
-    out.append(f"lowest on real data: {best} ({means[best]:.3f} m vs none {means['none']:.3f} m, "
-               f"worst case ratio to none {worst_ratio(real, best):.2f})")
-    if sim:
-        sm = {k: mean_ate(sim, k) for k in KERNELS}
-        out.append("mean unaligned ATE on the simulator with clutter: " + ", ".join(f"{k} {sm[k]:.3f} m" for k in KERNELS))
-        out.append(f"{best} on the simulator: worst case ratio to none {worst_ratio(sim, best):.3f} "
-                   f"({'no case worse than 5 %' if worst_ratio(sim, best) <= 1.05 else 'worse than none by > 5 % in some case'})")
-    # the rule: a kernel becomes the real-data default if it lowers the mean ATE by ≥ 10 % and is never worse
-    # than none by more than 5 % in any real or simulated case
-    ok = (means[best] <= 0.9 * means["none"] and worst_ratio(real, best) <= 1.05
-          and (not sim or worst_ratio(sim, best) <= 1.05))
-    out.append(f"decision: {'default robust=' + best + ' for sensor-reported ids' if ok and best != 'none' else 'keep robust=none'}"
-               f" (rule: ≥ 10 % lower mean real-data ATE than none and never > 5 % worse in any case; "
-               f"{'met' if ok else 'not met'})")
+    out.append("MRCLAM Dataset 7, mean unaligned ATE over the robots: "
+               + ", ".join(f"{k} {means[k]:.3f} m" for k in KERNELS))
+    for k in KERNELS[1:]:
+        q, c = worst_ratio(real, k)
+        out.append(f"{k}: worst robot {c} at {q:.2f}× none's ATE")
+    ok = [k for k in KERNELS[1:] if worst_ratio(real, k)[0] <= 1 + tolerance and means[k] < means["none"]]
+    strict = [k for k in KERNELS[1:] if worst_ratio(real, k)[0] <= 1.05 and means[k] < means["none"]]
+    out.append(f"kernels better than none on average and never > {tolerance:.0%} worse on any robot: "
+               f"{', '.join(ok) or 'none'}; with a 5 % tolerance: {', '.join(strict) or 'none'}")
+    choice = min(ok, key=lambda k: means[k]) if ok else "none"
+    for prefix, label in (("sim-loop-clutter", "simulator with clutter, nearest-neighbour association"),
+                          ("sim-loop-ids", "simulator with clutter, correct reported ids")):
+        rs = sel(prefix)
+        if rs:
+            sm = {k: mean_ate(rs, k) for k in KERNELS}
+            out.append(f"{label}, mean ATE: " + ", ".join(f"{k} {sm[k]:.4f} m" for k in KERNELS))
+            if choice != "none":
+                it = {k: np.mean([r["iterations"] for r in rs if r["robust"] == k]) for k in ("none", choice)}
+                out.append(f"  {choice} vs none there: {sm[choice] / sm['none']:.2f}× the ATE "
+                           f"({'better' if sm[choice] < sm['none'] else 'not better'}), "
+                           f"{it[choice] / it['none']:.1f}× the iterations")
+    out.append(f"decision: robust=auto → {choice} for ids read by a real sensor (reported_id_source = sensor), "
+               "none otherwise (simulated ids are correct by construction; with nearest-neighbour association "
+               f"pass robust={choice} explicitly where the ATE gain above is worth the extra iterations)"
+               if choice != "none" else "decision: keep robust=none (no kernel met the rule)")
     return out
 
 

@@ -172,6 +172,9 @@ class SlamInputs:
     gps_xy : ndarray (G, 2)          ... and position, m.
     gps_std : float                  σ of a GPS fix, m.
     constraints : PoseConstraints | None  per-edge information and pose-pose (loop-closure) constraints.
+    reported_id_source : str         where ``observations.reported_id`` comes from: ``"sensor"`` (a real sensor
+                                     that can misread an id, e.g. MRCLAM's barcodes), ``"file"`` (a graph
+                                     file's data association), ``"unknown"`` (default; the simulator's ids).
     """
 
     dt: float
@@ -186,6 +189,7 @@ class SlamInputs:
     gps_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     gps_std: float = 0.0
     constraints: PoseConstraints | None = None
+    reported_id_source: str = "unknown"
 
     @property
     def n_poses(self) -> int:

@@ -139,8 +139,8 @@ def test_tags_toro_gtsam_and_loop_closures(tmp_path):
     g = read_graph(f)
     np.testing.assert_allclose(g["pose_edges"][0][4], [[10, 1, 2], [1, 20, 3], [2, 3, 30]])
     np.testing.assert_allclose(g["pose_edges"][1][4], np.linalg.inv(np.diag([0.04, 0.01, 0.0025])))
-    np.testing.assert_allclose(g["landmark_obs"][0][4], [[4, 1], [1, 5]])
-    np.testing.assert_allclose(g["landmark_obs"][1][4], np.diag([4.0, 1.0]))
+    np.testing.assert_allclose(g["sightings"][0][4], [[4, 1], [1, 5]])
+    np.testing.assert_allclose(g["sightings"][1][4], np.diag([4.0, 1.0]))
     ds = import_graph(f, forward="x")
     c = ds.inputs.constraints
     assert ds.inputs.n_poses == 4 and c.n_between == 2 and ds.metadata["n_loop_closures"] == 2

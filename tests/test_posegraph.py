@@ -250,3 +250,31 @@ def test_chi2_outlier_counts_by_hand():
     assert counts["loop_closure"] == {"factors": len(meas), "dof": 3, "over_95": int(np.sum(s2 > 7.814727903251178)),
                                       "over_99": int(np.sum(s2 > 11.344866730144373))}
     assert counts["loop_closure"]["over_99"] >= 1 and counts["odometry"]["factors"] == 39
+
+
+def test_robust_auto_is_cauchy_only_for_real_sensor_ids(tmp_path):
+    """``robust=auto`` (the default): Cauchy for ids read by a real sensor (MRCLAM barcodes, which can be
+    misread), none for simulated ids, graph files and nearest-neighbour association; the source survives a
+    write/read and the kernel used is reported."""
+    from slamcli.datasets.mrclam import import_mrclam
+    from slamcli.sim import simulate_scenario
+
+    assert graph.resolve_robust("auto", "reported", "sensor") == "cauchy"
+    assert graph.resolve_robust("auto", "reported", "unknown") == "none"
+    assert graph.resolve_robust("auto", "reported", "file") == "none"
+    assert graph.resolve_robust("auto", "nn", "sensor") == "none"
+    assert graph.resolve_robust("huber", "nn", "unknown") == "huber"
+    ds = import_mrclam(DATA / "mrclam_excerpt", 1, dt=0.1)
+    f = tmp_path / "m.h5"
+    write_dataset(f, ds)
+    inp = read_dataset(f).inputs
+    assert inp.reported_id_source == "sensor"
+    auto = solve_dataset(inp, "graph", {"covariance": False})
+    cau = solve_dataset(inp, "graph", {"covariance": False, "robust": "cauchy"})
+    none = solve_dataset(inp, "graph", {"covariance": False, "robust": "none"})
+    assert auto.extra["robust"] == "cauchy" and none.extra["robust"] == "none"
+    assert auto.extra["final_cost"] == cau.extra["final_cost"] != none.extra["final_cost"]
+    sim = simulate_scenario("loop", seed=1, overrides={"sensor.report_ids": True})
+    assert sim.inputs.reported_id_source == "unknown"
+    r = solve_dataset(sim.inputs, "graph", {"covariance": False})
+    assert r.extra["association"] == "reported" and r.extra["robust"] == "none"

@@ -118,9 +118,10 @@ def read_graph(path: str | Path) -> dict:
     Returns
     -------
     dict with ``vertices`` {id: (x, y, θ)}, ``pose_edges`` [(i, j, d (3,), cov (3,3), info (3,3), line)],
-    ``landmark_obs`` [(i, l, z (2,), cov (2,2), info (2,2), line, model)] with ``model`` ``"xy"`` (z = offset
+    ``sightings`` [(i, l, z (2,), cov (2,2), info (2,2), line, model)] with ``model`` ``"xy"`` (z = offset
     (dx, dy), matrices over (x, y)) or ``"range_bearing"`` (z = (range, bearing), matrices over (r, b)),
-    ``n_landmark_vertices``.
+    ``n_landmark_vertices``; and the short forms ``odometry`` [(i, j, d, cov, line)] (all pose-pose edges)
+    and ``landmark_obs`` [(i, l, z, cov, line)].
 
     Raises
     ------
@@ -188,7 +189,9 @@ def read_graph(path: str | Path) -> dict:
     return {
         "vertices": vertices,
         "pose_edges": pose_edges,
-        "landmark_obs": landmark_obs,
+        "sightings": landmark_obs,
+        "odometry": [(e[0], e[1], e[2], e[3], e[5]) for e in pose_edges],
+        "landmark_obs": [(o[0], o[1], o[2], o[3], o[5]) for o in landmark_obs],
         "n_landmark_vertices": n_lm_vertices,
     }
 
@@ -304,7 +307,7 @@ def import_graph(
     between_info = info_to_body([e[4] for e in others])
 
     # --- landmark observations --------------------------------------------------------------------------------
-    obs_rows = g["landmark_obs"]
+    obs_rows = g["sightings"]
     if max_poses is not None:
         obs_rows = [r for r in obs_rows if r[0] in step_of]
     for i, _l, _z, _c, _m, line, _k in obs_rows:
@@ -388,6 +391,7 @@ def import_graph(
         observations=obs,
         noise=noise,
         constraints=constraints,
+        reported_id_source="file",
     )
 
     def spread(a):

@@ -126,6 +126,8 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                     doc="landmark id reported by the sensor itself, -1 = none (N,)")
         write_array(go, "offsets", np.asarray(obs.offsets, np.int64), units="-", frame="-",
                     doc="CSR row offsets per pose (T+2,)")
+        if inp.reported_id_source != "unknown":
+            go["reported_id"].attrs["source"] = str(inp.reported_id_source)
 
         gn = g.create_group("noise")
         gn.attrs["doc"] = "noise standard deviations a solver may assume (slamcli.types.NoiseSpec)"
@@ -162,6 +164,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 
 
 OBSERVATION_MODELS = ("range_bearing", "xy")
+REPORTED_ID_SOURCES = ("sensor", "file", "unknown")
 
 
 def _write_constraints(g, c: PoseConstraints) -> None:
@@ -328,7 +331,17 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
         gps_xy=gps_xy,
         gps_std=gps_std,
         constraints=_read_constraints(r, n_poses, len(observations)),
+        reported_id_source=_reported_id_source(r),
     )
+
+
+def _reported_id_source(r: Reader) -> str:
+    """``@source`` of ``inputs/observations/reported_id`` (``sensor`` / ``file``), ``unknown`` when absent."""
+    v = r.f["inputs/observations/reported_id"].attrs.get("source", "unknown")
+    v = v.decode() if isinstance(v, bytes) else str(v)
+    if v not in REPORTED_ID_SOURCES:
+        raise r.fail("inputs/observations/reported_id@source", f"must be one of {REPORTED_ID_SOURCES}, got {v!r}")
+    return v
 
 
 def _check_index_range(r: Reader, name: str, idx: np.ndarray, lo: int, hi: int) -> None:
@@ -462,6 +475,8 @@ def dataset_hash(dataset: Dataset) -> str:
     _feed(h, "gps_step", inp.gps_step, np.int64)
     _feed(h, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), np.float64)
     _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
+    if inp.reported_id_source != "unknown":  # fed only when set, so older hashes are unchanged
+        h.update(f"reported_id_source|{inp.reported_id_source}|".encode())
     c = inp.constraints
     if c is not None:  # fed only when present, so the hash of a dataset without constraints is unchanged
         _feed(h, "constraints.between_ij", np.asarray(c.between_ij, np.int64).reshape(-1, 2), np.int64)
