@@ -4,6 +4,7 @@ from __future__ import annotations
 
 # Each module registers its commands on ``app`` when imported; they import only typer at module level.
 from slamcli.cli import (
+    diff_cmd,  # noqa: F401
     evaluate_cmd,  # noqa: F401
     import_cmd,  # noqa: F401
     info_cmd,  # noqa: F401

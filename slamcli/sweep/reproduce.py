@@ -423,7 +423,7 @@ class Reproduction:
         max_mc = float(mc.max()) * 1e3 if len(mc) else None
         times = result.trace.time_s[1:] if result.trace is not None and len(result.trace) > 1 else []
         n_steps = int(row.get("n_poses", 0) or 0) - 1
-        init_ms = result.extra.get("init_ms_per_step")
+        init_ms = result.timings.get("init_ms_per_step", result.extra.get("init_ms_per_step"))
         drift_mm = None
         if result.trace is not None and len(result.trace) > 1:
             import numpy as np
