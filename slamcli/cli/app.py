@@ -119,3 +119,29 @@ def fail(message: str) -> None:
 
 def is_tty() -> bool:
     return sys.stderr.isatty()
+
+
+def check_output(path, *, folder: bool = False, option: str = "-o") -> None:
+    """Refuse an output path that cannot be written, before any work is done (one line, exit 1).
+
+    A directory where a file is expected (or a file where a folder is expected), a name longer than the
+    file system allows, a parent that is a file, or a parent folder this process may not write into.
+    """
+    import os
+    from pathlib import Path
+
+    p = Path(path)
+    for part in p.parts:
+        if len(os.fsencode(part)) > 255:
+            fail(f"{option} {p}: a name is too long ({len(os.fsencode(part))} bytes, limit 255)")
+    if not folder and p.is_dir():
+        fail(f"{option} {p}: is a directory, expected a file name")
+    if folder and (p.is_symlink() or (p.exists() and not p.is_dir())):
+        fail(f"{option} {p}: exists and is not a folder")
+    anc = p.parent
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if anc.exists() and not anc.is_dir():
+        fail(f"{option} {p}: {anc} is a file, not a folder")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        fail(f"{option} {p}: folder {anc} is not writable")

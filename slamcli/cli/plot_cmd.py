@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors
+from slamcli.cli.app import app, check_output, fail, handle_errors
 
 KINDS = ("map", "errors", "nees", "mapchange")
 
@@ -36,6 +36,7 @@ def plot_command(
             fail(f"got {len(results)} result(s) but {len(data)} --data file(s); give one per result or none")
         if kind in ("map", "errors") and len(results) != 1:
             fail(f"plot {kind} takes exactly one result, got {len(results)}")
+        check_output(output)
         from slamcli.plots import new_figure, save_figure
 
         fig, ax = new_figure(*((7.0, 6.0) if kind == "map" else (6.4, 4.4)))
