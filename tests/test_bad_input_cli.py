@@ -198,8 +198,8 @@ def build_cases(w: Path, ds: Path, icm: Path, ekf: Path, odo: Path, ds2: Path) -
                       "afile", w / "afile" / "m.png"))
     cases.append(Case("ISSUE-plot-out-unwritable", ["plot", "map", icm, "--data", ds, "-o", "/proc/sl/m.png"],
                       "/proc/sl", Path("/proc/sl/m.png")))
-    cases.append(Case("plot-errors-no-trace", ["plot", "errors", ekf, "--data", ds, "-o", w / "e.png"], "ekf.h5",
-                      w / "e.png"))
+    cases.append(Case("plot-mapchange-no-trace", ["plot", "mapchange", ekf, "-o", w / "mc.png"], "ekf.h5",
+                      w / "mc.png"))
     cases.append(Case("plot-nees-no-cov", ["plot", "nees", odo, "--data", ds, "-o", w / "n.png"], "nees",
                       w / "n.png"))
     cases.append(Case("plot-format-jpg", ["plot", "map", icm, "-o", w / "m.jpg"], "m.jpg", w / "m.jpg"))

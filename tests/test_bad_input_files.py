@@ -230,7 +230,7 @@ def test_diff_datasets_and_other_seeds(files, tmp_path):
     simulate_to_file("loop", 6, {"n_steps": 100}, other)
     res = diff(ds, other)
     assert res.exit_code == 1 and "@seed" in res.stdout
-    s2 = tmp_path / "s2.h5"
+    s2 = d / "s2.h5"  # beside a.h5: the recorded relative dataset path is the same
     solve_file(ds, "icm", {"max_sweeps": 4}, s2, seed=3)
     res = diff(a, s2)
     assert res.exit_code == 1 and "@extra_json: keys seed 2 vs 3" in res.stdout
