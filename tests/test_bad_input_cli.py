@@ -276,6 +276,22 @@ def build_cases(w: Path, ds: Path, icm: Path, ekf: Path, odo: Path, ds2: Path) -
     cases.append(Case("ISSUE-sweep-out-is-file", ["sweep", good, "--out", w / "afile", "-q"], "afile"))
     cases.append(Case("sweep-file-missing", ["sweep", w / "missing.toml", "-q"], "missing.toml"))
     cases.append(Case("sweep-workers-zero", ["sweep", good, "-j", "0", "--out", w / "wz"], "--workers", w / "wz"))
+    # export / import trajectory / aggregate
+    cases.append(Case("export-out-is-directory", ["export", icm, "-f", "tum", "-o", w / "adir.png"], "adir.png"))
+    cases.append(Case("export-format-unknown", ["export", icm, "-f", "xyz", "-o", w / "x.txt"], "--format",
+                      w / "x.txt"))
+    cases.append(Case("export-bad-result", ["export", w / "status-bogus.h5", "-f", "tum", "-o", w / "b.tum"],
+                      "@status", w / "b.tum"))
+    (w / "nan.tum").write_text("0 1 2 0 0 0 0 1\n0.1 nan 2 0 0 0 0 1\n")
+    (w / "short.tum").write_text("0 1 2\n")
+    for cid, f, field in (("trajectory-nan", "nan.tum", "nan.tum"), ("trajectory-columns", "short.tum", "short.tum")):
+        t = out / f"{cid}.h5"
+        cases.append(Case(cid, ["import", "trajectory", w / f, "-d", ds, "-o", t, "-q"], field, t))
+    (w / "agg").mkdir()
+    (w / "agg" / "results.csv").write_text("not,a,table\n1,2,3\n")
+    cases.append(Case("aggregate-foreign-table", ["aggregate", w / "agg", "-q"], "results.csv",
+                      w / "agg" / "aggregate.csv"))
+    cases.append(Case("aggregate-no-table", ["aggregate", out, "-q"], "results.csv"))
     # diff / info / solvers
     cases.append(Case("diff-text-file", ["diff", ds, w / "text-file.h5"], "text-file.h5"))
     cases.append(Case("diff-missing", ["diff", w / "gone.h5", ds], "gone.h5"))
