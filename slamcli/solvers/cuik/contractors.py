@@ -1,0 +1,130 @@
+"""Narrowing operators (contractors) for the edges of a kinematic graph, built from codac primitives.
+
+A *box* is a Python list of :class:`codac.Interval` (outward-rounded interval arithmetic); a contractor
+holds the indices of its variables in the box and narrows them in place. Each operator satisfies paper 004
+Def. 4.1: contractance ``f(X) ⊆ X``, correctness ``X ∩ ρ ⊆ f(X)`` and — because :meth:`Contractor.contract`
+iterates its own steps to a local fixpoint with tolerance ``tol`` — idempotence up to ``tol``.
+
+Edges (our heading convention: θ from +x, counter-clockwise; paper 004 Fig. 2 uses x₂−x₁ = d·sin θ,
+y₂−y₁ = d·cos θ, converted once in ``slamcli.sim.bounded.heading_from_paper004``):
+
+* odometry, turn then move (``NoiseBounds.odometry_model = "turn_move"``), measured ``(d̃, α̃)`` with
+  half-widths ``(h_d, h_α)``::
+
+      θ_{t+1} − θ_t ∈ A = [α̃ ± h_α]
+      (x_{t+1} − x_t, y_{t+1} − y_t) = d·(cos θ_{t+1}, sin θ_{t+1}),   d ∈ D = [d̃ ± h_d] ∩ [0, ∞)
+
+* observation of landmark j from pose t, measured ``(r̃, b̃)`` with half-widths ``(h_r, h_b)``::
+
+      φ = θ_t + b,  b ∈ B = [b̃ ± h_b]
+      (l_x − x_t, l_y − y_t) = r·(cos φ, sin φ),   r ∈ R = [r̃ ± h_r] ∩ [0, ∞)
+
+The polar relation is codac's ``CtcPolar`` (2π-periodic in the angle, so headings stay unwrapped in the
+boxes); differences and sums are narrowed forward with interval arithmetic and backward with
+``SubOp.bwd``/``AddOp.bwd``.
+
+``narrow_theta=False`` is paper 004's operator set ("no narrowing of θ's were used", §6): headings come only
+from the odometry turn chain and are read, never narrowed, by the polar relations. ``narrow_theta=True``
+(the full set) lets the polar relations narrow φ and hence θ.
+"""
+
+from __future__ import annotations
+
+import codac
+
+Interval = codac.Interval
+_POLAR = codac.CtcPolar()
+_NONNEG = Interval(0.0, codac.oo)
+
+
+def unbounded() -> codac.Interval:
+    """``(-∞, +∞)``: the domain of a variable nothing is known about yet."""
+    return Interval(-codac.oo, codac.oo)
+
+
+def moved(old: codac.Interval, new: codac.Interval, tol: float) -> bool:
+    """True when ``new`` (⊆ old) is empty or has a bound that moved inwards by more than ``tol``."""
+    if new.is_empty():
+        return True
+    return new.lb() > old.lb() + tol or new.ub() < old.ub() - tol
+
+
+class Contractor:
+    """Base class: ``vars`` are box indices; :meth:`step` narrows once, :meth:`contract` to a local fixpoint."""
+
+    vars: tuple[int, ...] = ()
+    #: local fixpoint iterations at most (the steps converge geometrically; this bounds the worst case)
+    max_inner: int = 50
+
+    def step(self, box: list, narrow_theta: bool) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def contract(self, box: list, narrow_theta: bool = True, tol: float = 1e-9) -> list[int] | None:
+        """Narrow ``box`` in place; return the indices whose bounds moved by more than ``tol``, or None when
+        a variable became empty (the constraint has no solution in the box)."""
+        before = [Interval(box[v]) for v in self.vars]
+        for _ in range(self.max_inner):
+            prev = [Interval(box[v]) for v in self.vars]
+            self.step(box, narrow_theta)
+            if any(box[v].is_empty() for v in self.vars):
+                for v in self.vars:
+                    box[v] = Interval.empty()
+                return None
+            if not any(moved(p, box[v], tol) for p, v in zip(prev, self.vars)):
+                break
+        return [v for b, v in zip(before, self.vars) if moved(b, box[v], tol)]
+
+
+def _polar_sub(box: list, ix0: int, iy0: int, ix1: int, iy1: int, rho: codac.Interval, phi: codac.Interval):
+    """Narrow ``(x1 − x0, y1 − y0) = ρ·(cos φ, sin φ)``; returns the contracted φ (the caller decides whether
+    it may narrow a heading)."""
+    dx = box[ix1] - box[ix0]
+    dy = box[iy1] - box[iy0]
+    rho = Interval(rho)
+    phi = Interval(phi)
+    dx, dy, rho, phi = _POLAR.contract(dx, dy, rho, phi)
+    x1, x0, y1, y0 = Interval(box[ix1]), Interval(box[ix0]), Interval(box[iy1]), Interval(box[iy0])
+    codac.SubOp.bwd(dx, x1, x0)
+    codac.SubOp.bwd(dy, y1, y0)
+    if dx.is_empty() or dy.is_empty() or rho.is_empty():
+        x1 = Interval.empty()
+    box[ix1], box[ix0], box[iy1], box[iy0] = x1, x0, y1, y0
+    return phi
+
+
+class OdometryTurnMove(Contractor):
+    """Edge pose t → t+1 of the turn-and-move robot (see the module docstring)."""
+
+    def __init__(self, pose_from: tuple[int, int, int], pose_to: tuple[int, int, int], d: float, alpha: float,
+                 h_d: float, h_alpha: float) -> None:
+        self.p0, self.p1 = pose_from, pose_to
+        self.vars = (*pose_from, *pose_to)
+        self.D = Interval(d - h_d, d + h_d) & _NONNEG
+        self.A = Interval(alpha - h_alpha, alpha + h_alpha)
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        (x0, y0, t0), (x1, y1, t1) = self.p0, self.p1
+        # θ_{t+1} − θ_t ∈ A, forward and backward (paper set included: this is the odometry turn chain)
+        box[t1] = box[t1] & (box[t0] + self.A)
+        box[t0] = box[t0] & (box[t1] - self.A)
+        phi = _polar_sub(box, x0, y0, x1, y1, self.D, box[t1])
+        if narrow_theta:
+            box[t1] = box[t1] & phi
+
+
+class RangeBearing(Contractor):
+    """Observation edge pose t → landmark j (see the module docstring)."""
+
+    def __init__(self, pose: tuple[int, int, int], landmark: tuple[int, int], r: float, b: float, h_r: float,
+                 h_b: float) -> None:
+        self.pose, self.landmark = pose, landmark
+        self.vars = (*pose, *landmark)
+        self.R = Interval(r - h_r, r + h_r) & _NONNEG
+        self.B = Interval(b - h_b, b + h_b)
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        (x, y, t), (lx, ly) = self.pose, self.landmark
+        phi = box[t] + self.B
+        phi = _polar_sub(box, x, y, lx, ly, self.R, phi)
+        if narrow_theta:
+            box[t] = box[t] & (phi - self.B)  # θ ∩= φ − B  (backward step of φ = θ + b)
