@@ -1,4 +1,4 @@
-"""``slamcli plot``: figures from result files (map, errors, nees, mapchange), PNG or PDF."""
+"""``slamcli plot``: figures from result files (map, errors, nees, mapchange, boxes), PNG or PDF."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import typer
 
 from slamcli.cli.app import app, fail, handle_errors
 
-KINDS = ("map", "errors", "nees", "mapchange")
+KINDS = ("map", "errors", "nees", "mapchange", "boxes")
 
 
 @app.command("plot")
 def plot_command(
-    kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange")],
+    kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange | boxes")],
     results: Annotated[list[Path], typer.Argument(
         help="Result file(s): nees takes N Monte-Carlo runs, mapchange overlays several, map/errors take one.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Image file, .png or .pdf.")],
@@ -25,6 +25,7 @@ def plot_command(
         help="map: with --ellipses, a pose ellipse every K poses (0 = none).")] = 0,
     no_hash_check: Annotated[bool, typer.Option("--no-hash-check", help="Skip the dataset hash check.")] = False,
     title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
+    hypothesis: Annotated[int, typer.Option(help="boxes: which surviving hypothesis to draw (0 = first).")] = 0,
 ) -> None:
     """Draw one publication figure; the image is written atomically."""
     with handle_errors():
@@ -34,7 +35,7 @@ def plot_command(
             fail(f"{output}: unsupported image format {output.suffix or '(none)'!r}; use .png or .pdf")
         if data and len(data) != len(results):
             fail(f"got {len(results)} result(s) but {len(data)} --data file(s); give one per result or none")
-        if kind in ("map", "errors") and len(results) != 1:
+        if kind in ("map", "errors", "boxes") and len(results) != 1:
             fail(f"plot {kind} takes exactly one result, got {len(results)}")
         from slamcli.plots import new_figure, save_figure
 
@@ -47,6 +48,8 @@ def plot_command(
             _errors(ax, results[0], data_paths[0], check, title)
         elif kind == "mapchange":
             _mapchange(ax, results, title)
+        elif kind == "boxes":
+            _boxes(ax, results[0], data_paths[0], check, hypothesis, title)
         else:
             _nees(ax, results, data_paths, check, title)
         save_figure(fig, output)
@@ -117,3 +120,23 @@ def _nees(ax, result_paths, data_paths, check, title):
     n_finite = int(np.isfinite(a.anees).sum())
     typer.echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}); {100 * a.fraction_inside:.1f}% of "
                f"{n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}] for N = {a.n_runs} runs")
+
+
+def _boxes(ax, result_path, data_path, check, hypothesis, title):
+    from slamcli.api.evaluate import load_result_and_dataset
+    from slamcli.errors import SlamcliError
+    from slamcli.plots.boxes import plot_boxes
+
+    res, ds, _ = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
+    hb = res.hypotheses
+    if hb is None or len(hb) == 0:
+        raise SlamcliError(f"{result_path}: no hypotheses group (solver {res.solver!r}); plot boxes needs a "
+                           "set-membership result such as cuik")
+    if not 0 <= hypothesis < len(hb):
+        raise SlamcliError(f"--hypothesis {hypothesis}: the result has {len(hb)} hypotheses (0..{len(hb) - 1})")
+    L = int(hb.n_landmarks[hypothesis])
+    truth = ds.truth
+    plot_boxes(ax, hb.pose_lo[hypothesis], hb.pose_hi[hypothesis], hb.landmark_lo[hypothesis, :L],
+               hb.landmark_hi[hypothesis, :L], truth.poses_xyt if truth else None,
+               truth.landmarks_xy if truth else None,
+               title=title or f"{res.solver}: hypothesis {hypothesis} of {len(hb)} ({L} landmarks)")
