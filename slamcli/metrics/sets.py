@@ -100,17 +100,19 @@ def n_distinct(hb: BoxHypotheses) -> int:
     return len({canonical(hb.assoc[h]) for h in range(len(hb))})
 
 
-def estimate_inside(hb: BoxHypotheses, h: int, poses_xyt, landmarks_xy=None, assoc=None) -> dict:
+def estimate_inside(hb: BoxHypotheses, h: int, poses_xyt, landmarks_xy=None, assoc=None,
+                    slack: float = 1e-9) -> dict:
     """Fraction of another estimate inside hypothesis ``h``'s boxes (poses; landmarks matched through the
-    shared observations ``assoc`` → labels of h)."""
-    pin = poses_in_boxes(poses_xyt, hb.pose_lo[h], hb.pose_hi[h])
+    shared observations ``assoc`` → labels of h). ``slack`` (m, rad) absorbs rounding: a least-squares
+    solver that holds the known start with a tight prior lands ~1e-15 beside the degenerate start box."""
+    pin = poses_in_boxes(poses_xyt, hb.pose_lo[h], hb.pose_hi[h], slack)
     out = {"pose_inside_fraction": float(pin.mean()), "pose_inside": pin}
     if landmarks_xy is not None and assoc is not None:
         m = landmark_map(hb.assoc[h], assoc)  # label of h -> row of the other estimate
         lab = np.array(sorted(m), np.int64)
         if lab.size:
             lin = points_in_boxes(np.asarray(landmarks_xy)[[m[k] for k in lab]], hb.landmark_lo[h, lab],
-                                  hb.landmark_hi[h, lab])
+                                  hb.landmark_hi[h, lab], slack)
             out["landmark_inside_fraction"] = float(lin.mean())
             out["landmark_inside"] = lin
     return out

@@ -123,7 +123,8 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
 
     h_d, h_a = float(b.odometry_d), math.radians(b.odometry_turn_deg)
     h_r, h_b = float(b.range), math.radians(b.bearing_deg)
-    u = stream("odometry", seed).uniform(-1.0, 1.0, (T, 2)) * [h_d, h_a]
+    on = 0.0 if b.exact_readings else 1.0  # exact readings: zero errors, bounds still declared
+    u = stream("odometry", seed).uniform(-1.0, 1.0, (T, 2)) * [h_d, h_a] * on
     legs_meas = legs + u
     legs_meas[:, 0] = np.maximum(legs_meas[:, 0], 0.0)  # a distance reading is never negative
     odometry_xyt = chain_legs(x0, legs_meas)
@@ -134,8 +135,8 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
     for t in range(T + 1):
         for j in closest_visible(poses[t], landmarks, s.min_range, s.max_range, s.fov_rad, b.closest_only):
             d = landmarks[j] - poses[t, :2]
-            r = float(np.hypot(*d)) + rng_s.uniform(-h_r, h_r)
-            br = math.atan2(d[1], d[0]) - poses[t, 2] + rng_s.uniform(-h_b, h_b)
+            r = float(np.hypot(*d)) + rng_s.uniform(-h_r, h_r) * on
+            br = math.atan2(d[1], d[0]) - poses[t, 2] + rng_s.uniform(-h_b, h_b) * on
             rows_step.append(t)
             rows_z.append([max(r, 0.0), br])
             rows_lm.append(int(j))

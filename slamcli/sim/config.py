@@ -308,6 +308,8 @@ class BoundedConfig:
                                       empty = all type 0.
     declared_scale : float            the bounds written into the dataset are ``declared_scale ×`` the true
                                       ones (< 1 = a deliberately wrong, too small declaration, for tests).
+    exact_readings : bool             every error is zero while the bounds are still declared — paper 004 §6
+                                      simulated exact readings (its Table 1 l1 box is centred on the truth).
     """
 
     enabled: bool = False
@@ -318,6 +320,7 @@ class BoundedConfig:
     closest_only: bool = True
     landmark_types: tuple[int, ...] = ()
     declared_scale: float = 1.0
+    exact_readings: bool = False
 
     def __post_init__(self) -> None:
         _check(min(self.odometry_d, self.odometry_turn_deg, self.range, self.bearing_deg) >= 0,

@@ -62,33 +62,34 @@ class Contractor:
     def contract(self, box: list, narrow_theta: bool = True, tol: float = 1e-9) -> list[int] | None:
         """Narrow ``box`` in place; return the indices whose bounds moved by more than ``tol``, or None when
         a variable became empty (the constraint has no solution in the box)."""
-        before = [Interval(box[v]) for v in self.vars]
+        vs = self.vars
+        start = prev = [(box[v].lb(), box[v].ub()) for v in vs]
         for _ in range(self.max_inner):
-            prev = [Interval(box[v]) for v in self.vars]
             self.step(box, narrow_theta)
-            if any(box[v].is_empty() for v in self.vars):
-                for v in self.vars:
+            cur = [(box[v].lb(), box[v].ub()) for v in vs]
+            if any(lo != lo for lo, _hi in cur):  # an empty interval has NaN bounds
+                for v in vs:
                     box[v] = Interval.empty()
                 return None
-            if not any(moved(p, box[v], tol) for p, v in zip(prev, self.vars)):
+            if not any(c[0] > p[0] + tol or c[1] < p[1] - tol for c, p in zip(cur, prev)):
                 break
-        return [v for b, v in zip(before, self.vars) if moved(b, box[v], tol)]
+            prev = cur
+        return [v for v, c, p in zip(vs, cur, start) if c[0] > p[0] + tol or c[1] < p[1] - tol]
 
 
 def _polar_sub(box: list, ix0: int, iy0: int, ix1: int, iy1: int, rho: codac.Interval, phi: codac.Interval):
     """Narrow ``(x1 − x0, y1 − y0) = ρ·(cos φ, sin φ)``; returns the contracted φ (the caller decides whether
-    it may narrow a heading)."""
+    it may narrow a heading). The four position intervals are narrowed in place."""
     dx = box[ix1] - box[ix0]
     dy = box[iy1] - box[iy0]
     rho = Interval(rho)
     phi = Interval(phi)
-    dx, dy, rho, phi = _POLAR.contract(dx, dy, rho, phi)
-    x1, x0, y1, y0 = Interval(box[ix1]), Interval(box[ix0]), Interval(box[iy1]), Interval(box[iy0])
-    codac.SubOp.bwd(dx, x1, x0)
-    codac.SubOp.bwd(dy, y1, y0)
+    _POLAR.contract(dx, dy, rho, phi)
     if dx.is_empty() or dy.is_empty() or rho.is_empty():
-        x1 = Interval.empty()
-    box[ix1], box[ix0], box[iy1], box[iy0] = x1, x0, y1, y0
+        box[ix1] = Interval.empty()
+        return phi
+    codac.SubOp.bwd(dx, box[ix1], box[ix0])  # x1 ∩= dx + x0,  x0 ∩= x1 − dx
+    codac.SubOp.bwd(dy, box[iy1], box[iy0])
     return phi
 
 

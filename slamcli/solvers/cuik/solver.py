@@ -100,13 +100,16 @@ class CuikSlam(BaseSolver):
         t_start = time.perf_counter()
         p = self.params
         nb = inputs.noise_bounds
-        if nb is None:
-            raise ValueError("cuik needs guaranteed error bounds (inputs/noise_bounds); simulate with "
-                             "bounded.enabled=true (e.g. scenario cuik-room)")
-        if nb.odometry_model != "turn_move":
-            raise ValueError(f"cuik: odometry model {nb.odometry_model!r} not supported (turn_move only)")
         n_poses = inputs.n_poses
         obs = inputs.observations
+        why = ("the dataset declares no guaranteed error bounds (inputs/noise_bounds); simulate with "
+               "bounded.enabled=true (e.g. scenario cuik-room)" if nb is None else
+               f"odometry model {nb.odometry_model!r} not supported (turn_move only)"
+               if nb.odometry_model != "turn_move" else None)
+        if why is not None:  # no bounds, no guaranteed boxes: a documented failure, not a guess
+            return self.make_result(status=Status.FAILED, poses_xyt=np.full((n_poses, 3), np.nan),
+                                    landmarks_xy=np.zeros((0, 2)), assoc=np.full(len(obs), -1, np.int64),
+                                    t_start=t_start, message=f"cuik: {why}")
         types = (np.asarray(obs.landmark_type, np.int64) if obs.landmark_type is not None
                  else np.zeros(len(obs), np.int64))
         h_d, h_a = (float(x) + p.recovery_slack for x in nb.odometry_half_width)
