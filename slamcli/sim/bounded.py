@@ -85,7 +85,8 @@ def legs_from_odometry(odometry_xyt: np.ndarray) -> np.ndarray:
 
 def closest_visible(pose_xyt: np.ndarray, landmarks_xy: np.ndarray, min_range: float, max_range: float,
                     fov_rad: float, closest_only: bool) -> np.ndarray:
-    """Indices of the landmarks the sensor reports at one pose (the nearest visible one, or all visible)."""
+    """Indices of the landmarks the sensor reports at one pose (the nearest visible one, or all visible);
+    ties within 1 nm go to the landmark with the smallest |bearing|."""
     if len(landmarks_xy) == 0:
         return np.zeros(0, np.int64)
     d = landmarks_xy - pose_xyt[:2]
@@ -94,7 +95,10 @@ def closest_visible(pose_xyt: np.ndarray, landmarks_xy: np.ndarray, min_range: f
     ok = (r >= min_range) & (r <= max_range) & (np.abs(b) <= fov_rad / 2 + 1e-12)
     idx = np.flatnonzero(ok)
     if closest_only and idx.size:
-        idx = idx[[int(np.argmin(r[idx]))]]
+        # the closest one; an exact tie (the room's even poses are equidistant from two landmarks) goes to
+        # the landmark nearest to straight ahead
+        near = idx[r[idx] <= r[idx].min() + 1e-9]
+        idx = near[[int(np.argmin(np.abs(b[near])))]]
     return idx.astype(np.int64)
 
 

@@ -30,6 +30,14 @@ from the odometry turn chain and are read, never narrowed, by the polar relation
 
 from __future__ import annotations
 
+import importlib.util
+
+# Native load-order crash: with codac 2.1.2 and h5py 3.x wheels, `import codac; import h5py` segfaults while
+# loading h5py's bundled libhdf5 (the other order is fine). The solver never uses h5py; we only make sure
+# HDF5 is loaded first when it is installed, so a process that solves and then writes a file survives.
+if importlib.util.find_spec("h5py") is not None:
+    import h5py  # noqa: F401
+
 import codac
 
 Interval = codac.Interval

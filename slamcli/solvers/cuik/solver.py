@@ -89,7 +89,7 @@ class CuikSlam(BaseSolver):
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator,
               progress: ProgressFn | None = None) -> SolverResult:
         try:
-            import codac  # noqa: F401
+            import slamcli.solvers.cuik.contractors  # noqa: F401  (loads codac the safe way, see there)
         except ImportError:
             raise ValueError("cuik needs the optional interval extra: pip install 'slamcli[interval]' "
                              "(codac)") from None

@@ -1,0 +1,353 @@
+"""Reproduction section for paper 004 (Kubica & Szynkiewicz, "CuikSLAM with Unknown Correspondence –
+Preliminary Results"): Tables 1-6 side by side with ``cuik`` on ``cuik-room``, hypothesis counts, our tighter
+boxes with θ narrowing (+ 3B shaving and bisection), Monte-Carlo soundness, the wrong-bound check, the
+``graph`` cross-check and a lower bound on any sound box from feasible solutions.
+
+Hook: ``run_section(out_dir, quick, progress) -> (markdown, ok)``; every outcome sentence is computed from the
+numbers of the run. This module is the experiment harness: it reads ground truth (for metrics and for the
+"unique correspondence" runs, which hand the solver the true association like ``solve
+--oracle-association``), the solver never does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from slamcli.sim.bounded import heading_from_paper004
+
+# Paper 004 Table 1 (unique correspondence): rows r1..r9, l1..l4 → [x_lo, x_hi, y_lo, y_hi, θ_lo, θ_hi]
+# (θ in the paper's convention, NaN for landmarks). Tables 2-6: the uncertain-correspondence solutions.
+TABLE1 = {
+    "r1": [15.000000, 15.000000, 5.000000, 5.000000, 1.963495, 1.963496],
+    "r2": [21.649003, 22.625890, 7.254080, 8.692127, 1.090830, 1.265364],
+    "r3": [23.859385, 26.376647, 13.576115, 16.498558, 0.218166, 0.567233],
+    "r4": [18.991749, 25.398227, 19.523065, 24.426118, -0.654499, -0.130899],
+    "r5": [11.003392, 19.871620, 20.255855, 29.368930, -1.527164, -0.829031],
+    "r6": [3.007425, 14.807419, 14.964192, 28.134633, -2.399828, -1.527163],
+    "r7": [-2.677651, 15.851102, 6.968225, 20.138666, -3.272493, -2.225294],
+    "r8": [3.696705, 14.846075, 1.353586, 12.142699, -4.145157, -2.923426],
+    "r9": [11.692672, 18.307328, 3.758019, 5.050190, -5.017822, -3.621558],
+    "l1": [14.956149, 15.043851, -0.025001, 0.025190, np.nan, np.nan],
+    "l2": [28.765282, 31.127910, 13.490822, 16.465664, np.nan, np.nan],
+    "l3": [10.010507, 20.577533, 25.039668, 33.802960, np.nan, np.nan],
+    "l4": [-6.799463, 11.729289, 4.374615, 22.449843, np.nan, np.nan],
+}
+#: Tables 2-6: number of landmarks of each surviving solution (Table 4 leaves label l3 unused).
+PAPER_SOLUTIONS_LANDMARKS = [5, 5, 4, 4, 5]
+PAPER_N_GRAPHS = 5
+PAPER_N_DISTINCT = 3
+
+
+def table1_widths() -> dict[str, np.ndarray]:
+    """Widths ``[w_x, w_y, w_θ]`` of every Table 1 row (θ width is convention-independent)."""
+    out = {}
+    for k, v in TABLE1.items():
+        v = np.asarray(v, float)
+        th = heading_from_paper004(v[4:6])  # the one conversion; the interval flips
+        out[k] = np.array([v[1] - v[0], v[3] - v[2], float(np.max(th) - np.min(th))])
+    return out
+
+
+def our_widths(hb, h: int) -> dict[str, np.ndarray]:
+    """Our widths per paper label (pose t ↔ r_{t+1}; landmark label j ↔ l_{j+1}, labels by first sighting)."""
+    out = {}
+    for t in range(hb.pose_lo.shape[1]):
+        out[f"r{t + 1}"] = hb.pose_hi[h, t] - hb.pose_lo[h, t]
+    for j in range(int(hb.n_landmarks[h])):
+        w = hb.landmark_hi[h, j] - hb.landmark_lo[h, j]
+        out[f"l{j + 1}"] = np.array([w[0], w[1], np.nan])
+    return out
+
+
+def with_true_association(dataset):
+    """Inputs with the sensor-reported ids set to the true association (unique correspondence)."""
+    inp = dataset.inputs
+    obs = dataclasses.replace(inp.observations, reported_id=dataset.truth.obs_landmark.copy())
+    return dataclasses.replace(inp, observations=obs)
+
+
+def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200):
+    """Two feasible solutions minimising / maximising one coordinate, found by SLSQP over the bounded errors.
+
+    Variables: the normalised errors ``u ∈ [-1, 1]`` of every odometry leg (d, α) and observation (r, b);
+    poses follow by chaining, each landmark from its first observation, and every later observation of the
+    same (true) landmark must reproduce it (equality constraints). A point returned with ``|constraint| <
+    1e-6`` is a genuine solution of the bounded-error problem, so ANY sound enclosure must contain both
+    extremes: their distance is a lower bound on the box width of that coordinate (local optimisation may
+    miss a wider solution; it never overstates the bound).
+
+    ``coordinate``: ("pose", t, c) or ("landmark", true index, c). Returns ``(lo, hi, max_violation)``.
+    """
+    from scipy.optimize import minimize
+
+    from slamcli.sim.bounded import legs_from_odometry
+
+    inp = dataset.inputs
+    nb = inp.noise_bounds
+    obs = inp.observations
+    lab = dataset.truth.obs_landmark
+    legs = legs_from_odometry(inp.odometry_xyt)
+    T, N = len(legs), len(obs)
+    hd, ha = (float(x) for x in nb.odometry_half_width)
+    hr, hb = float(nb.range_half_width), float(nb.bearing_half_width)
+
+    def unpack(u):
+        du, au = u[:T] * hd, u[T:2 * T] * ha
+        ru, bu = u[2 * T:2 * T + N] * hr, u[2 * T + N:] * hb
+        P = np.zeros((T + 1, 3))
+        P[0] = inp.x0
+        for t in range(T):
+            th = P[t, 2] + legs[t, 1] + au[t]
+            d = legs[t, 0] + du[t]
+            P[t + 1] = [P[t, 0] + d * math.cos(th), P[t, 1] + d * math.sin(th), th]
+        L: dict[int, np.ndarray] = {}
+        res = []
+        for i in range(N):
+            t = int(obs.step[i])
+            ph = P[t, 2] + obs.bearing_rad[i] + bu[i]
+            q = P[t, :2] + (obs.range_m[i] + ru[i]) * np.array([math.cos(ph), math.sin(ph)])
+            if int(lab[i]) in L:
+                res.append(q - L[int(lab[i])])
+            else:
+                L[int(lab[i])] = q
+        return P, L, (np.concatenate(res) if res else np.zeros(0))
+
+    n = 2 * T + 2 * N
+    cons = [{"type": "eq", "fun": lambda u: unpack(u)[2]}]
+    box = [(-1.0, 1.0)] * n
+    kind, idx, c = coordinate
+
+    def value(u):
+        P, L, _ = unpack(u)
+        return P[idx, c] if kind == "pose" else L[idx][c]
+
+    start = minimize(lambda u: u @ u, np.zeros(n), constraints=cons, bounds=box, method="SLSQP",
+                     options={"maxiter": maxiter}).x
+    ext, viol = [], 0.0
+    for sgn in (1.0, -1.0):
+        r = minimize(lambda u, s=sgn: s * value(u), start, constraints=cons, bounds=box, method="SLSQP",
+                     options={"maxiter": maxiter})
+        u = np.clip(r.x, -1.0, 1.0)
+        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)))
+        ext.append(value(u))
+    return float(ext[0]), float(ext[1]), viol
+
+
+def _fmt(v, d=3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "—"
+    return f"{v:.{d}f}" if isinstance(v, float) else str(v)
+
+
+def _md(header, rows) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(_fmt(c) if isinstance(c, float) else str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | None = None) -> tuple[str, bool]:
+    """Run the paper 004 experiments; write figures under ``out_dir``; return (markdown, ok)."""
+    from slamcli.api.solve import solve_dataset
+    from slamcli.metrics import sets
+    from slamcli.sim.simulate import simulate_scenario
+
+    log = progress or (lambda s: None)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    md: list[str] = ["## Paper 004: CuikSLAM with unknown correspondence (interval boxes, `cuik`)", ""]
+    import importlib.util
+
+    if importlib.util.find_spec("codac") is None:
+        md.append("> **Section failed**: the `interval` extra (codac) is not installed: `pip install 'slamcli[interval]'`.")
+        return "\n".join(md), False
+    checks: dict[str, bool] = {}
+    full = {"narrow_theta": True, "shave_slices": 4, "bisect_leaves": 64}
+
+    # -- 1. Table 1: unique correspondence, exact readings as in the paper ------------------------------------
+    exact = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True})
+    known = with_true_association(exact)
+    r_paper = solve_dataset(known, "cuik", {"narrow_theta": False, "association": "reported"})
+    r_theta = solve_dataset(known, "cuik", {"narrow_theta": True, "association": "reported"})
+    r_full = solve_dataset(known, "cuik", {**full, "association": "reported"})
+    log("paper004: Table 1 runs done")
+    tw = table1_widths()
+    wp, wt, wf = (our_widths(r.hypotheses, 0) for r in (r_paper, r_theta, r_full))
+    rows, narrower, not_narrower = [], 0, []
+    for key in TABLE1:
+        p = tw[key]
+        cols = [key]
+        for w in (p, wp[key], wt[key], wf[key]):
+            cols.append(" / ".join(_fmt(float(x), 2) for x in w if np.isfinite(x)))
+        ok_row = bool(np.all((wf[key] < p + 1e-12) | ~np.isfinite(p)))
+        if key != "r1":  # r1 is the known start: a point in both
+            narrower += ok_row
+            if not ok_row:
+                not_narrower.append(key)
+        rows.append(cols)
+    n_rows = len(TABLE1) - 1
+    excess = {k: float(np.nanmax((wf[k] - tw[k]) / np.where(tw[k] > 0, tw[k], np.nan))) for k in not_narrower}
+    dev = {k: float(np.nanmax(np.abs(wp[k] - tw[k]) / np.where(tw[k] > 0, tw[k], np.nan))) for k in TABLE1
+           if k != "r1"}
+    close = sorted((k for k in dev if dev[k] <= 0.02), key=list(TABLE1).index)
+    md += ["### Table 1 — unique correspondence (box widths x / y [/ θ], m and rad)", "",
+           "Data: `cuik-room` with exact readings (paper §6 simulated exact readings: its l1 box is centred on the "
+           "truth) and the paper's bounds (odometry ±25 cm, ±5°; sonar ±2.5 cm, ±0.5°); the robot sees the closest "
+           "landmark within 12 m. Columns: the paper; ours with the paper's operator set (no θ narrowing); ours "
+           "with θ narrowing; ours with θ narrowing + 3B shaving (4 slices) + bisection (64 leaves).", "",
+           _md(["row", "paper 004", "ours, paper set", "ours, θ narrowing", "ours, full + 3B + bisection"], rows),
+           ""]
+    lm_mean = {name: float(np.nanmean([np.nanmean(w[k][:2]) for k in w if k.startswith("l")]))
+               for name, w in (("paper", wp), ("theta", wt), ("full", wf))}
+    paper_lm_mean = float(np.mean([np.mean(tw[k][:2]) for k in tw if k.startswith("l")]))
+    md.append(f"With the full operator set {narrower} of {n_rows} rows (all but the known start r1) are at most as "
+              f"wide as the paper's Table 1 in every coordinate"
+              + (f"; wider: {', '.join(f'{k} (by up to {100 * excess[k]:.1f} %)' for k in not_narrower)}"
+                 if not_narrower else "") + ". "
+              f"Our paper-exact operator set reproduces the paper's widths within 2 % for {len(close)} of {n_rows} "
+              f"rows ({', '.join(close)}; largest deviation {100 * max(dev.values()):.1f} % at "
+              f"{max(dev, key=dev.get)}). "
+              f"Mean landmark box width: paper {paper_lm_mean:.2f} m, ours {lm_mean['paper']:.2f} m (paper set), "
+              f"{lm_mean['theta']:.2f} m (θ narrowing), {lm_mean['full']:.2f} m (full + 3B + bisection); "
+              + ("below" if lm_mean["full"] < 1.0 else "NOT below") + " the 1 m of Porta's CuikSLAM.")
+    md.append("")
+    checks["table1_rows_narrower"] = not not_narrower
+
+    # -- 2. lower bound on any sound box (feasible extremes) ------------------------------------------------
+    lo, hi, viol = feasible_extent(exact, ("landmark", 2, 0), maxiter=100 if quick else 300)
+    j_full = r_full.hypotheses
+    lab3 = sets.landmark_map(j_full.assoc[0], exact.truth.obs_landmark)
+    inv = {v: k for k, v in lab3.items()}
+    bx = (j_full.landmark_lo[0, inv[2], 0], j_full.landmark_hi[0, inv[2], 0])
+    inside = bx[0] - 1e-6 <= lo <= bx[1] + 1e-6 and bx[0] - 1e-6 <= hi <= bx[1] + 1e-6
+    md += ["### Why boxes stay wider than 1 m here", "",
+           f"Two solutions of the bounded-error problem (constraint violation {viol:.1e}, found by SLSQP over the "
+           f"normalised errors) put landmark (15, 30) at x = {lo:.2f} m and x = {hi:.2f} m: every sound box of its "
+           f"x must be at least {hi - lo:.2f} m wide, whatever the contractors. Our full-set box "
+           f"[{bx[0]:.2f}, {bx[1]:.2f}] {'contains both' if inside else 'MISSES one of them (unsound!)'} "
+           f"(width {bx[1] - bx[0]:.2f} m, {((bx[1] - bx[0]) / max(hi - lo, 1e-12)):.2f}× the lower bound). "
+           "With the closest-landmark sensor every landmark is seen from one to four poses and four legs are pinned "
+           "by no shared landmark, so the set of consistent maps is metres wide: the issue's < 1 m target is "
+           "below this lower bound and cannot be met by any sound method on this data.", ""]
+    checks["extremes_inside"] = bool(inside and viol < 1e-6)
+
+    # -- 3. Tables 2-6: uncertain correspondence --------------------------------------------------------------
+    u_paper = solve_dataset(exact.inputs, "cuik", {"narrow_theta": False})
+    u_theta = solve_dataset(exact.inputs, "cuik", {"narrow_theta": True})
+    log("paper004: uncertain-correspondence runs done")
+    rows = []
+    for name, r in (("paper set", u_paper), ("θ narrowing", u_theta)):
+        hb = r.hypotheses
+        m = sets.set_metrics(hb, exact.truth.poses_xyt, exact.truth.landmarks_xy, exact.truth.obs_landmark)
+        counts = np.bincount(hb.n_landmarks)
+        rows.append([name, len(hb), sets.n_distinct(hb), ", ".join(f"{c}×{k}" for k, c in enumerate(counts) if c),
+                     "yes" if m["true_correspondence_survived"] else "NO", m["true_hypothesis_index"],
+                     _fmt(m.get("soundness"), 3)])
+        checks[f"truth_survived_{name}"] = bool(m["true_correspondence_survived"] and m.get("soundness") == 1.0)
+    md += ["### Tables 2-6 — uncertain correspondence (door/corridor types only)", "",
+           _md(["operator set", "hypotheses", "distinct up to relabelling", "landmarks per hypothesis",
+                "true correspondence survived", "its rank", "soundness"],
+               [["paper 004", PAPER_N_GRAPHS, PAPER_N_DISTINCT, "3×5, 2×4", "yes", "—", "—"], *rows]), ""]
+    hb_u = u_theta.hypotheses
+    n_min = int(hb_u.n_landmarks.min())
+    md.append(
+        f"Paper: {PAPER_N_GRAPHS} graphs after 9 poses, {PAPER_N_DISTINCT} distinct up to labelling. Ours: "
+        f"{len(u_paper.hypotheses)} (paper set) and {len(hb_u)} (θ narrowing), all distinct up to relabelling "
+        "(labels are given by first sighting, so equal partitions are merged as they arise). "
+        + ("We keep more graphs than the paper: " if len(hb_u) > PAPER_N_GRAPHS else "")
+        + "every re-observation may also be 'a new landmark', which no box contradicts (the sensor's range and "
+        "bearing to a new landmark are always consistent), so the count doubles with each re-observation "
+        "unless the old landmark is refuted; the paper does not say how it bounded this. "
+        f"The fewest-landmark hypotheses have {n_min} landmarks; the true correspondence "
+        + ("is" if checks["truth_survived_θ narrowing"] else "is NOT") + " among the survivors and "
+        + ("is" if sets.true_hypothesis(hb_u, exact.truth.obs_landmark) == 0 else "is not")
+        + " ranked first (fewest landmarks, narrowest boxes).")
+    md.append("")
+
+    # -- 4. Monte-Carlo: soundness, survival, wrong bounds, graph cross-check ---------------------------------
+    n_known = 20 if quick else 200
+    n_unknown = 5 if quick else 50
+    n_graph = 3 if quick else 20
+    sound, sound_u, surv, ranks, nh = [], [], [], [], []
+    for seed in range(n_known):
+        ds = simulate_scenario("cuik-room", seed)
+        r = solve_dataset(with_true_association(ds), "cuik", {"association": "reported"})
+        m = sets.set_metrics(r.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+        sound.append(m["soundness"] == 1.0)
+        if seed < n_unknown:
+            r = solve_dataset(ds.inputs, "cuik", {})
+            m = sets.set_metrics(r.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+            surv.append(m["true_correspondence_survived"])
+            sound_u.append(m.get("soundness") == 1.0)
+            ranks.append(m["true_hypothesis_index"])
+            nh.append(m["n_hypotheses"])
+    log("paper004: Monte-Carlo done")
+    wrong = []
+    for seed in range(10 if quick else 50):
+        ds = simulate_scenario("cuik-room", seed, {"bounded.declared_scale": 0.2})
+        r = solve_dataset(with_true_association(ds), "cuik", {"association": "reported"})
+        wrong.append((r.status.value, r.extra.get("refuted_at_pose")))
+    n_caught = sum(s == "failed" for s, _ in wrong)
+    at_pose = sorted({p for s, p in wrong if s == "failed"})
+    gp, gl = [], []
+    for seed in range(n_graph):
+        ds = simulate_scenario("cuik-room", seed)
+        known_in = with_true_association(ds)
+        g = solve_dataset(known_in, "graph", {})
+        c = solve_dataset(known_in, "cuik", {"association": "reported"})
+        e = sets.estimate_inside(c.hypotheses, 0, g.poses_xyt, g.landmarks_xy, g.assoc)
+        gp.append(e["pose_inside_fraction"])
+        gl.append(e.get("landmark_inside_fraction", float("nan")))
+    checks["soundness_all"] = all(sound) and all(sound_u)
+    checks["truth_always_survives"] = all(surv)
+    checks["wrong_bound_caught"] = n_caught == len(wrong)
+    md += ["### Monte-Carlo on bounded-noise data (uniform errors within the bounds)", "",
+           _md(["check", "runs", "result"], [
+               ["soundness = 100 % (unique correspondence)", n_known, f"{sum(sound)} of {n_known}"],
+               ["soundness of the true hypothesis (unknown correspondence)", n_unknown, f"{sum(sound_u)} of {n_unknown}"],
+               ["true correspondence survived", n_unknown, f"{sum(surv)} of {n_unknown}"],
+               ["true correspondence ranked first", n_unknown, f"{sum(k == 0 for k in ranks)} of {n_unknown}"],
+               ["surviving hypotheses (mean / max)", n_unknown, f"{np.mean(nh):.1f} / {max(nh)}"],
+               ["declared bounds 0.2× too small → all boxes empty", len(wrong),
+                f"{n_caught} of {len(wrong)} (refuted at poses {at_pose})"],
+               ["`graph` poses inside the `cuik` boxes", n_graph, f"{100 * np.mean(gp):.1f} %"],
+               ["`graph` landmarks inside the `cuik` boxes", n_graph, f"{100 * np.nanmean(gl):.1f} %"],
+           ]), ""]
+    md.append(
+        ("Soundness held in every run" if checks["soundness_all"] else "Soundness FAILED in some run")
+        + f" ({sum(sound)}/{n_known} unique-correspondence and {sum(sound_u)}/{n_unknown} unknown-correspondence "
+        "runs with every true pose and landmark inside its box); the true correspondence "
+        + ("survived in every run" if checks["truth_always_survives"] else f"was lost in {n_unknown - sum(surv)} runs")
+        + f". Declaring bounds five times too small is {'always' if checks['wrong_bound_caught'] else 'NOT always'} "
+        "caught by an empty box where a landmark is re-observed (a cycle of the kinematic graph). "
+        f"Least squares and set membership agree: {100 * np.mean(gp):.1f} % of `graph`'s poses and "
+        f"{100 * np.nanmean(gl):.1f} % of its landmarks lie inside the `cuik` boxes.")
+    md.append("")
+
+    # -- 5. figure ------------------------------------------------------------------------------------------
+    from slamcli.plots import new_figure, save_figure
+    from slamcli.plots.boxes import plot_boxes
+
+    for name, r in (("paper-set", r_paper), ("full-set", r_full)):
+        fig, ax = new_figure(6.0, 6.0)
+        hb = r.hypotheses
+        L = int(hb.n_landmarks[0])
+        plot_boxes(ax, hb.pose_lo[0], hb.pose_hi[0], hb.landmark_lo[0, :L], hb.landmark_hi[0, :L],
+                   exact.truth.poses_xyt, exact.truth.landmarks_xy,
+                   title=f"cuik-room, unique correspondence, {name.replace('-', ' ')}")
+        save_figure(fig, out_dir / f"paper004_boxes_{name}.png")
+    md.append(f"Figures: `{out_dir.name}/paper004_boxes_paper-set.png`, `{out_dir.name}/paper004_boxes_full-set.png` "
+              f"(boxes as rectangles, headings as wedges). Section time {time.perf_counter() - t0:.0f} s.")
+    md.append("")
+    ok = checks["soundness_all"] and checks["truth_always_survives"] and checks["extremes_inside"] \
+        and checks["wrong_bound_caught"]
+    failed = [k for k, v in checks.items() if not v]
+    if failed:
+        md.append("Checks not met: " + ", ".join(f"`{k}`" for k in failed) + ".")
+    return "\n".join(md), bool(ok)
