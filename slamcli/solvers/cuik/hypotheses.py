@@ -16,11 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import codac
+from slamcli.solvers.cuik.contractors import Contractor, Interval
 
-from slamcli.solvers.cuik.contractors import Contractor
-
-Interval = codac.Interval
 
 
 @dataclass

@@ -15,11 +15,8 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
-import codac
+from slamcli.solvers.cuik.contractors import Contractor, Interval
 
-from slamcli.solvers.cuik.contractors import Contractor
-
-Interval = codac.Interval
 
 
 @dataclass
