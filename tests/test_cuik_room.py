@@ -12,11 +12,11 @@ import pytest
 
 pytest.importorskip("slamcli.solvers.cuik.contractors")  # loads codac after h5py (see there)
 
-from slamcli.api.solve import solve_dataset  # noqa: E402
-from slamcli.metrics import sets  # noqa: E402
-from slamcli.sim.simulate import simulate_scenario  # noqa: E402
-from slamcli.sweep.paper004 import feasible_extent, our_widths, table1_widths, with_true_association  # noqa: E402
-from slamcli.types import Status  # noqa: E402
+from slamcli.api.solve import solve_dataset
+from slamcli.metrics import sets
+from slamcli.sim.simulate import simulate_scenario
+from slamcli.sweep.paper004 import feasible_extent, our_widths, table1_widths, with_true_association
+from slamcli.types import Status
 
 
 def solve(inputs, **params):

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from slamcli.solvers.cuik.contractors import Contractor, Interval
 
 
-
 @dataclass
 class Hypothesis:
     """One kinematic graph.

@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from slamcli.solvers.cuik.contractors import Contractor, Interval
 
 
-
 @dataclass
 class Counter:
     """Work counters: contractor applications and propagation runs."""
