@@ -30,15 +30,42 @@ from the odometry turn chain and are read, never narrowed, by the polar relation
 
 from __future__ import annotations
 
-import importlib.util
+import contextlib
+import ctypes
+import ctypes.util
+import sys
 
-# Native load-order crash: with codac 2.1.2 and h5py 3.x wheels, `import codac; import h5py` segfaults while
-# loading h5py's bundled libhdf5 (the other order is fine). The solver never uses h5py; we only make sure
-# HDF5 is loaded first when it is installed, so a process that solves and then writes a file survives.
-if importlib.util.find_spec("h5py") is not None:
-    import h5py  # noqa: F401
 
-import codac
+def _fenv():
+    """``fegetround``/``fesetround`` of the C library (C99 <fenv.h>)."""
+    lib = ctypes.CDLL(ctypes.util.find_library("m") or ctypes.util.find_library("c"))
+    return lib.fegetround, lib.fesetround
+
+
+_fegetround, _fesetround = _fenv()
+#: the process's ordinary rounding mode (round to nearest, 0 on x86-64 and aarch64)
+NORMAL_ROUNDING = 0 if "codac" in sys.modules else int(_fegetround())
+
+import codac  # noqa: E402
+
+#: the mode codac's interval library (gaol) sets at import: round upward. Its outward rounding relies on it.
+INTERVAL_ROUNDING = int(_fegetround())
+# codac leaves the whole process rounding upward, which silently changes every other float computation
+# (float("1.2") parses to 1.2000000000000002) and crashes a later `import h5py` (libhdf5's float-format
+# detection). Give the process its ordinary mode back; cuik switches per solve (:func:`interval_rounding`).
+_fesetround(NORMAL_ROUNDING)
+
+
+@contextlib.contextmanager
+def interval_rounding():
+    """Run codac interval code in the rounding mode it needs, then restore the caller's mode."""
+    prev = int(_fegetround())
+    _fesetround(INTERVAL_ROUNDING)
+    try:
+        yield
+    finally:
+        _fesetround(prev)
+
 
 Interval = codac.Interval
 _POLAR = codac.CtcPolar()
@@ -108,8 +135,8 @@ class OdometryTurnMove(Contractor):
                  h_d: float, h_alpha: float) -> None:
         self.p0, self.p1 = pose_from, pose_to
         self.vars = (*pose_from, *pose_to)
-        self.D = Interval(d - h_d, d + h_d) & _NONNEG
-        self.A = Interval(alpha - h_alpha, alpha + h_alpha)
+        self.D = (Interval(d) + Interval(-h_d, h_d)) & _NONNEG  # outward-rounded d̃ ± h_d
+        self.A = Interval(alpha) + Interval(-h_alpha, h_alpha)
 
     def step(self, box: list, narrow_theta: bool) -> None:
         (x0, y0, t0), (x1, y1, t1) = self.p0, self.p1
@@ -128,8 +155,8 @@ class RangeBearing(Contractor):
                  h_b: float) -> None:
         self.pose, self.landmark = pose, landmark
         self.vars = (*pose, *landmark)
-        self.R = Interval(r - h_r, r + h_r) & _NONNEG
-        self.B = Interval(b - h_b, b + h_b)
+        self.R = (Interval(r) + Interval(-h_r, h_r)) & _NONNEG
+        self.B = Interval(b) + Interval(-h_b, h_b)
 
     def step(self, box: list, narrow_theta: bool) -> None:
         (x, y, t), (lx, ly) = self.pose, self.landmark

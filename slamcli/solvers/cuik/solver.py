@@ -89,10 +89,16 @@ class CuikSlam(BaseSolver):
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator,
               progress: ProgressFn | None = None) -> SolverResult:
         try:
-            import slamcli.solvers.cuik.contractors  # noqa: F401  (loads codac the safe way, see there)
+            from slamcli.solvers.cuik.contractors import interval_rounding
         except ImportError:
             raise ValueError("cuik needs the optional interval extra: pip install 'slamcli[interval]' "
                              "(codac)") from None
+        # codac's interval library computes outward-rounded bounds only in round-upward mode; the mode is set
+        # for this solve and the caller's (round-to-nearest) restored afterwards
+        with interval_rounding():
+            return self._solve(inputs, progress)
+
+    def _solve(self, inputs: SlamInputs, progress: ProgressFn | None) -> SolverResult:
         from slamcli.solvers.cuik.contractors import Interval, OdometryTurnMove, RangeBearing, unbounded
         from slamcli.solvers.cuik.hypotheses import Hypothesis, merge_relabelled
         from slamcli.solvers.cuik.propagate import Counter, bisect_hull, propagate, shave
