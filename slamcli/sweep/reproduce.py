@@ -172,8 +172,12 @@ class Reproduction:
         if add_all_solvers:
             present = {s.method for s in keep} | {s.method for s in cfg.solvers}
             labels = {s.label for s in cfg.solvers}
+            from slamcli.solvers import registry
+
             for name in self.solvers:
-                if name not in present and name not in labels:
+                # set-membership solvers (cuik) need bounded-noise data and have their own section
+                if name not in present and name not in labels and not getattr(
+                        registry.load(name), "needs_noise_bounds", False):
                     keep.append(SolverSpec(label=name, method=name))
         dropped = set(missing)
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 
@@ -85,6 +85,9 @@ class CuikSlam(BaseSolver):
 
     name = "cuik"
     Params = CuikParams
+    #: the solver needs guaranteed error bounds (``inputs.noise_bounds``); on other data it returns FAILED, so
+    #: cross-solver comparisons on Gaussian data leave it out (it has its own reproduce section, paper 004)
+    needs_noise_bounds: ClassVar[bool] = True
 
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator,
               progress: ProgressFn | None = None) -> SolverResult:
