@@ -545,6 +545,19 @@ class Reproduction:
         return sec
 
 
+def _external_section(key: str, target: str, rep: Reproduction, quick: bool, log) -> Section:
+    """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)``; the
+    markdown brings its own ``## `` heading (used as the title)."""
+    import importlib
+
+    mod_name, _, fn_name = target.partition(":")
+    markdown, ok = getattr(importlib.import_module(mod_name), fn_name)(rep.out / key, quick, log)
+    head, _, body = str(markdown).partition("\n")
+    sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
+    sec.add(body.strip())
+    return sec
+
+
 def reproduce(
     out_dir: str | Path,
     *,
@@ -585,6 +598,7 @@ def reproduce(
         ("fig9", rep.octagon_section),
         ("compare", rep.compare_section),
         ("nees", rep.nees_section),
+        ("paper004", lambda: _external_section("paper004", "slamcli.sweep.paper004:run_section", rep, quick, log)),
     ]
     sections: list[Section] = []
     for key, build in builders:
