@@ -113,8 +113,8 @@ class Contractor:
 
 
 def _polar_sub(box: list, ix0: int, iy0: int, ix1: int, iy1: int, rho: codac.Interval, phi: codac.Interval):
-    """Narrow ``(x1 − x0, y1 − y0) = ρ·(cos φ, sin φ)``; returns the contracted φ (the caller decides whether
-    it may narrow a heading). The four position intervals are narrowed in place."""
+    """Narrow ``(x1 − x0, y1 − y0) = ρ·(cos φ, sin φ)``; returns the contracted ``(φ, ρ)`` (the caller decides
+    whether they may narrow a heading / a leg). The four position intervals are narrowed in place."""
     dx = box[ix1] - box[ix0]
     dy = box[iy1] - box[iy0]
     rho = Interval(rho)
@@ -122,30 +122,79 @@ def _polar_sub(box: list, ix0: int, iy0: int, ix1: int, iy1: int, rho: codac.Int
     _POLAR.contract(dx, dy, rho, phi)
     if dx.is_empty() or dy.is_empty() or rho.is_empty():
         box[ix1] = Interval.empty()
-        return phi
+        return phi, rho
     codac.SubOp.bwd(dx, box[ix1], box[ix0])  # x1 ∩= dx + x0,  x0 ∩= x1 − dx
     codac.SubOp.bwd(dy, box[iy1], box[iy0])
-    return phi
+    return phi, rho
 
 
 class OdometryTurnMove(Contractor):
-    """Edge pose t → t+1 of the turn-and-move robot (see the module docstring)."""
+    """Edge pose t → t+1 of the turn-and-move robot (see the module docstring).
+
+    With ``leg = (i_d, i_α)`` the leg's distance and turn are variables of the box (initial domains
+    :attr:`D`, :attr:`A`) that the full operator set narrows — so a local-frame cycle
+    (:class:`SharedLandmarkLeg`) can tighten them; the paper set reads the constant measurement intervals.
+    """
 
     def __init__(self, pose_from: tuple[int, int, int], pose_to: tuple[int, int, int], d: float, alpha: float,
-                 h_d: float, h_alpha: float) -> None:
+                 h_d: float, h_alpha: float, leg: tuple[int, int] | None = None) -> None:
         self.p0, self.p1 = pose_from, pose_to
-        self.vars = (*pose_from, *pose_to)
+        self.leg = leg
+        self.vars = (*pose_from, *pose_to) + (tuple(leg) if leg is not None else ())
         self.D = (Interval(d) + Interval(-h_d, h_d)) & _NONNEG  # outward-rounded d̃ ± h_d
         self.A = Interval(alpha) + Interval(-h_alpha, h_alpha)
 
     def step(self, box: list, narrow_theta: bool) -> None:
         (x0, y0, t0), (x1, y1, t1) = self.p0, self.p1
+        use_leg = self.leg is not None and narrow_theta
+        D = box[self.leg[0]] if use_leg else self.D
+        A = box[self.leg[1]] if use_leg else self.A
         # θ_{t+1} − θ_t ∈ A, forward and backward (paper set included: this is the odometry turn chain)
-        box[t1] = box[t1] & (box[t0] + self.A)
-        box[t0] = box[t0] & (box[t1] - self.A)
-        phi = _polar_sub(box, x0, y0, x1, y1, self.D, box[t1])
+        box[t1] = box[t1] & (box[t0] + A)
+        box[t0] = box[t0] & (box[t1] - A)
+        phi, rho = _polar_sub(box, x0, y0, x1, y1, D, box[t1])
         if narrow_theta:
             box[t1] = box[t1] & phi
+        if use_leg:
+            box[self.leg[0]] = box[self.leg[0]] & rho
+            box[self.leg[1]] = box[self.leg[1]] & (box[t1] - box[t0])
+
+
+class SharedLandmarkLeg(Contractor):
+    """A cycle of the kinematic graph written in the frame of pose t: poses t and t+1 see the same landmark.
+
+    With ``q_t = r_t·(cos b_t, sin b_t)`` the landmark in frame t, ``q_s`` the same landmark in frame t+1 and
+    the leg ``(d, α)`` (turn α, then move d along the new heading), ``q_t = R(α)·(d·e_x + q_s)``, i.e. in the
+    frame turned by α::
+
+        r_t·(cos(b_t − α), sin(b_t − α)) = (d + q_s,x, q_s,y)
+
+    Each unknown appears once (α only in φ = b_t − α, d only in the x component), so the polar relation pins
+    the leg to about the sensor's precision, whatever the absolute boxes of the poses (no wrapping through
+    world-frame boxes). Variables: the leg ``(i_d, i_α)``; the readings are intervals ``[r̃ ± h_r]``,
+    ``[b̃ ± h_b]``. Full operator set only (the paper's set has no such operator).
+    """
+
+    def __init__(self, leg: tuple[int, int], z_t: tuple[float, float], z_s: tuple[float, float], h_r: float,
+                 h_b: float) -> None:
+        self.leg = leg
+        self.vars = tuple(leg)
+        self.Rt = (Interval(z_t[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Bt = Interval(z_t[1]) + Interval(-h_b, h_b)
+        rs = (Interval(z_s[0]) + Interval(-h_r, h_r)) & _NONNEG
+        qx, qy, phi = unbounded(), unbounded(), Interval(z_s[1]) + Interval(-h_b, h_b)
+        _POLAR.contract(qx, qy, rs, phi)  # q_s, a constant box
+        self.qsx, self.qsy = qx, qy
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        if not narrow_theta:
+            return
+        i_d, i_a = self.leg
+        gx, gy, rt = box[i_d] + self.qsx, Interval(self.qsy), Interval(self.Rt)
+        phi = self.Bt - box[i_a]
+        _POLAR.contract(gx, gy, rt, phi)
+        box[i_d] = box[i_d] & (gx - self.qsx)
+        box[i_a] = box[i_a] & (self.Bt - phi)
 
 
 class RangeBearing(Contractor):
@@ -161,6 +210,6 @@ class RangeBearing(Contractor):
     def step(self, box: list, narrow_theta: bool) -> None:
         (x, y, t), (lx, ly) = self.pose, self.landmark
         phi = box[t] + self.B
-        phi = _polar_sub(box, x, y, lx, ly, self.R, phi)
+        phi, _rho = _polar_sub(box, x, y, lx, ly, self.R, phi)
         if narrow_theta:
             box[t] = box[t] & (phi - self.B)  # θ ∩= φ − B  (backward step of φ = θ + b)

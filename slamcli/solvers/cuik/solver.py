@@ -1,7 +1,8 @@
 """CuikSLAM with unknown correspondence (paper 004): interval constraint propagation over many kinematic
 graphs.
 
-Variables are boxes for every pose ``(x, y, θ)`` and landmark ``(x, y)``; pose 0 is the known start. Poses are
+Variables are boxes for every pose ``(x, y, θ)``, every odometry leg ``(d, α)`` and landmark ``(x, y)``; pose 0
+is the known start. Poses are
 added one at a time: the odometry edge t−1 → t is added to every live hypothesis and propagated; then each
 observation of pose t branches every hypothesis over the landmarks of the reported type plus "a new landmark"
 (§5), each branch is propagated to a fixpoint (§4, :func:`~slamcli.solvers.cuik.propagate.propagate`) and
@@ -39,8 +40,10 @@ class CuikParams:
 
     Attributes
     ----------
-    narrow_theta : bool        True = the full operator set (the polar relations also narrow headings);
-                               False = paper 004's set (§6: "no narrowing of θ's were used").
+    narrow_theta : bool        True = the full operator set: the polar relations also narrow headings and
+                               the legs (d, α), and a landmark seen from two consecutive poses adds a
+                               local-frame cycle operator on that leg (``SharedLandmarkLeg``); False = paper
+                               004's set (§6: "no narrowing of θ's were used").
     tol : float                width-change tolerance of the fixpoint: an operator's output re-queues its
                                neighbours only when a bound moved by more than this (m or rad).
     max_hypotheses : int       cap on live kinematic graphs; the fewest-landmark, narrowest ones are kept.
@@ -102,7 +105,13 @@ class CuikSlam(BaseSolver):
             return self._solve(inputs, progress)
 
     def _solve(self, inputs: SlamInputs, progress: ProgressFn | None) -> SolverResult:
-        from slamcli.solvers.cuik.contractors import Interval, OdometryTurnMove, RangeBearing, unbounded
+        from slamcli.solvers.cuik.contractors import (
+            Interval,
+            OdometryTurnMove,
+            RangeBearing,
+            SharedLandmarkLeg,
+            unbounded,
+        )
         from slamcli.solvers.cuik.hypotheses import Hypothesis, merge_relabelled
         from slamcli.solvers.cuik.propagate import Counter, bisect_hull, propagate, shave
 
@@ -127,7 +136,9 @@ class CuikSlam(BaseSolver):
         odo = np.asarray(inputs.odometry_xyt, float)
         legs = np.column_stack([np.hypot(*(odo[1:, :2] - odo[:-1, :2]).T), wrap_angle(odo[1:, 2] - odo[:-1, 2])])
 
-        base = 3 * n_poses
+        # variables: poses (x, y, θ) at 3t.., legs (d, α) at 3(T+1) + 2t.., landmarks (x, y) from `base` on
+        n_legs = n_poses - 1
+        base = 3 * n_poses + 2 * n_legs
         box0 = [unbounded() for _ in range(base)]
         for k in range(3):
             box0[k] = Interval(float(inputs.x0[k]))
@@ -143,12 +154,17 @@ class CuikSlam(BaseSolver):
         def pose_vars(t: int) -> tuple[int, int, int]:
             return (3 * t, 3 * t + 1, 3 * t + 2)
 
+        def leg_vars(t: int) -> tuple[int, int]:
+            return (3 * n_poses + 2 * t, 3 * n_poses + 2 * t + 1)
+
         for t in range(n_poses):
             if t > 0:
                 edge = OdometryTurnMove(pose_vars(t - 1), pose_vars(t), float(legs[t - 1, 0]),
-                                        float(legs[t - 1, 1]), h_d, h_a)
+                                        float(legs[t - 1, 1]), h_d, h_a, leg=leg_vars(t - 1))
                 alive = []
                 for h in hyps:
+                    h.box[leg_vars(t - 1)[0]] = Interval(edge.D)
+                    h.box[leg_vars(t - 1)[1]] = Interval(edge.A)
                     k = h.add_edge(edge)
                     if propagate(h.box, h.edges, h.adj, [k], narrow_theta=p.narrow_theta, tol=p.tol,
                                  counter=counter):
@@ -179,9 +195,15 @@ class CuikSlam(BaseSolver):
                             if p.association == "reported" and rid >= 0:
                                 g.reported[rid] = j
                         lv = (base + 2 * j, base + 2 * j + 1)
-                        k = g.add_edge(RangeBearing(pose_vars(t), lv, r, b, h_r, h_b))
+                        start = [g.add_edge(RangeBearing(pose_vars(t), lv, r, b, h_r, h_b))]
+                        if p.narrow_theta and t > 0:  # the same landmark seen from pose t−1: a local cycle
+                            for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t])):
+                                if g.assoc[k] == j:
+                                    start.append(g.add_edge(SharedLandmarkLeg(
+                                        leg_vars(t - 1), (float(obs.range_m[k]), float(obs.bearing_rad[k])),
+                                        (r, b), h_r, h_b)))
                         n_branch += 1
-                        if propagate(g.box, g.edges, g.adj, [k], narrow_theta=p.narrow_theta, tol=p.tol,
+                        if propagate(g.box, g.edges, g.adj, start, narrow_theta=p.narrow_theta, tol=p.tol,
                                      counter=counter):
                             g.assoc.append(j)
                             children.append(g)
@@ -245,7 +267,7 @@ class CuikSlam(BaseSolver):
                     message="the 3B / bisection pass refuted every hypothesis: the data contradict the declared bounds")
 
         hyps.sort(key=lambda h: (h.n_landmarks, h.total_width()))
-        boxes = _to_arrays(hyps, n_poses, len(obs))
+        boxes = _to_arrays(hyps, n_poses, len(obs), base)
         best_lo, best_hi = boxes.pose_lo[0], boxes.pose_hi[0]
         poses = 0.5 * (best_lo + best_hi)
         poses[:, 2] = wrap_angle(poses[:, 2])
@@ -263,11 +285,11 @@ class CuikSlam(BaseSolver):
         return dataclasses.replace(res, hypotheses=boxes)
 
 
-def _to_arrays(hyps, n_poses: int, n_obs: int) -> BoxHypotheses:
-    """Pack hypotheses into :class:`BoxHypotheses` arrays (NaN / -1 padding for missing landmarks)."""
+def _to_arrays(hyps, n_poses: int, n_obs: int, base: int) -> BoxHypotheses:
+    """Pack hypotheses into :class:`BoxHypotheses` arrays (NaN / -1 padding for missing landmarks); landmark
+    variables start at ``base``."""
     H = len(hyps)
     Lmax = max((h.n_landmarks for h in hyps), default=0)
-    base = 3 * n_poses
     pose_lo = np.zeros((H, n_poses, 3))
     pose_hi = np.zeros((H, n_poses, 3))
     lm_lo = np.full((H, Lmax, 2), np.nan)
@@ -277,8 +299,8 @@ def _to_arrays(hyps, n_poses: int, n_obs: int) -> BoxHypotheses:
     for k, h in enumerate(hyps):
         lo = np.array([x.lb() for x in h.box])
         hi = np.array([x.ub() for x in h.box])
-        pose_lo[k] = lo[:base].reshape(n_poses, 3)
-        pose_hi[k] = hi[:base].reshape(n_poses, 3)
+        pose_lo[k] = lo[: 3 * n_poses].reshape(n_poses, 3)
+        pose_hi[k] = hi[: 3 * n_poses].reshape(n_poses, 3)
         L = h.n_landmarks
         lm_lo[k, :L] = lo[base:].reshape(L, 2)
         lm_hi[k, :L] = hi[base:].reshape(L, 2)
