@@ -260,7 +260,7 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
     u_theta = solve_dataset(exact.inputs, "cuik", {"narrow_theta": True})
     log("paper004: uncertain-correspondence runs done")
     rows = []
-    for name, r in (("paper set", u_paper), ("θ narrowing", u_theta)):
+    for name, r in (("paper set", u_paper), ("full set", u_theta)):
         hb = r.hypotheses
         m = sets.set_metrics(hb, exact.truth.poses_xyt, exact.truth.landmarks_xy, exact.truth.obs_landmark)
         counts = np.bincount(hb.n_landmarks)
@@ -276,14 +276,14 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
     n_min = int(hb_u.n_landmarks.min())
     md.append(
         f"Paper: {PAPER_N_GRAPHS} graphs after 9 poses, {PAPER_N_DISTINCT} distinct up to labelling. Ours: "
-        f"{len(u_paper.hypotheses)} (paper set) and {len(hb_u)} (θ narrowing), all distinct up to relabelling "
+        f"{len(u_paper.hypotheses)} (paper set) and {len(hb_u)} (full set), all distinct up to relabelling "
         "(labels are given by first sighting, so equal partitions are merged as they arise). "
         + ("We keep more graphs than the paper: " if len(hb_u) > PAPER_N_GRAPHS else "")
         + "every re-observation may also be 'a new landmark', which no box contradicts (the sensor's range and "
         "bearing to a new landmark are always consistent), so the count doubles with each re-observation "
         "unless the old landmark is refuted; the paper does not say how it bounded this. "
         f"The fewest-landmark hypotheses have {n_min} landmarks; the true correspondence "
-        + ("is" if checks["truth_survived_θ narrowing"] else "is NOT") + " among the survivors and "
+        + ("is" if checks["truth_survived_full set"] else "is NOT") + " among the survivors and "
         + ("is" if sets.true_hypothesis(hb_u, exact.truth.obs_landmark) == 0 else "is not")
         + " ranked first (fewest landmarks, narrowest boxes).")
     md.append("")
