@@ -54,8 +54,11 @@ class GraphParams:
     ----------
     model : "gtsam" | "paper"
         Factor definitions (module docstring). Default ``"gtsam"``.
-    method : "lm" | "gn"
-        Levenberg-Marquardt (default) or Gauss-Newton.
+    method : "lm" | "gn" | "dogleg"
+        Levenberg-Marquardt (default, GTSAM's damping schedule), Gauss-Newton, or Powell's dogleg.
+    linear_solver : "auto" | "cholmod" | "superlu" | "chain"
+        Sparse linear solver of the optimiser (:class:`slamcli.solvers.nls.NlsParams`): ``auto`` = CHOLMOD
+        (``scikit-sparse``) when installed, else SciPy's SuperLU; ordering computed once per problem.
     max_iterations : int
         Linear-solve budget (default 100).
     rel_cost_tol : float
@@ -116,7 +119,8 @@ class GraphParams:
     """
 
     model: Literal["gtsam", "paper"] = "gtsam"
-    method: Literal["lm", "gn"] = "lm"
+    method: Literal["lm", "gn", "dogleg"] = "lm"
+    linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = "auto"
     max_iterations: int = 100
     rel_cost_tol: float = 1e-12
     step_tol: float = 1e-12
@@ -402,7 +406,9 @@ def build_gtsam_problem(
     n_vars = P + 2 * L + (bias_col is not None)
     if bias_col is not None and not rows.size:
         raise SolverError("graph: estimate_range_bias needs associated observations")
-    problem = nls.NlsProblem(n_vars=n_vars, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3))
+    problem = nls.NlsProblem(
+        n_vars=n_vars, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3), se2_poses=n_poses
+    )
     x0 = pack_state(init_poses, init_landmarks)
     if bias_col is not None:
         x0 = np.concatenate([x0, [0.0]])
@@ -632,7 +638,7 @@ def landmark_joint_covariance(gp: GraphProblem, information) -> np.ndarray:
     """
     L = gp.n_landmarks
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
-        cov = nls.marginals_chain_border(information, gp.n_poses, 3)[1][: 2 * L, : 2 * L]
+        cov = nls.marginals_chain_border(information, gp.n_poses, 3, poses=False)[1][: 2 * L, : 2 * L]
         j = np.arange(L)
         nls.check_covariance_blocks(cov.reshape(L, 2, L, 2)[j, :, j, :], "landmark")
         return cov
@@ -844,6 +850,7 @@ class GraphSlam(BaseSolver):
 
         nparams = nls.NlsParams(
             method=p.method,
+            linear_solver=p.linear_solver,
             max_iterations=p.max_iterations,
             rel_cost_tol=p.rel_cost_tol,
             step_tol=p.step_tol,
