@@ -8,8 +8,9 @@ model problem and as a GTSAM graph of the same factors (PriorFactorPose2, Betwee
 BearingRangeFactor2D; grouped returns exactly as ours).
 
 Both optimisers run to the same tolerances (relative decrease 1e-10, at most 500 iterations) and are timed
-in the same process; the time of ours includes the symbolic analysis of the linear solver, GTSAM's
-includes its ordering. Per row: wall times (best of ``repeats``), ratio (goal ≤ 1.5), iterations, final
+in the same process, wall and CPU time (``process_time``, all threads; on a shared overloaded machine the CPU
+ratio is the like-for-like one); the time of ours includes the symbolic analysis of the linear solver, GTSAM's
+includes its ordering. Per row: wall and CPU times (one run each), ratio (goal ≤ 1.5), iterations, final
 costs both evaluated by GTSAM's ``graph.error`` (and ours by ours), their relative difference (goal ≤ 1e-6),
 per-iteration times and their ratio (issue 17 goal ≤ 1.0), and the linear solver used. Rows are measured in
 a child process with single-threaded BLAS (``OPENBLAS_NUM_THREADS=1``), like ``bench_graph``.
@@ -118,9 +119,9 @@ def to_values(gp, x):
 def run_ours(gp, **kw):
     from slamcli.solvers import nls
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = nls.solve(gp.problem, gp.x0, nls.NlsParams(rel_cost_tol=REL_TOL, max_iterations=MAX_IT, **kw))
-    return res, time.perf_counter() - t0
+    return res, (time.perf_counter() - t0, time.process_time() - c0)
 
 
 def run_gtsam(g, v0):
@@ -130,27 +131,28 @@ def run_gtsam(g, v0):
     p.setRelativeErrorTol(REL_TOL)
     p.setAbsoluteErrorTol(0.0)
     p.setMaxIterations(MAX_IT)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     opt = gtsam.LevenbergMarquardtOptimizer(g, v0, p)
     v = opt.optimize()
-    return v, int(opt.iterations()), time.perf_counter() - t0
+    return v, int(opt.iterations()), (time.perf_counter() - t0, time.process_time() - c0)
 
 
 def run_here(quick: bool = False) -> list[dict]:
     from slamcli.solvers import nls
 
-    repeats = 1 if quick else 2
+    repeats = 1
     rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, load in load_cases(quick, Path(tmp)):
             inputs = load()
             gp, g, v0 = build(inputs)
-            t_ours = t_gt = np.inf
+            t_ours = t_gt = (np.inf, np.inf)
             for _ in range(repeats):
                 res, t = run_ours(gp)
                 t_ours = min(t_ours, t)
                 vg, it_gt, t = run_gtsam(g, v0)
                 t_gt = min(t_gt, t)
+            (t_ours, cpu_ours), (t_gt, cpu_gt) = t_ours, t_gt
             c_ours = float(g.error(to_values(gp, res.x)))
             c_gt = float(g.error(vg))
             it = max(res.iterations, 1)
@@ -166,12 +168,16 @@ def run_here(quick: bool = False) -> list[dict]:
                     "graph_s": round(t_ours, 3),
                     "gtsam_s": round(t_gt, 3),
                     "ratio": round(t_ours / t_gt, 3),
+                    "graph_cpu_s": round(cpu_ours, 3),
+                    "gtsam_cpu_s": round(cpu_gt, 3),
+                    "cpu_ratio": round(cpu_ours / cpu_gt, 3),
                     "goal_ratio": 1.5,
                     "graph_iterations": res.iterations,
                     "gtsam_iterations": it_gt,
                     "graph_s_per_iter": round(t_ours / it, 5),
                     "gtsam_s_per_iter": round(t_gt / max(it_gt, 1), 5),
                     "per_iter_ratio": round((t_ours / it) / (t_gt / max(it_gt, 1)), 3),
+                    "cpu_per_iter_ratio": round((cpu_ours / it) / (cpu_gt / max(it_gt, 1)), 3),
                     "goal_per_iter_ratio": 1.0,
                     "status": res.status.value,
                     "cost_graph_by_gtsam": c_ours,
@@ -188,7 +194,7 @@ def run_here(quick: bool = False) -> list[dict]:
             for kw in alts:
                 if kw.get("linear_solver") == res.linear_solver:
                     continue
-                r2, t2 = run_ours(gp, **kw)
+                r2, (t2, c2_cpu) = run_ours(gp, **kw)
                 c2 = float(g.error(to_values(gp, r2.x)))
                 rows.append(
                     {
@@ -199,6 +205,9 @@ def run_here(quick: bool = False) -> list[dict]:
                         "graph_s": round(t2, 3),
                         "gtsam_s": round(t_gt, 3),
                         "ratio": round(t2 / t_gt, 3),
+                        "graph_cpu_s": round(c2_cpu, 3),
+                        "gtsam_cpu_s": round(cpu_gt, 3),
+                        "cpu_ratio": round(c2_cpu / cpu_gt, 3),
                         "graph_iterations": r2.iterations,
                         "status": r2.status.value,
                         "cost_graph_by_gtsam": c2,

@@ -185,3 +185,20 @@ def test_bad_optimiser_params_are_rejected():
         nls.NlsParams(lambda_init=1e6)
     with pytest.raises(ValueError, match="linear_solver"):
         nls.NlsParams(linear_solver="qr")
+
+
+@pytest.mark.parametrize("batch_size", [1, 4, 128])
+def test_batched_chain_border_marginals_equal_the_dense_inverse(small, batch_size):
+    """Issue 17: the pose marginals come from column batches of ``Z = A⁻¹ B R⁻¹`` (never a dense T × L block);
+    every batch size gives the blocks of the dense ``H⁻¹``, and ``poses=False`` the same border covariance."""
+    _, _, gp = small
+    H = nls.solve(gp.problem, gp.x0).information
+    Hinv = np.linalg.inv(H.toarray())
+    cov, border = nls.marginals_chain_border(H, gp.n_poses, 3, batch_size=batch_size)
+    pc = gp.pose_cols()
+    np.testing.assert_allclose(cov, Hinv[pc[:, :, None], pc[:, None, :]], rtol=1e-8, atol=1e-14)
+    n = 3 * gp.n_poses
+    np.testing.assert_allclose(border, Hinv[n:, n:], rtol=1e-8, atol=1e-14)
+    none, border2 = nls.marginals_chain_border(H, gp.n_poses, 3, poses=False, batch_size=batch_size)
+    assert none.shape == (0, 3, 3)
+    np.testing.assert_allclose(border2, border, rtol=1e-12, atol=1e-16)

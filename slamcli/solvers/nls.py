@@ -1103,13 +1103,12 @@ def marginals_chain_border(
                 f"Cholesky of the border Schur complement: leading minor {info} is not positive definite",
                 n + info - 1,
             )
-        Rinv = sla.solve_triangular(cS, np.eye(m), lower=False, check_finite=False)  # S⁻¹ = R⁻¹R⁻ᵀ
+        Rinv, info = lapack.dtrtri(cS, lower=0)  # S⁻¹ = R⁻¹R⁻ᵀ
         border_cov = Rinv @ Rinv.T
         if poses:
-            Bcsr = Bs.tocsr()
             for j0 in range(0, m, batch_size):
-                j1 = min(m, j0 + batch_size)
-                Z = a_solve(Bcsr[:, :j1] @ Rinv[:j1, j0:j1]).reshape(n_chain, k, j1 - j0)
+                j1 = min(m, j0 + batch_size)  # R⁻¹ is upper triangular: rows ≥ j1 of its columns j0:j1 are 0
+                Z = a_solve(Bs[:, :j1] @ Rinv[:j1, j0:j1]).reshape(n_chain, k, j1 - j0)
                 pose_extra += np.einsum("tkb,tlb->tkl", Z, Z, optimize=True)
     else:
         border_cov = np.zeros((0, 0))
