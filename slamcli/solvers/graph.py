@@ -229,6 +229,10 @@ def prior_error(x, prior):
 def bearing_range_error(x, m, z):
     """Range-bearing error ``e = [r̂ − r, wrap(b̂ − b)]`` (GTSAM's ``BearingRangeFactor2D`` up to row order).
 
+    As in GTSAM (``Rot2::relativeBearing``), a landmark within 1e-5 m of the pose has bearing ``b̂ = 0`` and a
+    zero bearing Jacobian: the bearing is undefined there, and a solution that put a landmark on a pose
+    (misread ids, a stalled optimisation) must have the cost GTSAM recomputes for it (issue 10, item 4).
+
     Parameters
     ----------
     x : ndarray (F, 3);  m : ndarray (F, 2);  z : ndarray (F, 2) as ``[range, bearing]``
@@ -240,6 +244,11 @@ def bearing_range_error(x, m, z):
     zh = observation.range_bearing(x, m)
     e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
     J_x, J_m = observation.range_bearing_jacobians(x, m)
+    near = zh[:, 0] <= 1e-5
+    if np.any(near):  # GTSAM's Rot2::relativeBearing: within 1e-5 m the bearing is 0, its Jacobian zero
+        e[near, 1] = wrap_angle(-z[near, 1])
+        J_x[near, 1] = 0.0
+        J_m[near, 1] = 0.0
     return e, J_x, J_m
 
 
