@@ -60,11 +60,16 @@ def test_lm_converges_on_the_victoria_park_prefix_where_marquardt_scaling_stalle
     # the stall itself (so that this test would have failed before the fix): 60 steps, cost far off
     old = nls.solve(gp.problem, gp.x0, nls.NlsParams(method="lm", max_iterations=60, **OLD_LM))
     assert old.status == Status.MAX_ITERATIONS and old.cost > 100 * gn.cost
-    assert lm.status == Status.CONVERGED and lm.iterations <= 25
+    # GTSAM's schedule and Pose2 chart: GTSAM's LM needs 57 iterations here (measured), ours the same ± a few
+    assert lm.status == Status.CONVERGED and lm.iterations <= 70
     assert abs(lm.cost - gn.cost) <= 1e-9 * gn.cost
     np.testing.assert_allclose(lm.x, gn.x, atol=1e-6)
     assert np.all(np.diff(lm.cost_trace) < 0)  # every accepted step lowers the cost
     assert dl.status == Status.CONVERGED and abs(dl.cost - gn.cost) <= 1e-9 * gn.cost
+    # additive world-coordinate steps (the former update) with the new schedule: fewer iterations, same optimum
+    world = nls.solve(gp.problem, gp.x0, nls.NlsParams(method="lm", pose_chart="world"))
+    assert world.status == Status.CONVERGED and world.iterations <= 25
+    assert abs(world.cost - gn.cost) <= 1e-9 * gn.cost
 
 
 def test_lm_and_dogleg_match_gtsam_on_the_victoria_park_prefix(victoria, victoria_solved):

@@ -59,6 +59,9 @@ class GraphParams:
     linear_solver : "auto" | "cholmod" | "superlu" | "chain"
         Sparse linear solver of the optimiser (:class:`slamcli.solvers.nls.NlsParams`): ``auto`` = CHOLMOD
         (``scikit-sparse``) when installed, else SciPy's SuperLU; ordering computed once per problem.
+    pose_chart : "body" | "world"
+        How the optimiser steps a pose: GTSAM's Pose2 retraction ``x ⊕ Exp(ξ)`` (default; follows GTSAM's
+        path, hence its local minimum on non-convex real data) or additive world coordinates.
     max_iterations : int
         Linear-solve budget (default 100).
     rel_cost_tol : float
@@ -121,6 +124,7 @@ class GraphParams:
     model: Literal["gtsam", "paper"] = "gtsam"
     method: Literal["lm", "gn", "dogleg"] = "lm"
     linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = "auto"
+    pose_chart: Literal["body", "world"] = "body"
     max_iterations: int = 100
     rel_cost_tol: float = 1e-12
     step_tol: float = 1e-12
@@ -860,6 +864,7 @@ class GraphSlam(BaseSolver):
         nparams = nls.NlsParams(
             method=p.method,
             linear_solver=p.linear_solver,
+            pose_chart=p.pose_chart,
             max_iterations=p.max_iterations,
             rel_cost_tol=p.rel_cost_tol,
             step_tol=p.step_tol,
