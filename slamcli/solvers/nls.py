@@ -16,23 +16,32 @@ Normal equations (Gauss-Newton approximation of the Hessian; IRLS weights ``w_f`
 
 ``H`` is assembled as a ``scipy.sparse.csc_matrix`` whose structure (the COO → CSC scatter map) is computed
 once per problem; every iteration is one vectorised evaluation per block and a ``np.bincount`` scatter — no
-Python loop over factors. Linear systems are solved with SuperLU (``scipy.sparse.linalg.splu``) in
-symmetric mode with a minimum-degree ordering of ``H`` (Cholesky-like fill), or by the chain solver
-(:class:`_ChainSolver`, banded Cholesky) with SuperLU as the fallback when the banded factorisation breaks
-down. ``H`` is positive semi-definite in exact arithmetic, but not always numerically: a landmark that sits
-(almost) on a pose has a bearing Jacobian ``∝ 1/r`` and puts entries of 1e24 next to entries of 1e4 into
-``H`` (seen on MRCLAM robot 5 with its misread barcodes), and Cholesky then meets a non-positive pivot.
-Gauss-Newton falls back to a damped (LM) step whenever the undamped system cannot be solved or its
-solution is not a descent direction.
+Python loop over factors. Linear systems (:func:`make_linear_solver`): CHOLMOD's supernodal Cholesky
+(``scikit-sparse``, extra ``cholmod``) with its fill-reducing ordering and symbolic analysis done once per
+problem and the numeric factorisation refilled in place; or SciPy's SuperLU in symmetric mode with the
+minimum-degree ordering of the first factorisation reused; or the chain solver (:class:`_ChainSolver`,
+banded Cholesky + dense border Schur complement). ``H`` is positive semi-definite in exact arithmetic, but
+not always numerically: a landmark that sits (almost) on a pose has a bearing Jacobian ``∝ 1/r`` and puts
+entries of 1e24 next to entries of 1e4 into ``H`` (seen on MRCLAM robot 5 with its misread barcodes), and
+Cholesky then meets a non-positive pivot: the system then goes to SuperLU, LM damps that trial with
+``D = diag(H)``, and Gauss-Newton falls back to a damped step whenever the undamped system cannot be
+solved or its solution is not a descent direction (each noted in ``NlsResult.notes``).
 
 Iterations are counted as GTSAM counts them: one iteration linearises once and ends with one accepted step;
 the LM steps rejected on the way (λ raised, system solved again) belong to the same iteration. So
 ``iterations == len(cost_trace) − 1`` and ``NlsParams.max_iterations`` bounds the accepted steps.
 
-LM follows Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems* (2004), §3.2:
-gain ratio ``ϱ = (F(x) − F(x+h)) / (L(0) − L(h))`` with ``L(0) − L(h) = ½ hᵀ(λ D h − g)``; on success
-``λ ← λ · max(1/3, 1 − (2ϱ − 1)³), ν ← 2``; on failure ``λ ← λ ν, ν ← 2ν``; ``λ₀ = τ · max diag(H)`` for
-``D = I`` and ``λ₀ = τ`` for Marquardt's ``D = diag(H)``.
+LM follows GTSAM's ``LevenbergMarquardtOptimizer`` (defaults of GTSAM 4.3): ``D = I``, ``λ₀ = 1e-5``;
+gain ratio (GTSAM's "model fidelity") ``ϱ = (F(x) − F(x ⊞ h)) / (L(0) − L(h))`` with
+``L(0) − L(h) = −gᵀh − ½hᵀHh = ½ hᵀ(λ D h − g)``; a trial is accepted iff ``ϱ > 1e-3``; then ``λ ← λ/10``,
+else ``λ ← 10 λ``; when λ would exceed 1e5 the optimiser gives up as converged. Marquardt's
+``D = diag(H)`` and Nielsen's schedule (Madsen, Nielsen & Tingleff, *Methods for non-linear least squares
+problems*, 2004, §3.2: ``λ ← λ · max(1/3, 1 − (2ϱ − 1)³)``, ``λ ← λν, ν ← 2ν``; Ceres's strategy) are
+options. They were the former default and stalled on long real chains (Victoria Park, issue 10): the
+diagonal of a pose block is the chain's own stiffness there, so ``λ·diag(H)`` pins every pose and the soft
+modes that bend the whole chain stay out of reach unless λ ≪ 1e-6. Powell's dogleg (``method="dogleg"``)
+is GTSAM's ``DoglegOptimizer`` (:func:`_dogleg_iteration`). With ``NlsProblem.se2_poses`` the SE(2) poses
+are stepped in GTSAM's Pose2 chart, ``x ⊕ Exp(ξ)`` (``NlsParams.pose_chart``).
 
 Huber kernel (IRLS, per factor, on the whitened norm ``s = ‖r̃_f‖``, as GTSAM's ``mEstimator.Huber``)::
 
@@ -40,8 +49,10 @@ Huber kernel (IRLS, per factor, on the whitened norm ``s = ‖r̃_f‖``, as GTS
            k s − ½ k²     otherwise                k / s
 
 Marginal covariances (Laplace approximation at the optimum, see ``EVALUATION-METHOD.md`` §A2) are blocks of
-``H⁻¹`` obtained by solving ``H X = E`` only for the unit columns ``E`` of the requested variables, in
-batches, with one sparse factorisation (:func:`marginal_covariances`) — never a dense inverse.
+``H⁻¹``: for a pose chain + landmark border by :func:`marginals_chain_border` (banded Cholesky, Schur
+complement, column batches — never a dense poses × landmarks block), otherwise by solving ``H X = E`` only
+for the unit columns ``E`` of the requested variables, in batches, with one sparse factorisation
+(:func:`marginal_covariances`) — never a dense inverse.
 """
 
 from __future__ import annotations
