@@ -8,7 +8,7 @@ For each world (paper-sim1, paper-sim2, octagon, a 2000-pose / ≈20 000-observa
   landmarks within 6 m of the true path — the paper's "adjacent rows");
 * known correspondences (sensor-reported ids), started from the kinematic initialisation (paper Fig. 6): sweeps
   and seconds (init included) until the energy is within 1 % of the MAP energy (MAP = joint Gauss-Newton to
-  convergence, :func:`slamcli.solvers.icm_energy.map_energy_fixed_assoc`).
+  convergence, :func:`slamcli.solvers.icm.energy.map_energy_fixed_assoc`).
 
 Paper 000 reference numbers are in the ``paper_*`` columns: Simulation 1 converged at iteration 27 after
 432.24 s (16.0 s per iteration, Matlab ``fminunc`` per pose); the octagon experiment took ≈10.8 s per iteration
@@ -25,7 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from slamcli.sim import simulate_scenario
-from slamcli.solvers import icm_energy as en
+from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import IcmParams, IcmSlam
 
 PAPER = {

@@ -8,7 +8,7 @@ and ``‖a‖²_Σ = aᵀ Σ a``::
                + Σ_{t,i: c_{t,i} ≥ 0} ‖h⁻¹(x_t, z_{t,i}) − m_{c_{t,i}}‖²_Q        observations, eq. (5)
 
 (the map potential Φ_m is a feasibility constraint — no two map points within ϑ — enforced by the map step,
-see :mod:`slamcli.solvers.icm_map`). Observations labelled ``-1`` (removed by the ς count filter) are out of the
+see :mod:`slamcli.solvers.icm.map_step`). Observations labelled ``-1`` (removed by the ς count filter) are out of the
 energy. A zero weight drops its potential (paper §3.1).
 
 Three independent evaluations of the same function live here:
@@ -113,7 +113,7 @@ class Problem:
     @staticmethod
     def from_inputs(inputs: SlamInputs, range_offset: float = 0.0) -> Problem:
         """``range_offset`` (m) is added to every measured range (beyond the paper: laser returns from the
-        surface of a post, see :attr:`slamcli.solvers.icm.IcmParams.range_offset`)."""
+        surface of a post, see :attr:`slamcli.solvers.icm.solver.IcmParams.range_offset`)."""
         obs = inputs.observations
         z = obs.z
         if range_offset:

@@ -1,7 +1,7 @@
 """ICM-SLAM: SLAM as a Markov random field solved by iterated conditional modes (paper 000, Algorithm 2).
 
 Nodes: the poses x_1..x_T (x_0 known), the matchings c_0..c_T of every observation to a map label, and the map
-m. The Gibbs energy (eq. 5, see :mod:`slamcli.solvers.icm_energy`) is minimised node by node:
+m. The Gibbs energy (eq. 5, see :mod:`slamcli.solvers.icm.energy`) is minimised node by node:
 
 1. **On-line initialisation** (Algorithm 2 step 1, eqs. 9-11): at each time t the matchings come from the
    nearest map point to h⁻¹(g(x_{t-1}, u_{t-1}), z_{t,i}) (a new label when none lies within ϑ), then x_t
@@ -42,8 +42,8 @@ import numpy as np
 from slamcli.models.angles import wrap_angle
 from slamcli.models.motion import integrate
 from slamcli.models.observation import inverse_range_bearing
-from slamcli.solvers import icm_energy as en
-from slamcli.solvers import icm_map as mp
+from slamcli.solvers.icm import energy as en
+from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
@@ -269,7 +269,7 @@ def online_init(
 
 
 def _stats_one(v, m):
-    """The 14 sufficient statistics (see :func:`icm_energy.step_stats`) of one step's matched observations."""
+    """The 14 sufficient statistics (see :func:`slamcli.solvers.icm.energy.step_stats`) of one step's matched observations."""
     if v.shape[0] == 0:
         return (0.0,) * 14
     vx, vy, mx, my = v[:, 0], v[:, 1], m[:, 0], m[:, 1]
