@@ -25,8 +25,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from slamcli.sim import simulate_scenario
-from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import IcmParams, IcmSlam
+from slamcli.solvers.icm import energy as en
 
 PAPER = {
     "paper-sim1": {

@@ -9,9 +9,9 @@ import pytest
 from scipy.optimize import least_squares
 
 from slamcli.models import motion, observation
+from slamcli.solvers.icm import IcmParams, IcmSlam, online_init, reported_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
-from slamcli.solvers.icm import IcmParams, IcmSlam, online_init, reported_labels
 from slamcli.types import NoiseSpec, Observations, SlamInputs, SolverResult, Status
 
 

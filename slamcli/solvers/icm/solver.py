@@ -42,10 +42,10 @@ import numpy as np
 from slamcli.models.angles import wrap_angle
 from slamcli.models.motion import integrate
 from slamcli.models.observation import inverse_range_bearing
-from slamcli.solvers.icm import energy as en
-from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
+from slamcli.solvers.icm import energy as en
+from slamcli.solvers.icm import map_step as mp
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
