@@ -260,9 +260,35 @@ def test_joint_step_memory_error_is_reported(monkeypatch):
     def boom(*a, **k):
         raise MemoryError("Unable to allocate 9.2 GiB")
 
-    monkeypatch.setattr(en, "solve_normal_schur", boom)
+    monkeypatch.setattr(en, "solve_normal_sparse", boom)
     res = IcmSlam(IcmParams(accelerate="joint", accelerate_every=1, max_sweeps=2, energy_rtol=0.0)).solve(
         inputs, rng=np.random.default_rng(0))
     assert res.extra["joint_steps_accepted"] == 0
     assert len(res.extra["joint_step_errors"]) == 2 and "MemoryError" in res.extra["joint_step_errors"][0]
     assert "joint step failed" in res.message and "9.2 GiB" in res.message
+
+
+def test_sparse_joint_step_equals_the_schur_step_and_forms_no_dense_block(monkeypatch):
+    """issue 17: the joint step solves the sparse normal equations directly; same step as the dense Schur
+    reference, and ``toarray`` (a dense T×L block) is never called."""
+    import scipy.sparse as sp
+
+    inputs, truth = _world(LM_CLOSE, T=80)
+    prob = en.Problem.from_inputs(inputs)
+    W = en.Weights.from_params((2.0, 1.5, 3.0), (0.7, 1.1, 0.4), (1.3, 0.8))
+    rng = np.random.default_rng(3)
+    poses = truth + rng.normal(0, [0.1, 0.1, 0.05], truth.shape)
+    poses[0] = inputs.x0
+    labels = reported_labels(inputs.observations.reported_id)
+    r, J = en.joint_residuals(prob, W, poses, LM_CLOSE + 0.1, labels)
+    ref = en.solve_normal_schur(J, r, 3 * prob.T)
+
+    def no_dense(self, *a, **k):
+        raise AssertionError("dense block formed")
+
+    monkeypatch.setattr(sp.csc_matrix, "toarray", no_dense)
+    monkeypatch.setattr(sp.csr_matrix, "toarray", no_dense)
+    step = en.solve_normal_sparse(J, r)
+    np.testing.assert_allclose(step, ref, rtol=1e-7, atol=1e-9)
+    p2, m2, f2, ok, err = en.joint_gn_step(prob, W, poses, LM_CLOSE + 0.1, labels)
+    assert ok and err is None and f2 < float(r @ r)

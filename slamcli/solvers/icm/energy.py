@@ -746,6 +746,24 @@ def solve_normal_schur(J, r, n_pose: int, damping: float = 1e-9) -> np.ndarray:
     return np.concatenate([dp, dm])
 
 
+def solve_normal_sparse(J, r, damping: float = 1e-9) -> np.ndarray:
+    """Gauss-Newton step ``δ = −(JᵀJ)⁻¹Jᵀr`` by one sparse LU of the whole normal matrix with a fill-reducing
+    minimum-degree ordering of ``H + Hᵀ`` (symmetric mode).
+
+    Nothing dense of size poses × landmarks is ever formed (:func:`solve_normal_schur`'s ``H_pp⁻¹ H_pm`` is a
+    dense ``3T × 2L`` block: 9.2 GB at 100k poses and ~5k landmarks). The ordering adapts to both shapes of the
+    problem: few landmarks seen from many poses (the paper's laser worlds: the landmarks end up last, a small
+    dense Schur complement) and many landmarks seen from few poses (city-scale worlds: fill stays local).
+    The same tiny relative diagonal as the Schur variant keeps unobserved variables solvable.
+    """
+    H = (J.T @ J).tocsc()
+    g = J.T @ r
+    diag = H.diagonal()
+    H = (H + sp.diags(damping * (diag + (diag == 0)), format="csc")).tocsc()
+    lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    return -lu.solve(g)
+
+
 def pack(poses, landmarks) -> np.ndarray:
     return np.concatenate([poses[1:].ravel(), landmarks.ravel()])
 
@@ -771,7 +789,7 @@ def joint_gn_step(prob: Problem, W: Weights, poses, landmarks, labels, *, max_ha
     r, J = joint_residuals(prob, W, poses, landmarks, labels)
     f0 = float(r @ r)
     try:
-        delta = solve_normal_schur(J, r, 3 * prob.T)
+        delta = solve_normal_sparse(J, r)
     except MemoryError as exc:
         return poses, landmarks, f0, False, f"MemoryError in the joint step ({exc})"
     except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
