@@ -492,10 +492,6 @@ class Reproduction:
                     + oc.faster([x["first_below_1mm"] for x in stats[si]], [x["first_below_1mm"] for x in stats[s0]],
                                 names.get(si, si), names.get(s0, s0), "a mean map change below 1 mm", n_max))
 
-    def _names(self, file: str) -> dict:
-        cfg, _ = self.prepare(file)
-        return {s.label: f"{s.label}" for s in cfg.solvers}
-
     def fig5_section(self) -> Section:
         intro = ("Paper §5: R = Q = I, ϑ = 1 m, ς = 500; initialisation (Algorithm 2 step 1) then 30 ICM "
                  "iterations; maps after the initialisation and iterations 10, 20, 30 (Fig. 5a-d); min/mean/max "

@@ -25,7 +25,7 @@ Deliberate deviations from the paper (Algorithm 2 as printed), each an option or
   involves x_t (the motion and odometry terms of step t+1 too), as eq. (6) prescribes.
 * **ς defaults to 1** (paper: 500) — ς counts laser returns per landmark and must be scaled to the data
   (the paper's 500 fits its laser with many returns per post; a point sensor sees a landmark a few dozen
-  times). The paper experiments in ``experiments/`` set ς = 500.
+  times). The paper experiments in ``slamcli/experiments/`` set ς = 500.
 * **the monotone guard** (``monotone=True``, default) — the map step always applies eq. (17) (the exact
   conditional mode of m for the current matchings); label fusion and the ς filter are applied only when
   the energy after them, over the same observations, does not exceed the energy at the start of the sweep.
@@ -52,8 +52,9 @@ Beyond the paper (separate options, default off):
 * ``range_offset`` — added to every range before h⁻¹: a laser measures a post's surface, not its centre; the
   bias of the paper-exact inverse observation pulls map points towards the robot and drags the poses with them
   (``benchmarks/bench_icm_study.py``).
-* the GPS potential of §4 (``K``, ``use_gps``) — the paper writes it down but does not use it in its
-  experiments; here it is in the energy whenever the dataset has GPS fixes and K > 0.
+
+The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
+writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).
 """
 
 from __future__ import annotations
