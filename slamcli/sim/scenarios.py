@@ -145,9 +145,9 @@ SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
     "paper-sim1": (lambda: _paper_sim(30.0, "paper-sim1"),
                    "paper 000 Sim. 1: 50×40 m, 7 rows of landmarks, irregular path, 30 m 181-beam laser"),
     "paper-sim2": (lambda: _paper_sim(10.0, "paper-sim2"), "paper 000 Sim. 2: as paper-sim1 with a 10 m laser"),
+    "octagon": (_octagon, "paper 000 §6: 8 cones on a 7.12 m octagon + centre cone + 2 people, 183 s, laser"),
     "paper-sim1-mobilesim": (_paper_sim_mobilesim, "paper-sim1 with MobileSim's documented Pioneer P3-DX "
                              "acceleration limits, odometry error and SICK LMS-200 noise"),
-    "octagon": (_octagon, "paper 000 §6: 8 cones on a 7.12 m octagon + centre cone + 2 people, 183 s, laser"),
 }
 
 
