@@ -8,7 +8,7 @@ BIN := $(VENV)/bin
 install:  ## create the venv and install slamcli with every extra the tests use
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --upgrade --quiet pip
-	$(BIN)/pip install --quiet -e ".[test,gtsam,dask,parquet,dev]"
+	$(BIN)/pip install --quiet -e ".[test,gtsam,dask,parquet,dev,interval]"
 
 test:  ## the whole test suite (what CI runs)
 	$(BIN)/pytest -q -n 2 --dist loadfile

@@ -229,7 +229,7 @@ def test_broken_plugin_error_lists_names(with_fake_plugins):
     assert "available solvers: " + ", ".join(with_fake_plugins) in msg
     with pytest.raises(PluginError, match="does not follow the solver contract"):
         registry.load("notasolver")
-    with pytest.raises(PluginError, match="unknown solver 'nope'; available solvers: broken, ekf"):
+    with pytest.raises(PluginError, match="unknown solver 'nope'; available solvers: broken, cuik, ekf"):
         registry.load("nope")
 
 
@@ -252,6 +252,6 @@ def test_cli_solvers_lists_every_solver_with_parameters():
         assert name in res.stdout
     assert "nn_threshold=1.0" in res.stdout and "min_support=1" in res.stdout
     one = CliRunner().invoke(app, ["solvers", "odometry"], terminal_width=400)
-    assert one.exit_code == 0 and "use_reported_ids=True" in one.stdout
+    assert one.exit_code == 0 and "use_reported_ids  [true | false]  default: True" in one.stdout
     bad = CliRunner().invoke(app, ["solvers", "nope"])
     assert bad.exit_code == 1 and "available solvers" in bad.stderr

@@ -28,6 +28,12 @@ _ROWS = [
     ("pose NEES (time mean, E = 3)", "pose_nees_mean", ""),
     ("landmark NEES (mean, E = 2)", "landmark_nees_mean", ""),
     ("iterations in trace", "n_iterations", ""),
+    ("set: soundness (true hypothesis)", "set_soundness", "frac"),
+    ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct"), ""),
+    ("set: true correspondence survived", "set_true_correspondence_survived", ""),
+    ("set: mean box width pose x / y / θ", ("set_true_pose_width_x_mean", "set_true_pose_width_y_mean",
+                                            "set_true_pose_width_t_mean"), "m, m, rad"),
+    ("set: mean landmark box width", "set_true_landmark_width_mean", "m"),
 ]
 
 

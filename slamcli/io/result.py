@@ -9,6 +9,9 @@ Layout (``T+1`` poses, ``L'`` estimated landmarks, ``N`` observations, ``K`` tra
     /trace/      (iterative solvers only) objective (K,) map_change (K,) time_s (K,)
                  landmarks_xy (M,2) landmark_offsets (K+1,)
                  [poses_xyt (P,T+1,3) pose_iterations (P,)]  (optional; one chunk per recorded iteration)
+    /hypotheses/ (set-membership solvers only, H surviving hypotheses, Lmax landmarks at most)
+                 assoc (H,N) pose_lo pose_hi (H,T+1,3) landmark_lo landmark_hi (H,Lmax,2; NaN padding)
+                 n_landmarks (H,) landmark_type (H,Lmax; -1 padding)
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from slamcli.io.schema import (
     utc_now,
     write_array,
 )
-from slamcli.types import IterationTrace, SolverResult, Status
+from slamcli.types import BoxHypotheses, IterationTrace, SolverResult, Status
 
 
 def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
@@ -91,7 +94,53 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
                         frame="-", doc="iteration k owns rows offsets[k]:offsets[k+1] (K+1,)")
             if tr.poses_xyt is not None:
                 _write_trace_poses(g, tr)
+        if result.hypotheses is not None:
+            _write_hypotheses(f, result.hypotheses)
     return final
+
+
+def _write_hypotheses(f, hb: BoxHypotheses) -> None:
+    g = f.create_group("hypotheses")
+    g.attrs["doc"] = "every surviving hypothesis (kinematic graph) with its association and boxes"
+    write_array(g, "assoc", np.asarray(hb.assoc, np.int64), units="-", frame="-",
+                doc="landmark row of each observation under hypothesis h (H,N)")
+    for name, doc in (("pose_lo", "lower"), ("pose_hi", "upper")):
+        write_array(g, name, np.asarray(getattr(hb, name), np.float64), units="m,m,rad", frame="world",
+                    doc=f"{doc} bounds of [x, y, theta] per hypothesis; theta unwrapped (H,T+1,3)")
+    for name, doc in (("landmark_lo", "lower"), ("landmark_hi", "upper")):
+        write_array(g, name, np.asarray(getattr(hb, name), np.float64), units="m", frame="world",
+                    doc=f"{doc} bounds of landmark [x, y]; NaN beyond n_landmarks[h] (H,Lmax,2)")
+    write_array(g, "n_landmarks", np.asarray(hb.n_landmarks, np.int64), units="-", frame="-",
+                doc="landmarks of each hypothesis (H,)")
+    write_array(g, "landmark_type", np.asarray(hb.landmark_type, np.int64), units="-", frame="-",
+                doc="type label of each landmark, -1 = padding (H,Lmax)")
+
+
+def _read_hypotheses(r: Reader, n_poses: int, n_obs: int) -> BoxHypotheses:
+    g = "hypotheses"
+    r.group(g)
+    assoc = r.array(f"{g}/assoc", dtype="i", shape=(None, n_obs)).astype(np.int64, copy=False)
+    H = assoc.shape[0]
+    lo = r.array(f"{g}/pose_lo", dtype="f", shape=(H, n_poses, 3))
+    hi = r.array(f"{g}/pose_hi", dtype="f", shape=(H, n_poses, 3))
+    llo = r.array(f"{g}/landmark_lo", dtype="f", shape=(H, None, 2), finite=False)
+    lhi = r.array(f"{g}/landmark_hi", dtype="f", shape=(H, llo.shape[1], 2), finite=False)
+    n_lm = r.array(f"{g}/n_landmarks", dtype="i", shape=(H,)).astype(np.int64, copy=False)
+    types = r.array(f"{g}/landmark_type", dtype="i", shape=(H, llo.shape[1])).astype(np.int64, copy=False)
+    if (lo > hi).any():
+        raise r.fail(f"{g}/pose_lo", "a lower bound exceeds its upper bound (pose_hi)")
+    if n_lm.size and (n_lm.min() < 0 or n_lm.max() > llo.shape[1]):
+        raise r.fail(f"{g}/n_landmarks", f"values must lie in [0, {llo.shape[1]}]")
+    for h in range(H):
+        L = int(n_lm[h])
+        if not (np.isfinite(llo[h, :L]).all() and np.isfinite(lhi[h, :L]).all()):
+            raise r.fail(f"{g}/landmark_lo", f"non-finite bound of hypothesis {h} within n_landmarks")
+        if (llo[h, :L] > lhi[h, :L]).any():
+            raise r.fail(f"{g}/landmark_lo", f"a lower bound exceeds its upper bound (hypothesis {h})")
+        if assoc.size and ((assoc[h] < -1) | (assoc[h] >= L)).any():
+            raise r.fail(f"{g}/assoc", f"hypothesis {h}: label out of range [-1, {L - 1}]")
+    return BoxHypotheses(assoc=assoc, pose_lo=lo, pose_hi=hi, landmark_lo=llo, landmark_hi=lhi, n_landmarks=n_lm,
+                         landmark_type=types)
 
 
 def _write_trace_poses(g, tr: IterationTrace) -> None:
@@ -159,6 +208,7 @@ def read_result(path: str | os.PathLike) -> SolverResult:
             landmark_cov = r.array("landmark_cov", dtype="f", shape=(None, 2, 2), finite=finite)
             r.expect_len("landmark_cov", landmark_cov, L, "len(landmarks_xy)")
         trace = _read_trace(r, finite) if r.has("trace") else None
+        hypotheses = _read_hypotheses(r, poses.shape[0], assoc.shape[0]) if r.has("hypotheses") else None
     return SolverResult(
         solver=solver,
         solver_version=solver_version,
@@ -174,6 +224,7 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         wall_time_s=wall,
         dataset_hash=dataset_hash,
         extra=extra,
+        hypotheses=hypotheses,
     )
 
 

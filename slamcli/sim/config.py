@@ -295,6 +295,50 @@ class GpsConfig:
 
 
 @dataclass(frozen=True)
+class BoundedConfig:
+    """Bounded-error "turn and move" runs for set-membership SLAM (paper 004 §6; off by default).
+
+    When ``enabled`` the robot does not use the tracking controller: from each waypoint of ``path`` it turns
+    in place towards the next one and drives straight to it, one pose per waypoint (``n_steps`` legs). Every
+    error is *uniform* within its ± bound, and the bounds are written into the dataset
+    (``inputs/noise_bounds``) so a solver reads them. Odometry reports ``d̃ = d + u_d``, ``α̃ = α + u_α``
+    (``|u_d| ≤ odometry_d``, ``|u_α| ≤ odometry_turn_deg``); the point sensor (``sensor.max_range``,
+    ``sensor.fov_deg``) reports ``r + u_r``, ``b + u_b`` and each landmark's type label, never its identity.
+
+    Attributes
+    ----------
+    enabled : bool                    use the turn-and-move robot with bounded noise.
+    odometry_d : float                half-width of the distance error, m (paper 004: 0.25).
+    odometry_turn_deg : float         half-width of the turn error, degrees (paper 004: 5).
+    range : float                     half-width of the range error, m (paper 004: 10× smaller, 0.025).
+    bearing_deg : float               half-width of the bearing error, degrees (0.5).
+    closest_only : bool               the sensor reports only the closest visible landmark (paper 004 §6).
+    landmark_types : tuple of int     type label per landmark in world order (e.g. 0 = door, 1 = corridor);
+                                      empty = all type 0.
+    declared_scale : float            the bounds written into the dataset are ``declared_scale ×`` the true
+                                      ones (< 1 = a deliberately wrong, too small declaration, for tests).
+    exact_readings : bool             every error is zero while the bounds are still declared — paper 004 §6
+                                      simulated exact readings (its Table 1 l1 box is centred on the truth).
+    """
+
+    enabled: bool = False
+    odometry_d: float = 0.25
+    odometry_turn_deg: float = 5.0
+    range: float = 0.025
+    bearing_deg: float = 0.5
+    closest_only: bool = True
+    landmark_types: tuple[int, ...] = ()
+    declared_scale: float = 1.0
+    exact_readings: bool = False
+
+    def __post_init__(self) -> None:
+        _check(min(self.odometry_d, self.odometry_turn_deg, self.range, self.bearing_deg) >= 0,
+               "bounded: every half-width must be >= 0")
+        _check(all(t >= 0 for t in self.landmark_types), "bounded.landmark_types must be >= 0")
+        _check(self.declared_scale > 0, "bounded.declared_scale must be > 0")
+
+
+@dataclass(frozen=True)
 class ScenarioConfig:
     """Everything that defines a simulated run (with the seed).
 
@@ -303,7 +347,7 @@ class ScenarioConfig:
     name : str          scenario name (for metadata).
     dt : float          sampling period Δt, s (paper 000: 0.1 s).
     n_steps : int       number of controls T; the run has T+1 poses and lasts ``T·dt`` s.
-    world, path, robot, odometry, sensor, clutter, gps : sub-configurations.
+    world, path, robot, odometry, sensor, clutter, gps, bounded : sub-configurations.
     """
 
     name: str = "custom"
@@ -316,6 +360,7 @@ class ScenarioConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
     clutter: ClutterConfig = field(default_factory=ClutterConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
+    bounded: BoundedConfig = field(default_factory=BoundedConfig)
 
     def __post_init__(self) -> None:
         _check(self.dt > 0 and math.isfinite(self.dt), "dt must be a finite number > 0")
@@ -326,7 +371,7 @@ class ScenarioConfig:
         return self.n_steps * self.dt
 
 
-_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps")
+_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps", "bounded")
 
 
 def known_keys(cfg: ScenarioConfig | None = None) -> list[str]:

@@ -191,8 +191,12 @@ class Reproduction:
         if add_all_solvers:
             present = {s.method for s in keep} | {s.method for s in cfg.solvers}
             labels = {s.label for s in cfg.solvers}
+            from slamcli.solvers import registry
+
             for name in self.solvers:
-                if name not in present and name not in labels:
+                # set-membership solvers (cuik) need bounded-noise data and have their own section
+                if name not in present and name not in labels and not getattr(
+                        registry.load(name), "needs_noise_bounds", False):
                     keep.append(SolverSpec(label=name, method=name))
         dropped = set(missing)
 
@@ -841,6 +845,7 @@ SECTIONS: list[tuple[str, str]] = [
     ("postprocess", "postprocess_section"),
     ("compare", "compare_section"),
     ("nees", "nees_section"),
+    ("paper004", "slamcli.sweep.paper004:run_section"),
 ]
 
 
@@ -863,14 +868,15 @@ class ReproduceOutcome:
 
 
 def _external_section(key: str, target: str, out: Path, quick: bool, log) -> Section:
-    """Run a hooked-in ``module:function`` section."""
+    """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)`` with
+    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title)."""
     import importlib
 
     mod_name, _, fn_name = target.partition(":")
-    fn = getattr(importlib.import_module(mod_name), fn_name or "run_section")
-    markdown, ok = fn(out, quick, log)
-    sec = Section(key, "")
-    sec.add(str(markdown))
+    markdown, ok = getattr(importlib.import_module(mod_name), fn_name or "run_section")(out / key, quick, log)
+    head, _, body = str(markdown).partition("\n")
+    sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
+    sec.add(body.strip())
     if not ok:
         sec.fail(f"{target} reported failure")
     return sec
