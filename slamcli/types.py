@@ -314,7 +314,12 @@ class SolverResult:
     dataset_hash : str                 content hash of the input dataset (filled in by the caller).
     hypotheses : BoxHypotheses | None  set-membership solvers: every surviving hypothesis with its boxes.
     extra : dict                       small solver-specific scalars/strings, e.g.
-                                       ``{"used_truth_association": True}``; JSON-serialisable.
+                                       ``{"used_truth_association": True}``; JSON-serialisable and
+                                       deterministic (same inputs + seed ⇒ same extra). No timings here.
+    timings : dict[str, float]         every solver-specific wall-clock measurement, seconds or ms as the
+                                       key says (e.g. ICM ``init_s``, ``s_per_sweep``). Together with
+                                       ``wall_time_s`` and ``trace.time_s`` these are the only
+                                       non-deterministic numbers of a result (docs/schema.md "Timings").
     """
 
     solver: str
@@ -331,6 +336,7 @@ class SolverResult:
     wall_time_s: float = 0.0
     dataset_hash: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
     hypotheses: BoxHypotheses | None = None
 
 

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, stdout_console
+from slamcli.cli.app import app, check_output, handle_errors, stdout_console
 
 # (label, key in metrics.json, unit) in display order; missing keys are skipped.
 _ROWS = [
@@ -66,6 +66,7 @@ def evaluate_command(
         from slamcli.api.evaluate import evaluate_files
 
         out = out_dir if out_dir is not None else result.parent / f"{result.stem}_eval"
+        check_output(out, folder=True, option="-o" if out_dir is not None else "output folder")
         m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
                            rpe_unit=rpe_unit, check_hash=not no_hash_check)
         if quiet:

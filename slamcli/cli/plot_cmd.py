@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors
+from slamcli.cli.app import app, check_output, fail, handle_errors
 
 KINDS = ("map", "errors", "nees", "mapchange", "compare", "boxes")
 _SIZES = {"map": (7.0, 6.0), "errors": (6.4, 4.4), "nees": (6.4, 4.4), "mapchange": (6.4, 4.4),
@@ -56,6 +56,7 @@ def plot_command(
         if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:
             what = "sweep folder" if kind == "compare" else "result"
             fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
+        check_output(output)
         w, h = parse_size(size, _SIZES[kind])
         check = not no_hash_check
         data_paths = list(data) if data else [None] * len(results)

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors, stderr_console
+from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console
 
 
 @app.command("reproduce")
@@ -36,6 +36,7 @@ def reproduce_command(
 
         if workers is not None and workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
+        check_output(out, folder=True, option="--out")
         con = stderr_console()
         if experiments is not None and not experiments.is_dir():
             fail(f"--experiments: {experiments} is not a directory")

@@ -29,6 +29,7 @@ import numpy as np
 from slamcli.errors import SchemaError
 from slamcli.io.schema import (
     DATASET_SCHEMA,
+    MAX_POSES,
     SCHEMA_VERSION,
     Reader,
     create_h5,
@@ -216,11 +217,47 @@ def read_dataset(path: str | os.PathLike, *, with_truth: bool = True) -> Dataset
         if not isinstance(metadata, dict):
             raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
         has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
+        check_declared_shapes(r, with_truth=with_truth and has_truth)
         inputs = _read_inputs(r, dt)
         truth = None
         if with_truth and has_truth:
             truth = _read_truth(r, inputs)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
+
+
+def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
+    """Check the *declared* array shapes against each other and :data:`MAX_POSES` before any array is read.
+
+    A forged header (say ``timestamps`` claiming 10⁹ rows in a 100 kB file) is refused here with one line,
+    instead of being materialised in memory by the first read. Missing arrays are left to the full reader.
+    """
+    ts = r.declared_shape("inputs/timestamps")
+    if ts is None or len(ts) != 1:
+        return
+    n_poses = ts[0]
+    if n_poses > MAX_POSES:
+        raise r.fail("inputs/timestamps", f"declares {n_poses} poses, above the limit of {MAX_POSES}")
+    g = "inputs/observations"
+    step = r.declared_shape(f"{g}/step")
+    expect: list[tuple[str, int, str]] = [
+        ("inputs/controls", n_poses - 1, "T = len(timestamps) - 1"),
+        ("inputs/odometry_xyt", n_poses, "T+1 = len(timestamps)"),
+        (f"{g}/offsets", n_poses + 1, "T+2 = len(timestamps) + 1"),
+    ]
+    if step is not None and len(step) == 1:
+        expect += [(f"{g}/{n}", step[0], f"len({g}/step)") for n in ("range_m", "bearing_rad", "sensor",
+                                                                     "reported_id")]
+        if with_truth:
+            expect.append(("truth/obs_landmark", step[0], "number of observations"))
+    if with_truth:
+        expect.append(("truth/poses_xyt", n_poses, "T+1 = len(inputs/timestamps)"))
+    gps = r.declared_shape("inputs/gps_step")
+    if gps is not None and len(gps) == 1:
+        expect.append(("inputs/gps_xy", gps[0], "len(gps_step)"))
+    for name, n, what in expect:
+        shp = r.declared_shape(name)
+        if shp is not None and len(shp) >= 1 and shp[0] != n:
+            raise r.fail(name, f"declared length {shp[0]} does not match {what} ({n})")
 
 
 def _read_inputs(r: Reader, dt: float) -> SlamInputs:
@@ -304,7 +341,14 @@ def _read_observations(r: Reader, n_poses: int) -> Observations:
     N = step.shape[0]
     range_m = r.array(f"{g}/range_m", dtype="f", shape=(None,))
     bearing = r.array(f"{g}/bearing_rad", dtype="f", shape=(None,))
-    sensor = r.array(f"{g}/sensor", dtype="i", shape=(None,)).astype(np.int16, copy=False)
+    sensor = r.array(f"{g}/sensor", dtype="i", shape=(None,))
+    if sensor.size and int(sensor.max()) > np.iinfo(np.int16).max:
+        k = int(np.argmax(sensor > np.iinfo(np.int16).max))
+        raise r.fail(f"{g}/sensor", f"sensor index {int(sensor[k])} at row {k} above {np.iinfo(np.int16).max}")
+    if sensor.size and int(sensor.min()) < 0:
+        k = int(np.argmax(sensor < 0))
+        raise r.fail(f"{g}/sensor", f"negative sensor index {int(sensor[k])} at row {k}")
+    sensor = sensor.astype(np.int16, copy=False)
     reported = r.array(f"{g}/reported_id", dtype="i", shape=(None,)).astype(np.int64, copy=False)
     offsets = r.array(f"{g}/offsets", dtype="i", shape=(None,)).astype(np.int64, copy=False)
     for name, arr in (("range_m", range_m), ("bearing_rad", bearing), ("sensor", sensor),

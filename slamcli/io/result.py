@@ -3,8 +3,8 @@
 Layout (``T+1`` poses, ``L'`` estimated landmarks, ``N`` observations, ``K`` trace iterations)::
 
     /            @schema="slamcli.result" @schema_version=1 @solver @solver_version @status @message
-                 @wall_time_s @params_json @dataset_hash @dataset_path @extra_json @slamcli_version
-                 @created_utc
+                 @wall_time_s @params_json @dataset_hash @dataset_path @extra_json @timings_json
+                 @slamcli_version @created_utc
     poses_xyt (T+1,3)   landmarks_xy (L',2)   assoc (N,)   [pose_cov (T+1,3,3)]  [landmark_cov (L',2,2)]
     /trace/      (iterative solvers only) objective (K,) map_change (K,) time_s (K,)
                  landmarks_xy (M,2) landmark_offsets (K+1,)
@@ -24,6 +24,7 @@ import numpy as np
 from slamcli.errors import SchemaError
 from slamcli.io.schema import (
     GZIP_LEVEL,
+    MAX_POSES,
     RESULT_SCHEMA,
     SCHEMA_VERSION,
     Reader,
@@ -47,6 +48,7 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
     try:
         params_json = to_json(result.params)
         extra_json = to_json(result.extra)
+        timings_json = to_json({str(k): float(v) for k, v in (result.timings or {}).items()})
     except (TypeError, ValueError) as exc:
         raise SchemaError(f"{final}: params/extra: not JSON-serialisable ({exc})") from None
     status = Status(result.status)
@@ -65,6 +67,7 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
         a["dataset_hash"] = str(result.dataset_hash)
         a["dataset_path"] = str(result.extra.get("dataset_path", ""))
         a["extra_json"] = extra_json
+        a["timings_json"] = timings_json
         write_array(f, "poses_xyt", np.asarray(result.poses_xyt, np.float64).reshape(-1, 3),
                     units="m,m,rad", frame="world", doc="estimated poses (T+1,3)")
         write_array(f, "landmarks_xy", np.asarray(result.landmarks_xy, np.float64).reshape(-1, 2),
@@ -188,7 +191,12 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         extra = r.json_attr("/", "extra_json", default={})
         if not isinstance(extra, dict):
             raise r.fail("@extra_json", f"expected a JSON object, got {type(extra).__name__}")
+        timings = r.json_attr("/", "timings_json", default={})
+        if not isinstance(timings, dict) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in timings.values()):
+            raise r.fail("@timings_json", "expected a JSON object of numbers")
         dataset_hash = r.attr("/", "dataset_hash", str)
+        check_declared_result_shapes(r)
 
         poses = r.array("poses_xyt", dtype="f", shape=(None, 3), finite=finite)
         lms = r.array("landmarks_xy", dtype="f", shape=(None, 2), finite=finite)
@@ -224,8 +232,33 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         wall_time_s=wall,
         dataset_hash=dataset_hash,
         extra=extra,
+        timings={str(k): float(v) for k, v in timings.items()},
         hypotheses=hypotheses,
     )
+
+
+def check_declared_result_shapes(r: Reader) -> None:
+    """Declared shapes against each other and :data:`MAX_POSES`, before any array of a result is read."""
+    poses = r.declared_shape("poses_xyt")
+    lms = r.declared_shape("landmarks_xy")
+    if poses is not None and len(poses) >= 1 and poses[0] > MAX_POSES:
+        raise r.fail("poses_xyt", f"declares {poses[0]} poses, above the limit of {MAX_POSES}")
+    expect = []
+    if poses is not None and len(poses) >= 1:
+        expect.append(("pose_cov", poses[0], "len(poses_xyt)"))
+    if lms is not None and len(lms) >= 1:
+        expect.append(("landmark_cov", lms[0], "len(landmarks_xy)"))
+    obj = r.declared_shape("trace/objective")
+    if obj is not None and len(obj) == 1:
+        expect += [("trace/map_change", obj[0], "len(trace/objective)"), ("trace/time_s", obj[0], "len(trace/objective)"),
+                   ("trace/landmark_offsets", obj[0] + 1, "len(trace/objective) + 1")]
+    tp = r.declared_shape("trace/poses_xyt")
+    if tp is not None and len(tp) >= 1:
+        expect.append(("trace/pose_iterations", tp[0], "len(trace/poses_xyt)"))
+    for name, n, what in expect:
+        shp = r.declared_shape(name)
+        if shp is not None and len(shp) >= 1 and shp[0] != n:
+            raise r.fail(name, f"declared length {shp[0]} does not match {what} ({n})")
 
 
 def _read_trace(r: Reader, finite: bool = True) -> IterationTrace:

@@ -586,7 +586,8 @@ class Reproduction:
                 per.append({
                     "max_mc_mm": float(mc.max()) * 1e3 if len(mc) else math.nan,
                     "drift_mm": drift,
-                    "init_ms": float(result.extra.get("init_ms_per_step", math.nan)),
+                    "init_ms": float(result.timings.get("init_ms_per_step",
+                                                        result.extra.get("init_ms_per_step", math.nan))),
                     "s_per_it": float(sum(times) / len(times)) if len(times) else math.nan,
                     "steps": int(row.get("n_poses", 0) or 0) - 1,
                     "iters": f"{max(int(row.get('n_iterations', 0) or 0) - 1, 0)} ({row.get('metric.status', '')})",
