@@ -60,6 +60,11 @@ def _map(ax, result_path, data_path, check, ellipses, every, title):
     # real recordings and imported graphs have no ground truth: then estimate and odometry only
     res, ds, data_path = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
     truth = ds.truth
+    if res.grids:  # occupancy map under the trajectory (paper 001 subfigures (c)/(d))
+        from slamcli.plots.grids import draw_grid
+
+        name = "frequentist" if "frequentist" in res.grids else next(iter(res.grids))
+        draw_grid(ax, res.grids[name], label=f"occupancy ({name})")
     plot_map(ax, truth.landmarks_xy if truth else None, res.landmarks_xy, truth.poses_xyt[:, :2] if truth else None,
              ds.inputs.odometry_xyt[:, :2], res.poses_xyt[:, :2],
              landmark_cov=res.landmark_cov if ellipses else None, pose_cov=res.pose_cov if ellipses else None,

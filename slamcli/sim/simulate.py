@@ -75,6 +75,10 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     seed = int(seed)
     if seed < 0:
         raise ConfigError(f"--seed: must be >= 0, got {seed}")
+    if cfg.walls.layout != "none":  # paper 001 wall worlds: ray-cast scans + features (sim/wallworld.py)
+        from slamcli.sim.wallworld import simulate_walls
+
+        return simulate_walls(cfg, seed, stream, progress)
 
     # 1) world: waypoints, then landmarks (a random layout keeps clear of the path)
     world_seed = seed if cfg.world.seed < 0 else int(cfg.world.seed)
