@@ -133,13 +133,21 @@ def pose_errors_3sigma(est_xyt: np.ndarray, true_xyt: np.ndarray, pose_cov: np.n
     })
 
 
+def common_mask(grids: dict[str, OccupancyGrid], truth: OccupancyGrid) -> np.ndarray:
+    """True cells observed by *every* grid (so that the maps are compared on the same cells) ``(H*·W*,)``."""
+    mask = None
+    for g in grids.values():
+        m = observed_mask(g, truth) if g.observed is not None else np.ones(truth.prob.size, bool)
+        mask = m if mask is None else mask & m
+    return mask
+
+
 def occupancy_scalars(grids: dict[str, OccupancyGrid], truth: OccupancyGrid, lap_end_step=None) -> dict:
-    """Flat scalars for ``metrics.json``: per grid name the final errors on the cells the *frequentist* map
-    observed (the same cells for every grid, so the numbers compare) and the total error at each lap end."""
+    """Flat scalars for ``metrics.json``: per grid name the final errors on the cells observed by every grid
+    (:func:`common_mask`, so the numbers compare) and the total error at each lap end."""
     if not grids:
         return {}
-    ref = grids.get("frequentist", next(iter(grids.values())))
-    mask = observed_mask(ref, truth)
+    mask = common_mask(grids, truth)
     out: dict = {}
     for name, g in grids.items():
         for k, v in grid_errors(g, truth, mask).items():

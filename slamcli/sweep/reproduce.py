@@ -581,6 +581,7 @@ def reproduce(
         ("fig9", rep.octagon_section),
         ("compare", rep.compare_section),
         ("nees", rep.nees_section),
+        ("paper001", lambda: __import__("slamcli.sweep.paper001", fromlist=["_"]).reproduce_section(rep.out, quick)),
     ]
     sections: list[Section] = []
     for key, build in builders:
