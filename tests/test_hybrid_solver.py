@@ -32,7 +32,6 @@ def test_map_error_falls_with_laps_and_beats_logodds(run_small_map1):
     mask = common_mask(res.grids, tr.occupancy)
     assert mask.sum() > 800
     freq = snapshot_errors(res.grids["frequentist"], tr.occupancy, tr.lap_end_step, mask)
-    logo = snapshot_errors(res.grids["logodds"], tr.occupancy, tr.lap_end_step, mask)
     e_freq = error_at_lap_ends(freq, tr.lap_end_step)
     # total map error falls from lap 1 to lap 3 (paper Figs. (e))
     assert e_freq[2] < e_freq[0], e_freq

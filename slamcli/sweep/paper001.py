@@ -63,11 +63,13 @@ def _execute(run: Run, out: Path, seed: int = 1) -> tuple[Path, Path]:
     d.mkdir(parents=True, exist_ok=True)
     dpath, rpath = d / "data.h5", d / "result.h5"
     if dpath.is_file() and rpath.is_file():
+        from slamcli.errors import SlamcliError
+
         try:
             read_result(rpath)
             return dpath, rpath
-        except Exception:  # noqa: BLE001 - a broken file is simply redone
-            pass
+        except SlamcliError:  # a broken file is simply redone
+            rpath.unlink()
     ds = simulate_scenario(run.scenario, seed, run.overrides)
     write_dataset(dpath, ds)
     res = HybridSlam(HybridParams(**run.params)).solve(ds.inputs, rng=np.random.default_rng([1, seed]))
@@ -139,6 +141,9 @@ def _figure(run: Run, m: dict, path: Path) -> None:
         ax.plot(res.landmarks_xy[:, 0], res.landmarks_xy[:, 1], "*", color="tab:red", ms=4, ls="none")
         ax.set_title(name)
         ax.set_aspect("equal")
+        wx, wy = tr.walls_xyxy[:, [0, 2]], tr.walls_xyxy[:, [1, 3]]
+        ax.set_xlim(wx.min() - 3, wx.max() + 3)
+        ax.set_ylim(wy.min() - 3, wy.max() + 3)
     curves = {name: (m[f"{name}_df"]["lap"].to_numpy(), m[f"{name}_df"]["total_abs_error"].to_numpy())
               for name in res.grids}
     plot_map_error_vs_laps(axs[1, 0], curves, title="(e) total map error")
@@ -240,13 +245,14 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
         if len(e) >= 2 and np.all(np.isfinite(e)):
             falls = bool(np.all(np.diff(e) < 0))
             ratios = e[1:] / e[:-1]
-            geo = bool(falls and np.max(ratios) < 1 and np.ptp(ratios) < 0.5 * np.mean(ratios))
+            geo = bool(falls and len(ratios) >= 2 and np.ptp(ratios) < 0.5 * np.mean(ratios))
             lines.append(
                 f"- *Map error falls roughly exponentially with laps* — {run.label}: total error at the lap ends "
                 + " → ".join(_fmt(x, 4) for x in e) + f" (ratios {', '.join(_fmt(x) for x in ratios)}): "
                 + ("falls every lap" if falls else "does NOT fall every lap")
                 + ("; roughly geometric (ratios within ±25 % of their mean)." if geo else
-                   ("; the per-lap ratios are not constant, so not clearly exponential." if falls else ".")))
+                   ("; one ratio only, the shape of the decay cannot be judged." if falls and len(ratios) < 2 else
+                    ("; the per-lap ratios are not constant, so not clearly exponential." if falls else "."))))
     for run, m in results:
         ff, lf = m["frequentist_final"], m.get("logodds_final")
         if lf:
