@@ -16,7 +16,8 @@ Algorithm "Hybrid SLAM" (§II.C), per step t:
    belief *mean*, the "localise first, then map with a Bayesian grid" alternative of §II.D.
 
 Output: EKF poses/covariances/landmarks and ``grids["frequentist"]`` (+ ``grids["logodds"]``) with
-``n_snapshots`` snapshots at evenly spaced steps.
+``n_snapshots`` snapshots at evenly spaced steps. A dataset without scan rows has nothing to map densely:
+the result is then the EKF part alone, without grids, and its message says so.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import numpy as np
 
 from slamcli.errors import SolverError
 from slamcli.models.occupancy import GridSpec
-from slamcli.solvers.base import BaseSolver
+from slamcli.solvers.base import BaseSolver, params_to_dict
 from slamcli.solvers.ekf import EkfParams, EkfSlam
 from slamcli.solvers.hybrid.frequentist import (
     ScanGeometry,
@@ -181,12 +182,14 @@ class HybridSlam(BaseSolver):
         n_poses = inputs.n_poses
         T = n_poses - 1
         obs = inputs.observations
-        alphas, ranges = scan_table(inputs, p.scan_sensor)  # validates before any work
-        if not math.isfinite(inputs.max_range):
-            raise SolverError("max_range: the hybrid solver needs a finite sensor max range")
+        has_scan = bool(np.any(np.asarray(obs.sensor) == p.scan_sensor))
+        if has_scan:
+            alphas, ranges = scan_table(inputs, p.scan_sensor)  # validates before any work
+            if not math.isfinite(inputs.max_range):
+                raise SolverError("max_range: the hybrid solver needs a finite sensor max range")
         # the grid covers at least the start pose ± (max range + margin): refuse before any work if even that
         # is too large (the exact extent, from the EKF trajectory, is checked again before the mapping)
-        min_side = math.ceil(2 * (inputs.max_range + p.grid_margin) / p.resolution)
+        min_side = math.ceil(2 * (inputs.max_range + p.grid_margin) / p.resolution) if has_scan else 0
         if min_side * min_side > p.max_cells:
             raise SolverError(f"resolution={p.resolution}: the grid would have at least {min_side * min_side} cells, "
                               f"more than max_cells={p.max_cells}")
@@ -202,6 +205,11 @@ class HybridSlam(BaseSolver):
         if ekf_res.status is Status.FAILED:
             return dataclasses.replace(ekf_res, solver=self.name, message=f"EKF part failed: {ekf_res.message}")
         mu, cov = ekf_res.poses_xyt, ekf_res.pose_cov
+        if not has_scan:  # nothing to map densely: the Bayesian part alone (no grids)
+            return dataclasses.replace(ekf_res, solver=self.name, solver_version=self.version(),
+                                       params=params_to_dict(p), wall_time_s=time.perf_counter() - t_start,
+                                       message=f"no rows of scan sensor {p.scan_sensor}: EKF part only, no grid; "
+                                               + ekf_res.message)
 
         # ---- the grid (checked before the mapping starts) ----
         spec = grid_for_trajectory(mu, inputs.max_range + p.grid_margin, p.resolution, p.grid_offset)
