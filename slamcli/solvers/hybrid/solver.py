@@ -83,6 +83,9 @@ class HybridParams:
                                 reproduction also runs the paper's 10.
     motion_std_scale : float    EKF factor on the process noise.
     feature_sensor, scan_sensor : int   sensor indices of the feature rows and the scan rows.
+    association : "auto" | "known" | "ml"   EKF data association of the feature rows: the reported ids (paper
+                                001 assumes identified features), maximum likelihood, or ``auto`` = known when
+                                the feature rows carry ids, else ml.
     baseline : bool             also build the log-odds (eq. 24) grid from the belief mean.
     logodds_clamp : float       |log-odds| bound of the baseline.
     n_snapshots : int           grid snapshots at evenly spaced steps (the last one = the final map).
@@ -109,6 +112,7 @@ class HybridParams:
     motion_std_scale: float = 1.0
     feature_sensor: int = 0
     scan_sensor: int = 1
+    association: Literal["auto", "known", "ml"] = "auto"
     baseline: bool = True
     logodds_clamp: float = 20.0
     n_snapshots: int = 12
@@ -198,7 +202,10 @@ class HybridSlam(BaseSolver):
 
         # ---- Bayesian part: the project's EKF on the feature rows ----
         f_inputs = dataclasses.replace(inputs, observations=_select_rows(obs, feat_mask, n_poses))
-        ekf = EkfSlam(EkfParams(association="known", motion_input="controls", obs_std_scale=p.stabilising_scale,
+        assoc_mode = p.association
+        if assoc_mode == "auto":
+            assoc_mode = "known" if np.any(f_inputs.observations.reported_id >= 0) else "ml"
+        ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
                                 motion_std_scale=p.motion_std_scale, use_gps=False))
         ekf_res = ekf.solve(f_inputs, rng=rng,
                             progress=None if progress is None else (lambda d, n: progress(d, total)))
