@@ -68,7 +68,7 @@ def _row(world: str, ds, params: HybridParams, n_map_steps: int, n_warm: int) ->
 
 
 def run(quick: bool = False) -> list[dict]:
-    n_map, n_warm = (60, 10) if quick else (300, 50)
+    n_map, n_warm = (300, 20) if quick else (900, 50)  # the solver reports progress every T/200 steps
     params = HybridParams()
     ds1 = simulate_scenario("hybrid-map1", 0)
     r1 = _row("hybrid-map1 (laser)", ds1, params, n_map, n_warm)
