@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, stdout_console
+from slamcli.cli.app import app, check_output, handle_errors, stdout_console
 
 # (label, key in metrics.json, unit) in display order; missing keys are skipped.
 _ROWS = [
@@ -33,6 +33,12 @@ _ROWS = [
     ("map error per cell: frequentist / log-odds", ("grid_frequentist_mean_abs_error", "grid_logodds_mean_abs_error"), ""),
     ("total map error: frequentist / log-odds", ("grid_frequentist_total_abs_error", "grid_logodds_total_abs_error"), ""),
     ("cell accuracy at 0.5: frequentist / log-odds", ("grid_frequentist_accuracy", "grid_logodds_accuracy"), ""),
+    ("set: soundness (true hypothesis)", "set_soundness", "frac"),
+    ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct"), ""),
+    ("set: true correspondence survived", "set_true_correspondence_survived", ""),
+    ("set: mean box width pose x / y / θ", ("set_true_pose_width_x_mean", "set_true_pose_width_y_mean",
+                                            "set_true_pose_width_t_mean"), "m, m, rad"),
+    ("set: mean landmark box width", "set_true_landmark_width_mean", "m"),
 ]
 
 
@@ -65,6 +71,7 @@ def evaluate_command(
         from slamcli.api.evaluate import evaluate_files
 
         out = out_dir if out_dir is not None else result.parent / f"{result.stem}_eval"
+        check_output(out, folder=True, option="-o" if out_dir is not None else "output folder")
         m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
                            rpe_unit=rpe_unit, check_hash=not no_hash_check)
         if quiet:

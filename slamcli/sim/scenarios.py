@@ -32,8 +32,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from slamcli.errors import ConfigError
 from slamcli.sim.config import (
+    BoundedConfig,
     ClutterConfig,
     OdometryConfig,
     PathConfig,
@@ -139,6 +142,54 @@ _MAPS = {  # paper 001 §III: (width, height, block rows, block cols, corridor w
     4: (1000.0, 200.0, 2, 10, 10.0),  # ~1 km x 200 m, 20 cycles (city blocks)
 }
 
+
+def _cuik_room() -> ScenarioConfig:
+    """Paper 004 §6: a 30 m square room, doors (type 0) at (15, 0) and (15, 30), corridors (type 1) at
+    (30, 15) and (0, 15); 8 turn-and-move legs of 7.65 m around an octagon of radius 10 m centred at
+    (15, 15), turning +45° (paper: −45°, its θ runs clockwise) per leg and closing the loop at pose 9 (our
+    pose 8). Start r1 = (15, 5, 1.963495) in the paper's heading convention (Table 1)."""
+    from slamcli.sim.bounded import heading_from_paper004
+
+    a = np.deg2rad(-90.0 + 45.0 * np.arange(8))
+    wp = np.column_stack([15.0 + 10.0 * np.cos(a), 15.0 + 10.0 * np.sin(a)]).round(12)
+    return ScenarioConfig(
+        name="cuik-room", dt=1.0, n_steps=8,
+        world=WorldConfig(layout="none", extra_landmarks=(15.0, 0.0, 30.0, 15.0, 15.0, 30.0, 0.0, 15.0)),
+        path=PathConfig(kind="explicit", waypoints=tuple(wp.ravel().tolist()), cyclic=True),
+        robot=RobotConfig(start=(15.0, 5.0, float(heading_from_paper004(1.9634954)))),
+        sensor=SensorConfig(kind="point", max_range=12.0, min_range=0.1, fov_deg=360.0),
+        bounded=BoundedConfig(enabled=True, odometry_d=0.25, odometry_turn_deg=5.0, range=0.025,
+                              bearing_deg=0.5, closest_only=True, landmark_types=(0, 1, 0, 1)),
+    )
+
+
+def _cuik_corridors() -> ScenarioConfig:
+    """Beyond paper 004: a 40 m × 20 m block of corridors driven 1.5 times around (45 legs of 4 m) with
+    14 doors (type 0) and corridor junctions (type 1) 2 m off the path; closest-landmark sensor of 6 m."""
+    corners = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 20.0], [0.0, 20.0]])
+    lms = [(4.0, -2.0), (12.0, 2.0), (20.0, -2.0), (28.0, 2.0), (36.0, -2.0), (42.0, 6.0), (38.0, 14.0),
+           (34.0, 22.0), (26.0, 18.0), (18.0, 22.0), (10.0, 18.0), (2.0, 22.0), (-2.0, 14.0), (2.0, 6.0)]
+    types = (0, 1, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 1, 0)
+    return ScenarioConfig(
+        name="cuik-corridors", dt=1.0, n_steps=45,
+        world=WorldConfig(layout="none", extra_landmarks=tuple(np.ravel(lms).tolist())),
+        path=PathConfig(kind="explicit", waypoints=tuple(_subdivide_closed(corners, 4.0).ravel().tolist()),
+                        cyclic=True),
+        robot=RobotConfig(start=(0.0, 0.0, 0.0)),
+        sensor=SensorConfig(kind="point", max_range=6.0, min_range=0.1, fov_deg=360.0),
+        bounded=BoundedConfig(enabled=True, odometry_d=0.1, odometry_turn_deg=2.0, range=0.025,
+                              bearing_deg=0.5, closest_only=True, landmark_types=types),
+    )
+
+
+def _subdivide_closed(corners_xy: np.ndarray, spacing: float) -> np.ndarray:
+    pts = []
+    for a, b in zip(corners_xy, np.roll(corners_xy, -1, axis=0)):
+        n = max(1, round(float(np.hypot(*(b - a))) / spacing))
+        pts += [a + (b - a) * k / n for k in range(n)]
+    return np.asarray(pts)
+
+
 SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
     "loop": (_loop, "small fast world for tests: 12 random landmarks, rectangular loop, point sensor, 500 steps"),
     "paper-sim1": (lambda: _paper_sim(30.0, "paper-sim1"),
@@ -151,6 +202,8 @@ SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
        for k in (1, 2, 3, 4) for suffix, sens in (("", "laser"), ("-noisy", "noisy")) if not (k == 4 and sens == "noisy")},
     "hybrid-map3-posts": (lambda: _hybrid("hybrid-map3-posts", "laser", *_MAPS[3], features="posts"),
                           "paper 001 Map 3 with point landmarks (posts) instead of corners, laser"),
+    "cuik-room": (_cuik_room, "paper 004 §6: 30 m room, 2 doors + 2 corridors, 8 turn-and-move legs, bounded noise"),
+    "cuik-corridors": (_cuik_corridors, "paper 004 beyond: 40×20 m corridors, 14 typed landmarks, 45 legs, bounded"),
 }
 
 

@@ -79,6 +79,10 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
         from slamcli.sim.wallworld import simulate_walls
 
         return simulate_walls(cfg, seed, stream, progress)
+    if cfg.bounded.enabled:  # paper 004: turn-and-move robot, uniform bounded errors, type labels
+        from slamcli.sim.bounded import simulate_bounded
+
+        return simulate_bounded(cfg, seed, progress)
 
     # 1) world: waypoints, then landmarks (a random layout keeps clear of the path)
     world_seed = seed if cfg.world.seed < 0 else int(cfg.world.seed)

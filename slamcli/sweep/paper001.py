@@ -187,9 +187,23 @@ def _fmt(x, digits: int = 3) -> str:
 
 
 def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tuple[str, bool]:
-    """Run the paper 001 experiments; return the markdown section and whether every run completed."""
-    out = Path(out_dir) / "paper001"
+    """Run the paper 001 experiments into ``out_dir``; return the markdown section (figure paths relative to
+    ``out_dir``'s parent, where the report lives) and whether every run completed.
+
+    ``progress`` is called as ``progress(done, total)``, or with one status string if it takes only that
+    (the reproduce driver passes its line logger)."""
+    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    rel = out.name
+
+    def report(done: int, total: int) -> None:
+        if progress is None:
+            return
+        try:
+            progress(done, total)
+        except TypeError:
+            progress(f"paper001: {done}/{total} runs")  # type: ignore[call-arg]
+
     runs = planned_runs(quick)
     lines = ["## Paper 001: hybrid Bayesian/frequentist SLAM (Figs. 2-9)", ""]
     if quick:
@@ -199,8 +213,7 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
     results: list[tuple[Run, dict]] = []
     total = len(runs) + 1
     for i, run in enumerate(runs):
-        if progress is not None:
-            progress(i, total)
+        report(i, total)
         try:
             dpath, rpath = _execute(run, out)
             m = _metrics(dpath, rpath)
@@ -210,8 +223,7 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
             ok = False
             lines.append(f"- **{run.label}: failed** — {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
     ce = counterexample_figure(out / "fig2_counterexample.png")
-    if progress is not None:
-        progress(total, total)
+    report(total, total)
 
     # ---- table ----
     hdr = ["run", "steps", "laps", "odometry max err (m)", "EKF mean pos err (m)", "pose NEES (mean, d=3)",
@@ -228,7 +240,7 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
     lines += ["| " + " | ".join(hdr) + " |", "|" + "---|" * len(hdr)]
     lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
     lines += ["", "Per-cell error = Σ|P − P*| / n over the cells both maps observed; the total error per lap is drawn in subfigure (e) of each run's figure "
-              + ", ".join(f"`paper001/{_slug(r.label)}.png`" for r, _ in results) + ".", ""]
+              + ", ".join(f"`{rel}/{_slug(r.label)}.png`" for r, _ in results) + ".", ""]
 
     # ---- claims, each sentence computed from the numbers ----
     lines += ["### The paper's claims beside our numbers", ""]
@@ -268,20 +280,9 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
     lines.append(f"- *Fig. 2: the frequentist update converges to the true map from every start* — {ce['n_starts']} "
                  f"starts, largest final distance to (0, 1) after 3000 updates: {_fmt(ce['max_final_dist'])}: "
                  + ("converged (< 0.05)." if ce["max_final_dist"] < 0.05 else "NOT converged within 0.05.")
-                 + " Figure: `paper001/fig2_counterexample.png`.")
+                 + f" Figure: `{rel}/fig2_counterexample.png`.")
     lines += ["", "Setting: our wall worlds approximate the paper's maps (corridor widths, beam count, feature "
               "set and route are our choices; the paper gives the sizes, robot, noise levels, 40 m range and "
               "laps). Observation matrices are conditional on the cell being observed and crossed cells count as "
               "empty only ≥ 3 m before the reading (see docs and `slamcli solvers hybrid`).", ""]
     return "\n".join(lines), ok and len(results) == len(runs)
-
-
-def reproduce_section(out_dir: Path, quick: bool, log=lambda s: None):
-    """Adapter for ``slamcli.sweep.reproduce``: the section as a ``Section`` object."""
-    from slamcli.sweep.reproduce import Section
-
-    md, ok = run_section(Path(out_dir), quick, None)
-    title, _, body = md.partition("\n")
-    sec = Section("paper001", title.removeprefix("## ").strip())
-    sec.add(body.strip() + ("" if ok else "\n\n> Some paper 001 runs failed; see above."))
-    return sec
