@@ -226,6 +226,33 @@ class SlamInputs:
 
 
 @dataclass(frozen=True)
+class OccupancyGrid:
+    """A 2-D occupancy grid (paper 001): cell ``(row, col)`` covers
+    ``[x0 + col·res, x0 + (col+1)·res) × [y0 + row·res, y0 + (row+1)·res)``.
+
+    Attributes
+    ----------
+    origin_xy : ndarray (2,)                lower-left corner of cell (0, 0), m (world).
+    resolution : float                      cell side, m.
+    prob : ndarray (H, W) float32           occupancy probability of every cell (truth: 0/1).
+    observed : ndarray (H, W) int32 | None  how many steps updated each cell (0 = never observed).
+    snapshot_step : ndarray (K,) int64 | None   steps after which ``snapshots`` were taken ...
+    snapshots : ndarray (K, H, W) float32 | None ... the probabilities at those steps.
+    """
+
+    origin_xy: np.ndarray
+    resolution: float
+    prob: np.ndarray
+    observed: np.ndarray | None = None
+    snapshot_step: np.ndarray | None = None
+    snapshots: np.ndarray | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.prob.shape[0]), int(self.prob.shape[1]))
+
+
+@dataclass(frozen=True)
 class GroundTruth:
     """What really happened; produced by the simulator, read only by metrics.
 
@@ -234,11 +261,17 @@ class GroundTruth:
     poses_xyt : ndarray (T+1, 3)       true poses.
     landmarks_xy : ndarray (L, 2)      true landmark positions.
     obs_landmark : ndarray (N,) int64  true landmark index of each observation row; -1 for clutter.
+    occupancy : OccupancyGrid | None   wall worlds: the true grid (walls rasterised, prob 0/1).
+    walls_xyxy : ndarray (W, 4) | None wall worlds: wall segments ``[x1, y1, x2, y2]``, m.
+    lap_end_step : ndarray (K,) int64 | None  wall worlds: step at which each lap of the route ended.
     """
 
     poses_xyt: np.ndarray
     landmarks_xy: np.ndarray
     obs_landmark: np.ndarray
+    occupancy: OccupancyGrid | None = None
+    walls_xyxy: np.ndarray | None = None
+    lap_end_step: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -362,6 +395,8 @@ class SolverResult:
                                        key says (e.g. ICM ``init_s``, ``s_per_sweep``). Together with
                                        ``wall_time_s`` and ``trace.time_s`` these are the only
                                        non-deterministic numbers of a result (docs/schema.md "Timings").
+    grids : dict[str, OccupancyGrid]   occupancy maps by name (``hybrid``: "frequentist", "logodds");
+                                       written as the optional ``/grids`` group.
     """
 
     solver: str
@@ -380,6 +415,7 @@ class SolverResult:
     extra: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     hypotheses: BoxHypotheses | None = None
+    grids: dict[str, OccupancyGrid] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -76,6 +76,8 @@ def dataset_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str
                                                                    c.observation_info)) if a is not None]
         rows.append(("constraints", f"{c.n_between} loop closures (pose-pose between-factors); per-edge "
                                     f"information: {', '.join(per_edge) or 'none'}"))
+    if tr is not None and tr.occupancy is not None:
+        rows.append(("true grid", _grid_text(tr.occupancy)))
     rows.append(("content hash", dataset_hash(ds)[:23] + "…"))
     params = hdr.get("scenario_params_json")
     if not isinstance(params, dict):
@@ -108,6 +110,8 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
     if res.trace is not None and len(res.trace):
         obj = res.trace.objective
         rows.append(("objective first → last", f"{obj[0]:.6g} → {obj[-1]:.6g}"))
+    for name, g in res.grids.items():
+        rows.append((f"grid {name}", _grid_text(g)))
     if res.extra.get("used_truth_association"):
         rows.append(("association", "ORACLE (true association given to the solver)"))
     outliers = res.extra.get("chi2_outliers")
@@ -118,6 +122,19 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
     extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path", "chi2_outliers")}
     params = _flatten({"params": res.params, "extra": extra})
     return rows, params
+
+
+def _grid_text(g) -> str:
+    """One line about an occupancy grid: shape, resolution, origin, observed cells, snapshots."""
+    H, W = g.shape
+    txt = f"{H}x{W} cells at {g.resolution:g} m, origin ({g.origin_xy[0]:g}, {g.origin_xy[1]:g}) m"
+    if g.observed is not None:
+        txt += f", {int((g.observed > 0).sum())} observed"
+    else:
+        txt += f", {int((g.prob > 0.5).sum())} occupied"
+    if g.snapshots is not None:
+        txt += f", {len(g.snapshots)} snapshots"
+    return txt
 
 
 @app.command("info")

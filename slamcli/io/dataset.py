@@ -178,6 +178,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                         units="m", frame="world", doc="true landmark positions (L,2)")
             write_array(gt, "obs_landmark", np.asarray(tr.obs_landmark, np.int64), units="-", frame="-",
                         doc="true landmark index of each observation row, -1 = clutter (N,)")
+            _write_truth_walls(gt, tr)
     return final
 
 
@@ -509,7 +510,33 @@ def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
     obs_lm = r.array("truth/obs_landmark", dtype="i", shape=(None,)).astype(np.int64, copy=False)
     r.expect_len("truth/obs_landmark", obs_lm, len(inputs.observations), "number of observations")
     _check_index_range(r, "truth/obs_landmark", obs_lm, -1, lms.shape[0] - 1)
-    return GroundTruth(poses_xyt=poses, landmarks_xy=lms, obs_landmark=obs_lm)
+    occupancy, walls_xyxy, lap_end = _read_truth_walls(r)
+    return GroundTruth(poses_xyt=poses, landmarks_xy=lms, obs_landmark=obs_lm, occupancy=occupancy,
+                       walls_xyxy=walls_xyxy, lap_end_step=lap_end)
+
+
+def _write_truth_walls(gt, tr: GroundTruth) -> None:
+    """Optional wall-world truth (paper 001): ``occupancy/`` grid group, ``walls_xyxy``, ``lap_end_step``."""
+    from slamcli.io.grid import write_grid
+
+    if tr.occupancy is not None:
+        write_grid(gt, "occupancy", tr.occupancy)
+    if tr.walls_xyxy is not None:
+        write_array(gt, "walls_xyxy", np.asarray(tr.walls_xyxy, np.float64).reshape(-1, 4), units="m",
+                    frame="world", doc="wall segments [x1, y1, x2, y2] (W,4)")
+    if tr.lap_end_step is not None:
+        write_array(gt, "lap_end_step", np.asarray(tr.lap_end_step, np.int64), units="-", frame="-",
+                    doc="step at which each lap of the route ended (K,)")
+
+
+def _read_truth_walls(r: Reader):
+    from slamcli.io.grid import read_grid
+
+    occ = read_grid(r, "truth/occupancy") if r.has("truth/occupancy") else None
+    walls = r.array("truth/walls_xyxy", dtype="f", shape=(None, 4)) if r.has("truth/walls_xyxy") else None
+    laps = (r.array("truth/lap_end_step", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+            if r.has("truth/lap_end_step") else None)
+    return occ, walls, laps
 
 
 def read_header(path: str | os.PathLike) -> dict[str, Any]:
