@@ -10,8 +10,11 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
         noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
+        @motion_model ("ddmr" default | "ackermann")   vehicle/ wheelbase_m encoder_offset_m  (ackermann)
+        sensor_offset_xy (2,)  (only when non-zero)    observations/diameter_m (N,) (only when reported)
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
+        or, with @kind="position_reference" (a real recording's GPS): ref_time_s (G,) ref_xy (G,2) only
 """
 
 from __future__ import annotations
@@ -141,8 +144,11 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                         frame="world", doc="GPS position fixes (G,2)")
             write_array(g, "gps_std", np.float64(inp.gps_std), units="m", frame="world",
                         doc="sigma of one GPS fix")
+        _write_motion_model(g, go, inp)
 
-        if dataset.truth is not None:
+        if dataset.truth is not None and dataset.truth.position_reference_only:
+            _write_position_reference(f, dataset.truth)
+        elif dataset.truth is not None:
             tr = dataset.truth
             gt = f.create_group("truth")
             gt.attrs["doc"] = "ground truth (slamcli.types.GroundTruth); never given to solvers"
@@ -153,6 +159,64 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
             write_array(gt, "obs_landmark", np.asarray(tr.obs_landmark, np.int64), units="-", frame="-",
                         doc="true landmark index of each observation row, -1 = clutter (N,)")
     return final
+
+
+def _write_motion_model(g, go, inp: SlamInputs) -> None:
+    """Motion-model tag, car geometry, sensor mount and per-observation object size (issue 14)."""
+    g.attrs["motion_model"] = str(inp.motion_model)
+    if inp.vehicle is not None:
+        gv = g.create_group("vehicle")
+        gv.attrs["doc"] = "car geometry of the ackermann motion model (slamcli.models.ackermann.AckermannParams)"
+        write_array(gv, "wheelbase_m", np.float64(inp.vehicle.wheelbase_m), units="m", frame="body",
+                    doc="L, rear axle to front axle")
+        write_array(gv, "encoder_offset_m", np.float64(inp.vehicle.encoder_offset_m), units="m", frame="body",
+                    doc="H, lateral offset of the rear-left speed encoder from the rear-axle centre")
+    off = np.asarray(inp.sensor_offset_xy, np.float64).reshape(2)
+    if off.any():
+        write_array(g, "sensor_offset_xy", off, units="m", frame="body",
+                    doc="sensor mount (a, b) in the body frame (2,)")
+    if inp.observations.diameter_m is not None:
+        write_array(go, "diameter_m", np.asarray(inp.observations.diameter_m, np.float64), units="m",
+                    frame="-", doc="object size reported by the feature extractor, e.g. trunk diameter (N,)")
+
+
+def _write_position_reference(f, tr: GroundTruth) -> None:
+    gt = f.create_group("truth")
+    gt.attrs["doc"] = "position-only reference (e.g. GPS): no true poses, landmarks or association"
+    gt.attrs["kind"] = "position_reference"
+    write_array(gt, "ref_time_s", np.asarray(tr.ref_time_s, np.float64).reshape(-1), units="s", frame="-",
+                doc="time of each reference fix (G,)")
+    write_array(gt, "ref_xy", np.asarray(tr.ref_xy, np.float64).reshape(-1, 2), units="m", frame="world",
+                doc="reference positions (G,2)")
+
+
+def _read_motion_model(r: Reader, inputs: SlamInputs) -> SlamInputs:
+    import dataclasses
+
+    from slamcli.models.ackermann import MOTION_MODELS, AckermannParams
+
+    model = r.attr("inputs", "motion_model", str, default="ddmr")
+    if model not in MOTION_MODELS:
+        raise r.fail("inputs/@motion_model", f"unknown motion model {model!r} (known: {', '.join(MOTION_MODELS)})")
+    vehicle = None
+    if r.has("inputs/vehicle"):
+        L = float(r.array("inputs/vehicle/wheelbase_m", dtype="f", shape=()))
+        H = float(r.array("inputs/vehicle/encoder_offset_m", dtype="f", shape=()))
+        if not L > 0:
+            raise r.fail("inputs/vehicle/wheelbase_m", f"must be > 0, got {L}")
+        vehicle = AckermannParams(wheelbase_m=L, encoder_offset_m=H)
+    if model == "ackermann" and vehicle is None:
+        raise r.fail("inputs/vehicle", "missing group (required by motion_model='ackermann')")
+    off = np.zeros(2)
+    if r.has("inputs/sensor_offset_xy"):
+        off = r.array("inputs/sensor_offset_xy", dtype="f", shape=(2,))
+    obs = inputs.observations
+    if r.has("inputs/observations/diameter_m"):
+        diam = r.array("inputs/observations/diameter_m", dtype="f", shape=(None,))
+        r.expect_len("inputs/observations/diameter_m", diam, len(obs), "number of observations")
+        obs = dataclasses.replace(obs, diameter_m=diam)
+    return dataclasses.replace(inputs, motion_model=model, vehicle=vehicle, sensor_offset_xy=off,
+                               observations=obs)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -178,7 +242,7 @@ def read_dataset(path: str | os.PathLike, *, with_truth: bool = True) -> Dataset
         if not isinstance(metadata, dict):
             raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
         has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
-        inputs = _read_inputs(r, dt)
+        inputs = _read_motion_model(r, _read_inputs(r, dt))
         truth = None
         if with_truth and has_truth:
             truth = _read_truth(r, inputs)
@@ -305,6 +369,13 @@ def _read_observations(r: Reader, n_poses: int) -> Observations:
 
 def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
     r.group("truth")
+    if r.attr("truth", "kind", str, default="full") == "position_reference":
+        ref_t = r.array("truth/ref_time_s", dtype="f", shape=(None,))
+        ref_xy = r.array("truth/ref_xy", dtype="f", shape=(None, 2))
+        r.expect_len("truth/ref_xy", ref_xy, ref_t.shape[0], "len(truth/ref_time_s)")
+        if ref_t.shape[0] > 1 and not (np.diff(ref_t) > 0).all():
+            raise r.fail("truth/ref_time_s", "not strictly increasing")
+        return GroundTruth(poses_xyt=None, landmarks_xy=None, obs_landmark=None, ref_time_s=ref_t, ref_xy=ref_xy)
     poses = r.array("truth/poses_xyt", dtype="f", shape=(None, 3))
     r.expect_len("truth/poses_xyt", poses, inputs.n_poses, "T+1 = len(inputs/timestamps)")
     lms = r.array("truth/landmarks_xy", dtype="f", shape=(None, 2))
@@ -380,7 +451,17 @@ def dataset_hash(dataset: Dataset) -> str:
     _feed(h, "gps_step", inp.gps_step, np.int64)
     _feed(h, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), np.float64)
     _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
-    if dataset.truth is not None:
+    # issue-14 fields are hashed only when not at their defaults, so hashes of older datasets are unchanged
+    if inp.motion_model != "ddmr" or inp.vehicle is not None:
+        h.update(f"motion_model|{inp.motion_model}|{inp.vehicle!r}|".encode())
+    if np.asarray(inp.sensor_offset_xy).any():
+        _feed(h, "sensor_offset_xy", inp.sensor_offset_xy, np.float64)
+    if obs.diameter_m is not None:
+        _feed(h, "obs.diameter_m", obs.diameter_m, np.float64)
+    if dataset.truth is not None and dataset.truth.position_reference_only:
+        _feed(h, "truth.ref_time_s", dataset.truth.ref_time_s, np.float64)
+        _feed(h, "truth.ref_xy", np.asarray(dataset.truth.ref_xy, np.float64).reshape(-1, 2), np.float64)
+    elif dataset.truth is not None:
         t = dataset.truth
         _feed(h, "truth.poses_xyt", np.asarray(t.poses_xyt, np.float64).reshape(-1, 3), np.float64)
         _feed(h, "truth.landmarks_xy", np.asarray(t.landmarks_xy, np.float64).reshape(-1, 2), np.float64)
