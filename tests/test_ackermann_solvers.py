@@ -79,7 +79,7 @@ def test_ekf_and_graph_recover_the_car_world_and_agree(world):
     e_ate, e_lm = _errors(ekf, world)
     g_ate, g_lm = _errors(graph, world)
     o_ate, _ = _errors(odo, world)
-    assert e_ate < 0.25 and g_ate < 0.25 and e_lm < 0.5 and g_lm < 0.5, (e_ate, g_ate, e_lm, g_lm)
+    assert e_ate < 0.06 and g_ate < 0.06 and e_lm < 0.12 and g_lm < 0.12, (e_ate, g_ate, e_lm, g_lm)
     assert e_ate < o_ate and g_ate < o_ate
     ag = trajectory_against(ekf.poses_xyt, graph.poses_xyt, ekf.landmarks_xy, graph.landmarks_xy, cutoff_m=1.0)
     assert ag["against_ate_rmse_m"] < 0.25 and ag["against_lm_matched"] == len(graph.landmarks_xy)
@@ -92,3 +92,14 @@ def test_ekf_and_graph_recover_the_car_world_and_agree(world):
 def test_unsupported_solver_refuses_in_one_line(world):
     with pytest.raises(SolverError, match="supports the motion model"):
         solve_dataset(world.inputs, "icm", {})
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_fastslam_car_model(world, version):
+    """FastSLAM 1.0 (sampled car model) and 2.0 (linearised car model) reach the EKF's accuracy class."""
+    res = solve_dataset(world.inputs, "fastslam", {"association": "known", "version": version, "n_particles": 30},
+                        seed=3)
+    ate, lm = _errors(res, world)
+    odo_ate, _ = _errors(solve_dataset(world.inputs, "odometry", {}), world)
+    assert ate < 0.1 and lm < 0.2, (ate, lm)
+    assert ate < 2 * odo_ate
