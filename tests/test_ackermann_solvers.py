@@ -101,5 +101,5 @@ def test_fastslam_car_model(world, version):
                         seed=3)
     ate, lm = _errors(res, world)
     odo_ate, _ = _errors(solve_dataset(world.inputs, "odometry", {}), world)
-    assert ate < 0.1 and lm < 0.2, (ate, lm)
+    assert ate < 0.07 and lm < 0.15, (ate, lm)
     assert ate < 2 * odo_ate

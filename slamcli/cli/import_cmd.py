@@ -52,6 +52,8 @@ def import_mrclam_command(
     omega_std: Annotated[
         float | None, typer.Option(help="σ_ω of the controls to store, rad/s (default 0.07).")
     ] = None,
+    no_truth: Annotated[bool, typer.Option(
+        "--no-truth", help="Copy without Groundtruth files: x0 = 0 (own frame), no ground truth stored.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -107,12 +109,20 @@ def import_mrclam_command(
             noise=noise,
             control_delay=control_delay,
             max_range=max_range,
+            no_truth=no_truth,
         )
         write_dataset(out, ds)
         if quiet:
             return
         inp, md = ds.inputs, ds.metadata
         T = inp.n_poses - 1
+        if ds.truth is None:
+            stdout_console().print(
+                f"MRCLAM {directory.name} robot {robot} (no ground truth): {T} steps of {inp.dt:g} s, "
+                f"{len(inp.observations)} observations, odometry path "
+                f"{float(np.sum(np.hypot(*np.diff(inp.odometry_xyt[:, :2], axis=0).T))):.1f} m → {out}",
+                highlight=False, markup=False, soft_wrap=True)
+            return
         path_len = float(np.sum(np.hypot(*np.diff(ds.truth.poses_xyt[:, :2], axis=0).T)))
         n_clutter = int(np.sum(inp.observations.reported_id < 0))
         stdout_console().print(
