@@ -178,6 +178,8 @@ class GroundTruth:
     ref_time_s : ndarray (G,) | None   position-only reference (a real recording's GPS): fix times, s ...
     ref_xy : ndarray (G, 2) | None     ... and positions, m. When ``poses_xyt`` is None the truth is a
                                        position reference only: no true poses, landmarks or association.
+    ref_offset_xy : ndarray (2,) | None  body-frame point the reference positions refer to (e.g. the GPS
+                                       antenna); None = the body origin.
     """
 
     poses_xyt: np.ndarray | None
@@ -185,6 +187,7 @@ class GroundTruth:
     obs_landmark: np.ndarray | None
     ref_time_s: np.ndarray | None = None
     ref_xy: np.ndarray | None = None
+    ref_offset_xy: np.ndarray | None = None
 
     @property
     def position_reference_only(self) -> bool:

@@ -207,17 +207,31 @@ def evaluate_without_truth(result, dataset):
     truth = dataset.truth
     if truth is not None and truth.ref_time_s is not None:
         s["truth"] = "position reference (GPS) only"
-        g = ate_vs_position_reference(inp.timestamps, est, truth.ref_time_s, truth.ref_xy)
-        odo = ate_vs_position_reference(inp.timestamps, inp.odometry_xyt, truth.ref_time_s, truth.ref_xy)
-        errs, t_m = g.pop("gps_errors_aligned_m"), g.pop("gps_matched_time_s")
+        from slamcli.models.observation import sensor_pose
+
+        off = np.zeros(2) if truth.ref_offset_xy is None else np.asarray(truth.ref_offset_xy, float)
+        # the reference positions refer to the body point `off` (e.g. the GPS antenna)
+        g = ate_vs_position_reference(inp.timestamps, sensor_pose(est, off), truth.ref_time_s, truth.ref_xy)
+        odo = ate_vs_position_reference(inp.timestamps, sensor_pose(inp.odometry_xyt, off), truth.ref_time_s,
+                                        truth.ref_xy)
+        s["gps_ref_point_xy_m"] = off.tolist()
+        errs, t_m, align = g.pop("gps_errors_aligned_m"), g.pop("gps_matched_time_s"), g.pop("gps_alignment")
+        odo.pop("gps_alignment")
         s.update(g)
+        missing = [m for m in missing if not m.startswith("ate_rmse_m")]
+        if truth.landmarks_xy is not None and align is not None:  # surveyed landmarks (car park beacons)
+            from slamcli.metrics.reference import landmarks_vs_surveyed
+
+            s.update(landmarks_vs_surveyed(result.landmarks_xy, truth.landmarks_xy, *align))
+            missing = [m for m in missing if not m.startswith("landmark errors")]
+            s["survey_note"] = ("estimated landmarks moved into the GPS frame by the trajectory's SE(2) alignment, "
+                                "then optimally assigned to the surveyed ones within the cut-off")
         s["odometry_gps_ate_aligned_rmse_m"] = odo["gps_ate_aligned_rmse_m"]
         s["gps_note"] = (f"positions vs GPS at {g['gps_n_matched']} fixes (estimate interpolated at the GPS times); "
                          f"{g['gps_gap_count']} gaps > {g['gps_gap_threshold_s']:g} s without GPS, "
                          f"{g['gps_gap_total_s']:.1f} s in all, longest {g['gps_longest_gap_s']:.1f} s; the "
                          "unaligned ATE assumes the run's start frame is the GPS frame (it is not known to be), "
-                         "the aligned one removes that frame; the GPS antenna lever arm is not corrected")
-        missing = [m for m in missing if not m.startswith("ate_rmse_m")]
+                         f"the aligned one removes that frame; positions of the body point {off.tolist()} m")
         per_step["gps_aligned_err_m"] = np.interp(inp.timestamps, t_m, errs) if len(t_m) else np.nan
     s["not_available"] = missing
     n_it = len(result.trace) if result.trace is not None else 0

@@ -33,6 +33,7 @@ _ROWS = [
     ("GPS ATE RMSE (unaligned)", "gps_ate_rmse_m", "m"),
     ("odometry GPS ATE (aligned)", "odometry_gps_ate_aligned_rmse_m", "m"),
     ("GPS fixes matched / gaps / longest gap", ("gps_n_matched", "gps_gap_count", "gps_longest_gap_s"), "-/-/s"),
+    ("surveyed landmarks matched / RMSE", ("survey_lm_matched", "survey_lm_rmse_m"), "- / m"),
     ("final cost (own model)", "final_cost", ""),
     ("mean NIS / 95 % band", ("nis_mean", "nis_band_lo", "nis_band_hi"), ""),
     ("estimated landmarks (map size)", "n_landmarks_est", ""),

@@ -222,3 +222,33 @@ def import_victoria_park_command(
             f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s) → {out}",
             highlight=False, markup=False, soft_wrap=True,
         )
+
+
+@import_app.command("carpark")
+def import_carpark_command(
+    directory: Annotated[Path, typer.Argument(help="ACFR car-park folder (data_set.mat, beac_juan3.mat).")],
+    max_range: Annotated[float, typer.Option(help="Drop beacon returns beyond this range, m.")] = 81.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
+    out: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
+    ] = None,
+) -> None:
+    """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
+    ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        from slamcli.datasets.carpark import import_carpark
+        from slamcli.io import write_dataset
+
+        ds = import_carpark(directory, max_range=max_range)
+        write_dataset(out, ds)
+        if quiet:
+            return
+        inp, md = ds.inputs, ds.metadata
+        stdout_console().print(
+            f"ACFR car park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+            f"{md['n_beacon_observations']} beacon observations (intensity >= {md['beacon_intensity_threshold']}), "
+            f"{md['n_surveyed_beacons']} surveyed beacons, {md['n_gps_fixes']} GPS fixes → {out}",
+            highlight=False, markup=False, soft_wrap=True,
+        )

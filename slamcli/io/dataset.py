@@ -188,6 +188,12 @@ def _write_position_reference(f, tr: GroundTruth) -> None:
                 doc="time of each reference fix (G,)")
     write_array(gt, "ref_xy", np.asarray(tr.ref_xy, np.float64).reshape(-1, 2), units="m", frame="world",
                 doc="reference positions (G,2)")
+    if tr.ref_offset_xy is not None:
+        write_array(gt, "ref_offset_xy", np.asarray(tr.ref_offset_xy, np.float64).reshape(2), units="m",
+                    frame="body", doc="body-frame point the reference positions refer to (2,)")
+    if tr.landmarks_xy is not None:
+        write_array(gt, "landmarks_xy", np.asarray(tr.landmarks_xy, np.float64).reshape(-1, 2), units="m",
+                    frame="world", doc="surveyed landmark positions in the reference frame (L,2); no association")
 
 
 def _read_motion_model(r: Reader, inputs: SlamInputs) -> SlamInputs:
@@ -375,7 +381,10 @@ def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
         r.expect_len("truth/ref_xy", ref_xy, ref_t.shape[0], "len(truth/ref_time_s)")
         if ref_t.shape[0] > 1 and not (np.diff(ref_t) > 0).all():
             raise r.fail("truth/ref_time_s", "not strictly increasing")
-        return GroundTruth(poses_xyt=None, landmarks_xy=None, obs_landmark=None, ref_time_s=ref_t, ref_xy=ref_xy)
+        lms = r.array("truth/landmarks_xy", dtype="f", shape=(None, 2)) if r.has("truth/landmarks_xy") else None
+        ref_off = r.array("truth/ref_offset_xy", dtype="f", shape=(2,)) if r.has("truth/ref_offset_xy") else None
+        return GroundTruth(poses_xyt=None, landmarks_xy=lms, obs_landmark=None, ref_time_s=ref_t, ref_xy=ref_xy,
+                           ref_offset_xy=ref_off)
     poses = r.array("truth/poses_xyt", dtype="f", shape=(None, 3))
     r.expect_len("truth/poses_xyt", poses, inputs.n_poses, "T+1 = len(inputs/timestamps)")
     lms = r.array("truth/landmarks_xy", dtype="f", shape=(None, 2))
@@ -461,6 +470,11 @@ def dataset_hash(dataset: Dataset) -> str:
     if dataset.truth is not None and dataset.truth.position_reference_only:
         _feed(h, "truth.ref_time_s", dataset.truth.ref_time_s, np.float64)
         _feed(h, "truth.ref_xy", np.asarray(dataset.truth.ref_xy, np.float64).reshape(-1, 2), np.float64)
+        if dataset.truth.ref_offset_xy is not None:
+            _feed(h, "truth.ref_offset_xy", dataset.truth.ref_offset_xy, np.float64)
+        if dataset.truth.landmarks_xy is not None:
+            _feed(h, "truth.landmarks_xy", np.asarray(dataset.truth.landmarks_xy, np.float64).reshape(-1, 2),
+                  np.float64)
     elif dataset.truth is not None:
         t = dataset.truth
         _feed(h, "truth.poses_xyt", np.asarray(t.poses_xyt, np.float64).reshape(-1, 3), np.float64)

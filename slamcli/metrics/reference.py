@@ -9,8 +9,8 @@
 
   reported unaligned and after the least-squares SE(2) alignment of the estimate onto the reference (2-D
   Kabsch/Umeyama without scale: ``R, t = argmin Σ‖R p̂_i + t − g_i‖²``), which removes an unknown map frame
-  (a real run's start heading in the GPS frame is not known). The lever arm between the body origin and the
-  GPS antenna is not known either and is not corrected.
+  (a real run's start heading in the GPS frame is not known). The caller passes the positions of the body
+  point the reference refers to (``GroundTruth.ref_offset_xy``, e.g. the GPS antenna).
 * :func:`gaps` — the intervals without reference fixes longer than ``gap_s`` (stated with every ATE).
 * :func:`trajectory_against` — ATE and landmark distances of one result against another (``evaluate
   --against``): same pose count required; landmarks matched by optimal assignment (``linear_sum_assignment``)
@@ -73,14 +73,34 @@ def ate_vs_position_reference(timestamps, poses_xyt, ref_time_s, ref_xy, *, gap_
     }
     if len(t_m) < 2:
         out.update(gps_ate_rmse_m=float("nan"), gps_ate_aligned_rmse_m=float("nan"),
-                   gps_ate_aligned_max_m=float("nan"), gps_errors_aligned_m=np.zeros(0), gps_matched_time_s=t_m)
+                   gps_ate_aligned_max_m=float("nan"), gps_errors_aligned_m=np.zeros(0), gps_matched_time_s=t_m,
+                   gps_alignment=None)
         return out
     e = np.linalg.norm(est - g, axis=1)
     R, t = align_se2_xy(est, g)
     ea = np.linalg.norm(est @ R.T + t - g, axis=1)
     out.update(gps_ate_rmse_m=float(np.sqrt(np.mean(e**2))), gps_ate_aligned_rmse_m=float(np.sqrt(np.mean(ea**2))),
-               gps_ate_aligned_max_m=float(ea.max()), gps_errors_aligned_m=ea, gps_matched_time_s=t_m)
+               gps_ate_aligned_max_m=float(ea.max()), gps_errors_aligned_m=ea, gps_matched_time_s=t_m,
+               gps_alignment=(R, t))
     return out
+
+
+def landmarks_vs_surveyed(est_xy, surveyed_xy, R, t, *, cutoff_m: float = 2.0) -> dict:
+    """Estimated landmarks mapped into the reference frame by the trajectory alignment ``(R, t)`` (from
+    :func:`ate_vs_position_reference`), then matched to surveyed landmarks by optimal assignment with a cut-off:
+    ``survey_lm_matched``, ``survey_lm_rmse_m`` (matched pairs), ``survey_lm_missed``, ``survey_lm_spurious``."""
+    est = np.asarray(est_xy, float).reshape(-1, 2) @ np.asarray(R).T + np.asarray(t)
+    sv = np.asarray(surveyed_xy, float).reshape(-1, 2)
+    n, rmse = 0, float("nan")
+    if len(est) and len(sv):
+        D = cdist(est, sv)
+        r, c = linear_sum_assignment(np.minimum(D, cutoff_m))
+        ok = D[r, c] <= cutoff_m
+        n = int(ok.sum())
+        if n:
+            rmse = float(np.sqrt(np.mean(D[r, c][ok] ** 2)))
+    return {"survey_lm_matched": n, "survey_lm_rmse_m": rmse, "survey_lm_missed": int(len(sv) - n),
+            "survey_lm_spurious": int(len(est) - n), "survey_lm_cutoff_m": float(cutoff_m)}
 
 
 def trajectory_against(poses_a, poses_b, landmarks_a, landmarks_b, *, cutoff_m: float = 2.0) -> dict:
