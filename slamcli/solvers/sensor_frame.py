@@ -50,6 +50,9 @@ def to_sensor_frame(inputs: SlamInputs) -> SlamInputs:
     if inputs.motion_model == "ddmr":
         raise SolverError("a sensor offset with the ddmr motion model is not supported (the DDMR controls drive "
                           "the body origin); use motion_model='ackermann' or a zero offset")
+    if len(inputs.gps_step):
+        raise SolverError("GPS inputs with a sensor offset are not supported (the fixes refer to the body origin, "
+                          "the solver state to the sensor)")
     vehicle = inputs.vehicle
     if vehicle is not None:
         vehicle = dataclasses.replace(vehicle, ref_x_m=float(off[0]), ref_y_m=float(off[1]))
