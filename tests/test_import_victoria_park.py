@@ -9,6 +9,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from tiny_world import tiny_dataset
 from typer.testing import CliRunner
 
 from slamcli.api.solve import solve_dataset
@@ -18,7 +19,6 @@ from slamcli.datasets.victoria_park import import_victoria_park
 from slamcli.io import dataset_hash, read_dataset, write_dataset
 from slamcli.models.ackermann import VICTORIA_PARK, integrate_ackermann
 from slamcli.models.observation import inverse_range_bearing_offset
-from tiny_world import tiny_dataset
 
 VP = Path(__file__).parent / "data" / "victoria_park_excerpt"
 runner = CliRunner()

@@ -9,7 +9,6 @@ import shutil
 import sys
 from pathlib import Path
 
-import numpy as np
 import scipy.io as sio
 
 SRC = Path(sys.argv[1] if len(sys.argv) > 1 else "/work/shared/datasets/acfr_carpark")
