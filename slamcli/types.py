@@ -125,6 +125,42 @@ class Observations:
 
 
 @dataclass(frozen=True)
+class PoseConstraints:
+    """Per-edge constraints with their own information matrices (``/inputs/constraints`` in the schema).
+
+    Pose graphs (g2o ``EDGE_SE2`` loop closures), lossless graph imports and, later, multi-robot encounters
+    carry one information matrix per edge instead of one σ per quantity. Every field is optional (None or
+    zero rows when absent).
+
+    Attributes
+    ----------
+    between_ij : ndarray (B, 2) int64       pose indices ``(i, j)`` of each pose-pose constraint (any two poses;
+                                            the odometry chain ``t → t+1`` is *not* repeated here).
+    between_xyt : ndarray (B, 3)            measured pose of ``j`` in ``i``'s body frame ``[dx, dy, dθ]``
+                                            (g2o / GTSAM ``BetweenFactorPose2``: ``e = Log(d⁻¹ ⊕ x_i⁻¹ ⊕ x_j)``).
+    between_info : ndarray (B, 3, 3)        information ``Λ = Σ⁻¹`` of ``e`` (symmetric positive definite).
+    odometry_info : ndarray (T, 3, 3) | None  information of each odometry increment (replaces
+                                            ``NoiseSpec.odometry_std`` for the graph solver).
+    observation_info : ndarray (N, 2, 2) | None  information of each observation row, in the model named by
+                                            ``observation_model``.
+    observation_model : "range_bearing" | "xy"  ``range_bearing``: residual ``[r̂ − r, b̂ − b]``; ``xy``: the
+                                            Cartesian offset ``z = [r cos b, r sin b]`` in the body frame,
+                                            residual ``R(θ)ᵀ(m − p) − z`` (g2o ``EDGE_SE2_XY``).
+    """
+
+    between_ij: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    between_xyt: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    between_info: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    odometry_info: np.ndarray | None = None
+    observation_info: np.ndarray | None = None
+    observation_model: str = "range_bearing"
+
+    @property
+    def n_between(self) -> int:
+        return int(np.asarray(self.between_ij).reshape(-1, 2).shape[0])
+
+
+@dataclass(frozen=True)
 class NoiseBounds:
     """Guaranteed error bounds (set-membership data): every error lies in ``[-h, +h]`` of its half-width ``h``.
 
@@ -169,6 +205,10 @@ class SlamInputs:
                                      ``noise.motion_std`` = [σ_v m/s, σ_α rad]). Old files read as "ddmr".
     vehicle : AckermannParams | None car geometry, required with motion_model="ackermann".
     sensor_offset_xy : ndarray (2,)  sensor mount (a, b) in the body frame, m (zeros = at the body origin).
+    constraints : PoseConstraints | None  per-edge information and pose-pose (loop-closure) constraints.
+    reported_id_source : str         where ``observations.reported_id`` comes from: ``"sensor"`` (a real sensor
+                                     that can misread an id, e.g. MRCLAM's barcodes), ``"file"`` (a graph
+                                     file's data association), ``"unknown"`` (default; the simulator's ids).
     noise_bounds : NoiseBounds | None  guaranteed error bounds (bounded-noise datasets only).
     """
 
@@ -186,6 +226,8 @@ class SlamInputs:
     motion_model: str = "ddmr"
     vehicle: Any = None
     sensor_offset_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    constraints: PoseConstraints | None = None
+    reported_id_source: str = "unknown"
     noise_bounds: NoiseBounds | None = None
 
     @property

@@ -78,6 +78,12 @@ def dataset_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str
         v = inp.vehicle
         rows.append(("motion model", f"{inp.motion_model} (L {v.wheelbase_m:g} m, H {v.encoder_offset_m:g} m); "
                                      f"sensor at {np.round(inp.sensor_offset_xy, 3).tolist()} m"))
+    c = inp.constraints
+    if c is not None:
+        per_edge = [n for n, a in (("odometry", c.odometry_info), (f"observations ({c.observation_model})",
+                                                                   c.observation_info)) if a is not None]
+        rows.append(("constraints", f"{c.n_between} loop closures (pose-pose between-factors); per-edge "
+                                    f"information: {', '.join(per_edge) or 'none'}"))
     rows.append(("content hash", dataset_hash(ds)[:23] + "…"))
     params = hdr.get("scenario_params_json")
     if not isinstance(params, dict):
@@ -112,7 +118,12 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
         rows.append(("objective first → last", f"{obj[0]:.6g} → {obj[-1]:.6g}"))
     if res.extra.get("used_truth_association"):
         rows.append(("association", "ORACLE (true association given to the solver)"))
-    extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path",)}
+    outliers = res.extra.get("chi2_outliers")
+    if isinstance(outliers, dict) and outliers:
+        rows.append(("χ² outliers 95/99 %", "; ".join(
+            f"{name} {d.get('over_95')}/{d.get('over_99')} of {d.get('factors')}" for name, d in outliers.items()
+            if isinstance(d, dict))))
+    extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path", "chi2_outliers")}
     params = _flatten({"params": res.params, "extra": extra})
     return rows, params
 

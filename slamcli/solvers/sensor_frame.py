@@ -50,6 +50,8 @@ def to_sensor_frame(inputs: SlamInputs) -> SlamInputs:
     if inputs.motion_model == "ddmr":
         raise SolverError("a sensor offset with the ddmr motion model is not supported (the DDMR controls drive "
                           "the body origin); use motion_model='ackermann' or a zero offset")
+    if getattr(inputs, "constraints", None) is not None:
+        raise SolverError("pose-pose constraints with a sensor offset are not supported (they relate body poses)")
     if len(inputs.gps_step):
         raise SolverError("GPS inputs with a sensor offset are not supported (the fixes refer to the body origin, "
                           "the solver state to the sensor)")
