@@ -55,6 +55,8 @@ class Observations:
                                        simulator option ``report_ids``); -1 when the sensor reports none.
                                        This is a measurement a solver may use, not ground truth.
     offsets : ndarray (T+2,) int64     rows of pose t are ``offsets[t]:offsets[t+1]``.
+    diameter_m : ndarray (N,) | None   optional size of the observed object reported by the feature
+                                       extractor (Victoria Park: trunk diameter), m; None = not reported.
     landmark_type : ndarray (N,) int64 | None  landmark *type* label reported by the sensor (e.g. 0 = door,
                                        1 = corridor) without the identity; None when the sensor reports none.
     """
@@ -65,6 +67,7 @@ class Observations:
     sensor: np.ndarray
     reported_id: np.ndarray
     offsets: np.ndarray
+    diameter_m: np.ndarray | None = None
     landmark_type: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -197,6 +200,11 @@ class SlamInputs:
     gps_step : ndarray (G,) int64    optional GPS fixes: pose index ...
     gps_xy : ndarray (G, 2)          ... and position, m.
     gps_std : float                  σ of a GPS fix, m.
+    motion_model : str               "ddmr" (controls = [v, ω]) or "ackermann" (controls = [v_e, α]: speed at
+                                     the rear-left encoder and steering, see slamcli.models.ackermann; then
+                                     ``noise.motion_std`` = [σ_v m/s, σ_α rad]). Old files read as "ddmr".
+    vehicle : AckermannParams | None car geometry, required with motion_model="ackermann".
+    sensor_offset_xy : ndarray (2,)  sensor mount (a, b) in the body frame, m (zeros = at the body origin).
     constraints : PoseConstraints | None  per-edge information and pose-pose (loop-closure) constraints.
     reported_id_source : str         where ``observations.reported_id`` comes from: ``"sensor"`` (a real sensor
                                      that can misread an id, e.g. MRCLAM's barcodes), ``"file"`` (a graph
@@ -215,6 +223,9 @@ class SlamInputs:
     gps_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     gps_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     gps_std: float = 0.0
+    motion_model: str = "ddmr"
+    vehicle: Any = None
+    sensor_offset_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
     constraints: PoseConstraints | None = None
     reported_id_source: str = "unknown"
     noise_bounds: NoiseBounds | None = None
@@ -264,14 +275,27 @@ class GroundTruth:
     occupancy : OccupancyGrid | None   wall worlds: the true grid (walls rasterised, prob 0/1).
     walls_xyxy : ndarray (W, 4) | None wall worlds: wall segments ``[x1, y1, x2, y2]``, m.
     lap_end_step : ndarray (K,) int64 | None  wall worlds: step at which each lap of the route ended.
+    ref_time_s : ndarray (G,) | None   position-only reference (a real recording's GPS): fix times, s ...
+    ref_xy : ndarray (G, 2) | None     ... and positions, m. When ``poses_xyt`` is None the truth is a
+                                       position reference only: no true poses, landmarks or association.
+    ref_offset_xy : ndarray (2,) | None  body-frame point the reference positions refer to (e.g. the GPS
+                                       antenna); None = the body origin.
     """
 
-    poses_xyt: np.ndarray
-    landmarks_xy: np.ndarray
-    obs_landmark: np.ndarray
+    poses_xyt: np.ndarray | None
+    landmarks_xy: np.ndarray | None
+    obs_landmark: np.ndarray | None
     occupancy: OccupancyGrid | None = None
     walls_xyxy: np.ndarray | None = None
     lap_end_step: np.ndarray | None = None
+    ref_time_s: np.ndarray | None = None
+    ref_xy: np.ndarray | None = None
+    ref_offset_xy: np.ndarray | None = None
+
+    @property
+    def position_reference_only(self) -> bool:
+        """True when only a time-stamped position reference (e.g. GPS) is known."""
+        return self.poses_xyt is None
 
 
 @dataclass(frozen=True)

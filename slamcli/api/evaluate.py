@@ -94,6 +94,8 @@ def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = T
                                f"has hash {h[:19]}… (wrong or modified dataset)")
     if require_truth and dataset.truth is None:
         raise SlamcliError(f"{data_path}: dataset has no ground truth; nothing to evaluate against")
+    if require_truth and dataset.truth.position_reference_only:
+        raise SlamcliError(f"{data_path}: dataset has no ground truth (a GPS position reference only)")
     n_poses, n_obs = dataset.inputs.n_poses, len(dataset.inputs.observations)
     if result.poses_xyt.shape[0] != n_poses:
         raise SlamcliError(f"{result_path}: poses_xyt: {result.poses_xyt.shape[0]} poses, but dataset {data_path} "
@@ -166,7 +168,8 @@ def write_evaluation(evaluation, out_dir, extra_scalars: dict | None = None) -> 
 def evaluate_files(result_path: str | os.PathLike, data_path: str | os.PathLike | None = None,
                    out_dir: str | os.PathLike | None = None, *, cutoff: float = 1.0, ospa_order: float = 2.0,
                    near_path_m: float | None = None, rpe_delta: float = 1.0, rpe_unit: str = "steps",
-                   check_hash: bool = True, return_tables: bool = False):
+                   check_hash: bool = True, return_tables: bool = False,
+                   against: str | os.PathLike | None = None):
     """Evaluate one result file.
 
     Parameters
@@ -176,6 +179,9 @@ def evaluate_files(result_path: str | os.PathLike, data_path: str | os.PathLike 
     out_dir : where to write ``metrics.json`` + CSVs; None = write nothing.
     cutoff, ospa_order, near_path_m, rpe_delta, rpe_unit : see :class:`slamcli.metrics.summary.EvaluationParams`.
     return_tables : also return the :class:`~slamcli.metrics.summary.Evaluation` (tables included).
+    against : another result file of the same dataset; adds ``against_*`` metrics (this result's ATE and
+        landmark distances with the other as reference). A dataset without ground truth (or with a GPS-only
+        reference) gets :func:`evaluate_without_truth` instead of the truth metrics.
 
     Returns
     -------
@@ -185,11 +191,17 @@ def evaluate_files(result_path: str | os.PathLike, data_path: str | os.PathLike 
 
     check_evaluation_options(cutoff=cutoff, ospa_order=ospa_order, near_path_m=near_path_m, rpe_delta=rpe_delta,
                              rpe_unit=rpe_unit)
-    result, dataset, data_path = load_result_and_dataset(result_path, data_path, check_hash=check_hash)
+    result, dataset, data_path = load_result_and_dataset(result_path, data_path, check_hash=check_hash,
+                                                         require_truth=False)
     params = EvaluationParams(cutoff_m=cutoff, ospa_order=ospa_order, near_path_m=near_path_m,
                               rpe_delta=rpe_delta, rpe_unit=rpe_unit)
     try:
-        ev = evaluate_result(result, dataset.truth, dataset.inputs.odometry_xyt, params)
+        if dataset.truth is None or dataset.truth.position_reference_only:
+            ev = evaluate_without_truth(result, dataset)
+        else:
+            ev = evaluate_result(result, dataset.truth, dataset.inputs.odometry_xyt, params)
+        if against is not None:
+            ev = _add_against(ev, result, against, cutoff)
     except ValueError as exc:
         raise SlamcliError(f"{result_path} vs {data_path}: {exc}") from None
     files = {"result_path": str(result_path), "dataset_path": str(data_path),
@@ -229,3 +241,85 @@ def monte_carlo_nees_files(result_paths, data_paths=None, *, confidence: float =
         res, ds, _ = load_result_and_dataset(rp, dp, check_hash=check_hash)
         pairs.append((res, ds.truth))
     return monte_carlo_pose_nees(pairs, confidence)
+
+
+# ------------------------------------------------------------------------------------------------------
+# real recordings: no ground truth, or a position-only reference (issue 14)
+# ------------------------------------------------------------------------------------------------------
+def evaluate_without_truth(result, dataset):
+    """Metrics of a result whose dataset has no true poses/landmarks: the solver's own final cost, NIS with
+    its χ² band (filters), map size, dead-reckoning distance, and — with a position reference (GPS) — ATE
+    against it matched by time with the gaps stated. ``not_available`` lists what needs the truth."""
+    import numpy as np
+    import pandas as pd
+
+    from slamcli.metrics.reference import TRUTH_ONLY_METRICS, ate_vs_position_reference, own_model_metrics
+    from slamcli.metrics.summary import Evaluation
+
+    inp = dataset.inputs
+    est = np.asarray(result.poses_xyt, float)
+    if est.shape[0] != inp.n_poses:
+        raise ValueError(f"result has {est.shape[0]} poses but the dataset has {inp.n_poses}")
+    s = {"solver": result.solver, "status": getattr(result.status, "value", str(result.status)),
+         "n_poses": int(est.shape[0]), "truth": "none"}
+    s.update(own_model_metrics(result))
+    s["path_length_m"] = float(np.sum(np.linalg.norm(np.diff(est[:, :2], axis=0), axis=1)))
+    per_step = pd.DataFrame({"step": np.arange(len(est)), "time_s": inp.timestamps, "est_x": est[:, 0],
+                             "est_y": est[:, 1], "est_theta": est[:, 2]})
+    missing = list(TRUTH_ONLY_METRICS)
+    truth = dataset.truth
+    if truth is not None and truth.ref_time_s is not None:
+        s["truth"] = "position reference (GPS) only"
+        from slamcli.models.observation import sensor_pose
+
+        off = np.zeros(2) if truth.ref_offset_xy is None else np.asarray(truth.ref_offset_xy, float)
+        # the reference positions refer to the body point `off` (e.g. the GPS antenna)
+        g = ate_vs_position_reference(inp.timestamps, sensor_pose(est, off), truth.ref_time_s, truth.ref_xy)
+        odo = ate_vs_position_reference(inp.timestamps, sensor_pose(inp.odometry_xyt, off), truth.ref_time_s,
+                                        truth.ref_xy)
+        s["gps_ref_point_xy_m"] = off.tolist()
+        errs, t_m, align = g.pop("gps_errors_aligned_m"), g.pop("gps_matched_time_s"), g.pop("gps_alignment")
+        odo.pop("gps_alignment")
+        s.update(g)
+        missing = [m for m in missing if not m.startswith("ate_rmse_m")]
+        if truth.landmarks_xy is not None and align is not None:  # surveyed landmarks (car park beacons)
+            from slamcli.metrics.reference import landmarks_vs_surveyed
+
+            s.update(landmarks_vs_surveyed(result.landmarks_xy, truth.landmarks_xy, *align))
+            missing = [m for m in missing if not m.startswith("landmark errors")]
+            s["survey_note"] = ("estimated landmarks moved into the GPS frame by the trajectory's SE(2) alignment, "
+                                "then optimally assigned to the surveyed ones within the cut-off")
+        s["odometry_gps_ate_aligned_rmse_m"] = odo["gps_ate_aligned_rmse_m"]
+        s["gps_note"] = (f"positions vs GPS at {g['gps_n_matched']} fixes (estimate interpolated at the GPS times); "
+                         f"{g['gps_gap_count']} gaps > {g['gps_gap_threshold_s']:g} s without GPS, "
+                         f"{g['gps_gap_total_s']:.1f} s in all, longest {g['gps_longest_gap_s']:.1f} s; the "
+                         "unaligned ATE assumes the run's start frame is the GPS frame (it is not known to be), "
+                         f"the aligned one removes that frame; positions of the body point {off.tolist()} m")
+        per_step["gps_aligned_err_m"] = np.interp(inp.timestamps, t_m, errs) if len(t_m) else np.nan
+    s["not_available"] = missing
+    n_it = len(result.trace) if result.trace is not None else 0
+    per_iteration = pd.DataFrame({"iteration": np.arange(n_it),
+                                  "objective": result.trace.objective if n_it else np.zeros(0),
+                                  "n_landmarks": [len(result.trace.landmarks_at(k)) for k in range(n_it)]})
+    lm = np.asarray(result.landmarks_xy, float).reshape(-1, 2)
+    counts = np.bincount(np.asarray(result.assoc)[np.asarray(result.assoc) >= 0], minlength=len(lm))[:len(lm)]
+    per_landmark = pd.DataFrame({"landmark": np.arange(len(lm)), "est_x": lm[:, 0], "est_y": lm[:, 1],
+                                 "n_obs": counts})
+    return Evaluation(scalars=s, per_iteration=per_iteration, per_step=per_step, per_landmark=per_landmark)
+
+
+def _add_against(ev, result, against_path, cutoff: float):
+    """Add ``against_*`` scalars: this result against another result of the same dataset."""
+    import dataclasses
+
+    from slamcli.io import read_result
+    from slamcli.metrics.reference import trajectory_against
+
+    other = read_result(against_path)
+    if result.dataset_hash and other.dataset_hash and result.dataset_hash != other.dataset_hash:
+        raise ValueError(f"--against {against_path}: computed on a different dataset "
+                         f"({other.dataset_hash[:19]}… vs {result.dataset_hash[:19]}…)")
+    m = trajectory_against(result.poses_xyt, other.poses_xyt, result.landmarks_xy, other.landmarks_xy,
+                           cutoff_m=max(cutoff, 1e-9))
+    m["against"] = f"{other.solver} ({against_path})"
+    return dataclasses.replace(ev, scalars={**ev.scalars, **m})

@@ -122,7 +122,7 @@ def solve(ds: Dataset | PathLike, method: str, *, seed: int = 0, init: SolverRes
     dataset = _dataset(ds)
     inputs = dataset.inputs
     if oracle_association:
-        if dataset.truth is None:
+        if dataset.truth is None or dataset.truth.position_reference_only:
             raise ConfigError("oracle_association: the dataset has no ground truth (no true association)")
         obs = dataclasses.replace(inputs.observations, reported_id=dataset.truth.obs_landmark.copy())
         inputs = dataclasses.replace(inputs, observations=obs)
@@ -161,8 +161,6 @@ def evaluate(r: SolverResult | PathLike, ds: Dataset | PathLike | None = None, *
     if ds is None:
         raise ConfigError("evaluate: give the dataset of an in-memory result")
     dataset = _dataset(ds)
-    if dataset.truth is None:
-        raise SlamcliError("evaluate: the dataset has no ground truth")
     if check_hash and result.dataset_hash and result.dataset_hash != dataset_hash(dataset):
         raise SlamcliError("evaluate: the result was computed on another dataset (content hash differs)")
     if not cutoff > 0:
@@ -172,7 +170,12 @@ def evaluate(r: SolverResult | PathLike, ds: Dataset | PathLike | None = None, *
     params = EvaluationParams(cutoff_m=cutoff, ospa_order=ospa_order, near_path_m=near_path_m,
                               rpe_delta=rpe_delta, rpe_unit=rpe_unit)
     try:
-        ev = evaluate_result(result, dataset.truth, dataset.inputs.odometry_xyt, params)
+        if dataset.truth is None or dataset.truth.position_reference_only:
+            from slamcli.api.evaluate import evaluate_without_truth
+
+            ev = evaluate_without_truth(result, dataset)  # own-model metrics, GPS ATE when there is GPS
+        else:
+            ev = evaluate_result(result, dataset.truth, dataset.inputs.odometry_xyt, params)
     except ValueError as exc:
         raise SlamcliError(f"evaluate: {exc}") from None
     if out_dir is not None:

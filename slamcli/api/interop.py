@@ -57,7 +57,7 @@ def export_file(src: str | os.PathLike, fmt: str, out: str | os.PathLike, *, dat
         return export_objects(fmt, out, ds, res)
     if schema == DATASET_SCHEMA:
         ds = read_dataset(src)
-        if ds.truth is None:
+        if ds.truth is None or ds.truth.position_reference_only:
             raise SlamcliError(f"{src}: dataset has no ground truth to export (export a result instead)")
         return export_objects(fmt, out, ds)
     raise SchemaError(f"{src}: not a slamcli result or dataset (schema {schema!r})")
@@ -79,7 +79,7 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
         kind, poses, lms, assoc = "result", result.poses_xyt, result.landmarks_xy, result.assoc
         pose_cov, lm_cov = result.pose_cov, result.landmark_cov
     else:
-        if dataset.truth is None:
+        if dataset.truth is None or dataset.truth.position_reference_only:
             raise SlamcliError("the dataset has no ground truth to export")
         t = dataset.truth
         kind, poses, lms, assoc = "dataset", t.poses_xyt, t.landmarks_xy, t.obs_landmark

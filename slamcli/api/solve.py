@@ -115,15 +115,25 @@ def solve_dataset(
     """
     if not isinstance(inputs, SlamInputs):
         raise TypeError(f"solve_dataset expects SlamInputs (no ground truth), got {type(inputs).__name__}")
+    from slamcli.solvers.sensor_frame import check_motion_model, result_to_body, to_sensor_frame
+
     solver = make_solver(method, params)
+    check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics
+    offset = np.asarray(inputs.sensor_offset_xy, float).reshape(2).copy()
+    solver_inputs = to_sensor_frame(inputs)  # the sensor mounting offset, for every solver (issue 14)
+    if init is not None and offset.any():
+        from slamcli.models.observation import sensor_pose
+
+        init = dataclasses.replace(init, poses_xyt=sensor_pose(init.poses_xyt, offset))
     rng = solver_rng(seed)
     try:
-        result = solver.solve(inputs, init=init, rng=rng, progress=progress)
+        result = solver.solve(solver_inputs, init=init, rng=rng, progress=progress)
     except SlamcliError:
         raise
     except Exception as exc:
         raise SolverError(f"solver {method!r} failed: {_one_line(exc)}") from exc
-    return _check_result(result, method, inputs)
+    result = _check_result(result, method, inputs)
+    return result_to_body(result, offset)
 
 
 def solve_file(
@@ -158,7 +168,7 @@ def solve_file(
     dataset = read_dataset(data_path)
     inputs = dataset.inputs
     if oracle_association:
-        if dataset.truth is None:
+        if dataset.truth is None or dataset.truth.position_reference_only:
             raise ConfigError(f"--oracle-association: {data_path} has no /truth group (no true association)")
         obs = dataclasses.replace(inputs.observations, reported_id=dataset.truth.obs_landmark.copy())
         inputs = dataclasses.replace(inputs, observations=obs)

@@ -33,6 +33,17 @@ _ROWS = [
     ("map error per cell: frequentist / log-odds", ("grid_frequentist_mean_abs_error", "grid_logodds_mean_abs_error"), ""),
     ("total map error: frequentist / log-odds", ("grid_frequentist_total_abs_error", "grid_logodds_total_abs_error"), ""),
     ("cell accuracy at 0.5: frequentist / log-odds", ("grid_frequentist_accuracy", "grid_logodds_accuracy"), ""),
+    # no ground truth / GPS reference (issue 14)
+    ("GPS ATE RMSE (SE(2)-aligned)", "gps_ate_aligned_rmse_m", "m"),
+    ("GPS ATE RMSE (unaligned)", "gps_ate_rmse_m", "m"),
+    ("odometry GPS ATE (aligned)", "odometry_gps_ate_aligned_rmse_m", "m"),
+    ("GPS fixes matched / gaps / longest gap", ("gps_n_matched", "gps_gap_count", "gps_longest_gap_s"), "-/-/s"),
+    ("surveyed landmarks matched / RMSE", ("survey_lm_matched", "survey_lm_rmse_m"), "- / m"),
+    ("final cost (own model)", "final_cost", ""),
+    ("mean NIS / 95 % band", ("nis_mean", "nis_band_lo", "nis_band_hi"), ""),
+    ("estimated landmarks (map size)", "n_landmarks_est", ""),
+    ("against: ATE (unaligned / aligned)", ("against_ate_rmse_m", "against_ate_aligned_rmse_m"), "m"),
+    ("against: landmarks matched / RMSE", ("against_lm_matched", "against_lm_rmse_m"), "- / m"),
     ("set: soundness (true hypothesis)", "set_soundness", "frac"),
     ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct"), ""),
     ("set: true correspondence survived", "set_true_correspondence_survived", ""),
@@ -65,6 +76,8 @@ def evaluate_command(
     no_hash_check: Annotated[bool, typer.Option(
         "--no-hash-check", help="Do not require the dataset hash to match the result's record.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing; just write the files.")] = False,
+    against: Annotated[Path | None, typer.Option(
+        "--against", help="Another result of the same dataset: ATE and landmark distances against it.")] = None,
 ) -> None:
     """Compute trajectory, map and consistency metrics; write metrics.json + per_{iteration,step,landmark}.csv."""
     with handle_errors():
@@ -73,7 +86,7 @@ def evaluate_command(
         out = out_dir if out_dir is not None else result.parent / f"{result.stem}_eval"
         check_output(out, folder=True, option="-o" if out_dir is not None else "output folder")
         m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
-                           rpe_unit=rpe_unit, check_hash=not no_hash_check)
+                           rpe_unit=rpe_unit, check_hash=not no_hash_check, against=against)
         if quiet:
             return
         from rich.table import Table
@@ -89,7 +102,12 @@ def evaluate_command(
             table.add_row(label, " / ".join(_fmt(m[k]) for k in keys), unit)
         con = stdout_console()
         con.print(table)
-        for note in ("pose_nees_note", "landmark_nees_note", "per_iteration_note"):
+        for note in ("pose_nees_note", "landmark_nees_note", "per_iteration_note", "final_cost_note", "nis_note"):
             if str(m.get(note, "")).startswith("not available"):
                 con.print(f"{note.removesuffix('_note').replace('_', ' ')}: {m[note]}", markup=False)
+        if m.get("gps_note"):
+            con.print(f"GPS: {m['gps_note']}", markup=False, soft_wrap=True)
+        if m.get("not_available"):
+            con.print(f"not available without ground truth: {'; '.join(m['not_available'])}", markup=False,
+                      soft_wrap=True)
         con.print(f"wrote {out}/ (metrics.json, per_iteration.csv, per_step.csv, per_landmark.csv)", markup=False, soft_wrap=True)

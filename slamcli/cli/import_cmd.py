@@ -52,6 +52,8 @@ def import_mrclam_command(
     omega_std: Annotated[
         float | None, typer.Option(help="σ_ω of the controls to store, rad/s (default 0.07).")
     ] = None,
+    no_truth: Annotated[bool, typer.Option(
+        "--no-truth", help="Copy without Groundtruth files: x0 = 0 (own frame), no ground truth stored.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -108,12 +110,20 @@ def import_mrclam_command(
             noise=noise,
             control_delay=control_delay,
             max_range=max_range,
+            no_truth=no_truth,
         )
         write_dataset(out, ds)
         if quiet:
             return
         inp, md = ds.inputs, ds.metadata
         T = inp.n_poses - 1
+        if ds.truth is None:
+            stdout_console().print(
+                f"MRCLAM {directory.name} robot {robot} (no ground truth): {T} steps of {inp.dt:g} s, "
+                f"{len(inp.observations)} observations, odometry path "
+                f"{float(np.sum(np.hypot(*np.diff(inp.odometry_xyt[:, :2], axis=0).T))):.1f} m → {out}",
+                highlight=False, markup=False, soft_wrap=True)
+            return
         path_len = float(np.sum(np.hypot(*np.diff(ds.truth.poses_xyt[:, :2], axis=0).T)))
         n_clutter = int(np.sum(inp.observations.reported_id < 0))
         stdout_console().print(
@@ -187,4 +197,68 @@ def import_g2o_command(
             highlight=False,
             markup=False,
             soft_wrap=True,
+        )
+
+
+@import_app.command("victoria-park")
+def import_victoria_park_command(
+    directory: Annotated[
+        Path, typer.Argument(help="Victoria Park ASCII folder (inputs.dat, measurements.dat, gps.dat).")
+    ],
+    start: Annotated[float, typer.Option(help="Window start, s after the first input row.")] = 0.0,
+    duration: Annotated[float | None, typer.Option(help="Window length, s (default: to the end).")] = None,
+    max_range: Annotated[float, typer.Option(help="Sensor max range to store, m.")] = float("inf"),
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
+    out: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
+    ] = None,
+) -> None:
+    """Import Sydney Victoria Park: 40 Hz speed/steering as Ackermann controls, laser at (3.78, 0.50) m, tree
+    detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        from slamcli.datasets.victoria_park import import_victoria_park
+        from slamcli.io import write_dataset
+
+        ds = import_victoria_park(directory, start=start, duration=duration, max_range=max_range)
+        write_dataset(out, ds)
+        if quiet:
+            return
+        inp, md = ds.inputs, ds.metadata
+        stdout_console().print(
+            f"Victoria Park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+            f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
+            f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s) → {out}",
+            highlight=False, markup=False, soft_wrap=True,
+        )
+
+
+@import_app.command("carpark")
+def import_carpark_command(
+    directory: Annotated[Path, typer.Argument(help="ACFR car-park folder (data_set.mat, beac_juan3.mat).")],
+    max_range: Annotated[float, typer.Option(help="Drop beacon returns beyond this range, m.")] = 81.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
+    out: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
+    ] = None,
+) -> None:
+    """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
+    ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        from slamcli.datasets.carpark import import_carpark
+        from slamcli.io import write_dataset
+
+        ds = import_carpark(directory, max_range=max_range)
+        write_dataset(out, ds)
+        if quiet:
+            return
+        inp, md = ds.inputs, ds.metadata
+        stdout_console().print(
+            f"ACFR car park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+            f"{md['n_beacon_observations']} beacon observations (intensity >= {md['beacon_intensity_threshold']}), "
+            f"{md['n_surveyed_beacons']} surveyed beacons, {md['n_gps_fixes']} GPS fixes → {out}",
+            highlight=False, markup=False, soft_wrap=True,
         )

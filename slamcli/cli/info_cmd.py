@@ -35,6 +35,8 @@ def dataset_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str
     hdr = read_header(path)
     ds = read_dataset(path)
     inp, obs, tr = ds.inputs, ds.inputs.observations, ds.truth
+    ref = tr if tr is not None and tr.position_reference_only else None
+    tr = None if ref is not None else tr
     T = inp.n_poses - 1
     poses = tr.poses_xyt if tr is not None else inp.odometry_xyt
     path_len = float(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1).sum()) if T else 0.0
@@ -70,6 +72,12 @@ def dataset_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str
     rows.append(("noise σ", (f"motion {np.round(n.motion_std, 6).tolist()}, odometry {np.round(n.odometry_std, 6).tolist()}, "
                             f"range {n.range_std:g} m, bearing {n.bearing_std:g} rad")))
     rows.append(("GPS", f"{len(inp.gps_step)} fixes, σ {inp.gps_std:g} m" if len(inp.gps_step) else "none"))
+    if ref is not None:
+        rows.append(("reference", f"GPS positions only: {len(ref.ref_time_s)} fixes (evaluate: ATE vs GPS)"))
+    if inp.motion_model != "ddmr":
+        v = inp.vehicle
+        rows.append(("motion model", f"{inp.motion_model} (L {v.wheelbase_m:g} m, H {v.encoder_offset_m:g} m); "
+                                     f"sensor at {np.round(inp.sensor_offset_xy, 3).tolist()} m"))
     c = inp.constraints
     if c is not None:
         per_edge = [n for n, a in (("odometry", c.odometry_info), (f"observations ({c.observation_model})",

@@ -92,7 +92,7 @@ def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.e
         draw_grid(ax, res.grids[name], label=f"occupancy ({name})")
     draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every,
              title=title or f"{res.solver}: {Path(result_path).name}")
-    if ds.truth is None:
+    if ds.truth is None or ds.truth.position_reference_only:
         echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
 
 

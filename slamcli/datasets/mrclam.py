@@ -179,8 +179,16 @@ def _require_sorted(t: np.ndarray, lines: np.ndarray, path: Path) -> None:
         )
 
 
-def load_mrclam(directory: str | Path, robot: int) -> MrclamRaw:
+#: MRCLAM subject numbering (dataset documentation): subjects 1-5 are the robots, 6-20 the landmarks
+FIRST_LANDMARK_SUBJECT = 6
+
+
+def load_mrclam(directory: str | Path, robot: int, *, with_truth: bool = True) -> MrclamRaw:
     """Parse the five files that describe robot ``robot`` (1-based) in ``directory``.
+
+    ``with_truth=False`` (copies without the Groundtruth files) reads neither ``Landmark_Groundtruth.dat`` nor
+    ``RobotN_Groundtruth.dat``: the landmark subjects are then the Barcodes.dat subjects ≥ 6 (the documented
+    numbering), their positions NaN, and ``groundtruth`` is None.
 
     Raises
     ------
@@ -208,7 +216,11 @@ def load_mrclam(directory: str | Path, robot: int) -> MrclamRaw:
             raise DatasetImportError(f"{p_bar}: {name} {int(u[c > 1][0])} appears more than once")
 
     p_lm = d / "Landmark_Groundtruth.dat"
-    lm, ln = read_table(p_lm, ("subject", "x", "y", "x_std", "y_std"))
+    if not with_truth:
+        lm_subj = np.sort(bar[bar[:, 0] >= FIRST_LANDMARK_SUBJECT, 0])
+        lm, ln = np.column_stack([lm_subj, np.full((len(lm_subj), 4), np.nan)]), None
+    else:
+        lm, ln = read_table(p_lm, ("subject", "x", "y", "x_std", "y_std"))
     _require_rows(lm, p_lm)
     lm_subj = _require_integers(lm[:, 0], ln, p_lm, "subject")
     order = np.argsort(lm_subj, kind="stable")
@@ -239,6 +251,8 @@ def load_mrclam(directory: str | Path, robot: int) -> MrclamRaw:
     if far.size:
         raise DatasetImportError(f"{p_meas}:{ln[far[0]]}: bearing {float(meas[far[0], 3]):g} rad outside "
                                  "[-2pi, 2pi] (degrees? corrupt row?)")
+    if not with_truth:
+        return MrclamRaw(d, int(robot), bar, lm_subj, lm_xy, odo, meas, None)
     gt, ln = read_table(p_gt, ("time", "x", "y", "theta"))
     _require_rows(gt, p_gt, 2)
     _require_sorted(gt[:, 0], ln, p_gt)
@@ -323,6 +337,7 @@ def import_mrclam(
     max_range: float = float("inf"),
     control_delay: float = 0.0,
     misread_gate: float = 0.5,
+    no_truth: bool = False,
 ) -> Dataset:
     """Import robot ``robot`` of the MRCLAM dataset in ``directory`` as a slamcli :class:`Dataset`.
 
@@ -347,6 +362,8 @@ def import_mrclam(
         ``truth.obs_landmark`` is −1 (its ``reported_id`` stays what the sensor reported). On Dataset 7 the
         bearing residuals of all 16 067 landmark rows are < 0.12 rad except 8 rows > 2 rad (robots 3 and 5),
         whose ranges are also off by 3.1-5.9 m; ``inf`` turns the check off.
+    no_truth : for copies without the Groundtruth files: ``t_ref`` is the first odometry stamp, ``x0 = [0, 0,
+        0]`` (the robot's own start frame), ``truth = None``; landmarks are the barcode subjects ≥ 6.
 
     Raises
     ------
@@ -369,12 +386,14 @@ def import_mrclam(
         raise DatasetImportError(
             f"--control-delay: must be a number of seconds in [-5, 5], got {control_delay}"
         )
-    raw = load_mrclam(directory, robot)
+    raw = load_mrclam(directory, robot, with_truth=not no_truth)
     d = raw.directory
     p_odo, p_gt = d / f"Robot{robot}_Odometry.dat", d / f"Robot{robot}_Groundtruth.dat"
 
     # --- time window on the axis t_ref = 0 ---------------------------------------------------------------
-    odo_t_abs, gt_t_abs = raw.odometry[:, 0] + control_delay, raw.groundtruth[:, 0]
+    odo_t_abs = raw.odometry[:, 0] + control_delay
+    # without truth the odometry alone spans the window
+    gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
     t_ref = max(odo_t_abs[0], gt_t_abs[0])
     t_hi = min(odo_t_abs[-1], gt_t_abs[-1]) - t_ref
     if t_hi < dt:
@@ -407,9 +426,10 @@ def import_mrclam(
     # --- truth poses (dedupe equal stamps: keep the last) and x0 ---------------------------------------------
     gt_t = gt_t_abs - t_ref
     keep = np.r_[np.diff(gt_t) > 0, True]
-    gt_t, gt_xyt = gt_t[keep], raw.groundtruth[keep, 1:4]
+    gt_xyt = np.zeros((2, 3)) if no_truth else raw.groundtruth[keep, 1:4]
+    gt_t = gt_t[keep]
     truth_xyt = interpolate_poses(gt_t, gt_xyt, timestamps)
-    x0 = truth_xyt[0].copy()
+    x0 = truth_xyt[0].copy()  # no_truth: zeros, the robot's own start frame
     odometry_xyt = integrate(x0, controls, dt)
     inside = (gt_t >= timestamps[0]) & (gt_t <= timestamps[-1])
     gt_in = np.r_[timestamps[0], gt_t[inside], timestamps[-1]]
@@ -448,12 +468,14 @@ def import_mrclam(
     # truth association = the barcode's landmark, unless the row contradicts the motion capture (misread)
     true_lm = lm_index.copy()
     is_lm = true_lm >= 0
-    if np.any(is_lm) and math.isfinite(misread_gate):
+    if np.any(is_lm) and math.isfinite(misread_gate) and not no_truth:
         pose_at_row = interpolate_poses(gt_t, gt_xyt, np.clip(m_t[is_lm], gt_t[0], gt_t[-1]))
         b_true = range_bearing(pose_at_row, raw.landmarks_xy[true_lm[is_lm]])[:, 1]
         misread = np.abs(angle_diff(obs.bearing_rad[is_lm], b_true)) > misread_gate
         true_lm[np.flatnonzero(is_lm)[misread]] = -1
     truth = GroundTruth(poses_xyt=truth_xyt, landmarks_xy=raw.landmarks_xy.copy(), obs_landmark=true_lm)
+    if no_truth:
+        truth = None
     metadata = {
         "scenario": f"mrclam:{d.name}:robot{robot}",
         "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
@@ -499,6 +521,7 @@ def import_mrclam(
         "n_unknown_barcode_rows_in_window": int(np.sum(is_unknown & in_window)),
         "misread_gate_rad": float(misread_gate),
         "n_misread_rows": int(np.sum((lm_index >= 0) & (true_lm < 0))),
+        "truth": "none (imported with no_truth: x0 = [0, 0, 0], the robot's own frame)" if no_truth else "motion capture",
     }
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
 

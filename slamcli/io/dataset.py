@@ -13,11 +13,14 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
                            range_half_width () bearing_half_width ()
         observations/landmark_type (N,)   (only when the sensor reports type labels)
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
+        @motion_model ("ddmr" default | "ackermann")   vehicle/ wheelbase_m encoder_offset_m  (ackermann)
+        sensor_offset_xy (2,)  (only when non-zero)    observations/diameter_m (N,) (only when reported)
         constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
                            between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
                            [observation_info (N,2,2) @model]
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
+        or, with @kind="position_reference" (a real recording's GPS): ref_time_s (G,) ref_xy (G,2) only
 """
 
 from __future__ import annotations
@@ -164,11 +167,14 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                         frame="world", doc="GPS position fixes (G,2)")
             write_array(g, "gps_std", np.float64(inp.gps_std), units="m", frame="world",
                         doc="sigma of one GPS fix")
+        _write_motion_model(g, go, inp)
 
         if inp.constraints is not None:
             _write_constraints(g, inp.constraints)
 
-        if dataset.truth is not None:
+        if dataset.truth is not None and dataset.truth.position_reference_only:
+            _write_position_reference(f, dataset.truth)
+        elif dataset.truth is not None:
             tr = dataset.truth
             gt = f.create_group("truth")
             gt.attrs["doc"] = "ground truth (slamcli.types.GroundTruth); never given to solvers"
@@ -180,6 +186,70 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                         doc="true landmark index of each observation row, -1 = clutter (N,)")
             _write_truth_walls(gt, tr)
     return final
+
+
+def _write_motion_model(g, go, inp: SlamInputs) -> None:
+    """Motion-model tag, car geometry, sensor mount and per-observation object size (issue 14)."""
+    g.attrs["motion_model"] = str(inp.motion_model)
+    if inp.vehicle is not None:
+        gv = g.create_group("vehicle")
+        gv.attrs["doc"] = "car geometry of the ackermann motion model (slamcli.models.ackermann.AckermannParams)"
+        write_array(gv, "wheelbase_m", np.float64(inp.vehicle.wheelbase_m), units="m", frame="body",
+                    doc="L, rear axle to front axle")
+        write_array(gv, "encoder_offset_m", np.float64(inp.vehicle.encoder_offset_m), units="m", frame="body",
+                    doc="H, lateral offset of the rear-left speed encoder from the rear-axle centre")
+    off = np.asarray(inp.sensor_offset_xy, np.float64).reshape(2)
+    if off.any():
+        write_array(g, "sensor_offset_xy", off, units="m", frame="body",
+                    doc="sensor mount (a, b) in the body frame (2,)")
+    if inp.observations.diameter_m is not None:
+        write_array(go, "diameter_m", np.asarray(inp.observations.diameter_m, np.float64), units="m",
+                    frame="-", doc="object size reported by the feature extractor, e.g. trunk diameter (N,)")
+
+
+def _write_position_reference(f, tr: GroundTruth) -> None:
+    gt = f.create_group("truth")
+    gt.attrs["doc"] = "position-only reference (e.g. GPS): no true poses, landmarks or association"
+    gt.attrs["kind"] = "position_reference"
+    write_array(gt, "ref_time_s", np.asarray(tr.ref_time_s, np.float64).reshape(-1), units="s", frame="-",
+                doc="time of each reference fix (G,)")
+    write_array(gt, "ref_xy", np.asarray(tr.ref_xy, np.float64).reshape(-1, 2), units="m", frame="world",
+                doc="reference positions (G,2)")
+    if tr.ref_offset_xy is not None:
+        write_array(gt, "ref_offset_xy", np.asarray(tr.ref_offset_xy, np.float64).reshape(2), units="m",
+                    frame="body", doc="body-frame point the reference positions refer to (2,)")
+    if tr.landmarks_xy is not None:
+        write_array(gt, "landmarks_xy", np.asarray(tr.landmarks_xy, np.float64).reshape(-1, 2), units="m",
+                    frame="world", doc="surveyed landmark positions in the reference frame (L,2); no association")
+
+
+def _read_motion_model(r: Reader, inputs: SlamInputs) -> SlamInputs:
+    import dataclasses
+
+    from slamcli.models.ackermann import MOTION_MODELS, AckermannParams
+
+    model = r.attr("inputs", "motion_model", str, default="ddmr")
+    if model not in MOTION_MODELS:
+        raise r.fail("inputs/@motion_model", f"unknown motion model {model!r} (known: {', '.join(MOTION_MODELS)})")
+    vehicle = None
+    if r.has("inputs/vehicle"):
+        L = float(r.array("inputs/vehicle/wheelbase_m", dtype="f", shape=()))
+        H = float(r.array("inputs/vehicle/encoder_offset_m", dtype="f", shape=()))
+        if not L > 0:
+            raise r.fail("inputs/vehicle/wheelbase_m", f"must be > 0, got {L}")
+        vehicle = AckermannParams(wheelbase_m=L, encoder_offset_m=H)
+    if model == "ackermann" and vehicle is None:
+        raise r.fail("inputs/vehicle", "missing group (required by motion_model='ackermann')")
+    off = np.zeros(2)
+    if r.has("inputs/sensor_offset_xy"):
+        off = r.array("inputs/sensor_offset_xy", dtype="f", shape=(2,))
+    obs = inputs.observations
+    if r.has("inputs/observations/diameter_m"):
+        diam = r.array("inputs/observations/diameter_m", dtype="f", shape=(None,))
+        r.expect_len("inputs/observations/diameter_m", diam, len(obs), "number of observations")
+        obs = dataclasses.replace(obs, diameter_m=diam)
+    return dataclasses.replace(inputs, motion_model=model, vehicle=vehicle, sensor_offset_xy=off,
+                               observations=obs)
 
 
 OBSERVATION_MODELS = ("range_bearing", "xy")
@@ -309,7 +379,7 @@ def read_dataset(path: str | os.PathLike, *, with_truth: bool = True) -> Dataset
             raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
         has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
         check_declared_shapes(r, with_truth=with_truth and has_truth)
-        inputs = _read_inputs(r, dt)
+        inputs = _read_motion_model(r, _read_inputs(r, dt))
         truth = None
         if with_truth and has_truth:
             truth = _read_truth(r, inputs)
@@ -504,6 +574,16 @@ def _read_observations(r: Reader, n_poses: int) -> Observations:
 
 def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
     r.group("truth")
+    if r.attr("truth", "kind", str, default="full") == "position_reference":
+        ref_t = r.array("truth/ref_time_s", dtype="f", shape=(None,))
+        ref_xy = r.array("truth/ref_xy", dtype="f", shape=(None, 2))
+        r.expect_len("truth/ref_xy", ref_xy, ref_t.shape[0], "len(truth/ref_time_s)")
+        if ref_t.shape[0] > 1 and not (np.diff(ref_t) > 0).all():
+            raise r.fail("truth/ref_time_s", "not strictly increasing")
+        lms = r.array("truth/landmarks_xy", dtype="f", shape=(None, 2)) if r.has("truth/landmarks_xy") else None
+        ref_off = r.array("truth/ref_offset_xy", dtype="f", shape=(2,)) if r.has("truth/ref_offset_xy") else None
+        return GroundTruth(poses_xyt=None, landmarks_xy=lms, obs_landmark=None, ref_time_s=ref_t, ref_xy=ref_xy,
+                           ref_offset_xy=ref_off)
     poses = r.array("truth/poses_xyt", dtype="f", shape=(None, 3))
     r.expect_len("truth/poses_xyt", poses, inputs.n_poses, "T+1 = len(inputs/timestamps)")
     lms = r.array("truth/landmarks_xy", dtype="f", shape=(None, 2))
@@ -624,7 +704,22 @@ def dataset_hash(dataset: Dataset) -> str:
         h.update(f"noise_bounds|{nb.odometry_model}|".encode())
         _feed(h, "noise_bounds.values", np.r_[np.asarray(nb.odometry_half_width, float).reshape(2),
                                               nb.range_half_width, nb.bearing_half_width], np.float64)
-    if dataset.truth is not None:
+    # issue-14 fields are hashed only when not at their defaults, so hashes of older datasets are unchanged
+    if inp.motion_model != "ddmr" or inp.vehicle is not None:
+        h.update(f"motion_model|{inp.motion_model}|{inp.vehicle!r}|".encode())
+    if np.asarray(inp.sensor_offset_xy).any():
+        _feed(h, "sensor_offset_xy", inp.sensor_offset_xy, np.float64)
+    if obs.diameter_m is not None:
+        _feed(h, "obs.diameter_m", obs.diameter_m, np.float64)
+    if dataset.truth is not None and dataset.truth.position_reference_only:
+        _feed(h, "truth.ref_time_s", dataset.truth.ref_time_s, np.float64)
+        _feed(h, "truth.ref_xy", np.asarray(dataset.truth.ref_xy, np.float64).reshape(-1, 2), np.float64)
+        if dataset.truth.ref_offset_xy is not None:
+            _feed(h, "truth.ref_offset_xy", dataset.truth.ref_offset_xy, np.float64)
+        if dataset.truth.landmarks_xy is not None:
+            _feed(h, "truth.landmarks_xy", np.asarray(dataset.truth.landmarks_xy, np.float64).reshape(-1, 2),
+                  np.float64)
+    elif dataset.truth is not None:
         t = dataset.truth
         _feed(h, "truth.poses_xyt", np.asarray(t.poses_xyt, np.float64).reshape(-1, 3), np.float64)
         _feed(h, "truth.landmarks_xy", np.asarray(t.landmarks_xy, np.float64).reshape(-1, 2), np.float64)

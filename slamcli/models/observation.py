@@ -106,3 +106,59 @@ def to_paper_bearing(bearing):
 def from_paper_bearing(bearing_paper):
     """Inverse of :func:`to_paper_bearing`."""
     return wrap_angle(np.asarray(bearing_paper, float) - np.pi / 2)
+
+
+# --------------------------------------------------------------------------------------------------------
+# sensor mounting offset: the sensor sits at (a, b) in the body frame (e.g. the Victoria Park laser at
+# (3.78, 0.50) m ahead-left of the rear axle), with the body's heading.
+#
+#     s(x) = x ⊕ [a, b, 0] = [x + a cos θ − b sin θ,  y + a sin θ + b cos θ,  θ]
+#     h_o(x, m) = h(s(x), m)            ∂h_o/∂x = ∂h/∂s · ∂s/∂x
+#     m = h⁻¹(s(x), z)                  ∂m/∂x   = ∂h⁻¹/∂s · ∂s/∂x
+# --------------------------------------------------------------------------------------------------------
+def sensor_pose(x, offset_xy):
+    """Pose ``(..., 3)`` of a sensor mounted at ``offset_xy = (a, b)`` (body frame) on a robot at ``x (..., 3)``."""
+    x = np.asarray(x, float)
+    a, b = float(offset_xy[0]), float(offset_xy[1])
+    c, s = np.cos(x[..., 2]), np.sin(x[..., 2])
+    return np.stack([x[..., 0] + a * c - b * s, x[..., 1] + a * s + b * c, x[..., 2]], -1)
+
+
+def sensor_pose_jacobian(x, offset_xy):
+    """``∂s/∂x (..., 3, 3)``: identity plus ``[−a sin θ − b cos θ, a cos θ − b sin θ, 0]ᵀ`` in column θ."""
+    x = np.asarray(x, float)
+    a, b = float(offset_xy[0]), float(offset_xy[1])
+    c, s = np.cos(x[..., 2]), np.sin(x[..., 2])
+    J = np.zeros(x.shape[:-1] + (3, 3))
+    J[..., 0, 0] = J[..., 1, 1] = J[..., 2, 2] = 1.0
+    J[..., 0, 2] = -a * s - b * c
+    J[..., 1, 2] = a * c - b * s
+    return J
+
+
+def body_pose_from_sensor(s, offset_xy):
+    """Inverse of :func:`sensor_pose`: the body pose ``(..., 3)`` whose sensor is at ``s (..., 3)``."""
+    return sensor_pose(s, (-float(offset_xy[0]), -float(offset_xy[1])))
+
+
+def range_bearing_offset(x, m, offset_xy):
+    """:func:`range_bearing` of landmark(s) ``m (..., 2)`` seen by a sensor mounted at ``offset_xy`` on a robot
+    at ``x (..., 3)``; ``(..., 2)``."""
+    return range_bearing(sensor_pose(x, offset_xy), m)
+
+
+def range_bearing_offset_jacobians(x, m, offset_xy):
+    """Jacobians of :func:`range_bearing_offset`: ``H_x (..., 2, 3)``, ``H_m (..., 2, 2)``."""
+    H_s, H_m = range_bearing_jacobians(sensor_pose(x, offset_xy), m)
+    return H_s @ sensor_pose_jacobian(x, offset_xy), H_m
+
+
+def inverse_range_bearing_offset(x, z, offset_xy):
+    """Landmark ``(..., 2)`` at measurement ``z`` of a sensor mounted at ``offset_xy`` on a robot at ``x``."""
+    return inverse_range_bearing(sensor_pose(x, offset_xy), z)
+
+
+def inverse_range_bearing_offset_jacobians(x, z, offset_xy):
+    """Jacobians of :func:`inverse_range_bearing_offset`: ``M_x (..., 2, 3)``, ``M_z (..., 2, 2)``."""
+    M_s, M_z = inverse_range_bearing_jacobians(sensor_pose(x, offset_xy), z)
+    return M_s @ sensor_pose_jacobian(x, offset_xy), M_z

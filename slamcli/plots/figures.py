@@ -14,6 +14,8 @@ def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every:
     from slamcli.plots.maps import plot_map
 
     truth = dataset.truth
+    if truth is not None and truth.position_reference_only:  # GPS only: no true map or poses to draw
+        truth = None
     return plot_map(ax, truth.landmarks_xy if truth else None, result.landmarks_xy,
                     truth.poses_xyt[:, :2] if truth else None, dataset.inputs.odometry_xyt[:, :2],
                     result.poses_xyt[:, :2], landmark_cov=result.landmark_cov if ellipses else None,

@@ -40,6 +40,8 @@ class BaseSolver:
 
     name: ClassVar[str] = "base"
     Params: ClassVar[type] = NoParams
+    #: motion models (``SlamInputs.motion_model``) this solver implements; others are refused in one line
+    motion_models: ClassVar[tuple[str, ...]] = ("ddmr",)
 
     def __init__(self, params: Any | None = None) -> None:
         if params is None:

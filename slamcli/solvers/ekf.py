@@ -40,6 +40,7 @@ from typing import Literal
 import numpy as np
 
 from slamcli.errors import SolverError
+from slamcli.models.ackermann import ackermann_jacobians, ackermann_step
 from slamcli.models.angles import wrap_angle, wrap_angle_fast
 from slamcli.models.motion import odometry_increments
 from slamcli.models.observation import (
@@ -204,6 +205,8 @@ class EkfSlam(BaseSolver):
 
     name = "ekf"
     Params = EkfParams
+    #: ackermann: the predict step uses slamcli.models.ackermann (controls = [v_e, α], noise motion_std)
+    motion_models = ("ddmr", "ackermann")
 
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator, progress=None) -> SolverResult:
         t_start = time.perf_counter()
@@ -273,7 +276,11 @@ class EkfSlam(BaseSolver):
                 if p.motion_input == "controls":
                     # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ
                     u = controls[t - 1]
-                    pose_new, F, G_u = _ddmr_predict(x_r, u, inputs.dt)
+                    if inputs.motion_model == "ackermann":  # car model of the tracked point (G&N 2001)
+                        pose_new = ackermann_step(x_r, u, inputs.dt, inputs.vehicle)
+                        F, G_u = ackermann_jacobians(x_r, u, inputs.dt, inputs.vehicle)
+                    else:
+                        pose_new, F, G_u = _ddmr_predict(x_r, u, inputs.dt)
                     Q = G_u @ M @ G_u.T
                 else:
                     # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)

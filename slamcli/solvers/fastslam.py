@@ -69,6 +69,7 @@ import numpy as np
 from slamcli.errors import SolverError
 from slamcli.models import se2
 from slamcli.models.angles import circular_mean, wrap_angle
+from slamcli.models.ackermann import ackermann_jacobians, ackermann_step
 from slamcli.models.motion import ddmr_step
 from slamcli.models.observation import range_bearing
 from slamcli.solvers.base import BaseSolver, ProgressFn
@@ -456,6 +457,17 @@ def _predict_controls(x, u, dt, std_v, std_w, R):
     return x_hat, R
 
 
+def _predict_ackermann(x, u, dt, vehicle, M_std, version, rng, R):
+    """Ackermann prior (:mod:`slamcli.models.ackermann`): 1.0 samples ``g(x, u + ε)``, ε ~ N(0, diag(M_std²));
+    2.0 returns ``x̂ = g(x, u)`` and ``R = G_u diag(M_std²) G_uᵀ`` as ``(3, 3, P)`` in the buffer ``R``."""
+    P = x.shape[0]
+    if version == 1:
+        return ackermann_step(x, u + M_std * rng.standard_normal((P, 2)), dt, vehicle), None
+    _, G_u = ackermann_jacobians(x, u, dt, vehicle)  # (P, 3, 2)
+    R[...] = np.einsum("pij,j,pkj->ikp", G_u, np.square(M_std), G_u)
+    return ackermann_step(x, u, dt, vehicle), R
+
+
 def _motion_cov_odometry(th, std):
     """``R = J diag(σ_x², σ_y², σ_θ²) Jᵀ`` as ``(3, 3, P)``, ``J = ∂(x ⊕ d)/∂d = blkdiag(R(θ), 1)``."""
     c, s = np.cos(th), np.sin(th)
@@ -478,6 +490,8 @@ class FastSlam(BaseSolver):
 
     name = "fastslam"
     Params = FastSlamParams
+    #: ackermann: proposal from slamcli.models.ackermann (controls) or the odometry increments
+    motion_models = ("ddmr", "ackermann")
 
     def solve(
         self,
@@ -568,7 +582,9 @@ class FastSlam(BaseSolver):
                 x_hat = ps.x.copy()
             elif p.motion_source == "controls":
                 u = inputs.controls[t - 1]
-                if p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
+                if inputs.motion_model == "ackermann":  # car model of the tracked point, u = [v_e, α]
+                    x_hat, R = _predict_ackermann(ps.x, u, inputs.dt, inputs.vehicle, M_std, p.version, rng, R_buf)
+                elif p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
                     x_hat = ddmr_step(ps.x, u + M_std * rng.standard_normal((P, 2)), inputs.dt)
                 else:
                     x_hat, R = _predict_controls(ps.x, u, inputs.dt, M_std[0], M_std[1], R_buf)

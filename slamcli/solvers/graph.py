@@ -960,6 +960,8 @@ class GraphSlam(BaseSolver):
 
     name = "graph"
     Params = GraphParams
+    #: ackermann: between factors on the odometry increments, which an importer integrates with the car model
+    motion_models = ("ddmr", "ackermann")
 
     def _associate(self, inputs: SlamInputs, init: SolverResult | None, poses: np.ndarray):
         p = self.params
@@ -1003,6 +1005,9 @@ class GraphSlam(BaseSolver):
     ) -> SolverResult:
         t_start = time.perf_counter()
         p = self.params
+        if inputs.motion_model != "ddmr" and (p.use_controls or p.model == "paper"):
+            raise SolverError(f"graph: use_controls / model=paper read the controls as DDMR [v, omega]; with "
+                              f"motion_model={inputs.motion_model!r} use the odometry factors (model=gtsam)")
         if p.init_from == "init":
             if init is None:
                 raise SolverError("graph: init_from=init needs an --init result")

@@ -162,6 +162,8 @@ class OdometrySolver(BaseSolver):
 
     name = "odometry"
     Params = OdometryParams
+    #: reads only the odometry poses (for a car: the importer's integration of the Ackermann model)
+    motion_models = ("ddmr", "ackermann")
 
     def solve(
         self,

@@ -1,0 +1,203 @@
+"""Metrics for real recordings without full ground truth (issue 14).
+
+* :func:`ate_vs_position_reference` — ATE of an estimated trajectory against a time-stamped position-only
+  reference (GPS). The estimate is interpolated linearly at each reference time inside its span (the
+  estimate is dense — 40 Hz on Victoria Park — and the reference sparse); references outside the span are not
+  used. Errors are positions only::
+
+      e_i = p̂(t_i) − g_i,    ATE = sqrt(mean_i ‖e_i‖²)
+
+  reported unaligned and after the least-squares SE(2) alignment of the estimate onto the reference (2-D
+  Kabsch/Umeyama without scale: ``R, t = argmin Σ‖R p̂_i + t − g_i‖²``), which removes an unknown map frame
+  (a real run's start heading in the GPS frame is not known). The caller passes the positions of the body
+  point the reference refers to (``GroundTruth.ref_offset_xy``, e.g. the GPS antenna).
+* :func:`gaps` — the intervals without reference fixes longer than ``gap_s`` (stated with every ATE).
+* :func:`trajectory_against` — ATE and landmark distances of one result against another (``evaluate
+  --against``): same pose count required; landmarks matched by optimal assignment (``linear_sum_assignment``)
+  with a cut-off.
+* :func:`nis_summary` — average normalised innovation squared with its two-sided χ² band.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial.distance import cdist
+from scipy.stats import chi2
+
+
+def align_se2_xy(est_xy: np.ndarray, ref_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``R (2,2)`` and translation ``t (2,)`` minimising ``Σ‖R est_i + t − ref_i‖²`` (no scale)."""
+    est_xy = np.asarray(est_xy, float)
+    ref_xy = np.asarray(ref_xy, float)
+    me, mr = est_xy.mean(0), ref_xy.mean(0)
+    C = (ref_xy - mr).T @ (est_xy - me)
+    U, _, Vt = np.linalg.svd(C)
+    D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
+    R = U @ D @ Vt
+    return R, mr - R @ me
+
+
+def gaps(ref_time_s, t_from: float, t_to: float, gap_s: float) -> list[tuple[float, float]]:
+    """Intervals ``(start, end)`` within ``[t_from, t_to]`` longer than ``gap_s`` with no reference fix."""
+    t = np.clip(np.concatenate([[t_from], np.asarray(ref_time_s, float), [t_to]]), t_from, t_to)
+    d = np.diff(t)
+    return [(float(t[i]), float(t[i + 1])) for i in np.flatnonzero(d > gap_s)]
+
+
+def ate_vs_position_reference(timestamps, poses_xyt, ref_time_s, ref_xy, *, gap_s: float = 1.0) -> dict:
+    """ATE of ``poses_xyt (T+1, 3)`` at ``timestamps (T+1,)`` against a reference ``ref_xy (G, 2)`` at
+    ``ref_time_s (G,)``.
+
+    Returns
+    -------
+    dict with ``gps_ate_rmse_m`` (unaligned), ``gps_ate_aligned_rmse_m``, ``gps_ate_aligned_max_m``,
+    ``gps_n_matched``, ``gps_n_outside``, ``gps_gap_count``, ``gps_gap_total_s``, ``gps_longest_gap_s`` and
+    ``gps_errors_aligned_m`` (G', per matched fix) and ``gps_matched_time_s`` (G',).
+    """
+    ts = np.asarray(timestamps, float)
+    p = np.asarray(poses_xyt, float)
+    rt = np.asarray(ref_time_s, float)
+    rxy = np.asarray(ref_xy, float).reshape(-1, 2)
+    inside = (rt >= ts[0]) & (rt <= ts[-1])
+    t_m, g = rt[inside], rxy[inside]
+    est = np.column_stack([np.interp(t_m, ts, p[:, 0]), np.interp(t_m, ts, p[:, 1])])
+    gl = gaps(rt, float(ts[0]), float(ts[-1]), gap_s)
+    out = {
+        "gps_n_matched": int(inside.sum()),
+        "gps_n_outside": int((~inside).sum()),
+        "gps_gap_count": len(gl),
+        "gps_gap_total_s": float(sum(b - a for a, b in gl)),
+        "gps_longest_gap_s": float(max((b - a for a, b in gl), default=0.0)),
+        "gps_gap_threshold_s": float(gap_s),
+    }
+    if len(t_m) < 2:
+        out.update(gps_ate_rmse_m=float("nan"), gps_ate_aligned_rmse_m=float("nan"),
+                   gps_ate_aligned_max_m=float("nan"), gps_errors_aligned_m=np.zeros(0), gps_matched_time_s=t_m,
+                   gps_alignment=None)
+        return out
+    e = np.linalg.norm(est - g, axis=1)
+    R, t = align_se2_xy(est, g)
+    ea = np.linalg.norm(est @ R.T + t - g, axis=1)
+    out.update(gps_ate_rmse_m=float(np.sqrt(np.mean(e**2))), gps_ate_aligned_rmse_m=float(np.sqrt(np.mean(ea**2))),
+               gps_ate_aligned_max_m=float(ea.max()), gps_errors_aligned_m=ea, gps_matched_time_s=t_m,
+               gps_alignment=(R, t))
+    return out
+
+
+def landmarks_vs_surveyed(est_xy, surveyed_xy, R, t, *, cutoff_m: float = 2.0) -> dict:
+    """Estimated landmarks mapped into the reference frame by the trajectory alignment ``(R, t)`` (from
+    :func:`ate_vs_position_reference`), then matched to surveyed landmarks by optimal assignment with a cut-off:
+    ``survey_lm_matched``, ``survey_lm_rmse_m`` (matched pairs), ``survey_lm_missed``, ``survey_lm_spurious``."""
+    est = np.asarray(est_xy, float).reshape(-1, 2) @ np.asarray(R).T + np.asarray(t)
+    sv = np.asarray(surveyed_xy, float).reshape(-1, 2)
+    n, rmse = 0, float("nan")
+    if len(est) and len(sv):
+        D = cdist(est, sv)
+        r, c = linear_sum_assignment(np.minimum(D, cutoff_m))
+        ok = D[r, c] <= cutoff_m
+        n = int(ok.sum())
+        if n:
+            rmse = float(np.sqrt(np.mean(D[r, c][ok] ** 2)))
+    return {"survey_lm_matched": n, "survey_lm_rmse_m": rmse, "survey_lm_missed": int(len(sv) - n),
+            "survey_lm_spurious": int(len(est) - n), "survey_lm_cutoff_m": float(cutoff_m)}
+
+
+def trajectory_against(poses_a, poses_b, landmarks_a, landmarks_b, *, cutoff_m: float = 2.0) -> dict:
+    """Result A against result B (B as the reference): pose-position RMSE unaligned and SE(2)-aligned, mean
+    heading difference, and landmark distances after optimal assignment with a cut-off.
+
+    Returns
+    -------
+    dict: ``against_ate_rmse_m``, ``against_ate_aligned_rmse_m``, ``against_heading_rmse_rad``,
+    ``against_lm_matched``, ``against_lm_rmse_m`` (matched pairs within ``cutoff_m``), ``against_lm_only_a``,
+    ``against_lm_only_b``, ``against_lm_cutoff_m``.
+    """
+    from slamcli.models.angles import angle_diff
+
+    pa, pb = np.asarray(poses_a, float), np.asarray(poses_b, float)
+    if pa.shape != pb.shape:
+        raise ValueError(f"the two results have {pa.shape[0]} and {pb.shape[0]} poses; compare results of one dataset")
+    e = np.linalg.norm(pa[:, :2] - pb[:, :2], axis=1)
+    R, t = align_se2_xy(pa[:, :2], pb[:, :2])
+    ea = np.linalg.norm(pa[:, :2] @ R.T + t - pb[:, :2], axis=1)
+    dth = np.asarray(angle_diff(pa[:, 2], pb[:, 2]), float)
+    la = np.asarray(landmarks_a, float).reshape(-1, 2)
+    lb = np.asarray(landmarks_b, float).reshape(-1, 2)
+    n_match, lm_rmse = 0, float("nan")
+    if len(la) and len(lb):
+        D = cdist(la, lb)
+        r, c = linear_sum_assignment(np.minimum(D, cutoff_m))
+        ok = D[r, c] <= cutoff_m
+        n_match = int(ok.sum())
+        if n_match:
+            lm_rmse = float(np.sqrt(np.mean(D[r, c][ok] ** 2)))
+    return {
+        "against_ate_rmse_m": float(np.sqrt(np.mean(e**2))),
+        "against_ate_aligned_rmse_m": float(np.sqrt(np.mean(ea**2))),
+        "against_heading_rmse_rad": float(np.sqrt(np.mean(dth**2))),
+        "against_lm_matched": n_match,
+        "against_lm_rmse_m": lm_rmse,
+        "against_lm_only_a": int(len(la) - n_match),
+        "against_lm_only_b": int(len(lb) - n_match),
+        "against_lm_cutoff_m": float(cutoff_m),
+    }
+
+
+def nis_summary(nis: np.ndarray, dof: np.ndarray | int, confidence: float = 0.95) -> dict:
+    """Mean NIS over ``N`` innovations and the two-sided band of the mean, ``chi2.ppf([α/2, 1−α/2], Σd)/N``
+    (the sum of N independent χ²_d is χ²_{Σd}); also the fraction of single innovations inside their own
+    per-innovation band ``chi2.ppf([α/2, 1−α/2], d)``."""
+    nis = np.asarray(nis, float)
+    dof = np.broadcast_to(np.asarray(dof, float), nis.shape)
+    N = nis.size
+    if N == 0:
+        return {"nis_n": 0, "nis_mean": float("nan"), "nis_band_lo": float("nan"), "nis_band_hi": float("nan"),
+                "nis_frac_inside": float("nan")}
+    a = 1.0 - confidence
+    lo, hi = chi2.ppf([a / 2, 1 - a / 2], dof.sum()) / N
+    lo1, hi1 = chi2.ppf(a / 2, dof), chi2.ppf(1 - a / 2, dof)
+    return {"nis_n": int(N), "nis_mean": float(nis.mean()), "nis_mean_dof": float(dof.mean()),
+            "nis_band_lo": float(lo), "nis_band_hi": float(hi),
+            "nis_frac_inside": float(np.mean((nis >= lo1) & (nis <= hi1)))}
+
+
+def mean_nis_band(mean_nis: float, n: int, dof: int = 2, confidence: float = 0.95) -> dict:
+    """Two-sided band of the mean NIS of ``n`` innovations of dimension ``dof`` under consistency:
+    ``chi2.ppf([α/2, 1−α/2], n·dof)/n`` (treats the innovations as independent)."""
+    if not n or mean_nis is None or not np.isfinite(mean_nis):
+        return {"nis_mean": float("nan"), "nis_n": int(n or 0), "nis_band_lo": float("nan"),
+                "nis_band_hi": float("nan"), "nis_inside_band": None}
+    a = 1.0 - confidence
+    lo, hi = chi2.ppf([a / 2, 1 - a / 2], n * dof) / n
+    return {"nis_mean": float(mean_nis), "nis_n": int(n), "nis_band_lo": float(lo), "nis_band_hi": float(hi),
+            "nis_inside_band": bool(lo <= mean_nis <= hi)}
+
+
+#: metrics that need true poses / true landmarks / the true association (reported as not available)
+TRUTH_ONLY_METRICS = ("ate_rmse_m (true poses)", "rpe (true poses)", "heading error (true headings)",
+                      "landmark errors / OSPA / GOSPA (true landmarks)", "pose and landmark NEES (true poses)",
+                      "association accuracy (true association)")
+
+
+def own_model_metrics(result) -> dict:
+    """Metrics a result carries about its own model, needing no truth: final cost/energy (iterative solvers'
+    last trace objective or ``extra["final_cost"]``), mean NIS with its χ² band (filters that record
+    ``mean_nis`` and their update count), map size and associated rows."""
+    out: dict = {"n_landmarks_est": int(np.asarray(result.landmarks_xy).reshape(-1, 2).shape[0]),
+                 "n_obs_associated": int(np.sum(np.asarray(result.assoc) >= 0)),
+                 "n_obs": int(np.asarray(result.assoc).shape[0])}
+    extra = result.extra or {}
+    cost = extra.get("final_cost")
+    if cost is None and result.trace is not None and len(result.trace):
+        cost = float(result.trace.objective[-1])
+    out["final_cost"] = float(cost) if cost is not None else float("nan")
+    out["final_cost_note"] = ("the solver's own objective at its estimate (graph: ½Σ‖e‖²_Σ; icm: its energy)"
+                              if cost is not None else "not available: the solver records no objective")
+    n_upd = extra.get("n_updates", extra.get("particle_landmark_updates"))
+    if extra.get("mean_nis") is not None and n_upd:
+        out.update(mean_nis_band(float(extra["mean_nis"]), int(n_upd)))
+        out["nis_note"] = "mean NIS of all updates (χ²(2) each) and the 95 % band of the mean"
+    else:
+        out["nis_note"] = "not available: the solver records no innovations"
+    return out
