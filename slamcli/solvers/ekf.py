@@ -5,15 +5,17 @@ The filter alternates the textbook predict → update cycle (Thrun et al., *Prob
 paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
 
 * state ``x = [x_r (3,), m_1 (2,), ..., m_L (2,)]`` of length ``n = 3 + 2L``, covariance ``P (n, n)``;
-  the state grows by two entries whenever a landmark is added (buffers grow geometrically, so adding a
-  landmark costs amortised O(n) copies, not a fresh O(n²) allocation every time);
+  both live in preallocated buffers (``P`` C-contiguous) that every step updates in place; the state grows
+  by two entries whenever a landmark is added (one O(n²) re-layout, capacity doubling when full);
 * **predict** touches only the pose rows/columns (O(n)); the motion is either the DDMR model driven by the
   commanded controls with actuation noise ``NoiseSpec.motion_std`` (``motion_input="controls"``), or the
   composition with the encoder odometry increment with ``NoiseSpec.odometry_std``
   (``motion_input="odometry"``);
 * **update** with one range-bearing observation touches pose + one landmark columns of ``H`` (sparse), so
-  one update is O(n²) (the rank-2 correction of ``P``) instead of the O(n³) dense form; it uses the Joseph
-  form ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ``; observations of one step are applied sequentially;
+  one update is O(n²): one in-place symmetric rank-2 correction ``P −= V Vᵀ`` of the preallocated ``P``,
+  which equals the Joseph form ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ`` for the gain ``K = P Hᵀ S⁻¹`` (derivation at
+  :func:`update_inplace`); no copy of ``P`` per update or step; observations of one step are applied
+  sequentially;
 * **association**: ``known`` uses the sensor-reported ids (``observations.reported_id``); ``ml`` is
   maximum-likelihood (nearest neighbour in Mahalanobis distance of the innovation) with a χ² gate, new
   landmark creation beyond a second χ² threshold and an optional provisional list (paper 002 §14.1: wait
@@ -25,9 +27,11 @@ paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
   factor of approximately 10 ... to maintain consistency"): ``obs_std_scale`` multiplies σ_r, σ_b,
   ``motion_std_scale`` the process noise σ's, and ``stabilising_pose_std`` adds a per-step pose noise.
 
-The numerical core is a set of pure functions under the class (:func:`predict`, :func:`update`,
-:func:`update_position`, :func:`landmark_init`, :func:`innovation_stats`), each returning new arrays, so the class is a thin
-driver and the functions can be tested against hand-written Kalman algebra.
+The numerical core is a set of functions under the class: in-place kernels the filter runs
+(:func:`predict_inplace`, :func:`update_inplace`, :func:`update_position_inplace`) with pure twins that copy
+first and return new arrays (:func:`predict`, :func:`update`, :func:`update_position`), and
+:func:`landmark_init`, :func:`innovation_stats`; the class is a thin driver and the functions are tested
+against hand-written Kalman algebra.
 """
 
 from __future__ import annotations
@@ -150,43 +154,50 @@ class _Candidate:
 
 
 class _GrowingState:
-    """``x (cap,)`` and ``P (cap, cap)`` buffers with an active size ``n``; capacity doubles when full."""
+    """State ``x (n,)`` and covariance ``P (n, n)`` in preallocated buffers with an active size ``n``.
+
+    ``P`` is kept C-contiguous (the first ``n²`` entries of a flat buffer), not a strided ``[:n, :n]``
+    window of a square buffer: numpy's in-place rank-k update ``P -= V @ V.T`` on a strided view costs about
+    twice as much (measured in ``benchmarks/bench_ekf.py``). Adding a landmark re-lays the ``n × n`` block out
+    as ``(n+2) × (n+2)`` in place (one O(n²) move, the cost of one update); the buffer capacity doubles
+    when full, so growth costs amortised O(n²) per landmark and never a fresh allocation per update.
+    ``x`` and ``P`` are views: the in-place core (:func:`predict_inplace`, :func:`update_inplace`, ...)
+    writes straight into the buffers.
+    """
 
     def __init__(self, x0, P0, cap_landmarks: int = 16):
         cap = 3 + 2 * cap_landmarks
         self.x_buf = np.zeros(cap)
-        self.P_buf = np.zeros((cap, cap))
+        self.P_flat = np.zeros(cap * cap)
         self.n = 3
         self.x_buf[:3] = x0
-        self.P_buf[:3, :3] = P0
+        self._views()
+        self.P[:] = P0
 
-    @property
-    def x(self) -> np.ndarray:
-        return self.x_buf[: self.n]
-
-    @property
-    def P(self) -> np.ndarray:
-        return self.P_buf[: self.n, : self.n]
-
-    def set(self, x, P) -> None:
-        self.x_buf[: self.n] = x
-        self.P_buf[: self.n, : self.n] = P
+    def _views(self) -> None:
+        n = self.n
+        self.x = self.x_buf[:n]
+        self.P = self.P_flat[: n * n].reshape(n, n)
 
     def append_landmark(self, m, P_mx, P_mm) -> int:
         """Add landmark ``m (2,)`` with cross-covariance ``P_mx (2, n)`` and ``P_mm (2, 2)``; return its index."""
-        n = self.n
-        if n + 2 > self.x_buf.shape[0]:
+        n, n2 = self.n, self.n + 2
+        if n2 > self.x_buf.shape[0]:
             cap = 2 * self.x_buf.shape[0] - 3
             x_new = np.zeros(cap)
-            P_new = np.zeros((cap, cap))
             x_new[:n] = self.x_buf[:n]
-            P_new[:n, :n] = self.P_buf[:n, :n]
-            self.x_buf, self.P_buf = x_new, P_new
-        self.x_buf[n : n + 2] = m
-        self.P_buf[n : n + 2, :n] = P_mx
-        self.P_buf[:n, n : n + 2] = P_mx.T
-        self.P_buf[n : n + 2, n : n + 2] = P_mm
-        self.n = n + 2
+            P_flat = np.empty(cap * cap)
+            P_flat[: n2 * n2].reshape(n2, n2)[:n, :n] = self.P
+            self.x_buf, self.P_flat = x_new, P_flat
+        else:
+            # same buffer, wider rows: numpy copies through a temporary when source and target overlap
+            self.P_flat[: n2 * n2].reshape(n2, n2)[:n, :n] = self.P
+        self.n = n2
+        self._views()
+        self.x[n:n2] = m
+        self.P[n:n2, :n] = P_mx
+        self.P[:n, n:n2] = P_mx.T
+        self.P[n:n2, n:n2] = P_mm
         return (n - 3) // 2
 
 
@@ -273,13 +284,11 @@ class EkfSlam(BaseSolver):
                     F, G = compose_jacobians(x_r, d)
                     pose_new = compose(x_r, d)
                     Q = G @ Sigma_d @ G.T
-                x, P = predict(st.x, st.P, pose_new, F, Q + Q_stab)
-                st.set(x, P)
+                predict_inplace(st.x, st.P, pose_new, F, Q + Q_stab)
 
             # ---------------- GPS position fix (linear update) ----------------
             if t in gps_at:
-                x, P = update_position(st.x, st.P, gps_at[t], R_gps)
-                st.set(x, P)
+                update_position_inplace(st.x, st.P, gps_at[t], R_gps)
 
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
@@ -319,8 +328,7 @@ class EkfSlam(BaseSolver):
                         n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
                         continue
                     used.add((int(sensor[i]), j))
-                x, P, y, S = update(st.x, st.P, z, j, R)
-                st.set(x, P)
+                y, S = update_inplace(st.x, st.P, z, j, R)
                 assoc[g] = j
                 nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
@@ -501,7 +509,7 @@ def compose_jacobians(a, b):
 
 
 def predict(x, P, pose_pred, F, Q):
-    """EKF-SLAM prediction: only the pose moves.
+    """EKF-SLAM prediction: only the pose moves (pure: returns new arrays; see :func:`predict_inplace`).
 
     ::
 
@@ -524,25 +532,21 @@ def predict(x, P, pose_pred, F, Q):
     """
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
+    predict_inplace(x, P, pose_pred, F, Q)
+    return x, P
+
+
+def predict_inplace(x, P, pose_pred, F, Q) -> None:
+    """:func:`predict` written into ``x (n,)`` and ``P (n, n)`` (touches 3 rows and 3 columns: O(n))."""
     x[:3] = pose_pred
     x[2] = _wrap(x[2])
     P[:3, :] = F @ P[:3, :]
     P[:, :3] = P[:, :3] @ F.T
     P[:3, :3] += Q
-    return x, P
 
 
 def update(x, P, z, j, R):
-    """Range-bearing update of pose + landmark ``j`` (Joseph form), O(n²).
-
-    ::
-
-        ẑ = h(x_r, m_j),   y = z ⊖ ẑ               (bearing wrapped)
-        H = [H_r, 0 … 0, H_m, 0 … 0]  (2, n)     nonzero only in the pose and landmark-j columns
-        S = H P Hᵀ + R
-        K = P Hᵀ S⁻¹                               (solve, not inv)
-        x = x + K y
-        P = (I − KH) P (I − KH)ᵀ + K R Kᵀ          (Joseph form; (I−KH)P = P − K (P Hᵀ)ᵀ is O(n²))
+    """Range-bearing update of pose + landmark ``j``, O(n²) (pure: copies, then :func:`update_inplace`).
 
     Parameters
     ----------
@@ -553,25 +557,70 @@ def update(x, P, z, j, R):
     -------
     x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
     """
-    x = np.asarray(x, float)
-    P = np.asarray(P, float)
+    x = np.array(x, float, copy=True)
+    P = np.array(P, float, copy=True)
+    y, S = update_inplace(x, P, z, j, R)
+    return x, P, y, S
+
+
+def update_inplace(x, P, z, j, R):
+    """Range-bearing update of pose + landmark ``j`` written into ``x (n,)`` and ``P (n, n)``: O(n²).
+
+    ::
+
+        ẑ = h(x_r, m_j),   y = z ⊖ ẑ               (bearing wrapped)
+        H = [H_r, 0 … 0, H_m, 0 … 0]  (2, n)     nonzero only in the pose and landmark-j columns
+        U = P Hᵀ  (n, 2)                          (5 columns of P: O(n))
+        S = H P Hᵀ + R = H U + R
+        K = U S⁻¹                                 (closed-form 2×2 inverse)
+        x = x + K y
+        P = (I − KH) P (I − KH)ᵀ + K R Kᵀ          (Joseph form)
+          = P − K Uᵀ − U Kᵀ + K S Kᵀ               (expanded, P symmetric)
+          = P − U S⁻¹ Uᵀ = P − V Vᵀ,   V = U L⁻ᵀ,  S = L Lᵀ     (for the gain K = U S⁻¹)
+
+    The last line is one symmetric rank-2 update of the preallocated ``P`` in place (numpy evaluates
+    ``V @ V.T`` with BLAS ``syrk``, so ``P`` stays exactly symmetric): no (n, n) copy of ``P`` is made.
+    It equals the textbook Joseph form to round-off (``tests/test_ekf.py`` checks 1e-10 on random
+    problems); the Joseph form's extra robustness concerns a gain that is not ``U S⁻¹``, which never
+    occurs here.
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n), C-contiguous for speed;  z : ndarray (2,) [range, bearing];
+    j : int landmark index;  R : ndarray (2, 2) measurement covariance.
+
+    Returns
+    -------
+    y : ndarray (2,) innovation, S : ndarray (2, 2) innovation covariance.
+    """
     k = 3 + 2 * j
-    idx = np.array([0, 1, 2, k, k + 1])
     y, Hs = _innovation_and_jacobian(x[0], x[1], x[2], x[k], x[k + 1], float(z[0]), float(z[1]))
-    PHt = P[:, idx] @ Hs.T  # (n, 2) = P Hᵀ
-    S = Hs @ PHt[idx] + R  # (2, 2)
-    K = PHt @ _inv2(S)  # (n, 2) = P Hᵀ S⁻¹ (closed-form 2×2 inverse of the SPD S)
-    x_new = x + K @ y
-    x_new[2] = _wrap(x_new[2])
-    # Joseph form, exploiting the sparsity of H:
-    #   A = (I − KH) P = P − K (H P),   H P = (P Hᵀ)ᵀ
-    #   B = A (I − KH)ᵀ = A − (A Hᵀ) Kᵀ,  A Hᵀ = A[:, idx] Hsᵀ
-    #   P = B + K R Kᵀ
-    A = P - K @ PHt.T
-    B = A - (A[:, idx] @ Hs.T) @ K.T
-    P_new = B + K @ R @ K.T
-    P_new = 0.5 * (P_new + P_new.T)  # remove round-off asymmetry
-    return x_new, P_new, y, S
+    U = P[:, :3] @ Hs[:, :3].T  # (n, 2) = P Hᵀ, pose columns ...
+    U += P[:, k : k + 2] @ Hs[:, 3:].T  # ... plus landmark-j columns
+    S = Hs[:, :3] @ U[:3] + Hs[:, 3:] @ U[k : k + 2] + R  # (2, 2)
+    K = U @ _inv2(S)  # (n, 2)
+    x += K @ y
+    x[2] = _wrap(x[2])
+    V = _sqrt_downdate_factor(U, S)
+    P -= V @ V.T  # syrk: exactly symmetric
+    return y, S
+
+
+def _sqrt_downdate_factor(U, S):
+    """``V = U L⁻ᵀ (n, 2)`` with ``S = L Lᵀ`` (2×2 Cholesky in closed form), so that ``V Vᵀ = U S⁻¹ Uᵀ``.
+
+    ::
+
+        L = [[l₁₁, 0], [l₂₁, l₂₂]],  l₁₁ = √S₁₁,  l₂₁ = S₂₁ / l₁₁,  l₂₂ = √(S₂₂ − l₂₁²)
+        V[:, 0] = U[:, 0] / l₁₁,  V[:, 1] = (U[:, 1] − l₂₁ V[:, 0]) / l₂₂
+    """
+    l11 = math.sqrt(S[0, 0])
+    l21 = 0.5 * (S[0, 1] + S[1, 0]) / l11
+    l22 = math.sqrt(S[1, 1] - l21 * l21)
+    V = np.empty_like(U)
+    V[:, 0] = U[:, 0] / l11
+    V[:, 1] = (U[:, 1] - l21 * V[:, 0]) / l22
+    return V
 
 
 def _innovation_and_jacobian(px, py, th, mx, my, r, b):
@@ -629,32 +678,36 @@ def _inv2(S):
 
 
 def update_position(x, P, z_xy, R):
-    """Linear position-fix update (GPS), Joseph form, O(n²).
-
-    ::
-
-        H = [I₂, 0 … 0]  (2, n),   y = z − p,   S = P_pp + R,   K = P Hᵀ S⁻¹ = P[:, :2] S⁻¹
-        x = x + K y,   P = (I − KH) P (I − KH)ᵀ + K R Kᵀ
-
-    Parameters
-    ----------
-    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+    """Linear position-fix update (GPS), O(n²) (pure: copies, then :func:`update_position_inplace`).
 
     Returns
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
-    x = np.asarray(x, float)
-    P = np.asarray(P, float)
+    x = np.array(x, float, copy=True)
+    P = np.array(P, float, copy=True)
+    update_position_inplace(x, P, z_xy, R)
+    return x, P
+
+
+def update_position_inplace(x, P, z_xy, R) -> None:
+    """Linear position-fix update (GPS) written into ``x (n,)`` and ``P (n, n)``, O(n²).
+
+    ::
+
+        H = [I₂, 0 … 0]  (2, n),   y = z − p,   U = P Hᵀ = P[:, :2],   S = U[:2] + R,   K = U S⁻¹
+        x = x + K y,   P = (I − KH) P (I − KH)ᵀ + K R Kᵀ = P − U S⁻¹ Uᵀ = P − V Vᵀ  (see :func:`update_inplace`)
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+    """
     y = np.asarray(z_xy, float) - x[:2]
-    PHt = P[:, :2]  # (n, 2)
-    S = PHt[:2] + R
-    K = PHt @ _inv2(S)
-    x_new = x + K @ y
-    A = P - K @ PHt.T  # (I − KH) P
-    B = A - A[:, :2] @ K.T  # A (I − KH)ᵀ
-    P_new = B + K @ R @ K.T
-    return x_new, 0.5 * (P_new + P_new.T)
+    U = P[:, :2].copy()  # (n, 2)
+    S = U[:2] + R
+    x += U @ _inv2(S) @ y
+    V = _sqrt_downdate_factor(U, S)
+    P -= V @ V.T
 
 
 def landmark_init(x, P, z, R):
