@@ -5,8 +5,9 @@ The filter alternates the textbook predict → update cycle (Thrun et al., *Prob
 paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
 
 * state ``x = [x_r (3,), m_1 (2,), ..., m_L (2,)]`` of length ``n = 3 + 2L``, covariance ``P (n, n)``;
-  both live in preallocated buffers (``P`` C-contiguous) that every step updates in place; the state grows
-  by two entries whenever a landmark is added (one O(n²) re-layout, capacity doubling when full);
+  both live in preallocated, zero-padded buffers (``P`` C-contiguous) that every step updates in place; the
+  state grows by two entries whenever a landmark is added (O(n) into the padding, an O(n²) re-layout only
+  every L/32 landmarks);
 * **predict** touches only the pose rows/columns (O(n)); the motion is either the DDMR model driven by the
   commanded controls with actuation noise ``NoiseSpec.motion_std`` (``motion_input="controls"``), or the
   composition with the encoder odometry increment with ``NoiseSpec.odometry_std``
@@ -154,44 +155,45 @@ class _Candidate:
 
 
 class _GrowingState:
-    """State ``x (n,)`` and covariance ``P (n, n)`` in preallocated buffers with an active size ``n``.
+    """State ``x (n,)`` and covariance ``P (n, n)`` inside zero-padded, preallocated buffers.
 
-    ``P`` is kept C-contiguous (the first ``n²`` entries of a flat buffer), not a strided ``[:n, :n]``
-    window of a square buffer: numpy's in-place rank-k update ``P -= V @ V.T`` on a strided view costs about
-    twice as much (measured in ``benchmarks/bench_ekf.py``). Adding a landmark re-lays the ``n × n`` block out
-    as ``(n+2) × (n+2)`` in place (one O(n²) move, the cost of one update); the buffer capacity doubles
-    when full, so growth costs amortised O(n²) per landmark and never a fresh allocation per update.
-    ``x`` and ``P`` are views: the in-place core (:func:`predict_inplace`, :func:`update_inplace`, ...)
-    writes straight into the buffers.
+    The in-place kernels (:func:`predict_inplace`, :func:`update_inplace`, ...) run on the padded pair
+    ``xa (nₐ,)``, ``Pa (nₐ, nₐ)`` with ``nₐ ≥ n``: ``Pa`` is C-contiguous (numpy's in-place rank-k update on a
+    strided ``[:n, :n]`` window of a larger square buffer costs about twice as much, measured) and its
+    rows/columns beyond ``n`` are exactly zero, which every kernel keeps exactly zero (their rows of
+    ``P Hᵀ`` are 0), so the padding changes no number. ``x`` and ``P`` are the active ``[:n]`` views.
+
+    Adding a landmark writes its two rows/columns into the padding (O(n)); only when the padding is used
+    up is the block re-laid out into a fresh zeroed buffer with room for ``max(4, L/32)`` more landmarks
+    (one O(n²) copy per L/32 additions: amortised O(n) per landmark, and at most ≈ 6 % extra work per
+    update from the padding).
     """
 
-    def __init__(self, x0, P0, cap_landmarks: int = 16):
-        cap = 3 + 2 * cap_landmarks
-        self.x_buf = np.zeros(cap)
-        self.P_flat = np.zeros(cap * cap)
+    def __init__(self, x0, P0, cap_landmarks: int = 4):
         self.n = 3
-        self.x_buf[:3] = x0
-        self._views()
+        self._alloc(3 + 2 * cap_landmarks)
+        self.x[:] = x0
         self.P[:] = P0
 
-    def _views(self) -> None:
+    def _alloc(self, na: int) -> None:
+        """Move the active block into fresh zeroed buffers of size ``na ≥ n``."""
         n = self.n
-        self.x = self.x_buf[:n]
-        self.P = self.P_flat[: n * n].reshape(n, n)
+        xa, Pa = np.zeros(na), np.zeros((na, na))
+        if hasattr(self, "xa"):
+            xa[:n] = self.x
+            Pa[:n, :n] = self.P
+        self.xa, self.Pa = xa, Pa
+        self._views()
+
+    def _views(self) -> None:
+        self.x = self.xa[: self.n]
+        self.P = self.Pa[: self.n, : self.n]
 
     def append_landmark(self, m, P_mx, P_mm) -> int:
         """Add landmark ``m (2,)`` with cross-covariance ``P_mx (2, n)`` and ``P_mm (2, 2)``; return its index."""
         n, n2 = self.n, self.n + 2
-        if n2 > self.x_buf.shape[0]:
-            cap = 2 * self.x_buf.shape[0] - 3
-            x_new = np.zeros(cap)
-            x_new[:n] = self.x_buf[:n]
-            P_flat = np.empty(cap * cap)
-            P_flat[: n2 * n2].reshape(n2, n2)[:n, :n] = self.P
-            self.x_buf, self.P_flat = x_new, P_flat
-        else:
-            # same buffer, wider rows: numpy copies through a temporary when source and target overlap
-            self.P_flat[: n2 * n2].reshape(n2, n2)[:n, :n] = self.P
+        if n2 > self.xa.shape[0]:
+            self._alloc(n2 + 2 * max(4, (n2 - 3) // 64))
         self.n = n2
         self._views()
         self.x[n:n2] = m
@@ -284,11 +286,11 @@ class EkfSlam(BaseSolver):
                     F, G = compose_jacobians(x_r, d)
                     pose_new = compose(x_r, d)
                     Q = G @ Sigma_d @ G.T
-                predict_inplace(st.x, st.P, pose_new, F, Q + Q_stab)
+                predict_inplace(st.xa, st.Pa, pose_new, F, Q + Q_stab)
 
             # ---------------- GPS position fix (linear update) ----------------
             if t in gps_at:
-                update_position_inplace(st.x, st.P, gps_at[t], R_gps)
+                update_position_inplace(st.xa, st.Pa, gps_at[t], R_gps)
 
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
@@ -328,7 +330,7 @@ class EkfSlam(BaseSolver):
                         n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
                         continue
                     used.add((int(sensor[i]), j))
-                y, S = update_inplace(st.x, st.P, z, j, R)
+                y, S = update_inplace(st.xa, st.Pa, z, j, R)
                 assoc[g] = j
                 nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
@@ -359,7 +361,7 @@ class EkfSlam(BaseSolver):
         landmark_cov = np.empty((L, 2, 2))
         for a in range(2):
             for b in range(2):
-                landmark_cov[:, a, b] = P[idx + a, idx + b]
+                landmark_cov[:, a, b] = 0.5 * (P[idx + a, idx + b] + P[idx + b, idx + a])
         return self.make_result(
             status=status,
             poses_xyt=poses,
@@ -578,11 +580,13 @@ def update_inplace(x, P, z, j, R):
           = P − K Uᵀ − U Kᵀ + K S Kᵀ               (expanded, P symmetric)
           = P − U S⁻¹ Uᵀ = P − V Vᵀ,   V = U L⁻ᵀ,  S = L Lᵀ     (for the gain K = U S⁻¹)
 
-    The last line is one symmetric rank-2 update of the preallocated ``P`` in place (numpy evaluates
-    ``V @ V.T`` with BLAS ``syrk``, so ``P`` stays exactly symmetric): no (n, n) copy of ``P`` is made.
-    It equals the textbook Joseph form to round-off (``tests/test_ekf.py`` checks 1e-10 on random
+    The last line is one rank-2 update of the preallocated ``P`` in place: no (n, n) copy of ``P`` is made.
+    It equals the textbook Joseph form to round-off (``tests/test_ekf_inplace.py`` checks 1e-10 on random
     problems); the Joseph form's extra robustness concerns a gain that is not ``U S⁻¹``, which never
-    occurs here.
+    occurs here. ``V Vᵀ`` is formed by BLAS ``gemm`` (``V @ V.T.copy()``): numpy's ``syrk`` path for
+    ``V @ V.T`` is exactly symmetric but, with its triangle copy, about twice as slow at n ≈ 2000
+    (measured), while ``gemm`` leaves an asymmetry at the level of round-off (≈ 1e-16 relative per
+    update); the solver symmetrises the covariance blocks it reports.
 
     Parameters
     ----------
@@ -602,7 +606,7 @@ def update_inplace(x, P, z, j, R):
     x += K @ y
     x[2] = _wrap(x[2])
     V = _sqrt_downdate_factor(U, S)
-    P -= V @ V.T  # syrk: exactly symmetric
+    P -= V @ V.T.copy()  # one in-place rank-2 update (gemm; see the docstring on symmetry)
     return y, S
 
 
@@ -707,7 +711,7 @@ def update_position_inplace(x, P, z_xy, R) -> None:
     S = U[:2] + R
     x += U @ _inv2(S) @ y
     V = _sqrt_downdate_factor(U, S)
-    P -= V @ V.T
+    P -= V @ V.T.copy()
 
 
 def landmark_init(x, P, z, R):
