@@ -15,18 +15,18 @@ def solvers_command(
     with handle_errors():
         from rich.table import Table
 
-        from slamcli.params import describe_params
         from slamcli.solvers import registry
 
         infos = registry.available()
         if name is not None:
-            registry.load(name)  # raises PluginError listing the names when unknown
+            if name not in {i.name for i in infos}:
+                registry.load(name)  # raises PluginError listing the names
             infos = [i for i in infos if i.name == name]
         table = Table(title="slamcli solvers")
         for col in ("name", "package", "version", "parameters (default)"):
             table.add_column(col)
         for info in infos:
-            cls = registry.load(info.name)
-            params = ", ".join(f"{n}={d}" for n, _t, d in describe_params(cls.Params))
+            # read from entry-point metadata and the Params source: no solver (numpy/scipy) is imported
+            params = ", ".join(f"{n}={d}" for n, _t, d in registry.describe(info.name))
             table.add_row(info.name, info.package, info.version, params or "—")
         stdout_console().print(table)
