@@ -14,7 +14,8 @@ World: *grid city* (:func:`grid_city`) — the ``paper-sim1`` scenario scaled up
 clutter. Datasets are simulated once and cached in ``benchmarks/results/scale_data/``.
 
 Rows (``row`` column; ``impl`` is slamcli or the reference of that row; ``ratio`` = slamcli / reference
-time of the same size in the same run, ``rss_ratio`` likewise for peak RSS):
+wall time of the same size in the same run, ``cpu_ratio`` the same for CPU time — steadier on a loaded
+machine — and ``rss_ratio`` for peak RSS):
 
 * ``graph+marginals`` — ``graph`` with default parameters (``covariance=true``) vs GTSAM 4
   ``LevenbergMarquardtOptimizer`` on the same factor graph and start + ``gtsam.Marginals`` of every pose
@@ -155,6 +156,10 @@ def _task(task: dict) -> dict:
 
         ds = read_dataset(dataset_path(size), with_truth=kind in ("hdf5-write", "savez"))
         extra["observations"] = len(ds.inputs.observations)
+    if kind in ("ekf", "ekf-reference"):
+        from benchmarks.bench_ekf import ekf_scale_world
+
+        inputs = ekf_scale_world(size, int(task["steps"]))
     rss0, cpu0, t0 = _rss_mb(), _cpu_s(), time.perf_counter()
     status = "ok"
     if kind == "graph":
@@ -205,11 +210,15 @@ def _task(task: dict) -> dict:
             _ = {k: z[k] for k in z.files}
         path.unlink()
     elif kind in ("ekf", "ekf-reference"):
-        from benchmarks.bench_ekf import scale_row
+        from benchmarks.bench_ekf import plain_reference_ekf
 
-        r = scale_row(size, int(task["steps"]), "slamcli" if kind == "ekf" else "reference")
-        extra.update(updates=r["updates"], us_per_update=r["us_per_update"],
-                     pose_digest=float(np.abs(r["poses"]).sum()))
+        if kind == "ekf":
+            res = _solver("ekf", {"association": "known"}).solve(inputs, rng=np.random.default_rng(0))
+            poses, n_upd = res.poses_xyt, res.extra["n_updates"]
+        else:
+            poses, n_upd = plain_reference_ekf(inputs)
+        extra.update(updates=n_upd, us_per_update=(time.perf_counter() - t0) / max(n_upd, 1) * 1e6,
+                     pose_digest=float(np.abs(poses).sum()))  # equal digests: both filters computed the same
     else:
         raise ValueError(f"unknown task {kind!r}")
     return {"status": status, "wall_s": time.perf_counter() - t0, "cpu_s": _cpu_s() - cpu0,
@@ -299,7 +308,7 @@ def _row(row: str, size: int, impl: str, m: dict, goal: str = "") -> dict:
 def _pair(rows: list[dict], row: str, size: int, ours: dict, ref: dict, ref_impl: str, goal: str,
           ours_impl: str = "slamcli") -> None:
     a, b = _row(row, size, ours_impl, ours, goal), _row(row, size, ref_impl, ref)
-    for key, col in (("wall_s", "ratio"), ("peak_rss_mb", "rss_ratio")):
+    for key, col in (("wall_s", "ratio"), ("cpu_s", "cpu_ratio"), ("peak_rss_mb", "rss_ratio")):
         x, y = ours.get(key), ref.get(key)
         a[col] = round(x / y, 3) if isinstance(x, (int, float)) and isinstance(y, (int, float)) and y > 0 else ""
     rows += [a, b]
@@ -323,14 +332,40 @@ def _selected() -> tuple[tuple[int, ...] | None, tuple[str, ...]]:
             tuple(r.strip() for r in rows.split(",")) if rows else ROWS)
 
 
-def run(quick: bool = False, sizes: tuple[int, ...] | None = None, rows_sel: tuple[str, ...] | None = None) -> list[dict]:
+def run(quick: bool = False, sizes: tuple[int, ...] | None = None, rows_sel: tuple[str, ...] | None = None,
+        on_row=None) -> list[dict]:
+    """The table's rows; ``on_row(rows)`` is called after each measured pair (for incremental saving)."""
+    rows = _Rows(on_row)
+    _run(rows, quick, sizes, rows_sel)
+    return list(rows)
+
+
+class _Rows(list):
+    """A list that reports every append/extend to ``on_row`` (the standalone runner saves the CSV)."""
+
+    def __init__(self, on_row):
+        super().__init__()
+        self.on_row = on_row
+
+    def append(self, item):
+        super().append(item)
+        if self.on_row:
+            self.on_row(list(self))
+
+    def __iadd__(self, items):
+        super().extend(items)
+        if self.on_row:
+            self.on_row(list(self))
+        return self
+
+
+def _run(rows: list[dict], quick: bool, sizes, rows_sel) -> None:
     env_sizes, env_rows = _selected()
     sizes = sizes or env_sizes or (QUICK_SIZES if quick else SIZES)
     rows_sel = rows_sel or env_rows
     unknown = set(rows_sel) - set(ROWS)
     if unknown:
         raise SystemExit(f"unknown rows {sorted(unknown)}; known: {', '.join(ROWS)}")
-    rows: list[dict] = []
     for n in sizes:  # simulate + cache the worlds first (in a child: the parent stays light)
         if any(r in rows_sel for r in ("startup", "hdf5", "graph", "icm")) and not dataset_path_exists(n):
             m = measure({"kind": "simulate-cache", "size": n})
@@ -368,7 +403,6 @@ def run(quick: bool = False, sizes: tuple[int, ...] | None = None, rows_sel: tup
             task = {"size": n, "steps": steps}
             _pair(rows, "ekf", n, measure({"kind": "ekf", **task}), measure({"kind": "ekf-reference", **task}),
                   "plain numpy EKF", "≤ 1.5× reference, O(n²)")
-    return rows
 
 
 def dataset_path_exists(n: int) -> bool:
@@ -392,6 +426,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--sizes", help="comma-separated pose counts (default 10001,50001,100001)")
     ap.add_argument("--rows", help=f"comma-separated rows out of {','.join(ROWS)}")
+    ap.add_argument("--out", default="scale", help="CSV name under benchmarks/results/ (default scale)")
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -405,8 +440,9 @@ def main(argv: list[str] | None = None) -> int:
     from benchmarks.__main__ import write_rows
 
     rows = run(quick=args.quick, sizes=tuple(int(s) for s in args.sizes.split(",")) if args.sizes else None,
-               rows_sel=tuple(args.rows.split(",")) if args.rows else None)
-    print(write_rows("scale", rows))
+               rows_sel=tuple(args.rows.split(",")) if args.rows else None,
+               on_row=lambda rows: write_rows(args.out, rows))  # saved after every row: a long run keeps its rows
+    print(write_rows(args.out, rows))
     return 0
 
 

@@ -105,7 +105,7 @@ class DynSolver:
 def test_static_reader_follows_imports_folds_constants_and_falls_back(tmp_path, monkeypatch):
     pkg = tmp_path / "toyplug"
     pkg.mkdir()
-    (pkg / "__init__.py").write_text("from .solver import ToySolver, DynSolver\n")
+    (pkg / "__init__.py").write_text("from .solver import *  # noqa: F403\n")
     (pkg / "params.py").write_text(PLUGIN_PARAMS)
     (pkg / "solver.py").write_text(PLUGIN_SOLVER)
     monkeypatch.syspath_prepend(str(tmp_path))

@@ -165,7 +165,7 @@ def _find_class(modname: str, name: str, depth: int = 0) -> tuple[str, ast.Class
     if depth > 8:
         raise _NotStatic(f"{modname}.{name}")
     tree, is_pkg = _module_source(modname)
-    found = None
+    found, star = None, []
     for node in tree.body:  # top-level statements only; the last binding wins, as at run time
         if isinstance(node, ast.ClassDef) and node.name == name:
             found = ("class", node)
@@ -173,10 +173,17 @@ def _find_class(modname: str, name: str, depth: int = 0) -> tuple[str, ast.Class
             for alias in node.names:
                 if (alias.asname or alias.name) == name:
                     found = ("import", (_import_target(modname, is_pkg, node), alias.name))
+                elif alias.name == "*":
+                    star.append(_import_target(modname, is_pkg, node))
         elif (isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name)
               and node.targets[0].id == name):
             found = ("alias", node.value)
     if found is None:
+        for target in reversed(star):  # ``from .solver import *``
+            try:
+                return _find_class(target, name, depth + 1)
+            except _NotStatic:
+                continue
         raise _NotStatic(f"{modname}.{name}")
     kind, what = found
     if kind == "class":
