@@ -74,7 +74,7 @@ def test_result_summary(tmp_path):
     out = res.stdout
     assert row(out, "solver") == "icm 0.1.0"
     assert row(out, "status") == "converged — map change below tol"
-    assert row(out, "iterations") == "4"
+    assert row(out, "iterations") == "3"  # 4 trace rows: the initialisation + 3 iterations
     assert row(out, "landmarks") == "3"
     assert row(out, "associated obs.") == "4 of 5"
     assert row(out, "wall time") == "1.25 s"

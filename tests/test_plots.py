@@ -61,7 +61,7 @@ def test_save_figure_formats_and_atomicity(tmp_path):
     png = save_figure(fig, tmp_path / "a.png")
     pdf = save_figure(fig, tmp_path / "sub" / "a.pdf")
     assert png.read_bytes()[:4] == b"\x89PNG" and pdf.read_bytes()[:4] == b"%PDF"
-    with pytest.raises(ConfigError, match="png or .pdf"):
+    with pytest.raises(ConfigError, match="png, .pdf or .svg"):
         save_figure(fig, tmp_path / "a.jpg")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "sub"]
 

@@ -252,6 +252,6 @@ def test_cli_solvers_lists_every_solver_with_parameters():
         assert name in res.stdout
     assert "nn_threshold=1.0" in res.stdout and "min_support=1" in res.stdout
     one = CliRunner().invoke(app, ["solvers", "odometry"], terminal_width=400)
-    assert one.exit_code == 0 and "use_reported_ids=True" in one.stdout
+    assert one.exit_code == 0 and "use_reported_ids  [true | false]  default: True" in one.stdout
     bad = CliRunner().invoke(app, ["solvers", "nope"])
     assert bad.exit_code == 1 and "available solvers" in bad.stderr

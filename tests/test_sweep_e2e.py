@@ -91,8 +91,9 @@ def test_cli_resume_skips_everything_and_keeps_numbers(swept):
 
 def test_cli_failures_exit_nonzero_with_summary(tmp_path):
     path = tmp_path / "bad.toml"
-    # EKF with the default 'known' association on a sensor that reports no ids: every EKF run fails
-    path.write_text(EXPERIMENT.replace("oracle_association = true\n", "").replace('name = "e2e"', 'name = "bad"')
+    # EKF with association 'known' on a sensor that reports no ids: every EKF run fails
+    path.write_text(EXPERIMENT.replace("oracle_association = true\n", '[solver.params]\nassociation = "known"\n')
+                    .replace('name = "e2e"', 'name = "bad"')
                     .replace("replicates = 2", "replicates = 1"))
     res = CliRunner().invoke(app, ["sweep", str(path), "--out", str(tmp_path), "--quiet"])
     assert res.exit_code == 1

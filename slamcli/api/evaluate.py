@@ -3,8 +3,9 @@
 ``evaluate_files`` is the file-level workflow behind ``slamcli evaluate`` and the sweep runner:
 
 * the dataset is the one given, or the path recorded in the result (``extra["dataset_path"]``, tried as
-  given and relative to the result's directory); its content hash must equal the hash recorded in the
-  result, otherwise the metrics would describe a different run → one-line :class:`SlamcliError`;
+  given and relative to the result's directory, then ``extra["dataset_relpath"]`` relative to the result's
+  directory, so a result and its dataset moved together still evaluate); its content hash must equal the
+  hash recorded in the result, otherwise the metrics would describe a different run → one-line :class:`SlamcliError`;
 * outputs (each written atomically): ``metrics.json`` (scalars, NaN → null), and tidy CSVs
   ``per_iteration.csv``, ``per_step.csv``, ``per_landmark.csv``.
 
@@ -23,11 +24,17 @@ from slamcli.errors import SlamcliError
 OUTPUT_FILES = ("metrics.json", "per_iteration.csv", "per_step.csv", "per_landmark.csv")
 
 
-def _resolve_dataset_path(result_path: Path, recorded: str) -> Path:
-    if not recorded:
+def _resolve_dataset_path(result_path: Path, recorded: str, relpath: str = "") -> Path:
+    """The recorded dataset: as recorded (absolute, or relative to the cwd / the result's directory), then
+    ``relpath`` relative to the result's directory (a result and its dataset moved together)."""
+    if not recorded and not relpath:
         raise SlamcliError(f"{result_path}: the result records no dataset path; pass the dataset with --data")
-    p = Path(recorded)
-    candidates = [p] if p.is_absolute() else [p, result_path.parent / p]
+    candidates = []
+    if recorded:
+        p = Path(recorded)
+        candidates += [p] if p.is_absolute() else [p, result_path.parent / p]
+    if relpath:
+        candidates.append(result_path.parent / relpath)
     for c in candidates:
         if c.is_file():
             return c
@@ -51,7 +58,8 @@ def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = T
     result_path = Path(result_path)
     result = read_result(result_path)
     if data_path is None:
-        data_path = _resolve_dataset_path(result_path, str(result.extra.get("dataset_path", "") or ""))
+        data_path = _resolve_dataset_path(result_path, str(result.extra.get("dataset_path", "") or ""),
+                                          str(result.extra.get("dataset_relpath", "") or ""))
     data_path = Path(data_path)
     dataset = read_dataset(data_path)
     if check_hash and result.dataset_hash:

@@ -35,6 +35,16 @@ def solver_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng([SOLVER_STREAM, int(seed)])
 
 
+def dataset_relpath(data_path: str | os.PathLike, result_path: str | os.PathLike) -> str:
+    """Path of the dataset relative to the result file's directory (POSIX separators; "" when the two live
+    on different drives)."""
+    try:
+        rel = os.path.relpath(Path(data_path).resolve(), Path(result_path).resolve().parent)
+    except ValueError:  # different drives on Windows
+        return ""
+    return Path(rel).as_posix()
+
+
 def make_solver(method: str, params: Any = None):
     """Instantiate the solver registered as ``method``.
 
@@ -115,7 +125,8 @@ def solve_file(
 ) -> SolverResult:
     """Read ``data_path``, solve with ``method``, write the result to ``out_path`` (atomically).
 
-    The result records ``dataset_hash`` and, in ``extra``: ``dataset_path`` (absolute), ``seed``,
+    The result records ``dataset_hash`` and, in ``extra``: ``dataset_path`` (absolute), ``dataset_relpath``
+    (relative to the result's directory, so a result moved together with its dataset still finds it), ``seed``,
     ``used_truth_association`` and, with ``init_path``, ``init_path``.
 
     ``oracle_association=True`` copies the TRUE association (``truth.obs_landmark``) into
@@ -151,6 +162,7 @@ def solve_file(
         raise SolverError(f"{data_path}: {exc}") from None
     extra = dict(result.extra)
     extra.update(dataset_path=str(data_path.resolve()), seed=int(seed), used_truth_association=bool(oracle_association))
+    extra["dataset_relpath"] = dataset_relpath(data_path, out_path)
     if init_path is not None:
         extra["init_path"] = str(Path(init_path).resolve())
     result = dataclasses.replace(result, dataset_hash=dataset_hash(dataset), extra=extra)

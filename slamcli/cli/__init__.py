@@ -4,8 +4,11 @@ from __future__ import annotations
 
 # Each module registers its commands on ``app`` when imported; they import only typer at module level.
 from slamcli.cli import (
+    aggregate_cmd,  # noqa: F401
     evaluate_cmd,  # noqa: F401
+    export_cmd,  # noqa: F401
     import_cmd,  # noqa: F401
+    import_trajectory_cmd,  # noqa: F401
     info_cmd,  # noqa: F401
     plot_cmd,  # noqa: F401
     reproduce_cmd,  # noqa: F401
@@ -14,7 +17,9 @@ from slamcli.cli import (
     solvers_cmd,  # noqa: F401
     sweep_cmd,  # noqa: F401
 )
-from slamcli.cli.app import app
+from slamcli.cli.app import app, polish_help
+
+polish_help(app)  # one-line command summaries that are never cut mid-word
 
 
 def main() -> None:

@@ -7,13 +7,44 @@ inside the function body, so ``slamcli --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import re
 import sys
 from collections.abc import Callable, Iterator
 
 import typer
+from typer.core import TyperGroup
+
+
+class SlamcliGroup(TyperGroup):
+    """The root command group: a usage error (unknown option, missing argument, bad value) prints one
+    ``error:`` line and one hint line on stderr (exit status 2) instead of click's usage block."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except typer.Abort:
+            typer.echo("aborted", err=True)
+            sys.exit(1)
+        except Exception as exc:  # click exceptions (typer may vendor click): matched by class name below
+            names = {c.__name__ for c in type(exc).__mro__}
+            if "ClickException" not in names:
+                raise
+            if "NoArgsIsHelpError" in names:  # a group called without a command: its help, as before
+                exc.show()
+                sys.exit(exc.exit_code)
+            typer.echo(f"error: {exc.format_message().strip().splitlines()[0]}", err=True)
+            if "UsageError" in names:
+                ctx = getattr(exc, "ctx", None)
+                typer.echo(f"hint: see '{ctx.command_path if ctx is not None else 'slamcli'} --help'", err=True)
+            sys.exit(exc.exit_code)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
 
 app = typer.Typer(
     name="slamcli",
+    cls=SlamcliGroup,
     help="2-D SLAM experiment runner: simulate → solve → evaluate → plot, and parameter sweeps.",
     no_args_is_help=True,
     add_completion=False,
@@ -108,3 +139,48 @@ def fail(message: str) -> None:
 
 def is_tty() -> bool:
     return sys.stderr.isatty()
+
+
+def iteration_count(result) -> int | None:
+    """Iterations of an iterative solve, as the solver counts them: ``extra["iterations"]`` when the solver
+    records it, else the trace length minus its row 0 (the initialisation); None without a trace."""
+    if "iterations" in result.extra:
+        return int(result.extra["iterations"])
+    if result.trace is None:
+        return None
+    return max(len(result.trace) - 1, 0)
+
+
+#: abbreviations whose full stop does not end the first sentence of a help text
+_ABBREV = re.compile(r"(?:\b(?:Figs?|Eqs?|e\.g|i\.e|cf|vs|etc|approx)\.)$")
+
+
+def short_help(doc: str | None, limit: int = 60) -> str:
+    """One-line command summary for ``slamcli --help``: the first clause of the docstring's first paragraph
+    (up to a sentence end, ``:`` or ``;``), shortened at a word boundary with "…" when longer than ``limit``
+    — never cut inside a word or after an abbreviation's full stop."""
+    text = " ".join((doc or "").strip().split("\n\n")[0].split())
+    for m in re.finditer(r"[.:;](?=\s|$)", text):
+        if m.group() == "." and _ABBREV.search(text[: m.end()]):
+            continue
+        text = text[: m.start()]
+        break
+    if len(text) <= limit:
+        return text
+    cut = text[: limit].rsplit(" ", 1)[0].rstrip(" ,(-—")
+    return cut + " …"
+
+
+def polish_help(typer_app: typer.Typer) -> None:
+    """Give every command and sub-group an explicit summary (:func:`short_help`), recursively."""
+    import inspect
+
+    for info in typer_app.registered_commands:
+        if not isinstance(info.short_help, str):
+            info.short_help = short_help(info.help or inspect.getdoc(info.callback))
+    for group in typer_app.registered_groups:
+        sub = group.typer_instance
+        if not isinstance(group.short_help, str):  # typer's Default(None) placeholder
+            text = group.help if isinstance(group.help, str) else sub.info.help
+            group.short_help = sub.info.short_help = short_help(text if isinstance(text, str) else "")
+        polish_help(sub)

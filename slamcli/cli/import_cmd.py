@@ -10,7 +10,7 @@ import typer
 from slamcli.cli.app import app, fail, handle_errors, stdout_console
 
 import_app = typer.Typer(
-    help="Import a public recording as a slamcli dataset (schema v1): then solve/evaluate/plot work on it.",
+    help="Import a recording, a landmark graph or another estimator's trajectory: then solve/evaluate/plot work on it.",
     no_args_is_help=True,
     rich_markup_mode=None,
 )

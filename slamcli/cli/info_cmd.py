@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, stdout_console
+from slamcli.cli.app import app, handle_errors, iteration_count, stdout_console
 
 
 def _flatten(d, prefix: str = "") -> list[tuple[str, str]]:
@@ -91,8 +91,7 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
         ("solver", f"{res.solver} {res.solver_version}"),
         ("status", res.status.value + (f" — {res.message}" if res.message else "")),
         ("wall time", _fmt(res.wall_time_s, "s")),
-        ("iterations", str(res.extra["iterations"]) if "iterations" in res.extra  # the solver's own count
-         else str(len(res.trace)) if res.trace is not None else "— (no trace)"),
+        ("iterations", str(iteration_count(res)) if iteration_count(res) is not None else "— (no trace)"),
         ("poses", str(len(res.poses_xyt))),
         ("landmarks", str(len(res.landmarks_xy))),
         ("associated obs.", f"{n_assoc} of {len(res.assoc)}"),

@@ -1,4 +1,4 @@
-"""``slamcli plot``: figures from result files (map, errors, nees, mapchange), PNG or PDF."""
+"""``slamcli plot``: figures from result files (map, errors, nees, mapchange) and sweeps (compare); PNG, PDF or SVG."""
 
 from __future__ import annotations
 
@@ -9,111 +9,145 @@ import typer
 
 from slamcli.cli.app import app, fail, handle_errors
 
-KINDS = ("map", "errors", "nees", "mapchange")
+KINDS = ("map", "errors", "nees", "mapchange", "compare")
+_SIZES = {"map": (7.0, 6.0), "errors": (6.4, 4.4), "nees": (6.4, 4.4), "mapchange": (6.4, 4.4),
+          "compare": (6.4, 4.4)}
 
 
 @app.command("plot")
 def plot_command(
-    kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange")],
+    kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange | compare")],
     results: Annotated[list[Path], typer.Argument(
-        help="Result file(s): nees takes N Monte-Carlo runs, mapchange overlays several, map/errors take one.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Image file, .png or .pdf.")],
+        help="Result file(s): nees takes N Monte-Carlo runs, mapchange overlays several, map/errors take "
+             "one; compare takes a sweep folder.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Image file: .png, .pdf or .svg.")],
     data: Annotated[list[Path] | None, typer.Option(
         "--data", "-d", help="Dataset file per result (repeat); default: recorded in each result.")] = None,
     ellipses: Annotated[bool, typer.Option("--ellipses", help="map: draw 2σ covariance ellipses if stored.")] = False,
     pose_ellipse_every: Annotated[int, typer.Option(
         help="map: with --ellipses, a pose ellipse every K poses (0 = none).")] = 0,
+    sigma: Annotated[float, typer.Option(
+        help="errors: half-width of the pose error band in σ (results with covariances).")] = 3.0,
+    metric: Annotated[str, typer.Option(help="compare: metric column, e.g. ate_rmse.")] = "ate_rmse_m",
+    by: Annotated[str, typer.Option(help="compare: group by this column (solver = label).")] = "solver",
+    linear: Annotated[bool, typer.Option(
+        "--linear", help="nees/mapchange: linear y axis instead of logarithmic.")] = False,
+    dpi: Annotated[int, typer.Option(help="Raster resolution (PNG).")] = 200,
+    size: Annotated[str | None, typer.Option(help="Figure size WIDTHxHEIGHT in inches, e.g. 3.5x2.6.")] = None,
     no_hash_check: Annotated[bool, typer.Option("--no-hash-check", help="Skip the dataset hash check.")] = False,
     title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
 ) -> None:
-    """Draw one publication figure; the image is written atomically."""
+    """Draw one publication figure; the format follows the extension; written atomically."""
     with handle_errors():
         if kind not in KINDS:
             fail(f"unknown plot kind {kind!r}; choose one of {', '.join(KINDS)}")
-        if output.suffix.lower() not in (".png", ".pdf"):
-            fail(f"{output}: unsupported image format {output.suffix or '(none)'!r}; use .png or .pdf")
+        from slamcli.plots import check_format, new_figure, parse_size, save_figure
+
+        check_format(output)
+        if dpi <= 0:
+            fail(f"--dpi: must be > 0, got {dpi}")
+        if not sigma > 0:
+            fail(f"--sigma: must be > 0, got {sigma}")
         if data and len(data) != len(results):
             fail(f"got {len(results)} result(s) but {len(data)} --data file(s); give one per result or none")
-        if kind in ("map", "errors") and len(results) != 1:
-            fail(f"plot {kind} takes exactly one result, got {len(results)}")
-        from slamcli.plots import new_figure, save_figure
-
-        fig, ax = new_figure(*((7.0, 6.0) if kind == "map" else (6.4, 4.4)))
+        if kind in ("map", "errors", "compare") and len(results) != 1:
+            what = "sweep folder" if kind == "compare" else "result"
+            fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
+        w, h = parse_size(size, _SIZES[kind])
         check = not no_hash_check
         data_paths = list(data) if data else [None] * len(results)
-        if kind == "map":
-            _map(ax, results[0], data_paths[0], check, ellipses, pose_ellipse_every, title)
-        elif kind == "errors":
-            _errors(ax, results[0], data_paths[0], check, title)
-        elif kind == "mapchange":
-            _mapchange(ax, results, title)
+        echo = (lambda msg: None) if quiet else typer.echo
+        if kind == "errors":
+            fig = _errors(results[0], data_paths[0], check, title, (w, h), sigma, echo)
         else:
-            _nees(ax, results, data_paths, check, title)
-        save_figure(fig, output)
-        typer.echo(f"wrote {output}")
+            fig, ax = new_figure(w, h)
+            if kind == "map":
+                _map(ax, results[0], data_paths[0], check, ellipses, pose_ellipse_every, title, echo)
+            elif kind == "mapchange":
+                _mapchange(ax, results, title, log=not linear)
+            elif kind == "compare":
+                _compare(ax, results[0], metric, by, title, echo)
+            else:
+                _nees(ax, results, data_paths, check, title, echo, log=not linear)
+        save_figure(fig, output, dpi=dpi)
+        echo(f"wrote {output}")
 
 
-def _map(ax, result_path, data_path, check, ellipses, every, title):
+def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.echo):
     from slamcli.api.evaluate import load_result_and_dataset
-    from slamcli.plots.maps import plot_map
+    from slamcli.plots.figures import draw_map
 
     # real recordings and imported graphs have no ground truth: then estimate and odometry only
     res, ds, data_path = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
-    truth = ds.truth
-    plot_map(ax, truth.landmarks_xy if truth else None, res.landmarks_xy, truth.poses_xyt[:, :2] if truth else None,
-             ds.inputs.odometry_xyt[:, :2], res.poses_xyt[:, :2],
-             landmark_cov=res.landmark_cov if ellipses else None, pose_cov=res.pose_cov if ellipses else None,
-             ellipse_every=every, title=title or f"{res.solver}: {Path(result_path).name}",
-             legend_note=None if truth else "No ground truth in dataset")
-    if truth is None:
-        typer.echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
+    draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every,
+             title=title or f"{res.solver}: {Path(result_path).name}")
+    if ds.truth is None:
+        echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
 
 
-def _errors(ax, result_path, data_path, check, title):
+def _errors(result_path, data_path, check, title, size, n_sigma, echo):
+    """Landmark error per iteration for a result with an iteration trace (paper Figs 5e/f); otherwise the
+    per-step pose error with ±nσ bands from the result's pose covariances (or without bands)."""
     from slamcli.api.evaluate import load_result_and_dataset
     from slamcli.errors import SlamcliError
-    from slamcli.metrics.landmarks import paper_error_per_iteration
-    from slamcli.plots.curves import plot_error_curves
+    from slamcli.plots import new_figure
+    from slamcli.plots.figures import draw_landmark_errors, draw_pose_errors
 
     res, ds, _ = load_result_and_dataset(result_path, data_path, check_hash=check)
-    if res.trace is None or len(res.trace) == 0:
-        raise SlamcliError(f"{result_path}: no iteration trace (solver {res.solver!r}); plot errors needs one")
-    df = paper_error_per_iteration(res.trace, ds.truth.landmarks_xy)
-    plot_error_curves(ax, df["iteration"], df["err_min_m"], df["err_mean_m"], df["err_max_m"],
-                      title=title or f"{res.solver}: landmark error per iteration")
+    if res.trace is not None and len(res.trace) > 0:
+        fig, ax = new_figure(*size)
+        draw_landmark_errors(ax, res, ds, title)
+        return fig
+    fig, axes = new_figure(size[0], max(size[1], 5.5), nrows=3, sharex=True)
+    try:
+        inside = draw_pose_errors(axes, res, ds, n_sigma, title)
+    except ValueError as exc:
+        raise SlamcliError(f"{result_path}: {exc}") from None
+    if inside is not None:
+        echo("steps inside ±{:g}σ: x {:.1f}%, y {:.1f}%, heading {:.1f}%".format(n_sigma, *(100 * inside)))
+    else:
+        echo(f"note: {result_path} stores no pose covariances; drew the error without σ bands")
+    return fig
 
 
-def _mapchange(ax, result_paths, title):
-    import numpy as np
-
+def _mapchange(ax, result_paths, title, log=True):
     from slamcli.errors import SlamcliError
     from slamcli.io import read_result
-    from slamcli.metrics.landmarks import map_change
-    from slamcli.plots.curves import plot_map_change
+    from slamcli.plots.figures import draw_mapchange
 
-    for rp in result_paths:
-        res = read_result(rp)
-        tr = res.trace
-        if tr is None or len(tr) < 2:
-            raise SlamcliError(f"{rp}: no iteration trace with ≥ 2 iterations (solver {res.solver!r})")
-        mc = [0.0] + [map_change(tr.landmarks_at(k - 1), tr.landmarks_at(k)) for k in range(1, len(tr))]
-        label = f"{res.solver}: {Path(rp).name}" if len(result_paths) > 1 else None
-        plot_map_change(ax, np.arange(len(tr)), np.asarray(mc), label=label)
-    ax.set_title(title or "Map change between iterations")
+    results = [read_result(rp) for rp in result_paths]
+    labels = [f"{r.solver}: {Path(rp).name}" for r, rp in zip(results, result_paths)] if len(results) > 1 else None
+    try:
+        draw_mapchange(ax, results, labels, log=log, title=title)
+    except ValueError as exc:
+        bad = next(rp for rp, r in zip(result_paths, results) if r.trace is None or len(r.trace) < 2)
+        raise SlamcliError(f"{bad}: {exc}") from None
 
 
-def _nees(ax, result_paths, data_paths, check, title):
+def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
     import numpy as np
 
     from slamcli.api.evaluate import monte_carlo_nees_files
     from slamcli.errors import SlamcliError
-    from slamcli.plots.curves import plot_nees
+    from slamcli.plots.figures import draw_nees
 
     a, why = monte_carlo_nees_files(result_paths, data_paths, check_hash=check)
     if a is None:
         raise SlamcliError(f"plot nees: {why}")
-    plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
-              title=title or f"Pose NEES over {a.n_runs} runs")
+    draw_nees(ax, a, log=log, title=title)
     n_finite = int(np.isfinite(a.anees).sum())
-    typer.echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}); {100 * a.fraction_inside:.1f}% of "
-               f"{n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}] for N = {a.n_runs} runs")
+    echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}) over N = {a.n_runs} runs;\n"
+         f"{100 * a.fraction_inside:.1f}% of {n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}]")
+
+
+def _compare(ax, exp_dir, metric, by, title, echo):
+    from slamcli.errors import SlamcliError
+    from slamcli.plots.curves import plot_compare
+    from slamcli.sweep.aggregate import compare_groups
+
+    labels, values, metric_col, by_col, n_excluded = compare_groups(exp_dir, metric, by)
+    if not labels or all(len(v) == 0 for v in values):
+        raise SlamcliError(f"{exp_dir}: no completed run has a value of {metric_col!r}")
+    plot_compare(ax, labels, values, metric_col, by_col, title=title or f"{Path(exp_dir).name}: {metric_col}")
+    echo(f"{sum(len(v) for v in values)} runs in {len(labels)} groups; {n_excluded} failed run(s) excluded")

@@ -28,8 +28,11 @@ def simulate_command(
             from slamcli.sim import list_scenarios
 
             console = stdout_console()
-            for name, desc in list_scenarios():
-                console.print(f"[bold]{name:<12}[/bold] {desc}", highlight=False, soft_wrap=True)
+            import textwrap
+
+            for name, desc in list_scenarios():  # hanging indent, 80 columns
+                text = textwrap.fill(f"{name:<12} {desc}", 80, subsequent_indent=" " * 13)
+                console.print(f"[bold]{name}[/bold]{text[len(name):]}", highlight=False, soft_wrap=True)
             return
         if scenario is None:
             fail("--scenario is required (see `slamcli simulate --list`)")
@@ -72,8 +75,8 @@ def simulate_command(
         path_len = float(np.sum(np.hypot(*np.diff(tr.poses_xyt[:, :2], axis=0).T))) if tr is not None else 0.0
         stdout_console().print(
             f"{scenario} seed {seed}: {inp.controls.shape[0]} steps ({inp.controls.shape[0] * inp.dt:.1f} s), "
-            f"{len(tr.landmarks_xy)} landmarks, {n_obs} observations ({n_clutter} not from a landmark), "
-            f"path {path_len:.1f} m → {out}",
+            f"path {path_len:.1f} m\n  {len(tr.landmarks_xy)} landmarks, {n_obs} observations ({n_clutter} not "
+            f"from a landmark)\n  wrote {out}",
             highlight=False,
             markup=False,
             soft_wrap=True,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, progress_bar, stdout_console
+from slamcli.cli.app import app, handle_errors, iteration_count, progress_bar, stdout_console
 
 
 @app.command("solve")
@@ -54,17 +54,18 @@ def solve_command(
         if quiet:
             return
         n_assoc = int((result.assoc >= 0).sum())
-        iters = f", {len(result.trace)} iterations" if result.trace is not None else ""
-        if "iterations" in result.extra:  # the solver's own count; graph's trace adds a start row per round
-            iters = f", {result.extra['iterations']} iterations"
+        n_iter = iteration_count(result)  # the solver's count (the trace's row 0 is the initialisation)
+        iters = f", {n_iter} iterations" if n_iter is not None else ""
         style = "red" if result.status.value == "failed" else "green"
         console = stdout_console()
         console.print(
-            f"[{style}]{result.status.value}[/{style}] {result.solver} in {result.wall_time_s:.3f} s{iters}: "
-            f"{len(result.landmarks_xy)} landmarks, {n_assoc}/{len(result.assoc)} observations associated"
-            + (" [yellow](oracle association)[/yellow]" if oracle_association else ""),
+            f"[{style}]{result.status.value}[/{style}] {result.solver} in {result.wall_time_s:.2f} s{iters}: "
+            f"{len(result.landmarks_xy)} landmarks, {n_assoc}/{len(result.assoc)} obs. associated",
             highlight=False,
         )
+        if oracle_association:
+            console.print("  [yellow]oracle association[/yellow]: the true data association was used",
+                          highlight=False)
         if result.message:
             console.print(f"  {result.message}", highlight=False, markup=False)
         console.print(f"  wrote {out}", highlight=False, markup=False, soft_wrap=True)

@@ -26,28 +26,43 @@ def plot_error_curves(ax, iterations, err_min_m, err_mean_m, err_max_m, title: s
     return ax
 
 
-def plot_map_change(ax, iterations, map_change_m, title: str | None = None, label: str | None = None):
-    """Mean norm of the landmark displacement between consecutive iterations (m), paper Fig. 9d."""
+def plot_map_change(ax, iterations, map_change_m, title: str | None = None, label: str | None = None,
+                    log: bool = False):
+    """Mean norm of the landmark displacement between consecutive iterations (m), paper Fig. 9d.
+
+    ``log``: logarithmic y axis (zero changes, which a log axis cannot show, are left out), so several
+    overlaid results that converge at different rates all stay readable.
+    """
     it = np.asarray(iterations)
     mc = np.asarray(map_change_m, float)
     keep = it > 0  # iteration 0 has no predecessor
+    if log:
+        keep &= mc > 0
     ax.plot(it[keep], mc[keep] * 1000.0, "o-", ms=3, lw=1.2, label=label or "Map change")
     ax.set_xlabel("Iteration")
     ax.set_ylabel("Map change per iteration (mm)")
-    # y from 0 to the largest value of every series drawn so far (several calls may overlay results)
-    tops = [np.nanmax(np.asarray(ln.get_ydata(), float), initial=0.0) for ln in ax.lines]
-    ax.set_ylim(0, 1.05 * max(max(tops, default=0.0), 1e-9))
-    ax.grid(True, lw=0.3, alpha=0.5)
+    if log:
+        ax.set_yscale("log")
+    else:
+        # y from 0 to the largest value of every series drawn so far (several calls may overlay results)
+        tops = [np.nanmax(np.asarray(ln.get_ydata(), float), initial=0.0) for ln in ax.lines]
+        ax.set_ylim(0, 1.05 * max(max(tops, default=0.0), 1e-9))
+    ax.grid(True, which="both" if log else "major", lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
-    legend_below(ax, ncol=2)
+    legend_below(ax, ncol=1 if log and len(ax.lines) > 2 else 2)
     return ax
 
 
 def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: int,
-              fraction_inside: float | None = None, label: str | None = None, title: str | None = None):
-    """Average NEES per step against the two-sided 95 % χ² band ``[lower, upper]`` (E[NEES] = d)."""
-    ax.axhspan(lower, upper, color="tab:green", alpha=0.15, lw=0,
+              fraction_inside: float | None = None, label: str | None = None, title: str | None = None,
+              log: bool = True):
+    """Average NEES per step against the two-sided 95 % χ² band ``[lower, upper]`` (E[NEES] = d).
+
+    ``log`` (default): logarithmic y axis whose limits always include the band, so an inconsistent filter
+    (NEES in the hundreds) and the band are both visible.
+    """
+    ax.axhspan(lower, upper, color="tab:green", alpha=0.2, lw=0,
                label=f"95% χ² band [{lower:.2f}, {upper:.2f}] (N={n_runs})")
     ax.axhline(dof, color="tab:green", lw=0.8, ls="--", label=f"E[NEES] = d = {dof}")
     lab = label or "Average NEES"
@@ -56,11 +71,76 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
     ax.plot(steps, anees, "-", color="tab:blue", lw=1.0, label=lab)
     ax.set_xlabel("Step")
     ax.set_ylabel(f"Average NEES over {n_runs} runs (d = {dof})")
-    finite = np.asarray(anees, float)[np.isfinite(anees)]
-    top = max(upper * 1.3, float(np.percentile(finite, 99)) * 1.1 if finite.size else upper * 1.3)
-    ax.set_ylim(0, top)
-    ax.grid(True, lw=0.3, alpha=0.5)
+    a = np.asarray(anees, float)
+    finite = a[np.isfinite(a) & (a > 0)] if log else a[np.isfinite(a)]
+    if log:
+        ax.set_yscale("log")
+        lo = min(lower / 2, float(np.percentile(finite, 1)) / 1.5) if finite.size else lower / 2
+        hi = max(upper * 2, float(np.max(finite)) * 1.5) if finite.size else upper * 2
+        ax.set_ylim(lo, hi)
+    else:
+        top = max(upper * 1.3, float(np.percentile(finite, 99)) * 1.1 if finite.size else upper * 1.3)
+        ax.set_ylim(0, top)
+    ax.grid(True, which="both" if log else "major", lw=0.3, alpha=0.5)
     if title:
         ax.set_title(title)
     legend_below(ax, ncol=2)
+    return ax
+
+
+def plot_pose_errors(axes, steps, err_xyt, sigma_xyt=None, n_sigma: float = 3.0, fraction_inside=None,
+                     title: str | None = None):
+    """Per-step signed pose error (estimate − truth; heading wrapped) in three stacked axes with the
+    ``±n_sigma·σ`` band of the estimator's own marginal covariance (the ``evo_ape --plot`` view plus the
+    filter's claimed uncertainty).
+
+    Parameters
+    ----------
+    axes : 3 matplotlib Axes (x, y, θ).
+    steps : (T+1,)     err_xyt : (T+1, 3)    sigma_xyt : (T+1, 3) | None   √diag of the pose covariance.
+    fraction_inside : (3,) | None   share of steps whose error lies inside the band, per component (legend).
+    """
+    names = (("x error (m)", 1.0), ("y error (m)", 1.0), ("heading error (deg)", 180.0 / np.pi))
+    steps = np.asarray(steps)
+    err = np.asarray(err_xyt, float)
+    for k, ax in enumerate(axes):
+        label, scale = names[k]
+        if sigma_xyt is not None:
+            band = n_sigma * np.asarray(sigma_xyt, float)[:, k] * scale
+            inside = "" if fraction_inside is None else f", {100 * fraction_inside[k]:.0f}% of steps inside"
+            ax.fill_between(steps, -band, band, color="tab:orange", alpha=0.25, lw=0,
+                            label=f"±{n_sigma:g}σ{inside}")
+        ax.plot(steps, err[:, k] * scale, "-", color="tab:blue", lw=0.9, label="estimate − truth")
+        ax.axhline(0.0, color="black", lw=0.5)
+        ax.set_ylabel(label)
+        ax.grid(True, lw=0.3, alpha=0.5)
+        ax.legend(loc="upper right", fontsize="x-small", frameon=False, ncol=2)
+    axes[-1].set_xlabel("Step")
+    if title:
+        axes[0].set_title(title)
+    return axes
+
+
+def plot_compare(ax, labels, values, ylabel: str, xlabel: str = "", title: str | None = None):
+    """Box plot per group with every run drawn on top (strip plot; points spread evenly across the box
+    width, no random jitter), e.g. ATE per solver over the replicates of a sweep.
+
+    Parameters
+    ----------
+    labels : list of str (G,)          values : list of (n_g,) arrays.
+    """
+    pos = np.arange(1, len(labels) + 1)
+    ax.boxplot([np.asarray(v, float) for v in values], positions=pos, widths=0.5, showfliers=False,
+               medianprops={"color": "black"})
+    for p, v in zip(pos, values):
+        v = np.asarray(v, float)
+        dx = np.linspace(-0.15, 0.15, len(v)) if len(v) > 1 else np.zeros(len(v))
+        ax.plot(p + dx, v, "o", ms=3.5, alpha=0.7, color="tab:blue", ls="none")
+    ax.set_xticks(pos, [f"{lab}\n(n={len(v)})" for lab, v in zip(labels, values)])
+    ax.set_ylabel(ylabel)
+    if xlabel:
+        ax.set_xlabel(xlabel)
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    if title:
+        ax.set_title(title)
     return ax

@@ -65,9 +65,11 @@ class EkfParams:
 
     Attributes
     ----------
-    association : "known" | "ml"
+    association : "auto" | "known" | "ml"
         ``known``: the landmark of a row is its sensor-reported id (rows with id −1 are discarded);
-        ``ml``: maximum-likelihood association by Mahalanobis distance (paper 002 §14.7, Fig. 14.5).
+        ``ml``: maximum-likelihood association by Mahalanobis distance (paper 002 §14.7, Fig. 14.5);
+        ``auto`` (default): ``known`` when the dataset reports ids, else ``ml`` (``ml`` with ``provisional``).
+        The association used is recorded as ``extra["association"]``.
     motion_input : "controls" | "odometry"
         Drive the prediction by the commanded controls through the DDMR model (noise ``motion_std``) or by
         the encoder odometry increments (noise ``odometry_std``, on the body-frame increment).
@@ -107,7 +109,7 @@ class EkfParams:
         nearer than its centre; ``range_offset`` ≈ π/4 · radius re-centres those returns.
     """
 
-    association: Literal["known", "ml"] = "known"
+    association: Literal["auto", "known", "ml"] = "auto"
     motion_input: Literal["controls", "odometry"] = "controls"
     gate_prob: float = 0.99
     new_landmark_prob: float = 0.9999
@@ -125,7 +127,7 @@ class EkfParams:
     range_offset: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.provisional and self.association != "ml":
+        if self.provisional and self.association == "known":
             raise ValueError("provisional=true needs association=ml (known ids need no provisional list)")
         if not 0.0 < self.gate_prob < 1.0:
             raise ValueError(f"gate_prob must be in (0, 1), got {self.gate_prob}")
@@ -225,6 +227,12 @@ class EkfSlam(BaseSolver):
         N = z_all.shape[0]
         sensor = np.asarray(obs.sensor)
         rid = np.asarray(obs.reported_id, np.int64)
+        if p.association == "auto":
+            from dataclasses import replace
+
+            from slamcli.solvers.frontend import resolve_association
+
+            p = replace(p, association=resolve_association(p.association, rid, force_ml=p.provisional))
         if p.association == "known" and N > 0 and np.all(rid < 0):
             raise SolverError(
                 "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
@@ -372,6 +380,7 @@ class EkfSlam(BaseSolver):
             pose_cov=pose_cov,
             landmark_cov=landmark_cov,
             extra={
+                "association": p.association,
                 "mean_nis": nis_sum / n_upd if n_upd else None,
                 "n_updates": n_upd,
                 "n_new_landmarks": n_new,

@@ -89,15 +89,19 @@ class FastSlamParams:
         Number of particles P.
     version : 1 | 2
         1 = proposal from the motion model; 2 = proposal improved by the observations (sampled, not its mean).
-    association : "known" | "ml"
+    association : "auto" | "known" | "ml"
         ``known`` uses ``observations.reported_id`` (rows with id −1 are ignored, assoc −1); ``ml`` =
-        per-particle maximum likelihood (eq. 14.30; keeps an ``(N_obs, P)`` int32 association history).
+        per-particle maximum likelihood (eq. 14.30; keeps an ``(N_obs, P)`` int32 association history);
+        ``auto`` (default) = ``known`` when the dataset reports ids, else ``ml``; the association used is
+        recorded as ``extra["association"]``.
     motion_source : "controls" | "odometry"
         Motion model used for the proposal: commanded controls with ``noise.motion_std`` (DDMR, paper 000
         §4), or the encoder odometry increments (eq. 16) with ``noise.odometry_std``.
     motion_noise_scale : float
         Multiplies the motion noise standard deviations (``>1`` = stabilising noise; 1 = as specified).
     resampling : "systematic" | "multinomial"
+        Resampling scheme (:mod:`slamcli.solvers.resampling`): systematic (one uniform draw, lower variance)
+        or multinomial (P independent draws).
     resample_threshold : float
         Resample when ``ESS < resample_threshold · P`` (0 = never, 1 = every step).
     output : "mean" | "best"
@@ -116,7 +120,7 @@ class FastSlamParams:
 
     n_particles: int = 100
     version: Literal[1, 2] = 2
-    association: Literal["known", "ml"] = "known"
+    association: Literal["auto", "known", "ml"] = "auto"
     motion_source: Literal["controls", "odometry"] = "controls"
     motion_noise_scale: float = 1.0
     resampling: Literal["systematic", "multinomial"] = "systematic"
@@ -132,8 +136,8 @@ class FastSlamParams:
             raise ValueError(f"n_particles must be ≥ 1, got {self.n_particles}")
         if self.version not in (1, 2):
             raise ValueError(f"version must be 1 or 2, got {self.version}")
-        if self.association not in ("known", "ml"):
-            raise ValueError(f"association must be 'known' or 'ml', got {self.association!r}")
+        if self.association not in ("auto", "known", "ml"):
+            raise ValueError(f"association must be 'auto', 'known' or 'ml', got {self.association!r}")
         if self.motion_source not in ("controls", "odometry"):
             raise ValueError(f"motion_source must be 'controls' or 'odometry', got {self.motion_source!r}")
         if self.resampling not in RESAMPLERS:
@@ -498,6 +502,10 @@ class FastSlam(BaseSolver):
             )
 
         # ---- correspondences -----------------------------------------------------------------------------
+        if p.association == "auto":
+            from slamcli.solvers.frontend import resolve_association
+
+            p = dataclasses.replace(p, association=resolve_association(p.association, obs.reported_id))
         known = p.association == "known"
         if known:
             rid = np.asarray(obs.reported_id, np.int64)

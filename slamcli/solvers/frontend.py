@@ -318,3 +318,15 @@ def associations_from_result(init: SolverResult, n_obs: int) -> tuple[np.ndarray
             f"init result ({init.solver}) labels up to {int(assoc.max())} but has {lm.shape[0]} landmarks"
         )
     return assoc, lm
+
+
+def resolve_association(mode: str, reported_id: np.ndarray, *, force_ml: bool = False) -> str:
+    """The association a filter actually runs: ``"auto"`` → ``"known"`` when any observation row carries a
+    sensor-reported id (``reported_id ≥ 0``), else ``"ml"`` (maximum likelihood); ``force_ml`` (e.g. an EKF
+    provisional list, which only ML association uses) picks ``"ml"``. Explicit ``"known"``/``"ml"`` pass
+    through unchanged."""
+    if mode != "auto":
+        return mode
+    if force_ml:
+        return "ml"
+    return "known" if bool(np.any(np.asarray(reported_id) >= 0)) else "ml"

@@ -18,32 +18,35 @@ An experiment file::
     seed = 0                          # optional, extra solver stream id (default 0)
     oracle_association = false        # optional: hand the solver the true association (recorded)
     [solver.params]                   # optional, validated against the solver's Params dataclass
-    gate_chi2 = 9.21
+    gate_prob = 0.99                  # (`slamcli solvers ekf` documents every parameter)
 
     [evaluate]                        # optional keyword options for slamcli.api.evaluate.evaluate_files
-    ospa_cutoff = 1.0
+    cutoff = 1.0
 
     [sweep]                           # optional; without it the experiment is one point
     replicates = 50                   # int N (= 0..N-1), a list of ints, or "range(a, b[, step])"
-    grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_chi2" = [5.99, 9.21] }
-    zip = { "scenario.noise.range_std" = [0.01, 0.05], "scenario.noise.bearing_std" = [0.01, 0.05] }
+    grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
+    zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
 
     [quick]                           # optional fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
-    "scenario.duration" = 30.0
+    "scenario.n_steps" = 150
 
 Sweep keys live in three namespaces: ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
 ``evaluate.<option>``. ``grid`` is a cartesian product (first key varies slowest); ``zip`` holds equal-length
 lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
 ``seed``) are the Monte-Carlo replicate ids that feed the seed derivation of :mod:`slamcli.sweep.expand`.
 
-Every error is one line naming the file and the key (``ConfigError``).
+Every error is one line naming the file and the TOML key (``ConfigError``); an unknown key gets a "did you
+mean" (:func:`check_keys`, run by :func:`slamcli.sweep.expand.expand` against the real scenario, solver and
+evaluation keys). The full reference is ``docs/experiments.md``.
 """
 
 from __future__ import annotations
 
 import re
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -143,6 +146,79 @@ def _type_name(v: Any) -> str:
     )
 
 
+def did_you_mean(key: str, known, prefix: str = "") -> str:
+    """``"; did you mean 'x'?"`` for the closest known names (:func:`difflib.get_close_matches`), else ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(key, list(known), n=2, cutoff=0.6)
+    return f"; did you mean {' or '.join(repr(prefix + c) for c in close)}?" if close else ""
+
+
+def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
+    """Check every key of ``cfg`` against the real scenario / solver / evaluate key sets, naming the TOML key.
+
+    ``known(kind, name)`` returns the known keys: ``("scenario", scenario name)`` → ``{dotted simulator key:
+    type}``, ``("solver", method)`` → ``{Params field: type}``, ``("evaluate", "")`` → option names; None =
+    cannot tell (unknown plugin: the resolver reports that). Unknown scenario names and keys raise a one-line
+    :class:`ConfigError` ``"<file>: <TOML key>: unknown ...; did you mean '...'?"``; a value (every value of a
+    sweep axis) whose type does not fit its key raises ``"<file>: <TOML key>: expected ..."``. Checks that
+    involve several keys together stay with the resolution.
+    """
+    from slamcli.params import _coerce
+    from slamcli.sim.scenarios import SCENARIOS
+
+    c = _Checker(cfg.source)
+    if cfg.scenario not in SCENARIOS:
+        raise c.fail("scenario.name", f"unknown scenario {cfg.scenario!r}{did_you_mean(cfg.scenario, SCENARIOS)} "
+                                      f"(known: {', '.join(SCENARIOS)})")
+    scen = known("scenario", cfg.scenario) or []
+    methods = {s.label: s.method for s in cfg.solvers}
+
+    def typed(values: tuple, tp: Any, toml_key: str) -> None:
+        for v in values:
+            try:
+                _coerce(v, tp, "\0")
+            except ConfigError as exc:
+                raise c.fail(toml_key, str(exc).split("\0", 1)[-1].lstrip(": ")) from None
+
+    def check(ns_key: str, toml_key: str, values: tuple) -> None:
+        ns, _, rest = ns_key.partition(".")
+        if ns == "scenario":
+            if scen and rest not in scen:
+                raise c.fail(toml_key, f"unknown scenario key {rest!r}{did_you_mean(rest, scen)} "
+                                       f"(`slamcli simulate --keys` lists them)")
+            if isinstance(scen, dict):
+                typed(values, scen[rest], toml_key)
+        elif ns == "solver":
+            label, _, param = rest.partition(".")
+            fields = known("solver", methods[label]) if label in methods else None
+            if fields is not None and param not in fields:
+                raise c.fail(toml_key, f"unknown parameter {param!r} of {methods[label]}"
+                                       f"{did_you_mean(param, fields)} (`slamcli solvers {methods[label]}` lists them)")
+            if isinstance(fields, dict):
+                typed(values, fields[param], toml_key)
+        elif ns == "evaluate":
+            opts = known("evaluate", "") or []
+            if opts and rest not in opts:
+                raise c.fail(toml_key, f"unknown option {rest!r}{did_you_mean(rest, opts)} (known: {', '.join(opts)})")
+
+    for k, v in cfg.scenario_params.items():
+        check(f"scenario.{k}", f"scenario.parameters.{k}", (v,))
+    for i, s in enumerate(cfg.solvers):
+        for k, v in s.params.items():
+            check(f"solver.{s.label}.{k}", f"solver[{i}].params.{k}", (v,))
+    for k, v in cfg.evaluate.items():
+        check(f"evaluate.{k}", f"evaluate.{k}", (v,))
+    for k, vals in cfg.sweep.grid:
+        check(k, f"sweep.grid {k!r}", vals)
+    for g in cfg.sweep.zips:
+        for k, vals in g:
+            check(k, f"sweep.zip {k!r}", vals)
+    for k, v in cfg.quick.items():
+        if k != "replicates":
+            check(k, f"quick {k!r}", (v,))
+
+
 def parse_range(text: str) -> list[int] | None:
     """``"range(0, 50)"`` → ``[0, ..., 49]`` (Python semantics); None when ``text`` is not a range()."""
     m = _RANGE_RE.match(text)
@@ -169,7 +245,8 @@ class _Checker:
     def known(self, table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
         for k in table:
             if k not in allowed:
-                raise self.fail(f"{where}.{k}" if where else k, f"unknown key; allowed: {', '.join(allowed)}")
+                raise self.fail(f"{where}.{k}" if where else k,
+                                f"unknown key{did_you_mean(k, allowed)} (allowed: {', '.join(allowed)})")
 
     def string(self, value: Any, key: str) -> str:
         if not isinstance(value, str):

@@ -115,6 +115,35 @@ class Resolver(Protocol):
 class RegistryResolver:
     """Resolve against the real simulator scenarios and the registered solvers' ``Params`` dataclasses."""
 
+    def known_keys(self, kind: str, name: str) -> dict[str, Any] | list[str] | None:
+        """Known keys for :func:`slamcli.sweep.config.check_keys`: ``{key: type}`` for a scenario or a solver,
+        the option names for ``evaluate``; None = unknown solver plugin (reported on resolution)."""
+        import inspect
+        import typing
+
+        if kind == "scenario":
+            from slamcli.sim import resolve_scenario
+            from slamcli.sim.config import known_keys
+
+            cfg = resolve_scenario(name)
+            top = typing.get_type_hints(type(cfg))
+            out = {}
+            for key in known_keys(cfg):
+                sec, _, leaf = key.rpartition(".")
+                out[key] = typing.get_type_hints(type(getattr(cfg, sec)))[leaf] if sec else top[leaf]
+            return out
+        if kind == "solver":
+            from slamcli.solvers import registry
+
+            try:
+                return typing.get_type_hints(registry.load(name).Params)
+            except SlamcliError:
+                return None
+        from slamcli.api.evaluate import evaluate_files
+
+        internal = {"result_path", "data_path", "out_dir", "check_hash", "return_tables"}
+        return sorted(n for n in inspect.signature(evaluate_files).parameters if n not in internal)
+
     def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
         from slamcli.sim import resolve_scenario
 
@@ -310,6 +339,10 @@ def expand(
 ) -> Expansion:
     """Every run of the experiment, resolved and hashed (see the module docstring for order and seeds)."""
     resolver = resolver if resolver is not None else RegistryResolver()
+    if hasattr(resolver, "known_keys"):  # name unknown keys by their TOML key, with a "did you mean"
+        from slamcli.sweep.config import check_keys
+
+        check_keys(cfg, resolver.known_keys)
     vers = run_versions if run_versions is not None else versions()
     axes = tuple(k for k, _ in cfg.sweep.grid) + tuple(k for g in cfg.sweep.zips for k, _ in g)
     scen_cache: dict[str, dict[str, Any]] = {}

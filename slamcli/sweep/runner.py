@@ -551,10 +551,10 @@ def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
 
 def write_tables(expansion: Expansion, exp_dir: Path) -> dict[str, Path]:
     """``manifest.csv`` and the tidy ``results.csv`` (+ ``results.parquet`` when pyarrow is importable)."""
-    import pandas as pd
+    from slamcli.sweep.aggregate import typed_frame
 
     rows = manifest_rows(expansion, exp_dir)
-    manifest = pd.DataFrame(rows)
+    manifest = typed_frame(rows)  # an int parameter absent for some solvers stays Int64 (10, not 10.0)
     out: dict[str, Path] = {}
     out["manifest"] = _write_csv(manifest, exp_dir / "manifest.csv")
     tidy_rows = []
@@ -568,7 +568,7 @@ def write_tables(expansion: Expansion, exp_dir: Path) -> dict[str, Path]:
                 else:
                     full[f"metric.{k}"] = v
         tidy_rows.append(full)
-    tidy = pd.DataFrame(tidy_rows)
+    tidy = typed_frame(tidy_rows)
     out["results"] = _write_csv(tidy, exp_dir / "results.csv")
     try:
         import pyarrow  # noqa: F401

@@ -1,0 +1,83 @@
+"""``slamcli.plot``: the figures of ``slamcli plot`` for notebooks, drawn into a given matplotlib axis.
+
+Each function takes objects or file paths and returns the axis (or axes); with ``ax=None`` it makes a
+new pyplot figure. ``slamcli.plots.save_figure(fig, "x.pdf")`` writes one atomically.
+"""
+
+from __future__ import annotations
+
+from slamcli.api.facade import _dataset, _is_path, _result
+
+
+def _ax(ax, size=(6.4, 4.4)):
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(figsize=size, layout="constrained")[1]
+
+
+def _pair(r, ds):
+    result = _result(r)
+    if ds is None:
+        if not _is_path(r):
+            raise TypeError("give the dataset of an in-memory result")
+        from slamcli.api.evaluate import load_result_and_dataset
+
+        return load_result_and_dataset(r, None, require_truth=False)[:2]
+    return result, _dataset(ds)
+
+
+def map(r, ds=None, *, ax=None, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None):
+    """Paper-style map: true and estimated landmarks and paths (+ covariance ellipses)."""
+    from slamcli.plots.figures import draw_map
+
+    result, dataset = _pair(r, ds)
+    return draw_map(_ax(ax, (7.0, 6.0)), result, dataset, ellipses=ellipses,
+                    pose_ellipse_every=pose_ellipse_every, title=title)
+
+
+def errors(r, ds=None, *, ax=None, n_sigma: float = 3.0, title: str | None = None):
+    """Landmark error per iteration (results with a trace), else per-step pose error with ±nσ bands; for
+    the latter ``ax`` is a sequence of three axes (x, y, θ)."""
+    from slamcli.plots.figures import draw_landmark_errors, draw_pose_errors
+
+    result, dataset = _pair(r, ds)
+    if result.trace is not None and len(result.trace) > 0:
+        return draw_landmark_errors(_ax(ax), result, dataset, title)
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        ax = plt.subplots(3, 1, sharex=True, figsize=(6.4, 5.5), layout="constrained")[1]
+    draw_pose_errors(ax, result, dataset, n_sigma, title)
+    return ax
+
+
+def mapchange(results, *, ax=None, labels=None, log: bool = True, title: str | None = None):
+    """Map change per iteration of one or several results (log axis)."""
+    from slamcli.plots.figures import draw_mapchange
+
+    results = results if isinstance(results, (list, tuple)) else [results]
+    return draw_mapchange(_ax(ax), [_result(r) for r in results], labels, log=log, title=title)
+
+
+def nees(results, datasets, *, ax=None, confidence: float = 0.95, log: bool = True, title: str | None = None):
+    """Monte-Carlo average pose NEES of N runs with the two-sided χ² band."""
+    from slamcli.errors import SlamcliError
+    from slamcli.metrics.summary import monte_carlo_pose_nees
+    from slamcli.plots.figures import draw_nees
+
+    pairs = [(_result(r), _dataset(d).truth) for r, d in zip(results, datasets, strict=True)]
+    avg, why = monte_carlo_pose_nees(pairs, confidence)
+    if avg is None:
+        raise SlamcliError(f"nees: {why}")
+    return draw_nees(_ax(ax), avg, log=log, title=title)
+
+
+def compare(exp_dir, metric: str = "ate_rmse_m", by: str = "solver", *, ax=None, title: str | None = None):
+    """Box + strip plot of a metric per solver / parameter value over a sweep's completed runs."""
+    from slamcli.plots.curves import plot_compare
+    from slamcli.sweep.aggregate import compare_groups
+
+    labels, values, metric_col, by_col, _ = compare_groups(exp_dir, metric, by)
+    return plot_compare(_ax(ax), labels, values, metric_col, by_col, title=title)

@@ -1,0 +1,265 @@
+"""Trajectory and graph files of the wider SLAM ecosystem: TUM, KITTI, g2o and a tidy CSV.
+
+Writers (all atomic: temporary name in the destination directory, then ``os.replace``):
+
+=========  ==============================================================================================
+TUM        ``timestamp x y z qx qy qz qw`` per pose (Sturm et al. 2012, the format ``evo`` reads). A planar
+           pose ``[x, y, θ]`` is lifted to SE(3) as ``t = (x, y, 0)``, ``q = (0, 0, sin(θ/2), cos(θ/2))``
+           (rotation θ about the world z axis, Hamilton convention, ``qw ≥ 0`` not enforced).
+KITTI      12 numbers per pose: the first three rows of the 4×4 pose matrix, row-major,
+           ``[R | t]`` with ``R = Rz(θ)``, ``t = (x, y, 0)``. (KITTI's own ground truth is in the camera
+           frame, y down; ours is the world frame, z up. One pose per line, no time stamps.)
+g2o        ``VERTEX_SE2 i x y θ`` (poses, ids ``0..T``), ``VERTEX_XY j x y`` (landmarks, ids ``T+1+l``),
+           ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (odometry increments, information matrix
+           upper triangle row by row) and ``EDGE_SE2_XY i j dx dy I11 I12 I22`` (landmark seen from pose
+           i, in pose i's frame). GTSAM's ``readG2o`` and g2o load it.
+CSV        tidy table ``kind, index, t_s, x_m, y_m, theta_rad`` (+ covariance columns when present);
+           ``kind`` is ``pose`` or ``landmark``.
+=========  ==============================================================================================
+
+Information matrices in the g2o file are the ones the solvers use (``slamcli.solvers.graph``):
+odometry ``Σ = diag(odometry_std²)`` of the dataset's NoiseSpec; observations are range-bearing with
+``Σ_rb = diag(σ_r², σ_b²)``, which g2o's Cartesian ``EDGE_SE2_XY`` can only carry to first order:
+``z_xy = r [cos b, sin b]``, ``J = ∂z_xy/∂(r, b) = [[cos b, −r sin b], [sin b, r cos b]]``,
+``Σ_xy = J Σ_rb Jᵀ`` and ``I = Σ_xy⁻¹`` (exact for the odometry edges, linearised for the landmark edges).
+
+Readers: :func:`read_tum` and :func:`read_kitti` return planar poses (yaw of the 3-D rotation; ``z`` and
+roll/pitch are dropped). Every error is a one-line :class:`~slamcli.errors.SchemaError` naming the file
+and line.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from slamcli.errors import SchemaError
+from slamcli.io.atomic import atomic_path
+from slamcli.models.angles import wrap_angle
+
+FORMATS = ("tum", "kitti", "g2o", "csv")
+
+
+def _g(v: float) -> str:
+    """Shortest text that round-trips a float exactly (``repr``)."""
+    return repr(float(v))
+
+
+def _write_lines(path: str | os.PathLike, lines) -> Path:
+    final = Path(path)
+    with atomic_path(final) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        for line in lines:
+            fh.write(line)
+            fh.write("\n")
+    return final
+
+
+# -- planar pose <-> SE(3) ------------------------------------------------------------------------------
+
+
+def yaw_to_quaternion(theta) -> np.ndarray:
+    """``(..., 4)`` quaternions ``[qx, qy, qz, qw]`` of a rotation ``θ`` about z."""
+    th = np.asarray(theta, float)
+    z = np.zeros_like(th)
+    return np.stack([z, z, np.sin(th / 2), np.cos(th / 2)], -1)
+
+
+def quaternion_to_yaw(q_xyzw) -> np.ndarray:
+    """Yaw (rotation about z, ZYX Euler convention) of quaternions ``(..., 4)`` ``[qx, qy, qz, qw]``:
+    ``ψ = atan2(2(qw qz + qx qy), 1 − 2(qy² + qz²))``, wrapped to ``[-π, π)``."""
+    q = np.asarray(q_xyzw, float)
+    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return wrap_angle(np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy**2 + qz**2)))
+
+
+def poses_to_matrices(poses_xyt) -> np.ndarray:
+    """``(n, 3, 4)`` KITTI rows ``[Rz(θ) | (x, y, 0)]``."""
+    p = np.asarray(poses_xyt, float).reshape(-1, 3)
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    M = np.zeros((len(p), 3, 4))
+    M[:, 0, 0], M[:, 0, 1], M[:, 1, 0], M[:, 1, 1] = c, -s, s, c
+    M[:, 2, 2] = 1.0
+    M[:, 0, 3], M[:, 1, 3] = p[:, 0], p[:, 1]
+    return M
+
+
+# -- writers ------------------------------------------------------------------------------------------------
+
+
+def write_tum(path, timestamps_s, poses_xyt) -> Path:
+    """TUM trajectory file: ``timestamp x y z qx qy qz qw`` (T+1 lines)."""
+    t = np.asarray(timestamps_s, float).reshape(-1)
+    p = np.asarray(poses_xyt, float).reshape(-1, 3)
+    if len(t) != len(p):
+        raise ValueError(f"{len(t)} timestamps for {len(p)} poses")
+    q = yaw_to_quaternion(p[:, 2])
+    return _write_lines(path, (
+        " ".join(_g(v) for v in (t[i], p[i, 0], p[i, 1], 0.0, *q[i])) for i in range(len(p))
+    ))
+
+
+def write_kitti(path, poses_xyt) -> Path:
+    """KITTI pose file: 12 numbers per line (3×4 ``[R | t]`` row-major)."""
+    M = poses_to_matrices(poses_xyt).reshape(-1, 12)
+    return _write_lines(path, (" ".join(_g(v) for v in row) for row in M))
+
+
+def odometry_information(odometry_std) -> np.ndarray:
+    """``(3, 3)`` information ``diag(1/σ²)`` of an odometry increment ``[dx, dy, dθ]``."""
+    return np.diag(1.0 / np.square(np.asarray(odometry_std, float)))
+
+
+def observation_xy_information(range_m, bearing_rad, range_std: float, bearing_std: float) -> np.ndarray:
+    """``(N, 2, 2)`` first-order Cartesian information of range-bearing observations (module docstring)."""
+    r = np.asarray(range_m, float).reshape(-1)
+    b = np.asarray(bearing_rad, float).reshape(-1)
+    c, s = np.cos(b), np.sin(b)
+    J = np.stack([np.stack([c, -r * s], -1), np.stack([s, r * c], -1)], -2)  # (N,2,2)
+    S = np.diag([range_std**2, bearing_std**2])
+    cov = J @ S @ np.swapaxes(J, -1, -2)
+    return np.linalg.inv(cov)
+
+
+def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_step, obs_range_m,
+              obs_bearing_rad, obs_landmark, range_std: float, bearing_std: float) -> Path:
+    """g2o landmark graph (see module docstring).
+
+    Parameters
+    ----------
+    poses_xyt : (T+1, 3)          vertex estimates (ids 0..T).
+    landmarks_xy : (L, 2)         landmark vertex estimates (ids T+1+l).
+    odometry_xyt : (T+1, 3)       dead-reckoning poses; edge t→t+1 measures ``between(odo_t, odo_{t+1})``.
+    odometry_std : (3,)           σ of one odometry increment.
+    obs_step, obs_range_m, obs_bearing_rad : (N,)   observation rows.
+    obs_landmark : (N,)           row of ``landmarks_xy`` each observation is attached to; -1 = not written.
+    range_std, bearing_std        σ of one observation.
+    """
+    from slamcli.models import se2
+
+    poses = np.asarray(poses_xyt, float).reshape(-1, 3)
+    lms = np.asarray(landmarks_xy, float).reshape(-1, 2)
+    odo = np.asarray(odometry_xyt, float).reshape(-1, 3)
+    n = len(poses)
+    if len(odo) != n:
+        raise ValueError(f"{len(odo)} odometry poses for {n} poses")
+    d = se2.between(odo[:-1], odo[1:])
+    I_odo = odometry_information(odometry_std)
+    iu3 = np.triu_indices(3)
+    info3 = " ".join(_g(v) for v in I_odo[iu3])
+    step = np.asarray(obs_step, np.int64).reshape(-1)
+    lab = np.asarray(obs_landmark, np.int64).reshape(-1)
+    r = np.asarray(obs_range_m, float).reshape(-1)
+    b = np.asarray(obs_bearing_rad, float).reshape(-1)
+    keep = np.flatnonzero(lab >= 0)
+    I_obs = observation_xy_information(r[keep], b[keep], range_std, bearing_std)
+    xy = np.column_stack([r[keep] * np.cos(b[keep]), r[keep] * np.sin(b[keep])])
+
+    def lines():
+        # no comment line: GTSAM's readG2o stops parsing at the first line it does not understand
+        for i, (x, y, th) in enumerate(poses):
+            yield f"VERTEX_SE2 {i} {_g(x)} {_g(y)} {_g(th)}"
+        for l, (x, y) in enumerate(lms):
+            yield f"VERTEX_XY {n + l} {_g(x)} {_g(y)}"
+        for t in range(n - 1):
+            yield f"EDGE_SE2 {t} {t + 1} {_g(d[t, 0])} {_g(d[t, 1])} {_g(d[t, 2])} {info3}"
+        for k, row in enumerate(keep):
+            I = I_obs[k]
+            yield (f"EDGE_SE2_XY {int(step[row])} {n + int(lab[row])} {_g(xy[k, 0])} {_g(xy[k, 1])} "
+                   f"{_g(I[0, 0])} {_g(I[0, 1])} {_g(I[1, 1])}")
+
+    return _write_lines(path, lines())
+
+
+_COV3 = ("cov_xx", "cov_xy", "cov_xt", "cov_yy", "cov_yt", "cov_tt")
+_COV2 = ("cov_xx", "cov_xy", "cov_yy")
+
+
+def trajectory_frame(timestamps_s, poses_xyt, landmarks_xy=None, pose_cov=None, landmark_cov=None):
+    """Tidy DataFrame: one row per pose (``kind="pose"``) and per landmark (``kind="landmark"``)."""
+    import pandas as pd
+
+    p = np.asarray(poses_xyt, float).reshape(-1, 3)
+    rows = {"kind": ["pose"] * len(p), "index": np.arange(len(p)), "t_s": np.asarray(timestamps_s, float),
+            "x_m": p[:, 0], "y_m": p[:, 1], "theta_rad": p[:, 2]}
+    df = pd.DataFrame(rows)
+    if pose_cov is not None:
+        C = np.asarray(pose_cov, float).reshape(-1, 3, 3)
+        for name, (i, j) in zip(_COV3, zip(*np.triu_indices(3))):
+            df[name] = C[:, i, j]
+    if landmarks_xy is not None and len(landmarks_xy):
+        m = np.asarray(landmarks_xy, float).reshape(-1, 2)
+        lm = pd.DataFrame({"kind": "landmark", "index": np.arange(len(m)), "t_s": np.nan, "x_m": m[:, 0],
+                           "y_m": m[:, 1], "theta_rad": np.nan})
+        if landmark_cov is not None:
+            C = np.asarray(landmark_cov, float).reshape(-1, 2, 2)
+            lm["cov_xx"], lm["cov_xy"], lm["cov_yy"] = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
+        df = pd.concat([df, lm], ignore_index=True)
+    return df
+
+
+def write_csv(path, timestamps_s, poses_xyt, landmarks_xy=None, pose_cov=None, landmark_cov=None) -> Path:
+    """Tidy CSV (see :func:`trajectory_frame`), full float precision."""
+    df = trajectory_frame(timestamps_s, poses_xyt, landmarks_xy, pose_cov, landmark_cov)
+    final = Path(path)
+    with atomic_path(final) as tmp:
+        df.to_csv(tmp, index=False, float_format="%.17g")
+    return final
+
+
+# -- readers ------------------------------------------------------------------------------------------------
+
+
+def _numeric_rows(path, n_fields: tuple[int, ...], what: str) -> np.ndarray:
+    p = Path(path)
+    if not p.is_file():
+        raise SchemaError(f"{p}: file not found")
+    rows = []
+    with open(p, encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, 1):
+            s = line.replace(",", " ").strip()
+            if not s or s.startswith("#"):
+                continue
+            parts = s.split()
+            if len(parts) not in n_fields:
+                raise SchemaError(f"{p}:{lineno}: {what} needs {' or '.join(map(str, n_fields))} numbers per "
+                                  f"line, got {len(parts)}")
+            try:
+                vals = [float(v) for v in parts]
+            except ValueError:
+                raise SchemaError(f"{p}:{lineno}: non-numeric value in {s[:60]!r}") from None
+            if not all(math.isfinite(v) for v in vals):
+                raise SchemaError(f"{p}:{lineno}: non-finite value")
+            rows.append(vals)
+    if not rows:
+        raise SchemaError(f"{p}: no {what} rows")
+    return np.asarray(rows, float)
+
+
+def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM file → ``(timestamps_s (n,), poses_xyt (n, 3))`` sorted by time (strictly increasing)."""
+    a = _numeric_rows(path, (8,), "TUM (timestamp x y z qx qy qz qw)")
+    t = a[:, 0]
+    order = np.argsort(t, kind="stable")
+    t, a = t[order], a[order]
+    if np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise SchemaError(f"{path}: duplicate timestamp {float(t[k])!r}")
+    norms = np.linalg.norm(a[:, 4:8], axis=1)
+    if np.any(norms < 1e-9):
+        raise SchemaError(f"{path}: zero quaternion at timestamp {float(t[int(np.argmin(norms))])!r}")
+    yaw = quaternion_to_yaw(a[:, 4:8] / norms[:, None])
+    return t, np.column_stack([a[:, 1], a[:, 2], yaw])
+
+
+def read_kitti(path) -> np.ndarray:
+    """Read a KITTI pose file → ``poses_xyt (n, 3)``: ``x = t_x``, ``y = t_y``, ``θ = atan2(R₁₀, R₀₀)``."""
+    a = _numeric_rows(path, (12,), "KITTI (3x4 pose matrix)").reshape(-1, 3, 4)
+    return np.column_stack([a[:, 0, 3], a[:, 1, 3], wrap_angle(np.arctan2(a[:, 1, 0], a[:, 0, 0]))])
+
+
+def read_times(path) -> np.ndarray:
+    """A KITTI ``times.txt``: one timestamp (s) per line."""
+    return _numeric_rows(path, (1,), "times (one timestamp per line)")[:, 0]

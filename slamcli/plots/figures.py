@@ -1,0 +1,94 @@
+"""Figures from slamcli objects (a :class:`~slamcli.types.SolverResult` and its
+:class:`~slamcli.types.Dataset`): pick the arrays each figure needs and hand them to the drawing functions of
+:mod:`~slamcli.plots.maps` / :mod:`~slamcli.plots.curves`. Shared by ``slamcli plot`` and the Python API
+(``slamcli.plot``); the metric values come from :mod:`slamcli.metrics`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None):
+    """Paper-style map of ``result`` over ``dataset`` (truth drawn when the dataset has it)."""
+    from slamcli.plots.maps import plot_map
+
+    truth = dataset.truth
+    return plot_map(ax, truth.landmarks_xy if truth else None, result.landmarks_xy,
+                    truth.poses_xyt[:, :2] if truth else None, dataset.inputs.odometry_xyt[:, :2],
+                    result.poses_xyt[:, :2], landmark_cov=result.landmark_cov if ellipses else None,
+                    pose_cov=result.pose_cov if ellipses else None, ellipse_every=pose_ellipse_every,
+                    title=title if title is not None else result.solver,
+                    legend_note=None if truth else "No ground truth in dataset")
+
+
+def draw_landmark_errors(ax, result, dataset, title: str | None = None):
+    """Min/mean/max nearest-true-landmark error per iteration of the result's trace (paper Figs 5e/f)."""
+    from slamcli.metrics.landmarks import paper_error_per_iteration
+    from slamcli.plots.curves import plot_error_curves
+
+    df = paper_error_per_iteration(result.trace, dataset.truth.landmarks_xy)
+    return plot_error_curves(ax, df["iteration"], df["err_min_m"], df["err_mean_m"], df["err_max_m"],
+                             title=title or f"{result.solver}: landmark error per iteration")
+
+
+def pose_errors(result, dataset, n_sigma: float = 3.0):
+    """Signed per-step pose error and the estimator's own σ.
+
+    Returns
+    -------
+    err_xyt (T+1, 3)   ``[x̂ − x, ŷ − y, angle_diff(θ̂, θ)]``.
+    sigma_xyt (T+1, 3) | None   ``√diag(pose_cov)``.
+    inside (3,) | None          share of steps with ``|err| ≤ n_sigma·σ``, per component.
+    """
+    from slamcli.models.angles import angle_diff
+
+    est, true = np.asarray(result.poses_xyt, float), np.asarray(dataset.truth.poses_xyt, float)
+    if est.shape != true.shape:
+        raise ValueError(f"{len(est)} estimated poses but {len(true)} true poses")
+    err = np.column_stack([est[:, :2] - true[:, :2], angle_diff(est[:, 2], true[:, 2])])
+    if result.pose_cov is None:
+        return err, None, None
+    sig = np.sqrt(np.clip(np.diagonal(np.asarray(result.pose_cov, float), axis1=1, axis2=2), 0.0, None))
+    return err, sig, np.mean(np.abs(err) <= n_sigma * sig, axis=0)
+
+
+def draw_pose_errors(axes, result, dataset, n_sigma: float = 3.0, title: str | None = None):
+    """Per-step pose error with ±nσ bands into three axes; returns the in-band shares (or None)."""
+    from slamcli.plots.curves import plot_pose_errors
+
+    err, sig, inside = pose_errors(result, dataset, n_sigma)
+    plot_pose_errors(axes, np.arange(len(err)), err, sig, n_sigma, inside,
+                     title=title or f"{result.solver}: pose error per step")
+    return inside
+
+
+def map_change_series(result) -> np.ndarray:
+    """Map change per iteration of a result's trace, ``(K,)`` (0 for iteration 0)."""
+    from slamcli.metrics.landmarks import map_change
+
+    tr = result.trace
+    if tr is None or len(tr) < 2:
+        raise ValueError(f"no iteration trace with ≥ 2 iterations (solver {result.solver!r})")
+    return np.asarray([0.0] + [map_change(tr.landmarks_at(k - 1), tr.landmarks_at(k)) for k in range(1, len(tr))])
+
+
+def draw_mapchange(ax, results, labels=None, *, log: bool = True, title: str | None = None):
+    """Overlay the map change per iteration of several results (log axis by default)."""
+    from slamcli.plots.curves import plot_map_change
+
+    for k, res in enumerate(results):
+        mc = map_change_series(res)
+        label = labels[k] if labels else (res.solver if len(results) > 1 else None)
+        plot_map_change(ax, np.arange(len(mc)), mc, label=label, log=log)
+    ax.set_title(title or "Map change between iterations")
+    return ax
+
+
+def draw_nees(ax, average, *, log: bool = True, title: str | None = None):
+    """Monte-Carlo average pose NEES (:class:`~slamcli.metrics.consistency` result) with its χ² band."""
+    from slamcli.plots.curves import plot_nees
+
+    a = average
+    return plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
+                     title=title or f"Pose NEES over {a.n_runs} runs", log=log)

@@ -1,0 +1,160 @@
+"""`slamcli aggregate` and `plot compare`: means/std/CI against hand computations, dtypes kept, failed runs
+excluded and counted."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from slamcli.cli import app
+from slamcli.errors import ConfigError
+from slamcli.sweep.aggregate import aggregate_dir, read_table, resolve_column, summarise, typed_frame
+
+runner = CliRunner()
+
+
+def _write_sweep(d):
+    """A hand-made results table: ekf with an integer parameter (absent for odometry), one failed run."""
+    rows = []
+    ate = {("ekf", 2): [1.0, 2.0, 3.0, 4.0], ("ekf", 5): [0.5, 0.7], ("odometry", None): [10.0, 12.0, 14.0]}
+    k = 0
+    for (label, hits), values in ate.items():
+        for v in values:
+            row = {"run_id": f"r{k}", "label": label, "method": label, "replicate": k, "status": "completed",
+                   "ate_rmse_m": v, "solve_time_s": 0.1 * k}
+            if hits is not None:
+                row["solver.ekf.provisional_min_hits"] = hits
+            rows.append(row)
+            k += 1
+    rows.append({"run_id": "bad", "label": "ekf", "method": "ekf", "replicate": 99, "status": "failed",
+                 "solver.ekf.provisional_min_hits": 2, "ate_rmse_m": None})
+    df = typed_frame(rows)
+    d.mkdir(parents=True, exist_ok=True)
+    df.to_csv(d / "results.csv", index=False)
+    return df
+
+
+def test_typed_frame_and_csv_keep_integer_columns(tmp_path):
+    df = _write_sweep(tmp_path / "exp")
+    assert str(df["solver.ekf.provisional_min_hits"].dtype) == "Int64"
+    col = pd.read_csv(tmp_path / "exp" / "results.csv", dtype=str)["solver.ekf.provisional_min_hits"]
+    assert col.dropna().tolist() == ["2", "2", "2", "2", "5", "5", "2"]  # written as 2, not 2.0
+    back = read_table(tmp_path / "exp")
+    assert str(back["solver.ekf.provisional_min_hits"].dtype) == "Int64"
+    assert back["solver.ekf.provisional_min_hits"].isna().sum() == 3  # the odometry rows
+    assert back["ate_rmse_m"].dtype == np.float64 and back["replicate"].dtype == "Int64"
+
+
+def test_summarise_matches_hand_computation():
+    s = summarise([1.0, 2.0, 3.0, 4.0, float("nan")])
+    # hand: mean 2.5; s² = (2.25 + 0.25 + 0.25 + 2.25)/3 = 5/3; t_{0.975,3} = 3.182446305 (t table)
+    half = 3.182446305284263 * math.sqrt(5 / 3) / 2
+    assert s["n"] == 4 and s["mean"] == pytest.approx(2.5, rel=1e-15)
+    assert s["std"] == pytest.approx(math.sqrt(5 / 3), rel=1e-14)
+    assert s["ci_low"] == pytest.approx(2.5 - half, rel=1e-9) and s["ci_high"] == pytest.approx(2.5 + half, rel=1e-9)
+    one = summarise([7.0])
+    assert one["n"] == 1 and one["mean"] == 7.0 and math.isnan(one["std"]) and math.isnan(one["ci_low"])
+
+
+def test_aggregate_dir_writes_three_tables(tmp_path):
+    _write_sweep(tmp_path / "exp")
+    a = aggregate_dir(tmp_path / "exp", metrics=["ate_rmse"])
+    s = a["summary"]
+    assert a["n_excluded"] == 1 and a["n_runs"] == 10
+    assert str(s["solver.ekf.provisional_min_hits"].dtype) == "Int64"
+    ekf2 = s[(s.label == "ekf") & (s["solver.ekf.provisional_min_hits"] == 2)].iloc[0]
+    assert ekf2["n"] == 4 and ekf2["mean"] == pytest.approx(2.5)  # the failed run is not in it
+    ekf5 = s[(s.label == "ekf") & (s["solver.ekf.provisional_min_hits"] == 5)].iloc[0]
+    # n = 2: t_{0.975,1} = 12.7062047 ; s = 0.1414214
+    assert ekf5["mean"] == pytest.approx(0.6) and ekf5["ci_high"] - ekf5["mean"] == pytest.approx(
+        12.706204736174698 * math.sqrt(0.02) / math.sqrt(2), rel=1e-9)
+    odo = s[s.label == "odometry"].iloc[0]
+    assert odo["mean"] == pytest.approx(12.0) and odo["std"] == pytest.approx(2.0)
+    assert pd.isna(odo["solver.ekf.provisional_min_hits"])
+    md = (tmp_path / "exp" / "aggregate.md").read_text()
+    assert "| ekf | 2 | 4 | 2.5 ± 2.1 |" in md and "1 failed or unfinished run(s) excluded" in md
+    tex = (tmp_path / "exp" / "aggregate.tex").read_text()
+    assert r"\toprule" in tex and r"2.5 $\pm$ 2.1" in tex and r"ate\_rmse\_m" in tex
+    back = pd.read_csv(tmp_path / "exp" / "aggregate.csv")
+    assert len(back) == 3 and set(back["metric"]) == {"ate_rmse_m"}
+
+
+def test_by_solver_and_cli(tmp_path):
+    _write_sweep(tmp_path / "exp")
+    r = runner.invoke(app, ["aggregate", str(tmp_path / "exp"), "--by", "solver", "-m", "ate_rmse_m",
+                            "-o", str(tmp_path / "out")], env={"COLUMNS": "80"})
+    assert r.exit_code == 0, r.output
+    assert "1 failed or unfinished run(s) excluded" in r.output
+    assert max(len(line) for line in r.output.splitlines()) <= 80
+    s = pd.read_csv(tmp_path / "out" / "aggregate.csv")
+    ekf = s[s.label == "ekf"].iloc[0]
+    vals = [1.0, 2.0, 3.0, 4.0, 0.5, 0.7]
+    assert ekf["n"] == 6 and ekf["mean"] == pytest.approx(np.mean(vals)) and ekf["std"] == pytest.approx(
+        np.std(vals, ddof=1))
+    r = runner.invoke(app, ["aggregate", str(tmp_path / "exp"), "--by", "lable"])
+    assert r.exit_code == 1 and "did you mean 'label'" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+def test_resolve_column_suffix_and_prefix():
+    cols = ["label", "solver.ekf.gate_prob", "ate_rmse_m", "aligned_ate_rmse_m"]
+    assert resolve_column("gate_prob", cols) == "solver.ekf.gate_prob"
+    assert resolve_column("ate_rmse", cols) == "ate_rmse_m"
+    assert resolve_column("solver", cols) == "label"
+    with pytest.raises(ConfigError, match="did you mean"):
+        resolve_column("ate_rsme_m", cols)
+
+
+def test_plot_compare(tmp_path):
+    _write_sweep(tmp_path / "exp")
+    out = tmp_path / "c.png"
+    r = runner.invoke(app, ["plot", "compare", str(tmp_path / "exp"), "--metric", "ate_rmse", "--by", "solver",
+                            "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "9 runs in 2 groups; 1 failed run(s) excluded" in r.output
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    from slamcli.plots import new_figure
+    from slamcli.plots.curves import plot_compare
+    from slamcli.sweep.aggregate import compare_groups
+
+    labels, values, *_ = compare_groups(tmp_path / "exp", "ate_rmse", "solver")
+    assert labels == ["ekf", "odometry"] and sorted(values[1]) == [10.0, 12.0, 14.0]
+    _, ax = new_figure()
+    plot_compare(ax, labels, values, "ATE (m)")
+    np.testing.assert_allclose(np.sort(ax.lines[-1].get_ydata()), [10.0, 12.0, 14.0])  # every run drawn
+
+
+def test_real_sweep_keeps_int_parameter(tmp_path):
+    toml = tmp_path / "e.toml"
+    toml.write_text("""
+[experiment]
+name = "agg"
+[scenario]
+name = "loop"
+[scenario.parameters]
+n_steps = 40
+[[solver]]
+method = "odometry"
+[[solver]]
+method = "ekf"
+[solver.params]
+association = "ml"
+[sweep]
+replicates = 2
+grid = { "solver.ekf.provisional_min_hits" = [2, 3] }
+""")
+    r = runner.invoke(app, ["sweep", str(toml), "-o", str(tmp_path / "res"), "-q"])
+    assert r.exit_code == 0, r.output
+    col = pd.read_csv(tmp_path / "res" / "agg" / "results.csv", dtype=str)["solver.ekf.provisional_min_hits"]
+    assert sorted(col.dropna()) == ["2", "2", "3", "3"]  # not 2.0 although the odometry rows have none
+    a = aggregate_dir(tmp_path / "res" / "agg", by=["solver", "provisional_min_hits"], metrics=["ate_rmse"])
+    s = a["summary"]
+    hits = s["solver.ekf.provisional_min_hits"]
+    assert str(hits.dtype) == "Int64" and hits.iloc[:2].tolist() == [2, 3] and pd.isna(hits.iloc[2])
+    table = read_table(tmp_path / "res" / "agg")
+    for _, row in s.iterrows():  # every mean recomputed by hand from the run table
+        sel = table[(table.label == row.label) & (table.status == "completed")]
+        if not pd.isna(row["solver.ekf.provisional_min_hits"]):
+            sel = sel[sel["solver.ekf.provisional_min_hits"] == row["solver.ekf.provisional_min_hits"]]
+        assert row["n"] == 2 and row["mean"] == pytest.approx(sum(sel.ate_rmse_m) / 2, rel=1e-12)
