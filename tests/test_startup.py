@@ -75,11 +75,24 @@ class ToyParams:
 
 PLUGIN_SOLVER = '''
 import dataclasses
+import functools
 from .params import ToyParams as _P
 
 
 def _seven():
     return 7
+
+
+@functools.lru_cache(
+    maxsize=None,
+)
+def _layout(
+    a,
+) -> str:
+    text = """
+a column-0 line inside a function: the function cut falls back to parsing the whole module
+"""
+    return text
 
 
 @dataclasses.dataclass(frozen=True)
