@@ -308,9 +308,11 @@ def _row(row: str, size: int, impl: str, m: dict, goal: str = "") -> dict:
 def _pair(rows: list[dict], row: str, size: int, ours: dict, ref: dict, ref_impl: str, goal: str,
           ours_impl: str = "slamcli") -> None:
     a, b = _row(row, size, ours_impl, ours, goal), _row(row, size, ref_impl, ref)
+    finished = not any(str(m.get("status", "")).startswith(("timeout", "failed")) for m in (ours, ref))
     for key, col in (("wall_s", "ratio"), ("cpu_s", "cpu_ratio"), ("peak_rss_mb", "rss_ratio")):
         x, y = ours.get(key), ref.get(key)
-        a[col] = round(x / y, 3) if isinstance(x, (int, float)) and isinstance(y, (int, float)) and y > 0 else ""
+        ok = finished and isinstance(x, (int, float)) and isinstance(y, (int, float)) and y > 0
+        a[col] = round(x / y, 3) if ok else ""  # no ratio against a run that did not finish
     rows += [a, b]
     _progress(a)
     _progress(b)
