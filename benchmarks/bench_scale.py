@@ -261,19 +261,37 @@ def measure(task: dict, *, timeout: float | None = None, mem_gb: float | None = 
     mem_gb = mem_gb or float(os.environ.get("SLAMCLI_SCALE_MEM_GB", 8))
     cmd = [sys.executable, "-m", "benchmarks.bench_scale", "--worker", json.dumps(task)]
     t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=_child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, preexec_fn=_limits(mem_gb))
     try:
-        out = subprocess.run(cmd, cwd=ROOT, env=_child_env(), capture_output=True, text=True, timeout=timeout,
-                             preexec_fn=_limits(mem_gb))
+        stdout, stderr = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
-        return {"status": f"timeout after {timeout:.0f} s", "wall_s": time.perf_counter() - t0}
-    for line in reversed(out.stdout.splitlines()):
+        hwm = _vm_hwm_mb(proc.pid)  # the peak RSS so far, read before the kill
+        proc.kill()
+        proc.communicate()
+        return {"status": f"timeout after {timeout:.0f} s", "wall_s": time.perf_counter() - t0, "peak_rss_mb": hwm}
+    for line in reversed(stdout.splitlines()):
         if line.startswith("{"):
-            return json.loads(line)
-    err = [ln for ln in out.stderr.strip().splitlines() if ln.strip()]
-    last = err[-1][:160] if err else f"exit {out.returncode}"
-    if "MemoryError" in out.stderr or "bad_alloc" in out.stderr:
+            m = json.loads(line)
+            if "MemoryError" in str(m.get("status")):
+                m["status"] = f"{m['status']} (under the {mem_gb:g} GiB address-space limit)"
+            return m
+    err = [ln for ln in stderr.strip().splitlines() if ln.strip()]
+    last = err[-1][:160] if err else f"exit {proc.returncode}"
+    if "MemoryError" in stderr or "bad_alloc" in stderr:
         last = f"MemoryError under the {mem_gb:g} GiB address-space limit ({last})"
     return {"status": f"failed: {last}", "wall_s": time.perf_counter() - t0}
+
+
+def _vm_hwm_mb(pid: int) -> float | str:
+    """Peak resident set size of a running process (``VmHWM`` in /proc, Linux), MB."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return ""
 
 
 def _startup_cmd(args: list[str], repeats: int) -> dict:
@@ -437,7 +455,14 @@ def main(argv: list[str] | None = None) -> int:
             dataset_path(int(task["size"]))
             print(json.dumps({"status": "ok"}))
             return 0
-        print(json.dumps(_task(task), default=str))
+        t0 = time.perf_counter()
+        try:
+            out = _task(task)
+        except Exception as exc:  # noqa: BLE001 - a failed measurement is a row, with the memory it reached
+            first = (str(exc).strip().splitlines() or [""])[0][:160]
+            out = {"status": f"failed: {type(exc).__name__}: {first}", "wall_s": time.perf_counter() - t0,
+                   "peak_rss_mb": _rss_mb()}
+        print(json.dumps(out, default=str))
         return 0
     from benchmarks.__main__ import write_rows
 
