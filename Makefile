@@ -8,7 +8,9 @@ BIN := $(VENV)/bin
 install:  ## create the venv and install slamcli with every extra the tests use
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --upgrade --quiet pip
-	$(BIN)/pip install --quiet -e ".[test,gtsam,dask,parquet,dev]"
+	@# scikit-sparse (extra "cholmod") compiles against SuiteSparse's headers: Debian's libsuitesparse-dev
+	@dpkg -s libsuitesparse-dev >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq libsuitesparse-dev; }
+	$(BIN)/pip install --quiet -e ".[test,gtsam,dask,parquet,dev,interval,cholmod]"
 
 test:  ## the whole test suite (what CI runs)
 	$(BIN)/pytest -q -n 2 --dist loadfile

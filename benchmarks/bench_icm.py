@@ -150,7 +150,7 @@ def run(quick: bool = False) -> list[dict]:
                 "N_obs": prob.n_obs,
                 "status": res.status.value,
                 "sweeps": res.extra["sweeps"],
-                "s_per_sweep": round(res.extra["s_per_sweep"], 4),
+                "s_per_sweep": round(res.timings["s_per_sweep"], 4),
                 "total_s": round(total, 2),
                 "init_ms_per_step": round(res.extra["init_ms_per_step"], 3),
                 "E_final": round(float(tr.objective[-1]), 4),

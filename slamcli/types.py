@@ -55,6 +55,8 @@ class Observations:
                                        simulator option ``report_ids``); -1 when the sensor reports none.
                                        This is a measurement a solver may use, not ground truth.
     offsets : ndarray (T+2,) int64     rows of pose t are ``offsets[t]:offsets[t+1]``.
+    landmark_type : ndarray (N,) int64 | None  landmark *type* label reported by the sensor (e.g. 0 = door,
+                                       1 = corridor) without the identity; None when the sensor reports none.
     """
 
     step: np.ndarray
@@ -63,6 +65,7 @@ class Observations:
     sensor: np.ndarray
     reported_id: np.ndarray
     offsets: np.ndarray
+    landmark_type: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.range_m.shape[0])
@@ -119,6 +122,29 @@ class Observations:
 
 
 @dataclass(frozen=True)
+class NoiseBounds:
+    """Guaranteed error bounds (set-membership data): every error lies in ``[-h, +h]`` of its half-width ``h``.
+
+    The simulator's bounded-noise option draws errors uniformly within these bounds and records them here,
+    so a set-membership solver reads the bounds, never the truth.
+
+    Attributes
+    ----------
+    odometry_model : str               ``"turn_move"``: pose t → t+1 is a turn in place by ``α`` followed by a
+                                       straight move of length ``d`` along the new heading; the odometry
+                                       increment of ``odometry_xyt`` encodes the measured ``(d̃, α̃)``.
+    odometry_half_width : ndarray (2,) ``[h_d m, h_α rad]``: ``|d − d̃| ≤ h_d``, ``|α − α̃| ≤ h_α``.
+    range_half_width : float           ``|r − r̃| ≤ h_r``, m.
+    bearing_half_width : float         ``|b − b̃| ≤ h_b``, rad.
+    """
+
+    odometry_model: str
+    odometry_half_width: np.ndarray
+    range_half_width: float
+    bearing_half_width: float
+
+
+@dataclass(frozen=True)
 class SlamInputs:
     """Everything a solver may use.
 
@@ -135,6 +161,7 @@ class SlamInputs:
     gps_step : ndarray (G,) int64    optional GPS fixes: pose index ...
     gps_xy : ndarray (G, 2)          ... and position, m.
     gps_std : float                  σ of a GPS fix, m.
+    noise_bounds : NoiseBounds | None  guaranteed error bounds (bounded-noise datasets only).
     """
 
     dt: float
@@ -148,6 +175,7 @@ class SlamInputs:
     gps_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     gps_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     gps_std: float = 0.0
+    noise_bounds: NoiseBounds | None = None
 
     @property
     def n_poses(self) -> int:
@@ -187,6 +215,7 @@ class Status(str, enum.Enum):
     MAX_ITERATIONS = "max_iterations"  # stopped on the iteration budget
     COMPLETED = "completed"  # a filter/one-pass solver processed every step
     FAILED = "failed"  # no usable estimate; message says why
+    TRUNCATED = "truncated"  # a set-membership solver hit its hypothesis cap: the set may miss solutions
 
 
 @dataclass(frozen=True)
@@ -283,8 +312,14 @@ class SolverResult:
     trace : IterationTrace | None
     wall_time_s : float
     dataset_hash : str                 content hash of the input dataset (filled in by the caller).
+    hypotheses : BoxHypotheses | None  set-membership solvers: every surviving hypothesis with its boxes.
     extra : dict                       small solver-specific scalars/strings, e.g.
-                                       ``{"used_truth_association": True}``; JSON-serialisable.
+                                       ``{"used_truth_association": True}``; JSON-serialisable and
+                                       deterministic (same inputs + seed ⇒ same extra). No timings here.
+    timings : dict[str, float]         every solver-specific wall-clock measurement, seconds or ms as the
+                                       key says (e.g. ICM ``init_s``, ``s_per_sweep``). Together with
+                                       ``wall_time_s`` and ``trace.time_s`` these are the only
+                                       non-deterministic numbers of a result (docs/schema.md "Timings").
     """
 
     solver: str
@@ -301,3 +336,33 @@ class SolverResult:
     wall_time_s: float = 0.0
     dataset_hash: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    hypotheses: BoxHypotheses | None = None
+
+
+@dataclass(frozen=True)
+class BoxHypotheses:
+    """Every surviving hypothesis (kinematic graph) of a set-membership solver, H of them.
+
+    Landmark rows of hypothesis h are ``0 .. n_landmarks[h]-1``; rows beyond are NaN padding (-1 for types).
+
+    Attributes
+    ----------
+    assoc : ndarray (H, N) int64              landmark row of each observation under hypothesis h.
+    pose_lo, pose_hi : ndarray (H, T+1, 3)    lower/upper bounds of [x, y, θ]; θ is *unwrapped* (a box may
+                                              extend beyond [-π, π)).
+    landmark_lo, landmark_hi : ndarray (H, Lmax, 2)   lower/upper bounds of landmark [x, y].
+    n_landmarks : ndarray (H,) int64
+    landmark_type : ndarray (H, Lmax) int64   type label of each landmark (-1 = none/padding).
+    """
+
+    assoc: np.ndarray
+    pose_lo: np.ndarray
+    pose_hi: np.ndarray
+    landmark_lo: np.ndarray
+    landmark_hi: np.ndarray
+    n_landmarks: np.ndarray
+    landmark_type: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.assoc.shape[0])

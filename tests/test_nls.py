@@ -327,10 +327,14 @@ def test_banded_cholesky_breakdown_falls_back_and_gauss_newton_takes_damped_step
     _, data, g = asm.linearize(x0, nls.NlsParams())
     assert nls._ChainSolver(asm, 6, 1).solve(data, -g) is None  # the breakdown this test is about
     # before the fix GN stopped at x0 with FAILED "singular normal equations"
-    gn = nls.solve(prob, x0, nls.NlsParams(method="gn"))
+    gn = nls.solve(prob, x0, nls.NlsParams(method="gn", linear_solver="chain"))
     assert gn.status == Status.CONVERGED and np.all(np.isfinite(gn.x))
     np.testing.assert_allclose(gn.x, np.arange(6.0), atol=1e-8)
     assert any("banded Cholesky" in n for n in gn.notes) and any("damped" in n for n in gn.notes)
+    if nls.cholmod_available():  # the default solver meets the same breakdown and falls back the same way
+        gn2 = nls.solve(prob, x0, nls.NlsParams(method="gn", linear_solver="cholmod"))
+        np.testing.assert_allclose(gn2.x, np.arange(6.0), atol=1e-8)
+        assert any("CHOLMOD" in n for n in gn2.notes)
     lm = nls.solve(prob, x0, nls.NlsParams(method="lm"))
     assert lm.status == Status.CONVERGED
     np.testing.assert_allclose(lm.x, np.arange(6.0), atol=1e-8)

@@ -229,7 +229,7 @@ def test_broken_plugin_error_lists_names(with_fake_plugins):
     assert "available solvers: " + ", ".join(with_fake_plugins) in msg
     with pytest.raises(PluginError, match="does not follow the solver contract"):
         registry.load("notasolver")
-    with pytest.raises(PluginError, match="unknown solver 'nope'; available solvers: broken, ekf"):
+    with pytest.raises(PluginError, match="unknown solver 'nope'; available solvers: broken, cuik, ekf"):
         registry.load("nope")
 
 

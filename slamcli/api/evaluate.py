@@ -24,6 +24,31 @@ from slamcli.errors import SlamcliError
 OUTPUT_FILES = ("metrics.json", "per_iteration.csv", "per_step.csv", "per_landmark.csv")
 
 
+def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, near_path_m: float | None = None,
+                             rpe_delta: float = 1.0, rpe_unit: str = "steps", where: str = "") -> None:
+    """Value checks of the evaluation options (CLI flags and experiment ``[evaluate]`` tables alike).
+
+    Raises a one-line :class:`SlamcliError` naming the option: cut-off, RPE separation and near-path distance
+    must be finite and > 0, the OSPA order finite and >= 1, the RPE unit ``steps`` or ``m``.
+    """
+    pre = f"{where}: " if where else ""
+
+    def num(v) -> float | None:
+        return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+
+    for name, v in (("cutoff", cutoff), ("rpe_delta", rpe_delta), ("near_path_m", near_path_m)):
+        if name == "near_path_m" and v is None:
+            continue
+        x = num(v)
+        if x is None or not (math.isfinite(x) and x > 0):
+            raise SlamcliError(f"{pre}{name}: must be a finite number > 0, got {v!r}")
+    x = num(ospa_order)
+    if x is None or not (math.isfinite(x) and x >= 1):
+        raise SlamcliError(f"{pre}ospa_order: must be a finite number >= 1, got {ospa_order!r}")
+    if rpe_unit not in ("steps", "m"):
+        raise SlamcliError(f"{pre}rpe_unit: must be 'steps' or 'm', got {rpe_unit!r}")
+
+
 def _resolve_dataset_path(result_path: Path, recorded: str, relpath: str = "") -> Path:
     """The recorded dataset: as recorded (absolute, or relative to the cwd / the result's directory), then
     ``relpath`` relative to the result's directory (a result and its dataset moved together)."""
@@ -69,6 +94,13 @@ def load_result_and_dataset(result_path, data_path=None, *, check_hash: bool = T
                                f"has hash {h[:19]}… (wrong or modified dataset)")
     if require_truth and dataset.truth is None:
         raise SlamcliError(f"{data_path}: dataset has no ground truth; nothing to evaluate against")
+    n_poses, n_obs = dataset.inputs.n_poses, len(dataset.inputs.observations)
+    if result.poses_xyt.shape[0] != n_poses:
+        raise SlamcliError(f"{result_path}: poses_xyt: {result.poses_xyt.shape[0]} poses, but dataset {data_path} "
+                           f"has {n_poses}")
+    if result.assoc.shape[0] != n_obs:
+        raise SlamcliError(f"{result_path}: assoc: {result.assoc.shape[0]} rows, but dataset {data_path} has "
+                           f"{n_obs} observations")
     return result, dataset, data_path
 
 
@@ -86,19 +118,48 @@ def _json_clean(obj):
 
 
 def write_evaluation(evaluation, out_dir, extra_scalars: dict | None = None) -> Path:
-    """Write ``metrics.json`` and the three CSVs into ``out_dir`` (created if missing), each atomically."""
-    from slamcli.io import atomic_path
+    """Write ``metrics.json`` and the three CSVs into ``out_dir`` without ever mixing two evaluations.
+
+    * ``out_dir`` missing, or holding only the files of an earlier evaluation: the four files are written
+      into a temporary sibling folder that then replaces ``out_dir`` (:func:`slamcli.io.atomic.atomic_folder`);
+      a ``kill -9`` leaves the previous folder intact.
+    * ``out_dir`` holding other files too (a sweep's run folder, a user's folder): the four files are written
+      under temporary names first and renamed into place together at the end.
+
+    OS failures (read-only folder, a file in the way) become one-line SlamcliErrors.
+    """
+    from slamcli.io.atomic import atomic_folder, clean_stale_temporaries, temporary_sibling
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     scalars = dict(evaluation.scalars)
     scalars.update(extra_scalars or {})
-    with atomic_path(out / "metrics.json") as tmp:
-        tmp.write_text(json.dumps(_json_clean(scalars), indent=2, allow_nan=False) + "\n")
-    for name, df in (("per_iteration.csv", evaluation.per_iteration), ("per_step.csv", evaluation.per_step),
-                     ("per_landmark.csv", evaluation.per_landmark)):
-        with atomic_path(out / name) as tmp:
-            df.to_csv(tmp, index=False)
+    files = {"metrics.json": lambda p: p.write_text(json.dumps(_json_clean(scalars), indent=2, allow_nan=False) + "\n"),
+             "per_iteration.csv": lambda p: evaluation.per_iteration.to_csv(p, index=False),
+             "per_step.csv": lambda p: evaluation.per_step.to_csv(p, index=False),
+             "per_landmark.csv": lambda p: evaluation.per_landmark.to_csv(p, index=False)}
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise SlamcliError(f"{out}: exists and is not a folder; give -o a folder name")
+    try:
+        own = not out.exists() or all(e.name in OUTPUT_FILES for e in out.iterdir())
+        if own:
+            with atomic_folder(out) as tmp:
+                for name, write in files.items():
+                    write(tmp / name)
+            return out
+        clean_stale_temporaries(out)
+        staged = {}
+        try:
+            for name, write in files.items():
+                staged[name] = temporary_sibling(out / name)
+                write(staged[name])
+            for name, tmp in staged.items():
+                os.replace(tmp, out / name)
+        finally:
+            for tmp in staged.values():
+                tmp.unlink(missing_ok=True)
+    except OSError as exc:
+        where = exc.filename if exc.filename is not None else out
+        raise SlamcliError(f"{where}: cannot write the evaluation ({exc.strerror or exc})") from None
     return out
 
 
@@ -122,10 +183,8 @@ def evaluate_files(result_path: str | os.PathLike, data_path: str | os.PathLike 
     """
     from slamcli.metrics.summary import EvaluationParams, evaluate_result
 
-    if not cutoff > 0:
-        raise SlamcliError(f"--cutoff must be > 0, got {cutoff}")
-    if rpe_unit not in ("steps", "m"):
-        raise SlamcliError(f"rpe unit must be 'steps' or 'm', got {rpe_unit!r}")
+    check_evaluation_options(cutoff=cutoff, ospa_order=ospa_order, near_path_m=near_path_m, rpe_delta=rpe_delta,
+                             rpe_unit=rpe_unit)
     result, dataset, data_path = load_result_and_dataset(result_path, data_path, check_hash=check_hash)
     params = EvaluationParams(cutoff_m=cutoff, ospa_order=ospa_order, near_path_m=near_path_m,
                               rpe_delta=rpe_delta, rpe_unit=rpe_unit)

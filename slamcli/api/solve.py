@@ -60,7 +60,21 @@ def make_solver(method: str, params: Any = None):
         params = {}
     if not isinstance(params, cls.Params):
         params = build_params(cls.Params, params, where=f"--param ({method})")
+    _check_finite_params(params, method)
     return cls(params)
+
+
+def _check_finite_params(params: Any, method: str) -> None:
+    """``inf`` is refused like ``nan`` for every float parameter whose default is finite (a default of ``inf``
+    means "unlimited", so ``inf`` stays allowed there)."""
+    import math
+
+    for f in dataclasses.fields(params):
+        v = getattr(params, f.name)
+        default = f.default if f.default is not dataclasses.MISSING else None
+        for x in (v if isinstance(v, tuple) else (v,)):
+            if isinstance(x, float) and math.isinf(x) and not (isinstance(default, float) and math.isinf(default)):
+                raise ConfigError(f"--param ({method}) {f.name}: must be finite, got {x}")
 
 
 def _one_line(exc: BaseException) -> str:

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, stdout_console
+from slamcli.cli.app import app, check_output, handle_errors, stdout_console
 
 
 def _split(values: list[str] | None) -> list[str]:
@@ -35,7 +35,12 @@ def aggregate_command(
             raise ConfigError(f"--confidence: must be in (0, 1), got {confidence}")
         from slamcli.sweep.aggregate import aggregate_dir, cell_text
 
-        a = aggregate_dir(exp_dir, _split(by), _split(metric), out_dir, confidence)
+        if out_dir is not None:
+            check_output(out_dir, folder=True)
+        try:
+            a = aggregate_dir(exp_dir, _split(by), _split(metric), out_dir, confidence)
+        except KeyError as exc:  # a results.csv that lacks a column every sweep writes
+            raise ConfigError(f"{exp_dir / 'results.csv'}: not a slamcli results table (no column {exc})") from None
         if quiet:
             return
         from rich.table import Table

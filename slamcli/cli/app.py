@@ -80,17 +80,28 @@ def stdout_console():
     return Console()
 
 
+def one_line(text: str) -> str:
+    """First line of ``text``, printable whatever the file names in it (non-UTF-8 bytes → ``\\udcxx``)."""
+    line = text.splitlines()[0] if text.strip() else ""
+    return line.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 @contextlib.contextmanager
-def handle_errors() -> Iterator[None]:
-    """Turn a :class:`~slamcli.errors.SlamcliError` into one line on stderr and exit status 1."""
+def handle_errors(exit_code: int = 1) -> Iterator[None]:
+    """Turn a :class:`~slamcli.errors.SlamcliError` (or an operating-system error the library did not
+    anticipate, e.g. a read-only folder) into one line on stderr and exit status ``exit_code``."""
     from slamcli.errors import SlamcliError
 
     try:
         yield
     except SlamcliError as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        msg = one_line(str(exc)) or type(exc).__name__
         typer.echo(f"error: {msg}", err=True)
-        raise typer.Exit(1) from None
+        raise typer.Exit(exit_code) from None
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        typer.echo(f"error: {one_line(where + (exc.strerror or str(exc) or type(exc).__name__))}", err=True)
+        raise typer.Exit(exit_code) from None
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         raise typer.Exit(130) from None
@@ -133,12 +144,38 @@ def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[
 
 def fail(message: str) -> None:
     """Print a one-line error and exit 1 (for CLI-level argument problems)."""
-    typer.echo(f"error: {message}", err=True)
+    typer.echo(f"error: {one_line(message)}", err=True)
     raise typer.Exit(1)
 
 
 def is_tty() -> bool:
     return sys.stderr.isatty()
+
+
+def check_output(path, *, folder: bool = False, option: str = "-o") -> None:
+    """Refuse an output path that cannot be written, before any work is done (one line, exit 1).
+
+    A directory where a file is expected (or a file where a folder is expected), a name longer than the
+    file system allows, a parent that is a file, or a parent folder this process may not write into.
+    """
+    import os
+    from pathlib import Path
+
+    p = Path(path)
+    for part in p.parts:
+        if len(os.fsencode(part)) > 255:
+            fail(f"{option} {p}: a name is too long ({len(os.fsencode(part))} bytes, limit 255)")
+    if not folder and p.is_dir():
+        fail(f"{option} {p}: is a directory, expected a file name")
+    if folder and (p.is_symlink() or (p.exists() and not p.is_dir())):
+        fail(f"{option} {p}: exists and is not a folder")
+    anc = p.parent
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if anc.exists() and not anc.is_dir():
+        fail(f"{option} {p}: {anc} is a file, not a folder")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        fail(f"{option} {p}: folder {anc} is not writable")
 
 
 def iteration_count(result) -> int | None:

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, stdout_console
+from slamcli.cli.app import app, check_output, handle_errors, stdout_console
 
 # (label, key in metrics.json, unit) in display order; missing keys are skipped.
 _ROWS = [
@@ -28,6 +28,12 @@ _ROWS = [
     ("pose NEES (time mean, E = 3)", "pose_nees_mean", ""),
     ("landmark NEES (mean, E = 2)", "landmark_nees_mean", ""),
     ("iterations in trace", "n_iterations", ""),
+    ("set: soundness (true hypothesis)", "set_soundness", "frac"),
+    ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct"), ""),
+    ("set: true correspondence survived", "set_true_correspondence_survived", ""),
+    ("set: mean box width pose x / y / θ", ("set_true_pose_width_x_mean", "set_true_pose_width_y_mean",
+                                            "set_true_pose_width_t_mean"), "m, m, rad"),
+    ("set: mean landmark box width", "set_true_landmark_width_mean", "m"),
 ]
 
 
@@ -60,6 +66,7 @@ def evaluate_command(
         from slamcli.api.evaluate import evaluate_files
 
         out = out_dir if out_dir is not None else result.parent / f"{result.stem}_eval"
+        check_output(out, folder=True, option="-o" if out_dir is not None else "output folder")
         m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
                            rpe_unit=rpe_unit, check_hash=not no_hash_check)
         if quiet:

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, handle_errors
+from slamcli.cli.app import app, check_output, handle_errors
 
 
 @app.command("export")
@@ -28,6 +28,7 @@ def export_command(
     with handle_errors():
         from slamcli.api.interop import export_file
 
+        check_output(output)
         s = export_file(src, fmt, output, data=data, check_hash=not no_hash_check)
         if not quiet:
             edges = f", {s['n_edges']} edges" if "n_edges" in s else ""

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors, stdout_console
+from slamcli.cli.app import app, check_output, fail, handle_errors, stdout_console
 
 import_app = typer.Typer(
     help="Import a recording, a landmark graph or another estimator's trajectory: then solve/evaluate/plot work on it.",
@@ -62,6 +62,7 @@ def import_mrclam_command(
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
+        check_output(out)
         import dataclasses
 
         import numpy as np
@@ -161,6 +162,7 @@ def import_g2o_command(
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
+        check_output(out)
         from slamcli.datasets.g2o import import_graph
         from slamcli.io import write_dataset
 

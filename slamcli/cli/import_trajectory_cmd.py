@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import handle_errors
+from slamcli.cli.app import check_output, handle_errors
 from slamcli.cli.import_cmd import import_app
 
 
@@ -31,6 +31,7 @@ def import_trajectory_command(
     with handle_errors():
         from slamcli.api.interop import import_trajectory_file
 
+        check_output(output)
         r = import_trajectory_file(path, data, output, fmt=fmt, times=times, time_offset=time_offset,
                                    extrapolate=extrapolate, name=name)
         if not quiet:

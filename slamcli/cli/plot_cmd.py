@@ -1,4 +1,5 @@
-"""``slamcli plot``: figures from result files (map, errors, nees, mapchange) and sweeps (compare); PNG, PDF or SVG."""
+"""``slamcli plot``: figures from result files (map, errors, nees, mapchange, boxes) and sweeps (compare); PNG, PDF
+or SVG."""
 
 from __future__ import annotations
 
@@ -7,16 +8,16 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors
+from slamcli.cli.app import app, check_output, fail, handle_errors
 
-KINDS = ("map", "errors", "nees", "mapchange", "compare")
+KINDS = ("map", "errors", "nees", "mapchange", "compare", "boxes")
 _SIZES = {"map": (7.0, 6.0), "errors": (6.4, 4.4), "nees": (6.4, 4.4), "mapchange": (6.4, 4.4),
-          "compare": (6.4, 4.4)}
+          "compare": (6.4, 4.4), "boxes": (7.0, 6.0)}
 
 
 @app.command("plot")
 def plot_command(
-    kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange | compare")],
+    kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange | compare | boxes")],
     results: Annotated[list[Path], typer.Argument(
         help="Result file(s): nees takes N Monte-Carlo runs, mapchange overlays several, map/errors take "
              "one; compare takes a sweep folder.")],
@@ -37,6 +38,7 @@ def plot_command(
     no_hash_check: Annotated[bool, typer.Option("--no-hash-check", help="Skip the dataset hash check.")] = False,
     title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
+    hypothesis: Annotated[int, typer.Option(help="boxes: which surviving hypothesis to draw (0 = first).")] = 0,
 ) -> None:
     """Draw one publication figure; the format follows the extension; written atomically."""
     with handle_errors():
@@ -51,9 +53,10 @@ def plot_command(
             fail(f"--sigma: must be > 0, got {sigma}")
         if data and len(data) != len(results):
             fail(f"got {len(results)} result(s) but {len(data)} --data file(s); give one per result or none")
-        if kind in ("map", "errors", "compare") and len(results) != 1:
+        if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:
             what = "sweep folder" if kind == "compare" else "result"
             fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
+        check_output(output)
         w, h = parse_size(size, _SIZES[kind])
         check = not no_hash_check
         data_paths = list(data) if data else [None] * len(results)
@@ -68,6 +71,8 @@ def plot_command(
                 _mapchange(ax, results, title, log=not linear)
             elif kind == "compare":
                 _compare(ax, results[0], metric, by, title, echo)
+            elif kind == "boxes":
+                _boxes(ax, results[0], data_paths[0], check, hypothesis, title)
             else:
                 _nees(ax, results, data_paths, check, title, echo, log=not linear)
         save_figure(fig, output, dpi=dpi)
@@ -151,3 +156,23 @@ def _compare(ax, exp_dir, metric, by, title, echo):
         raise SlamcliError(f"{exp_dir}: no completed run has a value of {metric_col!r}")
     plot_compare(ax, labels, values, metric_col, by_col, title=title or f"{Path(exp_dir).name}: {metric_col}")
     echo(f"{sum(len(v) for v in values)} runs in {len(labels)} groups; {n_excluded} failed run(s) excluded")
+
+
+def _boxes(ax, result_path, data_path, check, hypothesis, title):
+    from slamcli.api.evaluate import load_result_and_dataset
+    from slamcli.errors import SlamcliError
+    from slamcli.plots.boxes import plot_boxes
+
+    res, ds, _ = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
+    hb = res.hypotheses
+    if hb is None or len(hb) == 0:
+        raise SlamcliError(f"{result_path}: no hypotheses group (solver {res.solver!r}); plot boxes needs a "
+                           "set-membership result such as cuik")
+    if not 0 <= hypothesis < len(hb):
+        raise SlamcliError(f"--hypothesis {hypothesis}: the result has {len(hb)} hypotheses (0..{len(hb) - 1})")
+    L = int(hb.n_landmarks[hypothesis])
+    truth = ds.truth
+    plot_boxes(ax, hb.pose_lo[hypothesis], hb.pose_hi[hypothesis], hb.landmark_lo[hypothesis, :L],
+               hb.landmark_hi[hypothesis, :L], truth.poses_xyt if truth else None,
+               truth.landmarks_xy if truth else None,
+               title=title or f"{res.solver}: hypothesis {hypothesis} of {len(hb)} ({L} landmarks)")

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors, stderr_console
+from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console
 
 
 @app.command("reproduce")
@@ -30,6 +30,7 @@ def reproduce_command(
 
         if workers is not None and workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
+        check_output(out, folder=True, option="--out")
         con = stderr_console()
         report = reproduce(
             out, quick=quick, workers=workers, experiments_dir=experiments,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors, progress_bar, stdout_console
+from slamcli.cli.app import app, check_output, fail, handle_errors, progress_bar, stdout_console
 
 
 @app.command("simulate")
@@ -55,6 +55,7 @@ def simulate_command(
             return
         if out is None:
             fail("-o/--out is required")
+        check_output(out)
         # The bar opens on the first progress report (after the world is built), so errors print one line.
         with contextlib.ExitStack() as stack:
             bar: list = []

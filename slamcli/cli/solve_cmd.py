@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, iteration_count, progress_bar, stdout_console
+from slamcli.cli.app import app, check_output, handle_errors, iteration_count, progress_bar, stdout_console
 
 
 @app.command("solve")
@@ -32,6 +32,7 @@ def solve_command(
         from slamcli.api.solve import make_solver, solve_file
 
         make_solver(method, list(param or []))  # validate method and params before reading data
+        check_output(out)
         # The bar opens on the solver's first progress report, so input errors print only their one line.
         with contextlib.ExitStack() as stack:
             bar: list = []

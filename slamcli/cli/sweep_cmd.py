@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, fail, handle_errors, stderr_console, stdout_console
+from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console, stdout_console
 
 
 @app.command("sweep")
@@ -43,6 +43,7 @@ def sweep_command(
         if dry_run:
             _print_dry_run(expansion, out)
             return
+        check_output(out, folder=True, option="--out")
         summary = _run(expansion, out, workers, executor, scheduler, resume, quiet)
         _print_summary(summary)
         if not summary.ok:

@@ -233,6 +233,12 @@ def load_mrclam(directory: str | Path, robot: int) -> MrclamRaw:
     neg = np.flatnonzero(meas[:, 2] < 0)
     if neg.size:
         raise DatasetImportError(f"{p_meas}:{ln[neg[0]]}: range must be >= 0, got {float(meas[neg[0], 2]):g}")
+    # bearings are radians; one just past ±pi is wrapped on import, but a value beyond ±2pi (degrees, a
+    # corrupt row) is refused rather than wrapped to a plausible-looking angle (45 rad would become 1.018)
+    far = np.flatnonzero(np.abs(meas[:, 3]) > 2 * np.pi)
+    if far.size:
+        raise DatasetImportError(f"{p_meas}:{ln[far[0]]}: bearing {float(meas[far[0], 3]):g} rad outside "
+                                 "[-2pi, 2pi] (degrees? corrupt row?)")
     gt, ln = read_table(p_gt, ("time", "x", "y", "theta"))
     _require_rows(gt, p_gt, 2)
     _require_sorted(gt[:, 0], ln, p_gt)

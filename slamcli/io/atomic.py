@@ -2,15 +2,87 @@
 
 A reader (or a sweep coordinator) therefore sees either no file or a complete one, never a half-written
 HDF5 file; if writing fails, the temporary file is removed and nothing is left behind.
+
+Temporary names are ``.<name>.tmp-<pid>-<8 hex>``. A process killed with ``kill -9`` cannot remove its
+temporary file, so every atomic write first removes the temporaries of *dead* processes in its destination
+directory (:func:`clean_stale_temporaries`); those of live processes are never touched.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
+import shutil
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+
+from slamcli.errors import SlamcliError
+
+_TMP_RE = re.compile(r"^\..*\.tmp-(\d+)-[0-9a-f]{8}$")
+
+
+def _name_max(directory: Path) -> int:
+    try:
+        return int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return 255
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this pid exists (on this host)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # exists, owned by another user
+    return True
+
+
+def clean_stale_temporaries(directory: str | os.PathLike) -> int:
+    """Remove ``.<name>.tmp-<pid>-<hex>`` files/folders in ``directory`` whose process no longer exists.
+
+    Returns how many were removed. Errors (a vanished entry, no permission) are ignored: cleaning is best
+    effort and must never make a write fail.
+    """
+    d = Path(directory)
+    n = 0
+    try:
+        entries = list(os.scandir(d))
+    except OSError:
+        return 0
+    for e in entries:
+        m = _TMP_RE.match(e.name)
+        if not m or int(m.group(1)) == os.getpid() or pid_alive(int(m.group(1))):
+            continue
+        try:
+            if e.is_dir(follow_symlinks=False):
+                shutil.rmtree(e.path)
+            else:
+                os.unlink(e.path)
+            n += 1
+        except OSError:
+            pass
+    return n
+
+
+def temporary_sibling(path: str | os.PathLike) -> Path:
+    """``.<name>.tmp-<pid>-<hex>`` beside ``path`` (the name shortened when it would exceed NAME_MAX).
+
+    Raises a one-line :class:`SlamcliError` when the final name itself is too long for the file system.
+    """
+    final = Path(path)
+    limit = _name_max(final.parent if final.parent.is_dir() else Path("."))
+    size = len(os.fsencode(final.name))
+    if size > limit:
+        raise SlamcliError(f"{final}: file name too long ({size} bytes, the file system allows {limit})")
+    suffix = f".tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    stem = os.fsencode(final.name)[: max(1, limit - len(suffix) - 1)]
+    return final.with_name("." + os.fsdecode(stem) + suffix)
 
 
 @contextlib.contextmanager
@@ -18,16 +90,47 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on clean exit rename it onto ``path`` atomically.
 
     The temporary file lives in the same directory (``os.replace`` is only atomic within one file system).
-    The parent directory is created when missing. On any exception the temporary file is deleted and the
-    exception propagates; an existing file at ``path`` is left untouched.
+    The parent directory is created when missing; stale temporaries of dead processes there are removed. On
+    any exception the temporary file is deleted and the exception propagates; an existing file at ``path``
+    is left untouched.
     """
     final = Path(path)
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = final.with_name(f".{final.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    clean_stale_temporaries(final.parent)
+    tmp = temporary_sibling(final)
     try:
         yield tmp
         os.replace(tmp, final)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(FileNotFoundError, IsADirectoryError, NotADirectoryError):
             tmp.unlink()
+        raise
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary folder next to ``path``; on clean exit it *becomes* ``path``.
+
+    An existing folder at ``path`` is moved aside (``.<name>.tmp-<pid>-<hex>``), the new one renamed into
+    place and the old one removed, so ``path`` never mixes files of two runs: a crash leaves the previous
+    folder, or (between the two renames) none. On an exception the temporary folder is removed.
+    """
+    final = Path(path)
+    if final.is_symlink() or (final.exists() and not final.is_dir()):
+        raise SlamcliError(f"{final}: exists and is not a folder")
+    final.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_temporaries(final.parent)
+    tmp = temporary_sibling(final)
+    tmp.mkdir()
+    try:
+        yield tmp
+        old = None
+        if final.exists():
+            old = temporary_sibling(final)
+            os.rename(final, old)
+        os.rename(tmp, final)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -9,6 +9,9 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         timestamps (T+1,)  x0 (3,)  controls (T,2)  odometry_xyt (T+1,3)  max_range ()
         observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
         noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
+        noise_bounds/      (bounded-noise data only) @odometry_model odometry_half_width (2,)
+                           range_half_width () bearing_half_width ()
+        observations/landmark_type (N,)   (only when the sensor reports type labels)
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
@@ -26,6 +29,7 @@ import numpy as np
 from slamcli.errors import SchemaError
 from slamcli.io.schema import (
     DATASET_SCHEMA,
+    MAX_POSES,
     SCHEMA_VERSION,
     Reader,
     create_h5,
@@ -34,7 +38,7 @@ from slamcli.io.schema import (
     utc_now,
     write_array,
 )
-from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
+from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, SlamInputs
 
 #: metadata keys promoted to their own root attributes (dicts as ``<key>_json``, see
 #: :func:`promoted_sections`); everything in ``Dataset.metadata`` also round-trips through ``@metadata_json``.
@@ -124,6 +128,12 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         write_array(go, "offsets", np.asarray(obs.offsets, np.int64), units="-", frame="-",
                     doc="CSR row offsets per pose (T+2,)")
 
+        if obs.landmark_type is not None:
+            write_array(go, "landmark_type", np.asarray(obs.landmark_type, np.int64), units="-", frame="-",
+                        doc="landmark type label reported by the sensor (not its identity) (N,)")
+        if inp.noise_bounds is not None:
+            _write_bounds(g, inp.noise_bounds)
+
         gn = g.create_group("noise")
         gn.attrs["doc"] = "noise standard deviations a solver may assume (slamcli.types.NoiseSpec)"
         n = inp.noise
@@ -155,6 +165,35 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
     return final
 
 
+def _write_bounds(g, nb: NoiseBounds) -> None:
+    gb = g.create_group("noise_bounds")
+    gb.attrs["doc"] = "guaranteed error half-widths (slamcli.types.NoiseBounds): |error| <= bound"
+    gb.attrs["odometry_model"] = str(nb.odometry_model)
+    write_array(gb, "odometry_half_width", np.asarray(nb.odometry_half_width, np.float64).reshape(2),
+                units="m,rad", frame="body", doc="[h_d, h_alpha] of the turn_move odometry (2,)")
+    write_array(gb, "range_half_width", np.float64(nb.range_half_width), units="m", frame="sensor", doc="h_r")
+    write_array(gb, "bearing_half_width", np.float64(nb.bearing_half_width), units="rad", frame="sensor",
+                doc="h_b")
+
+
+def _read_bounds(r: Reader) -> NoiseBounds | None:
+    if not r.has("inputs/noise_bounds"):
+        return None
+    g = "inputs/noise_bounds"
+    r.group(g)
+    model = r.attr(g, "odometry_model", str)
+    if model != "turn_move":
+        raise r.fail(f"{g}/@odometry_model", f"unknown odometry model {model!r} (known: turn_move)")
+    odo = r.array(f"{g}/odometry_half_width", dtype="f", shape=(2,))
+    hr = float(r.array(f"{g}/range_half_width", dtype="f", shape=()))
+    hb = float(r.array(f"{g}/bearing_half_width", dtype="f", shape=()))
+    for name, v in (("odometry_half_width", odo), ("range_half_width", hr), ("bearing_half_width", hb)):
+        if (np.asarray(v) < 0).any():
+            raise r.fail(f"{g}/{name}", f"half-widths must be >= 0, got {v}")
+    return NoiseBounds(odometry_model=model, odometry_half_width=odo, range_half_width=hr,
+                       bearing_half_width=hb)
+
+
 # --------------------------------------------------------------------------------------------------------
 # reading
 # --------------------------------------------------------------------------------------------------------
@@ -178,11 +217,47 @@ def read_dataset(path: str | os.PathLike, *, with_truth: bool = True) -> Dataset
         if not isinstance(metadata, dict):
             raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
         has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
+        check_declared_shapes(r, with_truth=with_truth and has_truth)
         inputs = _read_inputs(r, dt)
         truth = None
         if with_truth and has_truth:
             truth = _read_truth(r, inputs)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
+
+
+def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
+    """Check the *declared* array shapes against each other and :data:`MAX_POSES` before any array is read.
+
+    A forged header (say ``timestamps`` claiming 10⁹ rows in a 100 kB file) is refused here with one line,
+    instead of being materialised in memory by the first read. Missing arrays are left to the full reader.
+    """
+    ts = r.declared_shape("inputs/timestamps")
+    if ts is None or len(ts) != 1:
+        return
+    n_poses = ts[0]
+    if n_poses > MAX_POSES:
+        raise r.fail("inputs/timestamps", f"declares {n_poses} poses, above the limit of {MAX_POSES}")
+    g = "inputs/observations"
+    step = r.declared_shape(f"{g}/step")
+    expect: list[tuple[str, int, str]] = [
+        ("inputs/controls", n_poses - 1, "T = len(timestamps) - 1"),
+        ("inputs/odometry_xyt", n_poses, "T+1 = len(timestamps)"),
+        (f"{g}/offsets", n_poses + 1, "T+2 = len(timestamps) + 1"),
+    ]
+    if step is not None and len(step) == 1:
+        expect += [(f"{g}/{n}", step[0], f"len({g}/step)") for n in ("range_m", "bearing_rad", "sensor",
+                                                                     "reported_id")]
+        if with_truth:
+            expect.append(("truth/obs_landmark", step[0], "number of observations"))
+    if with_truth:
+        expect.append(("truth/poses_xyt", n_poses, "T+1 = len(inputs/timestamps)"))
+    gps = r.declared_shape("inputs/gps_step")
+    if gps is not None and len(gps) == 1:
+        expect.append(("inputs/gps_xy", gps[0], "len(gps_step)"))
+    for name, n, what in expect:
+        shp = r.declared_shape(name)
+        if shp is not None and len(shp) >= 1 and shp[0] != n:
+            raise r.fail(name, f"declared length {shp[0]} does not match {what} ({n})")
 
 
 def _read_inputs(r: Reader, dt: float) -> SlamInputs:
@@ -246,6 +321,7 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
         gps_step=gps_step,
         gps_xy=gps_xy,
         gps_std=gps_std,
+        noise_bounds=_read_bounds(r),
     )
 
 
@@ -265,7 +341,14 @@ def _read_observations(r: Reader, n_poses: int) -> Observations:
     N = step.shape[0]
     range_m = r.array(f"{g}/range_m", dtype="f", shape=(None,))
     bearing = r.array(f"{g}/bearing_rad", dtype="f", shape=(None,))
-    sensor = r.array(f"{g}/sensor", dtype="i", shape=(None,)).astype(np.int16, copy=False)
+    sensor = r.array(f"{g}/sensor", dtype="i", shape=(None,))
+    if sensor.size and int(sensor.max()) > np.iinfo(np.int16).max:
+        k = int(np.argmax(sensor > np.iinfo(np.int16).max))
+        raise r.fail(f"{g}/sensor", f"sensor index {int(sensor[k])} at row {k} above {np.iinfo(np.int16).max}")
+    if sensor.size and int(sensor.min()) < 0:
+        k = int(np.argmax(sensor < 0))
+        raise r.fail(f"{g}/sensor", f"negative sensor index {int(sensor[k])} at row {k}")
+    sensor = sensor.astype(np.int16, copy=False)
     reported = r.array(f"{g}/reported_id", dtype="i", shape=(None,)).astype(np.int64, copy=False)
     offsets = r.array(f"{g}/offsets", dtype="i", shape=(None,)).astype(np.int64, copy=False)
     for name, arr in (("range_m", range_m), ("bearing_rad", bearing), ("sensor", sensor),
@@ -299,8 +382,15 @@ def _read_observations(r: Reader, n_poses: int) -> Observations:
         k = int(np.argmax(expected != offsets))
         raise r.fail(f"{g}/offsets", f"do not match the step column (first mismatch at pose {max(k - 1, 0)}; "
                                      "steps must be sorted and counted per pose)")
+    landmark_type = None
+    if r.has(f"{g}/landmark_type"):
+        landmark_type = r.array(f"{g}/landmark_type", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+        r.expect_len(f"{g}/landmark_type", landmark_type, N, f"len({g}/step)")
+        if N and (landmark_type < -1).any():
+            k = int(np.argmax(landmark_type < -1))
+            raise r.fail(f"{g}/landmark_type", f"value {int(landmark_type[k])} at row {k} below -1")
     return Observations(step=step, range_m=range_m, bearing_rad=bearing, sensor=sensor, reported_id=reported,
-                        offsets=offsets)
+                        offsets=offsets, landmark_type=landmark_type)
 
 
 def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
@@ -380,6 +470,13 @@ def dataset_hash(dataset: Dataset) -> str:
     _feed(h, "gps_step", inp.gps_step, np.int64)
     _feed(h, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), np.float64)
     _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
+    if obs.landmark_type is not None:  # fed only when present: hashes of older datasets are unchanged
+        _feed(h, "obs.landmark_type", obs.landmark_type, np.int64)
+    if inp.noise_bounds is not None:
+        nb = inp.noise_bounds
+        h.update(f"noise_bounds|{nb.odometry_model}|".encode())
+        _feed(h, "noise_bounds.values", np.r_[np.asarray(nb.odometry_half_width, float).reshape(2),
+                                              nb.range_half_width, nb.bearing_half_width], np.float64)
     if dataset.truth is not None:
         t = dataset.truth
         _feed(h, "truth.poses_xyt", np.asarray(t.poses_xyt, np.float64).reshape(-1, 3), np.float64)

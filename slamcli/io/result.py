@@ -3,12 +3,15 @@
 Layout (``T+1`` poses, ``L'`` estimated landmarks, ``N`` observations, ``K`` trace iterations)::
 
     /            @schema="slamcli.result" @schema_version=1 @solver @solver_version @status @message
-                 @wall_time_s @params_json @dataset_hash @dataset_path @extra_json @slamcli_version
-                 @created_utc
+                 @wall_time_s @params_json @dataset_hash @dataset_path @extra_json @timings_json
+                 @slamcli_version @created_utc
     poses_xyt (T+1,3)   landmarks_xy (L',2)   assoc (N,)   [pose_cov (T+1,3,3)]  [landmark_cov (L',2,2)]
     /trace/      (iterative solvers only) objective (K,) map_change (K,) time_s (K,)
                  landmarks_xy (M,2) landmark_offsets (K+1,)
                  [poses_xyt (P,T+1,3) pose_iterations (P,)]  (optional; one chunk per recorded iteration)
+    /hypotheses/ (set-membership solvers only, H surviving hypotheses, Lmax landmarks at most)
+                 assoc (H,N) pose_lo pose_hi (H,T+1,3) landmark_lo landmark_hi (H,Lmax,2; NaN padding)
+                 n_landmarks (H,) landmark_type (H,Lmax; -1 padding)
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import numpy as np
 from slamcli.errors import SchemaError
 from slamcli.io.schema import (
     COMPRESSION,
+    MAX_POSES,
     RESULT_SCHEMA,
     SCHEMA_VERSION,
     Reader,
@@ -30,7 +34,7 @@ from slamcli.io.schema import (
     utc_now,
     write_array,
 )
-from slamcli.types import IterationTrace, SolverResult, Status
+from slamcli.types import BoxHypotheses, IterationTrace, SolverResult, Status
 
 
 def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
@@ -44,6 +48,7 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
     try:
         params_json = to_json(result.params)
         extra_json = to_json(result.extra)
+        timings_json = to_json({str(k): float(v) for k, v in (result.timings or {}).items()})
     except (TypeError, ValueError) as exc:
         raise SchemaError(f"{final}: params/extra: not JSON-serialisable ({exc})") from None
     status = Status(result.status)
@@ -62,6 +67,7 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
         a["dataset_hash"] = str(result.dataset_hash)
         a["dataset_path"] = str(result.extra.get("dataset_path", ""))
         a["extra_json"] = extra_json
+        a["timings_json"] = timings_json
         write_array(f, "poses_xyt", np.asarray(result.poses_xyt, np.float64).reshape(-1, 3),
                     units="m,m,rad", frame="world", doc="estimated poses (T+1,3)")
         write_array(f, "landmarks_xy", np.asarray(result.landmarks_xy, np.float64).reshape(-1, 2),
@@ -91,7 +97,53 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
                         frame="-", doc="iteration k owns rows offsets[k]:offsets[k+1] (K+1,)")
             if tr.poses_xyt is not None:
                 _write_trace_poses(g, tr)
+        if result.hypotheses is not None:
+            _write_hypotheses(f, result.hypotheses)
     return final
+
+
+def _write_hypotheses(f, hb: BoxHypotheses) -> None:
+    g = f.create_group("hypotheses")
+    g.attrs["doc"] = "every surviving hypothesis (kinematic graph) with its association and boxes"
+    write_array(g, "assoc", np.asarray(hb.assoc, np.int64), units="-", frame="-",
+                doc="landmark row of each observation under hypothesis h (H,N)")
+    for name, doc in (("pose_lo", "lower"), ("pose_hi", "upper")):
+        write_array(g, name, np.asarray(getattr(hb, name), np.float64), units="m,m,rad", frame="world",
+                    doc=f"{doc} bounds of [x, y, theta] per hypothesis; theta unwrapped (H,T+1,3)")
+    for name, doc in (("landmark_lo", "lower"), ("landmark_hi", "upper")):
+        write_array(g, name, np.asarray(getattr(hb, name), np.float64), units="m", frame="world",
+                    doc=f"{doc} bounds of landmark [x, y]; NaN beyond n_landmarks[h] (H,Lmax,2)")
+    write_array(g, "n_landmarks", np.asarray(hb.n_landmarks, np.int64), units="-", frame="-",
+                doc="landmarks of each hypothesis (H,)")
+    write_array(g, "landmark_type", np.asarray(hb.landmark_type, np.int64), units="-", frame="-",
+                doc="type label of each landmark, -1 = padding (H,Lmax)")
+
+
+def _read_hypotheses(r: Reader, n_poses: int, n_obs: int) -> BoxHypotheses:
+    g = "hypotheses"
+    r.group(g)
+    assoc = r.array(f"{g}/assoc", dtype="i", shape=(None, n_obs)).astype(np.int64, copy=False)
+    H = assoc.shape[0]
+    lo = r.array(f"{g}/pose_lo", dtype="f", shape=(H, n_poses, 3))
+    hi = r.array(f"{g}/pose_hi", dtype="f", shape=(H, n_poses, 3))
+    llo = r.array(f"{g}/landmark_lo", dtype="f", shape=(H, None, 2), finite=False)
+    lhi = r.array(f"{g}/landmark_hi", dtype="f", shape=(H, llo.shape[1], 2), finite=False)
+    n_lm = r.array(f"{g}/n_landmarks", dtype="i", shape=(H,)).astype(np.int64, copy=False)
+    types = r.array(f"{g}/landmark_type", dtype="i", shape=(H, llo.shape[1])).astype(np.int64, copy=False)
+    if (lo > hi).any():
+        raise r.fail(f"{g}/pose_lo", "a lower bound exceeds its upper bound (pose_hi)")
+    if n_lm.size and (n_lm.min() < 0 or n_lm.max() > llo.shape[1]):
+        raise r.fail(f"{g}/n_landmarks", f"values must lie in [0, {llo.shape[1]}]")
+    for h in range(H):
+        L = int(n_lm[h])
+        if not (np.isfinite(llo[h, :L]).all() and np.isfinite(lhi[h, :L]).all()):
+            raise r.fail(f"{g}/landmark_lo", f"non-finite bound of hypothesis {h} within n_landmarks")
+        if (llo[h, :L] > lhi[h, :L]).any():
+            raise r.fail(f"{g}/landmark_lo", f"a lower bound exceeds its upper bound (hypothesis {h})")
+        if assoc.size and ((assoc[h] < -1) | (assoc[h] >= L)).any():
+            raise r.fail(f"{g}/assoc", f"hypothesis {h}: label out of range [-1, {L - 1}]")
+    return BoxHypotheses(assoc=assoc, pose_lo=lo, pose_hi=hi, landmark_lo=llo, landmark_hi=lhi, n_landmarks=n_lm,
+                         landmark_type=types)
 
 
 def _write_trace_poses(g, tr: IterationTrace) -> None:
@@ -138,7 +190,12 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         extra = r.json_attr("/", "extra_json", default={})
         if not isinstance(extra, dict):
             raise r.fail("@extra_json", f"expected a JSON object, got {type(extra).__name__}")
+        timings = r.json_attr("/", "timings_json", default={})
+        if not isinstance(timings, dict) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in timings.values()):
+            raise r.fail("@timings_json", "expected a JSON object of numbers")
         dataset_hash = r.attr("/", "dataset_hash", str)
+        check_declared_result_shapes(r)
 
         poses = r.array("poses_xyt", dtype="f", shape=(None, 3), finite=finite)
         lms = r.array("landmarks_xy", dtype="f", shape=(None, 2), finite=finite)
@@ -158,6 +215,7 @@ def read_result(path: str | os.PathLike) -> SolverResult:
             landmark_cov = r.array("landmark_cov", dtype="f", shape=(None, 2, 2), finite=finite)
             r.expect_len("landmark_cov", landmark_cov, L, "len(landmarks_xy)")
         trace = _read_trace(r, finite) if r.has("trace") else None
+        hypotheses = _read_hypotheses(r, poses.shape[0], assoc.shape[0]) if r.has("hypotheses") else None
     return SolverResult(
         solver=solver,
         solver_version=solver_version,
@@ -173,7 +231,33 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         wall_time_s=wall,
         dataset_hash=dataset_hash,
         extra=extra,
+        timings={str(k): float(v) for k, v in timings.items()},
+        hypotheses=hypotheses,
     )
+
+
+def check_declared_result_shapes(r: Reader) -> None:
+    """Declared shapes against each other and :data:`MAX_POSES`, before any array of a result is read."""
+    poses = r.declared_shape("poses_xyt")
+    lms = r.declared_shape("landmarks_xy")
+    if poses is not None and len(poses) >= 1 and poses[0] > MAX_POSES:
+        raise r.fail("poses_xyt", f"declares {poses[0]} poses, above the limit of {MAX_POSES}")
+    expect = []
+    if poses is not None and len(poses) >= 1:
+        expect.append(("pose_cov", poses[0], "len(poses_xyt)"))
+    if lms is not None and len(lms) >= 1:
+        expect.append(("landmark_cov", lms[0], "len(landmarks_xy)"))
+    obj = r.declared_shape("trace/objective")
+    if obj is not None and len(obj) == 1:
+        expect += [("trace/map_change", obj[0], "len(trace/objective)"), ("trace/time_s", obj[0], "len(trace/objective)"),
+                   ("trace/landmark_offsets", obj[0] + 1, "len(trace/objective) + 1")]
+    tp = r.declared_shape("trace/poses_xyt")
+    if tp is not None and len(tp) >= 1:
+        expect.append(("trace/pose_iterations", tp[0], "len(trace/poses_xyt)"))
+    for name, n, what in expect:
+        shp = r.declared_shape(name)
+        if shp is not None and len(shp) >= 1 and shp[0] != n:
+            raise r.fail(name, f"declared length {shp[0]} does not match {what} ({n})")
 
 
 def _read_trace(r: Reader, finite: bool = True) -> IterationTrace:

@@ -35,6 +35,15 @@ CHUNK_ROWS = 16384
 #: the h5py filter arguments of every compressed dataset (the one place they are set)
 COMPRESSION: dict[str, Any] = {"compression": "gzip", "compression_opts": GZIP_LEVEL, "shuffle": True,
                                "fletcher32": True}
+#: The only fields of a dataset/result file that differ between two runs with the same inputs and seed:
+#: the creation time and the wall-clock timings (docs/schema.md, "Timings"). ``slamcli diff`` ignores exactly
+#: these; every other attribute and array must be bit-identical for the same seed.
+NONDETERMINISTIC_FIELDS = ("@created_utc", "@wall_time_s", "@timings_json", "trace/time_s")
+#: sane bound on the element count of one stored array, checked on the *declared* shape before anything is
+#: read (5·10⁷ float64 = 400 MB; a 10 Hz run of 10⁷ steps stays far below it with its (T+1,3) poses).
+MAX_ELEMENTS = 50_000_000
+#: sane bound on the number of poses (T+1) of a dataset/result (10⁷ steps = 11.6 days at 10 Hz).
+MAX_POSES = 10_000_001
 
 
 def json_default(obj: Any) -> Any:
@@ -214,6 +223,7 @@ class Reader:
             raise self.fail(name, f"unreadable ({_one_line(exc)})") from None
         if not isinstance(obj, h5py.Dataset):
             raise self.fail(name, "expected a dataset, found a group")
+        self._check_declared(name, obj, shape)
         try:
             data = obj[()]
         except Exception as exc:  # noqa: BLE001 - truncated/corrupt chunks surface here
@@ -224,14 +234,58 @@ class Reader:
             raise self.fail(name, f"expected floating-point data, got dtype {data.dtype}")
         if dtype == "i" and kind not in "iu":
             raise self.fail(name, f"expected integer data, got dtype {data.dtype}")
-        if len(shape) != data.ndim or any(s is not None and s != d for s, d in zip(shape, data.shape)):
-            want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
-            raise self.fail(name, f"expected shape {want}, got {data.shape}")
         if finite and kind == "f" and data.size and not np.isfinite(data).all():
-            bad = np.argwhere(~np.isfinite(data))[0]
+            bad = np.argwhere(~np.isfinite(np.atleast_1d(data)))[0]
             idx = tuple(int(i) for i in bad)
-            raise self.fail(name, f"non-finite value {data[idx]} at index {idx if len(idx) > 1 else idx[0]}")
+            value = data[idx] if data.ndim else data[()]
+            where = "" if not data.ndim else f" at index {idx if len(idx) > 1 else idx[0]}"
+            raise self.fail(name, f"non-finite value {value}{where}")
+        if kind == "u" and data.size and data.dtype.itemsize >= 8 and int(data.max()) > np.iinfo(np.int64).max:
+            k = int(np.argmax(data.reshape(-1) > np.iinfo(np.int64).max))
+            raise self.fail(name, f"value {int(data.reshape(-1)[k])} at index {k} does not fit in int64")
         return data
+
+    def declared_shape(self, name: str) -> tuple[int, ...] | None:
+        """Shape of dataset ``name`` as declared in the file (nothing is read); None when absent/not a dataset."""
+        try:
+            obj = self.f[name]
+        except Exception:  # noqa: BLE001
+            return None
+        return tuple(int(d) for d in obj.shape) if isinstance(obj, h5py.Dataset) and obj.shape is not None else None
+
+    def _check_declared(self, name: str, obj: h5py.Dataset, shape: tuple[int | None, ...]) -> None:
+        """Rank/shape, the :data:`MAX_ELEMENTS` bound and allocated storage, all from the header (no data read).
+
+        A forged header can declare 10⁹ rows in a 100 kB file (unwritten chunks read back as fill values); such
+        a dataset is refused here instead of being materialised in memory.
+        """
+        dshape = obj.shape
+        if dshape is None:
+            raise self.fail(name, "dataset has no shape (empty dataspace)")
+        if len(shape) != len(dshape) or any(s is not None and s != d for s, d in zip(shape, dshape)):
+            want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+            raise self.fail(name, f"expected shape {want}, got {tuple(dshape)}")
+        n = math.prod(int(d) for d in dshape)
+        if n > MAX_ELEMENTS:
+            raise self.fail(name, f"declares {n} elements {tuple(dshape)}, above the limit of {MAX_ELEMENTS}")
+        if n == 0:
+            return
+        try:
+            if obj.is_virtual or obj.external:
+                raise self.fail(name, "external or virtual storage is not supported")
+            if obj.chunks is not None:
+                expected = math.prod(-(-int(d) // int(c)) for d, c in zip(dshape, obj.chunks))
+                stored = obj.id.get_num_chunks()
+                if stored < expected:
+                    raise self.fail(name, f"declares shape {tuple(dshape)} but only {stored} of {expected} "
+                                          "chunks are stored (truncated or forged header)")
+            elif obj.id.get_storage_size() < n * obj.dtype.itemsize:
+                raise self.fail(name, f"declares shape {tuple(dshape)} ({n * obj.dtype.itemsize} bytes) but stores "
+                                      f"only {obj.id.get_storage_size()} bytes (truncated or forged header)")
+        except SchemaError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - corrupt layout messages surface here
+            raise self.fail(name, f"unreadable layout ({_one_line(exc)})") from None
 
     def expect_len(self, name: str, data: np.ndarray, n: int, what: str) -> None:
         if data.shape[0] != n:

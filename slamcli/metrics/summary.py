@@ -176,6 +176,11 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
         per_it = pd.DataFrame({c: [] for c in PER_ITERATION_COLUMNS})
         s["n_iterations"] = 0
         s["per_iteration_note"] = "not available: the result has no iteration trace"
+    if result.hypotheses is not None and len(result.hypotheses):  # set-membership results (cuik)
+        from slamcli.metrics.sets import set_metrics
+
+        s.update({f"set_{k}": v for k, v in set_metrics(result.hypotheses, truth.poses_xyt, truth.landmarks_xy,
+                                                         truth.obs_landmark).items()})
     return Evaluation(s, per_it, per_step, per_landmark)
 
 

@@ -26,6 +26,26 @@ def _check(cond: bool, message: str) -> None:
         raise ConfigError(message)
 
 
+#: Size limits, checked before anything is simulated (a typo such as ``n_steps=1000000000000`` must not try
+#: to allocate terabytes): steps per run, landmarks of a world, laser beams, ellipse points / path waypoints.
+MAX_STEPS = 1_000_000
+MAX_LANDMARKS = 100_000
+MAX_BEAMS = 10_000
+MAX_WAYPOINTS = 1_000_000
+MAX_CLUTTER_RATE = 1_000.0
+
+
+def _check_finite(obj: Any) -> None:
+    """Every float field (and every entry of a float tuple) of a config dataclass must be finite."""
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        vals = v if isinstance(v, tuple) else (v,)
+        for x in vals:
+            if isinstance(x, float) and not math.isfinite(x):
+                raise ConfigError(f"{type(obj).__name__.removesuffix('Config').lower()}.{f.name}: must be finite, "
+                                  f"got {x}")
+
+
 @dataclass(frozen=True)
 class WorldConfig:
     """Landmark layout (drawn from the *world* random stream).
@@ -81,6 +101,15 @@ class WorldConfig:
         _check(len(self.extra_landmarks) % 2 == 0, "world.extra_landmarks must be x,y pairs (even length)")
         _check(self.landmark_radius > 0, "world.landmark_radius must be > 0")
         _check(self.seed >= -1, "world.seed must be >= 0 (or -1 = the run's seed)")
+        _check_finite(self)
+        _check(self.n_landmarks <= MAX_LANDMARKS and self.n_rows <= MAX_LANDMARKS,
+               f"world: n_landmarks and n_rows must be <= {MAX_LANDMARKS} (the limit of landmarks)")
+        n_rows_layout = self.n_rows * (math.floor((self.x_max - self.x_min) / self.col_spacing) + 1)
+        _check(self.layout != "rows" or n_rows_layout <= MAX_LANDMARKS,
+               f"world: the rows layout would place {n_rows_layout} landmarks, above the limit of {MAX_LANDMARKS} "
+               "(check col_spacing and n_rows)")
+        _check(len(self.extra_landmarks) // 2 <= MAX_LANDMARKS,
+               f"world.extra_landmarks: more than {MAX_LANDMARKS} points")
 
 
 @dataclass(frozen=True)
@@ -125,6 +154,14 @@ class PathConfig:
             _check(len(self.waypoints) >= 4, "path.waypoints: kind=explicit needs at least 2 points")
         if self.kind == "serpentine":
             _check(len(self.lanes) >= 1, "path.lanes: kind=serpentine needs at least one lane")
+        _check_finite(self)
+        _check(self.n_points <= MAX_WAYPOINTS, f"path.n_points must be <= {MAX_WAYPOINTS}")
+        if self.spacing > 0:  # edges are subdivided: bound the waypoint count before it is built
+            span = 2.0 * (self.x_max - self.x_min + self.y_max - self.y_min) * (len(self.lanes) + 1)
+            span += sum(abs(a - b) for a, b in zip(self.waypoints[2:], self.waypoints[:-2]))
+            _check(span / self.spacing <= MAX_WAYPOINTS,
+                   f"path.spacing: {self.spacing} m would make about {span / self.spacing:.3g} waypoints, above "
+                   f"the limit of {MAX_WAYPOINTS}")
 
 
 @dataclass(frozen=True)
@@ -162,6 +199,7 @@ class RobotConfig:
         _check(self.v_max > 0 and self.w_max > 0 and self.k_heading > 0, "robot: v_max, w_max, k_heading must be > 0")
         _check(self.waypoint_tol > 0, "robot.waypoint_tol must be > 0")
         _check(all(s >= 0 for s in self.actuation_std), "robot.actuation_std must be >= 0")
+        _check_finite(self)
 
 
 @dataclass(frozen=True)
@@ -185,6 +223,7 @@ class OdometryConfig:
     def __post_init__(self) -> None:
         _check(all(s >= 0 for s in self.std), "odometry.std must be >= 0")
         _check(self.scale_bias > -1 and self.turn_bias > -1, "odometry: biases must be > -1")
+        _check_finite(self)
 
 
 @dataclass(frozen=True)
@@ -242,6 +281,8 @@ class SensorConfig:
         _check(self.period_steps >= 1, "sensor.period_steps must be >= 1")
         _check(self.n_beams >= 2, "sensor.n_beams must be >= 2")
         _check(self.isolation_gap >= 0, "sensor.isolation_gap must be >= 0")
+        _check_finite(self)
+        _check(self.n_beams <= MAX_BEAMS, f"sensor.n_beams must be <= {MAX_BEAMS}")
 
     @property
     def fov_rad(self) -> float:
@@ -263,6 +304,7 @@ class ClutterConfig:
 
     def __post_init__(self) -> None:
         _check(self.rate >= 0, "clutter.rate must be >= 0")
+        _check(self.rate <= MAX_CLUTTER_RATE, f"clutter.rate must be <= {MAX_CLUTTER_RATE:g} false returns per scan")
 
 
 @dataclass(frozen=True)
@@ -283,6 +325,51 @@ class GpsConfig:
     def __post_init__(self) -> None:
         _check(self.period_steps >= 1, "gps.period_steps must be >= 1")
         _check(self.std >= 0, "gps.std must be >= 0")
+        _check_finite(self)
+
+
+@dataclass(frozen=True)
+class BoundedConfig:
+    """Bounded-error "turn and move" runs for set-membership SLAM (paper 004 §6; off by default).
+
+    When ``enabled`` the robot does not use the tracking controller: from each waypoint of ``path`` it turns
+    in place towards the next one and drives straight to it, one pose per waypoint (``n_steps`` legs). Every
+    error is *uniform* within its ± bound, and the bounds are written into the dataset
+    (``inputs/noise_bounds``) so a solver reads them. Odometry reports ``d̃ = d + u_d``, ``α̃ = α + u_α``
+    (``|u_d| ≤ odometry_d``, ``|u_α| ≤ odometry_turn_deg``); the point sensor (``sensor.max_range``,
+    ``sensor.fov_deg``) reports ``r + u_r``, ``b + u_b`` and each landmark's type label, never its identity.
+
+    Attributes
+    ----------
+    enabled : bool                    use the turn-and-move robot with bounded noise.
+    odometry_d : float                half-width of the distance error, m (paper 004: 0.25).
+    odometry_turn_deg : float         half-width of the turn error, degrees (paper 004: 5).
+    range : float                     half-width of the range error, m (paper 004: 10× smaller, 0.025).
+    bearing_deg : float               half-width of the bearing error, degrees (0.5).
+    closest_only : bool               the sensor reports only the closest visible landmark (paper 004 §6).
+    landmark_types : tuple of int     type label per landmark in world order (e.g. 0 = door, 1 = corridor);
+                                      empty = all type 0.
+    declared_scale : float            the bounds written into the dataset are ``declared_scale ×`` the true
+                                      ones (< 1 = a deliberately wrong, too small declaration, for tests).
+    exact_readings : bool             every error is zero while the bounds are still declared — paper 004 §6
+                                      simulated exact readings (its Table 1 l1 box is centred on the truth).
+    """
+
+    enabled: bool = False
+    odometry_d: float = 0.25
+    odometry_turn_deg: float = 5.0
+    range: float = 0.025
+    bearing_deg: float = 0.5
+    closest_only: bool = True
+    landmark_types: tuple[int, ...] = ()
+    declared_scale: float = 1.0
+    exact_readings: bool = False
+
+    def __post_init__(self) -> None:
+        _check(min(self.odometry_d, self.odometry_turn_deg, self.range, self.bearing_deg) >= 0,
+               "bounded: every half-width must be >= 0")
+        _check(all(t >= 0 for t in self.landmark_types), "bounded.landmark_types must be >= 0")
+        _check(self.declared_scale > 0, "bounded.declared_scale must be > 0")
 
 
 @dataclass(frozen=True)
@@ -294,7 +381,7 @@ class ScenarioConfig:
     name : str          scenario name (for metadata).
     dt : float          sampling period Δt, s (paper 000: 0.1 s).
     n_steps : int       number of controls T; the run has T+1 poses and lasts ``T·dt`` s.
-    world, path, robot, odometry, sensor, clutter, gps : sub-configurations.
+    world, path, robot, odometry, sensor, clutter, gps, bounded : sub-configurations.
     """
 
     name: str = "custom"
@@ -307,17 +394,19 @@ class ScenarioConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
     clutter: ClutterConfig = field(default_factory=ClutterConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
+    bounded: BoundedConfig = field(default_factory=BoundedConfig)
 
     def __post_init__(self) -> None:
         _check(self.dt > 0 and math.isfinite(self.dt), "dt must be a finite number > 0")
         _check(self.n_steps >= 1, "n_steps must be >= 1")
+        _check(self.n_steps <= MAX_STEPS, f"n_steps must be <= {MAX_STEPS} (got {self.n_steps}; the limit of one run)")
 
     @property
     def duration_s(self) -> float:
         return self.n_steps * self.dt
 
 
-_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps")
+_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps", "bounded")
 
 
 def known_keys(cfg: ScenarioConfig | None = None) -> list[str]:

@@ -32,8 +32,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from slamcli.errors import ConfigError
 from slamcli.sim.config import (
+    BoundedConfig,
     ClutterConfig,
     OdometryConfig,
     PathConfig,
@@ -102,12 +105,61 @@ def _octagon() -> ScenarioConfig:
     )
 
 
+def _cuik_room() -> ScenarioConfig:
+    """Paper 004 §6: a 30 m square room, doors (type 0) at (15, 0) and (15, 30), corridors (type 1) at
+    (30, 15) and (0, 15); 8 turn-and-move legs of 7.65 m around an octagon of radius 10 m centred at
+    (15, 15), turning +45° (paper: −45°, its θ runs clockwise) per leg and closing the loop at pose 9 (our
+    pose 8). Start r1 = (15, 5, 1.963495) in the paper's heading convention (Table 1)."""
+    from slamcli.sim.bounded import heading_from_paper004
+
+    a = np.deg2rad(-90.0 + 45.0 * np.arange(8))
+    wp = np.column_stack([15.0 + 10.0 * np.cos(a), 15.0 + 10.0 * np.sin(a)]).round(12)
+    return ScenarioConfig(
+        name="cuik-room", dt=1.0, n_steps=8,
+        world=WorldConfig(layout="none", extra_landmarks=(15.0, 0.0, 30.0, 15.0, 15.0, 30.0, 0.0, 15.0)),
+        path=PathConfig(kind="explicit", waypoints=tuple(wp.ravel().tolist()), cyclic=True),
+        robot=RobotConfig(start=(15.0, 5.0, float(heading_from_paper004(1.9634954)))),
+        sensor=SensorConfig(kind="point", max_range=12.0, min_range=0.1, fov_deg=360.0),
+        bounded=BoundedConfig(enabled=True, odometry_d=0.25, odometry_turn_deg=5.0, range=0.025,
+                              bearing_deg=0.5, closest_only=True, landmark_types=(0, 1, 0, 1)),
+    )
+
+
+def _cuik_corridors() -> ScenarioConfig:
+    """Beyond paper 004: a 40 m × 20 m block of corridors driven 1.5 times around (45 legs of 4 m) with
+    14 doors (type 0) and corridor junctions (type 1) 2 m off the path; closest-landmark sensor of 6 m."""
+    corners = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 20.0], [0.0, 20.0]])
+    lms = [(4.0, -2.0), (12.0, 2.0), (20.0, -2.0), (28.0, 2.0), (36.0, -2.0), (42.0, 6.0), (38.0, 14.0),
+           (34.0, 22.0), (26.0, 18.0), (18.0, 22.0), (10.0, 18.0), (2.0, 22.0), (-2.0, 14.0), (2.0, 6.0)]
+    types = (0, 1, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 1, 0)
+    return ScenarioConfig(
+        name="cuik-corridors", dt=1.0, n_steps=45,
+        world=WorldConfig(layout="none", extra_landmarks=tuple(np.ravel(lms).tolist())),
+        path=PathConfig(kind="explicit", waypoints=tuple(_subdivide_closed(corners, 4.0).ravel().tolist()),
+                        cyclic=True),
+        robot=RobotConfig(start=(0.0, 0.0, 0.0)),
+        sensor=SensorConfig(kind="point", max_range=6.0, min_range=0.1, fov_deg=360.0),
+        bounded=BoundedConfig(enabled=True, odometry_d=0.1, odometry_turn_deg=2.0, range=0.025,
+                              bearing_deg=0.5, closest_only=True, landmark_types=types),
+    )
+
+
+def _subdivide_closed(corners_xy: np.ndarray, spacing: float) -> np.ndarray:
+    pts = []
+    for a, b in zip(corners_xy, np.roll(corners_xy, -1, axis=0)):
+        n = max(1, round(float(np.hypot(*(b - a))) / spacing))
+        pts += [a + (b - a) * k / n for k in range(n)]
+    return np.asarray(pts)
+
+
 SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
     "loop": (_loop, "small fast world for tests: 12 random landmarks, rectangular loop, point sensor, 500 steps"),
     "paper-sim1": (lambda: _paper_sim(30.0, "paper-sim1"),
                    "paper 000 Sim. 1: 50×40 m, 7 rows of landmarks, irregular path, 30 m 181-beam laser"),
     "paper-sim2": (lambda: _paper_sim(10.0, "paper-sim2"), "paper 000 Sim. 2: as paper-sim1 with a 10 m laser"),
     "octagon": (_octagon, "paper 000 §6: 8 cones on a 7.12 m octagon + centre cone + 2 people, 183 s, laser"),
+    "cuik-room": (_cuik_room, "paper 004 §6: 30 m room, 2 doors + 2 corridors, 8 turn-and-move legs, bounded noise"),
+    "cuik-corridors": (_cuik_corridors, "paper 004 beyond: 40×20 m corridors, 14 typed landmarks, 45 legs, bounded"),
 }
 
 

@@ -75,6 +75,10 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     seed = int(seed)
     if seed < 0:
         raise ConfigError(f"--seed: must be >= 0, got {seed}")
+    if cfg.bounded.enabled:  # paper 004: turn-and-move robot, uniform bounded errors, type labels
+        from slamcli.sim.bounded import simulate_bounded
+
+        return simulate_bounded(cfg, seed, progress)
 
     # 1) world: waypoints, then landmarks (a random layout keeps clear of the path)
     world_seed = seed if cfg.world.seed < 0 else int(cfg.world.seed)

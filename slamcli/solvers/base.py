@@ -77,8 +77,12 @@ class BaseSolver:
         landmark_cov: np.ndarray | None = None,
         trace: IterationTrace | None = None,
         extra: dict[str, Any] | None = None,
+        timings: dict[str, float] | None = None,
     ) -> SolverResult:
-        """Assemble a :class:`SolverResult`; ``t_start`` is a ``time.perf_counter()`` reading."""
+        """Assemble a :class:`SolverResult`; ``t_start`` is a ``time.perf_counter()`` reading.
+
+        ``extra`` must be deterministic; wall-clock measurements go to ``timings`` (never to ``extra``).
+        """
         return SolverResult(
             solver=self.name,
             solver_version=self.version(),
@@ -93,6 +97,7 @@ class BaseSolver:
             trace=trace,
             wall_time_s=time.perf_counter() - t_start,
             extra=dict(extra or {}),
+            timings={str(k): float(v) for k, v in (timings or {}).items()},
         )
 
 

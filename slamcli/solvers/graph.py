@@ -54,8 +54,14 @@ class GraphParams:
     ----------
     model : "gtsam" | "paper"
         Factor definitions (module docstring). Default ``"gtsam"``.
-    method : "lm" | "gn"
-        Levenberg-Marquardt (default) or Gauss-Newton.
+    method : "lm" | "gn" | "dogleg"
+        Levenberg-Marquardt (default, GTSAM's damping schedule), Gauss-Newton, or Powell's dogleg.
+    linear_solver : "auto" | "cholmod" | "superlu" | "chain"
+        Sparse linear solver of the optimiser (:class:`slamcli.solvers.nls.NlsParams`): ``auto`` = CHOLMOD
+        (``scikit-sparse``) when installed, else SciPy's SuperLU; ordering computed once per problem.
+    pose_chart : "body" | "world"
+        How the optimiser steps a pose: GTSAM's Pose2 retraction ``x ⊕ Exp(ξ)`` (default; follows GTSAM's
+        path, hence its local minimum on non-convex real data) or additive world coordinates.
     max_iterations : int
         Linear-solve budget (default 100).
     rel_cost_tol : float
@@ -116,7 +122,9 @@ class GraphParams:
     """
 
     model: Literal["gtsam", "paper"] = "gtsam"
-    method: Literal["lm", "gn"] = "lm"
+    method: Literal["lm", "gn", "dogleg"] = "lm"
+    linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = "auto"
+    pose_chart: Literal["body", "world"] = "body"
     max_iterations: int = 100
     rel_cost_tol: float = 1e-12
     step_tol: float = 1e-12
@@ -225,6 +233,10 @@ def prior_error(x, prior):
 def bearing_range_error(x, m, z):
     """Range-bearing error ``e = [r̂ − r, wrap(b̂ − b)]`` (GTSAM's ``BearingRangeFactor2D`` up to row order).
 
+    As in GTSAM (``Rot2::relativeBearing``), a landmark within 1e-5 m of the pose has bearing ``b̂ = 0`` and a
+    zero bearing Jacobian: the bearing is undefined there, and a solution that put a landmark on a pose
+    (misread ids, a stalled optimisation) must have the cost GTSAM recomputes for it (issue 10, item 4).
+
     Parameters
     ----------
     x : ndarray (F, 3);  m : ndarray (F, 2);  z : ndarray (F, 2) as ``[range, bearing]``
@@ -236,6 +248,11 @@ def bearing_range_error(x, m, z):
     zh = observation.range_bearing(x, m)
     e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
     J_x, J_m = observation.range_bearing_jacobians(x, m)
+    near = zh[:, 0] <= 1e-5
+    if np.any(near):  # GTSAM's Rot2::relativeBearing: within 1e-5 m the bearing is 0, its Jacobian zero
+        e[near, 1] = wrap_angle(-z[near, 1])
+        J_x[near, 1] = 0.0
+        J_m[near, 1] = 0.0
     return e, J_x, J_m
 
 
@@ -402,7 +419,9 @@ def build_gtsam_problem(
     n_vars = P + 2 * L + (bias_col is not None)
     if bias_col is not None and not rows.size:
         raise SolverError("graph: estimate_range_bias needs associated observations")
-    problem = nls.NlsProblem(n_vars=n_vars, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3))
+    problem = nls.NlsProblem(
+        n_vars=n_vars, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3), se2_poses=n_poses
+    )
     x0 = pack_state(init_poses, init_landmarks)
     if bias_col is not None:
         x0 = np.concatenate([x0, [0.0]])
@@ -632,7 +651,7 @@ def landmark_joint_covariance(gp: GraphProblem, information) -> np.ndarray:
     """
     L = gp.n_landmarks
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
-        cov = nls.marginals_chain_border(information, gp.n_poses, 3)[1][: 2 * L, : 2 * L]
+        cov = nls.marginals_chain_border(information, gp.n_poses, 3, poses=False)[1][: 2 * L, : 2 * L]
         j = np.arange(L)
         nls.check_covariance_blocks(cov.reshape(L, 2, L, 2)[j, :, j, :], "landmark")
         return cov
@@ -844,6 +863,8 @@ class GraphSlam(BaseSolver):
 
         nparams = nls.NlsParams(
             method=p.method,
+            linear_solver=p.linear_solver,
+            pose_chart=p.pose_chart,
             max_iterations=p.max_iterations,
             rel_cost_tol=p.rel_cost_tol,
             step_tol=p.step_tol,

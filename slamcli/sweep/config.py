@@ -219,15 +219,25 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
             check(k, f"quick {k!r}", (v,))
 
 
+#: most values one sweep axis or replicate list may hold (the whole expansion is bounded in sweep.expand)
+MAX_AXIS_VALUES = 100_000
+
+
 def parse_range(text: str) -> list[int] | None:
-    """``"range(0, 50)"`` → ``[0, ..., 49]`` (Python semantics); None when ``text`` is not a range()."""
+    """``"range(0, 50)"`` → ``[0, ..., 49]`` (Python semantics); None when ``text`` is not a range().
+
+    Raises ValueError for a zero step or more than :data:`MAX_AXIS_VALUES` values (checked before listing).
+    """
     m = _RANGE_RE.match(text)
     if not m:
         return None
     a, b, c = m.groups()
-    if b is None:
-        return list(range(int(a)))
-    return list(range(int(a), int(b), int(c) if c is not None else 1))
+    if c is not None and int(c) == 0:
+        raise ValueError(f"{text}: step must not be 0")
+    r = range(int(a)) if b is None else range(int(a), int(b), int(c) if c is not None else 1)
+    if len(r) > MAX_AXIS_VALUES:
+        raise ValueError(f"{text} has {len(r)} values, above the limit of {MAX_AXIS_VALUES}")
+    return list(r)
 
 
 class _Checker:
@@ -274,7 +284,10 @@ class _Checker:
     def values(self, value: Any, key: str) -> tuple[Any, ...]:
         """A sweep axis: a non-empty array, or a ``"range(...)"`` string."""
         if isinstance(value, str):
-            r = parse_range(value)
+            try:
+                r = parse_range(value)
+            except ValueError as exc:
+                raise self.fail(key, str(exc)) from None
             if r is None:
                 raise self.fail(key, f"expected an array of values or 'range(a, b[, step])', got {value!r}")
             value = r
@@ -290,6 +303,8 @@ class _Checker:
         if isinstance(value, int):
             if value < 1:
                 raise self.fail(key, f"must be >= 1, got {value}")
+            if value > MAX_AXIS_VALUES:
+                raise self.fail(key, f"{value} replicates, above the limit of {MAX_AXIS_VALUES}")
             return tuple(range(value))
         vals = self.values(value, key)
         for v in vals:
@@ -328,6 +343,9 @@ def load_experiment(path: str | Path) -> ExperimentConfig:
             raw = tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at "
+                          f"offset {exc.start})") from None
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read: {exc.strerror}") from None
     return parse_experiment(raw, source=str(p))

@@ -159,8 +159,11 @@ class RegistryResolver:
         from slamcli.solvers.base import params_to_dict
 
         try:
+            from slamcli.api.solve import _check_finite_params
+
             cls = registry.load(method)
             p = build_params(cls.Params, dict(params), where=where)
+            _check_finite_params(p, method)
         except SlamcliError as exc:
             raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
         return _canonical(params_to_dict(p))
@@ -184,6 +187,13 @@ class RegistryResolver:
             elif isinstance(default, str) and not isinstance(value, str):
                 raise ConfigError(f"{where}: {key}: expected a string, got {value!r}")
             out[key] = value
+        from slamcli.api.evaluate import check_evaluation_options
+
+        try:
+            check_evaluation_options(**{k: v for k, v in out.items() if k in (
+                "cutoff", "ospa_order", "near_path_m", "rpe_delta", "rpe_unit")}, where=where)
+        except SlamcliError as exc:
+            raise ConfigError(str(exc)) from None
         return _canonical(out)
 
 
@@ -314,6 +324,21 @@ class Expansion:
         return [RunGroup(ds[k], tuple(v)) for k, v in by_ds.items()]
 
 
+#: most runs one experiment may expand to (checked on the grid sizes before anything is expanded)
+MAX_RUNS = 100_000
+
+
+def check_size(cfg: ExperimentConfig) -> int:
+    """Number of runs of ``cfg`` from its axis lengths alone; ConfigError above :data:`MAX_RUNS`."""
+    sizes = [len(v) for _, v in cfg.sweep.grid] + [len(g[0][1]) for g in cfg.sweep.zips]
+    n = math.prod(sizes) * len(cfg.sweep.replicates) * max(len(cfg.solvers), 1)
+    if n > MAX_RUNS:
+        shape = "×".join(str(s) for s in sizes) or "1"
+        raise ConfigError(f"{cfg.source}: [sweep]: {n} runs (points {shape} × {len(cfg.sweep.replicates)} "
+                          f"replicates × {len(cfg.solvers)} solvers), above the limit of {MAX_RUNS} runs")
+    return n
+
+
 def sweep_points(cfg: ExperimentConfig) -> list[dict[str, Any]]:
     """The sweep points (key → value dicts): grid product × each zip group, in deterministic order."""
     factors: list[list[dict[str, Any]]] = []
@@ -338,6 +363,7 @@ def expand(
     run_versions: dict[str, Any] | None = None,
 ) -> Expansion:
     """Every run of the experiment, resolved and hashed (see the module docstring for order and seeds)."""
+    check_size(cfg)
     resolver = resolver if resolver is not None else RegistryResolver()
     if hasattr(resolver, "known_keys"):  # name unknown keys by their TOML key, with a "did you mean"
         from slamcli.sweep.config import check_keys

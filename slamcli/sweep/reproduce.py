@@ -172,8 +172,12 @@ class Reproduction:
         if add_all_solvers:
             present = {s.method for s in keep} | {s.method for s in cfg.solvers}
             labels = {s.label for s in cfg.solvers}
+            from slamcli.solvers import registry
+
             for name in self.solvers:
-                if name not in present and name not in labels:
+                # set-membership solvers (cuik) need bounded-noise data and have their own section
+                if name not in present and name not in labels and not getattr(
+                        registry.load(name), "needs_noise_bounds", False):
                     keep.append(SolverSpec(label=name, method=name))
         dropped = set(missing)
 
@@ -423,7 +427,7 @@ class Reproduction:
         max_mc = float(mc.max()) * 1e3 if len(mc) else None
         times = result.trace.time_s[1:] if result.trace is not None and len(result.trace) > 1 else []
         n_steps = int(row.get("n_poses", 0) or 0) - 1
-        init_ms = result.extra.get("init_ms_per_step")
+        init_ms = result.timings.get("init_ms_per_step", result.extra.get("init_ms_per_step"))
         drift_mm = None
         if result.trace is not None and len(result.trace) > 1:
             import numpy as np
@@ -541,6 +545,19 @@ class Reproduction:
         return sec
 
 
+def _external_section(key: str, target: str, rep: Reproduction, quick: bool, log) -> Section:
+    """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)``; the
+    markdown brings its own ``## `` heading (used as the title)."""
+    import importlib
+
+    mod_name, _, fn_name = target.partition(":")
+    markdown, ok = getattr(importlib.import_module(mod_name), fn_name)(rep.out / key, quick, log)
+    head, _, body = str(markdown).partition("\n")
+    sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
+    sec.add(body.strip())
+    return sec
+
+
 def reproduce(
     out_dir: str | Path,
     *,
@@ -581,6 +598,7 @@ def reproduce(
         ("fig9", rep.octagon_section),
         ("compare", rep.compare_section),
         ("nees", rep.nees_section),
+        ("paper004", lambda: _external_section("paper004", "slamcli.sweep.paper004:run_section", rep, quick, log)),
     ]
     sections: list[Section] = []
     for key, build in builders:

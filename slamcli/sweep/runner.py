@@ -7,7 +7,8 @@ On disk (``results/<experiment>/``)::
     <run_id>/dataset.h5            hard link to datasets/<dataset_id>.h5 (a copy where links are impossible)
     <run_id>/result.h5             solver result
     <run_id>/metrics.json          scalar metrics (plus whatever tidy CSVs the evaluation writes)
-    <run_id>/status.json           {"status": "completed" | "failed", "traceback": ..., times, host}
+    <run_id>/status.json           {"status": "completed" | "failed", "solver_status", "error", "traceback",
+                                    times, host}
     <run_id>/run.log               log of the run
     manifest.csv                   one row per run of the expansion: ids, labels, sweep point, status
     results.csv / results.parquet  the tidy table: manifest columns + every scalar metric, one row per run
@@ -16,6 +17,21 @@ Atomicity: a run is built in a hidden temporary directory ``.<run_id>.tmp-<pid>-
 ``<run_id>/`` only when ``status.json`` (written last) is in place, so an interrupted sweep (Ctrl-C,
 ``kill -9``) leaves either nothing or a complete run directory; datasets are written under a temporary name
 and ``os.replace``-d. Leftover temporary entries are removed when the next sweep of the experiment starts.
+
+Solver status: a result whose status is ``failed`` (or ``diverged``) makes the run *failed*, with the solver's
+message in ``status.json["error"]``; it is not evaluated, so its numbers never reach ``results.csv`` and the
+sweep exits non-zero. Every other status (``converged``, ``max_iterations``, ``completed``) is recorded as
+``solver_status`` in ``status.json``, the manifest and the results table.
+
+Locking: a sweep holds an exclusive ``flock`` on ``<experiment>/.sweep.lock`` for its whole duration; a second
+sweep on the same folder is refused with one line naming the holder's pid (the lock dies with its process).
+
+Worker hygiene: every pool worker polls its parent and exits when the coordinator is gone (``kill -9``), so no
+orphan keeps starting queued runs. A worker that dies during a run fails only that run; the pool is rebuilt
+and the other in-flight runs are resubmitted.
+
+Dataset cache: ``datasets/<dataset_id>.json`` records the SHA-256 of the dataset file written for that id;
+a cached file whose bytes no longer match (swapped, truncated) is simulated again instead of being reused.
 
 Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id and every
 artefact exists. Failed and missing runs are (re)done. ``resume=False`` redoes everything.
@@ -33,13 +49,16 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import functools
+import hashlib
 import json
 import logging
 import math
 import os
 import platform
 import shutil
+import signal
 import subprocess
+import threading
 import time
 import traceback
 import uuid
@@ -49,13 +68,16 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
-from slamcli.errors import ConfigError
+from slamcli.errors import ConfigError, SlamcliError
 from slamcli.sweep.expand import DatasetSpec, Expansion, RunSpec, canonical_json
 
 ARTEFACTS = ("config.json", "dataset.h5", "result.h5", "metrics.json", "status.json", "run.log")
 COMPLETED = "completed"
 FAILED = "failed"
 MISSING = "missing"
+#: solver statuses (``SolverResult.status`` values) that make a run failed: no usable estimate
+FAILING_SOLVER_STATUSES = ("failed", "diverged")
+LOCK_NAME = ".sweep.lock"
 
 log = logging.getLogger(__name__)
 
@@ -69,8 +91,11 @@ class Pipeline(Protocol):
     def simulate(self, dataset: DatasetSpec, out_path: Path) -> None:
         """Write the dataset for ``dataset`` to ``out_path`` (the runner handles atomic renaming)."""
 
-    def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> None:
-        """Solve ``dataset_path`` with the run's solver configuration, writing ``result_path``."""
+    def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> Any:
+        """Solve ``dataset_path`` with the run's solver configuration, writing ``result_path``.
+
+        May return the result (anything with ``status`` and ``message``) so the runner can fail the run on a
+        failed solver status."""
 
     def evaluate(self, run: RunSpec, dataset_path: Path, result_path: Path, out_dir: Path) -> dict[str, Any]:
         """Evaluate the result; may write tidy files into ``out_dir``; returns the scalar metrics."""
@@ -86,10 +111,10 @@ class WorkflowPipeline:
             scenario=dataset.scenario, seed=dataset.seed, overrides=dict(dataset.overrides), out_path=out_path
         )
 
-    def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> None:
+    def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> Any:
         from slamcli.api.solve import solve_file
 
-        solve_file(
+        return solve_file(
             dataset_path,
             run.method,
             dict(run.param_overrides),
@@ -161,6 +186,8 @@ def _link_or_copy(src: Path, dst: Path) -> None:
 def run_status(exp_dir: Path, run_id: str) -> str:
     """``completed`` (status says so and every artefact exists), ``failed``, or ``missing``."""
     d = exp_dir / run_id
+    if d.is_symlink() or not d.is_dir():  # a link or a plain file in the way is not a run: redo it
+        return MISSING
     st = read_json(d / "status.json")
     if st is None or st.get("run_id") != run_id:
         return MISSING
@@ -177,12 +204,56 @@ def clean_temporaries(exp_dir: Path) -> int:
             continue
         for p in base.iterdir():
             if p.name.startswith(".") and ".tmp-" in p.name:
-                if p.is_dir():
-                    shutil.rmtree(p, ignore_errors=True)
-                else:
-                    p.unlink(missing_ok=True)
+                _remove(p)
                 n += 1
     return n
+
+
+def _remove(p: Path) -> None:
+    """Remove a file, a symlink (never its target) or a directory tree."""
+    if p.is_symlink() or not p.is_dir():
+        p.unlink(missing_ok=True)
+    else:
+        shutil.rmtree(p, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def sweep_lock(exp_dir: Path) -> Iterator[None]:
+    """Exclusive, non-blocking ``flock`` on ``exp_dir/.sweep.lock`` for the duration of a sweep.
+
+    Raises a one-line :class:`ConfigError` when another process holds it. The kernel drops the lock when its
+    holder dies (even by ``kill -9``), so a crashed sweep never blocks the next one.
+    """
+    import fcntl
+
+    path = exp_dir / LOCK_NAME
+    try:
+        fh = open(path, "a+")  # held open for the whole sweep
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot create the sweep lock ({exc.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "unknown"
+            raise ConfigError(f"{exp_dir}: another sweep (pid {holder}) is running on this results folder; "
+                              "wait for it to finish or use another --out") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"{os.getpid()}\n")
+        fh.flush()
+        yield
+    finally:
+        fh.close()
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return "sha256:" + h.hexdigest()
 
 
 # -- worker side ----------------------------------------------------------------------------------------------------
@@ -214,12 +285,20 @@ def _ensure_dataset(dataset: DatasetSpec, exp_dir: Path, pipeline: Pipeline, fre
     ds_dir = exp_dir / "datasets"
     ds_dir.mkdir(parents=True, exist_ok=True)
     path = dataset_path(exp_dir, dataset)
-    if path.exists() and not fresh:
-        return path, None
+    sidecar = path.with_suffix(".json")
+    if path.is_file() and not path.is_symlink() and not fresh:
+        rec = read_json(sidecar) or {}
+        if rec.get("dataset_id") == dataset.dataset_id and rec.get("file_sha256") == file_sha256(path):
+            return path, None
+        log.warning("%s: cached dataset does not match its recorded hash; simulating it again", path)
     tmp = ds_dir / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         pipeline.simulate(dataset, tmp)
+        digest = file_sha256(tmp)
+        if path.is_symlink() or path.is_dir():
+            _remove(path)
         os.replace(tmp, path)
+        write_json(sidecar, {"dataset_id": dataset.dataset_id, "file_sha256": digest})
         return path, None
     except Exception:  # noqa: BLE001 - fail-soft: every run of the group records this failure
         with contextlib.suppress(FileNotFoundError):
@@ -267,10 +346,13 @@ def execute_run(
                 )
             _link_or_copy(dataset_path, tmp / "dataset.h5")
             t1 = time.perf_counter()
-            pipeline.solve(run, dataset_path, tmp / "result.h5")
+            solved = pipeline.solve(run, dataset_path, tmp / "result.h5")
             t2 = time.perf_counter()
             rlog.info("solve (%s) took %.3f s", run.method, t2 - t1)
+            _check_solver_status(status, solved, run)
             metrics = pipeline.evaluate(run, dataset_path, tmp / "result.h5", tmp)
+            if solved is None:  # a pipeline that returns no result: the metrics carry the solver status
+                _check_solver_status(status, metrics, run)
             rlog.info("evaluate took %.3f s", time.perf_counter() - t2)
             # paths that point into the temporary directory must name the final one
             metrics = {
@@ -285,10 +367,45 @@ def execute_run(
             status.update(status=FAILED, error=f"{type(exc).__name__}: {last[-1] if last else ''}", traceback=tb)
     status.update(finished_utc=_utc_now(), wall_time_s=time.perf_counter() - t0)
     write_json(tmp / "status.json", status)
-    if final.exists():
-        shutil.rmtree(final)
+    if final.is_symlink() or final.exists():
+        _remove(final)
     os.replace(tmp, final)
     return {k: status.get(k) for k in ("run_id", "status", "error", "wall_time_s")}
+
+
+class SolverFailed(SlamcliError):
+    """The solver returned a result whose status says there is no usable estimate."""
+
+
+def _check_solver_status(status: dict[str, Any], solved: Any, run: RunSpec) -> None:
+    """Record the solver's status; raise :class:`SolverFailed` for a failing one (the run becomes failed)."""
+    if solved is None:
+        return
+    st = solved.get("status") if isinstance(solved, dict) else getattr(solved, "status", None)
+    if st is None:
+        return
+    st = str(getattr(st, "value", st))
+    message = solved.get("message", "") if isinstance(solved, dict) else getattr(solved, "message", "")
+    status["solver_status"] = st
+    if st in FAILING_SOLVER_STATUSES:
+        raise SolverFailed(f"solver {run.method!r} returned status {st}: {message or 'no message'}")
+
+
+def record_dead_run(run: RunSpec, exp_dir: Path, error: str) -> dict[str, Any]:
+    """Write ``<run_id>/`` with ``config.json`` + a failed ``status.json`` for a run whose worker died."""
+    final = exp_dir / run.run_id
+    tmp = exp_dir / f".{run.run_id}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tmp.mkdir(parents=True)
+    write_json(tmp / "config.json", {"run_id": run.run_id, "point": run.point, **run.config()})
+    now = _utc_now()
+    status = {"run_id": run.run_id, "experiment": run.experiment, "label": run.label, "method": run.method,
+              "replicate": run.replicate, "dataset_id": run.dataset.dataset_id, "status": FAILED, "error": error,
+              "started_utc": now, "finished_utc": now, "host": platform.node(), "git": git_revision()}
+    write_json(tmp / "status.json", status)
+    if final.is_symlink() or final.exists():
+        _remove(final)
+    os.replace(tmp, final)
+    return {"run_id": run.run_id, "status": FAILED, "error": error, "wall_time_s": None}
 
 
 def simulate_dataset(dataset: DatasetSpec, exp_dir: str, pipeline: Pipeline, fresh: bool = False) -> str | None:
@@ -332,6 +449,84 @@ class SweepSummary:
         return self.counts.failed == 0 and not self.interrupted
 
 
+def watch_parent(parent_pid: int, interval_s: float = 0.25) -> None:
+    """Pool-worker initializer: a daemon thread that ends this process as soon as its parent is gone.
+
+    After a ``kill -9`` of the coordinator the worker is re-parented (``getppid()`` changes); it then exits
+    within ``interval_s`` instead of starting the runs still queued in its pipe.
+    """
+
+    def loop() -> None:
+        while True:
+            if os.getppid() != parent_pid:
+                os._exit(75)
+            time.sleep(interval_s)
+
+    threading.Thread(target=loop, name="slamcli-watch-parent", daemon=True).start()
+
+
+class LocalPool:
+    """A spawn ``ProcessPoolExecutor`` whose workers die with the coordinator and that can be rebuilt.
+
+    When a worker dies (``kill -9``, out of memory, ``os._exit``), ``concurrent.futures`` breaks the whole
+    pool and fails every pending future; :meth:`rebuild` starts a fresh pool, and :meth:`dead_workers` tells
+    which worker processes died on their own (not terminated by the executor while it broke the pool).
+    """
+
+    def __init__(self, workers: int) -> None:
+        self.workers = workers
+        self._procs: dict[int, Any] = {}
+        self._start()
+
+    def _start(self) -> None:
+        import multiprocessing
+
+        with _single_threaded_blas():
+            self.ex = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=watch_parent, initargs=(os.getpid(),))
+        self._procs = {}
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any) -> cf.Future:
+        fut = self.ex.submit(fn, *args)
+        self._procs.update(getattr(self.ex, "_processes", None) or {})  # pid -> Process, spawned on submit
+        return fut
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self.ex.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+    def rebuild(self) -> dict[int, int]:
+        """Shut the broken pool down, start a new one; returns ``{pid: exit code}`` of workers that died."""
+        self.ex.shutdown(wait=True, cancel_futures=True)  # joins the manager thread: exit codes are final
+        dead = {}
+        for pid, proc in self._procs.items():
+            code = proc.exitcode
+            if code not in (None, 0, -signal.SIGTERM):  # the executor SIGTERMs the survivors of a broken pool
+                dead[int(pid)] = int(code)
+        self._start()
+        return dead
+
+
+def describe_exit(code: int) -> str:
+    if code < 0:
+        try:
+            return f"was killed by signal {-code} ({signal.Signals(-code).name})"
+        except ValueError:
+            return f"was killed by signal {-code}"
+    return f"exited with code {code}"
+
+
+def _tmp_pids(base: Path, stem: str) -> dict[int, Path]:
+    """``{pid: path}`` of the temporary entries ``.<stem>.tmp-<pid>-<rand>`` in ``base``."""
+    out = {}
+    prefix = f".{stem}.tmp-"
+    if base.is_dir():
+        for p in base.iterdir():
+            if p.name.startswith(prefix):
+                with contextlib.suppress(ValueError, IndexError):
+                    out[int(p.name[len(prefix):].split("-")[0])] = p
+    return out
+
+
 @contextlib.contextmanager
 def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iterator[cf.Executor | None]:
     """``None`` (in-process, serial) for one local worker; a spawn ``ProcessPoolExecutor``; or a Dask executor.
@@ -350,10 +545,7 @@ def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
         if workers == 1:
             yield None
             return
-        import multiprocessing
-
-        with _single_threaded_blas():
-            ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        ex = LocalPool(workers)
         try:
             yield ex
         finally:
@@ -421,8 +613,21 @@ def run_sweep(
     """
     pipeline = pipeline if pipeline is not None else WorkflowPipeline()
     exp_dir = Path(out_dir) / expansion.experiment.name
-    exp_dir.mkdir(parents=True, exist_ok=True)
+    if exp_dir.is_symlink() or (exp_dir.exists() and not exp_dir.is_dir()):
+        raise ConfigError(f"{exp_dir}: exists and is not a directory; remove it or use another --out")
+    try:
+        exp_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"{exp_dir}: cannot create the results folder ({exc.strerror})") from None
+    if not os.access(exp_dir, os.W_OK | os.X_OK):
+        raise ConfigError(f"{exp_dir}: results folder is not writable")
+    with sweep_lock(exp_dir):
+        return _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress)
+
+
+def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress) -> SweepSummary:
     clean_temporaries(exp_dir)
+    since = _utc_now()
     t0 = time.perf_counter()
     counts = Counts(total=len(expansion.runs))
     pending: list[RunSpec] = []
@@ -465,32 +670,53 @@ def run_sweep(
                 # Phase 1 simulates each shared dataset once; as soon as one exists, its runs are submitted
                 # one task each, so the runs of a single dataset still spread over every worker.
                 futures: dict[cf.Future, tuple[str, Any]] = {}
+                attempts: dict[str, int] = {}
+
+                def submit(kind: str, obj: Any, fn: Callable[..., Any], *args: Any) -> None:
+                    futures[ex.submit(fn, *args)] = (kind, obj)
 
                 def submit_run(r: RunSpec, ds_error: str | None) -> None:
                     try:
-                        futures[ex.submit(execute_single, r, str(exp_dir), pipeline, ds_error)] = ("run", r)
+                        submit("run", r, execute_single, r, str(exp_dir), pipeline, ds_error)
                     except Exception as exc:  # noqa: BLE001 - e.g. a broken pool
                         record([run_failed(r, exc)])
 
+                def submit_sim(g: Any) -> None:
+                    submit("sim", g, simulate_dataset, g.dataset, str(exp_dir), pipeline, not resume)
+
+                def finished_sim(g: Any, ds_error: str | None) -> None:
+                    for r in g.runs:
+                        submit_run(r, ds_error)
+
                 for g in groups:
-                    futures[ex.submit(simulate_dataset, g.dataset, str(exp_dir), pipeline, not resume)] = ("sim", g)
+                    submit_sim(g)
                 try:
                     while futures:
                         done, _ = cf.wait(list(futures), return_when=cf.FIRST_COMPLETED)
+                        broken = [f for f in done if _is_broken(f)]
+                        if broken and hasattr(ex, "rebuild"):
+                            # one worker died: every pending future fails; wait for all, then sort them out
+                            cf.wait(list(futures))
+                            lost, sims_done = [], []
+                            for fut in list(futures):
+                                kind, obj = futures.pop(fut)
+                                if _is_broken(fut):
+                                    lost.append((kind, obj))
+                                elif kind == "sim":
+                                    sims_done.append((obj, _sim_outcome(fut)))
+                                else:
+                                    record([_run_outcome(fut, obj, run_failed)])
+                            dead = ex.rebuild()
+                            for g, ds_error in sims_done:
+                                finished_sim(g, ds_error)
+                            _recover(lost, dead, exp_dir, since, attempts, record, submit_sim, submit_run)
+                            continue
                         for fut in done:
                             kind, obj = futures.pop(fut)
                             if kind == "sim":
-                                try:
-                                    ds_error = fut.result()
-                                except Exception as exc:  # noqa: BLE001
-                                    ds_error = f"worker failed: {type(exc).__name__}: {exc}"
-                                for r in obj.runs:
-                                    submit_run(r, ds_error)
+                                finished_sim(obj, _sim_outcome(fut))
                             else:
-                                try:
-                                    record([fut.result()])
-                                except Exception as exc:  # noqa: BLE001
-                                    record([run_failed(obj, exc)])
+                                record([_run_outcome(fut, obj, run_failed)])
                 except BaseException:
                     for f in futures:
                         f.cancel()
@@ -502,6 +728,79 @@ def run_sweep(
         summary.wall_time_s = time.perf_counter() - t0
         summary.tables = write_tables(expansion, exp_dir)
     return summary
+
+
+def _is_broken(fut: cf.Future) -> bool:
+    from concurrent.futures.process import BrokenProcessPool
+
+    return not fut.cancelled() and isinstance(fut.exception(), BrokenProcessPool)
+
+
+def _sim_outcome(fut: cf.Future) -> str | None:
+    try:
+        return fut.result()
+    except Exception as exc:  # noqa: BLE001
+        return f"worker failed: {type(exc).__name__}: {exc}"
+
+
+def _run_outcome(fut: cf.Future, run: RunSpec, run_failed: Callable[[RunSpec, BaseException], dict]) -> dict:
+    try:
+        return fut.result()
+    except Exception as exc:  # noqa: BLE001
+        return run_failed(run, exc)
+
+
+#: a run (or dataset) whose worker pool broke this often without its own worker being identified as the one
+#: that died is recorded as failed rather than retried forever
+MAX_POOL_BREAKS = 2
+
+
+def _recover(lost, dead: dict[int, int], exp_dir: Path, since: str, attempts: dict[str, int], record, submit_sim,
+             submit_run) -> None:
+    """Sort out the tasks of a broken pool (already rebuilt): fail only the ones whose worker died.
+
+    Each task leaves a temporary entry named with its worker's pid (``.<run_id>.tmp-<pid>-…`` for a run,
+    ``datasets/.<id>.h5.tmp-<pid>-…`` for a dataset), so the task of a worker in ``dead`` is known. Its run
+    is recorded as failed (``status.json`` on disk says which process died and how); every other lost task
+    is resubmitted to the new pool. Runs that completed just before the break are taken from disk.
+    """
+    for kind, obj in lost:
+        if kind == "run":
+            run = obj
+            st = read_json(exp_dir / run.run_id / "status.json") or {}
+            tmps = _tmp_pids(exp_dir, run.run_id)
+            if not tmps and st.get("run_id") == run.run_id and str(st.get("started_utc", "")) >= since:
+                # finished (renamed into place) by this sweep just before the pool broke
+                record([{"run_id": run.run_id, "status": st.get("status"), "error": st.get("error")}])
+                continue
+            culprit = [pid for pid in tmps if pid in dead]
+            for p in tmps.values():
+                _remove(p)
+            key = f"run:{run.run_id}"
+            attempts[key] = attempts.get(key, 0) + bool(tmps)
+            if culprit or attempts[key] > MAX_POOL_BREAKS:
+                why = (f"worker failed: process {culprit[0]} {describe_exit(dead[culprit[0]])} during this run"
+                       if culprit else f"worker failed: the process pool broke {attempts[key]} times during this run")
+                log.warning("run %s: %s", run.run_id, why)
+                record([record_dead_run(run, exp_dir, why)])
+            else:
+                submit_run(run, None)
+        else:
+            g = obj
+            ds_dir = exp_dir / "datasets"
+            tmps = _tmp_pids(ds_dir, f"{g.dataset.dataset_id}.h5")
+            culprit = [pid for pid in tmps if pid in dead]
+            for p in tmps.values():
+                _remove(p)
+            key = f"sim:{g.dataset.dataset_id}"
+            attempts[key] = attempts.get(key, 0) + bool(tmps)
+            if culprit or attempts[key] > MAX_POOL_BREAKS:
+                why = (f"worker failed: process {culprit[0]} {describe_exit(dead[culprit[0]])} while simulating"
+                       if culprit else f"worker failed: the process pool broke {attempts[key]} times while simulating")
+                for run in g.runs:
+                    record([record_dead_run(run, exp_dir, f"dataset {g.dataset.dataset_id}: {why}")])
+            else:
+                submit_sim(g)
 
 
 # -- tables --------------------------------------------------------------------------------------------------------------
@@ -538,6 +837,7 @@ def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
             "dataset_seed": r.dataset.seed,
             "solver_seed": r.seed,
             "status": status,
+            "solver_status": st.get("solver_status", ""),
             "error": st.get("error", "") if status == FAILED else "",
             "wall_time_s": st.get("wall_time_s"),
             "solve_time_s": st.get("solve_time_s"),

@@ -1,0 +1,215 @@
+"""Narrowing operators (contractors) for the edges of a kinematic graph, built from codac primitives.
+
+A *box* is a Python list of :class:`codac.Interval` (outward-rounded interval arithmetic); a contractor
+holds the indices of its variables in the box and narrows them in place. Each operator satisfies paper 004
+Def. 4.1: contractance ``f(X) ⊆ X``, correctness ``X ∩ ρ ⊆ f(X)`` and — because :meth:`Contractor.contract`
+iterates its own steps to a local fixpoint with tolerance ``tol`` — idempotence up to ``tol``.
+
+Edges (our heading convention: θ from +x, counter-clockwise; paper 004 Fig. 2 uses x₂−x₁ = d·sin θ,
+y₂−y₁ = d·cos θ, converted once in ``slamcli.sim.bounded.heading_from_paper004``):
+
+* odometry, turn then move (``NoiseBounds.odometry_model = "turn_move"``), measured ``(d̃, α̃)`` with
+  half-widths ``(h_d, h_α)``::
+
+      θ_{t+1} − θ_t ∈ A = [α̃ ± h_α]
+      (x_{t+1} − x_t, y_{t+1} − y_t) = d·(cos θ_{t+1}, sin θ_{t+1}),   d ∈ D = [d̃ ± h_d] ∩ [0, ∞)
+
+* observation of landmark j from pose t, measured ``(r̃, b̃)`` with half-widths ``(h_r, h_b)``::
+
+      φ = θ_t + b,  b ∈ B = [b̃ ± h_b]
+      (l_x − x_t, l_y − y_t) = r·(cos φ, sin φ),   r ∈ R = [r̃ ± h_r] ∩ [0, ∞)
+
+The polar relation is codac's ``CtcPolar`` (2π-periodic in the angle, so headings stay unwrapped in the
+boxes); differences and sums are narrowed forward with interval arithmetic and backward with
+``SubOp.bwd``/``AddOp.bwd``.
+
+``narrow_theta=False`` is paper 004's operator set ("no narrowing of θ's were used", §6): headings come only
+from the odometry turn chain and are read, never narrowed, by the polar relations. ``narrow_theta=True``
+(the full set) lets the polar relations narrow φ and hence θ.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import sys
+
+
+def _fenv():
+    """``fegetround``/``fesetround`` of the C library (C99 <fenv.h>)."""
+    lib = ctypes.CDLL(ctypes.util.find_library("m") or ctypes.util.find_library("c"))
+    return lib.fegetround, lib.fesetround
+
+
+_fegetround, _fesetround = _fenv()
+#: the process's ordinary rounding mode (round to nearest, 0 on x86-64 and aarch64)
+NORMAL_ROUNDING = 0 if "codac" in sys.modules else int(_fegetround())
+
+import codac  # noqa: E402
+
+#: the mode codac's interval library (gaol) sets at import: round upward. Its outward rounding relies on it.
+INTERVAL_ROUNDING = int(_fegetround())
+# codac leaves the whole process rounding upward, which silently changes every other float computation
+# (float("1.2") parses to 1.2000000000000002) and crashes a later `import h5py` (libhdf5's float-format
+# detection). Give the process its ordinary mode back; cuik switches per solve (:func:`interval_rounding`).
+_fesetround(NORMAL_ROUNDING)
+
+
+@contextlib.contextmanager
+def interval_rounding():
+    """Run codac interval code in the rounding mode it needs, then restore the caller's mode."""
+    prev = int(_fegetround())
+    _fesetround(INTERVAL_ROUNDING)
+    try:
+        yield
+    finally:
+        _fesetround(prev)
+
+
+Interval = codac.Interval
+_POLAR = codac.CtcPolar()
+_NONNEG = Interval(0.0, codac.oo)
+
+
+def unbounded() -> codac.Interval:
+    """``(-∞, +∞)``: the domain of a variable nothing is known about yet."""
+    return Interval(-codac.oo, codac.oo)
+
+
+def moved(old: codac.Interval, new: codac.Interval, tol: float) -> bool:
+    """True when ``new`` (⊆ old) is empty or has a bound that moved inwards by more than ``tol``."""
+    if new.is_empty():
+        return True
+    return new.lb() > old.lb() + tol or new.ub() < old.ub() - tol
+
+
+class Contractor:
+    """Base class: ``vars`` are box indices; :meth:`step` narrows once, :meth:`contract` to a local fixpoint."""
+
+    vars: tuple[int, ...] = ()
+    #: local fixpoint iterations at most (the steps converge geometrically; this bounds the worst case)
+    max_inner: int = 50
+
+    def step(self, box: list, narrow_theta: bool) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def contract(self, box: list, narrow_theta: bool = True, tol: float = 1e-9) -> list[int] | None:
+        """Narrow ``box`` in place; return the indices whose bounds moved by more than ``tol``, or None when
+        a variable became empty (the constraint has no solution in the box)."""
+        vs = self.vars
+        start = prev = [(box[v].lb(), box[v].ub()) for v in vs]
+        for _ in range(self.max_inner):
+            self.step(box, narrow_theta)
+            cur = [(box[v].lb(), box[v].ub()) for v in vs]
+            if any(lo != lo for lo, _hi in cur):  # an empty interval has NaN bounds
+                for v in vs:
+                    box[v] = Interval.empty()
+                return None
+            if not any(c[0] > p[0] + tol or c[1] < p[1] - tol for c, p in zip(cur, prev)):
+                break
+            prev = cur
+        return [v for v, c, p in zip(vs, cur, start) if c[0] > p[0] + tol or c[1] < p[1] - tol]
+
+
+def _polar_sub(box: list, ix0: int, iy0: int, ix1: int, iy1: int, rho: codac.Interval, phi: codac.Interval):
+    """Narrow ``(x1 − x0, y1 − y0) = ρ·(cos φ, sin φ)``; returns the contracted ``(φ, ρ)`` (the caller decides
+    whether they may narrow a heading / a leg). The four position intervals are narrowed in place."""
+    dx = box[ix1] - box[ix0]
+    dy = box[iy1] - box[iy0]
+    rho = Interval(rho)
+    phi = Interval(phi)
+    _POLAR.contract(dx, dy, rho, phi)
+    if dx.is_empty() or dy.is_empty() or rho.is_empty():
+        box[ix1] = Interval.empty()
+        return phi, rho
+    codac.SubOp.bwd(dx, box[ix1], box[ix0])  # x1 ∩= dx + x0,  x0 ∩= x1 − dx
+    codac.SubOp.bwd(dy, box[iy1], box[iy0])
+    return phi, rho
+
+
+class OdometryTurnMove(Contractor):
+    """Edge pose t → t+1 of the turn-and-move robot (see the module docstring).
+
+    With ``leg = (i_d, i_α)`` the leg's distance and turn are variables of the box (initial domains
+    :attr:`D`, :attr:`A`) that the full operator set narrows — so a local-frame cycle
+    (:class:`SharedLandmarkLeg`) can tighten them; the paper set reads the constant measurement intervals.
+    """
+
+    def __init__(self, pose_from: tuple[int, int, int], pose_to: tuple[int, int, int], d: float, alpha: float,
+                 h_d: float, h_alpha: float, leg: tuple[int, int] | None = None) -> None:
+        self.p0, self.p1 = pose_from, pose_to
+        self.leg = leg
+        self.vars = (*pose_from, *pose_to) + (tuple(leg) if leg is not None else ())
+        self.D = (Interval(d) + Interval(-h_d, h_d)) & _NONNEG  # outward-rounded d̃ ± h_d
+        self.A = Interval(alpha) + Interval(-h_alpha, h_alpha)
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        (x0, y0, t0), (x1, y1, t1) = self.p0, self.p1
+        use_leg = self.leg is not None and narrow_theta
+        D = box[self.leg[0]] if use_leg else self.D
+        A = box[self.leg[1]] if use_leg else self.A
+        # θ_{t+1} − θ_t ∈ A, forward and backward (paper set included: this is the odometry turn chain)
+        box[t1] = box[t1] & (box[t0] + A)
+        box[t0] = box[t0] & (box[t1] - A)
+        phi, rho = _polar_sub(box, x0, y0, x1, y1, D, box[t1])
+        if narrow_theta:
+            box[t1] = box[t1] & phi
+        if use_leg:
+            box[self.leg[0]] = box[self.leg[0]] & rho
+            box[self.leg[1]] = box[self.leg[1]] & (box[t1] - box[t0])
+
+
+class SharedLandmarkLeg(Contractor):
+    """A cycle of the kinematic graph written in the frame of pose t: poses t and t+1 see the same landmark.
+
+    With ``q_t = r_t·(cos b_t, sin b_t)`` the landmark in frame t, ``q_s`` the same landmark in frame t+1 and
+    the leg ``(d, α)`` (turn α, then move d along the new heading), ``q_t = R(α)·(d·e_x + q_s)``, i.e. in the
+    frame turned by α::
+
+        r_t·(cos(b_t − α), sin(b_t − α)) = (d + q_s,x, q_s,y)
+
+    Each unknown appears once (α only in φ = b_t − α, d only in the x component), so the polar relation pins
+    the leg to about the sensor's precision, whatever the absolute boxes of the poses (no wrapping through
+    world-frame boxes). Variables: the leg ``(i_d, i_α)``; the readings are intervals ``[r̃ ± h_r]``,
+    ``[b̃ ± h_b]``. Full operator set only (the paper's set has no such operator).
+    """
+
+    def __init__(self, leg: tuple[int, int], z_t: tuple[float, float], z_s: tuple[float, float], h_r: float,
+                 h_b: float) -> None:
+        self.leg = leg
+        self.vars = tuple(leg)
+        self.Rt = (Interval(z_t[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Bt = Interval(z_t[1]) + Interval(-h_b, h_b)
+        rs = (Interval(z_s[0]) + Interval(-h_r, h_r)) & _NONNEG
+        qx, qy, phi = unbounded(), unbounded(), Interval(z_s[1]) + Interval(-h_b, h_b)
+        _POLAR.contract(qx, qy, rs, phi)  # q_s, a constant box
+        self.qsx, self.qsy = qx, qy
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        if not narrow_theta:
+            return
+        i_d, i_a = self.leg
+        gx, gy, rt = box[i_d] + self.qsx, Interval(self.qsy), Interval(self.Rt)
+        phi = self.Bt - box[i_a]
+        _POLAR.contract(gx, gy, rt, phi)
+        box[i_d] = box[i_d] & (gx - self.qsx)
+        box[i_a] = box[i_a] & (self.Bt - phi)
+
+
+class RangeBearing(Contractor):
+    """Observation edge pose t → landmark j (see the module docstring)."""
+
+    def __init__(self, pose: tuple[int, int, int], landmark: tuple[int, int], r: float, b: float, h_r: float,
+                 h_b: float) -> None:
+        self.pose, self.landmark = pose, landmark
+        self.vars = (*pose, *landmark)
+        self.R = (Interval(r) + Interval(-h_r, h_r)) & _NONNEG
+        self.B = Interval(b) + Interval(-h_b, h_b)
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        (x, y, t), (lx, ly) = self.pose, self.landmark
+        phi = box[t] + self.B
+        phi, _rho = _polar_sub(box, x, y, lx, ly, self.R, phi)
+        if narrow_theta:
+            box[t] = box[t] & (phi - self.B)  # θ ∩= φ − B  (backward step of φ = θ + b)

@@ -1,0 +1,140 @@
+"""Chaotic iteration of narrowing operators to a fixpoint (paper 004 §4) and an optional 3B shaving pass.
+
+Paper 004's algorithm::
+
+    X := D;  G := F
+    while G ≠ ∅:  choose g ∈ G;  X' := g(X);  G := G ∪ {f ∈ F | f depends on a variable g modified};  X := X'
+
+Here ``G`` is a FIFO queue without duplicates, "modified" means a bound moved by more than ``tol`` (the
+width-change tolerance that makes the loop finite), and an empty variable ends the propagation: the
+constraint network has no solution in the box (the hypothesis is refuted).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+from slamcli.solvers.cuik.contractors import Contractor, Interval
+
+
+@dataclass
+class Counter:
+    """Work counters: contractor applications and propagation runs."""
+
+    contractions: int = 0
+    propagations: int = 0
+
+
+def propagate(box: list, edges: list[Contractor], adj: dict[int, list[int]], start: list[int], *,
+              narrow_theta: bool, tol: float, counter: Counter | None = None, max_contractions: int = 200_000
+              ) -> bool:
+    """Run the chaotic iteration from the edges ``start`` until no bound moves by more than ``tol``.
+
+    Parameters
+    ----------
+    box : list of Interval   the variables; narrowed in place.
+    edges : contractors of the kinematic graph; ``adj[v]`` lists the edges that depend on variable ``v``.
+    start : indices into ``edges`` queued first.
+
+    Returns
+    -------
+    bool : False when some variable became empty (no solution), else True.
+    """
+    queue = deque(dict.fromkeys(start))
+    queued = set(queue)
+    n = 0
+    if counter is not None:
+        counter.propagations += 1
+    while queue:
+        e = queue.popleft()
+        queued.discard(e)
+        changed = edges[e].contract(box, narrow_theta, tol)
+        n += 1
+        if changed is None:
+            if counter is not None:
+                counter.contractions += n
+            return False
+        for v in changed:
+            for f in adj.get(v, ()):
+                if f != e and f not in queued:
+                    queue.append(f)
+                    queued.add(f)
+        if n >= max_contractions:  # a safety net; the tolerance ends the loop long before
+            break
+    if counter is not None:
+        counter.contractions += n
+    return True
+
+
+def shave(box: list, edges: list[Contractor], adj: dict[int, list[int]], variables: list[int], *,
+          narrow_theta: bool, tol: float, slices: int, counter: Counter | None = None, rounds: int = 2) -> bool:
+    """3B-consistency by shaving: refute the outer ``1/slices`` of each variable's interval.
+
+    For a variable ``v`` with ``[a, b]``: propagate a copy with ``v ∈ [a, a + w/slices]``; if it empties, no
+    solution has ``v`` there and ``a`` moves up (repeat), likewise for the upper end; then propagate the
+    narrowed box. Sound: only slices proved empty are removed. Returns False when the whole box is refuted.
+    """
+    all_edges = list(range(len(edges)))
+    for _ in range(rounds):
+        moved_any = False
+        for v in variables:
+            for side in (0, 1):
+                for _k in range(slices):
+                    iv = box[v]
+                    if iv.is_empty():
+                        return False
+                    w = iv.diam()
+                    if not (w > 10 * tol) or w == float("inf"):
+                        break
+                    cut = iv.lb() + w / slices if side == 0 else iv.ub() - w / slices
+                    part = Interval(iv.lb(), cut) if side == 0 else Interval(cut, iv.ub())
+                    trial = [Interval(x) for x in box]
+                    trial[v] = part
+                    if propagate(trial, edges, adj, adj.get(v, []), narrow_theta=narrow_theta, tol=tol,
+                                 counter=counter):
+                        break
+                    box[v] = Interval(cut, iv.ub()) if side == 0 else Interval(iv.lb(), cut)
+                    moved_any = True
+            if not propagate(box, edges, adj, adj.get(v, []), narrow_theta=narrow_theta, tol=tol, counter=counter):
+                return False
+        if not moved_any:
+            break
+    return propagate(box, edges, adj, all_edges, narrow_theta=narrow_theta, tol=tol, counter=counter)
+
+
+def bisect_hull(box: list, edges: list[Contractor], adj: dict[int, list[int]], split_vars: list[int], *,
+                narrow_theta: bool, tol: float, max_leaves: int, counter: Counter | None = None) -> bool:
+    """Bisection pass: split the widest of ``split_vars`` (headings, where the constraints are most
+    non-linear) recursively, propagate each half, and replace ``box`` by the hull of the surviving leaves.
+
+    Sound: the leaves cover the original box and each is only narrowed by correct operators, so every
+    solution lies in some leaf, hence in the hull. At most ``max_leaves`` leaves (breadth-first on the
+    widest split variable). Returns False when every leaf is refuted.
+    """
+    leaves = [[Interval(x) for x in box]]
+    while len(leaves) < max_leaves:
+        # split the leaf whose widest split variable is widest
+        k, v, w = -1, -1, 0.0
+        for i, leaf in enumerate(leaves):
+            for u in split_vars:
+                du = leaf[u].diam()
+                if du > w and du != float("inf"):
+                    k, v, w = i, u, du
+        if k < 0 or w <= 10 * tol:
+            break
+        leaf = leaves.pop(k)
+        mid = leaf[v].mid()
+        for half in (Interval(leaf[v].lb(), mid), Interval(mid, leaf[v].ub())):
+            child = [Interval(x) for x in leaf]
+            child[v] = half
+            if propagate(child, edges, adj, adj.get(v, []), narrow_theta=narrow_theta, tol=tol, counter=counter):
+                leaves.append(child)
+        if not leaves:
+            return False
+    for i in range(len(box)):
+        h = leaves[0][i]
+        for leaf in leaves[1:]:
+            h = h | leaf[i]
+        box[i] = box[i] & h
+    return True

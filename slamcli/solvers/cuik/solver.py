@@ -1,0 +1,310 @@
+"""CuikSLAM with unknown correspondence (paper 004): interval constraint propagation over many kinematic
+graphs.
+
+Variables are boxes for every pose ``(x, y, θ)``, every odometry leg ``(d, α)`` and landmark ``(x, y)``; pose 0
+is the known start. Poses are
+added one at a time: the odometry edge t−1 → t is added to every live hypothesis and propagated; then each
+observation of pose t branches every hypothesis over the landmarks of the reported type plus "a new landmark"
+(§5), each branch is propagated to a fixpoint (§4, :func:`~slamcli.solvers.cuik.propagate.propagate`) and
+discarded when a box becomes empty; hypotheses equal up to relabelling are merged; at most
+``max_hypotheses`` stay alive (status ``truncated`` when the cap removed some — then the surviving set is no
+longer guaranteed to contain the true correspondence).
+
+The data must carry guaranteed bounds (``SlamInputs.noise_bounds``, written by the simulator's bounded-noise
+option): the solver reads the bounds, never the truth. Everything is sound under those bounds: if the errors
+really lie within them, the true poses and landmarks are inside the boxes of the true correspondence, which
+is never discarded (unless the cap bites).
+
+Output: every surviving hypothesis with its association and lower/upper boxes (``SolverResult.hypotheses``);
+the point estimate (``poses_xyt``, ``landmarks_xy``, ``assoc``) is the box midpoint of the first hypothesis
+in the order (fewest landmarks, smallest total width).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from slamcli.models.angles import wrap_angle
+from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.types import BoxHypotheses, SlamInputs, SolverResult, Status
+
+
+@dataclass(frozen=True)
+class CuikParams:
+    """Parameters of ``cuik``.
+
+    Attributes
+    ----------
+    narrow_theta : bool        True = the full operator set: the polar relations also narrow headings and
+                               the legs (d, α), and a landmark seen from two consecutive poses adds a
+                               local-frame cycle operator on that leg (``SharedLandmarkLeg``); False = paper
+                               004's set (§6: "no narrowing of θ's were used").
+    tol : float                width-change tolerance of the fixpoint: an operator's output re-queues its
+                               neighbours only when a bound moved by more than this (m or rad).
+    max_hypotheses : int       cap on live kinematic graphs; the fewest-landmark, narrowest ones are kept.
+    association : "types" | "reported"
+                               ``types``: unknown correspondence, branch over landmarks of the reported type
+                               (paper 004 §5); ``reported``: use sensor-reported ids where present (unique
+                               correspondence, Table 1; e.g. ``solve --oracle-association``).
+    new_landmarks : bool       offer "a new landmark" as a branch (paper 004: the number is not known).
+    shave_slices : int         0 = off; else a final 3B-consistency pass refuting outer 1/slices of every
+                               variable (sound; slower).
+    shave_rounds : int         passes of the 3B shaving over all variables.
+    bisect_leaves : int        0 = off; else a final bisection pass over the pose headings with at most
+                               this many leaves per hypothesis, replaced by the hull of the surviving leaves
+                               (sound; runs after the 3B pass).
+    recovery_slack : float     added to the odometry bounds: ``(d̃, α̃)`` are recovered from the chained
+                               ``odometry_xyt`` with rounding error ~1e-14 (m, rad).
+    """
+
+    narrow_theta: bool = True
+    tol: float = 1e-6
+    max_hypotheses: int = 256
+    association: Literal["types", "reported"] = "types"
+    new_landmarks: bool = True
+    shave_slices: int = 0
+    shave_rounds: int = 2
+    bisect_leaves: int = 0
+    recovery_slack: float = 1e-9
+
+    def __post_init__(self) -> None:
+        if not self.tol > 0:
+            raise ValueError("tol must be > 0")
+        if self.max_hypotheses < 1:
+            raise ValueError("max_hypotheses must be >= 1")
+        if self.shave_slices < 0 or self.shave_rounds < 1:
+            raise ValueError("shave_slices must be >= 0 and shave_rounds >= 1")
+        if self.recovery_slack < 0:
+            raise ValueError("recovery_slack must be >= 0")
+
+
+class CuikSlam(BaseSolver):
+    """Set-membership SLAM with unknown correspondence (paper 004), on codac intervals."""
+
+    name = "cuik"
+    Params = CuikParams
+    #: the solver needs guaranteed error bounds (``inputs.noise_bounds``); on other data it returns FAILED, so
+    #: cross-solver comparisons on Gaussian data leave it out (it has its own reproduce section, paper 004)
+    needs_noise_bounds: ClassVar[bool] = True
+
+    def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator,
+              progress: ProgressFn | None = None) -> SolverResult:
+        try:
+            from slamcli.solvers.cuik.contractors import interval_rounding
+        except ImportError:
+            raise ValueError("cuik needs the optional interval extra: pip install 'slamcli[interval]' "
+                             "(codac)") from None
+        # codac's interval library computes outward-rounded bounds only in round-upward mode; the mode is set
+        # for this solve and the caller's (round-to-nearest) restored afterwards
+        with interval_rounding():
+            return self._solve(inputs, progress)
+
+    def _solve(self, inputs: SlamInputs, progress: ProgressFn | None) -> SolverResult:
+        from slamcli.solvers.cuik.contractors import (
+            Interval,
+            OdometryTurnMove,
+            RangeBearing,
+            SharedLandmarkLeg,
+            unbounded,
+        )
+        from slamcli.solvers.cuik.hypotheses import Hypothesis, merge_relabelled
+        from slamcli.solvers.cuik.propagate import Counter, bisect_hull, propagate, shave
+
+        t_start = time.perf_counter()
+        p = self.params
+        nb = inputs.noise_bounds
+        n_poses = inputs.n_poses
+        obs = inputs.observations
+        why = ("the dataset declares no guaranteed error bounds (inputs/noise_bounds); simulate with "
+               "bounded.enabled=true (e.g. scenario cuik-room)" if nb is None else
+               f"odometry model {nb.odometry_model!r} not supported (turn_move only)"
+               if nb.odometry_model != "turn_move" else None)
+        if why is not None:  # no bounds, no guaranteed boxes: a documented failure, not a guess
+            return self.make_result(status=Status.FAILED, poses_xyt=np.full((n_poses, 3), np.nan),
+                                    landmarks_xy=np.zeros((0, 2)), assoc=np.full(len(obs), -1, np.int64),
+                                    t_start=t_start, message=f"cuik: {why}")
+        types = (np.asarray(obs.landmark_type, np.int64) if obs.landmark_type is not None
+                 else np.zeros(len(obs), np.int64))
+        h_d, h_a = (float(x) + p.recovery_slack for x in nb.odometry_half_width)
+        h_r, h_b = float(nb.range_half_width), float(nb.bearing_half_width)
+
+        odo = np.asarray(inputs.odometry_xyt, float)
+        legs = np.column_stack([np.hypot(*(odo[1:, :2] - odo[:-1, :2]).T), wrap_angle(odo[1:, 2] - odo[:-1, 2])])
+
+        # variables: poses (x, y, θ) at 3t.., legs (d, α) at 3(T+1) + 2t.., landmarks (x, y) from `base` on
+        n_legs = n_poses - 1
+        base = 3 * n_poses + 2 * n_legs
+        box0 = [unbounded() for _ in range(base)]
+        for k in range(3):
+            box0[k] = Interval(float(inputs.x0[k]))
+        hyps = [Hypothesis(box=box0)]
+        counter = Counter()
+        live_per_step: list[int] = []
+        branches_per_step: list[int] = []
+        merged_total = 0
+        capped_steps: list[int] = []
+        dropped = 0
+        refuted: tuple[int, int] | None = None
+
+        def pose_vars(t: int) -> tuple[int, int, int]:
+            return (3 * t, 3 * t + 1, 3 * t + 2)
+
+        def leg_vars(t: int) -> tuple[int, int]:
+            return (3 * n_poses + 2 * t, 3 * n_poses + 2 * t + 1)
+
+        for t in range(n_poses):
+            if t > 0:
+                edge = OdometryTurnMove(pose_vars(t - 1), pose_vars(t), float(legs[t - 1, 0]),
+                                        float(legs[t - 1, 1]), h_d, h_a, leg=leg_vars(t - 1))
+                alive = []
+                for h in hyps:
+                    h.box[leg_vars(t - 1)[0]] = Interval(edge.D)
+                    h.box[leg_vars(t - 1)[1]] = Interval(edge.A)
+                    k = h.add_edge(edge)
+                    if propagate(h.box, h.edges, h.adj, [k], narrow_theta=p.narrow_theta, tol=p.tol,
+                                 counter=counter):
+                        alive.append(h)
+                hyps = alive
+                if not hyps:
+                    refuted = (t, -1)
+                    break
+            n_branch = 0
+            for i in range(int(obs.offsets[t]), int(obs.offsets[t + 1])):
+                r, b, ty = float(obs.range_m[i]), float(obs.bearing_rad[i]), int(types[i])
+                rid = int(obs.reported_id[i])
+                children = []
+                for h in hyps:
+                    options: list[int]
+                    if p.association == "reported" and rid >= 0:
+                        options = [h.reported[rid]] if rid in h.reported else [-1]
+                    else:
+                        options = [j for j, tj in enumerate(h.landmark_type) if tj == ty]
+                        if p.new_landmarks or not options:
+                            options.append(-1)
+                    for n_opt, j in enumerate(options):
+                        g = h if n_opt == len(options) - 1 else h.copy()
+                        if j < 0:
+                            j = g.n_landmarks
+                            g.box += [unbounded(), unbounded()]
+                            g.landmark_type.append(ty)
+                            if p.association == "reported" and rid >= 0:
+                                g.reported[rid] = j
+                        lv = (base + 2 * j, base + 2 * j + 1)
+                        start = [g.add_edge(RangeBearing(pose_vars(t), lv, r, b, h_r, h_b))]
+                        if p.narrow_theta and t > 0:  # the same landmark seen from pose t−1: a local cycle
+                            for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t])):
+                                if g.assoc[k] == j:
+                                    start.append(g.add_edge(SharedLandmarkLeg(
+                                        leg_vars(t - 1), (float(obs.range_m[k]), float(obs.bearing_rad[k])),
+                                        (r, b), h_r, h_b)))
+                        n_branch += 1
+                        if propagate(g.box, g.edges, g.adj, start, narrow_theta=p.narrow_theta, tol=p.tol,
+                                     counter=counter):
+                            g.assoc.append(j)
+                            children.append(g)
+                hyps, m = merge_relabelled(children)
+                merged_total += m
+                if not hyps:
+                    refuted = (t, i)
+                    break
+                if len(hyps) > p.max_hypotheses:
+                    hyps.sort(key=lambda h: (h.n_landmarks, h.total_width()))
+                    dropped += len(hyps) - p.max_hypotheses
+                    hyps = hyps[: p.max_hypotheses]
+                    capped_steps.append(t)
+            if refuted is not None:
+                break
+            live_per_step.append(len(hyps))
+            branches_per_step.append(n_branch)
+            if progress is not None:
+                progress(t + 1, n_poses)
+
+        extra = {
+            "contractions": counter.contractions,
+            "propagations": counter.propagations,
+            "live_hypotheses_per_step": live_per_step,
+            "branches_per_step": branches_per_step,
+            "merged_relabelled": merged_total,
+            "hypotheses_dropped_by_cap": dropped,
+            "cap_hit_at_steps": capped_steps,
+            "operator_set": "full" if p.narrow_theta else "paper",
+        }
+        if refuted is not None:
+            t, i = refuted
+            where = f"pose {t}" + (f", observation row {i}" if i >= 0 else " (odometry edge)")
+            extra.update(refuted_at_pose=t, refuted_at_observation=i)
+            nan = np.full((n_poses, 3), np.nan)
+            return self.make_result(
+                status=Status.FAILED, poses_xyt=nan, landmarks_xy=np.zeros((0, 2)),
+                assoc=np.full(len(obs), -1, np.int64), t_start=t_start, extra=extra,
+                message=f"every hypothesis became empty at {where}: the data contradict the declared bounds")
+
+        if p.shave_slices > 0 or p.bisect_leaves > 0:
+            kept = []
+            for h in hyps:
+                variables = [v for v, x in enumerate(h.box) if x.diam() > 10 * p.tol]
+                ok = p.shave_slices == 0 or shave(h.box, h.edges, h.adj, variables, narrow_theta=p.narrow_theta,
+                                                  tol=p.tol, slices=p.shave_slices, rounds=p.shave_rounds,
+                                                  counter=counter)
+                if ok and p.bisect_leaves > 0:
+                    ok = bisect_hull(h.box, h.edges, h.adj, [3 * t + 2 for t in range(n_poses)],
+                                     narrow_theta=p.narrow_theta, tol=p.tol, max_leaves=p.bisect_leaves,
+                                     counter=counter)
+                if ok:
+                    kept.append(h)
+            hyps = kept
+            extra["contractions"] = counter.contractions
+            extra["propagations"] = counter.propagations
+            if not hyps:
+                return self.make_result(
+                    status=Status.FAILED, poses_xyt=np.full((n_poses, 3), np.nan), landmarks_xy=np.zeros((0, 2)),
+                    assoc=np.full(len(obs), -1, np.int64), t_start=t_start, extra=extra,
+                    message="the 3B / bisection pass refuted every hypothesis: the data contradict the declared bounds")
+
+        hyps.sort(key=lambda h: (h.n_landmarks, h.total_width()))
+        boxes = _to_arrays(hyps, n_poses, len(obs), base)
+        best_lo, best_hi = boxes.pose_lo[0], boxes.pose_hi[0]
+        poses = 0.5 * (best_lo + best_hi)
+        poses[:, 2] = wrap_angle(poses[:, 2])
+        L0 = int(boxes.n_landmarks[0])
+        lms = 0.5 * (boxes.landmark_lo[0, :L0] + boxes.landmark_hi[0, :L0])
+        truncated = bool(capped_steps)
+        extra.update(n_hypotheses=len(hyps), n_landmarks_best=L0)
+        message = (f"{len(hyps)} kinematic graph(s) survive; the hypothesis cap ({p.max_hypotheses}) removed "
+                   f"{dropped} at steps {capped_steps[:5]}{'...' if len(capped_steps) > 5 else ''} — the "
+                   "surviving set may miss the true correspondence" if truncated
+                   else f"{len(hyps)} kinematic graph(s) survive; boxes are guaranteed under the declared bounds")
+        res = self.make_result(status=Status.TRUNCATED if truncated else Status.COMPLETED, poses_xyt=poses,
+                               landmarks_xy=lms, assoc=boxes.assoc[0], t_start=t_start, message=message,
+                               extra=extra)
+        return dataclasses.replace(res, hypotheses=boxes)
+
+
+def _to_arrays(hyps, n_poses: int, n_obs: int, base: int) -> BoxHypotheses:
+    """Pack hypotheses into :class:`BoxHypotheses` arrays (NaN / -1 padding for missing landmarks); landmark
+    variables start at ``base``."""
+    H = len(hyps)
+    Lmax = max((h.n_landmarks for h in hyps), default=0)
+    pose_lo = np.zeros((H, n_poses, 3))
+    pose_hi = np.zeros((H, n_poses, 3))
+    lm_lo = np.full((H, Lmax, 2), np.nan)
+    lm_hi = np.full((H, Lmax, 2), np.nan)
+    lm_type = np.full((H, Lmax), -1, np.int64)
+    assoc = np.full((H, n_obs), -1, np.int64)
+    for k, h in enumerate(hyps):
+        lo = np.array([x.lb() for x in h.box])
+        hi = np.array([x.ub() for x in h.box])
+        pose_lo[k] = lo[: 3 * n_poses].reshape(n_poses, 3)
+        pose_hi[k] = hi[: 3 * n_poses].reshape(n_poses, 3)
+        L = h.n_landmarks
+        lm_lo[k, :L] = lo[base:].reshape(L, 2)
+        lm_hi[k, :L] = hi[base:].reshape(L, 2)
+        lm_type[k, :L] = h.landmark_type
+        assoc[k, : len(h.assoc)] = h.assoc
+    return BoxHypotheses(assoc=assoc, pose_lo=pose_lo, pose_hi=pose_hi, landmark_lo=lm_lo, landmark_hi=lm_hi,
+                         n_landmarks=np.array([h.n_landmarks for h in hyps], np.int64), landmark_type=lm_type)

@@ -1,0 +1,384 @@
+"""Reproduction section for paper 004 (Kubica & Szynkiewicz, "CuikSLAM with Unknown Correspondence –
+Preliminary Results"): Tables 1-6 side by side with ``cuik`` on ``cuik-room``, hypothesis counts, our tighter
+boxes with θ narrowing (+ 3B shaving and bisection), Monte-Carlo soundness, the wrong-bound check, the
+``graph`` cross-check and a lower bound on any sound box from feasible solutions.
+
+Hook: ``run_section(out_dir, quick, progress) -> (markdown, ok)``; every outcome sentence is computed from the
+numbers of the run. This module is the experiment harness: it reads ground truth (for metrics and for the
+"unique correspondence" runs, which hand the solver the true association like ``solve
+--oracle-association``), the solver never does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from slamcli.sim.bounded import heading_from_paper004
+
+# Paper 004 Table 1 (unique correspondence): rows r1..r9, l1..l4 → [x_lo, x_hi, y_lo, y_hi, θ_lo, θ_hi]
+# (θ in the paper's convention, NaN for landmarks). Tables 2-6: the uncertain-correspondence solutions.
+TABLE1 = {
+    "r1": [15.000000, 15.000000, 5.000000, 5.000000, 1.963495, 1.963496],
+    "r2": [21.649003, 22.625890, 7.254080, 8.692127, 1.090830, 1.265364],
+    "r3": [23.859385, 26.376647, 13.576115, 16.498558, 0.218166, 0.567233],
+    "r4": [18.991749, 25.398227, 19.523065, 24.426118, -0.654499, -0.130899],
+    "r5": [11.003392, 19.871620, 20.255855, 29.368930, -1.527164, -0.829031],
+    "r6": [3.007425, 14.807419, 14.964192, 28.134633, -2.399828, -1.527163],
+    "r7": [-2.677651, 15.851102, 6.968225, 20.138666, -3.272493, -2.225294],
+    "r8": [3.696705, 14.846075, 1.353586, 12.142699, -4.145157, -2.923426],
+    "r9": [11.692672, 18.307328, 3.758019, 5.050190, -5.017822, -3.621558],
+    "l1": [14.956149, 15.043851, -0.025001, 0.025190, np.nan, np.nan],
+    "l2": [28.765282, 31.127910, 13.490822, 16.465664, np.nan, np.nan],
+    "l3": [10.010507, 20.577533, 25.039668, 33.802960, np.nan, np.nan],
+    "l4": [-6.799463, 11.729289, 4.374615, 22.449843, np.nan, np.nan],
+}
+#: Tables 2-6: number of landmarks of each surviving solution (Table 4 leaves label l3 unused).
+PAPER_SOLUTIONS_LANDMARKS = [5, 5, 4, 4, 5]
+PAPER_N_GRAPHS = 5
+PAPER_N_DISTINCT = 3
+
+
+def table1_widths() -> dict[str, np.ndarray]:
+    """Widths ``[w_x, w_y, w_θ]`` of every Table 1 row (θ width is convention-independent)."""
+    out = {}
+    for k, v in TABLE1.items():
+        v = np.asarray(v, float)
+        th = heading_from_paper004(v[4:6])  # the one conversion; the interval flips
+        out[k] = np.array([v[1] - v[0], v[3] - v[2], float(np.max(th) - np.min(th))])
+    return out
+
+
+def our_widths(hb, h: int) -> dict[str, np.ndarray]:
+    """Our widths per paper label (pose t ↔ r_{t+1}; landmark label j ↔ l_{j+1}, labels by first sighting)."""
+    out = {}
+    for t in range(hb.pose_lo.shape[1]):
+        out[f"r{t + 1}"] = hb.pose_hi[h, t] - hb.pose_lo[h, t]
+    for j in range(int(hb.n_landmarks[h])):
+        w = hb.landmark_hi[h, j] - hb.landmark_lo[h, j]
+        out[f"l{j + 1}"] = np.array([w[0], w[1], np.nan])
+    return out
+
+
+def with_true_association(dataset):
+    """Inputs with the sensor-reported ids set to the true association (unique correspondence)."""
+    inp = dataset.inputs
+    obs = dataclasses.replace(inp.observations, reported_id=dataset.truth.obs_landmark.copy())
+    return dataclasses.replace(inp, observations=obs)
+
+
+def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200):
+    """Two feasible solutions minimising / maximising one coordinate, found by SLSQP over the bounded errors.
+
+    Variables: the normalised errors ``u ∈ [-1, 1]`` of every odometry leg (d, α) and observation (r, b);
+    poses follow by chaining, each landmark from its first observation, and every later observation of the
+    same (true) landmark must reproduce it (equality constraints). A point returned with ``|constraint| <
+    1e-6`` is a genuine solution of the bounded-error problem, so ANY sound enclosure must contain both
+    extremes: their distance is a lower bound on the box width of that coordinate (local optimisation may
+    miss a wider solution; it never overstates the bound).
+
+    ``coordinate``: ("pose", t, c) or ("landmark", true index, c). Returns ``(lo, hi, max_violation)``.
+    """
+    from scipy.optimize import minimize
+
+    from slamcli.sim.bounded import legs_from_odometry
+
+    inp = dataset.inputs
+    nb = inp.noise_bounds
+    obs = inp.observations
+    lab = dataset.truth.obs_landmark
+    legs = legs_from_odometry(inp.odometry_xyt)
+    T, N = len(legs), len(obs)
+    hd, ha = (float(x) for x in nb.odometry_half_width)
+    hr, hb = float(nb.range_half_width), float(nb.bearing_half_width)
+
+    def unpack(u):
+        du, au = u[:T] * hd, u[T:2 * T] * ha
+        ru, bu = u[2 * T:2 * T + N] * hr, u[2 * T + N:] * hb
+        P = np.zeros((T + 1, 3))
+        P[0] = inp.x0
+        for t in range(T):
+            th = P[t, 2] + legs[t, 1] + au[t]
+            d = legs[t, 0] + du[t]
+            P[t + 1] = [P[t, 0] + d * math.cos(th), P[t, 1] + d * math.sin(th), th]
+        L: dict[int, np.ndarray] = {}
+        res = []
+        for i in range(N):
+            t = int(obs.step[i])
+            ph = P[t, 2] + obs.bearing_rad[i] + bu[i]
+            q = P[t, :2] + (obs.range_m[i] + ru[i]) * np.array([math.cos(ph), math.sin(ph)])
+            if int(lab[i]) in L:
+                res.append(q - L[int(lab[i])])
+            else:
+                L[int(lab[i])] = q
+        return P, L, (np.concatenate(res) if res else np.zeros(0))
+
+    n = 2 * T + 2 * N
+    cons = [{"type": "eq", "fun": lambda u: unpack(u)[2]}]
+    box = [(-1.0, 1.0)] * n
+    kind, idx, c = coordinate
+
+    def value(u):
+        P, L, _ = unpack(u)
+        return P[idx, c] if kind == "pose" else L[idx][c]
+
+    start = minimize(lambda u: u @ u, np.zeros(n), constraints=cons, bounds=box, method="SLSQP",
+                     options={"maxiter": maxiter}).x
+    ext, viol = [], 0.0
+    for sgn in (1.0, -1.0):
+        r = minimize(lambda u, s=sgn: s * value(u), start, constraints=cons, bounds=box, method="SLSQP",
+                     options={"maxiter": maxiter})
+        u = np.clip(r.x, -1.0, 1.0)
+        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)))
+        ext.append(value(u))
+    return float(ext[0]), float(ext[1]), viol
+
+
+def _fmt(v, d=3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "—"
+    return f"{v:.{d}f}" if isinstance(v, float) else str(v)
+
+
+def _md(header, rows) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(_fmt(c) if isinstance(c, float) else str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | None = None) -> tuple[str, bool]:
+    """Run the paper 004 experiments; write figures under ``out_dir``; return (markdown, ok)."""
+    from slamcli.api.solve import solve_dataset
+    from slamcli.metrics import sets
+    from slamcli.sim.simulate import simulate_scenario
+
+    log = progress or (lambda s: None)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    md: list[str] = ["## Paper 004: CuikSLAM with unknown correspondence (interval boxes, `cuik`)", ""]
+    import importlib.util
+
+    if importlib.util.find_spec("codac") is None:
+        md.append("> **Section failed**: the `interval` extra (codac) is not installed: `pip install 'slamcli[interval]'`.")
+        return "\n".join(md), False
+    checks: dict[str, bool] = {}
+    full = {"narrow_theta": True, "shave_slices": 4, "bisect_leaves": 64}
+
+    # -- 1. Table 1: unique correspondence, exact readings as in the paper ------------------------------------
+    exact = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True})
+    known = with_true_association(exact)
+    r_paper = solve_dataset(known, "cuik", {"narrow_theta": False, "association": "reported"})
+    r_theta = solve_dataset(known, "cuik", {"narrow_theta": True, "association": "reported"})
+    r_full = solve_dataset(known, "cuik", {**full, "association": "reported"})
+    log("paper004: Table 1 runs done")
+    tw = table1_widths()
+    wp, wt, wf = (our_widths(r.hypotheses, 0) for r in (r_paper, r_theta, r_full))
+    rows, narrower, not_narrower = [], 0, []
+    for key in TABLE1:
+        p = tw[key]
+        cols = [key]
+        for w in (p, wp[key], wt[key], wf[key]):
+            cols.append(" / ".join(_fmt(float(x), 2) for x in w if np.isfinite(x)))
+        ok_row = bool(np.all((wf[key] < p + 1e-12) | ~np.isfinite(p)))
+        if key != "r1":  # r1 is the known start: a point in both
+            narrower += ok_row
+            if not ok_row:
+                not_narrower.append(key)
+        rows.append(cols)
+    n_rows = len(TABLE1) - 1
+    excess = {k: float(np.nanmax((wf[k] - tw[k]) / np.where(tw[k] > 0, tw[k], np.nan))) for k in not_narrower}
+    dev = {k: float(np.nanmax(np.abs(wp[k] - tw[k]) / np.where(tw[k] > 0, tw[k], np.nan))) for k in TABLE1
+           if k != "r1"}
+    close = sorted((k for k in dev if dev[k] <= 0.02), key=list(TABLE1).index)
+    md += ["### Table 1 — unique correspondence (box widths x / y [/ θ], m and rad)", "",
+           "Data: `cuik-room` with exact readings (paper §6 simulated exact readings: its l1 box is centred on the "
+           "truth) and the paper's bounds (odometry ±25 cm, ±5°; sonar ±2.5 cm, ±0.5°); the robot sees the closest "
+           "landmark within 12 m (exact ties go to the landmark ahead). Columns: the paper; ours with the paper's "
+           "operator set (no θ narrowing); ours with the full set (θ narrowing, and the local-frame cycle operator "
+           "for a landmark seen from two consecutive poses); the full set + 3B shaving (4 slices) + bisection (64 "
+           "leaves).", "",
+           _md(["row", "paper 004", "ours, paper set", "ours, full set (θ narrowing, local cycles)",
+                "ours, full + 3B + bisection"], rows),
+           ""]
+    lm_mean = {name: float(np.nanmean([np.nanmean(w[k][:2]) for k in w if k.startswith("l")]))
+               for name, w in (("paper", wp), ("theta", wt), ("full", wf))}
+    paper_lm_mean = float(np.mean([np.mean(tw[k][:2]) for k in tw if k.startswith("l")]))
+    md.append(f"With the full operator set {narrower} of {n_rows} rows (all but the known start r1) are at most as "
+              f"wide as the paper's Table 1 in every coordinate"
+              + (f"; wider: {', '.join(f'{k} (by up to {100 * excess[k]:.2f} %)' for k in not_narrower)}"
+                 if not_narrower else "") + ". "
+              f"Our paper-exact operator set reproduces the paper's widths within 2 % for {len(close)} of {n_rows} "
+              f"rows ({', '.join(close)}; largest deviation {100 * max(dev.values()):.1f} % at "
+              f"{max(dev, key=dev.get)}). "
+              f"Mean landmark box width: paper {paper_lm_mean:.2f} m, ours {lm_mean['paper']:.2f} m (paper set), "
+              f"{lm_mean['theta']:.2f} m (full set), {lm_mean['full']:.2f} m (full + 3B + bisection); "
+              + ("below" if lm_mean["full"] < 1.0 else "NOT below") + " the 1 m of Porta's CuikSLAM.")
+    md.append("")
+    checks["table1_rows_narrower"] = not not_narrower
+
+    # -- 2. lower bounds on any sound box (feasible extremes) -----------------------------------------------
+    hb_full = r_full.hypotheses
+    inv = {v: k for k, v in sets.landmark_map(hb_full.assoc[0], exact.truth.obs_landmark).items()}
+    rows, all_inside, worst_viol = [], True, 0.0
+    for true_j, c in ((1, 0), (1, 1), (2, 0), (3, 0)):
+        lo, hi, viol = feasible_extent(exact, ("landmark", true_j, c), maxiter=100 if quick else 300)
+        bx = (float(hb_full.landmark_lo[0, inv[true_j], c]), float(hb_full.landmark_hi[0, inv[true_j], c]))
+        inside = bx[0] - 1e-6 <= lo and hi <= bx[1] + 1e-6
+        all_inside &= inside and viol < 1e-6
+        worst_viol = max(worst_viol, viol)
+        paper_w = tw[f"l{true_j + 1}"][c]
+        rows.append([f"l{true_j + 1} {'xy'[c]}", f"{hi - lo:.4f}", f"{paper_w:.4f}", f"{bx[1] - bx[0]:.4f}",
+                     f"{(bx[1] - bx[0]) / (hi - lo):.3f}", "yes" if inside else "NO",
+                     "yes" if paper_w >= hi - lo else f"no ({1e3 * (hi - lo - paper_w):.1f} mm narrower)"])
+    md += ["### How close to the best possible box", "",
+           "Two solutions of the bounded-error problem per coordinate (SLSQP over the normalised errors, largest "
+           f"constraint violation {worst_viol:.1e}) minimise and maximise it: EVERY sound box must contain both, so "
+           "their spread is a lower bound on its width, whatever the contractors.", "",
+           _md(["coordinate", "feasible spread (m)", "paper 004 (m)", "ours, full + 3B + bisection (m)",
+                "ours / spread", "ours contains both", "paper ≥ spread"], rows), ""]
+    r_l2 = rows[0]
+    md.append(
+        f"Our boxes {'contain every feasible extreme' if all_inside else 'MISS a feasible extreme (unsound!)'}. "
+        f"For l2 no sound box can beat the paper: its x spread alone is {r_l2[1]} m against the paper's {r_l2[2]} m"
+        + (" — the paper's box is slightly narrower than the spread of two feasible solutions of our reconstruction "
+           "of its geometry (octagon radius 10 m, r1 = (15, 5)); with its exact geometry unknown we cannot tell "
+           "whether the paper's l2 box was itself a little too narrow" if r_l2[6] != "yes" else "")
+        + ". The issue's target of a mean landmark width below 1 m is far below these lower bounds: with the "
+        "closest-landmark sensor four legs share no landmark, so the set of consistent maps is metres wide and no "
+        "sound method can get below 1 m on this data.")
+    md.append("")
+    checks["extremes_inside"] = bool(all_inside)
+
+    # -- 3. Tables 2-6: uncertain correspondence --------------------------------------------------------------
+    u_paper = solve_dataset(exact.inputs, "cuik", {"narrow_theta": False})
+    u_theta = solve_dataset(exact.inputs, "cuik", {"narrow_theta": True})
+    log("paper004: uncertain-correspondence runs done")
+    rows = []
+    for name, r in (("paper set", u_paper), ("full set", u_theta)):
+        hb = r.hypotheses
+        m = sets.set_metrics(hb, exact.truth.poses_xyt, exact.truth.landmarks_xy, exact.truth.obs_landmark)
+        counts = np.bincount(hb.n_landmarks)
+        rows.append([name, len(hb), sets.n_distinct(hb), ", ".join(f"{c}×{k}" for k, c in enumerate(counts) if c),
+                     "yes" if m["true_correspondence_survived"] else "NO", m["true_hypothesis_index"],
+                     _fmt(m.get("soundness"), 3)])
+        checks[f"truth_survived_{name}"] = bool(m["true_correspondence_survived"] and m.get("soundness") == 1.0)
+    md += ["### Tables 2-6 — uncertain correspondence (door/corridor types only)", "",
+           _md(["operator set", "hypotheses", "distinct up to relabelling", "landmarks per hypothesis",
+                "true correspondence survived", "its rank", "soundness"],
+               [["paper 004", PAPER_N_GRAPHS, PAPER_N_DISTINCT, "3×5, 2×4", "yes", "—", "—"], *rows]), ""]
+    hb_u = u_theta.hypotheses
+    n_min = int(hb_u.n_landmarks.min())
+    md.append(
+        f"Paper: {PAPER_N_GRAPHS} graphs after 9 poses, {PAPER_N_DISTINCT} distinct up to labelling. Ours: "
+        f"{len(u_paper.hypotheses)} (paper set) and {len(hb_u)} (full set), all distinct up to relabelling "
+        "(labels are given by first sighting, so equal partitions are merged as they arise). "
+        + ("We keep more graphs than the paper: " if len(hb_u) > PAPER_N_GRAPHS else "")
+        + "every re-observation may also be 'a new landmark', which no box contradicts (the sensor's range and "
+        "bearing to a new landmark are always consistent), so the count doubles with each re-observation "
+        "unless the old landmark is refuted; the paper does not say how it bounded this. "
+        f"The fewest-landmark hypotheses have {n_min} landmarks; the true correspondence "
+        + ("is" if checks["truth_survived_full set"] else "is NOT") + " among the survivors and "
+        + ("is" if sets.true_hypothesis(hb_u, exact.truth.obs_landmark) == 0 else "is not")
+        + " ranked first (fewest landmarks, narrowest boxes).")
+    md.append("")
+
+    # -- 4. Monte-Carlo: soundness, survival, wrong bounds, graph cross-check ---------------------------------
+    n_known = 10 if quick else 200
+    n_unknown = 3 if quick else 50
+    n_graph = 2 if quick else 20
+    sound, sound_u, surv, ranks, nh = [], [], [], [], []
+    for seed in range(n_known):
+        ds = simulate_scenario("cuik-room", seed)
+        r = solve_dataset(with_true_association(ds), "cuik", {"association": "reported"})
+        m = sets.set_metrics(r.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+        sound.append(m["soundness"] == 1.0)
+        if seed < n_unknown:
+            r = solve_dataset(ds.inputs, "cuik", {})
+            m = sets.set_metrics(r.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+            surv.append(m["true_correspondence_survived"])
+            sound_u.append(m.get("soundness") == 1.0)
+            ranks.append(m["true_hypothesis_index"])
+            nh.append(m["n_hypotheses"])
+    log("paper004: Monte-Carlo done")
+    wrong = []
+    for seed in range(5 if quick else 50):
+        ds = simulate_scenario("cuik-room", seed, {"bounded.declared_scale": 0.2})
+        r = solve_dataset(with_true_association(ds), "cuik", {"association": "reported"})
+        i = int(r.extra.get("refuted_at_observation", -1))
+        cycle = i >= 0 and bool((ds.truth.obs_landmark[:i] == ds.truth.obs_landmark[i]).any())
+        wrong.append((r.status.value, r.extra.get("refuted_at_pose"), cycle))
+    n_caught = sum(s == "failed" for s, _, _ in wrong)
+    n_cycle = sum(s == "failed" and c for s, _, c in wrong)
+    at_pose = sorted({p for s, p, _ in wrong if s == "failed"})
+    gp, gl = [], []
+    for seed in range(n_graph):
+        ds = simulate_scenario("cuik-room", seed)
+        known_in = with_true_association(ds)
+        g = solve_dataset(known_in, "graph", {})
+        c = solve_dataset(known_in, "cuik", {"association": "reported"})
+        e = sets.estimate_inside(c.hypotheses, 0, g.poses_xyt, g.landmarks_xy, g.assoc)
+        gp.append(e["pose_inside_fraction"])
+        gl.append(e.get("landmark_inside_fraction", float("nan")))
+    checks["soundness_all"] = all(sound) and all(sound_u)
+    checks["truth_always_survives"] = all(surv)
+    checks["wrong_bound_caught"] = n_caught >= 0.9 * len(wrong)
+    md += ["### Monte-Carlo on bounded-noise data (uniform errors within the bounds)", "",
+           _md(["check", "runs", "result"], [
+               ["soundness = 100 % (unique correspondence)", n_known, f"{sum(sound)} of {n_known}"],
+               ["soundness of the true hypothesis (unknown correspondence)", n_unknown, f"{sum(sound_u)} of {n_unknown}"],
+               ["true correspondence survived", n_unknown, f"{sum(surv)} of {n_unknown}"],
+               ["true correspondence ranked first", n_unknown, f"{sum(k == 0 for k in ranks)} of {n_unknown}"],
+               ["surviving hypotheses (mean / max)", n_unknown, f"{np.mean(nh):.1f} / {max(nh)}"],
+               ["declared bounds 0.2× too small → all boxes empty", len(wrong),
+                f"{n_caught} of {len(wrong)} (refuted at poses {at_pose})"],
+               ["`graph` poses inside the `cuik` boxes", n_graph, f"{100 * np.mean(gp):.1f} %"],
+               ["`graph` landmarks inside the `cuik` boxes", n_graph, f"{100 * np.nanmean(gl):.1f} %"],
+           ]), ""]
+    md.append(
+        ("Soundness held in every run" if checks["soundness_all"] else "Soundness FAILED in some run")
+        + f" ({sum(sound)}/{n_known} unique-correspondence and {sum(sound_u)}/{n_unknown} unknown-correspondence "
+        "runs with every true pose and landmark inside its box); the true correspondence "
+        + ("survived in every run" if checks["truth_always_survives"] else f"was lost in {n_unknown - sum(surv)} runs")
+        + f". Declaring bounds five times too small is caught by an empty box in {n_caught} of {len(wrong)} runs, "
+        + ("always" if n_cycle == n_caught else f"{n_cycle} times")
+        + " at an observation that re-observes a landmark (a cycle of the kinematic graph)"
+        + (f"; in the other {len(wrong) - n_caught} the readings stay consistent with the too-small bounds, so "
+           "there is no contradiction to detect" if n_caught < len(wrong) else "") + ". "
+        f"Least squares and set membership agree: {100 * np.mean(gp):.1f} % of `graph`'s poses and "
+        f"{100 * np.nanmean(gl):.1f} % of its landmarks lie inside the `cuik` boxes.")
+    md.append("")
+
+    # -- 5. figure ------------------------------------------------------------------------------------------
+    from slamcli.plots import new_figure, save_figure
+    from slamcli.plots.boxes import plot_boxes
+
+    for name, r in (("paper-set", r_paper), ("full-set", r_full)):
+        fig, ax = new_figure(6.0, 6.0)
+        hb = r.hypotheses
+        L = int(hb.n_landmarks[0])
+        plot_boxes(ax, hb.pose_lo[0], hb.pose_hi[0], hb.landmark_lo[0, :L], hb.landmark_hi[0, :L],
+                   exact.truth.poses_xyt, exact.truth.landmarks_xy,
+                   title=f"cuik-room, unique correspondence, {name.replace('-', ' ')}")
+        save_figure(fig, out_dir / f"paper004_boxes_{name}.png")
+    md.append(f"![cuik-room boxes, paper operator set]({out_dir.name}/paper004_boxes_paper-set.png) "
+              f"![cuik-room boxes, full set + 3B + bisection]({out_dir.name}/paper004_boxes_full-set.png)")
+    md.append("")
+    md.append(f"Boxes as rectangles, heading intervals as wedges, truth in black. Section time "
+              f"{time.perf_counter() - t0:.0f} s.")
+    md.append("")
+    hard = ("soundness_all", "truth_always_survives", "extremes_inside", "wrong_bound_caught")
+    ok = all(checks[k] for k in hard)
+    failed = [k for k in hard if not checks[k]]
+    if failed:
+        md.append("**Section FAILED** — guarantees not met: " + ", ".join(f"`{k}`" for k in failed) + ".")
+    targets = [t for t, met in (("every full-set box at most as wide as Table 1", checks["table1_rows_narrower"]),
+                                ("mean landmark box width < 1 m", lm_mean["full"] < 1.0)) if not met]
+    if targets:
+        md.append("Issue targets not met (findings, measured above): " + "; ".join(targets) + ".")
+    return "\n".join(md), bool(ok)

@@ -1,0 +1,210 @@
+"""cuik on the paper 004 room and beyond: soundness, correspondence, wrong bounds, Table 1, graph cross-check.
+
+Every number asserted here is measured in the test; the paper's Table 1 comes from slamcli.sweep.paper004.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+pytest.importorskip("slamcli.solvers.cuik.contractors")  # loads codac after h5py (see there)
+
+from slamcli.api.solve import solve_dataset
+from slamcli.metrics import sets
+from slamcli.sim.simulate import simulate_scenario
+from slamcli.sweep.paper004 import feasible_extent, our_widths, table1_widths, with_true_association
+from slamcli.types import Status
+
+
+def solve(inputs, **params):
+    return solve_dataset(inputs, "cuik", params)
+
+
+def test_soundness_is_100_percent_over_200_bounded_noise_runs():
+    n_sound, n_runs, widths = 0, 200, []
+    for seed in range(n_runs):
+        ds = simulate_scenario("cuik-room", seed)
+        r = solve(with_true_association(ds), association="reported")
+        assert r.status is Status.COMPLETED and len(r.hypotheses) == 1
+        m = sets.set_metrics(r.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+        n_sound += m["soundness"] == 1.0
+        widths.append(m["true_landmark_width_mean"])
+    assert n_sound == n_runs
+    # the boxes are informative, not the whole room: landmark boxes average well below the 30 m room
+    assert 0.5 < np.mean(widths) < 10.0
+
+
+def test_unknown_correspondence_keeps_the_true_graph_and_its_boxes_contain_the_truth():
+    n = 30
+    ranks, counts = [], []
+    for seed in range(n):
+        ds = simulate_scenario("cuik-room", seed)
+        r = solve(ds.inputs)  # types only: doors vs corridors, no identities
+        assert r.status is Status.COMPLETED
+        m = sets.set_metrics(r.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+        assert m["true_correspondence_survived"], f"seed {seed}: true correspondence refuted"
+        assert m["soundness"] == 1.0, f"seed {seed}: truth outside the true hypothesis' boxes"
+        assert m["n_hypotheses_distinct"] == m["n_hypotheses"]  # merged up to relabelling as they arise
+        ranks.append(m["true_hypothesis_index"])
+        counts.append(m["n_hypotheses"])
+    # ambiguity is real (several graphs survive) and the parsimonious ranking puts the truth first
+    assert min(counts) > 1
+    assert all(k == 0 for k in ranks)
+
+
+def test_a_too_small_declared_bound_is_caught_by_an_empty_box_when_a_cycle_closes():
+    # bounds declared 5× too small: the readings are the same, and every box empties at the first observation
+    # that closes a cycle of the kinematic graph (a landmark re-observed — paper 004 Fig. 1)
+    for seed in range(8):
+        honest = simulate_scenario("cuik-room", seed)
+        wrong = simulate_scenario("cuik-room", seed, {"bounded.declared_scale": 0.2})
+        np.testing.assert_array_equal(honest.inputs.observations.range_m, wrong.inputs.observations.range_m)
+        assert solve(with_true_association(honest), association="reported").status is Status.COMPLETED
+        r = solve(with_true_association(wrong), association="reported")
+        assert r.status is Status.FAILED and "empty" in r.message
+        i = r.extra["refuted_at_observation"]
+        lm = wrong.truth.obs_landmark
+        assert i >= 0 and (lm[:i] == lm[i]).any()  # the observation re-observes a landmark: a cycle closes
+
+
+def test_an_error_beyond_its_bound_at_the_room_loop_closure_empties_every_box():
+    # seed 1: the sighting of l1 that closes the room's loop (pose 8) reads 0.1 m long (4× its ±2.5 cm bound).
+    # A bounded-error set catches an error only when it exceeds the slack the other bounds leave; here it does
+    # (with seeds 0 and 2-4 the same error is absorbed by the pose box and nothing can be detected).
+    ds = simulate_scenario("cuik-room", 1)
+    known = with_true_association(ds)
+    obs = known.observations
+    assert int(obs.step[-1]) == 8 and ds.truth.obs_landmark[-1] == 0 and ds.truth.obs_landmark[0] == 0
+    bad = obs.range_m.copy()
+    bad[-1] += 0.1
+    r = solve(dataclasses.replace(known, observations=dataclasses.replace(obs, range_m=bad)), association="reported")
+    assert r.status is Status.FAILED
+    assert (r.extra["refuted_at_pose"], r.extra["refuted_at_observation"]) == (8, len(obs) - 1)
+    assert solve(known, association="reported").status is Status.COMPLETED
+
+
+def test_table1_paper_set_reproduced_and_full_set_narrower():
+    exact = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True})
+    known = with_true_association(exact)
+    paper = our_widths(solve(known, association="reported", narrow_theta=False).hypotheses, 0)
+    full_r = solve(known, association="reported", narrow_theta=True, shave_slices=4, bisect_leaves=64)
+    full = our_widths(full_r.hypotheses, 0)
+    tw = table1_widths()
+    # the paper-exact operator set reproduces Table 1's early rows within 2 % (before any cycle closes)
+    for k in ("r2", "r3", "r4", "r5", "r9", "l1", "l2"):
+        np.testing.assert_allclose(paper[k], tw[k], rtol=0.02, err_msg=k)
+    # the full set (θ narrowing, local cycles, 3B, bisection) is never wider than Table 1 by more than 0.1 %
+    # (l2: the paper's box is already at the feasible spread, see the next test) and clearly narrower from r4 on
+    for k in tw:
+        ok = np.isfinite(tw[k])
+        assert (full[k][ok] <= tw[k][ok] * 1.001 + 1e-9).all(), k
+    for k in ("r4", "r5", "r6", "r7", "r8", "r9", "l3", "l4"):
+        assert (full[k][:2] < 0.85 * tw[k][:2]).all(), k
+    lm_ours = np.mean([full[f"l{j}"][:2] for j in range(1, 5)])
+    lm_paper = np.mean([tw[f"l{j}"][:2] for j in range(1, 5)])
+    assert lm_ours < 0.6 * lm_paper
+
+
+def test_no_sound_method_gets_below_1m_here_and_our_boxes_reach_the_feasible_spread():
+    # two genuine solutions of the bounded-error problem per coordinate: every sound box contains both, so their
+    # spread bounds its width from below — metres here (the issue's "< 1 m" is impossible on this data); our
+    # boxes contain both extremes and are within 1 % of the spread
+    exact = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True})
+    r = solve(with_true_association(exact), association="reported", shave_slices=4, bisect_leaves=64)
+    hb = r.hypotheses
+    inv = {v: k for k, v in sets.landmark_map(hb.assoc[0], exact.truth.obs_landmark).items()}
+    for true_j, spread_min in ((1, 2.0), (2, 5.0)):  # l2 x, l3 x
+        lo, hi, viol = feasible_extent(exact, ("landmark", true_j, 0), maxiter=100)
+        assert viol < 1e-6 and hi - lo > spread_min
+        b_lo, b_hi = hb.landmark_lo[0, inv[true_j], 0], hb.landmark_hi[0, inv[true_j], 0]
+        assert b_lo - 1e-6 <= lo and hi <= b_hi + 1e-6
+        assert b_hi - b_lo < 1.01 * (hi - lo)
+
+
+def test_graph_estimate_lies_inside_the_cuik_boxes():
+    fractions = []
+    for seed in range(3):
+        ds = simulate_scenario("cuik-room", seed)
+        known = with_true_association(ds)
+        g = solve_dataset(known, "graph", {})
+        c = solve(known, association="reported")
+        e = sets.estimate_inside(c.hypotheses, 0, g.poses_xyt, g.landmarks_xy, g.assoc)
+        fractions += [e["pose_inside_fraction"], e["landmark_inside_fraction"]]
+    assert fractions == [1.0] * 6
+
+
+def test_corridors_run_with_the_hypothesis_cap():
+    ds = simulate_scenario("cuik-corridors", 1)
+    assert len(ds.truth.landmarks_xy) >= 12 and ds.inputs.n_poses - 1 >= 40
+    r = solve(ds.inputs, max_hypotheses=2)
+    assert r.status is Status.TRUNCATED and "cap" in r.message
+    live = r.extra["live_hypotheses_per_step"]
+    assert len(live) == ds.inputs.n_poses and max(live) == 2
+    assert r.extra["hypotheses_dropped_by_cap"] > 0 and len(r.hypotheses) == 2
+    # with the true association every box still contains the truth on the long run
+    k = solve(with_true_association(ds), association="reported")
+    m = sets.set_metrics(k.hypotheses, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark)
+    assert m["soundness"] == 1.0
+
+
+def test_merge_up_to_relabelling_intersects_boxes():
+    from slamcli.solvers.cuik.contractors import Interval as I
+    from slamcli.solvers.cuik.hypotheses import Hypothesis, canonical_key, merge_relabelled
+
+    pose = [I(0, 1), I(0, 1), I(0, 1)]
+    a = Hypothesis(box=[I(x) for x in pose] + [I(0, 2), I(0, 2), I(5, 9), I(5, 9)], assoc=[0, 1, 0],
+                   landmark_type=[0, 1])
+    b = Hypothesis(box=[I(0.5, 1), I(0, 1), I(0, 1)] + [I(6, 8), I(6, 8), I(1, 3), I(1, 3)], assoc=[1, 0, 1],
+                   landmark_type=[1, 0])
+    assert canonical_key(a.assoc) == canonical_key(b.assoc) == (0, 1, 0)
+    kept, merged = merge_relabelled([a, b])
+    assert merged == 1 and len(kept) == 1
+    box = kept[0].box
+    assert (box[0].lb(), box[0].ub()) == (0.5, 1.0)
+    assert (box[3].lb(), box[3].ub()) == (1.0, 2.0)  # a's label 0 ↔ b's label 1
+    assert (box[5].lb(), box[5].ub()) == (6.0, 8.0)
+
+
+def test_without_declared_bounds_cuik_fails_cleanly():
+    ds = simulate_scenario("loop", 0, {"n_steps": 20})
+    r = solve(ds.inputs)
+    assert r.status is Status.FAILED and "noise_bounds" in r.message and r.hypotheses is None
+
+
+def test_files_and_cli_round_trip(tmp_path):
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+    from slamcli.io import dataset_hash, read_dataset, read_result, write_dataset
+
+    ds = simulate_scenario("cuik-room", 4)
+    back = read_dataset(write_dataset(tmp_path / "c.h5", ds))
+    nb, nb2 = ds.inputs.noise_bounds, back.inputs.noise_bounds
+    assert nb2 is not None and nb2.odometry_model == "turn_move"
+    np.testing.assert_array_equal(nb.odometry_half_width, nb2.odometry_half_width)
+    assert (nb.range_half_width, nb.bearing_half_width) == (nb2.range_half_width, nb2.bearing_half_width)
+    np.testing.assert_array_equal(back.inputs.observations.landmark_type, ds.inputs.observations.landmark_type)
+    assert dataset_hash(back) == dataset_hash(ds)
+    assert dataset_hash(dataclasses.replace(ds, inputs=dataclasses.replace(ds.inputs, noise_bounds=None))) != \
+        dataset_hash(ds)
+
+    runner = CliRunner()
+    for args in (["solve", tmp_path / "c.h5", "-m", "cuik", "-o", tmp_path / "r.h5", "--quiet"],
+                 ["evaluate", tmp_path / "r.h5", "-o", tmp_path / "ev", "--quiet"],
+                 ["plot", "boxes", tmp_path / "r.h5", "-o", tmp_path / "b.png"]):
+        res = runner.invoke(app, [str(a) for a in args])
+        assert res.exit_code == 0, res.output
+    r = read_result(tmp_path / "r.h5")
+    direct = solve(ds.inputs)
+    np.testing.assert_array_equal(r.hypotheses.assoc, direct.hypotheses.assoc)
+    np.testing.assert_array_equal(r.hypotheses.pose_lo, direct.hypotheses.pose_lo)
+    np.testing.assert_array_equal(r.hypotheses.landmark_hi, direct.hypotheses.landmark_hi)
+    import json
+
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert m["set_soundness"] == 1.0 and m["set_true_correspondence_survived"] is True
+    assert m["set_n_hypotheses"] == len(direct.hypotheses)
+    assert (tmp_path / "b.png").stat().st_size > 10_000
