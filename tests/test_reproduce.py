@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from slamcli.cli import app
 from slamcli.sweep.reproduce import Reproduction
 
-EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "slamcli" / "experiments"
 
 
 def _table_rows(report: str, section: str) -> dict[str, list[str]]:
@@ -31,19 +31,25 @@ def _table_rows(report: str, section: str) -> dict[str, list[str]]:
 @pytest.fixture(scope="module")
 def quick_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
-    res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(out), "--experiments", str(EXPERIMENTS),
-                                   "--quiet"])
+    # the packaged experiment files (no --experiments): what a wheel install runs
+    res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(out), "--quiet"])
     assert res.exit_code == 0, res.output
+    assert "all sections ok" in res.output
     return out, (out / "REPORT.md").read_text()
 
 
 def test_quick_report_has_every_section_and_figure(quick_report):
     out, report = quick_report
-    for title in ("Fig. 5", "Fig. 6", "Fig. 7", "Fig. 9", "Solver comparison", "Monte-Carlo pose NEES"):
+    for title in ("Fig. 5", "Initialisation study", "Fig. 6", "Fig. 7", "Fig. 9", "ICM as a post-processor",
+                  "Solver comparison", "Monte-Carlo pose NEES"):
         assert f"## {title}" in report
     assert "QUICK MODE" in report and "approximate the paper's setting" in report
-    for fig in re.findall(r"!\[[^\]]*\]\((figures/[^)]+)\)", report):
+    figs = re.findall(r"!\[[^\]]*\]\((figures/[^)]+)\)", report)
+    assert len(figs) >= 10
+    for fig in figs:
         assert (out / fig).stat().st_size > 1000
+        assert (out / fig).with_suffix(".pdf").stat().st_size > 1000  # PDF beside every PNG
+    assert report.count("Section status: **ok**") == 8 and "Every section completed." in report
     assert "0.148" in report and "432.24" in report and "< 35" in report  # the paper's numbers, beside ours
 
 
@@ -62,10 +68,16 @@ def test_quick_report_numbers_come_from_the_runs(quick_report):
 
     fig5 = pd.read_csv(out / "runs" / "fig5-sim1" / "results.csv")
     s0 = fig5[fig5.label == "icm-S0"]
-    if len(s0) and (s0.status == "completed").all():
-        ours = _table_rows(report, "Fig. 5")["final mean landmark error (m, nearest true)"]
-        assert ours[0].startswith("0.148") and float(ours[1]) == pytest.approx(s0["paper_err_mean_m"].iloc[0],
-                                                                               abs=1e-3)
+    assert len(s0) and (s0.status == "completed").all()
+    ours = _table_rows(report, "Fig. 5")["final mean landmark error (m, nearest true)"]
+    assert ours[0].startswith("0.148") and float(ours[1].split("±")[0]) == pytest.approx(
+        s0["paper_err_mean_m"].mean(), abs=1e-3)
+    # the outcome sentence states the same numbers and the verdict they imply
+    init = _table_rows(report, "Fig. 5")["mean landmark error at the initialisation (m, nearest true)"]
+    b, a = float(init[1].split("±")[0]), float(ours[1].split("±")[0])
+    verdict = "ICM (icm-S0) lowers" if a < b else "ICM (icm-S0) does not lower"
+    assert f"{verdict} the mean landmark error of its initialisation" in report
+    assert f"{b:.3f} → {a:.3f} m" in report
 
     nees = _table_rows(report, "Monte-Carlo pose NEES")
     for cells in nees.values():
@@ -84,6 +96,7 @@ def test_missing_solver_is_reported_not_faked(tmp_path):
     text = "\n".join(sec.markdown)
     assert "Not run: `icm`" in text and "not-a-solver" in text and "not produced" in text
     assert not sec.figures and "| max per-iteration map change" not in text
+    assert not sec.ok and any("not run" in p for p in sec.problems)
 
 
 def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_path):
@@ -122,3 +135,94 @@ def test_snapshot_path_without_trace_poses_only_on_last_panel():
                        poses_xyt=poses, landmarks_xy=np.zeros((1, 2)), assoc=np.zeros(0, np.int64), trace=trace)
     assert snapshot_path_xy(res, 0) is None and snapshot_path_xy(res, 1) is None
     np.testing.assert_array_equal(snapshot_path_xy(res, 2), poses[:, :2])
+
+
+def test_failed_section_makes_reproduce_exit_nonzero_with_a_summary(tmp_path):
+    exp_dir = tmp_path / "experiments"
+    exp_dir.mkdir()
+    text = (EXPERIMENTS / "fig9-octagon.toml").read_text().replace('method = "icm"', 'method = "not-a-solver"')
+    (exp_dir / "fig9-octagon.toml").write_text(text)
+    res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(tmp_path / "out"), "--experiments",
+                                   str(exp_dir), "--section", "fig9", "--quiet"])
+    assert res.exit_code == 1
+    assert "1 section(s) failed" in res.output and "fig9" in res.output and "not-a-solver" in res.output
+    report = (tmp_path / "out" / "REPORT.md").read_text()
+    assert "**1 section(s) FAILED**" in report and "Section status: **FAILED**" in report
+    bad = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(tmp_path / "o2"), "--section", "nope"])
+    assert bad.exit_code == 1 and "unknown section" in bad.output
+
+
+def test_packaged_experiments_are_the_default_not_the_cwd(tmp_path, monkeypatch):
+    from slamcli.sweep.reproduce import default_experiments_dir
+
+    (tmp_path / "experiments").mkdir()
+    (tmp_path / "experiments" / "fig5-sim1.toml").write_text("not toml [")
+    monkeypatch.chdir(tmp_path)
+    d = default_experiments_dir()
+    assert d == EXPERIMENTS and (d / "fig5-sim1.toml").read_text() != "not toml ["
+    assert {p.name for p in d.glob("*.toml")} >= {"fig5-sim1.toml", "fig5-mobilesim.toml", "fig6-kinematic.toml",
+                                                   "fig7-sim2.toml", "fig9-octagon.toml", "compare.toml", "nees.toml"}
+    import tomllib
+
+    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    assert "*.toml" in pyproject["tool"]["setuptools"]["package-data"]["slamcli.experiments"]
+
+
+def test_report_cites_nothing_outside_the_repository(quick_report):
+    out, report = quick_report
+    repo = Path(__file__).resolve().parents[1]
+    for bad in ("EVALUATION-METHOD", "/work/", "shared/", "STYLE-ANCHORS"):
+        assert bad not in report
+    for ref in set(re.findall(r"`((?:slamcli|benchmarks|tests)/[^`\s]+)`", report)):
+        assert (repo / ref).exists(), ref
+
+
+def test_figures_reference_lines_panel_letters_log_nees(quick_report, monkeypatch):
+    out, _ = quick_report
+    rep = Reproduction(out, quick=True, workers=1, experiments_dir=EXPERIMENTS, log=lambda s: None)
+    saved = {}
+
+    def keep(self, sec, fig, name):
+        saved[name] = fig
+
+    monkeypatch.setattr(Reproduction, "_save", keep)
+    rep.nees_section()  # finished runs are reused
+    rep.fig5_section()
+    rep.octagon_section()
+    for ax in saved["nees"].axes:
+        assert ax.get_yscale() == "log" and ax.get_title().startswith("(")
+    err_axes = saved["fig5_errors"].axes
+    assert [ax.get_title()[:3] for ax in err_axes][:2] == ["(e)", "(f)"]  # as the paper's Fig. 5e (S = 0), 5f (S = I)
+    for ax in err_axes:
+        assert any(np.allclose(ln.get_ydata(), 0.148) for ln in ax.get_lines())  # the paper's value
+    assert [ax.get_title()[:3] for ax in saved["fig5_maps"].axes] == ["(a)", "(b)"]
+    assert any(np.allclose(ln.get_ydata(), 35.0) for ln in saved["fig9_map_change"].axes[0].get_lines())
+
+
+def _stat(init, final, below, iters=30):
+    return {"init_err": init, "final_err": final, "first_below_1mm": below, "iterations": iters}
+
+
+def test_icm_figure_sentences_flip_with_the_numbers():
+    from slamcli.sweep.reproduce import Section
+
+    def text(stats, **kw):
+        sec = Section("t", "t")
+        Reproduction._icm_checks(sec, stats, list(stats), **kw)
+        return "\n".join(sec.markdown)
+
+    good = {"icm-S0": [_stat(0.5, 0.2, 20), _stat(0.6, 0.25, 22)], "icm-SI": [_stat(0.5, 0.2, 10), _stat(0.6, 0.2, 12)]}
+    bad = {"icm-S0": [_stat(0.3, 0.35, None), _stat(0.3, 0.31, None)], "icm-SI": [_stat(0.3, 0.4, 25), _stat(0.3, 0.4, 28)]}
+    t = text(good, paper_final=0.148)
+    assert "ICM (icm-S0) lowers the mean landmark error of its initialisation in every seed" in t
+    assert "is above the paper's 0.148 m" in t and "icm-SI converges faster than icm-S0" in t
+    t = text(bad, paper_final=0.148)
+    assert "ICM (icm-S0) does not lower the mean landmark error of its initialisation in any seed" in t
+    assert "icm-SI converges faster than icm-S0" in t  # 26.5 < 31 (never reached counts as 31)
+    t = text({"icm-S0": bad["icm-S0"], "icm-SI": bad["icm-S0"]}, paper_final=0.148)
+    assert "Neither icm-SI nor icm-S0 reaches" in t
+    t = text({"icm-S0": [_stat(0.1, 0.12, 3)], "icm-SI": [_stat(0.1, 0.12, 9)]}, paper_final=0.148)
+    assert "is below the paper's 0.148 m" in t and "icm-SI converges slower than icm-S0" in t
+    close = text({"icm-S0": [_stat(0.3, 0.31, 3)]}, paper_final=None, close_rel=0.1)
+    far = text({"icm-S0": [_stat(0.3, 0.5, 3)]}, paper_final=None, close_rel=0.1)
+    assert "ICM converges close to its initialisation" in close and "ICM moves away" in far

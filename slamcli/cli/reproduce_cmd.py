@@ -20,11 +20,17 @@ def reproduce_command(
         int | None, typer.Option("--workers", "-j", help="Parallel workers (default: 1 with --quick, else 2).")
     ] = None,
     experiments: Annotated[
-        Path | None, typer.Option("--experiments", help="Directory of experiment files (default: ./experiments).")
+        Path | None, typer.Option("--experiments", help="Directory of experiment files (default: the files shipped "
+                                                         "in the package, slamcli/experiments; ./experiments only "
+                                                         "when given here).")
+    ] = None,
+    section: Annotated[
+        list[str] | None, typer.Option("--section", help="Run only this report section (repeatable), e.g. fig5.")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress messages.")] = False,
 ) -> None:
-    """Run the paper experiments (Figs. 5, 6, 7, 9, solver comparison, Monte-Carlo NEES) and write REPORT.md."""
+    """Run the paper experiments (Figs. 5, 6, 7, 9, post-processing, solver comparison, Monte-Carlo NEES) and
+    write REPORT.md; exits 1 with a summary when any section fails."""
     with handle_errors():
         from slamcli.sweep.reproduce import reproduce
 
@@ -32,8 +38,12 @@ def reproduce_command(
             fail(f"--workers: must be >= 1, got {workers}")
         check_output(out, folder=True, option="--out")
         con = stderr_console()
-        report = reproduce(
+        if experiments is not None and not experiments.is_dir():
+            fail(f"--experiments: {experiments} is not a directory")
+        result = reproduce(
             out, quick=quick, workers=workers, experiments_dir=experiments,
-            log=(lambda s: None) if quiet else (lambda s: con.print(s, markup=False)),
+            log=(lambda s: None) if quiet else (lambda s: con.print(s, markup=False)), only=section or None,
         )
-        con.print(f"report: {report}", markup=False)
+        con.print(result.summary(), markup=False)
+        if not result.ok:
+            raise typer.Exit(1)

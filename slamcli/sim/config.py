@@ -175,6 +175,9 @@ class RobotConfig:
 
     and switches to the next waypoint within ``waypoint_tol``. The robot executes
     ``u_t + n_t, n_t ~ N(0, diag(actuation_std²))`` through ``g(x, u)`` (``models.motion.ddmr_step``).
+    With acceleration limits (``accel_max`` / ``decel_max`` > 0, a MobileSim/Stage robot base) the executed
+    velocity moves towards ``u_t + n_t`` by at most ``accel·dt`` per step when speeding up and ``decel·dt``
+    when slowing down, from rest at t = 0, so the executed motion lags the command the solvers see.
 
     Attributes
     ----------
@@ -185,6 +188,8 @@ class RobotConfig:
     k_heading : float           heading gain, 1/s.
     waypoint_tol : float        waypoint switching radius, m.
     actuation_std : (σ_v, σ_ω)  actuation noise on the commanded controls (m/s, rad/s).
+    accel_max : (a_v, a_ω)      acceleration limits of the executed velocities (m/s², rad/s²); 0 = none.
+    decel_max : (d_v, d_ω)      deceleration limits (m/s², rad/s²); 0 = none.
     """
 
     start: tuple[float, ...] = ()
@@ -193,12 +198,16 @@ class RobotConfig:
     k_heading: float = 1.5
     waypoint_tol: float = 0.5
     actuation_std: tuple[float, float] = (0.02, 0.02)
+    accel_max: tuple[float, float] = (0.0, 0.0)
+    decel_max: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         _check(len(self.start) in (0, 3), "robot.start must be empty or x,y,theta")
         _check(self.v_max > 0 and self.w_max > 0 and self.k_heading > 0, "robot: v_max, w_max, k_heading must be > 0")
         _check(self.waypoint_tol > 0, "robot.waypoint_tol must be > 0")
         _check(all(s >= 0 for s in self.actuation_std), "robot.actuation_std must be >= 0")
+        _check(len(self.accel_max) == 2 and all(a >= 0 for a in self.accel_max), "robot.accel_max: two values >= 0")
+        _check(len(self.decel_max) == 2 and all(a >= 0 for a in self.decel_max), "robot.decel_max: two values >= 0")
         _check_finite(self)
 
 

@@ -28,6 +28,16 @@ def start_pose(cfg: RobotConfig, waypoints_xy: np.ndarray) -> np.ndarray:
     return np.array([p0[0], p0[1], math.atan2(p1[1] - p0[1], p1[0] - p0[0])])
 
 
+def _ramp(prev: float, target: float, up: float, down: float) -> float:
+    """``prev`` moved towards ``target`` by at most ``up`` when |speed| grows, ``down`` when it shrinks
+    (0 = no limit)."""
+    d = target - prev
+    lim = up if abs(target) > abs(prev) else down
+    if lim > 0.0:
+        d = lim if d > lim else (-lim if d < -lim else d)
+    return prev + d
+
+
 def drive(
     cfg: RobotConfig,
     waypoints_xy: np.ndarray,
@@ -45,6 +55,10 @@ def drive(
         e   = wrap(atan2(w_y − y_t, w_x − x_t) − θ_t)
         u_t = [v_max · max(0, cos e),  clip(k_heading · e, ±w_max)]      (commanded, seen by solvers)
         x_{t+1} = g(x_t, u_t + n_t)                                        (executed, paper 000 §4)
+
+    With ``cfg.accel_max`` / ``cfg.decel_max`` the executed velocity ``ũ_t`` moves from ``ũ_{t-1}`` (rest at
+    t = 0) towards ``u_t + n_t`` by at most ``accel·dt`` (speeding up) or ``decel·dt`` (slowing down) per
+    component, and ``x_{t+1} = g(x_t, ũ_t)``.
 
     ``g`` is the scalar form of :func:`slamcli.models.motion.ddmr_step` (the tests check
     ``ddmr_step(poses[:-1], u_exec, dt) == poses[1:]``).
@@ -66,6 +80,11 @@ def drive(
     reached = [-1] * K
     noise = np.asarray(actuation_noise, float).tolist()
     v_max, w_max, k_h, tol = float(cfg.v_max), float(cfg.w_max), float(cfg.k_heading), float(cfg.waypoint_tol)
+    acc = [float(a) * dt for a in getattr(cfg, "accel_max", (0.0, 0.0))]
+    dec = [float(a) * dt for a in getattr(cfg, "decel_max", (0.0, 0.0))]
+    limited = any(acc) or any(dec)
+    ve_prev = we_prev = 0.0
+    executed: list[tuple[float, float]] = []
     x, y, th = float(x0[0]), float(x0[1]), float(x0[2])
     poses = [(x, y, th)]
     u_cmd: list[tuple[float, float]] = []
@@ -104,10 +123,16 @@ def drive(
             v = v_max * c if c > 0.0 else 0.0
         nv, nw = noise[t]
         ve = v + nv
+        we = w + nw
+        if limited:
+            ve = _ramp(ve_prev, ve, acc[0], dec[0])
+            we = _ramp(we_prev, we, acc[1], dec[1])
+            ve_prev, we_prev = ve, we
+        executed.append((ve, we))
         # g(x, u) = x + dt·[v cos θ, v sin θ, ω]  (heading wrapped)
         x += dt * ve * cos(th)
         y += dt * ve * sin(th)
-        th = wrap(th + dt * (w + nw))
+        th = wrap(th + dt * we)
         if th >= pi:
             th -= two_pi
         u_cmd.append((v, w))
@@ -118,7 +143,7 @@ def drive(
     controls = np.array(u_cmd, float).reshape(T, 2)
     return (
         controls,
-        controls + np.asarray(actuation_noise, float).reshape(T, 2),  # bit-identical to v + n_v in the loop
+        np.array(executed, float).reshape(T, 2),  # u_t + n_t (bit-identical), or its ramped version
         np.array(poses, float).reshape(T + 1, 3),
         np.array(reached, np.int64),
     )

@@ -88,6 +88,44 @@ def _paper_sim(max_range: float, name: str) -> ScenarioConfig:
     )
 
 
+def _paper_sim_mobilesim() -> ScenarioConfig:
+    """``paper-sim1-mobilesim``: ``paper-sim1`` with the robot base, laser and odometry of MobileSim's Pioneer
+    P3-DX model, as documented by its model file — decided from the documentation before ICM was run on it.
+
+    Sources (MobileSim is built on the Player/Stage library and loads its robot models from a Stage include
+    file that "agrees with Aria's parameter files"):
+
+    * MobileSim README (github.com/srmq/MobileSim): "based on the Stage library"; "Laser range sensor (SICK
+      LMS-200) model"; "Robot odometry pose estimation (with cumulative error)".
+    * PioneerRobotModels.world.inc of AMRISim, MobileSim's maintained successor (github.com/reedhedges/AMRISim):
+      base ``pioneer``: ``accel [0.3 0 1.74]``, ``decel [0.6 0 1.74]`` (m/s², rad/s²), ``odom_error [0.0075
+      0.0075 0.0075]`` (m per m, rad per rad; in the default ``random_init`` mode one error is drawn per robot
+      at start-up within that range and added per metre travelled — a constant scale error, not white noise);
+      ``p3dx``: ``max_speed [1.0 0 1.74]``; ``sicklms200``: ``samples 181``, ``fov 180``, ``range_max
+      32.767``, ``noise 0.005`` ("uniform random number ... in [-0.005, 0.005] meters") and
+      ``reading_angle_error 0.0007`` (uniform in [-0.0007, 0.0007] rad).
+    * SICK LMS5xx operating instructions ("the distance-dependent spacing between the measured points is the
+      tangent of the angular resolution × distance"): at 1° a post at 30 m is sampled every 0.52 m, so a
+      0.5 m-wide post gives one return or none — the coarse far returns are kept (181 beams over 180°).
+
+    Mapped onto our simulator: executed velocities ramp with ``accel_max = (0.3, 1.74)`` and ``decel_max =
+    (0.6, 1.74)`` (the command the solvers see is the controller's, the motion lags it); no actuation noise
+    beyond a 1 mm/s, 1 mrad/s floor (Stage executes the ramped command exactly; the floor keeps every
+    solver's motion covariance positive); odometry with the documented constant error at its bound,
+    ``scale_bias = turn_bias = 0.0075`` (one admissible ``random_init`` draw, fixed so runs are comparable)
+    and the small white noise of ``paper-sim1``; laser range σ = 0.005/√3 m and bearing σ = 0.0007/√3 rad
+    (the standard deviations of the documented uniform errors), 32 m range. Not documented and therefore
+    unchanged from ``paper-sim1``: the world (rows of 0.25 m-radius posts), the path, the 0.5 m/s cruise
+    speed and the clutter. ``benchmarks/bench_icm_init.py`` measures each change alone and together.
+    """
+    base = _paper_sim(32.0, "paper-sim1-mobilesim")
+    return apply_overrides(base, {
+        "robot.accel_max": [0.3, 1.74], "robot.decel_max": [0.6, 1.74], "robot.actuation_std": [0.001, 0.001],
+        "odometry.scale_bias": 0.0075, "odometry.turn_bias": 0.0075,
+        "sensor.range_std": 0.005 / 3**0.5, "sensor.bearing_std": 0.0007 / 3**0.5,
+    })
+
+
 def _octagon() -> ScenarioConfig:
     return ScenarioConfig(
         name="octagon",
@@ -160,6 +198,8 @@ SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
     "octagon": (_octagon, "paper 000 §6: 8 cones on a 7.12 m octagon + centre cone + 2 people, 183 s, laser"),
     "cuik-room": (_cuik_room, "paper 004 §6: 30 m room, 2 doors + 2 corridors, 8 turn-and-move legs, bounded noise"),
     "cuik-corridors": (_cuik_corridors, "paper 004 beyond: 40×20 m corridors, 14 typed landmarks, 45 legs, bounded"),
+    "paper-sim1-mobilesim": (_paper_sim_mobilesim, "paper-sim1 with MobileSim's documented Pioneer P3-DX "
+                             "acceleration limits, odometry error and SICK LMS-200 noise"),
 }
 
 

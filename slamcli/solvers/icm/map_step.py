@@ -74,6 +74,18 @@ def label_means(points_xy, labels, n_labels: int):
     return means, cnt
 
 
+def eq17(points_xy, labels):
+    """Eq. (17) alone — the exact conditional mode of m given the matchings and poses: every label's point is
+    the mean of its observations; labels left without observations (their observations were matched
+    elsewhere) are dropped and the rest renumbered in order. Returns ``(labels (N,), landmarks_xy (L', 2))``."""
+    labels = np.asarray(labels, np.int64)
+    n_lab = int(labels.max()) + 1 if labels.size and labels.max() >= 0 else 0
+    means, cnt = label_means(points_xy, labels, n_lab)
+    keep = cnt > 0
+    labels, _ = relabel_compact(labels, keep)
+    return labels, means[keep].reshape(-1, 2)
+
+
 def relabel_compact(labels, keep_mask):
     """Drop labels not in ``keep_mask``, renumber the rest 0.. in their old order. Returns ``(labels, old_of_new)``."""
     old_of_new = np.flatnonzero(keep_mask)

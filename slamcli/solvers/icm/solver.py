@@ -1,7 +1,7 @@
 """ICM-SLAM: SLAM as a Markov random field solved by iterated conditional modes (paper 000, Algorithm 2).
 
 Nodes: the poses x_1..x_T (x_0 known), the matchings c_0..c_T of every observation to a map label, and the map
-m. The Gibbs energy (eq. 5, see :mod:`slamcli.solvers.icm_energy`) is minimised node by node:
+m. The Gibbs energy (eq. 5, see :mod:`slamcli.solvers.icm.energy`) is minimised node by node:
 
 1. **On-line initialisation** (Algorithm 2 step 1, eqs. 9-11): at each time t the matchings come from the
    nearest map point to h⁻¹(g(x_{t-1}, u_{t-1}), z_{t,i}) (a new label when none lies within ϑ), then x_t
@@ -14,20 +14,47 @@ m. The Gibbs energy (eq. 5, see :mod:`slamcli.solvers.icm_energy`) is minimised 
    observations first (one KD-tree query); x_t then moves to the mode of its 3-D conditional (eq. 14, a few
    Gauss-Newton steps with step halving); the map step is eq. (17) + label fusion within ϑ + the ς filter.
 
+Deliberate deviations from the paper (Algorithm 2 as printed), each an option or a documented choice:
+
+* **new label when nothing lies within ϑ** — eqs. (9)-(10) give the nearest existing label; the paper's own
+  text creates labels for objects seen for the first time, and the on-line init does so when no map point
+  lies within ϑ.
+* **up to 10 fusion passes** — the paper's three-step map procedure makes one regrouping pass; regrouping
+  can leave two points closer than ϑ (infeasible under Φ_m), so it is repeated (≤ 10, almost always 1).
+* **eq. (6) where the printed eq. (14) drops a term** — the pose conditional keeps every potential that
+  involves x_t (the motion and odometry terms of step t+1 too), as eq. (6) prescribes.
+* **ς defaults to 1** (paper: 500) — ς counts laser returns per landmark and must be scaled to the data
+  (the paper's 500 fits its laser with many returns per post; a point sensor sees a landmark a few dozen
+  times). The paper experiments in ``slamcli/experiments/`` set ς = 500.
+* **the monotone guard** (``monotone=True``, default) — the map step always applies eq. (17) (the exact
+  conditional mode of m for the current matchings); label fusion and the ς filter are applied only when
+  the energy after them, over the same observations, does not exceed the energy at the start of the sweep.
+  ``monotone=False`` is the paper's unguarded procedure. ``extra["map_step_parts"]`` records, per sweep,
+  which parts ran (``eq17``, ``fusion``, ``filter``, or ``rejected`` when the guard kept the eq.-17 map).
+* **stopping rule** — the paper runs a fixed number of iterations (30 / 100); here the run stops early
+  (status ``converged``) when one sweep lowers the energy by a non-negative relative amount ≤
+  ``energy_rtol``, over the same observations. An energy *increase* (possible with ``monotone=False``)
+  never stops the run; it is counted in ``extra["energy_increases"]``.
+
+Observations of map points removed by the ς filter: ``filtered="rematch"`` (default, the paper's eq. 13)
+matches them again to the nearest remaining map point in the next sweep — they stay in the energy;
+``filtered="drop"`` takes them out of the model for good (fewer terms: the energy falls without any
+optimisation, so energies are compared over the observations in the model at the start of each sweep).
+
 Beyond the paper (separate options, default off):
 
 * ``schedule="parallel"`` — the coding scheme odd poses / even poses: each class is conditionally independent
   given the other, the map and the matchings, so a class is updated at once, vectorised.
 * ``accelerate="joint"`` — every ``accelerate_every`` sweeps, one joint Gauss-Newton step over all poses and the
   map with the current matchings, accepted only if it lowers the same energy (backtracking).
+* ``weights="information"`` — R, S, Q (and K) from the dataset's noise model (inverse covariances,
+  :func:`slamcli.solvers.icm.energy.information_weights`) instead of the design matrices given.
 * ``range_offset`` — added to every range before h⁻¹: a laser measures a post's surface, not its centre; the
   bias of the paper-exact inverse observation pulls map points towards the robot and drags the poses with them
   (``benchmarks/bench_icm_study.py``).
 
-Energy bookkeeping: observations whose label the ς filter removed are out of the model for good (the paper's
-clutter); the map step is the paper's three-step procedure, and with ``monotone=True`` (default) it is kept
-only if the energy after the sweep does not exceed the energy before it (otherwise the previous, feasible map
-stays) — so the recorded energy never increases from sweep to sweep.
+The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
+writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).
 """
 
 from __future__ import annotations
@@ -42,16 +69,17 @@ import numpy as np
 from slamcli.models.angles import wrap_angle
 from slamcli.models.motion import integrate
 from slamcli.models.observation import inverse_range_bearing
-from slamcli.solvers import icm_energy as en
-from slamcli.solvers import icm_map as mp
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
+from slamcli.solvers.icm import energy as en
+from slamcli.solvers.icm import map_step as mp
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
 @dataclasses.dataclass(frozen=True)
 class IcmParams:
-    """Parameters of ICM-SLAM (defaults: paper 000 §5, Simulation 1).
+    """Parameters of ICM-SLAM (defaults: paper 000 §5, Simulation 1, except ς and the deviations listed in the
+    module docstring).
 
     Attributes
     ----------
@@ -63,19 +91,29 @@ class IcmParams:
     min_observations : int       ς: map points seen fewer times are removed (§4; paper: 500 for its laser data
                                  with many returns per landmark per scan — scale it to the data; the simulated
                                  paper-sim1/octagon lasers give 800-3000 returns per landmark, so 500 fits).
-                                 Default 1 keeps every map point.
+                                 Default 1 keeps every map point (a deviation from the paper's 500, see above).
+    filtered : "rematch" | "drop"  observations of removed map points: matched again to the nearest remaining
+                                 point in the next sweep (paper eq. 13, default) or out of the model for good.
     init : "online" | "kinematic"  Algorithm 2 step 1 as written, or poses from g(x, u) only (Fig. 6).
     correspondences : "nearest" | "reported"  nearest-map-point matchings (eqs. 9-13), or fixed labels from the
                                  sensor-reported ids (known correspondences; no fusion, no filter).
     max_sweeps : int             maximum number of ICM iterations N.
-    map_tol : float              stop when the mean map change of an iteration is below this, m.
-    energy_rtol : float          stop when an iteration lowers the energy by less than this fraction.
+    energy_rtol : float          the one stopping rule: stop (``converged``) when a sweep lowers the energy by a
+                                 relative amount in [0, energy_rtol], over the same observations; 0 = never
+                                 stop early (the paper's fixed iteration count).
     pose_iters : int             Gauss-Newton steps per pose conditional in a sweep (eq. 14).
     init_pose_iters : int        Gauss-Newton steps of the on-line init (eq. 11).
     schedule : "sequential" | "parallel"  paper visit order, or odd/even coding scheme (beyond the paper).
     accelerate : "none" | "joint"  occasional joint Gauss-Newton step (beyond the paper).
     accelerate_every : int       sweeps between joint steps.
-    monotone : bool              keep the previous map when the paper's map step would raise the energy.
+    monotone : bool              apply label fusion and the ς filter only when they do not raise the energy
+                                 above the sweep's starting energy (eq. 17 always applies); False = the
+                                 paper's unguarded map step.
+    weights : "design" | "information"  R, S, Q, K as given (paper) or from the dataset's noise model.
+    K : float                    GPS weight k (K = k·I, paper §4); used when the dataset has GPS fixes and
+                                 ``use_gps``; needs an isotropic Q (the GPS fix enters the pose conditional
+                                 as a pseudo-observation). 0 drops the GPS potential.
+    use_gps : bool               include the GPS potential when the dataset has fixes.
     covariance : bool            Laplace marginal covariances at the end (joint Hessian, fixed matchings).
     range_offset : float         beyond the paper (default 0 = paper-exact): added to every measured range before
                                  the inverse observation h⁻¹(x, [r + range_offset, b]), m — the same option as
@@ -99,20 +137,23 @@ class IcmParams:
     init: Literal["online", "kinematic"] = "online"
     correspondences: Literal["nearest", "reported"] = "nearest"
     max_sweeps: int = 100
-    map_tol: float = 1e-4
-    energy_rtol: float = 1e-7
+    energy_rtol: float = 1e-6
     pose_iters: int = 3
     init_pose_iters: int = 5
     schedule: Literal["sequential", "parallel"] = "sequential"
     accelerate: Literal["none", "joint"] = "none"
     accelerate_every: int = 5
     monotone: bool = True
+    filtered: Literal["rematch", "drop"] = "rematch"
+    weights: Literal["design", "information"] = "design"
+    K: float = 1.0
+    use_gps: bool = True
     covariance: bool = False
     range_offset: float = 0.0
     trace_poses_every: int = 1
 
     def __post_init__(self) -> None:
-        en.Weights.from_params(self.R, self.S, self.Q)  # validates lengths and signs
+        en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
         if not (self.fusion_radius >= 0 and math.isfinite(self.fusion_radius)):
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
         if self.min_observations < 0:
@@ -122,16 +163,42 @@ class IcmParams:
                 raise ValueError(
                     f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
                 )
-        if self.map_tol < 0 or self.energy_rtol < 0:
-            raise ValueError("map_tol and energy_rtol must be >= 0")
+        if not (self.energy_rtol >= 0):
+            raise ValueError(f"energy_rtol must be >= 0, got {self.energy_rtol}")
         if not (self.range_offset >= 0 and math.isfinite(self.range_offset)):
             raise ValueError(f"range_offset must be a finite number >= 0, got {self.range_offset}")
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
 
-    @property
-    def weights(self) -> en.Weights:
-        return en.Weights.from_params(self.R, self.S, self.Q)
+    def design_weights(self) -> en.Weights:
+        """R, S, Q, K as given (``weights="design"``)."""
+        return en.Weights.from_params(self.R, self.S, self.Q, self.K)
+
+    def weights_for(self, inputs: SlamInputs) -> en.Weights:
+        """The weights a solve uses: the design matrices, or the dataset's information matrices."""
+        return en.information_weights(inputs) if self.weights == "information" else self.design_weights()
+
+
+def stop_decision(E_before: float, E_after: float, rtol: float) -> str:
+    """The one stopping rule. ``E_before`` / ``E_after``: energies at the start and end of a sweep over the same
+    observations. Returns ``"increase"`` when the energy rose (reported, never a stop), ``"converged"`` when it
+    fell by a relative amount in ``[0, rtol]``, else ``"continue"``."""
+    d = E_before - E_after
+    if d < 0:
+        return "increase"
+    return "converged" if d <= rtol * max(abs(E_before), 1e-300) else "continue"
+
+
+def _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts=None) -> np.ndarray:
+    """``labels`` with every in-model observation labelled ``-1`` matched to its nearest map point (eq. 13), i.e.
+    the matchings the next sweep's c-step starts from for observations whose map point the ς filter removed."""
+    need = in_model & (labels < 0)
+    if not need.any() or landmarks.shape[0] == 0:
+        return labels
+    pts = prob.landmark_points(poses) if pts is None else pts
+    out = labels.copy()
+    out[need] = mp.nearest_labels(pts[need], landmarks, W.Q)
+    return out
 
 
 def reported_labels(reported_id) -> np.ndarray:
@@ -176,6 +243,9 @@ def online_init(
     step_s = np.empty(T + 1)
     U = prob.controls.tolist()
     D = prob.odo_inc.tolist()
+    gps_st = en.gps_step_stats(prob, W)
+    has_gps = np.zeros(T + 1, bool)
+    has_gps[prob.gps_step] = W.K > 0
     for t in range(T + 1):
         t0 = time.perf_counter()
         a, b = int(off[t]), int(off[t + 1])
@@ -210,6 +280,8 @@ def online_init(
         if t > 0 and not kinematic:
             ok = match >= 0
             st = _stats_one(prob.v_body[a:b][ok], msum[match[ok]] / mcnt[match[ok], None])
+            if has_gps[t]:
+                st = tuple(float(u + g) for u, g in zip(st, gps_st[:, t]))
             px, py, pth = poses[t - 1]
             g = (xh[0], xh[1], pth + prob.dt * U[t - 1][1])
             d = D[t - 1]
@@ -269,7 +341,7 @@ def online_init(
 
 
 def _stats_one(v, m):
-    """The 14 sufficient statistics (see :func:`icm_energy.step_stats`) of one step's matched observations."""
+    """The 14 sufficient statistics (see :func:`slamcli.solvers.icm.energy.step_stats`) of one step's matched observations."""
     if v.shape[0] == 0:
         return (0.0,) * 14
     vx, vy, mx, my = v[:, 0], v[:, 1], m[:, 0], m[:, 1]
@@ -307,16 +379,24 @@ class IcmSlam(BaseSolver):
     ) -> SolverResult:
         t_start = time.perf_counter()
         p: IcmParams = self.params
-        W = p.weights
-        prob = en.Problem.from_inputs(inputs, p.range_offset)
+        from slamcli.errors import ConfigError
+
+        try:
+            W = p.weights_for(inputs)
+            prob = en.Problem.from_inputs(inputs, p.range_offset, use_gps=p.use_gps and W.K > 0)
+            if prob.gps_step.size:
+                W.gps_obs_weight()  # the GPS pseudo-observation needs an isotropic Q
+        except ValueError as exc:
+            raise ConfigError(f"icm: {exc}") from None
         T, N = prob.T, prob.n_obs
         reported = p.correspondences == "reported"
         fixed = reported_labels(inputs.observations.reported_id) if reported else None
         if reported and N and not np.any(fixed >= 0):
-            from slamcli.errors import ConfigError
-
             raise ConfigError("icm: correspondences=reported needs sensor-reported ids, the dataset has none")
-        extra: dict = {"schedule": p.schedule, "accelerate": p.accelerate}
+        extra: dict = {"schedule": p.schedule, "accelerate": p.accelerate, "weights": p.weights,
+                       "weights_used": {"R": list(W.R), "S": list(W.S), "Q": list(W.Q), "K": W.K},
+                       "gps_fixes_used": int(prob.gps_step.size), "filtered": p.filtered}
+        rematch = p.filtered == "rematch" and not reported
         timings: dict = {}  # wall-clock numbers: SolverResult.timings, never extra (determinism)
 
         # ---- step 1: initialisation ----------------------------------------------------------------------
@@ -341,7 +421,11 @@ class IcmSlam(BaseSolver):
                 labels, landmarks, _ = mp.map_update(pts, labels, p.fusion_radius, p.min_observations)
             else:
                 landmarks = self._means_keep(prob, poses, labels, landmarks)
-        out_model = labels < 0  # observations outside the model (filtered / unlabelled); stays so
+        # observations in the model: all of them (eq. 13 re-matches the filtered ones), or — filtered="drop" —
+        # those with a label after the initialisation (reported: those with a sensor id)
+        in_model = np.ones(N, bool) if rematch else labels >= 0
+        if rematch:
+            labels = _fill_nearest(prob, poses, labels, landmarks, W, in_model)
         E = en.energy(prob, W, poses, landmarks, labels)
         objective, changes, times, lms = [E], [0.0], [time.perf_counter() - t0], [landmarks.copy()]
         every = p.trace_poses_every
@@ -350,46 +434,61 @@ class IcmSlam(BaseSolver):
 
         # ---- step 2: ICM sweeps ----------------------------------------------------------------------------
         status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
-        rejected = 0
+        parts_log: list[str] = []
+        rejected = increases = 0
         joint_accepted = 0
+        joint_errors: list[str] = []
         for n in range(1, p.max_sweeps + 1):
             t0 = time.perf_counter()
             E_start = E
             prev_landmarks = landmarks
-            # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i})
+            # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i}), every observation in the model
             if not reported and landmarks.shape[0]:
                 pts = prob.landmark_points(poses)
-                act = ~out_model
                 labels = labels.copy()
-                labels[act] = mp.nearest_labels(pts[act], landmarks, W.Q, labels[act])
+                labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
             if p.accelerate == "joint" and n % p.accelerate_every == 0:
-                poses, landmarks, _, ok = en.joint_gn_step(prob, W, poses, landmarks, labels)
+                poses, landmarks, _, ok, err = en.joint_gn_step(prob, W, poses, landmarks, labels)
                 joint_accepted += int(ok)
+                if err:
+                    joint_errors.append(f"sweep {n}: {err}")
             # x_1..x_T (eq. 14)
-            stats = en.step_stats(prob, labels, landmarks)
+            stats = en.step_stats(prob, labels, landmarks, W)
             poses = poses.copy()
             if p.schedule == "parallel":
                 en.sweep_poses_parallel(prob, W, poses, stats, p.pose_iters)
             else:
                 en.sweep_poses_sequential(prob, W, poses, stats, p.pose_iters)
-            # m (eq. 15): three-step map update + ς filter
+            # m (eq. 15): eq. (17) always; label fusion within ϑ and the ς filter (guarded when monotone)
             pts = prob.landmark_points(poses)
-            E_pose = en.chain_energy(prob, W, poses)
+            E_pose = en.chain_energy(prob, W, poses) + en.gps_energy(prob, W, poses)
             if reported:
-                new_landmarks = self._means_keep(prob, poses, labels, landmarks)
-                new_labels = labels
+                landmarks = self._means_keep(prob, poses, labels, landmarks)
+                parts = "eq17"
             else:
-                new_labels, new_landmarks, _ = mp.map_update(pts, labels, p.fusion_radius, p.min_observations)
-            E_new = E_pose + en.observation_energy(pts, new_labels, new_landmarks, W.Q)
-            accepted = True
-            if p.monotone and not reported and E_new > E_start:
-                accepted = False
-                rejected += 1
-                E_new = E_pose + en.observation_energy(pts, labels, landmarks, W.Q)
+                labels, landmarks = mp.eq17(pts, labels)
+                parts = "eq17"
+                cand_labels, cand_lm, info = mp.map_update(pts, labels, p.fusion_radius, p.min_observations)
+                if info["fused"] or info["removed"]:
+                    what = "+".join(k for k, f in (("fusion", info["fused"]), ("filter", info["removed"])) if f)
+                    E_cand = E_pose + en.observation_energy(
+                        pts, _fill_nearest(prob, poses, cand_labels, cand_lm, W, in_model, pts), cand_lm, W.Q)
+                    if p.monotone and E_cand > E_start:
+                        rejected += 1
+                        parts = f"eq17 ({what} rejected)"
+                    else:
+                        labels, landmarks = cand_labels, cand_lm
+                        parts = f"eq17+{what}"
+            # the energy over the observations in the model at the start of this sweep (the stopping rule's
+            # comparison), then the model of the next sweep
+            lab_same = _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
+            E_same = E_pose + en.observation_energy(pts, lab_same, landmarks, W.Q)
+            if rematch:
+                labels = lab_same
             else:
-                labels, landmarks = new_labels, new_landmarks
-                out_model = labels < 0
-            E = E_new
+                in_model = labels >= 0
+            E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q)
+            parts_log.append(parts)
             change = mp.map_change(prev_landmarks, landmarks)
             objective.append(E)
             changes.append(change)
@@ -400,11 +499,10 @@ class IcmSlam(BaseSolver):
                 pose_snaps.append(poses.copy())
             if progress is not None:
                 progress(n, p.max_sweeps)
-            rel = (E_start - E) / max(abs(E_start), 1e-300)
-            if accepted and (change < p.map_tol or rel < p.energy_rtol):
-                status = Status.CONVERGED
-                break
-            if not accepted and rel < p.energy_rtol:
+            decision = stop_decision(E_start, E_same, p.energy_rtol)
+            if decision == "increase":
+                increases += 1
+            elif decision == "converged":
                 status = Status.CONVERGED
                 break
 
@@ -412,10 +510,14 @@ class IcmSlam(BaseSolver):
         extra.update(
             sweeps=len(objective) - 1,
             map_steps_rejected=rejected,
+            map_step_parts=parts_log,
+            energy_increases=increases,
             joint_steps_accepted=joint_accepted,
             n_out_of_model=int((labels < 0).sum()),
             **{f"energy_{k}": v for k, v in en.energy_terms(prob, W, poses, landmarks, labels).items()},
         )
+        if joint_errors:
+            extra["joint_step_errors"] = joint_errors[:10]
         pose_cov = lm_cov = None
         if p.covariance and landmarks.shape[0] + T > 0:
             pose_cov, lm_cov = en.laplace_covariances(prob, W, poses, landmarks, labels)
@@ -432,7 +534,9 @@ class IcmSlam(BaseSolver):
             landmarks_xy=landmarks,
             assoc=labels,
             t_start=t_start,
-            message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}",
+            message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}"
+            + (f"; energy rose in {increases} sweep(s)" if increases else "")
+            + (f"; joint step failed: {joint_errors[0]}" if joint_errors else ""),
             pose_cov=pose_cov,
             landmark_cov=lm_cov,
             trace=trace,
