@@ -76,7 +76,7 @@ def build(inputs):
     from slamcli.models import motion
     from slamcli.solvers import frontend, graph
 
-    params = graph.GraphParams()
+    params = graph.GraphParams(edge_info=False)  # the NoiseSpec σ's, as the GTSAM graph below (not the per-edge model)
     assoc, _ = frontend.compact_labels(frontend.associate_reported(inputs.observations), 1)
     n_lm = int(assoc.max()) + 1
     poses0 = graph.odometry_initial_poses(inputs)

@@ -122,6 +122,42 @@ class Observations:
 
 
 @dataclass(frozen=True)
+class PoseConstraints:
+    """Per-edge constraints with their own information matrices (``/inputs/constraints`` in the schema).
+
+    Pose graphs (g2o ``EDGE_SE2`` loop closures), lossless graph imports and, later, multi-robot encounters
+    carry one information matrix per edge instead of one σ per quantity. Every field is optional (None or
+    zero rows when absent).
+
+    Attributes
+    ----------
+    between_ij : ndarray (B, 2) int64       pose indices ``(i, j)`` of each pose-pose constraint (any two poses;
+                                            the odometry chain ``t → t+1`` is *not* repeated here).
+    between_xyt : ndarray (B, 3)            measured pose of ``j`` in ``i``'s body frame ``[dx, dy, dθ]``
+                                            (g2o / GTSAM ``BetweenFactorPose2``: ``e = Log(d⁻¹ ⊕ x_i⁻¹ ⊕ x_j)``).
+    between_info : ndarray (B, 3, 3)        information ``Λ = Σ⁻¹`` of ``e`` (symmetric positive definite).
+    odometry_info : ndarray (T, 3, 3) | None  information of each odometry increment (replaces
+                                            ``NoiseSpec.odometry_std`` for the graph solver).
+    observation_info : ndarray (N, 2, 2) | None  information of each observation row, in the model named by
+                                            ``observation_model``.
+    observation_model : "range_bearing" | "xy"  ``range_bearing``: residual ``[r̂ − r, b̂ − b]``; ``xy``: the
+                                            Cartesian offset ``z = [r cos b, r sin b]`` in the body frame,
+                                            residual ``R(θ)ᵀ(m − p) − z`` (g2o ``EDGE_SE2_XY``).
+    """
+
+    between_ij: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    between_xyt: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    between_info: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    odometry_info: np.ndarray | None = None
+    observation_info: np.ndarray | None = None
+    observation_model: str = "range_bearing"
+
+    @property
+    def n_between(self) -> int:
+        return int(np.asarray(self.between_ij).reshape(-1, 2).shape[0])
+
+
+@dataclass(frozen=True)
 class NoiseBounds:
     """Guaranteed error bounds (set-membership data): every error lies in ``[-h, +h]`` of its half-width ``h``.
 
@@ -161,6 +197,10 @@ class SlamInputs:
     gps_step : ndarray (G,) int64    optional GPS fixes: pose index ...
     gps_xy : ndarray (G, 2)          ... and position, m.
     gps_std : float                  σ of a GPS fix, m.
+    constraints : PoseConstraints | None  per-edge information and pose-pose (loop-closure) constraints.
+    reported_id_source : str         where ``observations.reported_id`` comes from: ``"sensor"`` (a real sensor
+                                     that can misread an id, e.g. MRCLAM's barcodes), ``"file"`` (a graph
+                                     file's data association), ``"unknown"`` (default; the simulator's ids).
     noise_bounds : NoiseBounds | None  guaranteed error bounds (bounded-noise datasets only).
     """
 
@@ -175,12 +215,41 @@ class SlamInputs:
     gps_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     gps_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     gps_std: float = 0.0
+    constraints: PoseConstraints | None = None
+    reported_id_source: str = "unknown"
     noise_bounds: NoiseBounds | None = None
 
     @property
     def n_poses(self) -> int:
         """T+1."""
         return int(self.odometry_xyt.shape[0])
+
+
+@dataclass(frozen=True)
+class OccupancyGrid:
+    """A 2-D occupancy grid (paper 001): cell ``(row, col)`` covers
+    ``[x0 + col·res, x0 + (col+1)·res) × [y0 + row·res, y0 + (row+1)·res)``.
+
+    Attributes
+    ----------
+    origin_xy : ndarray (2,)                lower-left corner of cell (0, 0), m (world).
+    resolution : float                      cell side, m.
+    prob : ndarray (H, W) float32           occupancy probability of every cell (truth: 0/1).
+    observed : ndarray (H, W) int32 | None  how many steps updated each cell (0 = never observed).
+    snapshot_step : ndarray (K,) int64 | None   steps after which ``snapshots`` were taken ...
+    snapshots : ndarray (K, H, W) float32 | None ... the probabilities at those steps.
+    """
+
+    origin_xy: np.ndarray
+    resolution: float
+    prob: np.ndarray
+    observed: np.ndarray | None = None
+    snapshot_step: np.ndarray | None = None
+    snapshots: np.ndarray | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.prob.shape[0]), int(self.prob.shape[1]))
 
 
 @dataclass(frozen=True)
@@ -192,11 +261,17 @@ class GroundTruth:
     poses_xyt : ndarray (T+1, 3)       true poses.
     landmarks_xy : ndarray (L, 2)      true landmark positions.
     obs_landmark : ndarray (N,) int64  true landmark index of each observation row; -1 for clutter.
+    occupancy : OccupancyGrid | None   wall worlds: the true grid (walls rasterised, prob 0/1).
+    walls_xyxy : ndarray (W, 4) | None wall worlds: wall segments ``[x1, y1, x2, y2]``, m.
+    lap_end_step : ndarray (K,) int64 | None  wall worlds: step at which each lap of the route ended.
     """
 
     poses_xyt: np.ndarray
     landmarks_xy: np.ndarray
     obs_landmark: np.ndarray
+    occupancy: OccupancyGrid | None = None
+    walls_xyxy: np.ndarray | None = None
+    lap_end_step: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -320,6 +395,8 @@ class SolverResult:
                                        key says (e.g. ICM ``init_s``, ``s_per_sweep``). Together with
                                        ``wall_time_s`` and ``trace.time_s`` these are the only
                                        non-deterministic numbers of a result (docs/schema.md "Timings").
+    grids : dict[str, OccupancyGrid]   occupancy maps by name (``hybrid``: "frequentist", "logodds");
+                                       written as the optional ``/grids`` group.
     """
 
     solver: str
@@ -338,6 +415,7 @@ class SolverResult:
     extra: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     hypotheses: BoxHypotheses | None = None
+    grids: dict[str, OccupancyGrid] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

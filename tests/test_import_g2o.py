@@ -154,8 +154,11 @@ def test_noise_free_graph_is_recovered_exactly(tmp_path):
         ("EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", "toy.g2o:1: matrix is not positive definite"),
         ("# only a comment\nVERTEX_SE2 0 0 0 0\n", "no odometry edges"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 0 2 1 0 0 1 0 0 1 0 1\n",
-         "toy.g2o:2: pose 0 has a second odometry edge (to 2)"),
-        ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 0 1 0 0 1 0 0 1 0 1\n", "do not form one chain"),
+         "toy.g2o: no edge from pose 1 to pose 2 (the next pose id): the odometry chain is broken"),
+        ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 1 1 0 0 1 0 0 1 0 1\n", "toy.g2o:2: edge from pose 1 to itself"),
+        ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nBR 1 5 0.1 2 0 0.1\n", "toy.g2o:2: BR needs σ_bearing > 0"),
+        ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nBR 1 5 0.1 2 0.1 0.1\nEDGE_SE2_XY 0 5 1 0 1 0 1\n",
+         "mixes Cartesian (EDGE_SE2_XY/LANDMARK) and bearing-range (BR) sightings"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2_XY 7 9 1 0 1 0 1\n",
          "toy.g2o:2: landmark observation from pose 7, which is not on the odometry chain"),
     ],
@@ -181,7 +184,7 @@ def test_cli_import_g2o_solve_and_evaluate_says_no_truth(tmp_path):
     data = tmp_path / "vp.h5"
     res = runner.invoke(app, ["import", "g2o", str(VP), "-o", str(data)])
     assert res.exit_code == 0, res.output
-    assert "250 poses, 24 landmarks, 165 observations" in res.stdout
+    assert "250 poses, 0 loop closures, 24 landmarks, 165 observations" in res.stdout
     ds = read_dataset(data)
     assert ds.truth is None
     np.testing.assert_array_equal(ds.inputs.odometry_xyt, import_graph(VP).inputs.odometry_xyt)

@@ -29,7 +29,9 @@ def _problem(inputs):
     n_lm = int(assoc.max()) + 1
     p0 = graph.odometry_initial_poses(inputs)
     lm0 = frontend.landmarks_from_observations(p0, inputs.observations, assoc, n_lm)
-    return graph.build_gtsam_problem(inputs, assoc, p0, lm0, graph.GraphParams()), assoc
+    # edge_info=False: the bearing-range model with the NoiseSpec σ's that the GTSAM graph below is built with
+    # (the lossless import would otherwise use the file's per-edge Cartesian sighting model)
+    return graph.build_gtsam_problem(inputs, assoc, p0, lm0, graph.GraphParams(edge_info=False)), assoc
 
 
 @pytest.fixture(scope="module")

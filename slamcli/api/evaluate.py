@@ -194,6 +194,10 @@ def evaluate_files(result_path: str | os.PathLike, data_path: str | os.PathLike 
         raise SlamcliError(f"{result_path} vs {data_path}: {exc}") from None
     files = {"result_path": str(result_path), "dataset_path": str(data_path),
              "dataset_hash": result.dataset_hash, "wall_time_s": float(result.wall_time_s)}
+    if result.grids and dataset.truth.occupancy is not None:  # occupancy maps (paper 001)
+        from slamcli.metrics.occupancy import occupancy_scalars
+
+        files.update(occupancy_scalars(result.grids, dataset.truth.occupancy, dataset.truth.lap_end_step))
     if out_dir is not None:
         write_evaluation(ev, out_dir, files)
     scalars = _json_clean({**ev.scalars, **files})

@@ -28,6 +28,11 @@ _ROWS = [
     ("pose NEES (time mean, E = 3)", "pose_nees_mean", ""),
     ("landmark NEES (mean, E = 2)", "landmark_nees_mean", ""),
     ("iterations in trace", "n_iterations", ""),
+    # occupancy grids (paper 001): over the cells the frequentist map observed
+    ("grid cells observed", "grid_frequentist_n_observed", ""),
+    ("map error per cell: frequentist / log-odds", ("grid_frequentist_mean_abs_error", "grid_logodds_mean_abs_error"), ""),
+    ("total map error: frequentist / log-odds", ("grid_frequentist_total_abs_error", "grid_logodds_total_abs_error"), ""),
+    ("cell accuracy at 0.5: frequentist / log-odds", ("grid_frequentist_accuracy", "grid_logodds_accuracy"), ""),
     ("set: soundness (true hypothesis)", "set_soundness", "frac"),
     ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct"), ""),
     ("set: true correspondence survived", "set_true_correspondence_survived", ""),

@@ -133,8 +133,8 @@ def import_g2o_command(
     path: Annotated[
         Path,
         typer.Argument(
-            help="Landmark graph file: g2o (EDGE_SE2/EDGE_SE2_XY) or GTSAM text "
-            "(ODOMETRY/LANDMARK), e.g. dlr.g2o or victoria_park.txt."
+            help="Pose or landmark graph file: g2o (EDGE_SE2/EDGE_SE2_XY), TORO (EDGE2/LANDMARK2) or GTSAM "
+            "text (ODOMETRY/LANDMARK/BR), e.g. dlr.g2o, intel.g2o or victoria_park.txt."
         ),
     ],
     dt: Annotated[float, typer.Option(help="Nominal sampling period, s (a graph has no time).")] = 1.0,
@@ -152,13 +152,18 @@ def import_g2o_command(
         float | None,
         typer.Option(help="σ_b to store, rad (default: median of the propagated landmark covariances)."),
     ] = None,
+    max_poses: Annotated[
+        int | None,
+        typer.Option("--max-poses", help="Keep only the first N poses (ascending ids) and the edges among them."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
     ] = None,
 ) -> None:
-    """Import a landmark pose graph: the odometry chain, landmark sightings as range-bearing rows with the
-    file's landmark ids as reported ids, median noise. No ground truth (solvers run; evaluate cannot)."""
+    """Import a pose graph or landmark graph losslessly: the odometry chain, loop closures as between-factors,
+    landmark sightings as range-bearing rows with the file's landmark ids as reported ids, every edge's
+    information matrix. No ground truth (solvers run; evaluate cannot)."""
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
@@ -166,14 +171,17 @@ def import_g2o_command(
         from slamcli.datasets.g2o import import_graph
         from slamcli.io import write_dataset
 
-        ds = import_graph(path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std)
+        ds = import_graph(
+            path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std, max_poses=max_poses
+        )
         write_dataset(out, ds)
         if quiet:
             return
         inp, md = ds.inputs, ds.metadata
         n = inp.noise
         stdout_console().print(
-            f"{path.name}: {inp.n_poses} poses, {md['n_landmarks']} landmarks, {len(inp.observations)} observations, "
+            f"{path.name}: {inp.n_poses} poses, {md['n_loop_closures']} loop closures, {md['n_landmarks']} "
+            f"landmarks, {len(inp.observations)} observations, "
             f"forward axis {md['forward_axis']}; median σ odometry {[round(float(s), 5) for s in n.odometry_std]}, "
             f"range {n.range_std:.4g} m, bearing {n.bearing_std:.4g} rad; no ground truth → {out}",
             highlight=False,

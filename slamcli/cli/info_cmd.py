@@ -70,6 +70,14 @@ def dataset_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str
     rows.append(("noise σ", (f"motion {np.round(n.motion_std, 6).tolist()}, odometry {np.round(n.odometry_std, 6).tolist()}, "
                             f"range {n.range_std:g} m, bearing {n.bearing_std:g} rad")))
     rows.append(("GPS", f"{len(inp.gps_step)} fixes, σ {inp.gps_std:g} m" if len(inp.gps_step) else "none"))
+    c = inp.constraints
+    if c is not None:
+        per_edge = [n for n, a in (("odometry", c.odometry_info), (f"observations ({c.observation_model})",
+                                                                   c.observation_info)) if a is not None]
+        rows.append(("constraints", f"{c.n_between} loop closures (pose-pose between-factors); per-edge "
+                                    f"information: {', '.join(per_edge) or 'none'}"))
+    if tr is not None and tr.occupancy is not None:
+        rows.append(("true grid", _grid_text(tr.occupancy)))
     rows.append(("content hash", dataset_hash(ds)[:23] + "…"))
     params = hdr.get("scenario_params_json")
     if not isinstance(params, dict):
@@ -102,11 +110,31 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
     if res.trace is not None and len(res.trace):
         obj = res.trace.objective
         rows.append(("objective first → last", f"{obj[0]:.6g} → {obj[-1]:.6g}"))
+    for name, g in res.grids.items():
+        rows.append((f"grid {name}", _grid_text(g)))
     if res.extra.get("used_truth_association"):
         rows.append(("association", "ORACLE (true association given to the solver)"))
-    extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path",)}
+    outliers = res.extra.get("chi2_outliers")
+    if isinstance(outliers, dict) and outliers:
+        rows.append(("χ² outliers 95/99 %", "; ".join(
+            f"{name} {d.get('over_95')}/{d.get('over_99')} of {d.get('factors')}" for name, d in outliers.items()
+            if isinstance(d, dict))))
+    extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path", "chi2_outliers")}
     params = _flatten({"params": res.params, "extra": extra})
     return rows, params
+
+
+def _grid_text(g) -> str:
+    """One line about an occupancy grid: shape, resolution, origin, observed cells, snapshots."""
+    H, W = g.shape
+    txt = f"{H}x{W} cells at {g.resolution:g} m, origin ({g.origin_xy[0]:g}, {g.origin_xy[1]:g}) m"
+    if g.observed is not None:
+        txt += f", {int((g.observed > 0).sum())} observed"
+    else:
+        txt += f", {int((g.prob > 0.5).sum())} occupied"
+    if g.snapshots is not None:
+        txt += f", {len(g.snapshots)} snapshots"
+    return txt
 
 
 @app.command("info")

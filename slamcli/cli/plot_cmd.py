@@ -85,6 +85,11 @@ def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.e
 
     # real recordings and imported graphs have no ground truth: then estimate and odometry only
     res, ds, data_path = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
+    if res.grids:  # occupancy map under the trajectory (paper 001 subfigures (c)/(d))
+        from slamcli.plots.grids import draw_grid
+
+        name = "frequentist" if "frequentist" in res.grids else next(iter(res.grids))
+        draw_grid(ax, res.grids[name], label=f"occupancy ({name})")
     draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every,
              title=title or f"{res.solver}: {Path(result_path).name}")
     if ds.truth is None:

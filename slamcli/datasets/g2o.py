@@ -1,46 +1,63 @@
-"""Landmark pose-graph files (g2o ``EDGE_SE2``/``EDGE_SE2_XY`` and GTSAM ``ODOMETRY``/``LANDMARK``) → slamcli.
+"""Pose-graph and landmark-graph files (g2o, GTSAM text, TORO) → slamcli, losslessly.
 
-Two public benchmarks are distributed this way: the DLR-Spatial-Cognition landmark graph (``dlr.g2o``) and
-GTSAM's ``victoria_park.txt``. A graph file carries the *measurements* of a run, with no time and usually no
-ground truth, so the import gives solver inputs only (``has_truth = false``): every solver runs on it;
-``evaluate`` needs ground truth and says so.
+Public benchmarks distributed this way: the DLR-Spatial-Cognition landmark graph (``dlr.g2o``), GTSAM's
+``victoria_park.txt`` and the pose-graph benchmarks with loop closures (Intel, MIT, CSAIL, Manhattan M3500,
+City10000, KITTI 00; ``shared/datasets/pose_graphs``). A graph file carries the *measurements* of a run, with
+no time and usually no ground truth, so the import gives solver inputs only (``has_truth = false``): every
+solver runs on it; ``evaluate`` needs ground truth and says so.
 
 Lines understood (anything else is an error naming the line; ``#`` comments and blank lines are skipped):
 
 ===========================================  ===================================================================
 ``VERTEX_SE2 id x y θ`` / ``VERTEX2``        initial pose guess; only the first pose's is used (as ``x0``)
 ``VERTEX_XY id x y``                         initial landmark guess (not used: solvers initialise themselves)
-``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22      odometry increment, pose i's frame; 3×3 *information*,
-I23 I33``                                    upper triangle row by row (g2o order)
+``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22      relative pose of j in i's frame; 3×3 *information*, upper
+I23 I33``                                    triangle row by row (g2o order)
+``EDGE2 i j dx dy dθ I_ff I_fs I_ss I_rr     the same in TORO's order (forward f, sideways s, rotation r):
+I_fr I_sr``                                  ``[[ff, fs, fr], [fs, ss, sr], [fr, sr, rr]]`` (as GTSAM's TORO
+                                             noise format)
 ``ODOMETRY i j dx dy dθ C11 C12 C13 C22      the same with a 3×3 *covariance* (GTSAM's "COV" layout, the one
 C23 C33``                                    its loader detects for victoria_park.txt)
 ``EDGE_SE2_XY i l dx dy I11 I12 I22``        landmark l seen from pose i at (dx, dy) in pose i's frame;
                                              2×2 information
+``LANDMARK2 i l dx dy I11 I12 I22``          the same (older tag, read as EDGE_SE2_XY)
 ``LANDMARK i l dx dy C11 C12 C22``           the same with a 2×2 covariance (GTSAM)
+``BR i l b r σ_b σ_r``                       GTSAM bearing-range sighting: bearing (rad), range (m) and their σ
 ===========================================  ===================================================================
 
 Conversion
 ----------
-* **Pose order** – the odometry edges must form one chain ``p_0 → p_1 → … → p_T`` (each pose at most one
-  outgoing and one incoming edge, no loop-closure edges); pose ``p_k`` becomes step ``k``.
+* **Pose order** – pose ids are the ids used by pose-pose edges, in ascending order; pose ``p_k`` becomes step
+  ``k``. The first edge (file order) from ``p_k`` to ``p_{k+1}`` is the odometry of step ``k`` (every public
+  benchmark numbers its poses along the trajectory); a missing one is an error naming the pair.
+* **Loop closures** – every other pose-pose edge (any two poses, either direction, duplicates too) becomes a
+  between-factor of ``inputs.constraints`` (``/inputs/constraints`` in the schema) with its own measurement
+  and information matrix. ``max_poses = N`` keeps the first N poses and the edges and sightings among them.
 * **Body axes** – slamcli's body frame has x forward (bearing 0 straight ahead). Some files drive along
   another axis (``dlr.g2o`` along −y). With ``forward = "auto"`` the axis with the largest summed odometry
   translation (with its sign) is taken as forward; the body frame is rotated by φ (0, ±π/2, π) so that it
-  points forward: increments become ``(R(−φ)·[dx, dy], dθ)``, landmark offsets ``R(−φ)·[dx, dy]``, poses
-  ``θ + φ`` (an SE(2) change of body frame, exact).
+  points forward: increments and between measurements become ``(R(−φ)·[dx, dy], dθ)``, landmark offsets
+  ``R(−φ)·[dx, dy]``, poses ``θ + φ``, information matrices ``R₃ Λ R₃ᵀ`` with ``R₃ = blkdiag(R(−φ), 1)``
+  (the SE(2) error transforms as ``e' = R₃ e``, so every factor's cost is unchanged: exact).
 * **Odometry** – ``odometry_xyt`` chains the converted increments from ``x0`` (the first pose's vertex,
   converted, or the origin); ``controls = [d_x/dt, d_θ/dt]`` per step (the DDMR model has no lateral
   velocity, so d_y is only in the odometry). ``dt`` is nominal (default 1 s): a graph carries no time.
 * **Observations** – ``range = ‖[dx, dy]‖``, ``bearing = atan2(dy, dx)`` in the converted body frame;
   ``reported_id`` = landmark index (landmark ids in ascending order), because the file's data association
   is part of the data. Rows keep the file order within a step.
-* **Noise** – schema v1 keeps one σ per quantity, so the per-edge matrices are summarised by their median:
-  ``odometry_std`` = median √diag of the increment covariances (converted axes), ``motion_std`` =
-  ``[σ_x, σ_θ]/dt``, range/bearing σ = median of the first-order polar propagation
-  ``J P Jᵀ, J = [[x/r, y/r], [−y/r², x/r²]]`` of each landmark covariance P. The spread is in the metadata.
-  (GTSAM's own loader reads a ``LANDMARK`` covariance ``c·I`` differently: σ_r = √c, σ_b = √(c/10), i.e.
-  "the covariance describes the uncertainty at 10 m"; for victoria_park.txt that is 0.63 m and 0.2 rad, against
-  our 0.63 m and a median 0.05 rad. Pass ``range_std``/``bearing_std`` to choose other values.)
+* **Noise, lossless** – every edge keeps its information matrix in ``inputs.constraints``: odometry
+  ``odometry_info (T, 3, 3)``, sightings ``observation_info (N, 2, 2)`` in the file's own model (``xy`` for
+  EDGE_SE2_XY / LANDMARK / LANDMARK2: residual ``R(θ)ᵀ(m − p) − z``; ``range_bearing`` for BR). The ``graph``
+  solver uses them (``edge_info = true``, default), so its cost is the file's cost. A file mixing xy and BR
+  sightings is refused (one model per file).
+* **Noise, summary** – for solvers that take one σ per quantity (schema v1 ``NoiseSpec``) the per-edge
+  matrices are also summarised by their median: ``odometry_std`` = median √diag of the increment
+  covariances (converted axes), ``motion_std`` = ``[σ_x, σ_θ]/dt``, range/bearing σ = median of the
+  first-order polar propagation ``J P Jᵀ, J = [[x/r, y/r], [−y/r², x/r²]]`` of each landmark covariance P
+  (BR: the median σ's). The spread is in the metadata. (GTSAM's own loader reads a ``LANDMARK`` covariance
+  ``c·I`` differently: σ_r = √c, σ_b = √(c/10), i.e. "the covariance describes the uncertainty at 10 m"; for
+  victoria_park.txt that is 0.63 m and 0.2 rad, against our 0.63 m and a median 0.05 rad. Pass
+  ``range_std``/``bearing_std`` to choose other values.)
 """
 
 from __future__ import annotations
@@ -54,7 +71,7 @@ import numpy as np
 from slamcli.datasets import DatasetImportError
 from slamcli.models.angles import wrap_angle
 from slamcli.models.motion import chain_increments
-from slamcli.types import Dataset, NoiseSpec, Observations, SlamInputs
+from slamcli.types import Dataset, NoiseSpec, Observations, PoseConstraints, SlamInputs
 
 #: number of numeric fields after the tag, per supported tag
 _FIELDS = {
@@ -62,10 +79,14 @@ _FIELDS = {
     "VERTEX2": 4,
     "VERTEX_XY": 3,
     "EDGE_SE2": 11,
+    "EDGE2": 11,
     "ODOMETRY": 11,
     "EDGE_SE2_XY": 7,
+    "LANDMARK2": 7,
     "LANDMARK": 7,
+    "BR": 6,
 }
+_POSE_EDGES = ("EDGE_SE2", "EDGE2", "ODOMETRY")
 _FORWARD_ANGLE = {"x": 0.0, "y": math.pi / 2, "-x": math.pi, "-y": -math.pi / 2}
 
 
@@ -73,6 +94,12 @@ def _sym3(v) -> np.ndarray:
     """Upper triangle ``[a11 a12 a13 a22 a23 a33]`` → symmetric 3×3."""
     a11, a12, a13, a22, a23, a33 = v
     return np.array([[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]], float)
+
+
+def _sym3_toro(v) -> np.ndarray:
+    """TORO order ``[ff fs ss rr fr sr]`` → symmetric 3×3 over ``(f, s, r)``."""
+    ff, fs, ss, rr, fr, sr = v
+    return np.array([[ff, fs, fr], [fs, ss, sr], [fr, sr, rr]], float)
 
 
 def _sym2(v) -> np.ndarray:
@@ -86,23 +113,26 @@ def _rot(phi: float) -> np.ndarray:
 
 
 def read_graph(path: str | Path) -> dict:
-    """Parse a graph file into plain lists (ids as ints, matrices as covariances in the file's axes).
+    """Parse a graph file into plain lists (ids as ints, matrices in the file's axes).
 
     Returns
     -------
-    dict with ``vertices`` {id: (x, y, θ)}, ``odometry`` [(i, j, d (3,), cov (3,3), line)],
-    ``landmark_obs`` [(i, l, xy (2,), cov (2,2), line)], ``n_landmark_vertices``.
+    dict with ``vertices`` {id: (x, y, θ)}, ``pose_edges`` [(i, j, d (3,), cov (3,3), info (3,3), line)],
+    ``sightings`` [(i, l, z (2,), cov (2,2), info (2,2), line, model)] with ``model`` ``"xy"`` (z = offset
+    (dx, dy), matrices over (x, y)) or ``"range_bearing"`` (z = (range, bearing), matrices over (r, b)),
+    ``n_landmark_vertices``; and the short forms ``odometry`` [(i, j, d, cov, line)] (all pose-pose edges)
+    and ``landmark_obs`` [(i, l, z, cov, line)].
 
     Raises
     ------
     DatasetImportError  missing file, unknown tag, wrong field count, non-numeric/non-finite value, non-integer
-        id, or a matrix that is not positive definite (names the line).
+        id, a matrix that is not positive definite, a BR σ ≤ 0 (names the line).
     """
     path = Path(path)
     if not path.is_file():
         raise DatasetImportError(f"{path}: file not found")
     vertices: dict[int, tuple[float, float, float]] = {}
-    odometry: list = []
+    pose_edges: list = []
     landmark_obs: list = []
     n_lm_vertices = 0
     with open(path, encoding="utf-8", errors="replace") as fh:
@@ -134,18 +164,34 @@ def read_graph(path: str | Path) -> dict:
                 vertices[ids[0]] = tuple(vals[1:4])
             elif tag == "VERTEX_XY":
                 n_lm_vertices += 1
-            elif tag in ("EDGE_SE2", "ODOMETRY"):
-                m = _sym3(vals[5:11])
-                cov = _invert_pd(m, where) if tag == "EDGE_SE2" else _check_pd(m, where)
-                odometry.append((ids[0], ids[1], np.array(vals[2:5]), cov, lineno))
-            else:  # EDGE_SE2_XY / LANDMARK
+            elif tag in _POSE_EDGES:
+                if ids[0] == ids[1]:
+                    raise DatasetImportError(f"{where}: edge from pose {ids[0]} to itself")
+                m = _sym3_toro(vals[5:11]) if tag == "EDGE2" else _sym3(vals[5:11])
+                _check_pd(m, where)
+                cov, info = (m, np.linalg.inv(m)) if tag == "ODOMETRY" else (np.linalg.inv(m), m)
+                pose_edges.append((ids[0], ids[1], np.array(vals[2:5]), cov, info, lineno))
+            elif tag == "BR":
+                b, r, sb, sr = vals[2:6]
+                if not (sb > 0 and sr > 0):
+                    raise DatasetImportError(f"{where}: BR needs σ_bearing > 0 and σ_range > 0")
+                if not r > 0:
+                    raise DatasetImportError(f"{where}: BR range must be > 0, got {r}")
+                cov = np.diag([sr * sr, sb * sb])
+                landmark_obs.append(
+                    (ids[0], ids[1], np.array([r, b]), cov, np.linalg.inv(cov), lineno, "range_bearing")
+                )
+            else:  # EDGE_SE2_XY / LANDMARK2 / LANDMARK
                 m = _sym2(vals[4:7])
-                cov = _invert_pd(m, where) if tag == "EDGE_SE2_XY" else _check_pd(m, where)
-                landmark_obs.append((ids[0], ids[1], np.array(vals[2:4]), cov, lineno))
+                _check_pd(m, where)
+                cov, info = (m, np.linalg.inv(m)) if tag == "LANDMARK" else (np.linalg.inv(m), m)
+                landmark_obs.append((ids[0], ids[1], np.array(vals[2:4]), cov, info, lineno, "xy"))
     return {
         "vertices": vertices,
-        "odometry": odometry,
-        "landmark_obs": landmark_obs,
+        "pose_edges": pose_edges,
+        "sightings": landmark_obs,
+        "odometry": [(e[0], e[1], e[2], e[3], e[5]) for e in pose_edges],
+        "landmark_obs": [(o[0], o[1], o[2], o[3], o[5]) for o in landmark_obs],
         "n_landmark_vertices": n_lm_vertices,
     }
 
@@ -164,40 +210,21 @@ def _check_pd(m: np.ndarray, where: str) -> np.ndarray:
     return m
 
 
-def _invert_pd(m: np.ndarray, where: str) -> np.ndarray:
-    return np.linalg.inv(_check_pd(m, where))
-
-
-def _chain(odometry: list, path: Path) -> list:
-    """Order the odometry edges into one chain; returns the edges in order."""
-    by_src: dict[int, tuple] = {}
-    dst_seen: set[int] = set()
-    for e in odometry:
-        i, j, *_, line = e
-        if i in by_src:
+def _split_chain(pose_edges: list, pose_ids: list[int], path: Path) -> tuple[list, list]:
+    """The odometry edge ``p_k → p_{k+1}`` of every step (first in file order) and all other edges."""
+    first: dict[tuple[int, int], int] = {}
+    for n, e in enumerate(pose_edges):
+        first.setdefault((e[0], e[1]), n)
+    chain_idx = []
+    for a, b in zip(pose_ids[:-1], pose_ids[1:]):
+        n = first.get((a, b))
+        if n is None:
             raise DatasetImportError(
-                f"{path}:{line}: pose {i} has a second odometry edge (to {j}); only one "
-                "odometry chain is supported, no loop-closure edges"
+                f"{path}: no edge from pose {a} to pose {b} (the next pose id): the odometry chain is broken"
             )
-        if j in dst_seen:
-            raise DatasetImportError(f"{path}:{line}: pose {j} is reached by a second odometry edge")
-        by_src[i] = e
-        dst_seen.add(j)
-    starts = [i for i in by_src if i not in dst_seen]
-    if len(starts) != 1:
-        raise DatasetImportError(
-            f"{path}: the odometry edges do not form one chain ({len(starts)} start poses)"
-        )
-    chain, cur = [], starts[0]
-    while cur in by_src:
-        e = by_src[cur]
-        chain.append(e)
-        cur = e[1]
-    if len(chain) != len(odometry):
-        raise DatasetImportError(
-            f"{path}: the odometry edges do not form one chain (a cycle or a second piece)"
-        )
-    return chain
+        chain_idx.append(n)
+    used = set(chain_idx)
+    return [pose_edges[n] for n in chain_idx], [e for n, e in enumerate(pose_edges) if n not in used]
 
 
 def import_graph(
@@ -207,20 +234,22 @@ def import_graph(
     forward: Literal["auto", "x", "y", "-x", "-y"] = "auto",
     range_std: float | None = None,
     bearing_std: float | None = None,
+    max_poses: int | None = None,
 ) -> Dataset:
-    """Import a landmark pose-graph file as a slamcli :class:`Dataset` without ground truth.
+    """Import a pose-graph or landmark-graph file as a slamcli :class:`Dataset` without ground truth.
 
     Parameters
     ----------
-    path : the ``.g2o`` / GTSAM text file.
+    path : the ``.g2o`` / GTSAM / TORO text file.
     dt : nominal sampling period, s (> 0); controls are increments / dt.
     forward : which axis of the file's body frame points forward (see the module docstring).
-    range_std, bearing_std : σ to store instead of the medians of the propagated landmark covariances.
+    range_std, bearing_std : σ to store in the NoiseSpec instead of the medians of the sightings.
+    max_poses : keep only the first N poses (ascending ids) and the edges/sightings among them (≥ 2).
 
     Raises
     ------
-    DatasetImportError  see :func:`read_graph`; also no odometry edges, edges that are not one chain,
-        a landmark observation from a pose that is not on the chain, bad ``dt``/``forward``.
+    DatasetImportError  see :func:`read_graph`; also no pose-pose edges, a broken odometry chain, a landmark
+        observation from a pose that is not on the chain, xy and BR sightings mixed, bad arguments.
     """
     path = Path(path)
     if not (math.isfinite(dt) and dt > 0):
@@ -230,12 +259,20 @@ def import_graph(
     for name, v in (("--range-std", range_std), ("--bearing-std", bearing_std)):
         if v is not None and not (math.isfinite(v) and v >= 0):
             raise DatasetImportError(f"{name}: must be a finite number >= 0, got {v}")
+    if max_poses is not None and max_poses < 2:
+        raise DatasetImportError(f"--max-poses: must be >= 2, got {max_poses}")
     g = read_graph(path)
-    if not g["odometry"]:
-        raise DatasetImportError(f"{path}: no odometry edges (EDGE_SE2 or ODOMETRY)")
-    chain = _chain(g["odometry"], path)
-    pose_ids = [chain[0][0]] + [e[1] for e in chain]
+    edges = g["pose_edges"]
+    if not edges:
+        raise DatasetImportError(f"{path}: no odometry edges (EDGE_SE2, EDGE2 or ODOMETRY)")
+    pose_ids = sorted({e[0] for e in edges} | {e[1] for e in edges})
+    n_poses_file = len(pose_ids)
+    if max_poses is not None and max_poses < len(pose_ids):
+        pose_ids = pose_ids[:max_poses]
+        keep = set(pose_ids)
+        edges = [e for e in edges if e[0] in keep and e[1] in keep]
     step_of = {pid: k for k, pid in enumerate(pose_ids)}
+    chain, others = _split_chain(edges, pose_ids, path)
     T = len(chain)
 
     d_file = np.array([e[2] for e in chain])  # (T, 3) in the file's body axes
@@ -248,47 +285,81 @@ def import_graph(
     R3 = np.eye(3)
     R3[:2, :2] = R
 
-    inc = np.column_stack([d_file[:, :2] @ R.T, d_file[:, 2]])
-    cov_inc = np.array([R3 @ e[3] @ R3.T for e in chain])
+    def to_body(d):  # (n, 3) relative poses in file axes → slamcli body axes
+        d = np.asarray(d, float).reshape(-1, 3)
+        return np.column_stack([d[:, :2] @ R.T, d[:, 2]])
+
+    def info_to_body(m):  # (n, 3, 3): Λ' = R₃ Λ R₃ᵀ
+        return np.einsum("ij,njk,lk->nil", R3, np.asarray(m, float).reshape(-1, 3, 3), R3)
+
+    inc = to_body(d_file)
+    cov_inc = info_to_body([e[3] for e in chain])
+    info_inc = info_to_body([e[4] for e in chain])
     v0 = g["vertices"].get(pose_ids[0])
     x0 = np.array([v0[0], v0[1], wrap_angle(v0[2] + phi)]) if v0 is not None else np.zeros(3)
     odometry_xyt = chain_increments(x0, inc)
     odometry_xyt[:, 2] = wrap_angle(odometry_xyt[:, 2])
     controls = np.column_stack([inc[:, 0], inc[:, 2]]) / dt
 
+    # --- loop closures / other pose-pose edges ----------------------------------------------------------------
+    between_ij = np.array([[step_of[e[0]], step_of[e[1]]] for e in others], np.int64).reshape(-1, 2)
+    between_xyt = to_body([e[2] for e in others])
+    between_info = info_to_body([e[4] for e in others])
+
     # --- landmark observations --------------------------------------------------------------------------------
-    obs_rows = g["landmark_obs"]
-    for i, _l, _xy, _c, line in obs_rows:
+    obs_rows = g["sightings"]
+    if max_poses is not None:
+        obs_rows = [r for r in obs_rows if r[0] in step_of]
+    for i, _l, _z, _c, _m, line, _k in obs_rows:
         if i not in step_of:
             raise DatasetImportError(
                 f"{path}:{line}: landmark observation from pose {i}, which is not on the odometry chain"
             )
+    models = sorted({r[6] for r in obs_rows})
+    if len(models) > 1:
+        raise DatasetImportError(
+            f"{path}: the file mixes Cartesian (EDGE_SE2_XY/LANDMARK) and bearing-range (BR) sightings; "
+            "one sighting model per file is supported"
+        )
+    obs_model = models[0] if models else "xy"
     lm_ids = sorted({r[1] for r in obs_rows})
     lm_index = {lid: k for k, lid in enumerate(lm_ids)}
     if obs_rows:
         step = np.array([step_of[r[0]] for r in obs_rows], np.int64)
-        xy = np.array([r[2] for r in obs_rows]) @ R.T
-        cov = np.einsum("ij,njk,lk->nil", R, np.array([r[3] for r in obs_rows]), R)
+        z_file = np.array([r[2] for r in obs_rows])
+        if obs_model == "xy":
+            xy = z_file @ R.T
+        else:  # (range, bearing) → offset, rotated with the body frame; range unchanged, bearing − φ
+            xy = (z_file[:, 0:1] * np.column_stack([np.cos(z_file[:, 1]), np.sin(z_file[:, 1])])) @ R.T
+        cov = np.array([r[3] for r in obs_rows])
+        info = np.array([r[4] for r in obs_rows])
+        if obs_model == "xy":  # matrices over (x, y) rotate with the frame; over (r, b) they do not
+            cov = np.einsum("ij,njk,lk->nil", R, cov, R)
+            info = np.einsum("ij,njk,lk->nil", R, info, R)
         rid = np.array([lm_index[r[1]] for r in obs_rows], np.int64)
         order = np.argsort(step, kind="stable")
-        step, xy, cov, rid = step[order], xy[order], cov[order], rid[order]
+        step, xy, cov, info, rid = step[order], xy[order], cov[order], info[order], rid[order]
         rng = np.hypot(xy[:, 0], xy[:, 1])
         if np.any(rng == 0):
             raise DatasetImportError(f"{path}: a landmark observation at zero distance has no bearing")
         brg = wrap_angle(np.arctan2(xy[:, 1], xy[:, 0]))
-        # polar propagation J P Jᵀ, J = [[x/r, y/r], [−y/r², x/r²]]
-        J = np.stack(
-            [
-                np.column_stack([xy[:, 0] / rng, xy[:, 1] / rng]),
-                np.column_stack([-xy[:, 1] / rng**2, xy[:, 0] / rng**2]),
-            ],
-            axis=1,
-        )
-        P = np.einsum("nij,njk,nlk->nil", J, cov, J)
+        if obs_model == "xy":
+            # polar propagation J P Jᵀ, J = [[x/r, y/r], [−y/r², x/r²]]
+            J = np.stack(
+                [
+                    np.column_stack([xy[:, 0] / rng, xy[:, 1] / rng]),
+                    np.column_stack([-xy[:, 1] / rng**2, xy[:, 0] / rng**2]),
+                ],
+                axis=1,
+            )
+            P = np.einsum("nij,njk,nlk->nil", J, cov, J)
+        else:
+            P = cov
         sr, sb = np.sqrt(P[:, 0, 0]), np.sqrt(P[:, 1, 1])
     else:
         step = rid = np.zeros(0, np.int64)
         rng = brg = sr = sb = np.zeros(0)
+        info = np.zeros((0, 2, 2))
     obs = Observations.from_rows(step, np.column_stack([rng, brg]), T + 1, reported_id=rid)
 
     s_inc = np.sqrt(np.diagonal(cov_inc, axis1=1, axis2=2))  # (T, 3)
@@ -303,6 +374,14 @@ def import_graph(
         if len(sb)
         else 0.0,
     )
+    constraints = PoseConstraints(
+        between_ij=between_ij,
+        between_xyt=between_xyt,
+        between_info=between_info,
+        odometry_info=info_inc,
+        observation_info=info,
+        observation_model=obs_model,
+    )
     inputs = SlamInputs(
         dt=float(dt),
         timestamps=dt * np.arange(T + 1),
@@ -311,6 +390,8 @@ def import_graph(
         odometry_xyt=odometry_xyt,
         observations=obs,
         noise=noise,
+        constraints=constraints,
+        reported_id_source="file",
     )
 
     def spread(a):
@@ -320,11 +401,18 @@ def import_graph(
         "scenario": f"graph:{path.name}",
         "source_file": str(path.resolve()),
         "importer": "slamcli.datasets.g2o",
-        "scenario_params": {"dt": float(dt), "forward": forward, "format": "g2o/gtsam landmark graph"},
-        "sensor": {"type": "landmark offsets from a graph file", "reports_ids": True},
+        "scenario_params": {
+            "dt": float(dt),
+            "forward": forward,
+            "format": "g2o/gtsam/toro graph",
+            "max_poses": max_poses,
+        },
+        "sensor": {"type": "landmark sightings from a graph file", "reports_ids": True, "model": obs_model},
         "forward_axis": forward,
         "n_poses": T + 1,
+        "n_poses_in_file": n_poses_file,
         "n_landmarks": len(lm_ids),
+        "n_loop_closures": int(between_ij.shape[0]),
         "landmark_ids": [int(x) for x in lm_ids],
         "pose_ids_first_last": [int(pose_ids[0]), int(pose_ids[-1])],
         "noise_spread_min_median_max": {

@@ -443,6 +443,7 @@ def import_mrclam(
         observations=obs,
         noise=noise,
         max_range=float(max_range),
+        reported_id_source="sensor",  # barcodes read by a camera: can be misread (graph's robust=auto)
     )
     # truth association = the barcode's landmark, unless the row contradicts the motion capture (misread)
     true_lm = lm_index.copy()

@@ -13,6 +13,9 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
                            range_half_width () bearing_half_width ()
         observations/landmark_type (N,)   (only when the sensor reports type labels)
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
+        constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
+                           between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
+                           [observation_info (N,2,2) @model]
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
 """
@@ -38,7 +41,15 @@ from slamcli.io.schema import (
     utc_now,
     write_array,
 )
-from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, SlamInputs
+from slamcli.types import (
+    Dataset,
+    GroundTruth,
+    NoiseBounds,
+    NoiseSpec,
+    Observations,
+    PoseConstraints,
+    SlamInputs,
+)
 
 #: metadata keys promoted to their own root attributes (dicts as ``<key>_json``, see
 #: :func:`promoted_sections`); everything in ``Dataset.metadata`` also round-trips through ``@metadata_json``.
@@ -127,6 +138,8 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                     doc="landmark id reported by the sensor itself, -1 = none (N,)")
         write_array(go, "offsets", np.asarray(obs.offsets, np.int64), units="-", frame="-",
                     doc="CSR row offsets per pose (T+2,)")
+        if inp.reported_id_source != "unknown":
+            go["reported_id"].attrs["source"] = str(inp.reported_id_source)
 
         if obs.landmark_type is not None:
             write_array(go, "landmark_type", np.asarray(obs.landmark_type, np.int64), units="-", frame="-",
@@ -152,6 +165,9 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
             write_array(g, "gps_std", np.float64(inp.gps_std), units="m", frame="world",
                         doc="sigma of one GPS fix")
 
+        if inp.constraints is not None:
+            _write_constraints(g, inp.constraints)
+
         if dataset.truth is not None:
             tr = dataset.truth
             gt = f.create_group("truth")
@@ -162,9 +178,84 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
                         units="m", frame="world", doc="true landmark positions (L,2)")
             write_array(gt, "obs_landmark", np.asarray(tr.obs_landmark, np.int64), units="-", frame="-",
                         doc="true landmark index of each observation row, -1 = clutter (N,)")
+            _write_truth_walls(gt, tr)
     return final
 
 
+OBSERVATION_MODELS = ("range_bearing", "xy")
+REPORTED_ID_SOURCES = ("sensor", "file", "unknown")
+
+
+def _write_constraints(g, c: PoseConstraints) -> None:
+    """``/inputs/constraints``: pose-pose constraints and per-edge information matrices (all optional)."""
+    gc = g.create_group("constraints")
+    gc.attrs["doc"] = ("per-edge constraints with their own information matrices (slamcli.types.PoseConstraints): "
+                       "pose-pose between-factors (loop closures, any two poses) and per-edge information")
+    ij = np.asarray(c.between_ij, np.int64).reshape(-1, 2)
+    write_array(gc, "between_i", ij[:, 0].copy(), units="-", frame="-", doc="first pose index i (B,)")
+    write_array(gc, "between_j", ij[:, 1].copy(), units="-", frame="-", doc="second pose index j (B,)")
+    write_array(gc, "between_xyt", np.asarray(c.between_xyt, np.float64).reshape(-1, 3), units="m,m,rad",
+                frame="body", doc="measured pose of j in the body frame of i [dx, dy, dtheta] (B,3)")
+    write_array(gc, "between_info", np.asarray(c.between_info, np.float64).reshape(-1, 3, 3), units="1/m2,1/m2,1/rad2",
+                frame="body", doc="information (inverse covariance) of the SE(2) log error of each constraint (B,3,3)")
+    if c.odometry_info is not None:
+        write_array(gc, "odometry_info", np.asarray(c.odometry_info, np.float64).reshape(-1, 3, 3),
+                    units="1/m2,1/m2,1/rad2", frame="body",
+                    doc="information of each odometry increment t -> t+1 (T,3,3)")
+    if c.observation_info is not None:
+        write_array(gc, "observation_info", np.asarray(c.observation_info, np.float64).reshape(-1, 2, 2),
+                    units="per model", frame="body",
+                    doc="information of each observation row in the model named by @model (N,2,2)")
+        gc["observation_info"].attrs["model"] = str(c.observation_model)
+
+
+def _read_info(r: Reader, name: str, arr: np.ndarray) -> None:
+    """Every matrix of ``arr (n, k, k)`` must be symmetric positive definite."""
+    if not arr.shape[0]:
+        return
+    asym = np.abs(arr - np.swapaxes(arr, 1, 2)).max(axis=(1, 2)) > 1e-9 * np.maximum(1.0, np.abs(arr).max(axis=(1, 2)))
+    if asym.any():
+        raise r.fail(name, f"matrix {int(np.argmax(asym))} is not symmetric")
+    low = np.linalg.eigvalsh(arr)[:, 0]
+    if (low <= 0).any():
+        k = int(np.argmax(low <= 0))
+        raise r.fail(name, f"matrix {k} is not positive definite (smallest eigenvalue {low[k]:.3g})")
+
+
+def _read_constraints(r: Reader, n_poses: int, n_obs: int) -> PoseConstraints | None:
+    g = "inputs/constraints"
+    if not r.has(g):
+        return None
+    r.group(g)
+    bi = r.array(f"{g}/between_i", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    B = bi.shape[0]
+    bj = r.array(f"{g}/between_j", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len(f"{g}/between_j", bj, B, f"len({g}/between_i)")
+    xyt = r.array(f"{g}/between_xyt", dtype="f", shape=(None, 3))
+    r.expect_len(f"{g}/between_xyt", xyt, B, f"len({g}/between_i)")
+    info = r.array(f"{g}/between_info", dtype="f", shape=(None, 3, 3))
+    r.expect_len(f"{g}/between_info", info, B, f"len({g}/between_i)")
+    _check_index_range(r, f"{g}/between_i", bi, 0, n_poses - 1)
+    _check_index_range(r, f"{g}/between_j", bj, 0, n_poses - 1)
+    if B and (bi == bj).any():
+        raise r.fail(f"{g}/between_j", f"constraint {int(np.argmax(bi == bj))} links a pose to itself")
+    _read_info(r, f"{g}/between_info", info)
+    odo_info = None
+    if r.has(f"{g}/odometry_info"):
+        odo_info = r.array(f"{g}/odometry_info", dtype="f", shape=(None, 3, 3))
+        r.expect_len(f"{g}/odometry_info", odo_info, n_poses - 1, "T = len(timestamps) - 1")
+        _read_info(r, f"{g}/odometry_info", odo_info)
+    obs_info, model = None, "range_bearing"
+    if r.has(f"{g}/observation_info"):
+        obs_info = r.array(f"{g}/observation_info", dtype="f", shape=(None, 2, 2))
+        r.expect_len(f"{g}/observation_info", obs_info, n_obs, "number of observations")
+        _read_info(r, f"{g}/observation_info", obs_info)
+        model = r.f[f"{g}/observation_info"].attrs.get("model", "")
+        model = model.decode() if isinstance(model, bytes) else str(model)
+        if model not in OBSERVATION_MODELS:
+            raise r.fail(f"{g}/observation_info", f"@model must be one of {OBSERVATION_MODELS}, got {model!r}")
+    return PoseConstraints(between_ij=np.stack([bi, bj], axis=1), between_xyt=xyt, between_info=info,
+                           odometry_info=odo_info, observation_info=obs_info, observation_model=model)
 def _write_bounds(g, nb: NoiseBounds) -> None:
     gb = g.create_group("noise_bounds")
     gb.attrs["doc"] = "guaranteed error half-widths (slamcli.types.NoiseBounds): |error| <= bound"
@@ -254,6 +345,13 @@ def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
     gps = r.declared_shape("inputs/gps_step")
     if gps is not None and len(gps) == 1:
         expect.append(("inputs/gps_xy", gps[0], "len(gps_step)"))
+    gc = "inputs/constraints"
+    bi = r.declared_shape(f"{gc}/between_i")
+    if bi is not None and len(bi) == 1:
+        expect += [(f"{gc}/{n}", bi[0], f"len({gc}/between_i)") for n in ("between_j", "between_xyt", "between_info")]
+    expect.append((f"{gc}/odometry_info", n_poses - 1, "T = len(timestamps) - 1"))
+    if step is not None and len(step) == 1:
+        expect.append((f"{gc}/observation_info", step[0], "number of observations"))
     for name, n, what in expect:
         shp = r.declared_shape(name)
         if shp is not None and len(shp) >= 1 and shp[0] != n:
@@ -321,8 +419,19 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
         gps_step=gps_step,
         gps_xy=gps_xy,
         gps_std=gps_std,
+        constraints=_read_constraints(r, n_poses, len(observations)),
+        reported_id_source=_reported_id_source(r),
         noise_bounds=_read_bounds(r),
     )
+
+
+def _reported_id_source(r: Reader) -> str:
+    """``@source`` of ``inputs/observations/reported_id`` (``sensor`` / ``file``), ``unknown`` when absent."""
+    v = r.f["inputs/observations/reported_id"].attrs.get("source", "unknown")
+    v = v.decode() if isinstance(v, bytes) else str(v)
+    if v not in REPORTED_ID_SOURCES:
+        raise r.fail("inputs/observations/reported_id@source", f"must be one of {REPORTED_ID_SOURCES}, got {v!r}")
+    return v
 
 
 def _check_index_range(r: Reader, name: str, idx: np.ndarray, lo: int, hi: int) -> None:
@@ -401,7 +510,33 @@ def _read_truth(r: Reader, inputs: SlamInputs) -> GroundTruth:
     obs_lm = r.array("truth/obs_landmark", dtype="i", shape=(None,)).astype(np.int64, copy=False)
     r.expect_len("truth/obs_landmark", obs_lm, len(inputs.observations), "number of observations")
     _check_index_range(r, "truth/obs_landmark", obs_lm, -1, lms.shape[0] - 1)
-    return GroundTruth(poses_xyt=poses, landmarks_xy=lms, obs_landmark=obs_lm)
+    occupancy, walls_xyxy, lap_end = _read_truth_walls(r)
+    return GroundTruth(poses_xyt=poses, landmarks_xy=lms, obs_landmark=obs_lm, occupancy=occupancy,
+                       walls_xyxy=walls_xyxy, lap_end_step=lap_end)
+
+
+def _write_truth_walls(gt, tr: GroundTruth) -> None:
+    """Optional wall-world truth (paper 001): ``occupancy/`` grid group, ``walls_xyxy``, ``lap_end_step``."""
+    from slamcli.io.grid import write_grid
+
+    if tr.occupancy is not None:
+        write_grid(gt, "occupancy", tr.occupancy)
+    if tr.walls_xyxy is not None:
+        write_array(gt, "walls_xyxy", np.asarray(tr.walls_xyxy, np.float64).reshape(-1, 4), units="m",
+                    frame="world", doc="wall segments [x1, y1, x2, y2] (W,4)")
+    if tr.lap_end_step is not None:
+        write_array(gt, "lap_end_step", np.asarray(tr.lap_end_step, np.int64), units="-", frame="-",
+                    doc="step at which each lap of the route ended (K,)")
+
+
+def _read_truth_walls(r: Reader):
+    from slamcli.io.grid import read_grid
+
+    occ = read_grid(r, "truth/occupancy") if r.has("truth/occupancy") else None
+    walls = r.array("truth/walls_xyxy", dtype="f", shape=(None, 4)) if r.has("truth/walls_xyxy") else None
+    laps = (r.array("truth/lap_end_step", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+            if r.has("truth/lap_end_step") else None)
+    return occ, walls, laps
 
 
 def read_header(path: str | os.PathLike) -> dict[str, Any]:
@@ -470,6 +605,18 @@ def dataset_hash(dataset: Dataset) -> str:
     _feed(h, "gps_step", inp.gps_step, np.int64)
     _feed(h, "gps_xy", np.asarray(inp.gps_xy, np.float64).reshape(-1, 2), np.float64)
     _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
+    if inp.reported_id_source != "unknown":  # fed only when set, so older hashes are unchanged
+        h.update(f"reported_id_source|{inp.reported_id_source}|".encode())
+    c = inp.constraints
+    if c is not None:  # fed only when present, so the hash of a dataset without constraints is unchanged
+        _feed(h, "constraints.between_ij", np.asarray(c.between_ij, np.int64).reshape(-1, 2), np.int64)
+        _feed(h, "constraints.between_xyt", np.asarray(c.between_xyt, np.float64).reshape(-1, 3), np.float64)
+        _feed(h, "constraints.between_info", np.asarray(c.between_info, np.float64).reshape(-1, 3, 3), np.float64)
+        if c.odometry_info is not None:
+            _feed(h, "constraints.odometry_info", c.odometry_info, np.float64)
+        if c.observation_info is not None:
+            _feed(h, "constraints.observation_info", c.observation_info, np.float64)
+            h.update(f"constraints.observation_model|{c.observation_model}|".encode())
     if obs.landmark_type is not None:  # fed only when present: hashes of older datasets are unchanged
         _feed(h, "obs.landmark_type", obs.landmark_type, np.int64)
     if inp.noise_bounds is not None:

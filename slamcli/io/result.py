@@ -97,6 +97,12 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
                         frame="-", doc="iteration k owns rows offsets[k]:offsets[k+1] (K+1,)")
             if tr.poses_xyt is not None:
                 _write_trace_poses(g, tr)
+        if result.grids:  # optional occupancy maps (paper 001 hybrid solver), see slamcli/io/grid.py
+            from slamcli.io.grid import write_grid
+
+            gg = f.create_group("grids")
+            for name, grid in result.grids.items():
+                write_grid(gg, name, grid)
         if result.hypotheses is not None:
             _write_hypotheses(f, result.hypotheses)
     return final
@@ -215,6 +221,11 @@ def read_result(path: str | os.PathLike) -> SolverResult:
             landmark_cov = r.array("landmark_cov", dtype="f", shape=(None, 2, 2), finite=finite)
             r.expect_len("landmark_cov", landmark_cov, L, "len(landmarks_xy)")
         trace = _read_trace(r, finite) if r.has("trace") else None
+        grids = {}
+        if r.has("grids"):
+            from slamcli.io.grid import read_grid
+
+            grids = {name: read_grid(r, f"grids/{name}") for name in r.group("grids")}
         hypotheses = _read_hypotheses(r, poses.shape[0], assoc.shape[0]) if r.has("hypotheses") else None
     return SolverResult(
         solver=solver,
@@ -231,6 +242,7 @@ def read_result(path: str | os.PathLike) -> SolverResult:
         wall_time_s=wall,
         dataset_hash=dataset_hash,
         extra=extra,
+        grids=grids,
         timings={str(k): float(v) for k, v in timings.items()},
         hypotheses=hypotheses,
     )

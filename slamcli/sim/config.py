@@ -382,6 +382,62 @@ class BoundedConfig:
 
 
 @dataclass(frozen=True)
+class WallsConfig:
+    """Wall world and ray-casting scan of paper 001 §III (off unless ``layout`` is set; see ``sim.walls``).
+
+    With ``layout = "ladder"`` the world is an outer ``width × height`` rectangle holding
+    ``block_rows × block_cols`` blocks separated by corridors of width ``corridor``; the robot follows the
+    corridor centre lines; the sensor (``sensor.*``: range/bearing σ, max range, beams, field of view) gives
+    (1) range-bearing observations of the features with their identity (sensor index 0) and (2) a ray-cast
+    scan of ``sensor.n_beams`` beams against the walls (sensor index 1, max-range readings kept).
+
+    Attributes
+    ----------
+    layout : "none" | "ladder"
+    width, height : float       outer rectangle, m.
+    block_rows, block_cols : int
+    corridor : float            corridor width, m.
+    features : "corners" | "corners+mid" | "posts"
+        corners of every wall rectangle; plus the mid-point of every wall segment; or point landmarks
+        (posts a quarter corridor width off the centre lines, ``post_spacing`` apart; Map 3 variant).
+    post_spacing : float        m.
+    resolution : float          cell side of the true occupancy grid, m.
+    grid_margin : float         grid extends this far beyond the walls, m.
+    laps : int                  laps of the route; > 0 sets the run length (``n_steps`` is then ignored:
+                                the run ends when the robot is back at the start for the ``laps``-th time).
+    max_cells : int             refuse grids with more cells (memory guard).
+    """
+
+    layout: Literal["none", "ladder"] = "none"
+    width: float = 100.0
+    height: float = 100.0
+    block_rows: int = 1
+    block_cols: int = 1
+    corridor: float = 10.0
+    features: Literal["corners", "corners+mid", "posts"] = "corners+mid"
+    post_spacing: float = 20.0
+    resolution: float = 0.5
+    grid_margin: float = 2.0
+    laps: int = 3
+    max_cells: int = 50_000_000
+
+    def __post_init__(self) -> None:
+        _check(self.width > 0 and self.height > 0 and self.corridor > 0, "walls: width, height, corridor must be > 0")
+        _check(self.block_rows >= 1 and self.block_cols >= 1, "walls: block_rows and block_cols must be >= 1")
+        _check(self.width - (self.block_cols + 1) * self.corridor > 0
+               and self.height - (self.block_rows + 1) * self.corridor > 0,
+               "walls: corridors leave no room for the blocks (corridor too wide for width/height)")
+        _check(math.isfinite(self.resolution) and self.resolution > 0, "walls.resolution must be a finite number > 0")
+        _check(self.grid_margin >= 0 and self.post_spacing > 0, "walls: grid_margin >= 0 and post_spacing > 0")
+        _check(self.laps >= 0, "walls.laps must be >= 0")
+        if self.layout != "none":
+            cells = math.ceil((self.width + 2 * self.grid_margin) / self.resolution + 2) * math.ceil(
+                (self.height + 2 * self.grid_margin) / self.resolution + 2)
+            _check(cells <= self.max_cells, f"walls.resolution={self.resolution}: the grid would have {cells} "
+                   f"cells, more than walls.max_cells={self.max_cells} (too large for memory)")
+
+
+@dataclass(frozen=True)
 class ScenarioConfig:
     """Everything that defines a simulated run (with the seed).
 
@@ -403,6 +459,7 @@ class ScenarioConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
     clutter: ClutterConfig = field(default_factory=ClutterConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
+    walls: WallsConfig = field(default_factory=WallsConfig)
     bounded: BoundedConfig = field(default_factory=BoundedConfig)
 
     def __post_init__(self) -> None:
@@ -415,7 +472,7 @@ class ScenarioConfig:
         return self.n_steps * self.dt
 
 
-_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps", "bounded")
+_SECTIONS = ("world", "path", "robot", "odometry", "sensor", "clutter", "gps", "walls", "bounded")
 
 
 def known_keys(cfg: ScenarioConfig | None = None) -> list[str]:

@@ -143,6 +143,44 @@ def _octagon() -> ScenarioConfig:
     )
 
 
+def _hybrid(name: str, sensor: str, width: float, height: float, rows: int, cols: int, corridor: float,
+            features: str = "corners+mid") -> ScenarioConfig:
+    """Paper 001 §III: DDMR with wheel radius R = 0.25 m and width L = 0.5 m (eqs. 29-31) at a mean wheel
+    speed of 5 rad/s (v = 1.25 m/s), Δt = 0.5 s, wheel-encoder noise σ_u = 0.5 rad/s per wheel, i.e.
+    σ_v = R σ_u/√2 = 0.088 m/s and σ_ω = √2 R σ_u / L = 0.354 rad/s (independent); a 40 m sensor, either the
+    noisy 2-D sensor (σ_r = 0.2 m, σ_θ = 0.6°) or the laser (σ_r = 0.01 m, σ_θ = 0.05°), 180 beams all round
+    (the paper gives no beam count); 3 laps (``walls.laps``)."""
+    import math
+
+    from slamcli.sim.config import WallsConfig
+
+    r_std, b_deg = (0.2, 0.6) if sensor == "noisy" else (0.01, 0.05)
+    R, L, s_u = 0.25, 0.5, 0.5
+    return ScenarioConfig(
+        name=name,
+        dt=0.5,
+        n_steps=1,
+        world=WorldConfig(layout="none"),
+        robot=RobotConfig(v_max=5.0 * R, w_max=0.6, k_heading=1.0, waypoint_tol=1.0,
+                          actuation_std=(R * s_u / math.sqrt(2), math.sqrt(2) * R * s_u / L)),
+        odometry=OdometryConfig(std=(0.044, 0.005, 0.177)),
+        sensor=SensorConfig(kind="laser", max_range=40.0, min_range=0.1, fov_deg=360.0, n_beams=180,
+                            range_std=r_std, bearing_std=math.radians(b_deg), detection_prob=1.0,
+                            report_ids=True, drop_max_range=False, drop_isolated=False),
+        clutter=ClutterConfig(rate=0.0),
+        walls=WallsConfig(layout="ladder", width=width, height=height, block_rows=rows, block_cols=cols,
+                          corridor=corridor, features=features),  # type: ignore[arg-type]
+    )
+
+
+_MAPS = {  # paper 001 §III: (width, height, block rows, block cols, corridor width)
+    1: (100.0, 100.0, 1, 1, 10.0),  # one cyclic corridor of side 100 m
+    2: (100.0, 40.0, 1, 4, 8.0),  # 100 m x 40 m hallway, 4 cyclic corridors
+    3: (220.0, 40.0, 1, 10, 8.0),  # 220 m x 40 m, 10 cycles
+    4: (1000.0, 200.0, 2, 10, 10.0),  # ~1 km x 200 m, 20 cycles (city blocks)
+}
+
+
 def _cuik_room() -> ScenarioConfig:
     """Paper 004 §6: a 30 m square room, doors (type 0) at (15, 0) and (15, 30), corridors (type 1) at
     (30, 15) and (0, 15); 8 turn-and-move legs of 7.65 m around an octagon of radius 10 m centred at
@@ -196,6 +234,12 @@ SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
                    "paper 000 Sim. 1: 50×40 m, 7 rows of landmarks, irregular path, 30 m 181-beam laser"),
     "paper-sim2": (lambda: _paper_sim(10.0, "paper-sim2"), "paper 000 Sim. 2: as paper-sim1 with a 10 m laser"),
     "octagon": (_octagon, "paper 000 §6: 8 cones on a 7.12 m octagon + centre cone + 2 people, 183 s, laser"),
+    **{f"hybrid-map{k}{suffix}": ((lambda k=k, s=sens, sf=suffix: _hybrid(f"hybrid-map{k}{sf}", s, *_MAPS[k])),
+                                  f"paper 001 Map {k} ({'x'.join(str(int(v)) for v in _MAPS[k][:2])} m, "
+                                  f"{_MAPS[k][2] * _MAPS[k][3]} cycles), {sens} sensor, walls + features, 3 laps")
+       for k in (1, 2, 3, 4) for suffix, sens in (("", "laser"), ("-noisy", "noisy")) if not (k == 4 and sens == "noisy")},
+    "hybrid-map3-posts": (lambda: _hybrid("hybrid-map3-posts", "laser", *_MAPS[3], features="posts"),
+                          "paper 001 Map 3 with point landmarks (posts) instead of corners, laser"),
     "cuik-room": (_cuik_room, "paper 004 §6: 30 m room, 2 doors + 2 corridors, 8 turn-and-move legs, bounded noise"),
     "cuik-corridors": (_cuik_corridors, "paper 004 beyond: 40×20 m corridors, 14 typed landmarks, 45 legs, bounded"),
     "paper-sim1-mobilesim": (_paper_sim_mobilesim, "paper-sim1 with MobileSim's documented Pioneer P3-DX "

@@ -75,6 +75,10 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     seed = int(seed)
     if seed < 0:
         raise ConfigError(f"--seed: must be >= 0, got {seed}")
+    if cfg.walls.layout != "none":  # paper 001 wall worlds: ray-cast scans + features (sim/wallworld.py)
+        from slamcli.sim.wallworld import simulate_walls
+
+        return simulate_walls(cfg, seed, stream, progress)
     if cfg.bounded.enabled:  # paper 004: turn-and-move robot, uniform bounded errors, type labels
         from slamcli.sim.bounded import simulate_bounded
 

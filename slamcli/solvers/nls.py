@@ -48,6 +48,8 @@ Huber kernel (IRLS, per factor, on the whitened norm ``s = ‖r̃_f‖``, as GTS
     ρ(s) = ½ s²           if s ≤ k          w(s) = 1
            k s − ½ k²     otherwise                k / s
 
+Cauchy and Geman-McClure (GTSAM's ``mEstimator.Cauchy`` / ``GemanMcClure``) are in :func:`robust_kernel`.
+
 Marginal covariances (Laplace approximation at the optimum, see ``EVALUATION-METHOD.md`` §A2) are blocks of
 ``H⁻¹``: for a pose chain + landmark border by :func:`marginals_chain_border` (banded Cholesky, Schur
 complement, column batches — never a dense poses × landmarks block), otherwise by solving ``H X = E`` only
@@ -202,10 +204,10 @@ class NlsParams:
         into it (``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``), so that damping, trust region and the finite steps
         follow GTSAM's path (on non-convex real problems another path can end in another local minimum);
         ``world`` adds ``h`` to the world coordinates and wraps θ.
-    robust : "none" | "huber"
-        Kernel applied to blocks with ``robust=True``.
+    robust : "none" | "huber" | "cauchy" | "geman_mcclure"
+        Kernel applied to blocks with ``robust=True`` (:func:`robust_kernel`).
     huber_k : float
-        Huber threshold on the whitened residual norm.
+        Width ``k`` of the kernel on the whitened residual norm (Huber threshold, Cauchy scale, Geman-McClure c).
     max_border : int
         Largest border (non-chain) dimension for the chain/Schur linear solver (see ``NlsProblem.chain``).
     """
@@ -225,7 +227,7 @@ class NlsParams:
     delta_init: float = 1.0
     linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = "auto"
     pose_chart: Literal["body", "world"] = "body"
-    robust: Literal["none", "huber"] = "none"
+    robust: Literal["none", "huber", "cauchy", "geman_mcclure"] = "none"
     huber_k: float = 1.345
     max_border: int = 1500
 
@@ -473,12 +475,29 @@ def _rho(rw: np.ndarray, robust: bool, params: NlsParams):
     s2 = np.einsum("fk,fk->f", rw, rw)
     if not robust or params.robust == "none":
         return 0.5 * s2, None
-    k = params.huber_k
-    s = np.sqrt(s2)
-    big = s > k
-    rho = np.where(big, k * s - 0.5 * k * k, 0.5 * s2)
-    w = np.where(big, k / np.where(big, s, 1.0), 1.0)
-    return rho, w
+    return robust_kernel(s2, params.robust, params.huber_k)
+
+
+def robust_kernel(s2: np.ndarray, kind: str, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """M-estimator cost ``ρ(s)`` and IRLS weight ``w(s) = ρ'(s)/s`` of whitened norms ``s = √s2`` (F,).
+
+    The definitions of GTSAM's ``noiseModel.mEstimator`` (all equal ``½ s²`` to second order at 0)::
+
+        huber           ρ = ½ s²  (s ≤ k),  k s − ½ k²  (s > k)        w = 1,  k / s
+        cauchy          ρ = ½ k² log(1 + s²/k²)                         w = k² / (k² + s²)
+        geman_mcclure   ρ = ½ k² s² / (k² + s²)                         w = k⁴ / (k² + s²)²
+    """
+    if kind == "huber":
+        s = np.sqrt(s2)
+        big = s > k
+        rho = np.where(big, k * s - 0.5 * k * k, 0.5 * s2)
+        return rho, np.where(big, k / np.where(big, s, 1.0), 1.0)
+    k2 = k * k
+    if kind == "cauchy":
+        return 0.5 * k2 * np.log1p(s2 / k2), k2 / (k2 + s2)
+    if kind == "geman_mcclure":
+        return 0.5 * k2 * s2 / (k2 + s2), k2 * k2 / (k2 + s2) ** 2
+    raise ValueError(f"unknown robust kernel {kind!r}")
 
 
 def _factorize(H: sp.csc_matrix):

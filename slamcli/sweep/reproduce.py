@@ -846,6 +846,7 @@ SECTIONS: list[tuple[str, str]] = [
     ("postprocess", "postprocess_section"),
     ("compare", "compare_section"),
     ("nees", "nees_section"),
+    ("paper001", "slamcli.sweep.paper001:run_section"),
     ("paper004", "slamcli.sweep.paper004:run_section"),
 ]
 

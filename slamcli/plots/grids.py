@@ -1,0 +1,54 @@
+"""Occupancy-grid figures (paper 001 Figs. 3-9): grey-level maps, map error vs laps, pose errors with 3σ
+bounds, the §II.D counterexample trajectories. Draw into given axes; compute no metric."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def draw_grid(ax, grid, snapshot: int | None = None, unobserved_alpha: float = 1.0, label: str | None = None):
+    """Grey-level occupancy image (white = free, black = occupied, unobserved cells at their prior) of
+    ``grid`` (:class:`~slamcli.types.OccupancyGrid`), or of its ``snapshot``-th snapshot, under other artists."""
+    prob = grid.prob if snapshot is None else grid.snapshots[snapshot]
+    H, W = prob.shape
+    x0, y0 = float(grid.origin_xy[0]), float(grid.origin_xy[1])
+    ext = (x0, x0 + W * grid.resolution, y0, y0 + H * grid.resolution)
+    im = ax.imshow(prob, origin="lower", extent=ext, cmap="gray_r", vmin=0.0, vmax=1.0, interpolation="nearest",
+                   zorder=0, alpha=unobserved_alpha)
+    if label:
+        ax.plot([], [], "s", color="0.3", ms=6, ls="none", label=label)
+    return im
+
+
+def draw_walls(ax, walls_xyxy, **kw):
+    """Wall segments ``(W, 4)`` as thin lines (the true map, subfigure (a))."""
+    w = np.asarray(walls_xyxy, float).reshape(-1, 4)
+    kw = {"color": "tab:green", "lw": 0.8, **kw}
+    for i, s in enumerate(w):
+        ax.plot([s[0], s[2]], [s[1], s[3]], label="Walls (true)" if i == 0 else None, **kw)
+
+
+def plot_map_error_vs_laps(ax, curves: dict, ylabel: str = "total map error Σ|P − P*|", title: str | None = None):
+    """``curves``: ``{label: (laps (K,), error (K,))}`` — subfigure (e)."""
+    for label, (x, y) in curves.items():
+        ax.plot(x, y, "o-", ms=3, label=label)
+    ax.set_xlabel("laps")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, lw=0.3, alpha=0.5)
+    if title:
+        ax.set_title(title)
+    ax.legend(fontsize=8)
+
+
+def plot_pose_error_3sigma(axes, df, dt: float = 1.0):
+    """Subfigures (f)-(h): error in x, y, θ and ±3σ of the filter, one axis each; ``df`` from
+    :func:`slamcli.metrics.occupancy.pose_errors_3sigma`."""
+    t = df["step"].to_numpy() * dt
+    for ax, c, unit in zip(axes, ("x", "y", "theta"), ("m", "m", "rad")):
+        ax.plot(t, df[f"err_{c}"], lw=0.8, color="tab:blue", label=f"error {c}")
+        ax.plot(t, df[f"bound3_{c}"], lw=0.8, color="tab:red", ls="--", label="±3σ")
+        ax.plot(t, -df[f"bound3_{c}"], lw=0.8, color="tab:red", ls="--")
+        ax.set_ylabel(f"{c} ({unit})")
+        ax.grid(True, lw=0.3, alpha=0.5)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].legend(fontsize=7, loc="upper right")

@@ -1,0 +1,244 @@
+"""The frequentist part of hybrid SLAM (paper 001 §II.A-B): estimator E2 (eq. 20) on an occupancy grid, and the
+Bayesian log-odds baseline of §II.D (eq. 24) fed with the belief mean.
+
+One scan ``z`` (B beams) from a belief ``b(s)`` represented by weighted pose samples ``s_1..s_S``:
+
+* every (sample, beam) ray is traversed through the grid (:func:`slamcli.models.occupancy.traverse`) up to
+  its reading (+ a band for the sensor model) or to the max range;
+* the scan likelihood under the current map ``p(z | s, P) = Π_b p(r_b | s, P)`` with
+  ``p(r | s, P) = (1−ε) Σ_j π_j f_j(r) + ε/r_max`` (a max-range reading: ``(1−ε) Π_j(1−P_j) + ε``), the
+  forward model of eq. (15) with the estimate P in place of P* and a small outlier floor ε;
+* sample weights ``w_s ∝ p(z | s, P) b(s)`` (eq. 14);
+* the indicator ``1(q̂_i = O / s, z)``: the cell holding the reading is observed occupied, the cells the beam
+  crossed before it (each for at least ``min_traversal`` m) are observed empty; a max-range beam sees every
+  crossed cell empty;
+* ``c_i = Σ w_s 1(q̂_i = O / s, z) / W_i`` and ``A_i = Σ w_s A_i(s) / W_i`` over the (sample, beam) pairs that
+  observe cell i (``W_i`` = their total weight), with ``A_i(s)`` from eqs. (33)-(34) along the ray;
+* E2 (eq. 20 in the 2-state form of eq. 13):
+  ``P_i ← Π_[0,1]{ P_i + γ_i · min(1, W_i) · (c_i − P(q̂=O|O) P_i − P(q̂=O|E)(1 − P_i)) }`` with
+  ``γ = a·n^(−α)`` (n = the cell's own update count, or the global step with ``step_clock = "global"``);
+* the set B_i of eq. (51): a cell is updated only from beliefs whose mean lies within ``max_cell_dist``
+  (40 m in the paper) of the cell centre.
+
+Only the cells the scan crosses are touched, so the cost per step does not depend on the map size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamcli.models.angles import wrap_angle
+from slamcli.models.occupancy import (
+    GridSpec,
+    RaySegments,
+    band_for,
+    observation_probs,
+    ray_products,
+    reading_density,
+    traverse,
+)
+
+_P_CLIP = 1e-6  # the forward model uses P clipped into [1e-6, 1 − 1e-6] (no log/ratio of exact 0 or 1)
+
+
+@dataclass(frozen=True)
+class ScanGeometry:
+    """What the mapper needs to know about the scanner (from the dataset's noise spec and max range)."""
+
+    alphas: np.ndarray  # (B,) nominal beam bearings, rad (robot frame)
+    max_range: float
+    range_std: float
+    bearing_std: float
+
+
+def effective_sigma(r: np.ndarray, geo: ScanGeometry, use_bearing: bool) -> np.ndarray:
+    """Range σ of the sensor model per reading: ``sqrt(σ_r² + (r σ_θ)²)`` when the bearing error is folded
+    into range (a beam off by δθ meets a wall ≈ r·δθ away along it; the paper's eq. 32 is range-only)."""
+    if not use_bearing:
+        return np.full(np.shape(r), geo.range_std)
+    return np.sqrt(geo.range_std**2 + (np.asarray(r) * geo.bearing_std) ** 2)
+
+
+def sigma_points(mean_xyt: np.ndarray, cov: np.ndarray, kappa: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Julier's 2n+1 sigma points of a pose Gaussian (n = 3): ``μ, μ ± columns of chol((n+κ)Σ)``, weights
+    ``κ/(n+κ)`` and ``1/(2(n+κ))``; headings wrapped.
+
+    Returns
+    -------
+    samples : ndarray (7, 3);  weights : ndarray (7,)
+    """
+    n = 3
+    C = np.asarray(cov, float)
+    C = 0.5 * (C + C.T) + 1e-12 * np.eye(3)
+    try:
+        Lc = np.linalg.cholesky((n + kappa) * C)
+    except np.linalg.LinAlgError:
+        vals, vecs = np.linalg.eigh((n + kappa) * C)
+        Lc = vecs * np.sqrt(np.maximum(vals, 0.0))
+    pts = np.vstack([mean_xyt, mean_xyt + Lc.T, mean_xyt - Lc.T])
+    pts[:, 2] = wrap_angle(pts[:, 2])
+    w = np.full(2 * n + 1, 1.0 / (2 * (n + kappa)))
+    w[0] = kappa / (n + kappa)
+    return pts, w
+
+
+@dataclass
+class RayBatch:
+    """All rays of one scan from all samples, traversed; ``segs`` flat over the R = samples × beams rays."""
+
+    segs: RaySegments
+    r: np.ndarray  # (R,) reading per ray
+    is_max: np.ndarray  # (R,)
+    sigma: np.ndarray  # (R,)
+
+    def per_segment(self, v: np.ndarray) -> np.ndarray:
+        return v[self.segs.ray]
+
+    def first_sample(self, n_beams: int) -> RayBatch:
+        """The rays of the first sample (rays ``0 … n_beams−1``)."""
+        return RayBatch(self.segs.first_rays(n_beams), self.r[:n_beams], self.is_max[:n_beams],
+                        self.sigma[:n_beams])
+
+
+def trace_scan(spec: GridSpec, samples_xyt: np.ndarray, ranges: np.ndarray, geo: ScanGeometry, band: int,
+               use_bearing: bool) -> RayBatch:
+    """Traverse every (sample, beam) ray up to its reading plus the sensor-model band (or to max range)."""
+    S, B = samples_xyt.shape[0], len(geo.alphas)
+    r = np.tile(np.asarray(ranges, float), S)
+    is_max = r >= geo.max_range - 1e-9
+    sig = effective_sigma(r, geo, use_bearing)
+    ext = (band + 1) * spec.resolution * math.sqrt(2.0) + 6.0 * sig
+    length = np.where(is_max, geo.max_range, r + ext)
+    origins = np.repeat(samples_xyt[:, :2], B, axis=0)
+    angles = (samples_xyt[:, 2:3] + geo.alphas[None, :]).reshape(-1)
+    max_len = float(length.max()) if len(length) else 0.0
+    cell, t_in, t_out = traverse(spec, origins, angles, length, max_len)
+    return RayBatch(RaySegments.from_traversal(cell, t_in, t_out), r, is_max, sig)
+
+
+def scan_log_likelihood(rb: RayBatch, P_seg: np.ndarray, max_range: float, eps: float) -> np.ndarray:
+    """``log p(r | s, P)`` per ray ``(R,)`` (module docstring)."""
+    rs = rb.segs
+    _, pi, miss = ray_products(P_seg, rs)
+    f = reading_density(rb.per_segment(rb.r), rs.a, rs.b, rb.per_segment(rb.sigma))
+    p_hit = np.bincount(rs.ray, pi * f, minlength=rs.n_rays)
+    lik = np.where(rb.is_max, (1 - eps) * miss + eps, (1 - eps) * p_hit + eps / max_range)
+    return np.log(lik)
+
+
+def indicators(rb: RayBatch, min_traversal: float, free_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(observed, occupied)`` masks ``(M,)``: 1(q̂ = O / s, z) on ``occupied``, defined where ``observed``.
+
+    A crossed cell counts as observed empty when the beam runs ≥ ``min_traversal`` in it and leaves it at
+    least ``free_margin`` before the reading (a beam grazing a wall crosses the wall's cells just before it
+    hits the wall line)."""
+    rs = rb.segs
+    r = rb.per_segment(rb.r)
+    mx = rb.per_segment(rb.is_max)
+    inside = (rs.a <= r) & (r < rs.b) & ~mx
+    before = ((rs.b <= r - free_margin) | mx) & ((rs.b - rs.a) >= min_traversal)
+    return inside | before, inside
+
+
+def _aggregate(cells: np.ndarray, weights: np.ndarray, *values: np.ndarray):
+    """Per distinct cell: ``(cells_u, W, Σ w·v / W for each v)``."""
+    cu, inv = np.unique(cells, return_inverse=True)
+    W = np.bincount(inv, weights, minlength=len(cu))
+    outs = [np.bincount(inv, weights * v, minlength=len(cu)) / np.maximum(W, 1e-300) for v in values]
+    return cu, W, outs
+
+
+def _near(spec: GridSpec, cu: np.ndarray, mean_xy: np.ndarray, max_cell_dist: float) -> np.ndarray:
+    Wd = spec.shape[1]
+    cx = spec.origin_xy[0] + (cu % Wd + 0.5) * spec.resolution
+    cy = spec.origin_xy[1] + (cu // Wd + 0.5) * spec.resolution
+    return np.hypot(cx - mean_xy[0], cy - mean_xy[1]) <= max_cell_dist
+
+
+def segment_probs(P: np.ndarray, rb: RayBatch) -> np.ndarray:
+    """The current estimate of each segment's cell, clipped into [1e-6, 1 − 1e-6]."""
+    return np.clip(P[rb.segs.cell], _P_CLIP, 1 - _P_CLIP)
+
+
+def e2_update(P: np.ndarray, count: np.ndarray, spec: GridSpec, rb: RayBatch, w_ray: np.ndarray,
+              mean_xy: np.ndarray, t: int, *, a: float, alpha: float, step_clock: str, band: int,
+              min_traversal: float, max_cell_dist: float, conditional: bool = True,
+              free_margin: float = 0.0) -> int:
+    """One E2 step (eq. 20) in place on the flat grid ``P (H·W,)`` and the update counter ``count``.
+
+    Returns the number of cells updated.
+    """
+    P_seg = segment_probs(P, rb)
+    observed, occupied = indicators(rb, min_traversal, free_margin)
+    if not observed.any():
+        return 0
+    a_oo, a_oe = observation_probs(P_seg, rb.segs, rb.per_segment(rb.sigma), band, conditional)
+    ww = rb.per_segment(w_ray)[observed]
+    cu, W, (c, aoo, aoe) = _aggregate(rb.segs.cell[observed], ww, occupied[observed].astype(float),
+                                      a_oo[observed], a_oe[observed])
+    near = _near(spec, cu, mean_xy, max_cell_dist)  # B_i (eq. 51)
+    cu, W, c, aoo, aoe = cu[near], W[near], c[near], aoo[near], aoe[near]
+    count[cu] += 1
+    n = count[cu] if step_clock == "cell" else np.full(len(cu), max(t, 1))
+    gam = a * np.power(n.astype(float), -alpha) * np.minimum(W, 1.0)
+    p = P[cu]
+    P[cu] = np.clip(p + gam * (c - aoo * p - aoe * (1.0 - p)), 0.0, 1.0)
+    return int(len(cu))
+
+
+def logodds_update(L: np.ndarray, count: np.ndarray, spec: GridSpec, rb: RayBatch, mean_xy: np.ndarray, *,
+                   eps: float, max_range: float, min_traversal: float, max_cell_dist: float,
+                   l_max: float, free_margin: float = 0.0) -> None:
+    """Eq. (24), independent cells, from a single pose (the belief mean): in place on log-odds ``L (H·W,)``.
+
+    For an observed cell k of a beam with reading r (first-occupied decomposition along the beam, the other
+    cells at their current estimates)::
+
+        p(r | q_k = O) = Σ_{j<k} π_j f_j(r) + U_k f_k(r)
+        p(r | q_k = E) = Σ_{j<k} π_j f_j(r) + Σ_{j>k} π_j f_j(r) / (1 − P_k)       (max range: miss/(1 − P_k))
+        L_k ← L_k + log p(r | q_k = O) − log p(r | q_k = E)
+
+    each with the outlier floor ε of the frequentist likelihood.
+    """
+    rs = rb.segs
+    P_seg = np.clip(1.0 / (1.0 + np.exp(-L[rs.cell])), _P_CLIP, 1 - _P_CLIP)
+    observed, _ = indicators(rb, min_traversal, free_margin)
+    if not observed.any():
+        return
+    U, pi, miss = ray_products(P_seg, rs)
+    f = reading_density(rb.per_segment(rb.r), rs.a, rs.b, rb.per_segment(rb.sigma))
+    pf = pi * f
+    cum = np.cumsum(pf)
+    start_base = (cum - pf)[rs.start]  # cumulative sum before the ray's first segment
+    pre = cum - pf - start_base
+    ray_tot = np.bincount(rs.ray, pf, minlength=rs.n_rays)
+    suf = ray_tot[rs.ray] - (cum - start_base)
+    one_minus = 1.0 - P_seg
+    mx = rb.per_segment(rb.is_max)
+    p_o = np.where(mx, eps, (1 - eps) * (pre + U * f) + eps / max_range)
+    p_e = np.where(mx, (1 - eps) * miss[rs.ray] / one_minus + eps,
+                   (1 - eps) * (pre + np.maximum(suf, 0.0) / one_minus) + eps / max_range)
+    dl = np.log(p_o) - np.log(p_e)
+    cu, inv = np.unique(rs.cell[observed], return_inverse=True)
+    dsum = np.bincount(inv, dl[observed], minlength=len(cu))
+    near = _near(spec, cu, mean_xy, max_cell_dist)
+    cu, dsum = cu[near], dsum[near]
+    count[cu] += 1
+    L[cu] = np.clip(L[cu] + dsum, -l_max, l_max)
+
+
+__all__ = [
+    "RayBatch",
+    "ScanGeometry",
+    "band_for",
+    "e2_update",
+    "indicators",
+    "logodds_update",
+    "scan_log_likelihood",
+    "segment_probs",
+    "sigma_points",
+    "trace_scan",
+]
