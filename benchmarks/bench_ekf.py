@@ -19,6 +19,14 @@ position error against the truth (a sanity column, not a target). A last row com
 of :func:`slamcli.solvers.ekf.update` (sparse H: O(n²)) with the textbook dense form
 ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ`` with a full ``(2, n)`` H (O(n³)) at the final state size of the laser run,
 measured in the same process: ``ratio = dense / ours``.
+
+Scale rows (``ekf n=…``, issue 17): the filter against :func:`plain_reference_ekf` — a plain numpy EKF-SLAM
+written from the textbook (known association, ``P`` preallocated at its final size, one in-place rank-2
+update ``P -= K Uᵀ`` per observation) — on :func:`ekf_scale_world` worlds whose ``L = (n − 3)/2``
+landmarks are all seen at step 0, so that every later update runs at state size ``n``. Both run the same
+data in the same process; ``ratio = ours / reference`` (goal ≤ 1.5) and ``max_pose_diff`` (they compute
+the same filter, so their poses must agree to round-off). ``python -m benchmarks scale`` runs the same
+measurement in subprocesses with peak RSS.
 """
 
 from __future__ import annotations
@@ -27,8 +35,120 @@ import time
 
 import numpy as np
 
+from slamcli.models.angles import wrap_angle_fast
 from slamcli.sim import resolve_scenario, simulate_scenario
 from slamcli.solvers.ekf import EkfParams, EkfSlam, update
+from slamcli.types import NoiseSpec, Observations, SlamInputs
+
+SCALE_N = (103, 403, 2003)
+
+
+def ekf_scale_world(n: int, n_steps: int, obs_per_step: int = 10, seed: int = 0) -> SlamInputs:
+    """Known-id inputs with state size ``n = 3 + 2L``: all ``L`` landmarks observed at step 0, then
+    ``obs_per_step`` random landmarks per step (no range limit), robot on a slow circle in a 100 m square."""
+    rng = np.random.default_rng(seed)
+    L = (n - 3) // 2
+    dt, v, w = 0.1, 1.0, 0.05
+    lm = rng.uniform(-50, 50, size=(L, 2))
+    u = np.tile([v, w], (n_steps, 1))
+    u_true = u + rng.normal(0, [0.05, 0.01], size=u.shape)
+    poses = np.zeros((n_steps + 1, 3))
+    for t in range(n_steps):
+        x, y, th = poses[t]
+        poses[t + 1] = [x + dt * u_true[t, 0] * np.cos(th), y + dt * u_true[t, 0] * np.sin(th),
+                        wrap_angle_fast(th + dt * u_true[t, 1])]
+    steps, ids = [np.zeros(L, np.int64)], [np.arange(L)]
+    for t in range(1, n_steps + 1):
+        steps.append(np.full(obs_per_step, t))
+        ids.append(rng.choice(L, size=obs_per_step, replace=False))
+    step, rid = np.concatenate(steps), np.concatenate(ids)
+    d = lm[rid] - poses[step, :2]
+    z = np.stack([np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0]) - poses[step, 2]], -1)
+    z += rng.normal(0, [0.1, 0.01], size=z.shape)
+    return SlamInputs(
+        dt=dt, timestamps=dt * np.arange(n_steps + 1), x0=np.zeros(3), controls=u, odometry_xyt=poses.copy(),
+        observations=Observations.from_rows(step, z, n_steps + 1, reported_id=rid),
+        noise=NoiseSpec(motion_std=np.array([0.05, 0.01]), odometry_std=np.array([0.01, 0.01, 0.005]),
+                        range_std=0.1, bearing_std=0.01),
+    )
+
+
+def plain_reference_ekf(inputs: SlamInputs) -> tuple[np.ndarray, int]:
+    """Plain numpy EKF-SLAM (Thrun et al. ch. 10), known association, DDMR prediction from the controls.
+
+    ``P (n, n)`` is allocated once at its final size (one slot per reported id); every observation is one
+    in-place rank-2 update ``P -= K Uᵀ`` with ``U = P Hᵀ`` over the 5 nonzero columns of ``H``. Written
+    independently of :mod:`slamcli.solvers.ekf` (the benchmark's yardstick). Returns the filtered poses
+    ``(T+1, 3)`` and the number of updates.
+    """
+    obs = inputs.observations
+    rid = np.asarray(obs.reported_id)
+    slot = {int(k): i for i, k in enumerate(np.unique(rid[rid >= 0]))}
+    n = 3 + 2 * len(slot)
+    x = np.zeros(n)
+    x[:3] = inputs.x0
+    P = np.zeros((n, n))
+    seen = np.zeros(len(slot), bool)
+    R = np.diag([inputs.noise.range_std**2, inputs.noise.bearing_std**2])
+    M = np.diag(np.square(inputs.noise.motion_std))
+    dt, T = inputs.dt, inputs.n_poses - 1
+    poses = np.empty((T + 1, 3))
+    n_upd = 0
+    for t in range(T + 1):
+        if t > 0:
+            v, w = inputs.controls[t - 1]
+            c, s = np.cos(x[2]), np.sin(x[2])
+            F = np.array([[1, 0, -dt * v * s], [0, 1, dt * v * c], [0, 0, 1.0]])
+            G = np.array([[dt * c, 0], [dt * s, 0], [0, dt]])
+            x[:3] += [dt * v * c, dt * v * s, dt * w]
+            x[2] = wrap_angle_fast(x[2])
+            P[:3, :] = F @ P[:3, :]
+            P[:, :3] = P[:, :3] @ F.T
+            P[:3, :3] += G @ M @ G.T
+        for i in range(int(obs.offsets[t]), int(obs.offsets[t + 1])):
+            if rid[i] < 0:
+                continue
+            j = slot[int(rid[i])]
+            k = 3 + 2 * j
+            r, b = float(obs.range_m[i]), float(obs.bearing_rad[i])
+            if not seen[j]:  # m = p + r [cos(θ+b), sin(θ+b)], linearised covariance
+                seen[j] = True
+                c, s = np.cos(x[2] + b), np.sin(x[2] + b)
+                x[k : k + 2] = x[:2] + r * np.array([c, s])
+                Mx = np.array([[1, 0, -r * s], [0, 1, r * c]])
+                Mz = np.array([[c, -r * s], [s, r * c]])
+                P[k : k + 2, :] = Mx @ P[:3, :]
+                P[:, k : k + 2] = P[k : k + 2, :].T
+                P[k : k + 2, k : k + 2] = Mx @ P[:3, :3] @ Mx.T + Mz @ R @ Mz.T
+                continue
+            dx, dy = x[k] - x[0], x[k + 1] - x[1]
+            q = dx * dx + dy * dy
+            sq = np.sqrt(q)
+            H = np.array([[-dx / sq, -dy / sq, 0, dx / sq, dy / sq], [dy / q, -dx / q, -1, -dy / q, dx / q]])
+            idx = [0, 1, 2, k, k + 1]
+            U = P[:, idx] @ H.T  # P Hᵀ (n, 2)
+            S = H @ U[idx] + R
+            K = np.linalg.solve(S, U.T).T
+            y = np.array([r - sq, wrap_angle_fast(b - np.arctan2(dy, dx) + x[2])])
+            x += K @ y
+            x[2] = wrap_angle_fast(x[2])
+            P -= K @ U.T  # the one in-place rank-2 update
+            n_upd += 1
+        poses[t] = x[:3]
+    return poses, n_upd
+
+
+def scale_row(n: int, n_steps: int, which: str) -> dict:
+    """Time one filter (``which`` = "slamcli" | "reference") on :func:`ekf_scale_world` of size ``n``."""
+    inputs = ekf_scale_world(n, n_steps)
+    t0 = time.perf_counter()
+    if which == "slamcli":
+        res = EkfSlam(EkfParams(association="known")).solve(inputs, rng=np.random.default_rng(0))
+        poses, n_upd = res.poses_xyt, res.extra["n_updates"]
+    else:
+        poses, n_upd = plain_reference_ekf(inputs)
+    wall = time.perf_counter() - t0
+    return {"wall_s": wall, "updates": n_upd, "us_per_update": wall / max(n_upd, 1) * 1e6, "poses": poses}
 
 
 def _dense_joseph_update(x, P, z, j, R):
@@ -144,4 +264,20 @@ def run(quick: bool = False) -> list[dict]:
             "max_abs_diff_x": float(np.abs(xo - xd).max()),
         }
     )
+    # scale rows: our filter vs the plain reference at n = 103 / 403 / 2003 (same data, same process)
+    for n in SCALE_N:
+        n_steps = (100 if quick else 400) if n < 1000 else (30 if quick else 150)
+        ours, ref = scale_row(n, n_steps, "slamcli"), scale_row(n, n_steps, "reference")
+        rows.append(
+            {
+                "world": f"ekf n={n}",
+                "association": "known",
+                "steps": n_steps + 1,
+                "updates": ours["updates"],
+                "ours_us_per_update": ours["us_per_update"],
+                "reference_us_per_update": ref["us_per_update"],
+                "ratio_ours_over_reference": ours["wall_s"] / ref["wall_s"],
+                "max_pose_diff": float(np.abs(ours["poses"] - ref["poses"]).max()),
+            }
+        )
     return rows

@@ -24,13 +24,11 @@ def solvers_command(
 
             table = Table(title="slamcli solvers (slamcli solvers NAME explains the parameters)",
                           title_justify="left")
-            from slamcli.params import describe_params
-
             for col in ("name", "package", "version", "parameters (default)"):
                 table.add_column(col, overflow="fold")
             for info in infos:
-                cls = registry.load(info.name)
-                params = ", ".join(f"{n}={d}" for n, _t, d in describe_params(cls.Params))
+                # entry-point metadata + the Params read from source: no solver (numpy/scipy) is imported
+                params = ", ".join(f"{n}={d}" for n, _t, d in registry.describe(info.name))
                 table.add_row(info.name, info.package, info.version, params or "—")
             stdout_console().print(table)
             return

@@ -23,7 +23,7 @@ import numpy as np
 
 from slamcli.errors import SchemaError
 from slamcli.io.schema import (
-    GZIP_LEVEL,
+    COMPRESSION,
     MAX_POSES,
     RESULT_SCHEMA,
     SCHEMA_VERSION,
@@ -161,8 +161,7 @@ def _write_trace_poses(g, tr: IterationTrace) -> None:
              else np.asarray(tr.pose_iterations, np.int64))
     kwargs = {}
     if poses.size:  # chunk = one iteration's (T+1, 3) block: reading one snapshot decompresses only it
-        kwargs = {"chunks": (1,) + poses.shape[1:], "compression": "gzip", "compression_opts": GZIP_LEVEL,
-                  "shuffle": True, "fletcher32": True}
+        kwargs = {"chunks": (1,) + poses.shape[1:], **COMPRESSION}
     ds = g.create_dataset("poses_xyt", data=poses, **kwargs)
     ds.attrs["units"] = "m,m,rad"
     ds.attrs["frame"] = "world"

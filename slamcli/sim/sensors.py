@@ -92,11 +92,14 @@ def point_scans(
     L = len(landmarks_xy)
     half = cfg.fov_rad / 2
     parts = []
+    tree = _LandmarkIndex(landmarks_xy, cfg.max_range) if L else None
+    # The chunks are those of the all-pairs version (their boundaries order the random draws), so the output
+    # is identical to it; the candidate search per chunk is a KD-tree ball query: O(T log L + visible pairs).
     for a, b in _chunks(len(scan_steps), L):
         if L == 0:
             break
         steps = scan_steps[a:b]
-        si, li, r_v, b_v = _candidates(poses_xyt[steps], landmarks_xy, cfg.min_range, cfg.max_range)
+        si, li, r_v, b_v = tree.candidates(poses_xyt[steps], cfg.min_range, cfg.max_range)
         vis = np.ones(len(si), bool)
         if cfg.fov_deg < 360:
             vis &= np.abs(b_v) <= half
@@ -142,6 +145,45 @@ def _candidates(poses_xyt: np.ndarray, landmarks_xy: np.ndarray, r_min: float, r
     ok = (r >= r_min) & (r <= r_max)
     si, li, dx, dy, r = si[ok], li[ok], dx[ok], dy[ok], r[ok]
     return si, li, r, wrap_angle(np.arctan2(dy, dx) - poses_xyt[si, 2])
+
+
+class _LandmarkIndex:
+    """KD-tree over the landmarks for the point sensor's visibility query (``scipy.spatial.cKDTree``).
+
+    :meth:`candidates` returns exactly what :func:`_candidates` (all scan × landmark pairs, O(S·L)) returns,
+    in the same order: the tree proposes the landmarks within a slightly enlarged radius of each pose, and
+    the same floating-point gates as :func:`_candidates` then decide (the tree's own distance arithmetic
+    never decides a borderline pair). With an infinite range every pair is a candidate and the all-pairs
+    form is used.
+    """
+
+    def __init__(self, landmarks_xy: np.ndarray, r_max: float):
+        self.landmarks_xy = np.asarray(landmarks_xy, float)
+        self.tree = None
+        if math.isfinite(r_max):
+            from scipy.spatial import cKDTree
+
+            self.tree = cKDTree(self.landmarks_xy)
+
+    def candidates(self, poses_xyt: np.ndarray, r_min: float, r_max: float):
+        """``(scan row, landmark, range, bearing)`` of the pairs with ``r_min ≤ ‖m − p‖ ≤ r_max`` (see
+        :func:`_candidates`), rows in (scan row, landmark) order."""
+        if self.tree is None:
+            return _candidates(poses_xyt, self.landmarks_xy, r_min, r_max)
+        near = self.tree.query_ball_point(poses_xyt[:, :2], r_max * (1 + 1e-9) + 1e-9, return_sorted=True)
+        counts = np.fromiter((len(x) for x in near), np.int64, len(near))
+        si = np.repeat(np.arange(len(near)), counts)
+        li = np.fromiter((j for x in near for j in x), np.int64, int(counts.sum()))
+        # the same arithmetic, in the same order, as the all-pairs version
+        dx = self.landmarks_xy[li, 0] - poses_xyt[si, 0]
+        dy = self.landmarks_xy[li, 1] - poses_xyt[si, 1]
+        d2 = dx * dx + dy * dy
+        ok = (d2 >= r_min * r_min) & (d2 <= r_max * r_max)
+        si, li, dx, dy = si[ok], li[ok], dx[ok], dy[ok]
+        r = np.hypot(dx, dy)
+        ok = (r >= r_min) & (r <= r_max)
+        si, li, dx, dy, r = si[ok], li[ok], dx[ok], dy[ok], r[ok]
+        return si, li, r, wrap_angle(np.arctan2(dy, dx) - poses_xyt[si, 2])
 
 
 def _ray_hits(si: np.ndarray, li: np.ndarray, d: np.ndarray, b: np.ndarray, radius: float, cfg: SensorConfig):

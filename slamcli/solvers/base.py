@@ -107,10 +107,15 @@ class BaseSolver:
 def _distribution_version(module_root: str) -> str:
     """Version of the installed distribution providing ``module_root``, falling back to slamcli's.
 
-    Cached: ``packages_distributions()`` scans every installed package (~0.3 s per call).
+    Cached: ``packages_distributions()`` scans every installed package (~0.3 s per call), so the usual case
+    (the distribution is named like its top-level module, as slamcli is) is looked up by name first.
     """
     from importlib import metadata
 
+    try:
+        return metadata.version(module_root)
+    except metadata.PackageNotFoundError:
+        pass
     try:
         dists = metadata.packages_distributions().get(module_root, [])
         if dists:

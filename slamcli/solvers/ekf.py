@@ -5,15 +5,18 @@ The filter alternates the textbook predict → update cycle (Thrun et al., *Prob
 paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
 
 * state ``x = [x_r (3,), m_1 (2,), ..., m_L (2,)]`` of length ``n = 3 + 2L``, covariance ``P (n, n)``;
-  the state grows by two entries whenever a landmark is added (buffers grow geometrically, so adding a
-  landmark costs amortised O(n) copies, not a fresh O(n²) allocation every time);
+  both live in preallocated, zero-padded buffers (``P`` C-contiguous) that every step updates in place; the
+  state grows by two entries whenever a landmark is added (O(n) into the padding, an O(n²) re-layout only
+  every L/32 landmarks);
 * **predict** touches only the pose rows/columns (O(n)); the motion is either the DDMR model driven by the
   commanded controls with actuation noise ``NoiseSpec.motion_std`` (``motion_input="controls"``), or the
   composition with the encoder odometry increment with ``NoiseSpec.odometry_std``
   (``motion_input="odometry"``);
 * **update** with one range-bearing observation touches pose + one landmark columns of ``H`` (sparse), so
-  one update is O(n²) (the rank-2 correction of ``P``) instead of the O(n³) dense form; it uses the Joseph
-  form ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ``; observations of one step are applied sequentially;
+  one update is O(n²): one in-place symmetric rank-2 correction ``P −= V Vᵀ`` of the preallocated ``P``,
+  which equals the Joseph form ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ`` for the gain ``K = P Hᵀ S⁻¹`` (derivation at
+  :func:`update_inplace`); no copy of ``P`` per update or step; observations of one step are applied
+  sequentially;
 * **association**: ``known`` uses the sensor-reported ids (``observations.reported_id``); ``ml`` is
   maximum-likelihood (nearest neighbour in Mahalanobis distance of the innovation) with a χ² gate, new
   landmark creation beyond a second χ² threshold and an optional provisional list (paper 002 §14.1: wait
@@ -25,9 +28,11 @@ paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
   factor of approximately 10 ... to maintain consistency"): ``obs_std_scale`` multiplies σ_r, σ_b,
   ``motion_std_scale`` the process noise σ's, and ``stabilising_pose_std`` adds a per-step pose noise.
 
-The numerical core is a set of pure functions under the class (:func:`predict`, :func:`update`,
-:func:`update_position`, :func:`landmark_init`, :func:`innovation_stats`), each returning new arrays, so the class is a thin
-driver and the functions can be tested against hand-written Kalman algebra.
+The numerical core is a set of functions under the class: in-place kernels the filter runs
+(:func:`predict_inplace`, :func:`update_inplace`, :func:`update_position_inplace`) with pure twins that copy
+first and return new arrays (:func:`predict`, :func:`update`, :func:`update_position`), and
+:func:`landmark_init`, :func:`innovation_stats`; the class is a thin driver and the functions are tested
+against hand-written Kalman algebra.
 """
 
 from __future__ import annotations
@@ -153,43 +158,51 @@ class _Candidate:
 
 
 class _GrowingState:
-    """``x (cap,)`` and ``P (cap, cap)`` buffers with an active size ``n``; capacity doubles when full."""
+    """State ``x (n,)`` and covariance ``P (n, n)`` inside zero-padded, preallocated buffers.
 
-    def __init__(self, x0, P0, cap_landmarks: int = 16):
-        cap = 3 + 2 * cap_landmarks
-        self.x_buf = np.zeros(cap)
-        self.P_buf = np.zeros((cap, cap))
+    The in-place kernels (:func:`predict_inplace`, :func:`update_inplace`, ...) run on the padded pair
+    ``xa (nₐ,)``, ``Pa (nₐ, nₐ)`` with ``nₐ ≥ n``: ``Pa`` is C-contiguous (numpy's in-place rank-k update on a
+    strided ``[:n, :n]`` window of a larger square buffer costs about twice as much, measured) and its
+    rows/columns beyond ``n`` are exactly zero, which every kernel keeps exactly zero (their rows of
+    ``P Hᵀ`` are 0), so the padding changes no number. ``x`` and ``P`` are the active ``[:n]`` views.
+
+    Adding a landmark writes its two rows/columns into the padding (O(n)); only when the padding is used
+    up is the block re-laid out into a fresh zeroed buffer with room for ``max(4, L/32)`` more landmarks
+    (one O(n²) copy per L/32 additions: amortised O(n) per landmark, and at most ≈ 6 % extra work per
+    update from the padding).
+    """
+
+    def __init__(self, x0, P0, cap_landmarks: int = 4):
         self.n = 3
-        self.x_buf[:3] = x0
-        self.P_buf[:3, :3] = P0
+        self._alloc(3 + 2 * cap_landmarks)
+        self.x[:] = x0
+        self.P[:] = P0
 
-    @property
-    def x(self) -> np.ndarray:
-        return self.x_buf[: self.n]
+    def _alloc(self, na: int) -> None:
+        """Move the active block into fresh zeroed buffers of size ``na ≥ n``."""
+        n = self.n
+        xa, Pa = np.zeros(na), np.zeros((na, na))
+        if hasattr(self, "xa"):
+            xa[:n] = self.x
+            Pa[:n, :n] = self.P
+        self.xa, self.Pa = xa, Pa
+        self._views()
 
-    @property
-    def P(self) -> np.ndarray:
-        return self.P_buf[: self.n, : self.n]
-
-    def set(self, x, P) -> None:
-        self.x_buf[: self.n] = x
-        self.P_buf[: self.n, : self.n] = P
+    def _views(self) -> None:
+        self.x = self.xa[: self.n]
+        self.P = self.Pa[: self.n, : self.n]
 
     def append_landmark(self, m, P_mx, P_mm) -> int:
         """Add landmark ``m (2,)`` with cross-covariance ``P_mx (2, n)`` and ``P_mm (2, 2)``; return its index."""
-        n = self.n
-        if n + 2 > self.x_buf.shape[0]:
-            cap = 2 * self.x_buf.shape[0] - 3
-            x_new = np.zeros(cap)
-            P_new = np.zeros((cap, cap))
-            x_new[:n] = self.x_buf[:n]
-            P_new[:n, :n] = self.P_buf[:n, :n]
-            self.x_buf, self.P_buf = x_new, P_new
-        self.x_buf[n : n + 2] = m
-        self.P_buf[n : n + 2, :n] = P_mx
-        self.P_buf[:n, n : n + 2] = P_mx.T
-        self.P_buf[n : n + 2, n : n + 2] = P_mm
-        self.n = n + 2
+        n, n2 = self.n, self.n + 2
+        if n2 > self.xa.shape[0]:
+            self._alloc(n2 + 2 * max(4, (n2 - 3) // 64))
+        self.n = n2
+        self._views()
+        self.x[n:n2] = m
+        self.P[n:n2, :n] = P_mx
+        self.P[:n, n:n2] = P_mx.T
+        self.P[n:n2, n:n2] = P_mm
         return (n - 3) // 2
 
 
@@ -288,13 +301,11 @@ class EkfSlam(BaseSolver):
                     F, G = compose_jacobians(x_r, d)
                     pose_new = compose(x_r, d)
                     Q = G @ Sigma_d @ G.T
-                x, P = predict(st.x, st.P, pose_new, F, Q + Q_stab)
-                st.set(x, P)
+                predict_inplace(st.xa, st.Pa, pose_new, F, Q + Q_stab)
 
             # ---------------- GPS position fix (linear update) ----------------
             if t in gps_at:
-                x, P = update_position(st.x, st.P, gps_at[t], R_gps)
-                st.set(x, P)
+                update_position_inplace(st.xa, st.Pa, gps_at[t], R_gps)
 
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
@@ -334,8 +345,7 @@ class EkfSlam(BaseSolver):
                         n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
                         continue
                     used.add((int(sensor[i]), j))
-                x, P, y, S = update(st.x, st.P, z, j, R)
-                st.set(x, P)
+                y, S = update_inplace(st.xa, st.Pa, z, j, R)
                 assoc[g] = j
                 nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
@@ -366,7 +376,7 @@ class EkfSlam(BaseSolver):
         landmark_cov = np.empty((L, 2, 2))
         for a in range(2):
             for b in range(2):
-                landmark_cov[:, a, b] = P[idx + a, idx + b]
+                landmark_cov[:, a, b] = 0.5 * (P[idx + a, idx + b] + P[idx + b, idx + a])
         return self.make_result(
             status=status,
             poses_xyt=poses,
@@ -517,7 +527,7 @@ def compose_jacobians(a, b):
 
 
 def predict(x, P, pose_pred, F, Q):
-    """EKF-SLAM prediction: only the pose moves.
+    """EKF-SLAM prediction: only the pose moves (pure: returns new arrays; see :func:`predict_inplace`).
 
     ::
 
@@ -540,25 +550,21 @@ def predict(x, P, pose_pred, F, Q):
     """
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
+    predict_inplace(x, P, pose_pred, F, Q)
+    return x, P
+
+
+def predict_inplace(x, P, pose_pred, F, Q) -> None:
+    """:func:`predict` written into ``x (n,)`` and ``P (n, n)`` (touches 3 rows and 3 columns: O(n))."""
     x[:3] = pose_pred
     x[2] = _wrap(x[2])
     P[:3, :] = F @ P[:3, :]
     P[:, :3] = P[:, :3] @ F.T
     P[:3, :3] += Q
-    return x, P
 
 
 def update(x, P, z, j, R):
-    """Range-bearing update of pose + landmark ``j`` (Joseph form), O(n²).
-
-    ::
-
-        ẑ = h(x_r, m_j),   y = z ⊖ ẑ               (bearing wrapped)
-        H = [H_r, 0 … 0, H_m, 0 … 0]  (2, n)     nonzero only in the pose and landmark-j columns
-        S = H P Hᵀ + R
-        K = P Hᵀ S⁻¹                               (solve, not inv)
-        x = x + K y
-        P = (I − KH) P (I − KH)ᵀ + K R Kᵀ          (Joseph form; (I−KH)P = P − K (P Hᵀ)ᵀ is O(n²))
+    """Range-bearing update of pose + landmark ``j``, O(n²) (pure: copies, then :func:`update_inplace`).
 
     Parameters
     ----------
@@ -569,25 +575,72 @@ def update(x, P, z, j, R):
     -------
     x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
     """
-    x = np.asarray(x, float)
-    P = np.asarray(P, float)
+    x = np.array(x, float, copy=True)
+    P = np.array(P, float, copy=True)
+    y, S = update_inplace(x, P, z, j, R)
+    return x, P, y, S
+
+
+def update_inplace(x, P, z, j, R):
+    """Range-bearing update of pose + landmark ``j`` written into ``x (n,)`` and ``P (n, n)``: O(n²).
+
+    ::
+
+        ẑ = h(x_r, m_j),   y = z ⊖ ẑ               (bearing wrapped)
+        H = [H_r, 0 … 0, H_m, 0 … 0]  (2, n)     nonzero only in the pose and landmark-j columns
+        U = P Hᵀ  (n, 2)                          (5 columns of P: O(n))
+        S = H P Hᵀ + R = H U + R
+        K = U S⁻¹                                 (closed-form 2×2 inverse)
+        x = x + K y
+        P = (I − KH) P (I − KH)ᵀ + K R Kᵀ          (Joseph form)
+          = P − K Uᵀ − U Kᵀ + K S Kᵀ               (expanded, P symmetric)
+          = P − U S⁻¹ Uᵀ = P − V Vᵀ,   V = U L⁻ᵀ,  S = L Lᵀ     (for the gain K = U S⁻¹)
+
+    The last line is one rank-2 update of the preallocated ``P`` in place: no (n, n) copy of ``P`` is made.
+    It equals the textbook Joseph form to round-off (``tests/test_ekf_inplace.py`` checks 1e-10 on random
+    problems); the Joseph form's extra robustness concerns a gain that is not ``U S⁻¹``, which never
+    occurs here. ``V Vᵀ`` is formed by BLAS ``gemm`` (``V @ V.T.copy()``): numpy's ``syrk`` path for
+    ``V @ V.T`` is exactly symmetric but, with its triangle copy, about twice as slow at n ≈ 2000
+    (measured), while ``gemm`` leaves an asymmetry at the level of round-off (≈ 1e-16 relative per
+    update); the solver symmetrises the covariance blocks it reports.
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n), C-contiguous for speed;  z : ndarray (2,) [range, bearing];
+    j : int landmark index;  R : ndarray (2, 2) measurement covariance.
+
+    Returns
+    -------
+    y : ndarray (2,) innovation, S : ndarray (2, 2) innovation covariance.
+    """
     k = 3 + 2 * j
-    idx = np.array([0, 1, 2, k, k + 1])
     y, Hs = _innovation_and_jacobian(x[0], x[1], x[2], x[k], x[k + 1], float(z[0]), float(z[1]))
-    PHt = P[:, idx] @ Hs.T  # (n, 2) = P Hᵀ
-    S = Hs @ PHt[idx] + R  # (2, 2)
-    K = PHt @ _inv2(S)  # (n, 2) = P Hᵀ S⁻¹ (closed-form 2×2 inverse of the SPD S)
-    x_new = x + K @ y
-    x_new[2] = _wrap(x_new[2])
-    # Joseph form, exploiting the sparsity of H:
-    #   A = (I − KH) P = P − K (H P),   H P = (P Hᵀ)ᵀ
-    #   B = A (I − KH)ᵀ = A − (A Hᵀ) Kᵀ,  A Hᵀ = A[:, idx] Hsᵀ
-    #   P = B + K R Kᵀ
-    A = P - K @ PHt.T
-    B = A - (A[:, idx] @ Hs.T) @ K.T
-    P_new = B + K @ R @ K.T
-    P_new = 0.5 * (P_new + P_new.T)  # remove round-off asymmetry
-    return x_new, P_new, y, S
+    U = P[:, :3] @ Hs[:, :3].T  # (n, 2) = P Hᵀ, pose columns ...
+    U += P[:, k : k + 2] @ Hs[:, 3:].T  # ... plus landmark-j columns
+    S = Hs[:, :3] @ U[:3] + Hs[:, 3:] @ U[k : k + 2] + R  # (2, 2)
+    K = U @ _inv2(S)  # (n, 2)
+    x += K @ y
+    x[2] = _wrap(x[2])
+    V = _sqrt_downdate_factor(U, S)
+    P -= V @ V.T.copy()  # one in-place rank-2 update (gemm; see the docstring on symmetry)
+    return y, S
+
+
+def _sqrt_downdate_factor(U, S):
+    """``V = U L⁻ᵀ (n, 2)`` with ``S = L Lᵀ`` (2×2 Cholesky in closed form), so that ``V Vᵀ = U S⁻¹ Uᵀ``.
+
+    ::
+
+        L = [[l₁₁, 0], [l₂₁, l₂₂]],  l₁₁ = √S₁₁,  l₂₁ = S₂₁ / l₁₁,  l₂₂ = √(S₂₂ − l₂₁²)
+        V[:, 0] = U[:, 0] / l₁₁,  V[:, 1] = (U[:, 1] − l₂₁ V[:, 0]) / l₂₂
+    """
+    l11 = math.sqrt(S[0, 0])
+    l21 = 0.5 * (S[0, 1] + S[1, 0]) / l11
+    l22 = math.sqrt(S[1, 1] - l21 * l21)
+    V = np.empty_like(U)
+    V[:, 0] = U[:, 0] / l11
+    V[:, 1] = (U[:, 1] - l21 * V[:, 0]) / l22
+    return V
 
 
 def _innovation_and_jacobian(px, py, th, mx, my, r, b):
@@ -645,32 +698,36 @@ def _inv2(S):
 
 
 def update_position(x, P, z_xy, R):
-    """Linear position-fix update (GPS), Joseph form, O(n²).
-
-    ::
-
-        H = [I₂, 0 … 0]  (2, n),   y = z − p,   S = P_pp + R,   K = P Hᵀ S⁻¹ = P[:, :2] S⁻¹
-        x = x + K y,   P = (I − KH) P (I − KH)ᵀ + K R Kᵀ
-
-    Parameters
-    ----------
-    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+    """Linear position-fix update (GPS), O(n²) (pure: copies, then :func:`update_position_inplace`).
 
     Returns
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
-    x = np.asarray(x, float)
-    P = np.asarray(P, float)
+    x = np.array(x, float, copy=True)
+    P = np.array(P, float, copy=True)
+    update_position_inplace(x, P, z_xy, R)
+    return x, P
+
+
+def update_position_inplace(x, P, z_xy, R) -> None:
+    """Linear position-fix update (GPS) written into ``x (n,)`` and ``P (n, n)``, O(n²).
+
+    ::
+
+        H = [I₂, 0 … 0]  (2, n),   y = z − p,   U = P Hᵀ = P[:, :2],   S = U[:2] + R,   K = U S⁻¹
+        x = x + K y,   P = (I − KH) P (I − KH)ᵀ + K R Kᵀ = P − U S⁻¹ Uᵀ = P − V Vᵀ  (see :func:`update_inplace`)
+
+    Parameters
+    ----------
+    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+    """
     y = np.asarray(z_xy, float) - x[:2]
-    PHt = P[:, :2]  # (n, 2)
-    S = PHt[:2] + R
-    K = PHt @ _inv2(S)
-    x_new = x + K @ y
-    A = P - K @ PHt.T  # (I − KH) P
-    B = A - A[:, :2] @ K.T  # A (I − KH)ᵀ
-    P_new = B + K @ R @ K.T
-    return x_new, 0.5 * (P_new + P_new.T)
+    U = P[:, :2].copy()  # (n, 2)
+    S = U[:2] + R
+    x += U @ _inv2(S) @ y
+    V = _sqrt_downdate_factor(U, S)
+    P -= V @ V.T.copy()
 
 
 def landmark_init(x, P, z, R):
