@@ -68,8 +68,8 @@ import numpy as np
 
 from slamcli.errors import SolverError
 from slamcli.models import se2
-from slamcli.models.angles import circular_mean, wrap_angle
 from slamcli.models.ackermann import ackermann_jacobians, ackermann_step
+from slamcli.models.angles import circular_mean, wrap_angle
 from slamcli.models.motion import ddmr_step
 from slamcli.models.observation import range_bearing
 from slamcli.solvers.base import BaseSolver, ProgressFn
