@@ -119,9 +119,19 @@ def test_failed_status_is_still_written(data, tmp_path, monkeypatch):
 
     monkeypatch.setattr(OdometrySolver, "solve", failing)
     res = run("solve", data, "--method", "odometry", "-o", tmp_path / "r.h5")
-    assert res.exit_code == 0 and "failed" in res.stdout and "diverged at step 3" in res.stdout
+    # the complete result records why it failed; the exit status tells scripts (as a sweep run does)
+    assert res.exit_code == 1 and "failed" in res.stdout and "diverged at step 3" in res.stdout
     r = read_result(tmp_path / "r.h5")
     assert r.status is Status.FAILED and r.message == "diverged at step 3"
+    res = run("solve", data, "--method", "odometry", "-q", "-o", tmp_path / "q.h5")
+    assert res.exit_code == 1 and read_result(tmp_path / "q.h5").status is Status.FAILED
+
+
+def test_solver_needing_noise_bounds_refuses_in_one_line(data, tmp_path):
+    """cuik is set-membership: without declared error bounds it refuses up front and writes nothing."""
+    res = run("solve", data, "--method", "cuik", "-o", tmp_path / "r.h5")
+    assert_one_line_error(res, "solver 'cuik' needs guaranteed error bounds", "inputs/noise_bounds")
+    assert not (tmp_path / "r.h5").exists()
 
 
 # -- failures --------------------------------------------------------------------------------------------

@@ -169,9 +169,16 @@ def test_merge_up_to_relabelling_intersects_boxes():
 
 
 def test_without_declared_bounds_cuik_fails_cleanly():
+    from slamcli.errors import SolverError
+    from slamcli.solvers.cuik.solver import CuikSlam
+
     ds = simulate_scenario("loop", 0, {"n_steps": 20})
-    r = solve(ds.inputs)
+    # called directly, the solver returns a FAILED result that says why ...
+    r = CuikSlam().solve(ds.inputs, rng=np.random.default_rng(0))
     assert r.status is Status.FAILED and "noise_bounds" in r.message and r.hypotheses is None
+    # ... and the file-level workflow refuses up front in one line
+    with pytest.raises(SolverError, match="needs guaranteed error bounds"):
+        solve(ds.inputs)
 
 
 def test_files_and_cli_round_trip(tmp_path):

@@ -119,6 +119,9 @@ def solve_dataset(
 
     solver = make_solver(method, params)
     check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics
+    if getattr(solver, "needs_noise_bounds", False) and inputs.noise_bounds is None:
+        raise SolverError(f"solver {method!r} needs guaranteed error bounds (inputs/noise_bounds), which this "
+                          "dataset does not declare; simulate with bounded.enabled=true (e.g. -s cuik-room)")
     offset = np.asarray(inputs.sensor_offset_xy, float).reshape(2).copy()
     solver_inputs = to_sensor_frame(inputs)  # the sensor mounting offset, for every solver (issue 14)
     if init is not None and offset.any():

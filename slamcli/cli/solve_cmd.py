@@ -52,12 +52,15 @@ def solve_command(
                 oracle_association=oracle_association,
                 progress=progress,
             )
+        failed = result.status.value == "failed"
         if quiet:
+            if failed:
+                raise typer.Exit(1)
             return
         n_assoc = int((result.assoc >= 0).sum())
         n_iter = iteration_count(result)  # the solver's count (the trace's row 0 is the initialisation)
         iters = f", {n_iter} iterations" if n_iter is not None else ""
-        style = "red" if result.status.value == "failed" else "green"
+        style = "red" if failed else "green"
         console = stdout_console()
         console.print(
             f"[{style}]{result.status.value}[/{style}] {result.solver} in {result.wall_time_s:.2f} s{iters}: "
@@ -70,3 +73,5 @@ def solve_command(
         if result.message:
             console.print(f"  {result.message}", highlight=False, markup=False)
         console.print(f"  wrote {out}", highlight=False, markup=False, soft_wrap=True)
+        if failed:  # the result file records why; the exit status says it to scripts
+            raise typer.Exit(1)
