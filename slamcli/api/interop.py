@@ -39,7 +39,8 @@ def export_file(src: str | os.PathLike, fmt: str, out: str | os.PathLike, *, dat
 
     Returns
     -------
-    dict ``{"kind": "result"|"dataset", "format", "n_poses", "n_landmarks", "n_edges"}`` (edges: g2o only).
+    dict ``{"kind": "result"|"dataset", "format", "n_poses", "n_landmarks", "n_edges", "n_loop_closures"}``
+    (edges and loop closures: g2o only; ``n_edges`` counts odometry, loop-closure and landmark edges).
     """
     from slamcli.io import DATASET_SCHEMA, RESULT_SCHEMA, read_dataset
     from slamcli.io import export as ex
@@ -96,9 +97,16 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
         ex.write_csv(out, inp.timestamps, poses, lms, pose_cov, lm_cov)
     else:
         obs = inp.observations
+        # the factor graph the graph solver builds: per-edge information unless the result was solved
+        # with edge_info=false; loop closures always (they carry nothing but their own information)
+        use_edge_info = bool(result.params.get("edge_info", True)) if result is not None else True
+        cons = inp.constraints
         ex.write_g2o(out, poses, lms, inp.odometry_xyt, inp.noise.odometry_std, obs.step, obs.range_m,
-                     obs.bearing_rad, assoc, inp.noise.range_std, inp.noise.bearing_std)
-        summary["n_edges"] = int(len(poses) - 1 + np.count_nonzero(np.asarray(assoc) >= 0))
+                     obs.bearing_rad, assoc, inp.noise.range_std, inp.noise.bearing_std,
+                     constraints=cons, use_edge_info=use_edge_info)
+        n_between = cons.n_between if cons is not None else 0
+        summary["n_edges"] = int(len(poses) - 1 + n_between + np.count_nonzero(np.asarray(assoc) >= 0))
+        summary["n_loop_closures"] = int(n_between)
     return summary
 
 

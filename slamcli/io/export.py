@@ -10,18 +10,31 @@ KITTI      12 numbers per pose: the first three rows of the 4×4 pose matrix, ro
            ``[R | t]`` with ``R = Rz(θ)``, ``t = (x, y, 0)``. (KITTI's own ground truth is in the camera
            frame, y down; ours is the world frame, z up. One pose per line, no time stamps.)
 g2o        ``VERTEX_SE2 i x y θ`` (poses, ids ``0..T``), ``VERTEX_XY j x y`` (landmarks, ids ``T+1+l``),
-           ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (odometry increments, information matrix
-           upper triangle row by row) and ``EDGE_SE2_XY i j dx dy I11 I12 I22`` (landmark seen from pose
-           i, in pose i's frame). GTSAM's ``readG2o`` and g2o load it.
+           ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (the odometry chain ``t → t+1`` first, then
+           every loop closure / between-factor ``i → j`` of the dataset; information matrix upper triangle
+           row by row) and ``EDGE_SE2_XY i j dx dy I11 I12 I22`` (landmark seen from pose i, in pose i's
+           frame). GTSAM's ``readG2o``, g2o and ``slamcli import g2o`` load it.
 CSV        tidy table ``kind, index, t_s, x_m, y_m, theta_rad`` (+ covariance columns when present);
            ``kind`` is ``pose`` or ``landmark``.
 =========  ==============================================================================================
 
-Information matrices in the g2o file are the ones the solvers use (``slamcli.solvers.graph``):
-odometry ``Σ = diag(odometry_std²)`` of the dataset's NoiseSpec; observations are range-bearing with
-``Σ_rb = diag(σ_r², σ_b²)``, which g2o's Cartesian ``EDGE_SE2_XY`` can only carry to first order:
-``z_xy = r [cos b, sin b]``, ``J = ∂z_xy/∂(r, b) = [[cos b, −r sin b], [sin b, r cos b]]``,
-``Σ_xy = J Σ_rb Jᵀ`` and ``I = Σ_xy⁻¹`` (exact for the odometry edges, linearised for the landmark edges).
+The g2o file is the factor graph ``slamcli.solvers.graph`` optimises (its prior on pose 0 aside), so a
+result exported and read back (GTSAM's ``readG2o``, ``slamcli import g2o``) has the solver's cost:
+
+* **Per-edge information** (``inputs.constraints``, lossless graph imports; used by ``graph`` with
+  ``edge_info = true``): odometry edge t carries ``odometry_info[t]``, loop closure k ``between_ij[k]``,
+  ``between_xyt[k]`` and ``between_info[k]``, sighting row n ``observation_info[n]``. Written exactly when
+  ``observation_model = "xy"`` (the g2o model); a ``range_bearing`` row's ``Λ_rb`` goes through the
+  first-order propagation below with ``Σ_rb = Λ_rb⁻¹``. A result solved with ``edge_info = false`` is
+  exported with the σ's below (its loop closures keep their own information, as in the solver).
+* **One σ per quantity** (simulated data, schema v1 ``NoiseSpec``): odometry ``Λ = diag(1/odometry_std²)``;
+  observations are range-bearing with ``Σ_rb = diag(σ_r², σ_b²)``, which g2o's Cartesian ``EDGE_SE2_XY``
+  can only carry to first order: ``z_xy = r [cos b, sin b]``,
+  ``J = ∂z_xy/∂(r, b) = [[cos b, −r sin b], [sin b, r cos b]]``, ``Σ_xy = J Σ_rb Jᵀ`` and ``Λ = Σ_xy⁻¹``
+  (exact for the odometry edges, linearised for the landmark edges).
+
+Ids: poses are steps ``0..T`` of the dataset (an imported file's pose ids are renumbered in ascending order,
+its body frame is slamcli's x-forward frame, see :mod:`slamcli.datasets.g2o`).
 
 Readers: :func:`read_tum` and :func:`read_kitti` return planar poses (yaw of the 3-D rotation; ``z`` and
 roll/pitch are dropped). Every error is a one-line :class:`~slamcli.errors.SchemaError` naming the file
@@ -112,30 +125,45 @@ def odometry_information(odometry_std) -> np.ndarray:
     return np.diag(1.0 / np.square(np.asarray(odometry_std, float)))
 
 
-def observation_xy_information(range_m, bearing_rad, range_std: float, bearing_std: float) -> np.ndarray:
-    """``(N, 2, 2)`` first-order Cartesian information of range-bearing observations (module docstring)."""
+def rb_to_xy_information(range_m, bearing_rad, cov_rb) -> np.ndarray:
+    """``(N, 2, 2)`` first-order Cartesian information ``(J Σ_rb Jᵀ)⁻¹`` of range-bearing observations.
+
+    ``cov_rb`` is one ``(2, 2)`` covariance over ``(r, b)`` for all rows or one per row ``(N, 2, 2)``;
+    ``J = ∂(r cos b, r sin b)/∂(r, b)`` (module docstring).
+    """
     r = np.asarray(range_m, float).reshape(-1)
     b = np.asarray(bearing_rad, float).reshape(-1)
     c, s = np.cos(b), np.sin(b)
     J = np.stack([np.stack([c, -r * s], -1), np.stack([s, r * c], -1)], -2)  # (N,2,2)
-    S = np.diag([range_std**2, bearing_std**2])
-    cov = J @ S @ np.swapaxes(J, -1, -2)
+    cov = J @ np.asarray(cov_rb, float) @ np.swapaxes(J, -1, -2)
     return np.linalg.inv(cov)
 
 
+def observation_xy_information(range_m, bearing_rad, range_std: float, bearing_std: float) -> np.ndarray:
+    """``(N, 2, 2)`` first-order Cartesian information of range-bearing observations with one σ each."""
+    return rb_to_xy_information(range_m, bearing_rad, np.diag([range_std**2, bearing_std**2]))
+
+
 def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_step, obs_range_m,
-              obs_bearing_rad, obs_landmark, range_std: float, bearing_std: float) -> Path:
-    """g2o landmark graph (see module docstring).
+              obs_bearing_rad, obs_landmark, range_std: float, bearing_std: float, *,
+              constraints=None, use_edge_info: bool = True) -> Path:
+    """g2o factor graph (see module docstring): odometry chain, loop closures, landmark sightings.
 
     Parameters
     ----------
     poses_xyt : (T+1, 3)          vertex estimates (ids 0..T).
     landmarks_xy : (L, 2)         landmark vertex estimates (ids T+1+l).
     odometry_xyt : (T+1, 3)       dead-reckoning poses; edge t→t+1 measures ``between(odo_t, odo_{t+1})``.
-    odometry_std : (3,)           σ of one odometry increment.
+    odometry_std : (3,)           σ of one odometry increment (used when there is no per-edge information).
     obs_step, obs_range_m, obs_bearing_rad : (N,)   observation rows.
     obs_landmark : (N,)           row of ``landmarks_xy`` each observation is attached to; -1 = not written.
-    range_std, bearing_std        σ of one observation.
+    range_std, bearing_std        σ of one observation (used when there is no per-edge information).
+    constraints : PoseConstraints | None   the dataset's per-edge constraints: its between-factors are
+                                  written as ``EDGE_SE2 i j`` after the odometry chain, always with their own
+                                  information (as the graph solver uses them).
+    use_edge_info : bool          with ``constraints``, write its ``odometry_info`` (T, 3, 3) and
+                                  ``observation_info`` (N, 2, 2) instead of the σ's (the graph solver's
+                                  ``edge_info``).
     """
     from slamcli.models import se2
 
@@ -145,17 +173,37 @@ def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_ste
     n = len(poses)
     if len(odo) != n:
         raise ValueError(f"{len(odo)} odometry poses for {n} poses")
+    c = constraints
     d = se2.between(odo[:-1], odo[1:])
-    I_odo = odometry_information(odometry_std)
+    if c is not None and use_edge_info and c.odometry_info is not None:
+        I_odo = np.asarray(c.odometry_info, float).reshape(-1, 3, 3)
+        if len(I_odo) != n - 1:
+            raise ValueError(f"{len(I_odo)} odometry information matrices for {n - 1} increments")
+    else:
+        I_odo = np.broadcast_to(odometry_information(odometry_std), (n - 1, 3, 3))
+    if c is not None and c.n_between:
+        b_ij = np.asarray(c.between_ij, np.int64).reshape(-1, 2)
+        b_xyt = np.asarray(c.between_xyt, float).reshape(-1, 3)
+        b_info = np.asarray(c.between_info, float).reshape(-1, 3, 3)
+    else:
+        b_ij, b_xyt, b_info = np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3))
     iu3 = np.triu_indices(3)
-    info3 = " ".join(_g(v) for v in I_odo[iu3])
     step = np.asarray(obs_step, np.int64).reshape(-1)
     lab = np.asarray(obs_landmark, np.int64).reshape(-1)
     r = np.asarray(obs_range_m, float).reshape(-1)
     b = np.asarray(obs_bearing_rad, float).reshape(-1)
     keep = np.flatnonzero(lab >= 0)
-    I_obs = observation_xy_information(r[keep], b[keep], range_std, bearing_std)
+    obs_info = c.observation_info if (c is not None and use_edge_info) else None
+    if obs_info is None:
+        I_obs = observation_xy_information(r[keep], b[keep], range_std, bearing_std)
+    elif c.observation_model == "xy":  # already over the body-frame offset: exact
+        I_obs = np.asarray(obs_info, float).reshape(-1, 2, 2)[keep]
+    else:  # per-row information over (r, b): first order, as for the σ's
+        I_obs = rb_to_xy_information(r[keep], b[keep], np.linalg.inv(np.asarray(obs_info, float)[keep]))
     xy = np.column_stack([r[keep] * np.cos(b[keep]), r[keep] * np.sin(b[keep])])
+
+    def se2_edge(i, j, m, info):
+        return f"EDGE_SE2 {i} {j} {_g(m[0])} {_g(m[1])} {_g(m[2])} " + " ".join(_g(v) for v in info[iu3])
 
     def lines():
         # no comment line: GTSAM's readG2o stops parsing at the first line it does not understand
@@ -164,7 +212,9 @@ def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_ste
         for l, (x, y) in enumerate(lms):
             yield f"VERTEX_XY {n + l} {_g(x)} {_g(y)}"
         for t in range(n - 1):
-            yield f"EDGE_SE2 {t} {t + 1} {_g(d[t, 0])} {_g(d[t, 1])} {_g(d[t, 2])} {info3}"
+            yield se2_edge(t, t + 1, d[t], I_odo[t])
+        for k in range(len(b_ij)):
+            yield se2_edge(int(b_ij[k, 0]), int(b_ij[k, 1]), b_xyt[k], b_info[k])
         for k, row in enumerate(keep):
             I = I_obs[k]
             yield (f"EDGE_SE2_XY {int(step[row])} {n + int(lab[row])} {_g(xy[k, 0])} {_g(xy[k, 1])} "
