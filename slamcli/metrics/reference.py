@@ -21,21 +21,10 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-from scipy.spatial.distance import cdist
 from scipy.stats import chi2
 
-
-def align_se2_xy(est_xy: np.ndarray, ref_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation ``R (2,2)`` and translation ``t (2,)`` minimising ``Σ‖R est_i + t − ref_i‖²`` (no scale)."""
-    est_xy = np.asarray(est_xy, float)
-    ref_xy = np.asarray(ref_xy, float)
-    me, mr = est_xy.mean(0), ref_xy.mean(0)
-    C = (ref_xy - mr).T @ (est_xy - me)
-    U, _, Vt = np.linalg.svd(C)
-    D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
-    R = U @ D @ Vt
-    return R, mr - R @ me
+from slamcli.metrics.landmarks import assign_landmarks
+from slamcli.metrics.trajectory import umeyama_se2
 
 
 def gaps(ref_time_s, t_from: float, t_to: float, gap_s: float) -> list[tuple[float, float]]:
@@ -77,12 +66,20 @@ def ate_vs_position_reference(timestamps, poses_xyt, ref_time_s, ref_xy, *, gap_
                    gps_alignment=None)
         return out
     e = np.linalg.norm(est - g, axis=1)
-    R, t = align_se2_xy(est, g)
+    R, t = umeyama_se2(est, g)
     ea = np.linalg.norm(est @ R.T + t - g, axis=1)
     out.update(gps_ate_rmse_m=float(np.sqrt(np.mean(e**2))), gps_ate_aligned_rmse_m=float(np.sqrt(np.mean(ea**2))),
                gps_ate_aligned_max_m=float(ea.max()), gps_errors_aligned_m=ea, gps_matched_time_s=t_m,
                gps_alignment=(R, t))
     return out
+
+
+def _matched_rmse(est_xy: np.ndarray, ref_xy: np.ndarray, cutoff_m: float) -> tuple[int, float]:
+    """Pairs matched by the metrics' optimal assignment with a cut-off
+    (:func:`slamcli.metrics.landmarks.assign_landmarks`) and their RMSE (NaN when none)."""
+    a = assign_landmarks(est_xy, ref_xy, cutoff_m)
+    rmse = float(np.sqrt(np.mean(a.dist_m**2))) if a.n_matched else float("nan")
+    return a.n_matched, rmse
 
 
 def landmarks_vs_surveyed(est_xy, surveyed_xy, R, t, *, cutoff_m: float = 2.0) -> dict:
@@ -91,14 +88,7 @@ def landmarks_vs_surveyed(est_xy, surveyed_xy, R, t, *, cutoff_m: float = 2.0) -
     ``survey_lm_matched``, ``survey_lm_rmse_m`` (matched pairs), ``survey_lm_missed``, ``survey_lm_spurious``."""
     est = np.asarray(est_xy, float).reshape(-1, 2) @ np.asarray(R).T + np.asarray(t)
     sv = np.asarray(surveyed_xy, float).reshape(-1, 2)
-    n, rmse = 0, float("nan")
-    if len(est) and len(sv):
-        D = cdist(est, sv)
-        r, c = linear_sum_assignment(np.minimum(D, cutoff_m))
-        ok = D[r, c] <= cutoff_m
-        n = int(ok.sum())
-        if n:
-            rmse = float(np.sqrt(np.mean(D[r, c][ok] ** 2)))
+    n, rmse = _matched_rmse(est, sv, cutoff_m)
     return {"survey_lm_matched": n, "survey_lm_rmse_m": rmse, "survey_lm_missed": int(len(sv) - n),
             "survey_lm_spurious": int(len(est) - n), "survey_lm_cutoff_m": float(cutoff_m)}
 
@@ -119,19 +109,12 @@ def trajectory_against(poses_a, poses_b, landmarks_a, landmarks_b, *, cutoff_m: 
     if pa.shape != pb.shape:
         raise ValueError(f"the two results have {pa.shape[0]} and {pb.shape[0]} poses; compare results of one dataset")
     e = np.linalg.norm(pa[:, :2] - pb[:, :2], axis=1)
-    R, t = align_se2_xy(pa[:, :2], pb[:, :2])
+    R, t = umeyama_se2(pa[:, :2], pb[:, :2])
     ea = np.linalg.norm(pa[:, :2] @ R.T + t - pb[:, :2], axis=1)
     dth = np.asarray(angle_diff(pa[:, 2], pb[:, 2]), float)
     la = np.asarray(landmarks_a, float).reshape(-1, 2)
     lb = np.asarray(landmarks_b, float).reshape(-1, 2)
-    n_match, lm_rmse = 0, float("nan")
-    if len(la) and len(lb):
-        D = cdist(la, lb)
-        r, c = linear_sum_assignment(np.minimum(D, cutoff_m))
-        ok = D[r, c] <= cutoff_m
-        n_match = int(ok.sum())
-        if n_match:
-            lm_rmse = float(np.sqrt(np.mean(D[r, c][ok] ** 2)))
+    n_match, lm_rmse = _matched_rmse(la, lb, cutoff_m)
     return {
         "against_ate_rmse_m": float(np.sqrt(np.mean(e**2))),
         "against_ate_aligned_rmse_m": float(np.sqrt(np.mean(ea**2))),
