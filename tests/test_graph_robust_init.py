@@ -111,3 +111,57 @@ def test_init_robust_needs_the_gtsam_model(victoria):
     inputs, _ = victoria
     with pytest.raises(SolverError, match="init=robust needs model=gtsam"):
         _solve(inputs, init="robust", model="paper")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# init=incremental (unknown correspondences): association window by window on the current estimate
+# ---------------------------------------------------------------------------------------------------------
+def test_incremental_init_with_one_window_is_the_robust_solve_of_the_batch_association():
+    """With a window longer than the run, the incremental pass is one NN association on the odometry chain
+    followed by one Cauchy solve from it — exactly ``robust_initial_poses`` on that association."""
+    import dataclasses
+
+    from tiny_world import tiny_dataset
+
+    inputs = tiny_dataset(T=60, n_landmarks=6, seed=3).inputs
+    p = graph.GraphParams(incremental_window=1e3)
+    odo = graph.odometry_initial_poses(inputs)
+    inc = graph.incremental_initial_poses(inputs, odo, p)
+    assoc, _ = frontend.associate_nearest_neighbour(
+        odo,
+        inputs.observations,
+        inputs.noise.obs_cov,
+        gate_prob=p.gate_prob,
+        odometry_std=inputs.noise.odometry_std,
+        segment_dist=p.nn_segment_dist,
+    )
+    assoc, _ = frontend.compact_labels(assoc, 1)
+    ref, res = graph.robust_initial_poses(inputs, assoc, odo, dataclasses.replace(p, rel_cost_tol=1e-6))
+    assert res.iterations > 0 and np.max(np.abs(ref - odo)) > 1e-3  # the solve moved the poses
+    np.testing.assert_allclose(inc, ref, rtol=0, atol=1e-12)
+
+
+def test_incremental_init_on_the_victoria_park_excerpt(tmp_path):
+    """End to end on the first 60 s of Victoria Park (tests/data/victoria_park_excerpt): windows of 3 s,
+    GPS ATE (aligned) below dead reckoning's 1.37 m and at the batch front end's level (0.85 m measured; on
+    the first 300 s, where the batch association is built from 26 m of drift, it is 21.3 m against
+    1.38 m with init=incremental — too long for the suite, see /work/notes/issue-10.md)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+
+    runner = CliRunner()
+    data, out = tmp_path / "vp.h5", tmp_path / "g.h5"
+    vp = DATA / "victoria_park_excerpt"
+    assert runner.invoke(app, ["import", "victoria-park", str(vp), "-q", "-o", str(data)]).exit_code == 0
+    r = runner.invoke(
+        app, ["solve", str(data), "-m", "graph", "-p", "init=incremental", "-p", "robust=cauchy", "-q", "-o", str(out)]
+    )
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["evaluate", str(out), "-q", "-o", str(tmp_path / "ev")])
+    assert r.exit_code == 0, r.output
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert m["odometry_gps_ate_aligned_rmse_m"] == pytest.approx(1.369, abs=2e-3)
+    assert m["gps_ate_aligned_rmse_m"] < 0.9
