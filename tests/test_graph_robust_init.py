@@ -165,3 +165,9 @@ def test_incremental_init_on_the_victoria_park_excerpt(tmp_path):
     m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
     assert m["odometry_gps_ate_aligned_rmse_m"] == pytest.approx(1.369, abs=2e-3)
     assert m["gps_ate_aligned_rmse_m"] < 0.9
+
+
+def test_incremental_init_refuses_known_correspondences(victoria):
+    inputs, _ = victoria  # the graph file's landmark ids are reported ids
+    with pytest.raises(SolverError, match="init=incremental builds a nearest-neighbour association"):
+        _solve(inputs, init="incremental")

@@ -1127,6 +1127,12 @@ class GraphSlam(BaseSolver):
             if p.init == "incremental":
                 if p.model != "gtsam":
                     raise SolverError("graph: init=incremental needs model=gtsam")
+                has_ids = len(inputs.observations) and np.any(np.asarray(inputs.observations.reported_id) >= 0)
+                if p.association in ("reported", "init") or (p.association == "auto" and (init is not None or has_ids)):
+                    raise SolverError(
+                        "graph: init=incremental builds a nearest-neighbour association (unknown correspondences); "
+                        "use association=nn, or another init with reported ids / --init labels"
+                    )
                 poses0 = incremental_initial_poses(inputs, poses0, p)
         assoc, old_of_new, mode = self._associate(inputs, init, poses0)
         L = old_of_new.size
