@@ -97,7 +97,9 @@ class GraphParams:
         current estimate and the graph is re-optimised (Cauchy kernel), so each new sighting is compared
         with the map from poses that drifted only since the last window, not since the start. Measured on
         the first 300 s of Victoria Park (aligned GPS ATE): default 21.3 m; ``init=incremental
-        robust=cauchy`` 1.38 m with 3 s windows (≈ 15× the default's CPU time), 10.9 m with 10 s windows.
+        robust=cauchy`` 1.38 m with 3 s windows (≈ 15× the default's CPU time), 10.9 m with 10 s windows;
+        ACFR car park, full run: default 1.79 m (11 of 15 beacons matched), incremental + cauchy 0.083 m
+        (15 of 15). Cost: one full-chain solve per window (opt-in for that reason).
     incremental_window : float
         Window of ``init=incremental``, s (default 3).
     outlier_counts : bool
