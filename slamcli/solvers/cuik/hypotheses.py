@@ -68,6 +68,17 @@ class Hypothesis:
         return s
 
 
+    def landmark_area(self) -> float:
+        """Sum of the landmark boxes' areas ``w_x·w_y`` (m²) — with the landmark count, the cap's ranking."""
+        base = len(self.box) - 2 * self.n_landmarks
+        s = 0.0
+        for j in range(self.n_landmarks):
+            a = self.box[base + 2 * j].diam() * self.box[base + 2 * j + 1].diam()
+            if a != float("inf"):
+                s += a
+        return s
+
+
 def canonical_key(assoc: list[int]) -> tuple[int, ...]:
     """The association relabelled by order of first appearance (equal ⇔ equal up to relabelling)."""
     first: dict[int, int] = {}
