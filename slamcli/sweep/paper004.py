@@ -41,6 +41,8 @@ TABLE1 = {
 #: Tables 2-6: number of landmarks of each surviving solution (Table 4 leaves label l3 unused).
 PAPER_SOLUTIONS_LANDMARKS = [5, 5, 4, 4, 5]
 PAPER_N_GRAPHS = 5
+#: paper 004's operator set: no θ narrowing (§6) and no negative information of the closest-landmark sensor
+PAPER_SET = {"narrow_theta": False, "negative_information": False}
 PAPER_N_DISTINCT = 3
 
 
@@ -72,7 +74,7 @@ def with_true_association(dataset):
     return dataclasses.replace(inp, observations=obs)
 
 
-def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200):
+def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200, closest: bool = True):
     """Two feasible solutions minimising / maximising one coordinate, found by SLSQP over the bounded errors.
 
     Variables: the normalised errors ``u ∈ [-1, 1]`` of every odometry leg (d, α) and observation (r, b);
@@ -81,6 +83,11 @@ def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 20
     1e-6`` is a genuine solution of the bounded-error problem, so ANY sound enclosure must contain both
     extremes: their distance is a lower bound on the box width of that coordinate (local optimisation may
     miss a wider solution; it never overstates the bound).
+
+    ``closest``: also require the closest-landmark sensor's negative information (inequalities): from every
+    observing pose, every other landmark is at least as far as the true range of the one reported
+    (``‖l_m − p_t‖ ≥ r̃ + u_r``; stricter than the sensor model's "or closer than the minimum range", so the
+    points found stay genuine solutions). ``max_violation`` covers equalities and inequalities.
 
     ``coordinate``: ("pose", t, c) or ("landmark", true index, c). Returns ``(lo, hi, max_violation)``.
     """
@@ -120,6 +127,16 @@ def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 20
 
     n = 2 * T + 2 * N
     cons = [{"type": "eq", "fun": lambda u: unpack(u)[2]}]
+    others = [(i, m) for i in range(N) for m in sorted(set(lab.tolist())) if m != int(lab[i])]
+
+    def farther(u):  # ‖l_m − p_t‖ − r_i ≥ 0 for every observation i and other landmark m
+        P, L, _ = unpack(u)
+        ru = u[2 * T:2 * T + N] * hr
+        return np.array([np.hypot(*(L[m] - P[int(obs.step[i]), :2])) - (obs.range_m[i] + ru[i])
+                         for i, m in others])
+
+    if closest and others:
+        cons.append({"type": "ineq", "fun": farther})
     box = [(-1.0, 1.0)] * n
     kind, idx, c = coordinate
 
@@ -134,9 +151,90 @@ def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 20
         r = minimize(lambda u, s=sgn: s * value(u), start, constraints=cons, bounds=box, method="SLSQP",
                      options={"maxiter": maxiter})
         u = np.clip(r.x, -1.0, 1.0)
-        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)))
+        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)),
+                   float(-farther(u).min(initial=0.0)) if closest and others else 0.0)
         ext.append(value(u))
     return float(ext[0]), float(ext[1]), viol
+
+
+def loop_closure_rows(dataset) -> np.ndarray:
+    """Observation rows that close the room's big loop: the sightings of the first-seen landmark (l1) after
+    pose 0 (harness only — it reads the truth)."""
+    lab = np.asarray(dataset.truth.obs_landmark)
+    step = np.asarray(dataset.inputs.observations.step)
+    return np.flatnonzero((lab == lab[0]) & (step > 0))
+
+
+def corrupt_loop_closure(dataset, factor: float, rng: np.random.Generator):
+    """Inputs (true association) whose loop-closing sightings have errors of exactly ``factor ×`` the declared
+    bound in range and bearing (random signs): the bound is ``factor ×`` too small for those readings only."""
+    inp = with_true_association(dataset)
+    obs = inp.observations
+    nb = inp.noise_bounds
+    rows = loop_closure_rows(dataset)
+    P = dataset.truth.poses_xyt[obs.step[rows]]
+    L = dataset.truth.landmarks_xy[dataset.truth.obs_landmark[rows]]
+    d = L - P[:, :2]
+    sr, sb = rng.choice([-1.0, 1.0], size=(2, len(rows)))
+    rng_m, brg = obs.range_m.copy(), obs.bearing_rad.copy()
+    rng_m[rows] = np.hypot(d[:, 0], d[:, 1]) + sr * factor * nb.range_half_width
+    brg[rows] = np.arctan2(d[:, 1], d[:, 0]) - P[:, 2] + sb * factor * nb.bearing_half_width
+    return dataclasses.replace(inp, observations=dataclasses.replace(obs, range_m=rng_m, bearing_rad=brg))
+
+
+def wrong_bound_study(seeds, factor: float = 5.0, progress: Callable[[str], None] | None = None) -> dict:
+    """Where is a ``factor ×`` too small declared bound caught on ``cuik-room`` (unique correspondence)?
+
+    * ``all``: every bound declared ``1/factor`` of the true one (``bounded.declared_scale``): per operator
+      set, the number of runs caught (every box empty) and where — at a local cycle (a landmark re-observed
+      from the next pose), at the big loop closure (l1 re-sighted), elsewhere, or only by the final 3B pass.
+    * ``loop``: honest data except the loop-closing sightings, whose errors are exactly ``factor ×`` the bound:
+      how often that alone is caught.
+
+    Operator sets: ``paper`` (:data:`PAPER_SET`), ``full`` (θ narrowing + local cycles + closest-landmark
+    negative information), ``full+3B`` (the same + 3B shaving, 4 slices, 2 rounds). Returns counts per
+    (experiment, set) and the seeds where ``loop`` is caught by ``full+3B``.
+    """
+    from slamcli.api.solve import solve_dataset
+    from slamcli.sim.simulate import simulate_scenario
+
+    sets_ = {"paper": PAPER_SET, "full": {}, "full+3B": {"shave_slices": 4}}
+    out: dict = {"n": 0, "all": {k: {"caught": 0, "local_cycle": 0, "loop_closure": 0, "closest_landmark": 0, "other": 0,
+                                      "final_3B": 0}
+                                  for k in sets_},
+                 "loop": {k: 0 for k in sets_}, "loop_caught_seeds": []}
+    for seed in seeds:
+        honest = simulate_scenario("cuik-room", seed)
+        wrong = simulate_scenario("cuik-room", seed, {"bounded.declared_scale": 1.0 / factor})
+        lab = wrong.truth.obs_landmark
+        step = wrong.inputs.observations.step
+        closing = set(loop_closure_rows(wrong).tolist())
+        bad = corrupt_loop_closure(honest, factor, np.random.default_rng(seed))
+        out["n"] += 1
+        for name, prm in sets_.items():
+            r = solve_dataset(with_true_association(wrong), "cuik", {**prm, "association": "reported"})
+            acc = out["all"][name]
+            if r.status.value == "failed":
+                acc["caught"] += 1
+                i = int(r.extra.get("refuted_at_observation", -1))
+                if "refuted_at_pose" not in r.extra:
+                    acc["final_3B"] += 1
+                elif i in closing:
+                    acc["loop_closure"] += 1
+                elif i > 0 and (lab[:i][step[:i] == step[i] - 1] == lab[i]).any():
+                    acc["local_cycle"] += 1
+                elif i >= 0 and not (lab[:i] == lab[i]).any():
+                    acc["closest_landmark"] += 1  # a first sighting: only the negative information can refute it
+                else:
+                    acc["other"] += 1
+            r = solve_dataset(bad, "cuik", {**prm, "association": "reported"})
+            if r.status.value == "failed":
+                out["loop"][name] += 1
+                if name == "full+3B":
+                    out["loop_caught_seeds"].append(int(seed))
+        if progress is not None:
+            progress(f"paper004: wrong bounds, seed {seed}")
+    return out
 
 
 def _fmt(v, d=3) -> str:

@@ -319,3 +319,38 @@ class Separated(Contractor):
         codac.SqrOp.bwd(sy, dy)
         codac.SubOp.bwd(dx, box[bx], box[ax])
         codac.SubOp.bwd(dy, box[by], box[ay])
+
+
+class SeparatedLocal(Contractor):
+    """The separation prior written in the frame of pose t−1 (like :class:`SharedLandmarkLeg`): pose t−1 sees
+    landmark a at ``z_a``, pose t sees a *different* label b at ``z_b``. In the frame turned by the leg's α::
+
+        q_a = r_a·(cos(b_a − α), sin(b_a − α)),   q_b = (d + r_b cos b_b, r_b sin b_b),   ‖q_a − q_b‖ ≥ s
+
+    The world-frame :class:`Separated` cannot refute a duplicate label once the absolute boxes are wider than
+    ``s`` (wrapping); here only the leg ``(d, α)`` and the two readings enter, so "the landmark seen from two
+    consecutive poses is two landmarks" is refuted whenever the readings place them closer than ``s``.
+    Refutation only (the box is returned unchanged or emptied): sound, since it never removes a point that
+    satisfies the constraint. Variables: the leg ``(i_d, i_α)``."""
+
+    def __init__(self, leg: tuple[int, int], z_a: tuple[float, float], z_b: tuple[float, float], h_r: float,
+                 h_b: float, s: float) -> None:
+        self.leg = leg
+        self.vars = tuple(leg)
+        self.Ra = (Interval(z_a[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Ba = Interval(z_a[1]) + Interval(-h_b, h_b)
+        rb = (Interval(z_b[0]) + Interval(-h_r, h_r)) & _NONNEG
+        bb = Interval(z_b[1]) + Interval(-h_b, h_b)
+        self.qbx, self.qby = rb * codac.cos(bb), rb * codac.sin(bb)
+        self.s2 = (Interval(s) * Interval(s)).lb()
+
+    max_inner = 1
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        i_d, i_a = self.leg
+        phi = self.Ba - box[i_a]
+        dx = self.Ra * codac.cos(phi) - box[i_d] - self.qbx
+        dy = self.Ra * codac.sin(phi) - self.qby
+        if (codac.sqr(dx) + codac.sqr(dy)).ub() < self.s2:
+            box[i_d] = Interval.empty()
+            box[i_a] = Interval.empty()

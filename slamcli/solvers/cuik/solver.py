@@ -125,6 +125,7 @@ class CuikSlam(BaseSolver):
             OutsideBand,
             RangeBearing,
             Separated,
+            SeparatedLocal,
             SharedLandmarkLeg,
             unbounded,
         )
@@ -252,6 +253,11 @@ class CuikSlam(BaseSolver):
                                 start += [g.add_edge(OutsideBand(pose_vars(int(obs.step[k])), lv, r_min, r_lo[k]))
                                           for k in range(i)]
                                 start += [g.add_edge(OutsideBand(pose_vars(s), lv, r_min, r_max)) for s in silent]
+                        if sep > 0 and t > 0:  # a different label seen from pose t−1: separated, in its frame
+                            start += [g.add_edge(SeparatedLocal(
+                                leg_vars(t - 1), (float(obs.range_m[k]), float(obs.bearing_rad[k])), (r, b), h_r,
+                                h_b, sep)) for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t]))
+                                if g.assoc[k] != j]
                         if is_new and sep > 0:
                             start += [g.add_edge(Separated(lm_vars(m), lv, sep)) for m in range(g.n_landmarks)
                                       if m != j]
