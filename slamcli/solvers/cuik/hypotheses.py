@@ -79,6 +79,21 @@ class Hypothesis:
         return s
 
 
+    def log_volume(self, n_fixed: int) -> float:
+        """``Σ log(width)`` over the pose and landmark variables from index ``n_fixed`` on (skipping the known
+        start and unbounded ones): the log-volume of the box. Under uniform errors the likelihood of an
+        association is proportional to the volume of its feasible set, which the box encloses — a rough
+        proxy, used to rank hypotheses with equally many landmarks (larger first)."""
+        import math
+
+        s = 0.0
+        for x in self.box[n_fixed:]:
+            w = x.diam()
+            if 0.0 < w < float("inf"):
+                s += math.log(w)
+        return s
+
+
 def canonical_key(assoc: list[int]) -> tuple[int, ...]:
     """The association relabelled by order of first appearance (equal ⇔ equal up to relabelling)."""
     first: dict[int, int] = {}

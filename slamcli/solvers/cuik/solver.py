@@ -84,7 +84,7 @@ class CuikParams:
     recovery_slack: float = 1e-9
     negative_information: bool = True
     separation: bool = True
-    rank: Literal["parsimony_area", "parsimony_width"] = "parsimony_area"
+    rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_area"
 
     def __post_init__(self) -> None:
         if not self.tol > 0:
@@ -171,8 +171,9 @@ class CuikSlam(BaseSolver):
                 for r in np.asarray(obs.range_m, float)]
         silent: list[int] = []  # poses that reported no landmark
         sep = float(nb.min_separation) if p.separation else 0.0
-        rank = ((lambda h: (h.n_landmarks, h.landmark_area())) if p.rank == "parsimony_area"
-                else (lambda h: (h.n_landmarks, h.total_width())))
+        rank = {"parsimony_area": lambda h: (h.n_landmarks, h.landmark_area()),
+                "parsimony_width": lambda h: (h.n_landmarks, h.total_width()),
+                "parsimony_volume": lambda h: (h.n_landmarks, -h.log_volume(3))}[p.rank]
         hyps = [Hypothesis(box=box0)]
         counter = Counter()
         live_per_step: list[int] = []
