@@ -17,7 +17,19 @@ is never discarded (unless the cap bites).
 
 Output: every surviving hypothesis with its association and lower/upper boxes (``SolverResult.hypotheses``);
 the point estimate (``poses_xyt``, ``landmarks_xy``, ``assoc``) is the box midpoint of the first hypothesis
-in the order (fewest landmarks, smallest total width).
+in the ``rank`` order (default: fewest landmarks, then largest box volume).
+
+Pruning beyond the paper's empty boxes (each sound under a declaration the data carry):
+
+* the closest-landmark sensor (``NoiseBounds.closest_only``, paper 004 §6 "it does notice the closest
+  landmark"): from a pose that reported a landmark at ``r``, no other landmark of any type lies in
+  ``[r_min, r)``; from a pose that reported nothing, none lies in ``[r_min, r_max]`` (``OutsideBand``);
+* a declared landmark separation (``NoiseBounds.min_separation``, a map prior, not stated by the paper):
+  distinct labels are at least that far apart, in the world frame (``Separated``) and, for labels seen from
+  consecutive poses, in the frame of the first pose (``SeparatedLocal``) where the boxes do not wrap.
+
+Without the separation prior nothing sound can discard a hypothesis that splits one landmark into several
+labels: twin landmarks at one spot produce exactly the same readings (ties allowed by the sensor model).
 """
 
 from __future__ import annotations
@@ -46,7 +58,7 @@ class CuikParams:
                                004's set (§6: "no narrowing of θ's were used").
     tol : float                width-change tolerance of the fixpoint: an operator's output re-queues its
                                neighbours only when a bound moved by more than this (m or rad).
-    max_hypotheses : int       cap on live kinematic graphs; the fewest-landmark, narrowest ones are kept.
+    max_hypotheses : int       cap on live kinematic graphs; the first ones in the ``rank`` order are kept.
     association : "types" | "reported"
                                ``types``: unknown correspondence, branch over landmarks of the reported type
                                (paper 004 §5); ``reported``: use sensor-reported ids where present (unique
@@ -67,8 +79,14 @@ class CuikParams:
     separation : bool          when the data declare ``NoiseBounds.min_separation > 0`` (a map prior, not a
                                sensor fact): every pair of landmark labels is at least that far apart.
     rank : str                 order used by the cap and for the output (a heuristic, not a guarantee):
-                               ``parsimony_area`` = fewest landmarks, then smallest total landmark box area;
-                               ``parsimony_width`` = fewest landmarks, then smallest sum of all widths.
+                               ``parsimony_volume`` = fewest landmarks, then the LARGEST box log-volume (under
+                               uniform errors an association's likelihood is proportional to the volume of
+                               its feasible set; a wrong re-association survives only in a sliver where two
+                               boxes overlap, so its contracted box is small); ``parsimony_area`` = fewest
+                               landmarks, then the smallest total landmark box area; ``parsimony_width`` =
+                               fewest landmarks, then the smallest sum of all widths. Measured on
+                               cuik-corridors with a cap of 16 (bench_cuik): the smallest-first orders
+                               keep wrong re-associations and drop the truth.
     recovery_slack : float     added to the odometry bounds: ``(d̃, α̃)`` are recovered from the chained
                                ``odometry_xyt`` with rounding error ~1e-14 (m, rad).
     """
@@ -84,7 +102,7 @@ class CuikParams:
     recovery_slack: float = 1e-9
     negative_information: bool = True
     separation: bool = True
-    rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_area"
+    rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_volume"
 
     def __post_init__(self) -> None:
         if not self.tol > 0:
