@@ -87,7 +87,8 @@ class CuikParams:
                                fewest landmarks, then the smallest sum of all widths. Measured on
                                cuik-corridors with a cap of 16 (bench_cuik): the smallest-first orders
                                keep wrong re-associations and drop the truth.
-    recovery_slack : float     added to the odometry bounds: ``(d̃, α̃)`` are recovered from the chained
+    recovery_slack : float     subtracted from the closest-landmark band (ties within 1 nm) and added to the
+                               odometry bounds: ``(d̃, α̃)`` are recovered from the chained
                                ``odometry_xyt`` with rounding error ~1e-14 (m, rad).
     """
 
@@ -184,9 +185,10 @@ class CuikSlam(BaseSolver):
         r_min, r_max = float(nb.min_range), float(inputs.max_range)
         if neg and not np.isfinite(r_max):
             r_max = float("inf")
-        # lower end of each true range: R.lb of the outward-rounded reading interval [r̃ ± h_r] ∩ [0, ∞)
-        r_lo = [((Interval(float(r)) + Interval(-h_r, h_r)) & Interval(0.0, float("inf"))).lb()
-                for r in np.asarray(obs.range_m, float)]
+        # lower end of each true range: R.lb of the outward-rounded reading interval [r̃ ± h_r] ∩ [0, ∞), less
+        # recovery_slack (the simulator treats landmarks within 1 nm of the closest as tied)
+        r_lo = [max(0.0, ((Interval(float(r)) + Interval(-h_r, h_r)) & Interval(0.0, float("inf"))).lb()
+                    - p.recovery_slack) for r in np.asarray(obs.range_m, float)]
         silent: list[int] = []  # poses that reported no landmark
         sep = float(nb.min_separation) if p.separation else 0.0
         rank = {"parsimony_area": lambda h: (h.n_landmarks, h.landmark_area()),
