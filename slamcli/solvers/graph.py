@@ -1177,7 +1177,12 @@ class GraphSlam(BaseSolver):
             message += (
                 f" (in optimisation round {rnd + 1}, after landmark merges; {done_iters} iterations in all)"
             )
-        if p.covariance and res.status != Status.FAILED:
+        team_cov_skipped = p.covariance and inputs.robots is not None and len(inputs.robots.range_m) > 0
+        if team_cov_skipped:  # inter-robot factors break the chain + border layout of the fast marginals
+            extra["covariance_note"] = ("not computed: the inter-robot factors couple poses of different robots, "
+                                        "so the chain + border marginals do not apply and the general sparse "
+                                        "column solve takes minutes on a few thousand poses")
+        if p.covariance and res.status != Status.FAILED and not team_cov_skipped:
             try:
                 pose_cov, landmark_cov = laplace_marginals(gp, res.information)
             except np.linalg.LinAlgError as exc:
