@@ -115,7 +115,12 @@ def solve_dataset(
     """
     if not isinstance(inputs, SlamInputs):
         raise TypeError(f"solve_dataset expects SlamInputs (no ground truth), got {type(inputs).__name__}")
-    from slamcli.solvers.sensor_frame import check_motion_model, check_multi_robot, result_to_body, to_sensor_frame
+    from slamcli.solvers.sensor_frame import (
+        check_motion_model,
+        check_multi_robot,
+        result_to_body,
+        to_sensor_frame,
+    )
 
     solver = make_solver(method, params)
     check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics

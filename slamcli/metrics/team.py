@@ -48,13 +48,3 @@ def per_robot_trajectory_metrics(est_xyt, true_xyt, first_pose, robot_number, od
                    rpe_pairs=int(et.size))
     return out
 
-
-def joint_vs_solo_table(per_robot_joint: dict, per_robot_solo: dict) -> list[dict]:
-    """Rows ``{robot, joint_ate_m, solo_ate_m, change_pct}`` from two per-robot metric dicts (``solo`` maps a
-    robot number to that robot's solo ATE, ``joint`` is :func:`per_robot_trajectory_metrics`' output)."""
-    rows = []
-    for n in per_robot_joint["robots"]:
-        j = per_robot_joint[f"robot{n}_ate_rmse_m"]
-        s = per_robot_solo[n]
-        rows.append({"robot": n, "joint_ate_m": j, "solo_ate_m": s, "change_pct": 100.0 * (j - s) / s})
-    return rows
