@@ -882,11 +882,9 @@ def odometry_initial_poses(inputs: SlamInputs) -> np.ndarray:
     from its own start pose)."""
     team = inputs.robots
     if team is not None:
-        from slamcli.datasets.team import solo_dataset
-        from slamcli.types import Dataset
+        from slamcli.datasets.team import solo_inputs
 
-        ds = Dataset(inputs=inputs, truth=None, metadata={})
-        return np.concatenate([odometry_initial_poses(solo_dataset(ds, r).inputs) for r in range(team.n_robots)])
+        return np.concatenate([odometry_initial_poses(solo_inputs(inputs, r)) for r in range(team.n_robots)])
     d = motion.odometry_increments(inputs.odometry_xyt)
     poses = np.empty((inputs.n_poses, 3))
     poses[0] = inputs.x0

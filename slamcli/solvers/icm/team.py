@@ -32,7 +32,7 @@ from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
-from slamcli.types import Dataset, IterationTrace, SlamInputs, SolverResult, Status
+from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
 def _add_stats(out: np.ndarray, step: np.ndarray, v: np.ndarray, m: np.ndarray) -> None:
@@ -86,7 +86,7 @@ def team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels) -> 
 
 def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progress=None) -> SolverResult:
     """ICM on a multi-robot dataset (module docstring); ``solver`` is the :class:`IcmSlam` instance."""
-    from slamcli.datasets.team import solo_dataset
+    from slamcli.datasets.team import solo_inputs
     from slamcli.solvers.icm.solver import online_init, reported_labels, stop_decision
 
     t_start = time.perf_counter()
@@ -109,8 +109,7 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
     team = inputs.robots
     fp = team.first_pose
     R = team.n_robots
-    ds = Dataset(inputs=inputs, truth=None, metadata={})
-    solos = [solo_dataset(ds, r).inputs for r in range(R)]
+    solos = [solo_inputs(inputs, r) for r in range(R)]
     probs = [en.Problem.from_inputs(s, p.range_offset, use_gps=False) for s in solos]
     team_prob = en.Problem.from_inputs(inputs, p.range_offset, use_gps=False)
     labels = reported_labels(inputs.observations.reported_id)
