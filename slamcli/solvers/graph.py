@@ -1181,6 +1181,8 @@ class GraphSlam(BaseSolver):
             if p.init == "incremental":
                 if p.model != "gtsam":
                     raise SolverError("graph: init=incremental needs model=gtsam")
+                if getattr(inputs, "robots", None) is not None:
+                    raise SolverError("graph: init=incremental cuts one robot's run into time windows (single robot only)")
                 has_ids = len(inputs.observations) and np.any(np.asarray(inputs.observations.reported_id) >= 0)
                 if p.association in ("reported", "init") or (p.association == "auto" and (init is not None or has_ids)):
                     raise SolverError(
