@@ -15,6 +15,14 @@ costs both evaluated by GTSAM's ``graph.error`` (and ours by ours), their relati
 per-iteration times and their ratio (issue 17 goal ≤ 1.0), and the linear solver used. Rows are measured in
 a child process with single-threaded BLAS (``OPENBLAS_NUM_THREADS=1``), like ``bench_graph``.
 
+Victoria Park full is three rows. From the odometry chain the Gaussian graph stalls on *both* sides (LM gives
+up at λ = 1e5, costs ~150× the optimum): 10 of the file's 3640 sightings carry the wrong tree id and pull the
+drifted chain into a far basin — kept as a documented finding. Two well-posed rows on the same data: the same
+graph with GTSAM's Cauchy kernel on the sightings (both sides, odometry start), and the Gaussian graph started
+on both sides from the poses of our Cauchy solve (``graph -p init=robust``; that warm start's CPU time is
+``init_cpu_s``, in neither side's time). Iterations are accepted steps on both sides, as GTSAM's
+``LevenbergMarquardtOptimizer::iterations()`` counts them; ``graph_linear_solves`` adds our rejected λ trials.
+
 Run: ``python -m benchmarks graph_real [--quick]`` (``--quick``: only the two Victoria Park prefixes).
 Extra rows (ours only, LM, same run) compare the linear solvers (CHOLMOD vs SciPy SuperLU) and the pose
 chart (GTSAM's body-frame Pose2 retraction, the default, vs additive world coordinates).
