@@ -15,12 +15,13 @@ costs both evaluated by GTSAM's ``graph.error`` (and ours by ours), their relati
 per-iteration times and their ratio (issue 17 goal ≤ 1.0), and the linear solver used. Rows are measured in
 a child process with single-threaded BLAS (``OPENBLAS_NUM_THREADS=1``), like ``bench_graph``.
 
-Victoria Park full is three rows. From the odometry chain the Gaussian graph stalls on *both* sides (LM gives
+Victoria Park full is four rows. From the odometry chain the Gaussian graph stalls on *both* sides (LM gives
 up at λ = 1e5, costs ~150× the optimum): 10 of the file's 3640 sightings carry the wrong tree id and pull the
 drifted chain into a far basin — kept as a documented finding. Two well-posed rows on the same data: the same
 graph with GTSAM's Cauchy kernel on the sightings (both sides, odometry start), and the Gaussian graph started
 on both sides from the poses of our Cauchy solve (``graph -p init=robust``; that warm start's CPU time is
-``init_cpu_s``, in neither side's time). Iterations are accepted steps on both sides, as GTSAM's
+``init_cpu_s``, in neither side's time). The fourth is the issue's original graph: GTSAM's ``load2D`` noise
+for the sightings (σ_b = 0.2 rad), both sides from the odometry chain. Iterations are accepted steps on both sides, as GTSAM's
 ``LevenbergMarquardtOptimizer::iterations()`` counts them; ``graph_linear_solves`` adds our rejected λ trials.
 
 Run: ``python -m benchmarks graph_real [--quick]`` (``--quick``: only the two Victoria Park prefixes).
@@ -30,6 +31,7 @@ chart (GTSAM's body-frame Pose2 retraction, the default, vs additive world coord
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -61,7 +63,7 @@ def victoria_prefix(n_ids: int | None, out_dir: Path) -> Path:
 
 def load_cases(quick: bool, tmp: Path) -> list[tuple[str, object, list[tuple[str, dict]]]]:
     """``(name, load, variants)``: each variant ``(suffix, spec)`` is one row on the same imported data;
-    spec keys: ``robust`` (``none``/``cauchy``, both sides) and ``init`` (``odometry`` or ``robust`` = both
+    spec keys: ``robust`` (``none``/``cauchy``, both sides), ``bearing_std`` (σ_b of the sightings, both sides) and ``init`` (``odometry`` or ``robust`` = both
     sides start from the poses of our Cauchy solve, :func:`slamcli.solvers.graph.robust_initial_poses`)."""
     from slamcli.datasets.g2o import import_graph
     from slamcli.datasets.mrclam import import_mrclam
@@ -76,6 +78,9 @@ def load_cases(quick: bool, tmp: Path) -> list[tuple[str, object, list[tuple[str
             (", odometry init (both stall)", {}),
             (", Cauchy kernel, odometry init", {"robust": "cauchy"}),
             (", init from the Cauchy estimate", {"init": "robust"}),
+            # the issue's original graph: GTSAM's load2D reads a LANDMARK line's xy covariance v as the
+            # uncertainty at 10 m, σ_b = sqrt(v/10) = 0.2 rad, σ_r = sqrt(v) (= ours); both sides, odometry start
+            (", load2D sighting noise (σ_b 0.2 rad)", {"bearing_std": 0.2}),
         ]
         cases += [
             ("Victoria Park, full", lambda: import_graph(victoria_prefix(None, tmp)).inputs, vp_rows),
@@ -194,6 +199,13 @@ def run_here(quick: bool = False) -> list[dict]:
                 robust = spec.get("robust", "none")
                 extra = {}
                 poses0 = None
+                if "bearing_std" in spec:
+                    inputs_row = dataclasses.replace(
+                        inputs, noise=dataclasses.replace(inputs.noise, bearing_std=spec["bearing_std"])
+                    )
+                    extra = {"bearing_std": spec["bearing_std"]}
+                else:
+                    inputs_row = inputs
                 if spec.get("init") == "robust":
                     poses0, r0, cpu0 = robust_start(inputs)
                     extra = {
@@ -202,7 +214,7 @@ def run_here(quick: bool = False) -> list[dict]:
                         "init_iterations": r0.iterations,
                         "init_status": r0.status.value,
                     }
-                gp, g, v0 = build(inputs, robust=robust, poses0=poses0)
+                gp, g, v0 = build(inputs_row, robust=robust, poses0=poses0)
                 res, (t_ours, cpu_ours) = run_ours(gp, robust)
                 vg, it_gt, (t_gt, cpu_gt), lam_gt = run_gtsam(g, v0)
                 c_ours = float(g.error(to_values(gp, res.x)))
