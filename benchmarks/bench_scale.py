@@ -171,8 +171,9 @@ def _task(task: dict) -> dict:
         marg: dict = {}
         laplace = graph.laplace_marginals
 
-        def timed(*a, **k):  # the marginals' own share of the solve (wall and CPU)
+        def timed(*a, **k):  # the marginals' own share of the solve (wall, CPU, peak RSS before them)
             w, c = time.perf_counter(), _cpu_s()
+            marg["peak_rss_before_marginals_mb"] = _rss_mb()
             try:
                 return laplace(*a, **k)
             finally:
