@@ -41,7 +41,7 @@ import numpy as np
 from slamcli.errors import SolverError
 from slamcli.models import motion, observation, potentials, se2
 from slamcli.models.angles import wrap_angle
-from slamcli.solvers import frontend, nls
+from slamcli.solvers import frontend, nls, selinv
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.types import IterationTrace, Observations, SlamInputs, SolverResult, Status
 
@@ -744,7 +744,10 @@ def paper_energy(inputs, assoc, R, S, Q, poses_xyt, landmarks_xy) -> float:
 def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.ndarray]:
     """World-frame marginal covariances ``pose_cov (T+1, 3, 3)`` and ``landmark_cov (L, 2, 2)`` at the optimum.
 
-    ``H`` is block tridiagonal over the pose chain (every pose-pose factor links consecutive poses or is
+    With CHOLMOD (the ``cholmod`` extra) the blocks come from the *selected inverse* of ``H``
+    (:mod:`slamcli.solvers.selinv`: Takahashi recurrence on the pattern of the sparse Cholesky factor;
+    memory ``O(nnz(L))``, time about that of the factorisation); a pivot ≤ 0 there means ``H`` is not
+    numerically positive definite. Without CHOLMOD: ``H`` is block tridiagonal over the pose chain (every pose-pose factor links consecutive poses or is
     unary), so :func:`slamcli.solvers.nls.marginals_chain_border` eliminates the chain with a banded
     Cholesky and inverts only the ``2L × 2L`` landmark Schur complement. When that is not possible (other
     structure, or the banded Cholesky meets a pivot ≤ 0 because ``H`` is badly scaled — e.g. a landmark
@@ -760,6 +763,16 @@ def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.nda
         names the pose or landmark where the factorisation broke down.
     """
     L = gp.n_landmarks
+    if selinv.available():
+        pose_cols, lm_cols = gp.pose_cols(), gp.landmark_cols()
+        try:
+            sel = selinv.SelectedInverse.from_matrix(information, (pose_cols, lm_cols))
+            pose_cov, lm_cov = sel.blocks(pose_cols), sel.blocks(lm_cols)
+            nls.check_covariance_blocks(pose_cov, "pose")
+            nls.check_covariance_blocks(lm_cov, "landmark")
+        except np.linalg.LinAlgError as exc:
+            raise np.linalg.LinAlgError(_located(gp, exc)) from None
+        return pose_cov, lm_cov
     first_error = None
     if nls.is_block_tridiagonal(information, gp.n_poses, 3):
         try:
