@@ -162,6 +162,12 @@ def grid_for_trajectory(poses_xyt: np.ndarray, reach: float, resolution: float, 
     return GridSpec((float(o[0]), float(o[1])), float(resolution), (int(shape[1]), int(shape[0])))
 
 
+def scan_geometry(inputs: SlamInputs, alphas: np.ndarray) -> ScanGeometry:
+    """The scanner as the mapper sees it: beam bearings, max range and the dataset's declared noise."""
+    return ScanGeometry(alphas=alphas, max_range=float(inputs.max_range), range_std=float(inputs.noise.range_std),
+                        bearing_std=float(inputs.noise.bearing_std))
+
+
 def _select_rows(obs: Observations, mask: np.ndarray, n_poses: int) -> Observations:
     return Observations.from_rows(obs.step[mask], np.column_stack([obs.range_m[mask], obs.bearing_rad[mask]]),
                                   n_poses, reported_id=obs.reported_id[mask], sensor=obs.sensor[mask])
@@ -274,6 +280,20 @@ class HybridSlam(BaseSolver):
     name = "hybrid"
     Params = HybridParams
 
+    def bayesian_part(self, inputs: SlamInputs, rng: np.random.Generator, progress=None) -> SolverResult:
+        """The EKF (``solvers.ekf``) on the feature rows alone: its ``poses_xyt``/``pose_cov`` are the beliefs
+        ``N(μ_t, Σ_t)`` handed to :func:`map_scans`."""
+        p: HybridParams = self.params
+        obs = inputs.observations
+        feat_mask = np.asarray(obs.sensor) == p.feature_sensor
+        f_inputs = dataclasses.replace(inputs, observations=_select_rows(obs, feat_mask, inputs.n_poses))
+        assoc_mode = p.association
+        if assoc_mode == "auto":
+            assoc_mode = "known" if np.any(f_inputs.observations.reported_id >= 0) else "ml"
+        ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
+                                motion_std_scale=p.motion_std_scale, use_gps=False))
+        return ekf.solve(f_inputs, rng=rng, progress=progress)
+
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator, progress=None) -> SolverResult:
         t_start = time.perf_counter()
         p: HybridParams = self.params
@@ -294,14 +314,7 @@ class HybridSlam(BaseSolver):
         total = 2 * n_poses
 
         # ---- Bayesian part: the project's EKF on the feature rows ----
-        f_inputs = dataclasses.replace(inputs, observations=_select_rows(obs, feat_mask, n_poses))
-        assoc_mode = p.association
-        if assoc_mode == "auto":
-            assoc_mode = "known" if np.any(f_inputs.observations.reported_id >= 0) else "ml"
-        ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
-                                motion_std_scale=p.motion_std_scale, use_gps=False))
-        ekf_res = ekf.solve(f_inputs, rng=rng,
-                            progress=None if progress is None else (lambda d, n: progress(d, total)))
+        ekf_res = self.bayesian_part(inputs, rng, None if progress is None else (lambda d, n: progress(d, total)))
         if ekf_res.status is Status.FAILED:
             return dataclasses.replace(ekf_res, solver=self.name, message=f"EKF part failed: {ekf_res.message}")
         mu, cov = ekf_res.poses_xyt, ekf_res.pose_cov
@@ -316,8 +329,7 @@ class HybridSlam(BaseSolver):
         if spec.n_cells > p.max_cells:
             raise SolverError(f"resolution={p.resolution}: the grid would have {spec.n_cells} cells "
                               f"({spec.shape[0]}x{spec.shape[1]}), more than max_cells={p.max_cells}")
-        geo = ScanGeometry(alphas=alphas, max_range=float(inputs.max_range), range_std=float(inputs.noise.range_std),
-                           bearing_std=float(inputs.noise.bearing_std))
+        geo = scan_geometry(inputs, alphas)
         mp = map_scans(mu, cov, ranges, geo, spec, p, rng,
                        progress=None if progress is None else (lambda d, n: progress(n_poses + d, total)))
         P, cnt, L, cnt_b, snap_steps, snaps, snaps_b = (mp.P, mp.count, mp.L, mp.count_b, mp.snap_steps, mp.snaps,
