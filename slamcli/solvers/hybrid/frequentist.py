@@ -241,8 +241,12 @@ def segment_probs(P: np.ndarray, rb: RayBatch) -> np.ndarray:
 def e2_update(P: np.ndarray, count: np.ndarray, spec: GridSpec, rb: RayBatch, w_ray: np.ndarray,
               mean_xy: np.ndarray, t: int, *, a: float, alpha: float, step_clock: str, band: int,
               min_traversal: float, max_cell_dist: float, conditional: bool = True,
-              free_margin: float = 0.0) -> int:
+              free_margin: float = 0.0, clock: np.ndarray | None = None) -> int:
     """One E2 step (eq. 20) in place on the flat grid ``P (H·W,)`` and the update counter ``count``.
+
+    ``clock (H·W,)`` float, optional: the per-cell clock n of γ = a·n^(−α) advances by the weight
+    ``min(1, W_i)`` of the samples that observe the cell (a cell seen only from negligible-weight samples
+    keeps its step size); without it n = ``count`` (+1 per update).
 
     Returns the number of cells updated.
     """
@@ -257,8 +261,15 @@ def e2_update(P: np.ndarray, count: np.ndarray, spec: GridSpec, rb: RayBatch, w_
     near = _near(spec, cu, mean_xy, max_cell_dist)  # B_i (eq. 51)
     cu, W, c, aoo, aoe = cu[near], W[near], c[near], aoo[near], aoe[near]
     count[cu] += 1
-    n = count[cu] if step_clock == "cell" else np.full(len(cu), max(t, 1))
-    gam = a * np.power(n.astype(float), -alpha) * np.minimum(W, 1.0)
+    wq = np.minimum(W, 1.0)
+    if step_clock != "cell":
+        n = np.full(len(cu), float(max(t, 1)))
+    elif clock is not None:
+        clock[cu] += wq
+        n = np.maximum(clock[cu], 1.0)
+    else:
+        n = count[cu].astype(float)
+    gam = a * np.power(n, -alpha) * wq
     p = P[cu]
     P[cu] = np.clip(p + gam * (c - aoo * p - aoe * (1.0 - p)), 0.0, 1.0)
     return int(len(cu))

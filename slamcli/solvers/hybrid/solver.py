@@ -60,6 +60,8 @@ class HybridParams:
     prior : float               initial occupancy probability P_i(0).
     a, alpha : float            learning rate γ = a·n^(−α) (paper: α < 1).
     step_clock : "cell" | "global"   n = the cell's own update count, or the global step t.
+    weighted_clock : bool       with the cell clock: n advances by min(1, W_i), the weight of the samples
+                                that observe the cell (false: by 1 per update, however small W_i).
     samples : "sigma" | "random"     pose samples of the belief: 7 sigma points (κ = ``kappa``) or
                                      ``n_samples`` random draws (rng).
     n_samples : int             random draws per step (``samples = "random"``).
@@ -127,6 +129,7 @@ class HybridParams:
     n_snapshots: int = 12
     weight_floor: float = 1e-9
     thin_wall_likelihood: bool = True
+    weighted_clock: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution) and self.resolution > 0):
@@ -226,6 +229,7 @@ def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeom
     band = band_for(sig_max, p.resolution)
     P = np.full(spec.n_cells, p.prior, float)
     cnt = np.zeros(spec.n_cells, np.int32)
+    clock = np.zeros(spec.n_cells) if p.weighted_clock else None
     L = np.full(spec.n_cells, math.log(p.prior / (1 - p.prior)))
     cnt_b = np.zeros(spec.n_cells, np.int32)
     snap_steps = np.unique(np.round(np.linspace(0, T, p.n_snapshots + 1)[1:]).astype(np.int64))
@@ -257,7 +261,8 @@ def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeom
         rb_e2 = rb if len(keep) == len(w) else rb.select_samples(keep, B)
         n_upd += e2_update(P, cnt, spec, rb_e2, np.repeat(w[keep], B), mu[t, :2], t + 1, a=p.a, alpha=p.alpha,
                            step_clock=p.step_clock, band=band, min_traversal=min_trav,
-                           max_cell_dist=p.max_cell_dist, conditional=p.conditional_a, free_margin=p.free_margin)
+                           max_cell_dist=p.max_cell_dist, conditional=p.conditional_a, free_margin=p.free_margin,
+                           clock=clock)
         if p.baseline:
             # the belief mean's rays: sigma point 0 is the mean itself
             rb0 = (rb.first_sample(B) if p.samples == "sigma"
