@@ -9,7 +9,8 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         timestamps (T+1,)  x0 (3,)  controls (T,2)  odometry_xyt (T+1,3)  max_range ()
         observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
         noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
-        noise_bounds/      (bounded-noise data only) @odometry_model odometry_half_width (2,)
+        noise_bounds/      (bounded-noise data only) @odometry_model [@closest_only @min_range
+                           @min_separation] odometry_half_width (2,)
                            range_half_width () bearing_half_width ()
         observations/landmark_type (N,)   (only when the sensor reports type labels)
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
@@ -18,6 +19,10 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
                            between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
                            [observation_info (N,2,2) @model]
+        robots/            (multi-robot data only, RobotTeam) pose_robot (P,) robot_number (R,) x0_xyt (R,3);
+                           poses are stacked robot-major, timestamps repeat per robot (strictly increasing
+                           within each robot)
+        robot_observations/ (multi-robot only) observer_pose observed_pose range_m bearing_rad (K,)
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
         or, with @kind="position_reference" (a real recording's GPS): ref_time_s (G,) ref_xy (G,2) only
@@ -51,6 +56,7 @@ from slamcli.types import (
     NoiseSpec,
     Observations,
     PoseConstraints,
+    RobotTeam,
     SlamInputs,
 )
 
@@ -171,6 +177,8 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 
         if inp.constraints is not None:
             _write_constraints(g, inp.constraints)
+        if inp.robots is not None:
+            _write_robots(g, inp.robots)
 
         if dataset.truth is not None and dataset.truth.position_reference_only:
             _write_position_reference(f, dataset.truth)
@@ -326,6 +334,69 @@ def _read_constraints(r: Reader, n_poses: int, n_obs: int) -> PoseConstraints | 
             raise r.fail(f"{g}/observation_info", f"@model must be one of {OBSERVATION_MODELS}, got {model!r}")
     return PoseConstraints(between_ij=np.stack([bi, bj], axis=1), between_xyt=xyt, between_info=info,
                            odometry_info=odo_info, observation_info=obs_info, observation_model=model)
+def _write_robots(g, team: RobotTeam) -> None:
+    """``/inputs/robots`` and ``/inputs/robot_observations`` (multi-robot datasets, issue 14 item 7)."""
+    gr = g.create_group("robots")
+    gr.attrs["doc"] = ("multi-robot layout (slamcli.types.RobotTeam): poses of all robots stacked robot-major on "
+                       "one common time grid; the odometry chain never crosses from one robot to the next")
+    write_array(gr, "pose_robot", np.asarray(team.pose_robot, np.int64), units="-", frame="-",
+                doc="robot index 0..R-1 of each stacked pose (P,)")
+    write_array(gr, "robot_number", np.asarray(team.robot_number, np.int64), units="-", frame="-",
+                doc="the dataset's own robot numbers (R,)")
+    write_array(gr, "x0_xyt", np.asarray(team.x0_xyt, np.float64).reshape(-1, 3), units="m,m,rad", frame="world",
+                doc="known start pose of each robot (R,3)")
+    go = g.create_group("robot_observations")
+    go.attrs["doc"] = "range-bearing readings of one robot by another, between two stacked poses of the same step"
+    write_array(go, "observer_pose", np.asarray(team.observer_pose, np.int64), units="-", frame="-",
+                doc="stacked pose index of the observing robot (K,)")
+    write_array(go, "observed_pose", np.asarray(team.observed_pose, np.int64), units="-", frame="-",
+                doc="stacked pose index of the observed robot at the same step (K,)")
+    write_array(go, "range_m", np.asarray(team.range_m, np.float64), units="m", frame="sensor",
+                doc="measured range to the observed robot (K,)")
+    write_array(go, "bearing_rad", np.asarray(team.bearing_rad, np.float64), units="rad", frame="body",
+                doc="measured bearing in the observer's frame, wrapped [-pi, pi) (K,)")
+
+
+def _read_robots(r: Reader, n_poses: int) -> RobotTeam | None:
+    """The optional multi-robot groups; None for single-robot files (every file written before them)."""
+    g = "inputs/robots"
+    if not r.has(g):
+        return None
+    r.group(g)
+    pr = r.array(f"{g}/pose_robot", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len(f"{g}/pose_robot", pr, n_poses, "T+1 = len(timestamps)")
+    num = r.array(f"{g}/robot_number", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    R = num.shape[0]
+    if R < 1:
+        raise r.fail(f"{g}/robot_number", "needs at least one robot")
+    x0 = r.array(f"{g}/x0_xyt", dtype="f", shape=(None, 3))
+    r.expect_len(f"{g}/x0_xyt", x0, R, f"len({g}/robot_number)")
+    _check_index_range(r, f"{g}/pose_robot", pr, 0, R - 1)
+    if n_poses > 1 and (np.diff(pr) < 0).any():
+        raise r.fail(f"{g}/pose_robot", f"not non-decreasing at index {int(np.argmax(np.diff(pr) < 0)) + 1} "
+                                        "(poses are stacked robot-major)")
+    if np.unique(pr).size != R:
+        raise r.fail(f"{g}/pose_robot", f"some of the {R} robots own no pose")
+    go = "inputs/robot_observations"
+    r.group(go)
+    oi = r.array(f"{go}/observer_pose", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    K = oi.shape[0]
+    oj = r.array(f"{go}/observed_pose", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len(f"{go}/observed_pose", oj, K, f"len({go}/observer_pose)")
+    rng = r.array(f"{go}/range_m", dtype="f", shape=(None,))
+    r.expect_len(f"{go}/range_m", rng, K, f"len({go}/observer_pose)")
+    brg = r.array(f"{go}/bearing_rad", dtype="f", shape=(None,))
+    r.expect_len(f"{go}/bearing_rad", brg, K, f"len({go}/observer_pose)")
+    _check_index_range(r, f"{go}/observer_pose", oi, 0, n_poses - 1)
+    _check_index_range(r, f"{go}/observed_pose", oj, 0, n_poses - 1)
+    if K and (pr[oi] == pr[oj]).any():
+        raise r.fail(f"{go}/observed_pose", f"reading {int(np.argmax(pr[oi] == pr[oj]))} links a robot to itself")
+    if K and (rng < 0).any():
+        raise r.fail(f"{go}/range_m", f"range must be >= 0, got {float(rng[np.argmax(rng < 0)]):g}")
+    return RobotTeam(pose_robot=pr, robot_number=num, x0_xyt=x0, observer_pose=oi, observed_pose=oj,
+                     range_m=rng, bearing_rad=brg)
+
+
 def _write_bounds(g, nb: NoiseBounds) -> None:
     gb = g.create_group("noise_bounds")
     gb.attrs["doc"] = "guaranteed error half-widths (slamcli.types.NoiseBounds): |error| <= bound"
@@ -335,6 +406,9 @@ def _write_bounds(g, nb: NoiseBounds) -> None:
     write_array(gb, "range_half_width", np.float64(nb.range_half_width), units="m", frame="sensor", doc="h_r")
     write_array(gb, "bearing_half_width", np.float64(nb.bearing_half_width), units="rad", frame="sensor",
                 doc="h_b")
+    gb.attrs["closest_only"] = bool(nb.closest_only)
+    gb.attrs["min_range"] = float(nb.min_range)
+    gb.attrs["min_separation"] = float(nb.min_separation)
 
 
 def _read_bounds(r: Reader) -> NoiseBounds | None:
@@ -351,8 +425,15 @@ def _read_bounds(r: Reader) -> NoiseBounds | None:
     for name, v in (("odometry_half_width", odo), ("range_half_width", hr), ("bearing_half_width", hb)):
         if (np.asarray(v) < 0).any():
             raise r.fail(f"{g}/{name}", f"half-widths must be >= 0, got {v}")
+    # sensor / map declarations (optional; files written before they existed declare nothing)
+    closest = bool(r.attr(g, "closest_only", bool, default=False))
+    min_range = float(r.attr(g, "min_range", float, default=0.0))
+    min_sep = float(r.attr(g, "min_separation", float, default=0.0))
+    for name, v in (("@min_range", min_range), ("@min_separation", min_sep)):
+        if not (v >= 0 and np.isfinite(v)):
+            raise r.fail(f"{g}/{name}", f"must be a finite number >= 0, got {v}")
     return NoiseBounds(odometry_model=model, odometry_half_width=odo, range_half_width=hr,
-                       bearing_half_width=hb)
+                       bearing_half_width=hb, closest_only=closest, min_range=min_range, min_separation=min_sep)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -420,6 +501,7 @@ def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
     if bi is not None and len(bi) == 1:
         expect += [(f"{gc}/{n}", bi[0], f"len({gc}/between_i)") for n in ("between_j", "between_xyt", "between_info")]
     expect.append((f"{gc}/odometry_info", n_poses - 1, "T = len(timestamps) - 1"))
+    expect.append(("inputs/robots/pose_robot", n_poses, "T+1 = len(timestamps)"))
     if step is not None and len(step) == 1:
         expect.append((f"{gc}/observation_info", step[0], "number of observations"))
     for name, n, what in expect:
@@ -434,8 +516,11 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
     n_poses = ts.shape[0]
     if n_poses < 1:
         raise r.fail("inputs/timestamps", "needs at least one pose (T+1 >= 1)")
-    if n_poses > 1 and not (np.diff(ts) > 0).all():
-        k = int(np.argmax(~(np.diff(ts) > 0)))
+    robots = _read_robots(r, n_poses)
+    # multi-robot: the time grid repeats per robot; strictly increasing within each robot
+    same = np.ones(max(n_poses - 1, 0), bool) if robots is None else robots.pose_robot[:-1] == robots.pose_robot[1:]
+    if n_poses > 1 and not (np.diff(ts)[same] > 0).all():
+        k = int(np.argmax(~(np.diff(ts) > 0) & same))
         raise r.fail("inputs/timestamps", f"not strictly increasing at index {k + 1}")
     T = n_poses - 1
     x0 = r.array("inputs/x0", dtype="f", shape=(3,))
@@ -492,6 +577,7 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
         constraints=_read_constraints(r, n_poses, len(observations)),
         reported_id_source=_reported_id_source(r),
         noise_bounds=_read_bounds(r),
+        robots=robots,
     )
 
 
@@ -704,6 +790,9 @@ def dataset_hash(dataset: Dataset) -> str:
         h.update(f"noise_bounds|{nb.odometry_model}|".encode())
         _feed(h, "noise_bounds.values", np.r_[np.asarray(nb.odometry_half_width, float).reshape(2),
                                               nb.range_half_width, nb.bearing_half_width], np.float64)
+        if nb.closest_only or nb.min_range or nb.min_separation:  # declarations hashed only when made
+            _feed(h, "noise_bounds.declared", np.array([float(nb.closest_only), nb.min_range, nb.min_separation]),
+                  np.float64)
     # issue-14 fields are hashed only when not at their defaults, so hashes of older datasets are unchanged
     if inp.motion_model != "ddmr" or inp.vehicle is not None:
         h.update(f"motion_model|{inp.motion_model}|{inp.vehicle!r}|".encode())
@@ -711,6 +800,14 @@ def dataset_hash(dataset: Dataset) -> str:
         _feed(h, "sensor_offset_xy", inp.sensor_offset_xy, np.float64)
     if obs.diameter_m is not None:
         _feed(h, "obs.diameter_m", obs.diameter_m, np.float64)
+    if inp.robots is not None:  # multi-robot (fed only when present: single-robot hashes are unchanged)
+        tm = inp.robots
+        _feed(h, "robots.pose_robot", tm.pose_robot, np.int64)
+        _feed(h, "robots.robot_number", tm.robot_number, np.int64)
+        _feed(h, "robots.x0_xyt", np.asarray(tm.x0_xyt, np.float64).reshape(-1, 3), np.float64)
+        _feed(h, "robots.obs_ij", np.stack([np.asarray(tm.observer_pose, np.int64),
+                                            np.asarray(tm.observed_pose, np.int64)], -1), np.int64)
+        _feed(h, "robots.obs_z", tm.z, np.float64)
     if dataset.truth is not None and dataset.truth.position_reference_only:
         _feed(h, "truth.ref_time_s", dataset.truth.ref_time_s, np.float64)
         _feed(h, "truth.ref_xy", np.asarray(dataset.truth.ref_xy, np.float64).reshape(-1, 2), np.float64)

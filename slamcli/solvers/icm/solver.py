@@ -368,6 +368,8 @@ class IcmSlam(BaseSolver):
 
     name = "icm"
     Params = IcmParams
+    #: multi-robot datasets: one more potential per inter-robot reading (slamcli.solvers.icm.team)
+    multi_robot = True
 
     def solve(
         self,
@@ -377,6 +379,10 @@ class IcmSlam(BaseSolver):
         rng: np.random.Generator,
         progress: ProgressFn | None = None,
     ) -> SolverResult:
+        if inputs.robots is not None:
+            from slamcli.solvers.icm.team import solve_team
+
+            return solve_team(self, inputs, init=init, progress=progress)
         t_start = time.perf_counter()
         p: IcmParams = self.params
         from slamcli.errors import ConfigError
