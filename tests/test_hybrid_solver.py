@@ -1,5 +1,6 @@
-"""The ``hybrid`` solver end to end on a small Map 1 (40 m square corridor, 8 m wide, 1 m cells, 60-beam laser,
-3 laps — a fast variant of ``hybrid-map1``, not the paper's 100 m map), grid I/O and bad grid parameters."""
+"""The ``hybrid`` solver end to end on the paper's Map 1 (``hybrid-map1``: 100 m cyclic corridor, 10 m wide,
+0.5 m cells, accurate laser, 3 laps) with one reduction — 60 beams instead of 180, for speed — plus grid I/O,
+the CLI and bad grid parameters (those on a small 40 m Map 1)."""
 
 from __future__ import annotations
 
@@ -18,19 +19,26 @@ SMALL_MAP1 = {"walls.width": 40, "walls.height": 40, "walls.corridor": 8, "walls
 runner = CliRunner()
 
 
+# the paper's Map 1 (every scenario default: size, corridor, 0.5 m cells, laser σ, 3 laps), 60 beams (of 180)
+PAPER_MAP1_60_BEAMS = {"sensor.n_beams": 60}
+
+
 @pytest.fixture(scope="module")
-def run_small_map1():
-    ds = simulate_scenario("hybrid-map1", 0, SMALL_MAP1)
-    res = HybridSlam(HybridParams(resolution=1.0, n_snapshots=6)).solve(ds.inputs, rng=np.random.default_rng(0))
+def run_map1():
+    ds = simulate_scenario("hybrid-map1", 0, PAPER_MAP1_60_BEAMS)
+    res = HybridSlam(HybridParams(n_snapshots=6)).solve(ds.inputs, rng=np.random.default_rng(0))
     return ds, res
 
 
-def test_map_error_falls_with_laps_and_beats_logodds(run_small_map1):
-    ds, res = run_small_map1
+def test_map_error_falls_with_laps_and_beats_logodds(run_map1):
+    """Measured (seed 0, 60 beams): total error 427 → 254 → 205 at the lap ends; final per-cell error E2
+    0.0136 vs log-odds 0.0906 (the log-odds map keeps rarely hit cells near 0.5). The full scenario (180 beams)
+    is in the notes of issue 15."""
+    ds, res = run_map1
     tr = ds.truth
-    assert len(tr.lap_end_step) == 3
+    assert len(tr.lap_end_step) == 3 and tr.occupancy.resolution == 0.5
     mask = common_mask(res.grids, tr.occupancy)
-    assert mask.sum() > 800
+    assert mask.sum() > 14_000
     freq = snapshot_errors(res.grids["frequentist"], tr.occupancy, tr.lap_end_step, mask)
     e_freq = error_at_lap_ends(freq, tr.lap_end_step)
     # total map error falls from lap 1 to lap 3 (paper Figs. (e))
@@ -38,16 +46,16 @@ def test_map_error_falls_with_laps_and_beats_logodds(run_small_map1):
     # final per-cell error of E2 below the log-odds grid fed with the same belief mean (eq. 24)
     f_final = grid_errors(res.grids["frequentist"], tr.occupancy, mask)
     l_final = grid_errors(res.grids["logodds"], tr.occupancy, mask)
-    assert f_final["mean_abs_error"] < l_final["mean_abs_error"], (f_final, l_final)
-    assert f_final["accuracy"] > 0.98
+    assert f_final["mean_abs_error"] < 0.5 * l_final["mean_abs_error"], (f_final, l_final)
+    assert f_final["mean_abs_error"] < 0.03 and f_final["accuracy"] > 0.98, f_final
     # the Bayesian part: the EKF pose stays within a metre on this map (odometry alone drifts far more)
     err = np.hypot(*(res.poses_xyt[:, :2] - tr.poses_xyt[:, :2]).T)
     odo = np.hypot(*(ds.inputs.odometry_xyt[:, :2] - tr.poses_xyt[:, :2]).T)
     assert err.max() < 1.0 < odo.max()
 
 
-def test_grids_round_trip_and_old_files_read(run_small_map1, tmp_path):
-    ds, res = run_small_map1
+def test_grids_round_trip_and_old_files_read(run_map1, tmp_path):
+    ds, res = run_map1
     p = write_dataset(tmp_path / "d.h5", ds)
     back = read_dataset(p)
     np.testing.assert_array_equal(back.truth.occupancy.prob, ds.truth.occupancy.prob)

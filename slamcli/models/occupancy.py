@@ -155,9 +155,11 @@ def _G(u):
     shape = u.shape
     u = u.reshape(-1)
     out = np.maximum(u, 0.0)
-    m = np.abs(u) < 9.0
-    um = u[m]
-    out[m] = um * ndtr(um) + np.exp(-0.5 * um * um) / _SQRT_2PI
+    zero = u == 0.0  # G(0) = φ(0): exact zeros are common (a segment's own ends, shared ends of neighbours)
+    idx = np.flatnonzero((np.abs(u) < 9.0) & ~zero)
+    um = u[idx]
+    out[idx] = um * ndtr(um) + np.exp(-0.5 * um * um) / _SQRT_2PI
+    out[zero] = 1.0 / _SQRT_2PI
     return out.reshape(shape)
 
 
@@ -181,6 +183,19 @@ def tail_prob(a_k, a_j, b_j, sigma):
     (closed form ``σ/L_j [G((b_j − a_k)/σ) − G((a_j − a_k)/σ)]``, broadcasts)."""
     L = np.maximum(b_j - a_j, MIN_SEGMENT)
     return np.clip(sigma * (_G((b_j - a_k) / sigma) - _G((a_j - a_k) / sigma)) / L, 0.0, 1.0)
+
+
+def gamma_tail(a_k, b_k, a_j, b_j, sigma):
+    """``(Γ_kj, Q_kj)`` of :func:`gamma` and :func:`tail_prob` together: Q's two G values follow from two of
+    Γ's four through ``G(−u) = G(u) − u`` (four G evaluations instead of six)."""
+    L = np.maximum(b_j - a_j, MIN_SEGMENT)
+    s = sigma
+    u3 = (a_k - a_j) / s
+    u4 = (a_k - b_j) / s
+    g3, g4 = _G(u3), _G(u4)
+    g = _G((b_k - a_j) / s) - _G((b_k - b_j) / s) - g3 + g4
+    q = (g4 - u4) - (g3 - u3)
+    return np.clip(s * g / L, 0.0, 1.0), np.clip(s * q / L, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -256,10 +271,11 @@ def observation_probs(P: np.ndarray, rs: RaySegments, sigma: np.ndarray, band: i
     U, pi, _ = ray_products(P, rs)
     a, b = rs.a, rs.b
     one_minus = np.maximum(1.0 - P, 1e-12)
-    a_oo = gamma(a, b, a, b, sigma) * U
+    g_kk, q_kk = gamma_tail(a, b, a, b, sigma)
+    a_oo = g_kk * U
     a_oe = np.zeros_like(a_oo)
     if conditional:
-        d_o = U * tail_prob(a, a, b, sigma)
+        d_o = U * q_kk
         d_e = U.copy()
     lg = np.log1p(-np.minimum(P, 1.0 - 1e-12))
     cs = np.cumsum(lg)
@@ -269,21 +285,22 @@ def observation_probs(P: np.ndarray, rs: RaySegments, sigma: np.ndarray, band: i
         same = rs.same_ray_shift(d)
         k_hi, j_lo = slice(d, None), slice(None, -d)  # (k, j = k − d)
         s_k = sigma[k_hi]
-        g = np.where(same, gamma(a[k_hi], b[k_hi], a[j_lo], b[j_lo], s_k) * pi[j_lo], 0.0)
+        g_lo, q_lo = gamma_tail(a[k_hi], b[k_hi], a[j_lo], b[j_lo], s_k)
+        g = np.where(same, g_lo * pi[j_lo], 0.0)
         a_oo[k_hi] += g
         a_oe[k_hi] += g
         k_lo, j_hi = slice(None, -d), slice(d, None)  # (k, j = k + d)
         s_k = sigma[k_lo]
+        g_hi, q_hi = gamma_tail(a[k_lo], b[k_lo], a[j_hi], b[j_hi], s_k)
         # P_j U_k Π_{k<i<j}(1 − P_i) = P_j U_k exp(cs[j−1] − cs[k])
         between = np.exp(cs[d - 1 : len(cs) - 1] - cs[:-d]) if d > 1 else np.ones(len(a) - d)
-        h = np.where(same, gamma(a[k_lo], b[k_lo], a[j_hi], b[j_hi], s_k) * P[j_hi] * U[k_lo] * between, 0.0)
+        h = np.where(same, g_hi * P[j_hi] * U[k_lo] * between, 0.0)
         a_oe[k_lo] += h
         if conditional:
-            q = np.where(same, tail_prob(a[k_hi], a[j_lo], b[j_lo], sigma[k_hi]) * pi[j_lo], 0.0)
+            q = np.where(same, q_lo * pi[j_lo], 0.0)
             d_o[k_hi] += q
             d_e[k_hi] += q
-            qh = tail_prob(a[k_lo], a[j_hi], b[j_hi], s_k)
-            d_e[k_lo] -= np.where(same, pi[j_hi] * (1.0 - qh) / one_minus[k_lo], 0.0)
+            d_e[k_lo] -= np.where(same, pi[j_hi] * (1.0 - q_hi) / one_minus[k_lo], 0.0)
     if conditional:
         a_oo = a_oo / np.maximum(d_o, 1e-300)
         a_oe = a_oe / np.maximum(d_e, 1e-300)

@@ -60,6 +60,8 @@ class HybridParams:
     prior : float               initial occupancy probability P_i(0).
     a, alpha : float            learning rate γ = a·n^(−α) (paper: α < 1).
     step_clock : "cell" | "global"   n = the cell's own update count, or the global step t.
+    weighted_clock : bool       with the cell clock: n advances by min(1, W_i), the weight of the samples
+                                that observe the cell (false: by 1 per update, however small W_i).
     samples : "sigma" | "random"     pose samples of the belief: 7 sigma points (κ = ``kappa``) or
                                      ``n_samples`` random draws (rng).
     n_samples : int             random draws per step (``samples = "random"``).
@@ -89,6 +91,15 @@ class HybridParams:
     baseline : bool             also build the log-odds (eq. 24) grid from the belief mean.
     logodds_clamp : float       |log-odds| bound of the baseline.
     n_snapshots : int           grid snapshots at evenly spaced steps (the last one = the final map).
+    weight_floor : float        pose samples whose normalised weight p(z|s)b(s) is below this are left out of
+                                the E2 sums (they change c_i and A_i by less than S·floor; with the laser
+                                most steps keep one or two of the seven sigma points); 0 keeps all.
+    thin_wall_likelihood : bool the scan likelihood p(z|s,P) of the sample weights treats walls as thin
+                                (``frequentist.scan_log_likelihood`` with ``free_margin``): cells within
+                                ``free_margin`` before a reading do not block the beam, and a wall cell stops
+                                it with probability ∝ its crossing length. False = the forward model of
+                                eqs. (32)-(34) as is, which (measured on hybrid-map1 under a near-exact map)
+                                prefers sigma points 0.2-0.4 m off the true pose and smears the map.
     """
 
     resolution: float = 0.5
@@ -116,6 +127,9 @@ class HybridParams:
     baseline: bool = True
     logodds_clamp: float = 20.0
     n_snapshots: int = 12
+    weight_floor: float = 1e-9
+    thin_wall_likelihood: bool = True
+    weighted_clock: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution) and self.resolution > 0):
@@ -136,6 +150,8 @@ class HybridParams:
             raise ValueError("min_traversal and free_margin must be >= 0 and max_cell_dist > 0")
         if self.stabilising_scale <= 0 or self.motion_std_scale <= 0:
             raise ValueError("stabilising_scale and motion_std_scale must be > 0")
+        if not 0.0 <= self.weight_floor < 1e-3:
+            raise ValueError(f"weight_floor must be in [0, 1e-3), got {self.weight_floor}")
         if self.n_snapshots < 1 or self.logodds_clamp <= 0:
             raise ValueError("n_snapshots must be >= 1 and logodds_clamp > 0")
 
@@ -147,6 +163,12 @@ def grid_for_trajectory(poses_xyt: np.ndarray, reach: float, resolution: float, 
     o = (np.floor(lo / resolution - offset) + offset) * resolution
     shape = np.ceil((hi - o) / resolution).astype(int)
     return GridSpec((float(o[0]), float(o[1])), float(resolution), (int(shape[1]), int(shape[0])))
+
+
+def scan_geometry(inputs: SlamInputs, alphas: np.ndarray) -> ScanGeometry:
+    """The scanner as the mapper sees it: beam bearings, max range and the dataset's declared noise."""
+    return ScanGeometry(alphas=alphas, max_range=float(inputs.max_range), range_std=float(inputs.noise.range_std),
+                        bearing_std=float(inputs.noise.bearing_std))
 
 
 def _select_rows(obs: Observations, mask: np.ndarray, n_poses: int) -> Observations:
@@ -174,17 +196,113 @@ def scan_table(inputs: SlamInputs, scan_sensor: int) -> tuple[np.ndarray, np.nda
     return brg[0].copy(), rng_m
 
 
+@dataclass
+class MapperOutput:
+    """The grids built by :func:`map_scans` (flat ``(H·W,)`` arrays) and per-run statistics."""
+
+    P: np.ndarray  # E2 occupancy probabilities
+    count: np.ndarray  # E2 update count per cell
+    L: np.ndarray  # log-odds of the baseline (eq. 24)
+    count_b: np.ndarray
+    snap_steps: np.ndarray
+    snaps: list
+    snaps_b: list
+    n_updated: int  # cell updates summed over the steps
+    ess_sum: float  # Σ_t effective sample size of the weights p(z|s)b(s)
+    band: int
+    samples_kept: int  # Σ_t samples with weight ≥ ``weight_floor`` (the others are dropped before E2)
+
+
+def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeometry, spec: GridSpec,
+              p: HybridParams, rng: np.random.Generator, progress=None, on_step=None) -> MapperOutput:
+    """The frequentist part over all steps: E2 (and the log-odds baseline) from the pose beliefs
+    ``N(mu[t], cov[t])`` — ``mu (T+1, 3)``, ``cov (T+1, 3, 3)`` — and the scans ``ranges (T+1, B)``.
+
+    ``progress(done, n)`` after every T/200 steps; ``on_step(t, samples (S, 3), w (S,))`` (diagnostics) with
+    the pose samples and their normalised weights ``∝ p(z|s) b(s)``.
+    """
+    n_poses = len(mu)
+    T = n_poses - 1
+    B = len(geo.alphas)
+    sig_max = float(np.sqrt(geo.range_std**2 + (geo.max_range * geo.bearing_std) ** 2)) if p.bearing_in_range \
+        else geo.range_std
+    band = band_for(sig_max, p.resolution)
+    P = np.full(spec.n_cells, p.prior, float)
+    cnt = np.zeros(spec.n_cells, np.int32)
+    clock = np.zeros(spec.n_cells) if p.weighted_clock else None
+    L = np.full(spec.n_cells, math.log(p.prior / (1 - p.prior)))
+    cnt_b = np.zeros(spec.n_cells, np.int32)
+    snap_steps = np.unique(np.round(np.linspace(0, T, p.n_snapshots + 1)[1:]).astype(np.int64))
+    snaps, snaps_b = [], []
+    min_trav = p.min_traversal * p.resolution
+    n_upd, ess_sum, kept = 0, 0.0, 0
+    report = max(1, n_poses // 200)
+    for t in range(n_poses):
+        if p.samples == "sigma":
+            samples, w0 = sigma_points(mu[t], cov[t], p.kappa)
+        else:
+            samples = rng.multivariate_normal(mu[t], cov[t] + 1e-12 * np.eye(3), size=p.n_samples)
+            samples[:, 2] = np.mod(samples[:, 2] + np.pi, 2 * np.pi) - np.pi
+            w0 = np.full(p.n_samples, 1.0 / p.n_samples)
+        rb = trace_scan(spec, samples, ranges[t], geo, band, p.bearing_in_range)
+        P_seg = segment_probs(P, rb)
+        ll = scan_log_likelihood(rb, P_seg, geo.max_range, p.outlier_prob,
+                                 free_margin=p.free_margin if p.thin_wall_likelihood else 0.0,
+                                 resolution=spec.resolution).reshape(len(w0), -1).sum(axis=1)
+        lw = np.log(w0) + ll
+        w = np.exp(lw - lw.max())
+        w /= w.sum()
+        ess_sum += 1.0 / float(np.sum(w * w))
+        if on_step is not None:
+            on_step(t, samples, w)
+        # samples whose weight is below the floor change c_i and A_i by less than S·floor: skip their rays
+        keep = np.flatnonzero(w >= p.weight_floor)
+        kept += len(keep)
+        rb_e2 = rb if len(keep) == len(w) else rb.select_samples(keep, B)
+        n_upd += e2_update(P, cnt, spec, rb_e2, np.repeat(w[keep], B), mu[t, :2], t + 1, a=p.a, alpha=p.alpha,
+                           step_clock=p.step_clock, band=band, min_traversal=min_trav,
+                           max_cell_dist=p.max_cell_dist, conditional=p.conditional_a, free_margin=p.free_margin,
+                           clock=clock)
+        if p.baseline:
+            # the belief mean's rays: sigma point 0 is the mean itself
+            rb0 = (rb.first_sample(B) if p.samples == "sigma"
+                   else trace_scan(spec, mu[t : t + 1], ranges[t], geo, band, p.bearing_in_range))
+            logodds_update(L, cnt_b, spec, rb0, mu[t, :2], eps=p.outlier_prob, max_range=geo.max_range,
+                           min_traversal=min_trav, max_cell_dist=p.max_cell_dist, l_max=p.logodds_clamp,
+                           free_margin=p.free_margin)
+        if t in snap_steps:
+            snaps.append(P.reshape(spec.shape).astype(np.float32))
+            if p.baseline:
+                snaps_b.append(_prob(L).reshape(spec.shape).astype(np.float32))
+        if progress is not None and (t % report == 0 or t == T):
+            progress(t + 1, n_poses)
+    return MapperOutput(P, cnt, L, cnt_b, snap_steps, snaps, snaps_b, n_upd, ess_sum, band, kept)
+
+
 class HybridSlam(BaseSolver):
     """Hybrid Bayesian (EKF on features) / frequentist (E2 occupancy grid) SLAM — paper 001."""
 
     name = "hybrid"
     Params = HybridParams
 
+    def bayesian_part(self, inputs: SlamInputs, rng: np.random.Generator, progress=None) -> SolverResult:
+        """The EKF (``solvers.ekf``) on the feature rows alone: its ``poses_xyt``/``pose_cov`` are the beliefs
+        ``N(μ_t, Σ_t)`` handed to :func:`map_scans`."""
+        p: HybridParams = self.params
+        obs = inputs.observations
+        feat_mask = np.asarray(obs.sensor) == p.feature_sensor
+        f_inputs = dataclasses.replace(inputs, observations=_select_rows(obs, feat_mask, inputs.n_poses))
+        assoc_mode = p.association
+        if assoc_mode == "auto":
+            assoc_mode = "known" if np.any(f_inputs.observations.reported_id >= 0) else "ml"
+        ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
+                                motion_std_scale=p.motion_std_scale, use_gps=False))
+        return ekf.solve(f_inputs, rng=rng, progress=progress)
+
     def solve(self, inputs: SlamInputs, *, init=None, rng: np.random.Generator, progress=None) -> SolverResult:
         t_start = time.perf_counter()
         p: HybridParams = self.params
         n_poses = inputs.n_poses
-        T = n_poses - 1
         obs = inputs.observations
         has_scan = bool(np.any(np.asarray(obs.sensor) == p.scan_sensor))
         if has_scan:
@@ -201,14 +319,7 @@ class HybridSlam(BaseSolver):
         total = 2 * n_poses
 
         # ---- Bayesian part: the project's EKF on the feature rows ----
-        f_inputs = dataclasses.replace(inputs, observations=_select_rows(obs, feat_mask, n_poses))
-        assoc_mode = p.association
-        if assoc_mode == "auto":
-            assoc_mode = "known" if np.any(f_inputs.observations.reported_id >= 0) else "ml"
-        ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
-                                motion_std_scale=p.motion_std_scale, use_gps=False))
-        ekf_res = ekf.solve(f_inputs, rng=rng,
-                            progress=None if progress is None else (lambda d, n: progress(d, total)))
+        ekf_res = self.bayesian_part(inputs, rng, None if progress is None else (lambda d, n: progress(d, total)))
         if ekf_res.status is Status.FAILED:
             return dataclasses.replace(ekf_res, solver=self.name, message=f"EKF part failed: {ekf_res.message}")
         mu, cov = ekf_res.poses_xyt, ekf_res.pose_cov
@@ -223,55 +334,12 @@ class HybridSlam(BaseSolver):
         if spec.n_cells > p.max_cells:
             raise SolverError(f"resolution={p.resolution}: the grid would have {spec.n_cells} cells "
                               f"({spec.shape[0]}x{spec.shape[1]}), more than max_cells={p.max_cells}")
-        geo = ScanGeometry(alphas=alphas, max_range=float(inputs.max_range), range_std=float(inputs.noise.range_std),
-                           bearing_std=float(inputs.noise.bearing_std))
-        sig_max = float(np.sqrt(geo.range_std**2 + (geo.max_range * geo.bearing_std) ** 2)) if p.bearing_in_range \
-            else geo.range_std
-        band = band_for(sig_max, p.resolution)
-        P = np.full(spec.n_cells, p.prior, float)
-        cnt = np.zeros(spec.n_cells, np.int32)
-        L = np.full(spec.n_cells, math.log(p.prior / (1 - p.prior)))
-        cnt_b = np.zeros(spec.n_cells, np.int32)
-        snap_steps = np.unique(np.round(np.linspace(0, T, p.n_snapshots + 1)[1:]).astype(np.int64))
-        snaps, snaps_b = [], []
-        min_trav = p.min_traversal * p.resolution
-        n_upd = 0
-        ess_sum = 0.0
-        report = max(1, n_poses // 200)
-
-        # ---- frequentist part: E2 per step ----
-        for t in range(n_poses):
-            if p.samples == "sigma":
-                samples, w0 = sigma_points(mu[t], cov[t], p.kappa)
-            else:
-                samples = rng.multivariate_normal(mu[t], cov[t] + 1e-12 * np.eye(3), size=p.n_samples)
-                samples[:, 2] = np.mod(samples[:, 2] + np.pi, 2 * np.pi) - np.pi
-                w0 = np.full(p.n_samples, 1.0 / p.n_samples)
-            rb = trace_scan(spec, samples, ranges[t], geo, band, p.bearing_in_range)
-            P_seg = segment_probs(P, rb)
-            ll = scan_log_likelihood(rb, P_seg, geo.max_range, p.outlier_prob).reshape(len(w0), -1).sum(axis=1)
-            lw = np.log(w0) + ll
-            w = np.exp(lw - lw.max())
-            w /= w.sum()
-            ess_sum += 1.0 / float(np.sum(w * w))
-            w_ray = np.repeat(w, len(alphas))
-            n_upd += e2_update(P, cnt, spec, rb, w_ray, mu[t, :2], t + 1, a=p.a, alpha=p.alpha,
-                               step_clock=p.step_clock, band=band, min_traversal=min_trav,
-                               max_cell_dist=p.max_cell_dist, conditional=p.conditional_a,
-                               free_margin=p.free_margin)
-            if p.baseline:
-                # the belief mean's rays: sigma point 0 is the mean itself
-                rb0 = (rb.first_sample(len(alphas)) if p.samples == "sigma"
-                       else trace_scan(spec, mu[t : t + 1], ranges[t], geo, band, p.bearing_in_range))
-                logodds_update(L, cnt_b, spec, rb0, mu[t, :2], eps=p.outlier_prob, max_range=geo.max_range,
-                               min_traversal=min_trav, max_cell_dist=p.max_cell_dist, l_max=p.logodds_clamp,
-                               free_margin=p.free_margin)
-            if t in snap_steps:
-                snaps.append(P.reshape(spec.shape).astype(np.float32))
-                if p.baseline:
-                    snaps_b.append(_prob(L).reshape(spec.shape).astype(np.float32))
-            if progress is not None and (t % report == 0 or t == T):
-                progress(n_poses + t + 1, total)
+        geo = scan_geometry(inputs, alphas)
+        mp = map_scans(mu, cov, ranges, geo, spec, p, rng,
+                       progress=None if progress is None else (lambda d, n: progress(n_poses + d, total)))
+        P, cnt, L, cnt_b, snap_steps, snaps, snaps_b = (mp.P, mp.count, mp.L, mp.count_b, mp.snap_steps, mp.snaps,
+                                                       mp.snaps_b)
+        n_upd, ess_sum, band = mp.n_updated, mp.ess_sum, mp.band
 
         origin = np.asarray(spec.origin_xy, float)
         grids = {"frequentist": OccupancyGrid(origin, spec.resolution, P.reshape(spec.shape).astype(np.float32),
@@ -284,6 +352,7 @@ class HybridSlam(BaseSolver):
         extra = dict(ekf_res.extra)
         extra.update({"grid_cells": spec.n_cells, "grid_shape": list(spec.shape), "band": band,
                       "cells_updated_per_step": n_upd / n_poses, "mean_sample_ess": ess_sum / n_poses,
+                      "mean_samples_kept": mp.samples_kept / n_poses,
                       "n_beams": int(len(alphas))})
         res = self.make_result(
             status=Status.COMPLETED, poses_xyt=mu, landmarks_xy=ekf_res.landmarks_xy, assoc=assoc, t_start=t_start,
