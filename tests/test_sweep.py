@@ -290,7 +290,9 @@ def test_interrupt_leaves_no_half_run_and_resume_finishes(tmp_path, sig):
     env = dict(os.environ, PYTHONPATH=str(HERE) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     # runs of 1.2 s: the poll below must see two finished runs and signal before the next two finish, which
     # on a loaded 2-core machine took > 0.4 s (all six finished before the Ctrl-C landed)
-    code = f"import test_sweep_helpers as h; h.main({str(tmp_path)!r}, {RUN_S})"
+    # the default Ctrl-C handler, whatever disposition the test process's own parent left for SIGINT
+    code = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            f"import test_sweep_helpers as h; h.main({str(tmp_path)!r}, {RUN_S})")
     proc = subprocess.Popen([sys.executable, "-c", code], env=env, start_new_session=True)
     exp_dir = tmp_path / "killme"
     deadline = time.time() + 30
