@@ -185,7 +185,7 @@ def test_icm_car_unknown_association(world):
     """Unknown association (the ICM machinery unchanged): every true landmark found once, poses as good as
     dead reckoning's class, and ignoring the 3.8 m laser offset fails visibly."""
     # ϑ = 0.5 m: two true landmarks of this world lie 0.81 m apart
-    icm = solve_dataset(world.inputs, "icm", {"fusion_radius": 0.5, "max_sweeps": 100})
+    icm = solve_dataset(world.inputs, "icm", {"fusion_radius": 0.5, "max_sweeps": 30})
     ate, _ = _errors(icm, world)
     n_true = len(np.unique(world.truth.obs_landmark))
     ag = trajectory_against(icm.poses_xyt, world.truth.poses_xyt, icm.landmarks_xy,
@@ -194,7 +194,7 @@ def test_icm_car_unknown_association(world):
     assert len(icm.landmarks_xy) == n_true and ag["against_lm_matched"] == n_true, ag
     assert ag["against_lm_rmse_m"] < 0.15, ag
     wrong = dataclasses.replace(world.inputs, sensor_offset_xy=np.zeros(2))
-    w = solve_dataset(wrong, "icm", {"fusion_radius": 0.5, "max_sweeps": 100})
+    w = solve_dataset(wrong, "icm", {"fusion_radius": 0.5, "max_sweeps": 30})
     agw = trajectory_against(w.poses_xyt, world.truth.poses_xyt, w.landmarks_xy,
                              world.truth.landmarks_xy[np.unique(world.truth.obs_landmark)], cutoff_m=1.0)
     assert agw["against_lm_matched"] < n_true or agw["against_lm_rmse_m"] > 1.0, agw

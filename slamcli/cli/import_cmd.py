@@ -200,6 +200,21 @@ def import_g2o_command(
         )
 
 
+def _import_car_recording(out: Path | None, quiet: bool, load, summary) -> None:
+    """The shared body of the car-recording imports: ``load()`` → Dataset, written atomically to ``out``, then
+    ``summary(ds)`` (one line) unless ``quiet``; every failure is one line (handle_errors)."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        check_output(out)
+        from slamcli.io import write_dataset
+
+        ds = load()
+        write_dataset(out, ds)
+        if not quiet:
+            stdout_console().print(f"{summary(ds)} → {out}", highlight=False, markup=False, soft_wrap=True)
+
+
 @import_app.command("victoria-park")
 def import_victoria_park_command(
     directory: Annotated[
@@ -215,23 +230,19 @@ def import_victoria_park_command(
 ) -> None:
     """Import Sydney Victoria Park: 40 Hz speed/steering as Ackermann controls, laser at (3.78, 0.50) m, tree
     detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
-    with handle_errors():
-        if out is None:
-            fail("-o/--out is required")
-        from slamcli.datasets.victoria_park import import_victoria_park
-        from slamcli.io import write_dataset
 
-        ds = import_victoria_park(directory, start=start, duration=duration, max_range=max_range)
-        write_dataset(out, ds)
-        if quiet:
-            return
+    def load():
+        from slamcli.datasets.victoria_park import import_victoria_park
+
+        return import_victoria_park(directory, start=start, duration=duration, max_range=max_range)
+
+    def summary(ds):
         inp, md = ds.inputs, ds.metadata
-        stdout_console().print(
-            f"Victoria Park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
-            f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
-            f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s) → {out}",
-            highlight=False, markup=False, soft_wrap=True,
-        )
+        return (f"Victoria Park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+                f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
+                f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s)")
+
+    _import_car_recording(out, quiet, load, summary)
 
 
 @import_app.command("carpark")
@@ -245,20 +256,17 @@ def import_carpark_command(
 ) -> None:
     """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
     ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
-    with handle_errors():
-        if out is None:
-            fail("-o/--out is required")
-        from slamcli.datasets.carpark import import_carpark
-        from slamcli.io import write_dataset
 
-        ds = import_carpark(directory, max_range=max_range)
-        write_dataset(out, ds)
-        if quiet:
-            return
+    def load():
+        from slamcli.datasets.carpark import import_carpark
+
+        return import_carpark(directory, max_range=max_range)
+
+    def summary(ds):
         inp, md = ds.inputs, ds.metadata
-        stdout_console().print(
-            f"ACFR car park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
-            f"{md['n_beacon_observations']} beacon observations (intensity >= {md['beacon_intensity_threshold']}), "
-            f"{md['n_surveyed_beacons']} surveyed beacons, {md['n_gps_fixes']} GPS fixes → {out}",
-            highlight=False, markup=False, soft_wrap=True,
-        )
+        return (f"ACFR car park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+                f"{md['n_beacon_observations']} beacon observations (intensity >= "
+                f"{md['beacon_intensity_threshold']}), {md['n_surveyed_beacons']} surveyed beacons, "
+                f"{md['n_gps_fixes']} GPS fixes")
+
+    _import_car_recording(out, quiet, load, summary)
