@@ -19,7 +19,7 @@ from slamcli.api.solve import solve_dataset
 from slamcli.metrics.reference import trajectory_against
 from slamcli.models.ackermann import VICTORIA_PARK, ackermann_jacobians, ackermann_step, integrate_ackermann
 from slamcli.models.observation import body_pose_from_sensor, range_bearing, sensor_pose
-from slamcli.solvers.icm import IcmParams, IcmSlam, reported_labels
+from slamcli.solvers.icm import IcmParams, reported_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.sensor_frame import to_sensor_frame
 from slamcli.types import NoiseSpec, Observations, SlamInputs

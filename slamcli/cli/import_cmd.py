@@ -200,6 +200,12 @@ def import_g2o_command(
         )
 
 
+_RangeStd = Annotated[float | None, typer.Option(help="σ_r to store, m (default: the importer's, see its docstring).")]
+_BearingStd = Annotated[float | None, typer.Option(help="σ_b to store, rad (default: the importer's).")]
+_VStd = Annotated[float | None, typer.Option(help="σ of the encoder speed, m/s (default: the importer's).")]
+_SteerStd = Annotated[float | None, typer.Option(help="σ of the steering angle, rad (default: the importer's).")]
+
+
 def _import_car_recording(out: Path | None, quiet: bool, load, summary) -> None:
     """The shared body of the car-recording imports: ``load()`` → Dataset, written atomically to ``out``, then
     ``summary(ds)`` (one line) unless ``quiet``; every failure is one line (handle_errors)."""
@@ -223,6 +229,10 @@ def import_victoria_park_command(
     start: Annotated[float, typer.Option(help="Window start, s after the first input row.")] = 0.0,
     duration: Annotated[float | None, typer.Option(help="Window length, s (default: to the end).")] = None,
     max_range: Annotated[float, typer.Option(help="Sensor max range to store, m.")] = float("inf"),
+    range_std: _RangeStd = None,
+    bearing_std: _BearingStd = None,
+    v_std: _VStd = None,
+    steer_std: _SteerStd = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -232,9 +242,10 @@ def import_victoria_park_command(
     detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
 
     def load():
-        from slamcli.datasets.victoria_park import import_victoria_park
+        from slamcli.datasets.victoria_park import default_noise, import_victoria_park
 
-        return import_victoria_park(directory, start=start, duration=duration, max_range=max_range)
+        noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
+        return import_victoria_park(directory, start=start, duration=duration, max_range=max_range, noise=noise)
 
     def summary(ds):
         inp, md = ds.inputs, ds.metadata
@@ -249,6 +260,10 @@ def import_victoria_park_command(
 def import_carpark_command(
     directory: Annotated[Path, typer.Argument(help="ACFR car-park folder (data_set.mat, beac_juan3.mat).")],
     max_range: Annotated[float, typer.Option(help="Drop beacon returns beyond this range, m.")] = 81.0,
+    range_std: _RangeStd = None,
+    bearing_std: _BearingStd = None,
+    v_std: _VStd = None,
+    steer_std: _SteerStd = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -258,9 +273,10 @@ def import_carpark_command(
     ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
 
     def load():
-        from slamcli.datasets.carpark import import_carpark
+        from slamcli.datasets.carpark import default_noise, import_carpark
 
-        return import_carpark(directory, max_range=max_range)
+        noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
+        return import_carpark(directory, max_range=max_range, noise=noise)
 
     def summary(ds):
         inp, md = ds.inputs, ds.metadata

@@ -311,7 +311,8 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
     elif data is not None:
         vp_dir, cp_dir, mr_dir = (data / "victoria_park" / "rfs_slam_ascii", data / "acfr_carpark",
                                   data / "mrclam_dataset7")
-        source = "the public recordings (datasets folder: `SLAMCLI_DATASETS` or `../shared/datasets`)"
+        source = ("the public recordings (Victoria Park ASCII logs, MRCLAM Dataset 7, ACFR car-park .mat files) from the "
+                  "datasets folder (`SLAMCLI_DATASETS`, else the project's datasets folder beside the repository)")
     else:
         return ("## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)\n\n> **Not run**: no "
                 "datasets folder (set `SLAMCLI_DATASETS`) and no test excerpts.", False)
