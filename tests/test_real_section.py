@@ -32,7 +32,8 @@ def test_gps_table_shows_refusal_line_and_survey_columns():
 
 def test_mrclam_sentences_mean_over_robots():
     rows = [{"robot": r, "solver": s, "refused": None, "ate": a, "odo_ate": 1.0}
-            for r, s, a in ((1, "ekf", 0.4), (2, "ekf", 0.6), (1, "graph", 0.2), (2, "graph", 1.2))]
+            for r, s, a in ((1, "ekf", 0.4), (2, "ekf", 0.6), (1, "graph", 0.2), (2, "graph", 1.2),
+                            (1, "odometry", 1.0))]
     text = " ".join(pr._mrclam_sentences(rows))
     assert "`ekf` has the lowest mean ATE (0.500 m)" in text and "`graph` 0.700 m" in text
-    assert "Runs worse than dead reckoning: `graph` robot 2." in text
+    assert "Runs worse than dead reckoning: `graph` robot 2." in text  # not odometry: it is the reference
