@@ -184,6 +184,57 @@ class NoiseBounds:
 
 
 @dataclass(frozen=True)
+class RobotTeam:
+    """Multi-robot layout of a dataset (``/inputs/robots`` and ``/inputs/robot_observations`` in the schema).
+
+    The poses of all ``R`` robots are stacked robot-major into one pose array: robot ``r`` owns the
+    contiguous poses ``first_pose[r] .. first_pose[r+1]−1``, all on one common time grid (the same
+    ``timestamps`` block repeats per robot). Observation rows, controls and odometry refer to that stacked
+    index; the odometry chain never links the last pose of one robot to the first of the next (the control
+    row between them is zero and unused). Landmarks are shared by all robots.
+
+    Attributes
+    ----------
+    pose_robot : ndarray (P,) int64      robot index ``0..R-1`` of each stacked pose (non-decreasing).
+    robot_number : ndarray (R,) int64    the dataset's own robot numbers (MRCLAM: 1..5).
+    x0_xyt : ndarray (R, 3)              known start pose of each robot, world frame (one common frame).
+    observer_pose : ndarray (K,) int64   stacked pose index of the robot that took each inter-robot reading ...
+    observed_pose : ndarray (K,) int64   ... and of the robot it saw, at the same time step.
+    range_m : ndarray (K,)               measured range to the observed robot's body origin, m.
+    bearing_rad : ndarray (K,)           measured bearing in the observer's body frame, rad, wrapped.
+    """
+
+    pose_robot: np.ndarray
+    robot_number: np.ndarray
+    x0_xyt: np.ndarray
+    observer_pose: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    observed_pose: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    range_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bearing_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n_robots(self) -> int:
+        return int(np.asarray(self.robot_number).shape[0])
+
+    @property
+    def first_pose(self) -> np.ndarray:
+        """``(R+1,)`` CSR offsets: robot r owns stacked poses ``first_pose[r]:first_pose[r+1]``."""
+        counts = np.bincount(np.asarray(self.pose_robot, np.int64), minlength=self.n_robots)
+        return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+    @property
+    def chain_pairs(self) -> np.ndarray:
+        """``(E,)`` indices ``i`` of the odometry edges ``i → i+1`` that stay within one robot."""
+        pr = np.asarray(self.pose_robot, np.int64)
+        return np.flatnonzero(pr[:-1] == pr[1:]).astype(np.int64)
+
+    @property
+    def z(self) -> np.ndarray:
+        """Inter-robot measurements ``(K, 2)`` as ``[range, bearing]``."""
+        return np.stack([np.asarray(self.range_m, float), np.asarray(self.bearing_rad, float)], axis=-1)
+
+
+@dataclass(frozen=True)
 class SlamInputs:
     """Everything a solver may use.
 
@@ -210,6 +261,7 @@ class SlamInputs:
                                      that can misread an id, e.g. MRCLAM's barcodes), ``"file"`` (a graph
                                      file's data association), ``"unknown"`` (default; the simulator's ids).
     noise_bounds : NoiseBounds | None  guaranteed error bounds (bounded-noise datasets only).
+    robots : RobotTeam | None        multi-robot layout (stacked poses, inter-robot readings); None = one robot.
     """
 
     dt: float
@@ -229,6 +281,7 @@ class SlamInputs:
     constraints: PoseConstraints | None = None
     reported_id_source: str = "unknown"
     noise_bounds: NoiseBounds | None = None
+    robots: RobotTeam | None = None
 
     @property
     def n_poses(self) -> int:

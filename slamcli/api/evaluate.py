@@ -200,6 +200,8 @@ def evaluate_files(result_path: str | os.PathLike, data_path: str | os.PathLike 
             ev = evaluate_without_truth(result, dataset)
         else:
             ev = evaluate_result(result, dataset.truth, dataset.inputs.odometry_xyt, params)
+            if dataset.inputs.robots is not None:  # multi-robot: per-robot ATE, within-robot RPE
+                ev = _add_per_robot(ev, result, dataset, params)
         if against is not None:
             ev = _add_against(ev, result, against, cutoff)
     except ValueError as exc:
@@ -306,6 +308,26 @@ def evaluate_without_truth(result, dataset):
     per_landmark = pd.DataFrame({"landmark": np.arange(len(lm)), "est_x": lm[:, 0], "est_y": lm[:, 1],
                                  "n_obs": counts})
     return Evaluation(scalars=s, per_iteration=per_iteration, per_step=per_step, per_landmark=per_landmark)
+
+
+def _add_per_robot(ev, result, dataset, params):
+    """Per-robot metrics of a multi-robot result (:mod:`slamcli.metrics.team`); the RPE is replaced by the
+    one over within-robot pairs, and ``per_step`` gains a ``robot`` column."""
+    import dataclasses
+
+    import numpy as np
+
+    from slamcli.metrics.team import per_robot_trajectory_metrics
+
+    team = dataset.inputs.robots
+    m = per_robot_trajectory_metrics(result.poses_xyt, dataset.truth.poses_xyt, team.first_pose, team.robot_number,
+                                     dataset.inputs.odometry_xyt, params.rpe_delta, params.rpe_unit)
+    m["multi_robot_note"] = (f"{team.n_robots} robots: ate_rmse_m is over all stacked poses (the joint overall), "
+                             "aligned_ate_rmse_m with one SE(2) alignment for all; robot<N>_* per robot; RPE over "
+                             "pairs within one robot")
+    per_step = ev.per_step.copy()
+    per_step["robot"] = np.asarray(team.robot_number)[np.asarray(team.pose_robot)]
+    return dataclasses.replace(ev, scalars={**ev.scalars, **m}, per_step=per_step)
 
 
 def _add_against(ev, result, against_path, cutoff: float):

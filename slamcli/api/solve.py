@@ -115,10 +115,16 @@ def solve_dataset(
     """
     if not isinstance(inputs, SlamInputs):
         raise TypeError(f"solve_dataset expects SlamInputs (no ground truth), got {type(inputs).__name__}")
-    from slamcli.solvers.sensor_frame import check_motion_model, result_to_body, to_sensor_frame
+    from slamcli.solvers.sensor_frame import (
+        check_motion_model,
+        check_multi_robot,
+        result_to_body,
+        to_sensor_frame,
+    )
 
     solver = make_solver(method, params)
     check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics
+    check_multi_robot(solver, method, inputs)  # multi-robot data: graph / icm only (issue 14 item 7)
     if getattr(solver, "needs_noise_bounds", False) and inputs.noise_bounds is None:
         raise SolverError(f"solver {method!r} needs guaranteed error bounds (inputs/noise_bounds), which this "
                           "dataset does not declare; simulate with bounded.enabled=true (e.g. -s cuik-room)")

@@ -102,6 +102,14 @@ def evaluate_command(
             table.add_row(label, " / ".join(_fmt(m[k]) for k in keys), unit)
         con = stdout_console()
         con.print(table)
+        if m.get("robots"):  # multi-robot result: one row per robot
+            rt = Table(title="per robot (multi-robot dataset)")
+            for col in ("robot", "ATE RMSE [m]", "aligned ATE [m]", "odometry ATE [m]"):
+                rt.add_column(col, justify="right")
+            for n in m["robots"]:
+                rt.add_row(str(n), *(_fmt(m.get(f"robot{n}_{k}")) for k in ("ate_rmse_m", "aligned_ate_rmse_m",
+                                                                            "odometry_ate_rmse_m")))
+            con.print(rt)
         for note in ("pose_nees_note", "landmark_nees_note", "per_iteration_note", "final_cost_note", "nis_note"):
             if str(m.get(note, "")).startswith("not available"):
                 con.print(f"{note.removesuffix('_note').replace('_', ' ')}: {m[note]}", markup=False)

@@ -17,6 +17,52 @@ import_app = typer.Typer(
 app.add_typer(import_app, name="import")
 
 
+def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, solo_dir: Path | None, out: Path,
+                        quiet: bool, *, no_truth: bool, non_landmark: str, **kw) -> None:
+    """``import mrclam --robots`` / ``--all-robots``: one multi-robot dataset (issue 14 item 7)."""
+    import re
+
+    from slamcli.datasets.mrclam import import_mrclam_team
+    from slamcli.datasets.team import solo_dataset
+    from slamcli.io import write_dataset
+
+    if robots is not None and all_robots:
+        fail("--robots and --all-robots: give one of them")
+    if no_truth:
+        fail("--no-truth: a multi-robot import needs the motion-capture start poses (one world frame for all robots)")
+    if non_landmark != "drop":
+        fail("--non-landmark: with --robots, robot rows become inter-robot readings; only 'drop' applies")
+    if all_robots:
+        found = sorted(int(m.group(1)) for p in Path(directory).glob("Robot*_Odometry.dat")
+                       if (m := re.fullmatch(r"Robot(\d+)_Odometry\.dat", p.name)))
+        numbers = found
+    else:
+        try:
+            numbers = [int(x) for x in robots.split(",") if x.strip()]
+        except ValueError:
+            fail(f"--robots: expected comma-separated robot numbers like 1,2,3, got {robots!r}")
+    if solo_dir is not None:
+        check_output(solo_dir, folder=True, option="--solo-dir")
+    ds = import_mrclam_team(directory, numbers, **kw)
+    write_dataset(out, ds)
+    written = [out]
+    if solo_dir is not None:
+        solo_dir.mkdir(parents=True, exist_ok=True)
+        for r, n in enumerate(ds.inputs.robots.robot_number):
+            written.append(write_dataset(solo_dir / f"robot{int(n)}.h5", solo_dataset(ds, r)))
+    if quiet:
+        return
+    inp, rr = ds.inputs, ds.metadata["robot_rows"]
+    T = inp.n_poses // len(numbers) - 1
+    stdout_console().print(
+        f"MRCLAM {Path(directory).name} robots {','.join(map(str, numbers))}: {T} steps each ({T * inp.dt:.1f} s, "
+        f"dt {inp.dt:g} s), {len(inp.observations)} landmark observations, {rr['kept']} inter-robot readings of "
+        f"{rr['n_rows_with_robot_barcode']} rows with a robot's barcode ({rr['dropped_outside_time_base']} outside "
+        f"the common time base, {rr['dropped_robot_not_imported']} of robots not imported) → "
+        f"{', '.join(map(str, written))}",
+        highlight=False, markup=False, soft_wrap=True)
+
+
 @import_app.command("mrclam")
 def import_mrclam_command(
     directory: Annotated[
@@ -54,13 +100,21 @@ def import_mrclam_command(
     ] = None,
     no_truth: Annotated[bool, typer.Option(
         "--no-truth", help="Copy without Groundtruth files: x0 = 0 (own frame), no ground truth stored.")] = False,
+    robots: Annotated[str | None, typer.Option(
+        "--robots", help="Several robots into ONE multi-robot dataset, e.g. 1,2,3,4,5 (one time base, shared "
+                         "landmarks, inter-robot readings); replaces --robot.")] = None,
+    all_robots: Annotated[bool, typer.Option(
+        "--all-robots", help="Same as --robots with every RobotN_Odometry.dat in the folder.")] = False,
+    solo_dir: Annotated[Path | None, typer.Option(
+        "--solo-dir", help="With --robots: also write each robot alone on the same time grid, robotN.h5 in this "
+                           "folder (to compare solo and joint solves).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
     ] = None,
 ) -> None:
     """Import robot --robot of a UTIAS MRCLAM dataset: controls resampled to --dt, barcode ids as reported ids,
-    motion-capture ground truth for evaluation."""
+    motion-capture ground truth for evaluation. --robots / --all-robots: one multi-robot dataset."""
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
@@ -100,6 +154,13 @@ def import_mrclam_command(
                 range_std=base.range_std if range_std is None else float(range_std),
                 bearing_std=base.bearing_std if bearing_std is None else float(bearing_std),
             )
+        if robots is not None or all_robots:
+            _import_mrclam_team(directory, robots, all_robots, solo_dir, out, quiet, dt=dt, start=start,
+                                duration=duration, noise=noise, control_delay=control_delay, max_range=max_range,
+                                no_truth=no_truth, non_landmark=non_landmark)
+            return
+        if solo_dir is not None:
+            fail("--solo-dir: only with --robots or --all-robots")
         ds = import_mrclam(
             directory,
             robot,

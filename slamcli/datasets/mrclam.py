@@ -338,6 +338,8 @@ def import_mrclam(
     control_delay: float = 0.0,
     misread_gate: float = 0.5,
     no_truth: bool = False,
+    time_origin_unix: float | None = None,
+    raw: MrclamRaw | None = None,
 ) -> Dataset:
     """Import robot ``robot`` of the MRCLAM dataset in ``directory`` as a slamcli :class:`Dataset`.
 
@@ -364,6 +366,9 @@ def import_mrclam(
         whose ranges are also off by 3.1-5.9 m; ``inf`` turns the check off.
     no_truth : for copies without the Groundtruth files: ``t_ref`` is the first odometry stamp, ``x0 = [0, 0,
         0]`` (the robot's own start frame), ``truth = None``; landmarks are the barcode subjects ≥ 6.
+    time_origin_unix : Unix time to use as ``t_ref`` instead of this robot's own (the common time base of a
+        multi-robot import, :func:`import_mrclam_team`); must not lie before this robot's own ``t_ref``.
+    raw : the already parsed files of this robot (:func:`load_mrclam`), to avoid parsing them twice.
 
     Raises
     ------
@@ -386,7 +391,8 @@ def import_mrclam(
         raise DatasetImportError(
             f"--control-delay: must be a number of seconds in [-5, 5], got {control_delay}"
         )
-    raw = load_mrclam(directory, robot, with_truth=not no_truth)
+    if raw is None:
+        raw = load_mrclam(directory, robot, with_truth=not no_truth)
     d = raw.directory
     p_odo, p_gt = d / f"Robot{robot}_Odometry.dat", d / f"Robot{robot}_Groundtruth.dat"
 
@@ -395,6 +401,11 @@ def import_mrclam(
     # without truth the odometry alone spans the window
     gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
     t_ref = max(odo_t_abs[0], gt_t_abs[0])
+    if time_origin_unix is not None:
+        if time_origin_unix < t_ref - 1e-9:
+            raise DatasetImportError(f"time origin {time_origin_unix:.3f} lies before robot {robot}'s first moment "
+                                     f"with both odometry and ground truth ({t_ref:.3f})")
+        t_ref = float(time_origin_unix)
     t_hi = min(odo_t_abs[-1], gt_t_abs[-1]) - t_ref
     if t_hi < dt:
         raise DatasetImportError(
@@ -563,3 +574,194 @@ def residual_noise(dataset: Dataset) -> dict[str, float]:
         out[f"{name}_median"] = med
         out[f"{name}_std"] = float(1.4826 * np.median(np.abs(r - med))) if len(r) else float("nan")
     return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# multi-robot import (issue 14 item 7)
+# --------------------------------------------------------------------------------------------------------
+def robot_rows(
+    raw: MrclamRaw, team_numbers: list[int], t_ref: float, start: float, dt: float, T: int
+) -> dict[str, np.ndarray]:
+    """Classify the measurement rows of ``raw`` whose barcode is a robot's (subject 1..5).
+
+    Every such row gets exactly one fate:
+
+    * ``kept``           the observed robot is in the team and the row's nearest step lies in ``0..T``;
+    * ``outside``        its nearest step ``round((t − t_ref − start)/dt)`` is outside the common time base;
+    * ``not_in_team``    the observed robot was not imported;
+    * ``self``           the barcode is the observer's own (never happens on Dataset 7; counted anyway).
+
+    Returns
+    -------
+    dict with ``n_robot_rows`` (int), ``fate`` (n,) str, ``step`` (n,) int64, ``observed`` (n,) int64 robot
+    number, ``z`` (n, 2) ``[range, bearing]`` and ``t`` (n,) seconds on the ``t_ref`` axis, for those rows in
+    time order.
+    """
+    m = raw.measurements[np.argsort(raw.measurements[:, 0], kind="stable")]
+    b2s = dict(zip(raw.barcodes[:, 1].tolist(), raw.barcodes[:, 0].tolist()))
+    subject = np.array([b2s.get(int(b), -1) for b in m[:, 1]], dtype=np.int64)
+    is_robot = (subject >= 1) & (subject < FIRST_LANDMARK_SUBJECT) & ~np.isin(subject, raw.landmark_subjects)
+    m, subject = m[is_robot], subject[is_robot]
+    t = m[:, 0] - t_ref
+    step = nearest_steps(t, start, dt)
+    fate = np.full(len(m), "kept", dtype=object)
+    fate[~np.isin(subject, team_numbers)] = "not_in_team"
+    fate[(step < 0) | (step > T)] = "outside"
+    fate[subject == raw.robot] = "self"
+    return {"n_robot_rows": int(is_robot.sum()), "fate": fate, "step": step, "observed": subject,
+            "z": m[:, 2:4].copy(), "t": t}
+
+
+def import_mrclam_team(
+    directory: str | Path,
+    robots: list[int] | tuple[int, ...] = (1, 2, 3, 4, 5),
+    *,
+    dt: float = 0.1,
+    start: float = 0.0,
+    duration: float | None = None,
+    noise: NoiseSpec | None = None,
+    max_range: float = float("inf"),
+    control_delay: float = 0.0,
+    misread_gate: float = 0.5,
+) -> Dataset:
+    """Import several robots of one MRCLAM dataset as ONE multi-robot :class:`Dataset` (:class:`RobotTeam`).
+
+    * **One time base**: ``t_ref`` = the latest of the robots' own ``t_ref`` (first moment with odometry and
+      ground truth), the window ends at the earliest of their ends; every robot is imported by
+      :func:`import_mrclam` on that grid (``start``, ``duration`` on the common axis), so all have ``T+1``
+      poses at the same ``timestamps``.
+    * **Stacked poses**: robot-major, robot ``r`` owns stacked poses ``r·(T+1) .. r·(T+1)+T``; the odometry
+      chain never links two robots (the control row between two robots is zero and unused).
+    * **Start poses**: each robot's ``x0`` is its motion-capture pose at the first grid time, exactly as the
+      single-robot importer does; the motion-capture frame is therefore the one world frame of the joint
+      problem (a joint solve needs all start poses in one frame: the known start poses of paper 000 §3).
+    * **Landmarks** (barcode subjects ≥ 6) are shared: one index space, ``reported_id`` = landmark index as
+      for one robot (``reported_id_source = "sensor"``).
+    * **Inter-robot readings**: every row whose barcode is a robot's becomes a range-bearing reading from the
+      observer's pose to the observed robot's pose at the same step (nearest step, timing error ≤ dt/2); rows
+      are dropped only for the reasons of :func:`robot_rows` and counted per reason in
+      ``metadata["robot_rows"]``.
+    * **Truth** (evaluation only): stacked motion-capture poses; ``metadata["robot_rows"]`` also records the
+      residual of the kept readings against the truth (median and robust σ of range and bearing).
+
+    Raises
+    ------
+    DatasetImportError  bad files or arguments (see :func:`import_mrclam`), fewer than two distinct robots.
+    """
+    from slamcli.types import RobotTeam
+
+    numbers = [int(r) for r in robots]
+    if len(numbers) < 2 or len(set(numbers)) != len(numbers):
+        raise DatasetImportError(f"--robots: need at least two distinct robot numbers, got {numbers}")
+    if not (math.isfinite(dt) and dt > 0):
+        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
+    raws = [load_mrclam(directory, r) for r in numbers]
+    t0s = [max(rw.odometry[0, 0] + control_delay, rw.groundtruth[0, 0]) for rw in raws]
+    t1s = [min(rw.odometry[-1, 0] + control_delay, rw.groundtruth[-1, 0]) for rw in raws]
+    t_ref = float(max(t0s))
+    avail = float(min(t1s)) - t_ref - start
+    if duration is None:
+        if avail < dt:
+            raise DatasetImportError(f"robots {numbers}: their odometry and ground truth share less than one step "
+                                     f"(dt = {dt:g} s) after --start {start:g}")
+        duration = avail
+    solo = [
+        import_mrclam(directory, r, dt=dt, start=start, duration=duration, noise=noise, max_range=max_range,
+                      control_delay=control_delay, misread_gate=misread_gate, time_origin_unix=t_ref, raw=rw)
+        for r, rw in zip(numbers, raws)
+    ]
+    n1 = solo[0].inputs.n_poses
+    T = n1 - 1
+    R = len(numbers)
+    ts = solo[0].inputs.timestamps
+    pose_robot = np.repeat(np.arange(R, dtype=np.int64), n1)
+    controls = np.concatenate(
+        [np.concatenate([ds.inputs.controls, np.zeros((1, 2))]) for ds in solo]
+    )[:-1]
+    obs_list = [ds.inputs.observations for ds in solo]
+    steps = np.concatenate([o.step + k * n1 for k, o in enumerate(obs_list)])
+    z = np.concatenate([o.z for o in obs_list])
+    rid = np.concatenate([o.reported_id for o in obs_list])
+    obs = Observations.from_rows(steps, z, R * n1, reported_id=rid)
+
+    # inter-robot readings
+    index_of = {n: k for k, n in enumerate(numbers)}
+    rows = [robot_rows(rw, numbers, t_ref, start, dt, T) for rw in raws]
+    oi, oj, oz, counts = [], [], [], {"kept": 0, "outside": 0, "not_in_team": 0, "self": 0}
+    for k, rr in enumerate(rows):
+        for f in counts:
+            counts[f] += int(np.sum(rr["fate"] == f))
+        keep = rr["fate"] == "kept"
+        oi.append(k * n1 + rr["step"][keep])
+        oj.append(np.array([index_of[int(s)] for s in rr["observed"][keep]], np.int64) * n1 + rr["step"][keep])
+        oz.append(rr["z"][keep])
+    oi, oj, oz = np.concatenate(oi), np.concatenate(oj), np.concatenate(oz)
+    order = np.lexsort((oj, oi))
+    oi, oj, oz = oi[order], oj[order], oz[order]
+    x0s = np.stack([ds.inputs.x0 for ds in solo])
+    team = RobotTeam(pose_robot=pose_robot, robot_number=np.asarray(numbers, np.int64), x0_xyt=x0s,
+                     observer_pose=oi.astype(np.int64), observed_pose=oj.astype(np.int64),
+                     range_m=oz[:, 0].copy(), bearing_rad=np.asarray(wrap_angle(oz[:, 1]), float).reshape(-1))
+    inp0 = solo[0].inputs
+    inputs = SlamInputs(
+        dt=float(dt),
+        timestamps=np.tile(ts, R),
+        x0=x0s[0].copy(),
+        controls=controls,
+        odometry_xyt=np.concatenate([ds.inputs.odometry_xyt for ds in solo]),
+        observations=obs,
+        noise=inp0.noise,
+        max_range=inp0.max_range,
+        reported_id_source="sensor",
+        robots=team,
+    )
+    truth_poses = np.concatenate([ds.truth.poses_xyt for ds in solo])
+    truth = GroundTruth(poses_xyt=truth_poses, landmarks_xy=solo[0].truth.landmarks_xy.copy(),
+                        obs_landmark=np.concatenate([ds.truth.obs_landmark for ds in solo]))
+    # residual of the kept readings against the motion capture (documentation; solvers never see it)
+    resid = {}
+    if len(oi):
+        zh = range_bearing(truth_poses[oi], truth_poses[oj, :2])
+        dr = team.range_m - zh[:, 0]
+        db = angle_diff(team.bearing_rad, zh[:, 1])
+        for name, r_ in (("range", dr), ("bearing", db)):
+            med = float(np.median(r_))
+            resid[f"{name}_median"] = med
+            resid[f"{name}_robust_std"] = float(1.4826 * np.median(np.abs(r_ - med)))
+        resid["n_bearing_over_0.5rad"] = int(np.sum(np.abs(db) > 0.5))
+    d = Path(directory)
+    metadata = {
+        "scenario": f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
+        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
+        "source_dir": str(d.resolve()),
+        "importer": "slamcli.datasets.mrclam.import_mrclam_team",
+        "scenario_params": {
+            "robots": numbers,
+            "dt": float(dt),
+            "start_s": float(start),
+            "duration_s": float(T * dt),
+            "control_delay_s": float(control_delay),
+            "layout": "poses stacked robot-major; robot k owns stacked poses k*(T+1) .. k*(T+1)+T",
+            "start_poses": "motion capture at the first grid time of each robot (one world frame)",
+        },
+        "robot": {"numbers": numbers, "platform": "iRobot Create (differential drive)"},
+        "sensor": solo[0].metadata["sensor"],
+        "time_origin_unix_s": t_ref,
+        "window_unix_s": [float(t_ref + ts[0]), float(t_ref + ts[-1])],
+        "max_timing_error_s": float(dt / 2),
+        "robot_rows": {
+            "n_rows_with_robot_barcode": int(sum(rr["n_robot_rows"] for rr in rows)),
+            "kept": counts["kept"],
+            "dropped_outside_time_base": counts["outside"],
+            "dropped_robot_not_imported": counts["not_in_team"],
+            "dropped_self": counts["self"],
+            "truth_residual": resid,
+        },
+        "per_robot": [
+            {k: ds.metadata[k] for k in ("n_landmark_rows", "n_misread_rows", "observed_max_timing_error_s",
+                                         "truth_max_gap_s")} | {"robot": n}
+            for n, ds in zip(numbers, solo)
+        ],
+        "truth": "motion capture",
+    }
+    return Dataset(inputs=inputs, truth=truth, metadata=metadata)

@@ -18,6 +18,10 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
                            between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
                            [observation_info (N,2,2) @model]
+        robots/            (multi-robot data only, RobotTeam) pose_robot (P,) robot_number (R,) x0_xyt (R,3);
+                           poses are stacked robot-major, timestamps repeat per robot (strictly increasing
+                           within each robot)
+        robot_observations/ (multi-robot only) observer_pose observed_pose range_m bearing_rad (K,)
     /truth/                simulator ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
         or, with @kind="position_reference" (a real recording's GPS): ref_time_s (G,) ref_xy (G,2) only
@@ -51,6 +55,7 @@ from slamcli.types import (
     NoiseSpec,
     Observations,
     PoseConstraints,
+    RobotTeam,
     SlamInputs,
 )
 
@@ -171,6 +176,8 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 
         if inp.constraints is not None:
             _write_constraints(g, inp.constraints)
+        if inp.robots is not None:
+            _write_robots(g, inp.robots)
 
         if dataset.truth is not None and dataset.truth.position_reference_only:
             _write_position_reference(f, dataset.truth)
@@ -326,6 +333,69 @@ def _read_constraints(r: Reader, n_poses: int, n_obs: int) -> PoseConstraints | 
             raise r.fail(f"{g}/observation_info", f"@model must be one of {OBSERVATION_MODELS}, got {model!r}")
     return PoseConstraints(between_ij=np.stack([bi, bj], axis=1), between_xyt=xyt, between_info=info,
                            odometry_info=odo_info, observation_info=obs_info, observation_model=model)
+def _write_robots(g, team: RobotTeam) -> None:
+    """``/inputs/robots`` and ``/inputs/robot_observations`` (multi-robot datasets, issue 14 item 7)."""
+    gr = g.create_group("robots")
+    gr.attrs["doc"] = ("multi-robot layout (slamcli.types.RobotTeam): poses of all robots stacked robot-major on "
+                       "one common time grid; the odometry chain never crosses from one robot to the next")
+    write_array(gr, "pose_robot", np.asarray(team.pose_robot, np.int64), units="-", frame="-",
+                doc="robot index 0..R-1 of each stacked pose (P,)")
+    write_array(gr, "robot_number", np.asarray(team.robot_number, np.int64), units="-", frame="-",
+                doc="the dataset's own robot numbers (R,)")
+    write_array(gr, "x0_xyt", np.asarray(team.x0_xyt, np.float64).reshape(-1, 3), units="m,m,rad", frame="world",
+                doc="known start pose of each robot (R,3)")
+    go = g.create_group("robot_observations")
+    go.attrs["doc"] = "range-bearing readings of one robot by another, between two stacked poses of the same step"
+    write_array(go, "observer_pose", np.asarray(team.observer_pose, np.int64), units="-", frame="-",
+                doc="stacked pose index of the observing robot (K,)")
+    write_array(go, "observed_pose", np.asarray(team.observed_pose, np.int64), units="-", frame="-",
+                doc="stacked pose index of the observed robot at the same step (K,)")
+    write_array(go, "range_m", np.asarray(team.range_m, np.float64), units="m", frame="sensor",
+                doc="measured range to the observed robot (K,)")
+    write_array(go, "bearing_rad", np.asarray(team.bearing_rad, np.float64), units="rad", frame="body",
+                doc="measured bearing in the observer's frame, wrapped [-pi, pi) (K,)")
+
+
+def _read_robots(r: Reader, n_poses: int) -> RobotTeam | None:
+    """The optional multi-robot groups; None for single-robot files (every file written before them)."""
+    g = "inputs/robots"
+    if not r.has(g):
+        return None
+    r.group(g)
+    pr = r.array(f"{g}/pose_robot", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len(f"{g}/pose_robot", pr, n_poses, "T+1 = len(timestamps)")
+    num = r.array(f"{g}/robot_number", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    R = num.shape[0]
+    if R < 1:
+        raise r.fail(f"{g}/robot_number", "needs at least one robot")
+    x0 = r.array(f"{g}/x0_xyt", dtype="f", shape=(None, 3))
+    r.expect_len(f"{g}/x0_xyt", x0, R, f"len({g}/robot_number)")
+    _check_index_range(r, f"{g}/pose_robot", pr, 0, R - 1)
+    if n_poses > 1 and (np.diff(pr) < 0).any():
+        raise r.fail(f"{g}/pose_robot", f"not non-decreasing at index {int(np.argmax(np.diff(pr) < 0)) + 1} "
+                                        "(poses are stacked robot-major)")
+    if np.unique(pr).size != R:
+        raise r.fail(f"{g}/pose_robot", f"some of the {R} robots own no pose")
+    go = "inputs/robot_observations"
+    r.group(go)
+    oi = r.array(f"{go}/observer_pose", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    K = oi.shape[0]
+    oj = r.array(f"{go}/observed_pose", dtype="i", shape=(None,)).astype(np.int64, copy=False)
+    r.expect_len(f"{go}/observed_pose", oj, K, f"len({go}/observer_pose)")
+    rng = r.array(f"{go}/range_m", dtype="f", shape=(None,))
+    r.expect_len(f"{go}/range_m", rng, K, f"len({go}/observer_pose)")
+    brg = r.array(f"{go}/bearing_rad", dtype="f", shape=(None,))
+    r.expect_len(f"{go}/bearing_rad", brg, K, f"len({go}/observer_pose)")
+    _check_index_range(r, f"{go}/observer_pose", oi, 0, n_poses - 1)
+    _check_index_range(r, f"{go}/observed_pose", oj, 0, n_poses - 1)
+    if K and (pr[oi] == pr[oj]).any():
+        raise r.fail(f"{go}/observed_pose", f"reading {int(np.argmax(pr[oi] == pr[oj]))} links a robot to itself")
+    if K and (rng < 0).any():
+        raise r.fail(f"{go}/range_m", f"range must be >= 0, got {float(rng[np.argmax(rng < 0)]):g}")
+    return RobotTeam(pose_robot=pr, robot_number=num, x0_xyt=x0, observer_pose=oi, observed_pose=oj,
+                     range_m=rng, bearing_rad=brg)
+
+
 def _write_bounds(g, nb: NoiseBounds) -> None:
     gb = g.create_group("noise_bounds")
     gb.attrs["doc"] = "guaranteed error half-widths (slamcli.types.NoiseBounds): |error| <= bound"
@@ -420,6 +490,7 @@ def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
     if bi is not None and len(bi) == 1:
         expect += [(f"{gc}/{n}", bi[0], f"len({gc}/between_i)") for n in ("between_j", "between_xyt", "between_info")]
     expect.append((f"{gc}/odometry_info", n_poses - 1, "T = len(timestamps) - 1"))
+    expect.append(("inputs/robots/pose_robot", n_poses, "T+1 = len(timestamps)"))
     if step is not None and len(step) == 1:
         expect.append((f"{gc}/observation_info", step[0], "number of observations"))
     for name, n, what in expect:
@@ -434,8 +505,11 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
     n_poses = ts.shape[0]
     if n_poses < 1:
         raise r.fail("inputs/timestamps", "needs at least one pose (T+1 >= 1)")
-    if n_poses > 1 and not (np.diff(ts) > 0).all():
-        k = int(np.argmax(~(np.diff(ts) > 0)))
+    robots = _read_robots(r, n_poses)
+    # multi-robot: the time grid repeats per robot; strictly increasing within each robot
+    same = np.ones(max(n_poses - 1, 0), bool) if robots is None else robots.pose_robot[:-1] == robots.pose_robot[1:]
+    if n_poses > 1 and not (np.diff(ts)[same] > 0).all():
+        k = int(np.argmax(~(np.diff(ts) > 0) & same))
         raise r.fail("inputs/timestamps", f"not strictly increasing at index {k + 1}")
     T = n_poses - 1
     x0 = r.array("inputs/x0", dtype="f", shape=(3,))
@@ -492,6 +566,7 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
         constraints=_read_constraints(r, n_poses, len(observations)),
         reported_id_source=_reported_id_source(r),
         noise_bounds=_read_bounds(r),
+        robots=robots,
     )
 
 
@@ -711,6 +786,14 @@ def dataset_hash(dataset: Dataset) -> str:
         _feed(h, "sensor_offset_xy", inp.sensor_offset_xy, np.float64)
     if obs.diameter_m is not None:
         _feed(h, "obs.diameter_m", obs.diameter_m, np.float64)
+    if inp.robots is not None:  # multi-robot (fed only when present: single-robot hashes are unchanged)
+        tm = inp.robots
+        _feed(h, "robots.pose_robot", tm.pose_robot, np.int64)
+        _feed(h, "robots.robot_number", tm.robot_number, np.int64)
+        _feed(h, "robots.x0_xyt", np.asarray(tm.x0_xyt, np.float64).reshape(-1, 3), np.float64)
+        _feed(h, "robots.obs_ij", np.stack([np.asarray(tm.observer_pose, np.int64),
+                                            np.asarray(tm.observed_pose, np.int64)], -1), np.int64)
+        _feed(h, "robots.obs_z", tm.z, np.float64)
     if dataset.truth is not None and dataset.truth.position_reference_only:
         _feed(h, "truth.ref_time_s", dataset.truth.ref_time_s, np.float64)
         _feed(h, "truth.ref_xy", np.asarray(dataset.truth.ref_xy, np.float64).reshape(-1, 2), np.float64)

@@ -302,6 +302,27 @@ def landmark_offset_error(x, m, z_xy):
     return e, Jx, Jm
 
 
+def robot_range_bearing_error(x_i, x_j, z):
+    """Inter-robot range-bearing error: robot ``i`` at pose ``x_i`` measures robot ``j``'s body origin.
+
+    ``e = [‖p_j − p_i‖ − r,  wrap(atan2(p_j − p_i) − θ_i − b)]`` — :func:`bearing_range_error` with the
+    landmark replaced by the position of another pose; the heading of ``x_j`` does not enter, so the last
+    column of ``J_j`` is zero. (Multi-robot MRCLAM, issue 14 item 7.)
+
+    Parameters
+    ----------
+    x_i, x_j : ndarray (F, 3);  z : ndarray (F, 2) as ``[range, bearing]``
+
+    Returns
+    -------
+    e : ndarray (F, 2);  J_i : ndarray (F, 2, 3);  J_j : ndarray (F, 2, 3)
+    """
+    x_j = np.asarray(x_j, float)
+    e, J_i, J_m = bearing_range_error(np.asarray(x_i, float), x_j[:, :2], z)
+    J_j = np.concatenate([J_m, np.zeros((J_m.shape[0], 2, 1))], axis=2)
+    return e, J_i, J_j
+
+
 def _sqrt_info_batch(info: np.ndarray) -> np.ndarray:
     """``L (F, k, k)`` with ``LᵀL = Λ`` for each information matrix of ``info (F, k, k)``."""
     return np.swapaxes(np.linalg.cholesky(np.asarray(info, float)), 1, 2)
@@ -397,23 +418,31 @@ def build_gtsam_problem(
 
     bias_col = P + 2 * L if params.estimate_range_bias else None
 
-    prior = np.asarray(inputs.x0, float)[None, :]
+    team = inputs.robots
+    # one prior per robot (its known start pose); a single robot: x_0. The odometry chain stays in one robot.
+    first = np.zeros(1, np.int64) if team is None else team.first_pose[:-1]
+    chain = np.arange(n_poses - 1, dtype=np.int64) if team is None else team.chain_pairs
+    prior = np.asarray(inputs.x0, float)[None, :] if team is None else np.asarray(team.x0_xyt, float)
 
     def ev_prior(x):
-        e, J = prior_error(poses_of(x)[:1], prior)
+        e, J = prior_error(poses_of(x)[first], prior)
         return e, J
 
     blocks.append(
-        nls.FactorBlock("prior", pc[:1], ev_prior, _sqrt_info_from_cov(np.diag(np.square(params.prior_std))))
+        nls.FactorBlock("prior", pc[first], ev_prior, _sqrt_info_from_cov(np.diag(np.square(params.prior_std))))
     )
 
     def between_block(name, meas, cov, sqrt_info=None):
+        meas = meas[chain]
+        if sqrt_info is not None and np.ndim(sqrt_info) == 3:
+            sqrt_info = sqrt_info[chain]
+
         def ev(x):
             p = poses_of(x)
-            e, Ji, Jj = between_error(p[:-1], p[1:], meas)
+            e, Ji, Jj = between_error(p[chain], p[chain + 1], meas)
             return e, np.concatenate([Ji, Jj], axis=2)
 
-        cols = np.concatenate([pc[:-1], pc[1:]], axis=1)
+        cols = np.concatenate([pc[chain], pc[chain + 1]], axis=1)
         return nls.FactorBlock(name, cols, ev, _sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info)
 
     cons = inputs.constraints if params.edge_info else None
@@ -506,6 +535,17 @@ def build_gtsam_problem(
                 "bearing_range", cols, ev_obs, _sqrt_info_from_cov(inputs.noise.obs_cov), robust=True
             )
         )
+
+    if team is not None and len(team.range_m):
+        ri, rj, rz = np.asarray(team.observer_pose), np.asarray(team.observed_pose), team.z
+
+        def ev_robot(x):
+            p = poses_of(x)
+            e, Ji, Jj = robot_range_bearing_error(p[ri], p[rj], rz)
+            return e, np.concatenate([Ji, Jj], axis=2)
+
+        blocks.append(nls.FactorBlock("robot_range_bearing", np.concatenate([pc[ri], pc[rj]], axis=1), ev_robot,
+                                      _sqrt_info_from_cov(inputs.noise.obs_cov), robust=True))
 
     if params.use_gps and np.asarray(inputs.gps_step).size:
         gsteps = np.asarray(inputs.gps_step, np.int64)
@@ -838,7 +878,13 @@ def merge_candidates(
 # solver
 # ----------------------------------------------------------------------------------------------------------
 def odometry_initial_poses(inputs: SlamInputs) -> np.ndarray:
-    """Odometry increments chained from the known start pose, ``(T+1, 3)``."""
+    """Odometry increments chained from the known start pose, ``(T+1, 3)`` (multi-robot: each robot's chain
+    from its own start pose)."""
+    team = inputs.robots
+    if team is not None:
+        from slamcli.datasets.team import solo_inputs
+
+        return np.concatenate([odometry_initial_poses(solo_inputs(inputs, r)) for r in range(team.n_robots)])
     d = motion.odometry_increments(inputs.odometry_xyt)
     poses = np.empty((inputs.n_poses, 3))
     poses[0] = inputs.x0
@@ -962,6 +1008,9 @@ class GraphSlam(BaseSolver):
     Params = GraphParams
     #: ackermann: between factors on the odometry increments, which an importer integrates with the car model
     motion_models = ("ddmr", "ackermann")
+    #: multi-robot datasets (slamcli.types.RobotTeam): one prior per robot, chains per robot, and the
+    #: inter-robot range-bearing factor :func:`robot_range_bearing_error`
+    multi_robot = True
 
     def _associate(self, inputs: SlamInputs, init: SolverResult | None, poses: np.ndarray):
         p = self.params
@@ -1008,6 +1057,9 @@ class GraphSlam(BaseSolver):
         if inputs.motion_model != "ddmr" and (p.use_controls or p.model == "paper"):
             raise SolverError(f"graph: use_controls / model=paper read the controls as DDMR [v, omega]; with "
                               f"motion_model={inputs.motion_model!r} use the odometry factors (model=gtsam)")
+        if inputs.robots is not None and (p.model == "paper" or p.init != "odometry" or p.use_controls):
+            raise SolverError("graph: multi-robot data supports model=gtsam with init=odometry and "
+                              "use_controls=false only")
         if p.init_from == "init":
             if init is None:
                 raise SolverError("graph: init_from=init needs an --init result")
@@ -1123,7 +1175,12 @@ class GraphSlam(BaseSolver):
             message += (
                 f" (in optimisation round {rnd + 1}, after landmark merges; {done_iters} iterations in all)"
             )
-        if p.covariance and res.status != Status.FAILED:
+        team_cov_skipped = p.covariance and inputs.robots is not None and len(inputs.robots.range_m) > 0
+        if team_cov_skipped:  # inter-robot factors break the chain + border layout of the fast marginals
+            extra["covariance_note"] = ("not computed: the inter-robot factors couple poses of different robots, "
+                                        "so the chain + border marginals do not apply and the general sparse "
+                                        "column solve takes minutes on a few thousand poses")
+        if p.covariance and res.status != Status.FAILED and not team_cov_skipped:
             try:
                 pose_cov, landmark_cov = laplace_marginals(gp, res.information)
             except np.linalg.LinAlgError as exc:

@@ -41,6 +41,15 @@ def check_motion_model(solver, method: str, inputs: SlamInputs) -> None:
                           f"uses {inputs.motion_model!r}; it refuses rather than run the wrong kinematics")
 
 
+def check_multi_robot(solver, method: str, inputs: SlamInputs) -> None:
+    """One-line :class:`SolverError` when ``inputs`` is a multi-robot dataset (``inputs.robots``) and the solver
+    does not declare ``multi_robot = True`` (it would chain odometry from one robot into the next)."""
+    team = getattr(inputs, "robots", None)
+    if team is not None and not getattr(solver, "multi_robot", False):
+        raise SolverError(f"solver {method!r} does not support multi-robot data ({team.n_robots} robots in one "
+                          "dataset); use graph or icm, or solve one robot alone (slamcli.datasets.team.solo_dataset)")
+
+
 def to_sensor_frame(inputs: SlamInputs) -> SlamInputs:
     """The same problem with the state at the sensor (``sensor_offset_xy`` becomes zero); identity when the
     sensor already sits at the body origin."""

@@ -373,6 +373,8 @@ class IcmSlam(BaseSolver):
     #: ackermann: every motion term is the car model of the tracked point (energy.Problem); the sensor offset is
     #: handled by api.solve's sensor-frame change, so the observation potentials stay offset-free
     motion_models = ("ddmr", "ackermann")
+    #: multi-robot datasets: one more potential per inter-robot reading (slamcli.solvers.icm.team)
+    multi_robot = True
 
     def solve(
         self,
@@ -382,6 +384,10 @@ class IcmSlam(BaseSolver):
         rng: np.random.Generator,
         progress: ProgressFn | None = None,
     ) -> SolverResult:
+        if inputs.robots is not None:
+            from slamcli.solvers.icm.team import solve_team
+
+            return solve_team(self, inputs, init=init, progress=progress)
         t_start = time.perf_counter()
         p: IcmParams = self.params
         from slamcli.errors import ConfigError
