@@ -2,13 +2,17 @@
 
 Rows (seed 1 unless said otherwise):
 
-* ``cuik-room`` with unknown correspondence (types only), paper operator set and full set (θ narrowing);
-  the full set with the final 3B shaving (4 slices) + bisection (64 leaves) pass; and the unique
-  correspondence (true association, one graph) as the reference for the cost of branching — ``ratio`` =
-  seconds of the row / seconds of the unique-correspondence full-set run in the same process.
-* ``cuik-corridors`` (14 typed landmarks, 45 legs) with the hypothesis caps 4 and 16 (quick: 4 only): status,
-  whether the true correspondence survived the cap, and the live hypotheses after each pose (as a
-  ``;``-separated list).
+* ``cuik-room`` with unknown correspondence (types only): the scenario default (full set: θ narrowing,
+  closest-landmark negative information, declared 5 m landmark separation), the same without the separation
+  prior (``bounded.declared_separation=0``), and the paper operator set without it; the full set with the
+  final 3B shaving (4 slices) + bisection (64 leaves) pass; and the unique correspondence (true association,
+  one graph) as the reference for the cost of branching — ``ratio`` = seconds of the row / seconds of the
+  unique-correspondence full-set run in the same process.
+* ``cuik-corridors`` (14 typed landmarks, 45 legs, declared 4 m separation) with the hypothesis cap 16 and the
+  two cap rankings ``parsimony_volume`` (default: fewest landmarks, then largest box volume) and
+  ``parsimony_area`` (fewest landmarks, then smallest landmark box area); full mode also runs seeds 0-4 with
+  the default ranking (survival rate over seeds): status, whether the true correspondence survived the cap,
+  and the live hypotheses after each pose (as a ``;``-separated list).
 
 ``contractions`` counts narrowing-operator applications, ``propagations`` fixpoint runs (one per new edge
 per hypothesis, plus the 3B/bisection trials). Times are the best of ``repeats`` solves.
@@ -61,15 +65,22 @@ def _row(name, inputs, ds, params, repeats):
 def run(quick: bool = False) -> list[dict]:
     repeats = 1 if quick else 3
     room = simulate_scenario("cuik-room", 1)
+    room0 = simulate_scenario("cuik-room", 1, {"bounded.declared_separation": 0.0})
     rows = [_row("cuik-room/unique", _known(room), room, {"association": "reported"}, repeats)]
     ref = rows[0]["seconds"]
-    rows.append(_row("cuik-room/unknown", room.inputs, room, {"narrow_theta": False}, repeats))
     rows.append(_row("cuik-room/unknown", room.inputs, room, {}, repeats))
+    rows.append(_row("cuik-room/unknown-no-separation", room0.inputs, room0, {}, repeats))
+    rows.append(_row("cuik-room/unknown-no-separation", room0.inputs, room0,
+                     {"narrow_theta": False, "negative_information": False}, repeats))
     rows.append(_row("cuik-room/unique", _known(room), room,
                      {"association": "reported", "shave_slices": 4, "bisect_leaves": 64}, repeats))
     corr = simulate_scenario("cuik-corridors", 1)
-    for cap in (4,) if quick else (4, 16):
-        rows.append(_row("cuik-corridors/unknown", corr.inputs, corr, {"max_hypotheses": cap}, 1))
+    for rank in ("parsimony_volume",) if quick else ("parsimony_volume", "parsimony_area"):
+        rows.append(_row("cuik-corridors/unknown", corr.inputs, corr, {"max_hypotheses": 16, "rank": rank}, 1))
+    if not quick:
+        for seed in (0, 2, 3, 4):
+            ds = simulate_scenario("cuik-corridors", seed)
+            rows.append(_row(f"cuik-corridors/unknown seed {seed}", ds.inputs, ds, {"max_hypotheses": 16}, 1))
     rows.append(_row("cuik-corridors/unique", _known(corr), corr, {"association": "reported"}, 1))
     for r in rows:
         r["ratio_vs_room_unique"] = r["seconds"] / ref if ref > 0 else np.nan

@@ -19,7 +19,9 @@ machine — and ``rss_ratio`` for peak RSS):
 
 * ``graph+marginals`` — ``graph`` with default parameters (``covariance=true``) vs GTSAM 4
   ``LevenbergMarquardtOptimizer`` on the same factor graph and start + ``gtsam.Marginals`` of every pose
-  and landmark. Goal: peak RSS < 4 GB at 100k, time ≤ 1.5× GTSAM.
+  and landmark. Goal: peak RSS < 4 GB at 100k, time ≤ 1.5× GTSAM. ``details`` also hold the marginals'
+  own share on both sides (``marginals_s`` / ``marginals_cpu_s``; ours: the selected inverse of H on
+  CHOLMOD's factor, :mod:`slamcli.solvers.selinv`, or the SciPy Schur path without CHOLMOD).
 * ``icm-joint`` — ``icm`` with ``accelerate=joint``, reported correspondences, vs GTSAM LM (no marginals)
   on the same data. Goal: < 4 GB at 100k.
 * ``ekf`` (size = state dimension n = 103 / 403 / 2003) — :mod:`benchmarks.bench_ekf`'s scale world, our
@@ -127,13 +129,14 @@ def _gtsam_solve(inputs, marginals: bool) -> dict:
     vals = opt.optimize()
     out = {"iterations": int(opt.iterations()), "cost": float(g.error(vals)), "solve_s": time.perf_counter() - t0}
     if marginals:
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), _cpu_s()
         marg = gtsam.Marginals(g, vals)
         for t in range(inputs.n_poses):
             marg.marginalCovariance(gtsam.symbol("x", t))
         for j in range(L):
             marg.marginalCovariance(gtsam.symbol("l", j))
         out["marginals_s"] = time.perf_counter() - t1
+        out["marginals_cpu_s"] = _cpu_s() - c1
     return out
 
 
@@ -163,11 +166,26 @@ def _task(task: dict) -> dict:
     rss0, cpu0, t0 = _rss_mb(), _cpu_s(), time.perf_counter()
     status = "ok"
     if kind == "graph":
+        from slamcli.solvers import graph, selinv
+
+        marg: dict = {}
+        laplace = graph.laplace_marginals
+
+        def timed(*a, **k):  # the marginals' own share of the solve (wall, CPU, peak RSS before them)
+            w, c = time.perf_counter(), _cpu_s()
+            marg["peak_rss_before_marginals_mb"] = _rss_mb()
+            try:
+                return laplace(*a, **k)
+            finally:
+                marg.update(marginals_s=time.perf_counter() - w, marginals_cpu_s=_cpu_s() - c)
+
+        graph.laplace_marginals = timed
         res = _solver("graph", {}).solve(ds.inputs, rng=np.random.default_rng(0))
         status = res.status.value
         extra.update(iterations=res.extra.get("iterations"), landmarks=len(res.landmarks_xy),
                      has_marginals=res.pose_cov is not None and res.landmark_cov is not None,
-                     message=res.message[:120])
+                     marginals_path="selected inverse (CHOLMOD)" if selinv.available() else "SciPy Schur",
+                     message=res.message[:120], **marg)
     elif kind == "icm":
         res = _solver("icm", {"accelerate": "joint", "correspondences": "reported"}).solve(
             ds.inputs, rng=np.random.default_rng(0))

@@ -175,12 +175,23 @@ class NoiseBounds:
     odometry_half_width : ndarray (2,) ``[h_d m, h_α rad]``: ``|d − d̃| ≤ h_d``, ``|α − α̃| ≤ h_α``.
     range_half_width : float           ``|r − r̃| ≤ h_r``, m.
     bearing_half_width : float         ``|b − b̃| ≤ h_b``, rad.
+    closest_only : bool                the sensor (360° field of view) reports exactly the closest landmark of
+                                       any type whose range is in ``[min_range, SlamInputs.max_range]``, or
+                                       nothing when there is none (paper 004 §6) — negative information a
+                                       set-membership solver may use; False = not declared.
+    min_range : float                  the sensor's minimum range, m (closer landmarks are invisible).
+    min_separation : float             declared map prior, m: distinct landmarks are at least this far apart
+                                       (0 = nothing declared). Not a sensor fact; a wrong declaration can
+                                       refute the truth like a too-small error bound.
     """
 
     odometry_model: str
     odometry_half_width: np.ndarray
     range_half_width: float
     bearing_half_width: float
+    closest_only: bool = False
+    min_range: float = 0.0
+    min_separation: float = 0.0
 
 
 @dataclass(frozen=True)

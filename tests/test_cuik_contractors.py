@@ -16,7 +16,10 @@ contractors = pytest.importorskip("slamcli.solvers.cuik.contractors")
 
 from slamcli.solvers.cuik.contractors import (  # noqa: E402
     OdometryTurnMove,
+    OutsideBand,
     RangeBearing,
+    Separated,
+    SeparatedLocal,
     SharedLandmarkLeg,
     unbounded,
 )
@@ -237,3 +240,69 @@ def test_local_cycle_pins_the_leg_far_below_the_odometry_bounds():
     assert w[1] < 0.4 * 2 * H_A and w[0] < 2 * H_D
     paper = as_box(box0)
     assert ctc.contract(paper, False, TOL) == [] and bounds(paper).tolist() == [list(b) for b in box0]
+
+
+# -- negative information and the separation prior --------------------------------------------------------
+BAND_BOX = [(0.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (1.5, 3.5), (0.0, 1.0)]  # pose (x, y, θ), landmark (x, y)
+
+
+def test_outside_band_is_contracting_correct_and_idempotent():
+    # "landmark m is not in the visible band [0.1, 2.5) of pose t" (the sensor reported a landmark at ≥ 2.5 m)
+    ctc = OutsideBand((0, 1, 2), (3, 4), 0.1, 2.5)
+    box = as_box(BAND_BOX)
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(np.array(BAND_BOX)[:, 0], np.array(BAND_BOX)[:, 1], (200000, 5))
+    dist = np.hypot(pts[:, 3] - pts[:, 0], pts[:, 4] - pts[:, 1])
+    pts = pts[(dist < 0.1) | (dist >= 2.5)]
+    assert len(pts) > 1000
+    changed = ctc.contract(box, True, TOL)
+    b0, b1 = np.array(BAND_BOX), bounds(box)
+    assert (b1[:, 0] >= b0[:, 0]).all() and (b1[:, 1] <= b0[:, 1]).all()
+    # landmark x ≥ 2.5 − 1 = 1.5 is what a 1-D argument gives; the hull of the two allowed pieces reaches
+    # lx ≥ √(2.5² − 1²) = 2.29 (dy ≤ 1) and x ≤ 3.5 − 2.29 = 1.21 → 1 (no change); tight to 1 mm
+    assert changed and b1[3, 0] == pytest.approx(math.sqrt(2.5 ** 2 - 1.0), abs=1e-3)
+    assert inside(pts, box).all()  # correctness: every allowed point of the box survives
+    assert pts[:, 3].min() < b1[3, 0] + 0.1  # and the new bound is nearly attained by allowed points (tight)
+    assert ctc.contract(box, True, TOL) == []  # idempotent
+    # a landmark box certainly inside the band refutes the hypothesis; one far away is left alone quickly
+    near = as_box([(0.0, 0.1), (0.0, 0.1), (0.0, 0.0), (1.0, 1.2), (0.0, 0.1)])
+    assert ctc.contract(near, True, TOL) is None and all(near[i].is_empty() for i in (0, 1, 3, 4))
+    far = as_box([(0.0, 1.0), (0.0, 1.0), (0.0, 0.0), (9.0, 9.5), (0.0, 1.0)])
+    assert ctc.contract(far, True, TOL) == [] and bounds(far).tolist() == [[0, 1], [0, 1], [0, 0], [9, 9.5], [0, 1]]
+    # the sensor's minimum range: a landmark closer than r_min is invisible, so it is allowed
+    tiny = as_box([(0.0, 0.01), (0.0, 0.01), (0.0, 0.0), (0.0, 0.02), (0.0, 0.02)])
+    assert ctc.contract(tiny, True, TOL) is not None
+
+
+def test_separation_world_frame_is_correct_and_refutes_coincident_landmarks():
+    ctc = Separated((0, 1), (2, 3), 2.0)
+    box0 = [(0.0, 1.0), (0.0, 1.0), (1.5, 4.0), (0.0, 1.0)]
+    box = as_box(box0)
+    pts = np.random.default_rng(6).uniform(np.array(box0)[:, 0], np.array(box0)[:, 1], (200000, 4))
+    pts = pts[np.hypot(pts[:, 2] - pts[:, 0], pts[:, 3] - pts[:, 1]) >= 2.0]
+    assert ctc.contract(box, True, TOL)
+    assert inside(pts, box).all() and bounds(box)[2, 0] > 1.5 + 0.2  # l_b x ≥ √(4 − 1) = 1.73
+    same = as_box([(0.0, 1.0), (0.0, 1.0), (0.0, 1.0), (0.0, 1.0)])  # both within 1.5 m of each other
+    assert ctc.contract(same, True, TOL) is None
+
+
+def _reading(pose_xyt, lm_xy):
+    d = np.asarray(lm_xy) - pose_xyt[:2]
+    return float(np.hypot(*d)), float(math.atan2(d[1], d[0]) - pose_xyt[2])
+
+
+def test_local_separation_refutes_one_landmark_labelled_twice_and_keeps_two_distinct_ones():
+    # poses t−1 = origin heading 0, then turn α and move d; readings of the same / of two landmarks
+    p0 = np.array([0.0, 0.0, 0.0])
+    a, d = math.radians(10.0), 4.0
+    p1 = np.array([d * math.cos(a), d * math.sin(a), a])
+    leg = [(d - 0.1, d + 0.1), (a - math.radians(2.0), a + math.radians(2.0))]
+    same = SeparatedLocal((0, 1), _reading(p0, (2.0, -2.0)), _reading(p1, (2.0, -2.0)), H_R, H_B, 4.0)
+    box = as_box(leg)
+    assert same.contract(box, True, TOL) is None  # "two landmarks ≥ 4 m apart" contradicts the readings
+    two = SeparatedLocal((0, 1), _reading(p0, (2.0, -2.0)), _reading(p1, (9.0, 2.0)), H_R, H_B, 4.0)
+    box = as_box(leg)
+    assert two.contract(box, True, TOL) == [] and bounds(box).tolist() == [list(b) for b in leg]
+    # sound at the edge: the true distance is 8.06 m, a declared 7.9 m must not refute anywhere in the leg box
+    edge = SeparatedLocal((0, 1), _reading(p0, (2.0, -2.0)), _reading(p1, (9.0, 2.0)), H_R, H_B, 7.9)
+    assert edge.contract(as_box(leg), True, TOL) == []

@@ -9,7 +9,8 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         timestamps (T+1,)  x0 (3,)  controls (T,2)  odometry_xyt (T+1,3)  max_range ()
         observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
         noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
-        noise_bounds/      (bounded-noise data only) @odometry_model odometry_half_width (2,)
+        noise_bounds/      (bounded-noise data only) @odometry_model [@closest_only @min_range
+                           @min_separation] odometry_half_width (2,)
                            range_half_width () bearing_half_width ()
         observations/landmark_type (N,)   (only when the sensor reports type labels)
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
@@ -405,6 +406,9 @@ def _write_bounds(g, nb: NoiseBounds) -> None:
     write_array(gb, "range_half_width", np.float64(nb.range_half_width), units="m", frame="sensor", doc="h_r")
     write_array(gb, "bearing_half_width", np.float64(nb.bearing_half_width), units="rad", frame="sensor",
                 doc="h_b")
+    gb.attrs["closest_only"] = bool(nb.closest_only)
+    gb.attrs["min_range"] = float(nb.min_range)
+    gb.attrs["min_separation"] = float(nb.min_separation)
 
 
 def _read_bounds(r: Reader) -> NoiseBounds | None:
@@ -421,8 +425,15 @@ def _read_bounds(r: Reader) -> NoiseBounds | None:
     for name, v in (("odometry_half_width", odo), ("range_half_width", hr), ("bearing_half_width", hb)):
         if (np.asarray(v) < 0).any():
             raise r.fail(f"{g}/{name}", f"half-widths must be >= 0, got {v}")
+    # sensor / map declarations (optional; files written before they existed declare nothing)
+    closest = bool(r.attr(g, "closest_only", bool, default=False))
+    min_range = float(r.attr(g, "min_range", float, default=0.0))
+    min_sep = float(r.attr(g, "min_separation", float, default=0.0))
+    for name, v in (("@min_range", min_range), ("@min_separation", min_sep)):
+        if not (v >= 0 and np.isfinite(v)):
+            raise r.fail(f"{g}/{name}", f"must be a finite number >= 0, got {v}")
     return NoiseBounds(odometry_model=model, odometry_half_width=odo, range_half_width=hr,
-                       bearing_half_width=hb)
+                       bearing_half_width=hb, closest_only=closest, min_range=min_range, min_separation=min_sep)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -779,6 +790,9 @@ def dataset_hash(dataset: Dataset) -> str:
         h.update(f"noise_bounds|{nb.odometry_model}|".encode())
         _feed(h, "noise_bounds.values", np.r_[np.asarray(nb.odometry_half_width, float).reshape(2),
                                               nb.range_half_width, nb.bearing_half_width], np.float64)
+        if nb.closest_only or nb.min_range or nb.min_separation:  # declarations hashed only when made
+            _feed(h, "noise_bounds.declared", np.array([float(nb.closest_only), nb.min_range, nb.min_separation]),
+                  np.float64)
     # issue-14 fields are hashed only when not at their defaults, so hashes of older datasets are unchanged
     if inp.motion_model != "ddmr" or inp.vehicle is not None:
         h.update(f"motion_model|{inp.motion_model}|{inp.vehicle!r}|".encode())

@@ -150,8 +150,12 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
                        reported_id=obs.reported_id, offsets=obs.offsets, landmark_type=types[obs_lm])
 
     scale = float(b.declared_scale)
+    # the closest-landmark sensor's negative information is declared only for a 360° field of view (with a
+    # narrower one, "closer" would also need "inside the field of view")
+    closest = bool(b.closest_only) and s.fov_rad >= 2 * math.pi - 1e-12
     bounds = NoiseBounds(odometry_model="turn_move", odometry_half_width=np.array([h_d, h_a]) * scale,
-                         range_half_width=h_r * scale, bearing_half_width=h_b * scale)
+                         range_half_width=h_r * scale, bearing_half_width=h_b * scale, closest_only=closest,
+                         min_range=float(s.min_range), min_separation=float(b.declared_separation))
     max_leg = float(legs[:, 0].max()) if T else 0.0
     noise = NoiseSpec(  # the uniform errors' standard deviations h/√3, for least-squares solvers
         motion_std=np.zeros(2),
@@ -183,7 +187,9 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
         "config": config_to_dict(cfg),
         "streams": dict(STREAMS),
         "noise_bounds": {"odometry_model": "turn_move", "odometry_d_m": h_d * scale,
-                         "odometry_turn_rad": h_a * scale, "range_m": h_r * scale, "bearing_rad": h_b * scale},
+                         "odometry_turn_rad": h_a * scale, "range_m": h_r * scale, "bearing_rad": h_b * scale,
+                         "closest_only": closest, "min_range_m": float(s.min_range),
+                         "min_separation_m": float(b.declared_separation)},
         "landmark_types": types.tolist(),
     }
     if progress is not None:

@@ -362,6 +362,9 @@ class BoundedConfig:
                                       ones (< 1 = a deliberately wrong, too small declaration, for tests).
     exact_readings : bool             every error is zero while the bounds are still declared — paper 004 §6
                                       simulated exact readings (its Table 1 l1 box is centred on the truth).
+    declared_separation : float       map prior declared in the dataset (``NoiseBounds.min_separation``), m:
+                                      distinct landmarks are at least this far apart; 0 = none declared.
+                                      The simulator does not enforce it (a wrong declaration is a test case).
     """
 
     enabled: bool = False
@@ -373,12 +376,14 @@ class BoundedConfig:
     landmark_types: tuple[int, ...] = ()
     declared_scale: float = 1.0
     exact_readings: bool = False
+    declared_separation: float = 0.0
 
     def __post_init__(self) -> None:
         _check(min(self.odometry_d, self.odometry_turn_deg, self.range, self.bearing_deg) >= 0,
                "bounded: every half-width must be >= 0")
         _check(all(t >= 0 for t in self.landmark_types), "bounded.landmark_types must be >= 0")
         _check(self.declared_scale > 0, "bounded.declared_scale must be > 0")
+        _check(self.declared_separation >= 0, "bounded.declared_separation must be >= 0")
 
 
 @dataclass(frozen=True)

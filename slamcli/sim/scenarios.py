@@ -185,7 +185,8 @@ def _cuik_room() -> ScenarioConfig:
     """Paper 004 §6: a 30 m square room, doors (type 0) at (15, 0) and (15, 30), corridors (type 1) at
     (30, 15) and (0, 15); 8 turn-and-move legs of 7.65 m around an octagon of radius 10 m centred at
     (15, 15), turning +45° (paper: −45°, its θ runs clockwise) per leg and closing the loop at pose 9 (our
-    pose 8). Start r1 = (15, 5, 1.963495) in the paper's heading convention (Table 1)."""
+    pose 8). Start r1 = (15, 5, 1.963495) in the paper's heading convention (Table 1). Declares a landmark
+    separation of 5 m (a map prior the paper does not state; ``bounded.declared_separation=0`` drops it)."""
     from slamcli.sim.bounded import heading_from_paper004
 
     a = np.deg2rad(-90.0 + 45.0 * np.arange(8))
@@ -197,7 +198,8 @@ def _cuik_room() -> ScenarioConfig:
         robot=RobotConfig(start=(15.0, 5.0, float(heading_from_paper004(1.9634954)))),
         sensor=SensorConfig(kind="point", max_range=12.0, min_range=0.1, fov_deg=360.0),
         bounded=BoundedConfig(enabled=True, odometry_d=0.25, odometry_turn_deg=5.0, range=0.025,
-                              bearing_deg=0.5, closest_only=True, landmark_types=(0, 1, 0, 1)),
+                              bearing_deg=0.5, closest_only=True, landmark_types=(0, 1, 0, 1),
+                              declared_separation=5.0),  # map prior (true minimum 21.2 m); 0 = the paper's
     )
 
 
@@ -216,7 +218,8 @@ def _cuik_corridors() -> ScenarioConfig:
         robot=RobotConfig(start=(0.0, 0.0, 0.0)),
         sensor=SensorConfig(kind="point", max_range=6.0, min_range=0.1, fov_deg=360.0),
         bounded=BoundedConfig(enabled=True, odometry_d=0.1, odometry_turn_deg=2.0, range=0.025,
-                              bearing_deg=0.5, closest_only=True, landmark_types=types),
+                              bearing_deg=0.5, closest_only=True, landmark_types=types,
+                              declared_separation=4.0),  # map prior (true minimum 8.25 m)
     )
 
 

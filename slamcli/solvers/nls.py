@@ -182,7 +182,8 @@ class NlsParams:
         ``λ ← λν, ν ← 2ν`` on failure (Madsen, Nielsen & Tingleff 2004, §3.2; Ceres's LM strategy).
     lambda_min, lambda_max : float
         Bounds of λ (GTSAM's ``lambdaLowerBound`` = 0 and ``lambdaUpperBound`` = 1e5). When a rejected trial
-        would raise λ above ``lambda_max``, LM stops as converged (no decrease possible), as GTSAM does.
+        raises λ to ``lambda_max`` or above, LM stops as converged (no decrease possible) without trying that
+        λ, as GTSAM's ``tryLambda`` does.
     min_model_fidelity : float
         A trial step is accepted when the gain ratio ``ϱ = actual / predicted decrease`` exceeds this
         (GTSAM's ``minModelFidelity`` = 1e-3).
@@ -800,16 +801,16 @@ def solve(
                 else:
                     lam *= nu
                     nu *= 2.0
-                if lam > params.lambda_max:
+                if lam >= params.lambda_max:  # GTSAM: give up once the raised λ reaches lambdaUpperBound
                     if h is None:
                         stop = (
                             Status.FAILED,
-                            f"normal equations unsolvable even with damping λ > {params.lambda_max:.3g}",
+                            f"normal equations unsolvable even with damping λ ≥ {params.lambda_max:.3g}",
                         )
                     else:
                         stop = (
                             Status.CONVERGED,
-                            f"no cost decrease even with damping λ > {params.lambda_max:.3g}",
+                            f"no cost decrease with damping λ < {params.lambda_max:.3g} (lambda_max reached)",
                         )
                     break
         elif params.method == "dogleg":

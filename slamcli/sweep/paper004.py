@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -41,6 +42,8 @@ TABLE1 = {
 #: Tables 2-6: number of landmarks of each surviving solution (Table 4 leaves label l3 unused).
 PAPER_SOLUTIONS_LANDMARKS = [5, 5, 4, 4, 5]
 PAPER_N_GRAPHS = 5
+#: paper 004's operator set: no θ narrowing (§6) and no negative information of the closest-landmark sensor
+PAPER_SET = {"narrow_theta": False, "negative_information": False}
 PAPER_N_DISTINCT = 3
 
 
@@ -72,7 +75,7 @@ def with_true_association(dataset):
     return dataclasses.replace(inp, observations=obs)
 
 
-def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200):
+def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200, closest: bool = True):
     """Two feasible solutions minimising / maximising one coordinate, found by SLSQP over the bounded errors.
 
     Variables: the normalised errors ``u ∈ [-1, 1]`` of every odometry leg (d, α) and observation (r, b);
@@ -81,6 +84,11 @@ def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 20
     1e-6`` is a genuine solution of the bounded-error problem, so ANY sound enclosure must contain both
     extremes: their distance is a lower bound on the box width of that coordinate (local optimisation may
     miss a wider solution; it never overstates the bound).
+
+    ``closest``: also require the closest-landmark sensor's negative information (inequalities): from every
+    observing pose, every other landmark is at least as far as the true range of the one reported
+    (``‖l_m − p_t‖ ≥ r̃ + u_r``; stricter than the sensor model's "or closer than the minimum range", so the
+    points found stay genuine solutions). ``max_violation`` covers equalities and inequalities.
 
     ``coordinate``: ("pose", t, c) or ("landmark", true index, c). Returns ``(lo, hi, max_violation)``.
     """
@@ -120,6 +128,16 @@ def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 20
 
     n = 2 * T + 2 * N
     cons = [{"type": "eq", "fun": lambda u: unpack(u)[2]}]
+    others = [(i, m) for i in range(N) for m in sorted(set(lab.tolist())) if m != int(lab[i])]
+
+    def farther(u):  # ‖l_m − p_t‖ − r_i ≥ 0 for every observation i and other landmark m
+        P, L, _ = unpack(u)
+        ru = u[2 * T:2 * T + N] * hr
+        return np.array([np.hypot(*(L[m] - P[int(obs.step[i]), :2])) - (obs.range_m[i] + ru[i])
+                         for i, m in others])
+
+    if closest and others:
+        cons.append({"type": "ineq", "fun": farther})
     box = [(-1.0, 1.0)] * n
     kind, idx, c = coordinate
 
@@ -134,9 +152,90 @@ def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 20
         r = minimize(lambda u, s=sgn: s * value(u), start, constraints=cons, bounds=box, method="SLSQP",
                      options={"maxiter": maxiter})
         u = np.clip(r.x, -1.0, 1.0)
-        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)))
+        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)),
+                   float(-farther(u).min(initial=0.0)) if closest and others else 0.0)
         ext.append(value(u))
     return float(ext[0]), float(ext[1]), viol
+
+
+def loop_closure_rows(dataset) -> np.ndarray:
+    """Observation rows that close the room's big loop: the sightings of the first-seen landmark (l1) after
+    pose 0 (harness only — it reads the truth)."""
+    lab = np.asarray(dataset.truth.obs_landmark)
+    step = np.asarray(dataset.inputs.observations.step)
+    return np.flatnonzero((lab == lab[0]) & (step > 0))
+
+
+def corrupt_loop_closure(dataset, factor: float, rng: np.random.Generator):
+    """Inputs (true association) whose loop-closing sightings have errors of exactly ``factor ×`` the declared
+    bound in range and bearing (random signs): the bound is ``factor ×`` too small for those readings only."""
+    inp = with_true_association(dataset)
+    obs = inp.observations
+    nb = inp.noise_bounds
+    rows = loop_closure_rows(dataset)
+    P = dataset.truth.poses_xyt[obs.step[rows]]
+    L = dataset.truth.landmarks_xy[dataset.truth.obs_landmark[rows]]
+    d = L - P[:, :2]
+    sr, sb = rng.choice([-1.0, 1.0], size=(2, len(rows)))
+    rng_m, brg = obs.range_m.copy(), obs.bearing_rad.copy()
+    rng_m[rows] = np.hypot(d[:, 0], d[:, 1]) + sr * factor * nb.range_half_width
+    brg[rows] = np.arctan2(d[:, 1], d[:, 0]) - P[:, 2] + sb * factor * nb.bearing_half_width
+    return dataclasses.replace(inp, observations=dataclasses.replace(obs, range_m=rng_m, bearing_rad=brg))
+
+
+def wrong_bound_study(seeds, factor: float = 5.0, progress: Callable[[str], None] | None = None) -> dict:
+    """Where is a ``factor ×`` too small declared bound caught on ``cuik-room`` (unique correspondence)?
+
+    * ``all``: every bound declared ``1/factor`` of the true one (``bounded.declared_scale``): per operator
+      set, the number of runs caught (every box empty) and where — at a local cycle (a landmark re-observed
+      from the next pose), at the big loop closure (l1 re-sighted), elsewhere, or only by the final 3B pass.
+    * ``loop``: honest data except the loop-closing sightings, whose errors are exactly ``factor ×`` the bound:
+      how often that alone is caught.
+
+    Operator sets: ``paper`` (:data:`PAPER_SET`), ``full`` (θ narrowing + local cycles + closest-landmark
+    negative information), ``full+3B`` (the same + 3B shaving, 4 slices, 2 rounds). Returns counts per
+    (experiment, set) and the seeds where ``loop`` is caught by ``full+3B``.
+    """
+    from slamcli.api.solve import solve_dataset
+    from slamcli.sim.simulate import simulate_scenario
+
+    sets_ = {"paper": PAPER_SET, "full": {}, "full+3B": {"shave_slices": 4}}
+    out: dict = {"n": 0, "all": {k: {"caught": 0, "local_cycle": 0, "loop_closure": 0, "closest_landmark": 0, "other": 0,
+                                      "final_3B": 0}
+                                  for k in sets_},
+                 "loop": {k: 0 for k in sets_}, "loop_caught_seeds": []}
+    for seed in seeds:
+        honest = simulate_scenario("cuik-room", seed)
+        wrong = simulate_scenario("cuik-room", seed, {"bounded.declared_scale": 1.0 / factor})
+        lab = wrong.truth.obs_landmark
+        step = wrong.inputs.observations.step
+        closing = set(loop_closure_rows(wrong).tolist())
+        bad = corrupt_loop_closure(honest, factor, np.random.default_rng(seed))
+        out["n"] += 1
+        for name, prm in sets_.items():
+            r = solve_dataset(with_true_association(wrong), "cuik", {**prm, "association": "reported"})
+            acc = out["all"][name]
+            if r.status.value == "failed":
+                acc["caught"] += 1
+                i = int(r.extra.get("refuted_at_observation", -1))
+                if "refuted_at_pose" not in r.extra:
+                    acc["final_3B"] += 1
+                elif i in closing:
+                    acc["loop_closure"] += 1
+                elif i > 0 and (lab[:i][step[:i] == step[i] - 1] == lab[i]).any():
+                    acc["local_cycle"] += 1
+                elif i >= 0 and not (lab[:i] == lab[i]).any():
+                    acc["closest_landmark"] += 1  # a first sighting: only the negative information can refute it
+                else:
+                    acc["other"] += 1
+            r = solve_dataset(bad, "cuik", {**prm, "association": "reported"})
+            if r.status.value == "failed":
+                out["loop"][name] += 1
+                if name == "full+3B":
+                    out["loop_caught_seeds"].append(int(seed))
+        if progress is not None:
+            progress(f"paper004: wrong bounds, seed {seed}")
+    return out
 
 
 def _fmt(v, d=3) -> str:
@@ -173,7 +272,7 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
     # -- 1. Table 1: unique correspondence, exact readings as in the paper ------------------------------------
     exact = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True})
     known = with_true_association(exact)
-    r_paper = solve_dataset(known, "cuik", {"narrow_theta": False, "association": "reported"})
+    r_paper = solve_dataset(known, "cuik", {**PAPER_SET, "association": "reported"})
     r_theta = solve_dataset(known, "cuik", {"narrow_theta": True, "association": "reported"})
     r_full = solve_dataset(known, "cuik", {**full, "association": "reported"})
     log("paper004: Table 1 runs done")
@@ -225,74 +324,90 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
     # -- 2. lower bounds on any sound box (feasible extremes) -----------------------------------------------
     hb_full = r_full.hypotheses
     inv = {v: k for k, v in sets.landmark_map(hb_full.assoc[0], exact.truth.obs_landmark).items()}
-    rows, all_inside, worst_viol = [], True, 0.0
+    rows, all_inside, worst_viol, spread_free = [], True, 0.0, {}
     for true_j, c in ((1, 0), (1, 1), (2, 0), (3, 0)):
         lo, hi, viol = feasible_extent(exact, ("landmark", true_j, c), maxiter=100 if quick else 300)
+        if not quick:  # the same without the closest-landmark constraint (the previous argument)
+            lo0, hi0, _v = feasible_extent(exact, ("landmark", true_j, c), maxiter=300, closest=False)
+            spread_free[f"l{true_j + 1} {'xy'[c]}"] = hi0 - lo0
         bx = (float(hb_full.landmark_lo[0, inv[true_j], c]), float(hb_full.landmark_hi[0, inv[true_j], c]))
         inside = bx[0] - 1e-6 <= lo and hi <= bx[1] + 1e-6
         all_inside &= inside and viol < 1e-6
         worst_viol = max(worst_viol, viol)
         paper_w = tw[f"l{true_j + 1}"][c]
-        rows.append([f"l{true_j + 1} {'xy'[c]}", f"{hi - lo:.4f}", f"{paper_w:.4f}", f"{bx[1] - bx[0]:.4f}",
+        key = f"l{true_j + 1} {'xy'[c]}"
+        rows.append([key, f"{hi - lo:.4f}", _fmt(spread_free.get(key), 4), f"{paper_w:.4f}", f"{bx[1] - bx[0]:.4f}",
                      f"{(bx[1] - bx[0]) / (hi - lo):.3f}", "yes" if inside else "NO",
                      "yes" if paper_w >= hi - lo else f"no ({1e3 * (hi - lo - paper_w):.1f} mm narrower)"])
     md += ["### How close to the best possible box", "",
            "Two solutions of the bounded-error problem per coordinate (SLSQP over the normalised errors, largest "
            f"constraint violation {worst_viol:.1e}) minimise and maximise it: EVERY sound box must contain both, so "
-           "their spread is a lower bound on its width, whatever the contractors.", "",
-           _md(["coordinate", "feasible spread (m)", "paper 004 (m)", "ours, full + 3B + bisection (m)",
-                "ours / spread", "ours contains both", "paper ≥ spread"], rows), ""]
+           "their spread is a lower bound on its width, whatever the contractors. The solutions also obey the "
+           "closest-landmark sensor (from every observing pose every other landmark is at least as far as the "
+           "reported one), which the full set now uses; the column without it is the weaker model's spread.", "",
+           _md(["coordinate", "feasible spread (m)", "spread without the closest-landmark constraint (m)",
+                "paper 004 (m)", "ours, full + 3B + bisection (m)", "ours / spread", "ours contains both",
+                "paper ≥ spread"], rows), ""]
     r_l2 = rows[0]
     md.append(
         f"Our boxes {'contain every feasible extreme' if all_inside else 'MISS a feasible extreme (unsound!)'}. "
-        f"For l2 no sound box can beat the paper: its x spread alone is {r_l2[1]} m against the paper's {r_l2[2]} m"
-        + (" — the paper's box is slightly narrower than the spread of two feasible solutions of our reconstruction "
-           "of its geometry (octagon radius 10 m, r1 = (15, 5)); with its exact geometry unknown we cannot tell "
-           "whether the paper's l2 box was itself a little too narrow" if r_l2[6] != "yes" else "")
-        + ". The issue's target of a mean landmark width below 1 m is far below these lower bounds: with the "
+        f"l2 x: feasible spread {r_l2[1]} m, paper {r_l2[3]} m"
+        + (" — the paper's box is narrower than the spread of two feasible solutions of our reconstruction of its "
+           "geometry (octagon radius 10 m, r1 = (15, 5)); with its exact geometry unknown we cannot tell whether "
+           "the paper's l2 box was itself a little too narrow" if r_l2[7] != "yes" else "")
+        + f". The largest lower bound is {max(float(r[1]) for r in rows):.2f} m ({max(rows, key=lambda r: float(r[1]))[0]}): "
+        "the issue's target of a mean landmark width below 1 m is far below these lower bounds — with the "
         "closest-landmark sensor four legs share no landmark, so the set of consistent maps is metres wide and no "
-        "sound method can get below 1 m on this data.")
+        "sound method can get below 1 m on this data, with or without the closest-landmark constraint.")
     md.append("")
     checks["extremes_inside"] = bool(all_inside)
 
     # -- 3. Tables 2-6: uncertain correspondence --------------------------------------------------------------
-    u_paper = solve_dataset(exact.inputs, "cuik", {"narrow_theta": False})
-    u_theta = solve_dataset(exact.inputs, "cuik", {"narrow_theta": True})
-    log("paper004: uncertain-correspondence runs done")
-    rows = []
-    for name, r in (("paper set", u_paper), ("full set", u_theta)):
+    exact0 = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True, "bounded.declared_separation": 0.0})
+    variants = [("paper set, no separation prior", exact0, PAPER_SET),
+                ("full set + closest-landmark negative information, no prior", exact0, {}),
+                (f"full set + negative information + declared separation "
+                 f"{exact.inputs.noise_bounds.min_separation:g} m (scenario default)", exact, {})]
+    rows, runs = [], {}
+    for name, ds_v, prm in variants:
+        r = solve_dataset(ds_v.inputs, "cuik", prm)
         hb = r.hypotheses
-        m = sets.set_metrics(hb, exact.truth.poses_xyt, exact.truth.landmarks_xy, exact.truth.obs_landmark)
+        m = sets.set_metrics(hb, ds_v.truth.poses_xyt, ds_v.truth.landmarks_xy, ds_v.truth.obs_landmark)
         counts = np.bincount(hb.n_landmarks)
         rows.append([name, len(hb), sets.n_distinct(hb), ", ".join(f"{c}×{k}" for k, c in enumerate(counts) if c),
                      "yes" if m["true_correspondence_survived"] else "NO", m["true_hypothesis_index"],
                      _fmt(m.get("soundness"), 3)])
+        runs[name] = (r, m, ds_v)
         checks[f"truth_survived_{name}"] = bool(m["true_correspondence_survived"] and m.get("soundness") == 1.0)
+    log("paper004: uncertain-correspondence runs done")
     md += ["### Tables 2-6 — uncertain correspondence (door/corridor types only)", "",
            _md(["operator set", "hypotheses", "distinct up to relabelling", "landmarks per hypothesis",
                 "true correspondence survived", "its rank", "soundness"],
                [["paper 004", PAPER_N_GRAPHS, PAPER_N_DISTINCT, "3×5, 2×4", "yes", "—", "—"], *rows]), ""]
-    hb_u = u_theta.hypotheses
-    n_min = int(hb_u.n_landmarks.min())
+    r_neg, _m, ds_neg = runs[variants[1][0]]
+    truth_lab = ds_neg.truth.obs_landmark
+    n_split = sum(all(truth_lab[i] == truth_lab[k] for i in range(len(a)) for k in range(len(a)) if a[i] == a[k])
+                  for a in r_neg.hypotheses.assoc)
+    r_sep = runs[variants[2][0]][0]
     md.append(
-        f"Paper: {PAPER_N_GRAPHS} graphs after 9 poses, {PAPER_N_DISTINCT} distinct up to labelling. Ours: "
-        f"{len(u_paper.hypotheses)} (paper set) and {len(hb_u)} (full set), all distinct up to relabelling "
-        "(labels are given by first sighting, so equal partitions are merged as they arise). "
-        + ("We keep more graphs than the paper: " if len(hb_u) > PAPER_N_GRAPHS else "")
-        + "every re-observation may also be 'a new landmark', which no box contradicts (the sensor's range and "
-        "bearing to a new landmark are always consistent), so the count doubles with each re-observation "
-        "unless the old landmark is refuted; the paper does not say how it bounded this. "
-        f"The fewest-landmark hypotheses have {n_min} landmarks; the true correspondence "
-        + ("is" if checks["truth_survived_full set"] else "is NOT") + " among the survivors and "
-        + ("is" if sets.true_hypothesis(hb_u, exact.truth.obs_landmark) == 0 else "is not")
-        + " ranked first (fewest landmarks, narrowest boxes).")
+        f"Paper: {PAPER_N_GRAPHS} graphs after 9 poses, {PAPER_N_DISTINCT} distinct up to labelling. Without a map "
+        f"prior we keep {len(r_neg.hypotheses)} graphs even with the closest-landmark sensor's negative "
+        f"information, and {n_split} of them are *splits* of the true partition (one landmark given several "
+        "labels, no wrong merge). A split is realised by twin landmarks at one spot, which produce exactly the "
+        "same readings (the sensor model allows ties), so no rule implied by the sensor can discard it: "
+        + ("this count is the minimum for sound sensor-only pruning. " if n_split == len(r_neg.hypotheses) else
+           "the others are wrong merges the boxes do not refute. ")
+        + "The paper does not say how it bounded 'a new landmark'; a declared minimum separation between "
+        "landmarks (a map prior, not a sensor fact; the world frame plus a local-frame operator for labels seen "
+        f"from consecutive poses) leaves {len(r_sep.hypotheses)} graph(s) with "
+        f"{', '.join(str(int(k)) for k in sorted(set(r_sep.hypotheses.n_landmarks.tolist())))} landmarks.")
     md.append("")
 
     # -- 4. Monte-Carlo: soundness, survival, wrong bounds, graph cross-check ---------------------------------
     n_known = 10 if quick else 200
     n_unknown = 3 if quick else 50
     n_graph = 2 if quick else 20
-    sound, sound_u, surv, ranks, nh = [], [], [], [], []
+    sound, sound_u, surv, ranks, nh, nh0 = [], [], [], [], [], []
     for seed in range(n_known):
         ds = simulate_scenario("cuik-room", seed)
         r = solve_dataset(with_true_association(ds), "cuik", {"association": "reported"})
@@ -305,17 +420,15 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
             sound_u.append(m.get("soundness") == 1.0)
             ranks.append(m["true_hypothesis_index"])
             nh.append(m["n_hypotheses"])
+            if seed < n_unknown // 2:  # without the separation prior (sensor-only pruning)
+                d0 = simulate_scenario("cuik-room", seed, {"bounded.declared_separation": 0.0})
+                r0 = solve_dataset(d0.inputs, "cuik", {})
+                m0 = sets.set_metrics(r0.hypotheses, d0.truth.poses_xyt, d0.truth.landmarks_xy, d0.truth.obs_landmark)
+                surv.append(m0["true_correspondence_survived"])
+                sound_u.append(m0.get("soundness") == 1.0)
+                nh0.append(m0["n_hypotheses"])
     log("paper004: Monte-Carlo done")
-    wrong = []
-    for seed in range(5 if quick else 50):
-        ds = simulate_scenario("cuik-room", seed, {"bounded.declared_scale": 0.2})
-        r = solve_dataset(with_true_association(ds), "cuik", {"association": "reported"})
-        i = int(r.extra.get("refuted_at_observation", -1))
-        cycle = i >= 0 and bool((ds.truth.obs_landmark[:i] == ds.truth.obs_landmark[i]).any())
-        wrong.append((r.status.value, r.extra.get("refuted_at_pose"), cycle))
-    n_caught = sum(s == "failed" for s, _, _ in wrong)
-    n_cycle = sum(s == "failed" and c for s, _, c in wrong)
-    at_pose = sorted({p for s, p, _ in wrong if s == "failed"})
+    wb = wrong_bound_study(range(3 if quick else 50), 5.0, log)
     gp, gl = [], []
     for seed in range(n_graph):
         ds = simulate_scenario("cuik-room", seed)
@@ -327,31 +440,48 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
         gl.append(e.get("landmark_inside_fraction", float("nan")))
     checks["soundness_all"] = all(sound) and all(sound_u)
     checks["truth_always_survives"] = all(surv)
-    checks["wrong_bound_caught"] = n_caught >= 0.9 * len(wrong)
+    checks["wrong_bound_caught"] = wb["all"]["full"]["caught"] >= 0.9 * wb["n"]
     md += ["### Monte-Carlo on bounded-noise data (uniform errors within the bounds)", "",
            _md(["check", "runs", "result"], [
                ["soundness = 100 % (unique correspondence)", n_known, f"{sum(sound)} of {n_known}"],
-               ["soundness of the true hypothesis (unknown correspondence)", n_unknown, f"{sum(sound_u)} of {n_unknown}"],
-               ["true correspondence survived", n_unknown, f"{sum(surv)} of {n_unknown}"],
-               ["true correspondence ranked first", n_unknown, f"{sum(k == 0 for k in ranks)} of {n_unknown}"],
-               ["surviving hypotheses (mean / max)", n_unknown, f"{np.mean(nh):.1f} / {max(nh)}"],
-               ["declared bounds 0.2× too small → all boxes empty", len(wrong),
-                f"{n_caught} of {len(wrong)} (refuted at poses {at_pose})"],
+               ["soundness of the true hypothesis (unknown correspondence, with and without the separation prior)",
+                len(sound_u), f"{sum(sound_u)} of {len(sound_u)}"],
+               ["true correspondence survived (with and without the separation prior)", len(surv),
+                f"{sum(surv)} of {len(surv)}"],
+               ["true correspondence ranked first (separation prior)", n_unknown,
+                f"{sum(k == 0 for k in ranks)} of {n_unknown}"],
+               ["surviving hypotheses, declared 5 m separation: distribution", n_unknown,
+                ", ".join(f"{c} runs × {k}" for k, c in sorted(Counter(nh).items()))],
+               ["surviving hypotheses, no separation prior: distribution", len(nh0),
+                ", ".join(f"{c} runs × {k}" for k, c in sorted(Counter(nh0).items()))],
                ["`graph` poses inside the `cuik` boxes", n_graph, f"{100 * np.mean(gp):.1f} %"],
                ["`graph` landmarks inside the `cuik` boxes", n_graph, f"{100 * np.nanmean(gl):.1f} %"],
            ]), ""]
     md.append(
         ("Soundness held in every run" if checks["soundness_all"] else "Soundness FAILED in some run")
-        + f" ({sum(sound)}/{n_known} unique-correspondence and {sum(sound_u)}/{n_unknown} unknown-correspondence "
+        + f" ({sum(sound)}/{n_known} unique-correspondence and {sum(sound_u)}/{len(sound_u)} unknown-correspondence "
         "runs with every true pose and landmark inside its box); the true correspondence "
-        + ("survived in every run" if checks["truth_always_survives"] else f"was lost in {n_unknown - sum(surv)} runs")
-        + f". Declaring bounds five times too small is caught by an empty box in {n_caught} of {len(wrong)} runs, "
-        + ("always" if n_cycle == n_caught else f"{n_cycle} times")
-        + " at an observation that re-observes a landmark (a cycle of the kinematic graph)"
-        + (f"; in the other {len(wrong) - n_caught} the readings stay consistent with the too-small bounds, so "
-           "there is no contradiction to detect" if n_caught < len(wrong) else "") + ". "
-        f"Least squares and set membership agree: {100 * np.mean(gp):.1f} % of `graph`'s poses and "
-        f"{100 * np.nanmean(gl):.1f} % of its landmarks lie inside the `cuik` boxes.")
+        + ("survived in every run" if checks["truth_always_survives"] else f"was lost in {len(surv) - sum(surv)} runs")
+        + f". `graph` (least squares, oracle association): {100 * np.mean(gp):.1f} % of its poses and "
+        f"{100 * np.nanmean(gl):.1f} % of its landmarks lie inside the `cuik` boxes — a least-squares point need "
+        "not satisfy the closest-landmark constraint (at the room's tie poses it may put the unreported landmark "
+        "closer than the reported one), so 100 % is not expected once the negative information is used.")
+    md.append("")
+    wa, wl = wb["all"], wb["loop"]
+    md += ["### Wrong declared bounds (5× too small), unique correspondence", "",
+           _md(["operator set", "every bound 5× too small: caught", "… at a local cycle",
+                "… by the closest-landmark information (first sighting)", "… at the big loop closure",
+                "… only by the final 3B pass", "only the loop-closing sightings 5× beyond: caught"],
+               [[k, f"{wa[k]['caught']} of {wb['n']}", wa[k]["local_cycle"], wa[k]["closest_landmark"],
+                 wa[k]["loop_closure"], wa[k]["final_3B"], f"{wl[k]} of {wb['n']}"] for k in wa]), ""]
+    md.append(
+        f"With every bound 5× too small the full set empties every box in {wa['full']['caught']} of {wb['n']} runs "
+        f"(the paper set in {wa['paper']['caught']}), before the loop closes: at the first re-observation from the "
+        "next pose or at a first sighting that violates the closest-landmark information. When only the "
+        f"loop-closing sightings of l1 carry errors of 5× their bounds, the full set catches it in {wl['full']} of "
+        f"{wb['n']} runs (+3B: {wl['full+3B']}; paper set: {wl['paper']}); in the others the error is absorbed by "
+        "the slack the other bounds leave in the pose boxes (a set-membership method detects an error only when no "
+        f"admissible errors explain the data). Seeds caught with the full set + 3B: {wb['loop_caught_seeds']}.")
     md.append("")
 
     # -- 5. figure ------------------------------------------------------------------------------------------

@@ -213,3 +213,144 @@ class RangeBearing(Contractor):
         phi, _rho = _polar_sub(box, x, y, lx, ly, self.R, phi)
         if narrow_theta:
             box[t] = box[t] & (phi - self.B)  # θ ∩= φ − B  (backward step of φ = θ + b)
+
+
+class OutsideBand(Contractor):
+    """Negative information of the closest-landmark sensor: landmark m is NOT in the visible band closer than
+    what the sensor reported from pose t.
+
+    Paper 004 §6: the robot "does notice the closest landmark" only (``NoiseBounds.closest_only``; 360° field
+    of view, ranges ``[r_min, r_max]``). If pose t reported a landmark at true range ``r ∈ R = [r̃ ± h_r]``,
+    every other landmark m — of any type, seen before or after t — is either invisible (closer than
+    ``r_min``) or not closer than the reported one (ties allowed: the sensor picks one of equals)::
+
+        ‖l_m − p_t‖ ∉ [r_min, R.lb)     ⇔   ‖l_m − p_t‖² ∈ [0, r_min²] ∪ [R.lb², ∞)
+
+    A pose that reported nothing saw no landmark in range: ``‖l_m − p_t‖ ∉ [r_min, r_max]``, i.e. the
+    band's upper end is ``r_max`` and the outer set is ``(r_max, ∞)`` (closed here: sound).
+
+    Forward: ``s = (l_x − x)² + (l_y − y)²``; each allowed piece narrows a copy backward (``AddOp``,
+    ``SqrOp``, ``SubOp``) and the result is the hull of the surviving pieces — empty when neither survives.
+    The outer piece is non-convex in (x, y), so the operator mostly refutes (a box certainly inside the
+    band) and trims boxes only where one coordinate alone decides.
+    """
+
+    def __init__(self, pose: tuple[int, int, int], landmark: tuple[int, int], band_lo: float, band_hi: float) -> None:
+        self.pose, self.landmark = pose, landmark
+        self.vars = (pose[0], pose[1], *landmark)
+        # outward rounding: the allowed pieces are enlarged, never shrunk
+        lo2 = (Interval(band_lo) * Interval(band_lo)).ub() if band_lo > 0 else None
+        self.pieces = ([Interval(0.0, lo2)] if lo2 is not None else []) + [
+            Interval((Interval(band_hi) * Interval(band_hi)).lb(), codac.oo)]
+        # quick exit: boxes certainly farther apart than this (with a relative margin that dwarfs the
+        # rounding of the float test) satisfy the constraint everywhere — nothing to refute or narrow
+        self._far2 = band_hi * band_hi * (1.0 + 1e-9) + 1e-12
+
+    def _far(self, box: list) -> bool:
+        """The boxes are certainly farther apart than the band (float test with a margin): nothing to do.
+        Skipping an operator is always sound (it only narrows less)."""
+        (x, y, _t), (lx, ly) = self.pose, self.landmark
+        bx, by, blx, bly = box[x], box[y], box[lx], box[ly]
+        gx = max(0.0, blx.lb() - bx.ub(), bx.lb() - blx.ub())
+        gy = max(0.0, bly.lb() - by.ub(), by.lb() - bly.ub())
+        return gx * gx + gy * gy > self._far2
+
+    def contract(self, box: list, narrow_theta: bool = True, tol: float = 1e-9) -> list[int] | None:
+        if self._far(box):  # the common case: most landmarks are far from most poses
+            return []
+        return super().contract(box, narrow_theta, tol)
+
+    #: one pass suffices: the pieces' hull is re-queued by the propagation when its variables move
+    max_inner = 2
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        if self._far(box):
+            return
+        (x, y, _t), (lx, ly) = self.pose, self.landmark
+        bx, by, blx, bly = box[x], box[y], box[lx], box[ly]
+        dx, dy = blx - bx, bly - by
+        sx, sy = codac.sqr(dx), codac.sqr(dy)
+        s = sx + sy
+        hull = None
+        for piece in self.pieces:
+            sk = s & piece
+            if sk.is_empty():
+                continue
+            sxk, syk, dxk, dyk = Interval(sx), Interval(sy), Interval(dx), Interval(dy)
+            codac.AddOp.bwd(sk, sxk, syk)
+            codac.SqrOp.bwd(sxk, dxk)
+            codac.SqrOp.bwd(syk, dyk)
+            v = [Interval(box[i]) for i in (x, y, lx, ly)]
+            codac.SubOp.bwd(dxk, v[2], v[0])
+            codac.SubOp.bwd(dyk, v[3], v[1])
+            if any(iv.is_empty() for iv in v):
+                continue
+            hull = v if hull is None else [a | b for a, b in zip(hull, v)]
+        if hull is None:
+            for i in (x, y, lx, ly):
+                box[i] = Interval.empty()
+            return
+        for i, iv in zip((x, y, lx, ly), hull):
+            box[i] = box[i] & iv
+
+
+class Separated(Contractor):
+    """A declared map prior (not a sensor fact): two distinct landmarks are at least ``s`` apart,
+    ``‖l_a − l_b‖ ≥ s`` (``NoiseBounds.min_separation``; 0 = nothing declared, no operator). Refutes a
+    hypothesis that would need two labels for one physical landmark once their boxes are certainly closer
+    than ``s``."""
+
+    def __init__(self, a: tuple[int, int], b: tuple[int, int], s: float) -> None:
+        self.a, self.b = a, b
+        self.vars = (*a, *b)
+        self.piece = Interval((Interval(s) * Interval(s)).lb(), codac.oo)
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        (ax, ay), (bx, by) = self.a, self.b
+        dx, dy = box[bx] - box[ax], box[by] - box[ay]
+        sx, sy = codac.sqr(dx), codac.sqr(dy)
+        s = (sx + sy) & self.piece
+        if s.is_empty():
+            for i in self.vars:
+                box[i] = Interval.empty()
+            return
+        codac.AddOp.bwd(s, sx, sy)
+        codac.SqrOp.bwd(sx, dx)
+        codac.SqrOp.bwd(sy, dy)
+        codac.SubOp.bwd(dx, box[bx], box[ax])
+        codac.SubOp.bwd(dy, box[by], box[ay])
+
+
+class SeparatedLocal(Contractor):
+    """The separation prior written in the frame of pose t−1 (like :class:`SharedLandmarkLeg`): pose t−1 sees
+    landmark a at ``z_a``, pose t sees a *different* label b at ``z_b``. In the frame turned by the leg's α::
+
+        q_a = r_a·(cos(b_a − α), sin(b_a − α)),   q_b = (d + r_b cos b_b, r_b sin b_b),   ‖q_a − q_b‖ ≥ s
+
+    The world-frame :class:`Separated` cannot refute a duplicate label once the absolute boxes are wider than
+    ``s`` (wrapping); here only the leg ``(d, α)`` and the two readings enter, so "the landmark seen from two
+    consecutive poses is two landmarks" is refuted whenever the readings place them closer than ``s``.
+    Refutation only (the box is returned unchanged or emptied): sound, since it never removes a point that
+    satisfies the constraint. Variables: the leg ``(i_d, i_α)``."""
+
+    def __init__(self, leg: tuple[int, int], z_a: tuple[float, float], z_b: tuple[float, float], h_r: float,
+                 h_b: float, s: float) -> None:
+        self.leg = leg
+        self.vars = tuple(leg)
+        self.Ra = (Interval(z_a[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Ba = Interval(z_a[1]) + Interval(-h_b, h_b)
+        rb = (Interval(z_b[0]) + Interval(-h_r, h_r)) & _NONNEG
+        bb = Interval(z_b[1]) + Interval(-h_b, h_b)
+        self.qbx, self.qby = rb * codac.cos(bb), rb * codac.sin(bb)
+        self.s2 = (Interval(s) * Interval(s)).lb()
+
+    max_inner = 1
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        i_d, i_a = self.leg
+        phi = self.Ba - box[i_a]
+        dx = self.Ra * codac.cos(phi) - box[i_d] - self.qbx
+        dy = self.Ra * codac.sin(phi) - self.qby
+        if (codac.sqr(dx) + codac.sqr(dy)).ub() < self.s2:
+            box[i_d] = Interval.empty()
+            box[i_a] = Interval.empty()

@@ -68,6 +68,32 @@ class Hypothesis:
         return s
 
 
+    def landmark_area(self) -> float:
+        """Sum of the landmark boxes' areas ``w_x·w_y`` (m²) — with the landmark count, the cap's ranking."""
+        base = len(self.box) - 2 * self.n_landmarks
+        s = 0.0
+        for j in range(self.n_landmarks):
+            a = self.box[base + 2 * j].diam() * self.box[base + 2 * j + 1].diam()
+            if a != float("inf"):
+                s += a
+        return s
+
+
+    def log_volume(self, n_fixed: int) -> float:
+        """``Σ log(width)`` over the pose and landmark variables from index ``n_fixed`` on (skipping the known
+        start and unbounded ones): the log-volume of the box. Under uniform errors the likelihood of an
+        association is proportional to the volume of its feasible set, which the box encloses — a rough
+        proxy, used to rank hypotheses with equally many landmarks (larger first)."""
+        import math
+
+        s = 0.0
+        for x in self.box[n_fixed:]:
+            w = x.diam()
+            if 0.0 < w < float("inf"):
+                s += math.log(w)
+        return s
+
+
 def canonical_key(assoc: list[int]) -> tuple[int, ...]:
     """The association relabelled by order of first appearance (equal ⇔ equal up to relabelling)."""
     first: dict[int, int] = {}

@@ -17,7 +17,19 @@ is never discarded (unless the cap bites).
 
 Output: every surviving hypothesis with its association and lower/upper boxes (``SolverResult.hypotheses``);
 the point estimate (``poses_xyt``, ``landmarks_xy``, ``assoc``) is the box midpoint of the first hypothesis
-in the order (fewest landmarks, smallest total width).
+in the ``rank`` order (default: fewest landmarks, then largest box volume).
+
+Pruning beyond the paper's empty boxes (each sound under a declaration the data carry):
+
+* the closest-landmark sensor (``NoiseBounds.closest_only``, paper 004 §6 "it does notice the closest
+  landmark"): from a pose that reported a landmark at ``r``, no other landmark of any type lies in
+  ``[r_min, r)``; from a pose that reported nothing, none lies in ``[r_min, r_max]`` (``OutsideBand``);
+* a declared landmark separation (``NoiseBounds.min_separation``, a map prior, not stated by the paper):
+  distinct labels are at least that far apart, in the world frame (``Separated``) and, for labels seen from
+  consecutive poses, in the frame of the first pose (``SeparatedLocal``) where the boxes do not wrap.
+
+Without the separation prior nothing sound can discard a hypothesis that splits one landmark into several
+labels: twin landmarks at one spot produce exactly the same readings (ties allowed by the sensor model).
 """
 
 from __future__ import annotations
@@ -46,7 +58,7 @@ class CuikParams:
                                004's set (§6: "no narrowing of θ's were used").
     tol : float                width-change tolerance of the fixpoint: an operator's output re-queues its
                                neighbours only when a bound moved by more than this (m or rad).
-    max_hypotheses : int       cap on live kinematic graphs; the fewest-landmark, narrowest ones are kept.
+    max_hypotheses : int       cap on live kinematic graphs; the first ones in the ``rank`` order are kept.
     association : "types" | "reported"
                                ``types``: unknown correspondence, branch over landmarks of the reported type
                                (paper 004 §5); ``reported``: use sensor-reported ids where present (unique
@@ -58,7 +70,25 @@ class CuikParams:
     bisect_leaves : int        0 = off; else a final bisection pass over the pose headings with at most
                                this many leaves per hypothesis, replaced by the hull of the surviving leaves
                                (sound; runs after the 3B pass).
-    recovery_slack : float     added to the odometry bounds: ``(d̃, α̃)`` are recovered from the chained
+    negative_information : bool
+                               when the data declare a closest-landmark sensor (``NoiseBounds.closest_only``):
+                               add its negative information, one :class:`OutsideBand` operator per
+                               (observation or silent pose, other landmark) — no landmark of any type is in
+                               the visible band closer than the reported one (paper 004 §6: the robot
+                               "does notice the closest landmark"). Sound; False = the paper's graphs only.
+    separation : bool          when the data declare ``NoiseBounds.min_separation > 0`` (a map prior, not a
+                               sensor fact): every pair of landmark labels is at least that far apart.
+    rank : str                 order used by the cap and for the output (a heuristic, not a guarantee):
+                               ``parsimony_volume`` = fewest landmarks, then the LARGEST box log-volume (under
+                               uniform errors an association's likelihood is proportional to the volume of
+                               its feasible set; a wrong re-association survives only in a sliver where two
+                               boxes overlap, so its contracted box is small); ``parsimony_area`` = fewest
+                               landmarks, then the smallest total landmark box area; ``parsimony_width`` =
+                               fewest landmarks, then the smallest sum of all widths. Measured on
+                               cuik-corridors with a cap of 16 (bench_cuik): the smallest-first orders
+                               keep wrong re-associations and drop the truth.
+    recovery_slack : float     subtracted from the closest-landmark band (ties within 1 nm) and added to the
+                               odometry bounds: ``(d̃, α̃)`` are recovered from the chained
                                ``odometry_xyt`` with rounding error ~1e-14 (m, rad).
     """
 
@@ -71,6 +101,9 @@ class CuikParams:
     shave_rounds: int = 2
     bisect_leaves: int = 0
     recovery_slack: float = 1e-9
+    negative_information: bool = True
+    separation: bool = True
+    rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_volume"
 
     def __post_init__(self) -> None:
         if not self.tol > 0:
@@ -108,7 +141,10 @@ class CuikSlam(BaseSolver):
         from slamcli.solvers.cuik.contractors import (
             Interval,
             OdometryTurnMove,
+            OutsideBand,
             RangeBearing,
+            Separated,
+            SeparatedLocal,
             SharedLandmarkLeg,
             unbounded,
         )
@@ -142,6 +178,22 @@ class CuikSlam(BaseSolver):
         box0 = [unbounded() for _ in range(base)]
         for k in range(3):
             box0[k] = Interval(float(inputs.x0[k]))
+        # negative information of the closest-landmark sensor (one reading per pose at most, or the declaration
+        # is contradicted by the data and not used)
+        per_pose = np.diff(np.asarray(obs.offsets))
+        neg = bool(p.negative_information and nb.closest_only and (per_pose <= 1).all())
+        r_min, r_max = float(nb.min_range), float(inputs.max_range)
+        if neg and not np.isfinite(r_max):
+            r_max = float("inf")
+        # lower end of each true range: R.lb of the outward-rounded reading interval [r̃ ± h_r] ∩ [0, ∞), less
+        # recovery_slack (the simulator treats landmarks within 1 nm of the closest as tied)
+        r_lo = [max(0.0, ((Interval(float(r)) + Interval(-h_r, h_r)) & Interval(0.0, float("inf"))).lb()
+                    - p.recovery_slack) for r in np.asarray(obs.range_m, float)]
+        silent: list[int] = []  # poses that reported no landmark
+        sep = float(nb.min_separation) if p.separation else 0.0
+        rank = {"parsimony_area": lambda h: (h.n_landmarks, h.landmark_area()),
+                "parsimony_width": lambda h: (h.n_landmarks, h.total_width()),
+                "parsimony_volume": lambda h: (h.n_landmarks, -h.log_volume(3))}[p.rank]
         hyps = [Hypothesis(box=box0)]
         counter = Counter()
         live_per_step: list[int] = []
@@ -157,6 +209,9 @@ class CuikSlam(BaseSolver):
         def leg_vars(t: int) -> tuple[int, int]:
             return (3 * n_poses + 2 * t, 3 * n_poses + 2 * t + 1)
 
+        def lm_vars(j: int) -> tuple[int, int]:
+            return (base + 2 * j, base + 2 * j + 1)
+
         for t in range(n_poses):
             if t > 0:
                 edge = OdometryTurnMove(pose_vars(t - 1), pose_vars(t), float(legs[t - 1, 0]),
@@ -167,6 +222,20 @@ class CuikSlam(BaseSolver):
                     h.box[leg_vars(t - 1)[1]] = Interval(edge.A)
                     k = h.add_edge(edge)
                     if propagate(h.box, h.edges, h.adj, [k], narrow_theta=p.narrow_theta, tol=p.tol,
+                                 counter=counter):
+                        alive.append(h)
+                hyps = alive
+                if not hyps:
+                    refuted = (t, -1)
+                    break
+            if neg and per_pose[t] == 0:
+                # a silent pose: no landmark of any type within [r_min, r_max] of pose t
+                silent.append(t)
+                alive = []
+                for h in hyps:
+                    start = [h.add_edge(OutsideBand(pose_vars(t), lm_vars(m), r_min, r_max))
+                             for m in range(h.n_landmarks)]
+                    if propagate(h.box, h.edges, h.adj, start, narrow_theta=p.narrow_theta, tol=p.tol,
                                  counter=counter):
                         alive.append(h)
                 hyps = alive
@@ -188,14 +257,31 @@ class CuikSlam(BaseSolver):
                             options.append(-1)
                     for n_opt, j in enumerate(options):
                         g = h if n_opt == len(options) - 1 else h.copy()
-                        if j < 0:
+                        is_new = j < 0
+                        if is_new:
                             j = g.n_landmarks
                             g.box += [unbounded(), unbounded()]
                             g.landmark_type.append(ty)
                             if p.association == "reported" and rid >= 0:
                                 g.reported[rid] = j
-                        lv = (base + 2 * j, base + 2 * j + 1)
+                        lv = lm_vars(j)
                         start = [g.add_edge(RangeBearing(pose_vars(t), lv, r, b, h_r, h_b))]
+                        if neg:
+                            # closest-landmark sensor: every other landmark is outside [r_min, r) of pose t ...
+                            start += [g.add_edge(OutsideBand(pose_vars(t), lm_vars(m), r_min, r_lo[i]))
+                                      for m in range(g.n_landmarks) if m != j]
+                            if is_new:  # ... and a new landmark was never closer than what earlier poses saw
+                                start += [g.add_edge(OutsideBand(pose_vars(int(obs.step[k])), lv, r_min, r_lo[k]))
+                                          for k in range(i)]
+                                start += [g.add_edge(OutsideBand(pose_vars(s), lv, r_min, r_max)) for s in silent]
+                        if sep > 0 and t > 0:  # a different label seen from pose t−1: separated, in its frame
+                            start += [g.add_edge(SeparatedLocal(
+                                leg_vars(t - 1), (float(obs.range_m[k]), float(obs.bearing_rad[k])), (r, b), h_r,
+                                h_b, sep)) for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t]))
+                                if g.assoc[k] != j]
+                        if is_new and sep > 0:
+                            start += [g.add_edge(Separated(lm_vars(m), lv, sep)) for m in range(g.n_landmarks)
+                                      if m != j]
                         if p.narrow_theta and t > 0:  # the same landmark seen from pose t−1: a local cycle
                             for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t])):
                                 if g.assoc[k] == j:
@@ -213,7 +299,7 @@ class CuikSlam(BaseSolver):
                     refuted = (t, i)
                     break
                 if len(hyps) > p.max_hypotheses:
-                    hyps.sort(key=lambda h: (h.n_landmarks, h.total_width()))
+                    hyps.sort(key=rank)
                     dropped += len(hyps) - p.max_hypotheses
                     hyps = hyps[: p.max_hypotheses]
                     capped_steps.append(t)
@@ -233,6 +319,8 @@ class CuikSlam(BaseSolver):
             "hypotheses_dropped_by_cap": dropped,
             "cap_hit_at_steps": capped_steps,
             "operator_set": "full" if p.narrow_theta else "paper",
+            "negative_information": neg,
+            "min_separation": sep,
         }
         if refuted is not None:
             t, i = refuted
@@ -266,7 +354,7 @@ class CuikSlam(BaseSolver):
                     assoc=np.full(len(obs), -1, np.int64), t_start=t_start, extra=extra,
                     message="the 3B / bisection pass refuted every hypothesis: the data contradict the declared bounds")
 
-        hyps.sort(key=lambda h: (h.n_landmarks, h.total_width()))
+        hyps.sort(key=rank)
         boxes = _to_arrays(hyps, n_poses, len(obs), base)
         best_lo, best_hi = boxes.pose_lo[0], boxes.pose_hi[0]
         poses = 0.5 * (best_lo + best_hi)

@@ -1,0 +1,173 @@
+"""``graph`` with ``init=robust`` (issue 10, the Victoria Park full row): the warm start from a Cauchy-kernel
+solve of the same graph, checked against GTSAM's LM with the same kernel, and the Gaussian optimum reached
+from it.
+
+Why the option exists (measured in ``benchmarks/bench_graph_real.py`` on GTSAM's full victoria_park.txt, which
+is too large for the test suite): 10 of its 3640 sightings are labelled with the wrong tree; from the
+drifted odometry chain the Gaussian LM of both GTSAM and slamcli stalls at λ = 1e5 with a cost ~150× the
+optimum, while the same graph started from the Cauchy estimate converges in 8 iterations. The data here is
+the 1600-pose prefix (tests/data/victoria_park_1600.txt), on which both starts reach the same optimum: the
+test pins the numbers of both passes and checks the warm start against GTSAM.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slamcli.datasets.g2o import import_graph
+from slamcli.errors import SolverError
+from slamcli.solvers import frontend, graph
+from slamcli.types import Status
+
+DATA = Path(__file__).parent / "data"
+#: the NoiseSpec bearing-range model (not the file's per-edge Cartesian one), as the GTSAM graph below
+PARAMS = dict(edge_info=False, covariance=False, rel_cost_tol=1e-10, max_iterations=500)
+
+
+@pytest.fixture(scope="module")
+def victoria():
+    inputs = import_graph(DATA / "victoria_park_1600.txt").inputs
+    assoc, _ = frontend.compact_labels(frontend.associate_reported(inputs.observations), 1)
+    return inputs, assoc
+
+
+def _solve(inputs, **kw):
+    return graph.GraphSlam(graph.GraphParams(**{**PARAMS, **kw})).solve(inputs, rng=np.random.default_rng(0))
+
+
+def test_robust_warm_start_equals_gtsams_cauchy_lm(victoria):
+    gtsam = pytest.importorskip("gtsam")
+    from gtsam.symbol_shorthand import L, X
+
+    from slamcli.models import motion
+
+    inputs, assoc = victoria
+    p = graph.GraphParams(**PARAMS)
+    poses0 = graph.odometry_initial_poses(inputs)
+    poses, res = graph.robust_initial_poses(inputs, assoc, poses0, p)
+    assert res.status == Status.CONVERGED and res.iterations == 27
+    assert res.cost == pytest.approx(911.28152169934, rel=1e-9)
+
+    # the same graph in GTSAM's own types, Cauchy (k = 2.3849) on the sightings only
+    g = gtsam.NonlinearFactorGraph()
+    prior = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(p.prior_std, float))
+    g.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*inputs.x0), prior))
+    odo = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(inputs.noise.odometry_std, float))
+    for t, d in enumerate(motion.odometry_increments(inputs.odometry_xyt)):
+        g.add(gtsam.BetweenFactorPose2(X(t), X(t + 1), gtsam.Pose2(*d), odo))
+    obs = inputs.observations
+    n_lm = int(assoc.max()) + 1
+    steps, labels, z = graph.group_returns(np.asarray(obs.step), assoc, obs.z, n_lm)
+    sr, sb = inputs.noise.range_std, inputs.noise.bearing_std
+    br = gtsam.noiseModel.Robust.Create(
+        gtsam.noiseModel.mEstimator.Cauchy.Create(p.cauchy_k),
+        gtsam.noiseModel.Gaussian.Covariance(np.diag([sb**2, sr**2])),  # GTSAM order: [bearing, range]
+    )
+    for s, j, (r, b) in zip(steps, labels, z):
+        g.add(gtsam.BearingRangeFactor2D(X(int(s)), L(int(j)), gtsam.Rot2(float(b)), float(r), br))
+    lm0 = frontend.landmarks_from_observations(poses0, obs, assoc, n_lm)
+    v0 = gtsam.Values()
+    for t, q in enumerate(poses0):
+        v0.insert(X(t), gtsam.Pose2(*q))
+    for j, m in enumerate(lm0):
+        v0.insert(L(j), np.asarray(m, float))
+    lp = gtsam.LevenbergMarquardtParams()
+    lp.setRelativeErrorTol(1e-10)
+    lp.setAbsoluteErrorTol(0.0)
+    lp.setMaxIterations(500)
+    opt = gtsam.LevenbergMarquardtOptimizer(g, v0, lp)
+    v = opt.optimize()
+    assert opt.iterations() == res.iterations  # both count accepted steps
+    assert abs(g.error(v) - res.cost) <= 1e-9 * res.cost
+    gt_poses = np.array([[v.atPose2(X(t)).x(), v.atPose2(X(t)).y()] for t in range(inputs.n_poses)])
+    assert np.max(np.abs(gt_poses - poses[:, :2])) < 1e-6
+
+
+def test_init_robust_reaches_the_gaussian_optimum_from_inside_its_basin(victoria):
+    inputs, _ = victoria
+    odo = _solve(inputs)
+    rob = _solve(inputs, init="robust")
+    for r in (odo, rob):
+        assert r.status == Status.CONVERGED
+        assert r.extra["robust"] == "none"  # the final model is the Gaussian one
+    # same Gaussian optimum, reached in 4 iterations from the warm start instead of 58 from the chain
+    assert odo.extra["final_cost"] == pytest.approx(980.17817478848, rel=1e-9)
+    assert rob.extra["final_cost"] == pytest.approx(odo.extra["final_cost"], rel=1e-9)
+    assert odo.extra["iterations"] >= 50 and rob.extra["iterations"] <= 6
+    assert np.max(np.abs(rob.poses_xyt - odo.poses_xyt)) < 1e-5
+    assert rob.extra["init"] == "robust"
+    assert rob.extra["robust_init"] == {
+        "status": "converged",
+        "iterations": 27,
+        "cost": pytest.approx(911.2815217, rel=1e-8),
+    }
+    assert "robust_init" not in odo.extra
+
+
+def test_init_robust_needs_the_gtsam_model(victoria):
+    inputs, _ = victoria
+    with pytest.raises(SolverError, match="init=robust needs model=gtsam"):
+        _solve(inputs, init="robust", model="paper")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# init=incremental (unknown correspondences): association window by window on the current estimate
+# ---------------------------------------------------------------------------------------------------------
+def test_incremental_init_with_one_window_is_the_robust_solve_of_the_batch_association():
+    """With a window longer than the run, the incremental pass is one NN association on the odometry chain
+    followed by one Cauchy solve from it — exactly ``robust_initial_poses`` on that association."""
+    import dataclasses
+
+    from tiny_world import tiny_dataset
+
+    inputs = tiny_dataset(T=60, n_landmarks=6, seed=3).inputs
+    p = graph.GraphParams(incremental_window=1e3)
+    odo = graph.odometry_initial_poses(inputs)
+    inc = graph.incremental_initial_poses(inputs, odo, p)
+    assoc, _ = frontend.associate_nearest_neighbour(
+        odo,
+        inputs.observations,
+        inputs.noise.obs_cov,
+        gate_prob=p.gate_prob,
+        odometry_std=inputs.noise.odometry_std,
+        segment_dist=p.nn_segment_dist,
+    )
+    assoc, _ = frontend.compact_labels(assoc, 1)
+    ref, res = graph.robust_initial_poses(inputs, assoc, odo, dataclasses.replace(p, rel_cost_tol=1e-6))
+    assert res.iterations > 0 and np.max(np.abs(ref - odo)) > 1e-3  # the solve moved the poses
+    np.testing.assert_allclose(inc, ref, rtol=0, atol=1e-12)
+
+
+def test_incremental_init_on_the_victoria_park_excerpt(tmp_path):
+    """End to end on the first 60 s of Victoria Park (tests/data/victoria_park_excerpt): windows of 3 s,
+    GPS ATE (aligned) below dead reckoning's 1.37 m and at the batch front end's level (0.85 m measured; on
+    the first 300 s, where the batch association is built from 26 m of drift, it is 21.3 m against
+    1.38 m with init=incremental — too long for the suite, see /work/notes/issue-10.md)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+
+    runner = CliRunner()
+    data, out = tmp_path / "vp.h5", tmp_path / "g.h5"
+    vp = DATA / "victoria_park_excerpt"
+    assert runner.invoke(app, ["import", "victoria-park", str(vp), "-q", "-o", str(data)]).exit_code == 0
+    r = runner.invoke(
+        app, ["solve", str(data), "-m", "graph", "-p", "init=incremental", "-p", "robust=cauchy", "-q", "-o", str(out)]
+    )
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["evaluate", str(out), "-q", "-o", str(tmp_path / "ev")])
+    assert r.exit_code == 0, r.output
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert m["odometry_gps_ate_aligned_rmse_m"] == pytest.approx(1.369, abs=2e-3)
+    assert m["gps_ate_aligned_rmse_m"] < 0.9
+
+
+def test_incremental_init_refuses_known_correspondences(victoria):
+    inputs, _ = victoria  # the graph file's landmark ids are reported ids
+    with pytest.raises(SolverError, match="init=incremental builds a nearest-neighbour association"):
+        _solve(inputs, init="incremental")

@@ -1,0 +1,156 @@
+"""Selected inverse (Takahashi recurrence on the sparse factor, ``slamcli.solvers.selinv``) against dense
+``inv(H)``, against the SciPy marginals path it replaced, and on held-fixed / uncoupled variables."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from slamcli.solvers import graph, nls, selinv
+
+pytestmark = pytest.mark.skipif(not selinv.available(), reason="needs scikit-sparse (extra cholmod)")
+
+
+def _random_spd(n: int, density: float, seed: int) -> sp.csc_matrix:
+    """Sparse SPD ``A Aᵀ + δ I`` with a random pattern (fill-in under any ordering)."""
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=density, random_state=rng, data_rvs=rng.standard_normal)
+    return sp.csc_matrix(A @ A.T + 0.1 * sp.eye(n))
+
+
+def _block_spd(n_blocks: int, k: int, seed: int) -> sp.csc_matrix:
+    """Block-sparse SPD (``k × k`` variables, a chain plus random long-range couplings) — SLAM-like."""
+    rng = np.random.default_rng(seed)
+    n = n_blocks * k
+    pairs = [(i, i + 1) for i in range(n_blocks - 1)]
+    pairs += [tuple(sorted(rng.choice(n_blocks, 2, replace=False))) for _ in range(n_blocks)]
+    J = []
+    for a, b in pairs:  # one "factor" per pair: a k-row residual on the two blocks
+        Jf = np.zeros((k, n))
+        Jf[:, a * k : (a + 1) * k] = rng.standard_normal((k, k))
+        Jf[:, b * k : (b + 1) * k] = rng.standard_normal((k, k))
+        J.append(sp.csr_matrix(Jf))
+    J.append(sp.csr_matrix(np.eye(k, n)))  # prior on block 0
+    Jm = sp.vstack(J)
+    return sp.csc_matrix(Jm.T @ Jm)
+
+
+@pytest.mark.parametrize(
+    "H",
+    [_random_spd(40, 0.06, 0), _random_spd(120, 0.02, 1), _random_spd(200, 0.01, 2), _block_spd(60, 3, 3),
+     _block_spd(90, 2, 4)],
+    ids=["n40", "n120", "n200", "blocks3", "blocks2"],
+)
+def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
+    Hinv = np.linalg.inv(H.toarray())
+    scale = np.abs(Hinv).max()
+    S = selinv.SelectedInverse.from_matrix(H)
+    # every stored entry of Σ̃ is an entry of (P H Pᵀ)⁻¹
+    Pinv = Hinv[np.ix_(S.perm, S.perm)]
+    checked = 0
+    for K, j0 in enumerate(S._first):
+        rows = S._snrows[K]
+        blk = S._blk[K]
+        np.testing.assert_allclose(blk, Pinv[np.ix_(rows, np.arange(j0, j0 + blk.shape[1]))], rtol=0,
+                                   atol=1e-10 * scale)
+        checked += blk.size
+    assert checked == S.vals.size
+    # and the original-order lookup returns H⁻¹ on the whole pattern of H
+    C = sp.coo_matrix(H)
+    got = S.entries(C.row, C.col)
+    assert np.abs(got - Hinv[C.row, C.col]).max() <= 1e-10 * scale
+    # the factorisation behind it: P H Pᵀ = L D Lᵀ
+    F = selinv.factor_ldl(H)
+    LD = (F.L @ sp.diags(F.d) @ F.L.T).toarray()
+    assert np.abs(LD - H.toarray()[np.ix_(F.perm, F.perm)]).max() <= 1e-12 * np.abs(H).max()
+
+
+def test_recurrence_on_a_hand_made_factor_without_cholmod_ordering():
+    """The recurrence alone, on an ``L D Lᵀ`` from a dense Cholesky in natural order (banded + arrow
+    pattern, chordal): independent of CHOLMOD's ordering and of :func:`selinv.factor_ldl`."""
+    rng = np.random.default_rng(7)
+    n, bw = 30, 2
+    A = np.zeros((n, n))
+    for i in range(n):
+        for j in range(max(0, i - bw), i + 1):
+            A[i, j] = A[j, i] = rng.standard_normal()
+    A[-1, :] = A[:, -1] = rng.standard_normal(n)  # arrow: the last variable couples to all
+    A = A @ A.T + n * np.eye(n)  # pattern grows to band 4 + arrow; SPD
+    C = np.linalg.cholesky(A)
+    mask = np.abs(C) > 0  # the (numerical = symbolic here) pattern of the factor
+    Lu = np.where(mask, C / np.diag(C)[None, :], 0.0)
+    F = selinv.LdlFactor(sp.csc_matrix(Lu), np.diag(C) ** 2, np.arange(n))
+    S = selinv.SelectedInverse(F)
+    Ainv = np.linalg.inv(A)
+    r, c = np.nonzero(np.tril(mask))
+    assert np.abs(S.entries(r, c) - Ainv[r, c]).max() <= 1e-12 * np.abs(Ainv).max()
+    assert len(S.sn_first) < n  # the band and the arrow merge columns into supernodes
+
+
+def test_uncoupled_blocks_need_their_pattern_and_get_it():
+    """Variables no factor couples (held fixed: identity rows) — their 2×2 block is off the pattern of
+    ``H``; ``from_matrix(H, index_blocks)`` adds it as explicit zeros so the lookup is exact."""
+    H = sp.csc_matrix(sp.block_diag([_block_spd(10, 2, 5), sp.diags([2.0, 4.0])]))
+    idx = np.array([[20, 21], [0, 1]])
+    with pytest.raises(ValueError, match="not on the pattern"):
+        selinv.SelectedInverse.from_matrix(H).blocks(idx)
+    got = selinv.SelectedInverse.from_matrix(H, [idx]).blocks(idx)
+    Hinv = np.linalg.inv(H.toarray())
+    np.testing.assert_allclose(got[0], [[0.5, 0.0], [0.0, 0.25]], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got[1], Hinv[:2, :2], rtol=1e-12)
+
+
+def test_not_positive_definite_names_a_column():
+    H = sp.csc_matrix(np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 3.0], [0.0, 3.0, 1.0]]))  # eigenvalue < 0
+    with pytest.raises(selinv.NotPositiveDefinite) as info:
+        selinv.SelectedInverse.from_matrix(H)
+    assert 0 <= info.value.column < 3
+    assert isinstance(info.value, np.linalg.LinAlgError)  # graph reports it as "no covariances"
+
+
+def _graph_problem(T=60, n_landmarks=8, seed=2):
+    from tiny_world import tiny_dataset
+
+    from slamcli.solvers import frontend
+
+    ds = tiny_dataset(T=T, n_landmarks=n_landmarks, seed=seed, report_ids=True, clutter_every=0)
+    inp = ds.inputs
+    assoc = frontend.associate_reported(inp.observations)
+    p0 = graph.odometry_initial_poses(inp)
+    lm0 = frontend.landmarks_from_observations(p0, inp.observations, assoc, int(assoc.max()) + 1)
+    gp = graph.build_gtsam_problem(inp, assoc, p0, lm0)
+    return ds, gp, nls.solve(gp.problem, gp.x0)
+
+
+def test_graph_marginals_selected_inverse_equals_dense_inverse_and_the_scipy_path(monkeypatch):
+    ds, gp, opt = _graph_problem()
+    H = opt.information
+    Hinv = np.linalg.inv(H.toarray())
+    ip, il = gp.pose_cols(), gp.landmark_cols()
+    ref_p, ref_l = Hinv[ip[:, :, None], ip[:, None, :]], Hinv[il[:, :, None], il[:, None, :]]
+    pose_cov, lm_cov = graph.laplace_marginals(gp, H)  # CHOLMOD present: the selected inverse
+    assert np.abs(pose_cov - ref_p).max() <= 1e-10 * np.abs(ref_p).max()
+    assert np.abs(lm_cov - ref_l).max() <= 1e-10 * np.abs(ref_l).max()
+    # the previous (SciPy: banded chain + border Schur complement) path gives the same blocks
+    monkeypatch.setattr(selinv, "available", lambda: False)
+    old_p, old_l = graph.laplace_marginals(gp, H)
+    assert np.abs(pose_cov - old_p).max() <= 1e-9 * np.abs(old_p).max()
+    assert np.abs(lm_cov - old_l).max() <= 1e-9 * np.abs(old_l).max()
+
+
+def test_graph_solver_result_marginals_same_with_and_without_cholmod(monkeypatch):
+    """End to end: ``graph``'s result (default covariance=true) via the selected inverse equals the result
+    via the SciPy fallback (the same optimum, so the same H) to 1e-9."""
+    from tiny_world import tiny_dataset
+
+    ds = tiny_dataset(T=80, n_landmarks=10, seed=11, report_ids=True, clutter_every=0)
+    params = graph.GraphParams(association="reported")
+    new = graph.GraphSlam(params).solve(ds.inputs, rng=np.random.default_rng(0))
+    monkeypatch.setattr(selinv, "available", lambda: False)
+    old = graph.GraphSlam(params).solve(ds.inputs, rng=np.random.default_rng(0))
+    assert new.pose_cov is not None and new.landmark_cov is not None
+    assert new.pose_cov.shape == (ds.inputs.n_poses, 3, 3) and new.landmark_cov.shape[1:] == (2, 2)
+    assert np.abs(new.poses_xyt - old.poses_xyt).max() < 1e-12
+    assert np.abs(new.pose_cov - old.pose_cov).max() <= 1e-9 * np.abs(old.pose_cov).max()
+    assert np.abs(new.landmark_cov - old.landmark_cov).max() <= 1e-9 * np.abs(old.landmark_cov).max()
