@@ -91,7 +91,7 @@ def test_ekf_and_graph_recover_the_car_world_and_agree(world):
 
 def test_unsupported_solver_refuses_in_one_line(world):
     with pytest.raises(SolverError, match="supports the motion model"):
-        solve_dataset(world.inputs, "icm", {})
+        solve_dataset(world.inputs, "hybrid", {})
 
 
 @pytest.mark.parametrize("version", [1, 2])

@@ -103,7 +103,7 @@ def test_cli_end_to_end_and_refusals(tmp_path):
     assert m["gps_n_matched"] > 50 and m["gps_ate_aligned_rmse_m"] < m["odometry_gps_ate_aligned_rmse_m"] + 1.0
     assert m["final_cost"] > 0 and m["n_landmarks_est"] > 0
     # a solver that reads the controls as DDMR refuses in one line, writing nothing
-    for args in (["-m", "icm"], ["-m", "graph", "-p", "use_controls=true"]):
+    for args in (["-m", "hybrid"], ["-m", "graph", "-p", "use_controls=true"]):
         r = runner.invoke(app, ["solve", str(data), *args, "-o", str(tmp_path / "x.h5")])
         lines = r.stderr.strip().splitlines()
         assert r.exit_code == 1 and len(lines) == 1 and "ackermann" in lines[0], r.output

@@ -261,6 +261,27 @@ def import_g2o_command(
         )
 
 
+_RangeStd = Annotated[float | None, typer.Option(help="σ_r to store, m (default: the importer's, see its docstring).")]
+_BearingStd = Annotated[float | None, typer.Option(help="σ_b to store, rad (default: the importer's).")]
+_VStd = Annotated[float | None, typer.Option(help="σ of the encoder speed, m/s (default: the importer's).")]
+_SteerStd = Annotated[float | None, typer.Option(help="σ of the steering angle, rad (default: the importer's).")]
+
+
+def _import_car_recording(out: Path | None, quiet: bool, load, summary) -> None:
+    """The shared body of the car-recording imports: ``load()`` → Dataset, written atomically to ``out``, then
+    ``summary(ds)`` (one line) unless ``quiet``; every failure is one line (handle_errors)."""
+    with handle_errors():
+        if out is None:
+            fail("-o/--out is required")
+        check_output(out)
+        from slamcli.io import write_dataset
+
+        ds = load()
+        write_dataset(out, ds)
+        if not quiet:
+            stdout_console().print(f"{summary(ds)} → {out}", highlight=False, markup=False, soft_wrap=True)
+
+
 @import_app.command("victoria-park")
 def import_victoria_park_command(
     directory: Annotated[
@@ -269,6 +290,10 @@ def import_victoria_park_command(
     start: Annotated[float, typer.Option(help="Window start, s after the first input row.")] = 0.0,
     duration: Annotated[float | None, typer.Option(help="Window length, s (default: to the end).")] = None,
     max_range: Annotated[float, typer.Option(help="Sensor max range to store, m.")] = float("inf"),
+    range_std: _RangeStd = None,
+    bearing_std: _BearingStd = None,
+    v_std: _VStd = None,
+    steer_std: _SteerStd = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -276,29 +301,30 @@ def import_victoria_park_command(
 ) -> None:
     """Import Sydney Victoria Park: 40 Hz speed/steering as Ackermann controls, laser at (3.78, 0.50) m, tree
     detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
-    with handle_errors():
-        if out is None:
-            fail("-o/--out is required")
-        from slamcli.datasets.victoria_park import import_victoria_park
-        from slamcli.io import write_dataset
 
-        ds = import_victoria_park(directory, start=start, duration=duration, max_range=max_range)
-        write_dataset(out, ds)
-        if quiet:
-            return
+    def load():
+        from slamcli.datasets.victoria_park import default_noise, import_victoria_park
+
+        noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
+        return import_victoria_park(directory, start=start, duration=duration, max_range=max_range, noise=noise)
+
+    def summary(ds):
         inp, md = ds.inputs, ds.metadata
-        stdout_console().print(
-            f"Victoria Park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
-            f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
-            f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s) → {out}",
-            highlight=False, markup=False, soft_wrap=True,
-        )
+        return (f"Victoria Park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+                f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
+                f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s)")
+
+    _import_car_recording(out, quiet, load, summary)
 
 
 @import_app.command("carpark")
 def import_carpark_command(
     directory: Annotated[Path, typer.Argument(help="ACFR car-park folder (data_set.mat, beac_juan3.mat).")],
     max_range: Annotated[float, typer.Option(help="Drop beacon returns beyond this range, m.")] = 81.0,
+    range_std: _RangeStd = None,
+    bearing_std: _BearingStd = None,
+    v_std: _VStd = None,
+    steer_std: _SteerStd = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
@@ -306,20 +332,18 @@ def import_carpark_command(
 ) -> None:
     """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
     ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
-    with handle_errors():
-        if out is None:
-            fail("-o/--out is required")
-        from slamcli.datasets.carpark import import_carpark
-        from slamcli.io import write_dataset
 
-        ds = import_carpark(directory, max_range=max_range)
-        write_dataset(out, ds)
-        if quiet:
-            return
+    def load():
+        from slamcli.datasets.carpark import default_noise, import_carpark
+
+        noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
+        return import_carpark(directory, max_range=max_range, noise=noise)
+
+    def summary(ds):
         inp, md = ds.inputs, ds.metadata
-        stdout_console().print(
-            f"ACFR car park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
-            f"{md['n_beacon_observations']} beacon observations (intensity >= {md['beacon_intensity_threshold']}), "
-            f"{md['n_surveyed_beacons']} surveyed beacons, {md['n_gps_fixes']} GPS fixes → {out}",
-            highlight=False, markup=False, soft_wrap=True,
-        )
+        return (f"ACFR car park: {inp.n_poses - 1} steps of {inp.dt:g} s, {md['n_scans']} scans, "
+                f"{md['n_beacon_observations']} beacon observations (intensity >= "
+                f"{md['beacon_intensity_threshold']}), {md['n_surveyed_beacons']} surveyed beacons, "
+                f"{md['n_gps_fixes']} GPS fixes")
+
+    _import_car_recording(out, quiet, load, summary)

@@ -848,6 +848,7 @@ SECTIONS: list[tuple[str, str]] = [
     ("nees", "nees_section"),
     ("paper001", "slamcli.sweep.paper001:run_section"),
     ("paper004", "slamcli.sweep.paper004:run_section"),
+    ("real", "slamcli.sweep.paper_real:run_section"),
     ("real-multi", "slamcli.sweep.paper_real_multi:run_section"),
     ("paper001-map4", "slamcli.sweep.paper001:run_section_map4"),
 ]

@@ -35,7 +35,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from slamcli.models import observation, potentials, se2
+from slamcli.models import motion, observation, potentials, se2
+from slamcli.models.ackermann import ackermann_jacobians, ackermann_step, centre_twist, integrate_ackermann
 from slamcli.models.angles import wrap_angle, wrap_angle_fast
 from slamcli.types import SlamInputs
 
@@ -110,7 +111,10 @@ def information_weights(inputs: SlamInputs) -> Weights:
 
     * R: the actuation noise [σ_v, σ_ω] of one step of length dt moves the pose by ``dt·σ_v`` along the
       heading and turns it by ``dt·σ_ω``; R = diag((dt σ_v)⁻², (dt σ_v)⁻², (dt σ_ω)⁻²) (isotropic in x, y
-      because the residual is in the world frame).
+      because the residual is in the world frame). Car model (controls ``[v_e, α]``, σ = ``[σ_v, σ_α]``): the
+      step covariance is ``G_u diag(σ²) G_uᵀ`` (:func:`slamcli.models.ackermann.ackermann_jacobians`), which
+      depends on speed and steering; R uses the median over the moving steps of its mean x/y variance and
+      of its heading variance.
     * S = diag(σ_odo)⁻² (body-frame odometry increments, eq. 16 — the same frame as the noise model).
     * Q: h⁻¹(x, z) − m has covariance σ_r² along the beam and (r σ_b)² across it; the isotropic
       Q = q·I with ``q = 2 / (σ_r² + r̃² σ_b²)`` (mean of the two variances, r̃ = median measured range).
@@ -127,6 +131,16 @@ def information_weights(inputs: SlamInputs) -> Weights:
         if not np.all(v > 0):
             raise ValueError(f"weights=information: {name} = {v.tolist()} must be positive")
     R = (1.0 / (dt * ms[0]) ** 2, 1.0 / (dt * ms[0]) ** 2, 1.0 / (dt * ms[1]) ** 2)
+    if getattr(inputs, "motion_model", "ddmr") == "ackermann":
+        u = np.asarray(inputs.controls, float).reshape(-1, 2)
+        _, G_u = ackermann_jacobians(np.zeros(3), u, dt, inputs.vehicle)  # (T, 3, 2), heading 0: body frame
+        cov = np.einsum("tij,j,tkj->tik", G_u, ms**2, G_u)
+        moving = np.abs(u[:, 0]) > 0
+        if not moving.any():
+            raise ValueError("weights=information: the car never moves (all speeds are 0)")
+        var_xy = float(np.median(0.5 * (cov[moving, 0, 0] + cov[moving, 1, 1])))
+        var_th = float(np.median(cov[moving, 2, 2]))
+        R = (1.0 / var_xy, 1.0 / var_xy, 1.0 / var_th)
     S = tuple(float(a) for a in 1.0 / os_**2)
     r = np.asarray(inputs.observations.range_m, float)
     r_med = float(np.median(r)) if r.size else 0.0
@@ -144,7 +158,8 @@ class Problem:
     T : int                      number of motion steps (poses are 0..T).
     dt : float
     x0 : ndarray (3,)            known start pose (fixed).
-    controls : ndarray (T, 2)    u_{t-1} drives x_{t-1} → x_t.
+    controls : ndarray (T, 2)    u_{t-1} drives x_{t-1} → x_t, as the body twist ``[v, ω]`` of the tracked point
+                                 (DDMR: the dataset's controls; car model: see ``lateral``).
     odo_inc : ndarray (T, 3)     τ(θ̃_{t-1})(x̃_t − x̃_{t-1}) (eq. 16), row t-1 for step t.
     step : ndarray (N,) int64    pose index of each observation.
     z : ndarray (N, 2)           [range, bearing].
@@ -152,6 +167,14 @@ class Problem:
     offsets : ndarray (T+2,)     CSR rows of pose t.
     gps_step : ndarray (G,) int64  pose index of each GPS fix (empty: no GPS potential).
     gps_xy : ndarray (G, 2)      GPS positions y_t, m.
+    lateral : ndarray (T,) | None  lateral body speed v_y of step t-1 (None = 0, DDMR). The car model
+                                 (``motion_model="ackermann"``, :mod:`slamcli.models.ackermann`) moves the
+                                 tracked point (a, b) by ``dt·R(φ)[v_c − ω b, ω a]`` and turns it by ``dt·ω``, so
+                                 with ``controls = [v_c − ω b, ω]`` and ``lateral = ω a`` every motion term is
+                                 ``g(x, u) = p + dt·R(φ)[v, v_y], φ + dt·ω`` — DDMR is the case v_y = 0.
+    car_controls : ndarray (T, 2) | None  the dataset's ``[v_e, α]`` and ``vehicle`` its geometry (car model
+                                 only): the reference energy :func:`energy_terms`, the joint Jacobian and the
+                                 kinematic init evaluate the shared model :func:`ackermann_step` itself.
     """
 
     T: int
@@ -165,6 +188,9 @@ class Problem:
     offsets: np.ndarray
     gps_step: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
     gps_xy: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
+    lateral: np.ndarray | None = None
+    car_controls: np.ndarray | None = None
+    vehicle: object = None
 
     @staticmethod
     def from_inputs(inputs: SlamInputs, range_offset: float = 0.0, use_gps: bool = True) -> Problem:
@@ -176,11 +202,20 @@ class Problem:
             z = z + np.array([float(range_offset), 0.0])
         v = np.stack([z[:, 0] * np.cos(z[:, 1]), z[:, 0] * np.sin(z[:, 1])], -1)
         odo = np.asarray(inputs.odometry_xyt, float)
+        controls = np.asarray(inputs.controls, float)
+        car = {}
+        if getattr(inputs, "motion_model", "ddmr") == "ackermann":
+            veh = inputs.vehicle
+            v_c, w = centre_twist(controls, veh)
+            car = dict(lateral=w * veh.ref_x_m, car_controls=controls, vehicle=veh)
+            controls = np.column_stack([v_c - w * veh.ref_y_m, w])
+        elif getattr(inputs, "motion_model", "ddmr") != "ddmr":
+            raise ValueError(f"motion model {inputs.motion_model!r} is not implemented")
         return Problem(
             T=int(inputs.n_poses - 1),
             dt=float(inputs.dt),
             x0=np.asarray(inputs.x0, float).copy(),
-            controls=np.asarray(inputs.controls, float),
+            controls=controls,
             odo_inc=se2.between(odo[:-1], odo[1:]),
             step=np.asarray(obs.step, np.int64),
             z=z,
@@ -188,7 +223,26 @@ class Problem:
             offsets=np.asarray(obs.offsets, np.int64),
             gps_step=np.asarray(inputs.gps_step if use_gps else np.zeros(0), np.int64),
             gps_xy=np.asarray(inputs.gps_xy if use_gps else np.zeros((0, 2)), float).reshape(-1, 2),
+            **car,
         )
+
+    @property
+    def lat(self) -> np.ndarray:
+        """``lateral`` with None read as zeros ``(T,)``."""
+        return np.zeros(self.T) if self.lateral is None else self.lateral
+
+    def motion_prediction(self, poses_prev):
+        """``g(x_{t-1}, u_{t-1}) (T, 3)`` by the dataset's own model (reference path: ``ddmr_step`` or
+        ``ackermann_step``); ``poses_prev (T, 3)``."""
+        if self.car_controls is not None:
+            return ackermann_step(poses_prev, self.car_controls, self.dt, self.vehicle)
+        return motion.ddmr_step(poses_prev, self.controls, self.dt)
+
+    def kinematic_poses(self) -> np.ndarray:
+        """Poses ``(T+1, 3)`` from x_0 and the controls only (the paper's Fig. 6 initialisation)."""
+        if self.car_controls is not None:
+            return integrate_ackermann(self.x0, self.car_controls, self.dt, self.vehicle)
+        return motion.integrate(self.x0, self.controls, self.dt)
 
     @property
     def n_obs(self) -> int:
@@ -214,7 +268,7 @@ def energy_terms(prob: Problem, W: Weights, poses_xyt, landmarks_xy, labels) -> 
     poses = np.asarray(poses_xyt, float)
     out = {"motion": 0.0, "odometry": 0.0, "observation": 0.0, "gps": gps_energy(prob, W, poses)}
     if W.use_motion and prob.T > 0:
-        r = potentials.motion_residual(poses[:-1], prob.controls, poses[1:], prob.dt)
+        r = wrap_angle_last(prob.motion_prediction(poses[:-1]) - poses[1:])
         out["motion"] = potentials.weighted_sq(r, np.diag(W.R))
     if W.use_odometry and prob.T > 0:
         r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)
@@ -272,9 +326,9 @@ def chain_energy(prob: Problem, W: Weights, poses) -> float:
     th = p0[:, 2]
     c, s = np.cos(th), np.sin(th)
     if W.use_motion:
-        u = prob.controls
-        a0 = p0[:, 0] + prob.dt * u[:, 0] * c - p1[:, 0]
-        a1 = p0[:, 1] + prob.dt * u[:, 0] * s - p1[:, 1]
+        u, lat = prob.controls, prob.lat
+        a0 = p0[:, 0] + prob.dt * u[:, 0] * c - prob.dt * lat * s - p1[:, 0]
+        a1 = p0[:, 1] + prob.dt * u[:, 0] * s + prob.dt * lat * c - p1[:, 1]
         a2 = _wrap(th + prob.dt * u[:, 1] - p1[:, 2])
         out += W.R[0] * (a0 @ a0) + W.R[1] * (a1 @ a1) + W.R[2] * (a2 @ a2)
     if W.use_odometry:
@@ -341,12 +395,12 @@ def step_stats(prob: Problem, labels, landmarks_xy, W: Weights | None = None) ->
 def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     """Value of the terms of H that involve pose x_t = (x, y, th).
 
-    ``ctx = (px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2)``:
+    ``ctx = (px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2, l1)``:
     previous pose, its motion prediction g(x_{t-1}, u_{t-1}), odometry increment of step t, ``hn`` = 1 if a next
-    pose exists (0 drops every t+1 term, eq. 11), the next pose, the control u_t and the odometry increment of
-    step t+1. ``st`` = the 14 sufficient statistics of :func:`step_stats` at t. ``Wf = Weights.flat``.
+    pose exists (0 drops every t+1 term, eq. 11), the next pose, the control u_t (twist ``[v1, w1]`` and lateral
+    speed ``l1``, see :class:`Problem`) and the odometry increment of step t+1. ``st`` = the 14 sufficient statistics of :func:`step_stats` at t. ``Wf = Weights.flat``.
     """
-    px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2 = ctx
+    px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2, l1 = ctx
     r0, r1, r2, s0, s1, s2, q0, q1 = Wf
     n, V1x, V1y, M1x, M1y, Sxx, Sxy, Syy, Axx, Axy, Ayx, Ayy, Cmx, Cmy = st
     # motion t (eq. 3): g(x_{t-1}, u_{t-1}) − x_t
@@ -363,8 +417,8 @@ def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     cost = cost + s0 * b0 * b0 + s1 * b1 * b1 + s2 * b2 * b2
     c, s = cos(th), sin(th)
     # motion t+1: g(x_t, u_t) − x_{t+1}
-    f0 = x + dt * v1 * c - nx
-    f1 = y + dt * v1 * s - ny
+    f0 = x + dt * v1 * c - dt * l1 * s - nx
+    f1 = y + dt * v1 * s + dt * l1 * c - ny
     f2 = _wrap(th + dt * w1 - nth)
     # odometry t+1: τ(θ_t)(x_{t+1} − x_t) − d̃_{t+1}
     ex, ey = nx - x, ny - y
@@ -392,7 +446,7 @@ def cond_step(x, y, th, ctx, st, Wf, dt, cos, sin):
     Returns ``(δx, δy, δθ)`` (floats or arrays). Every Jacobian below is the analytic derivative of the
     corresponding residual in :func:`cond_cost` (tested against finite differences).
     """
-    px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2 = ctx
+    px, py, pth, gx, gy, gth, d0, d1, d2, hn, nx, ny, nth, v1, w1, e0, e1, e2, l1 = ctx
     r0, r1, r2, s0, s1, s2, q0, q1 = Wf
     n, V1x, V1y, M1x, M1y, Sxx, Sxy, Syy, Axx, Axy, Ayx, Ayy, _Cmx, _Cmy = st
     # motion t: J = −I
@@ -422,12 +476,12 @@ def cond_step(x, y, th, ctx, st, Wf, dt, cos, sin):
     g1 = g1 + sp * s0 * b0 + cp * s1 * b1
     g2 = g2 + s2 * b2
     c, s = cos(th), sin(th)
-    # motion t+1: J = [[1, 0, −dt v s], [0, 1, dt v c], [0, 0, 1]]
-    f0 = x + dt * v1 * c - nx
-    f1 = y + dt * v1 * s - ny
+    # motion t+1: J = [[1, 0, −dt (v s + l c)], [0, 1, dt (v c − l s)], [0, 0, 1]]
+    f0 = x + dt * v1 * c - dt * l1 * s - nx
+    f1 = y + dt * v1 * s + dt * l1 * c - ny
     f2 = _wrap(th + dt * w1 - nth)
-    j02 = -dt * v1 * s
-    j12 = dt * v1 * c
+    j02 = -dt * v1 * s - dt * l1 * c
+    j12 = dt * v1 * c - dt * l1 * s
     H00 = H00 + hn * r0
     H11 = H11 + hn * r1
     H02 = H02 + hn * r0 * j02
@@ -559,7 +613,8 @@ def pose_contexts(prob: Problem, poses, idx):
     T = prob.T
     idx = np.asarray(idx, np.int64)
     prev = poses[idx - 1]
-    g = _motion(prev, prob.controls[idx - 1], prob.dt)
+    lat = prob.lat
+    g = _motion(prev, prob.controls[idx - 1], prob.dt, lat[idx - 1])
     d = prob.odo_inc[idx - 1]
     hn = (idx < T).astype(float)
     jn = np.minimum(idx + 1, T)
@@ -585,15 +640,17 @@ def pose_contexts(prob: Problem, poses, idx):
         en[:, 0],
         en[:, 1],
         en[:, 2],
+        lat[np.minimum(idx, T - 1)],
     )
 
 
-def _motion(x, u, dt):
-    """g(x, u) without the heading wrap (residuals wrap themselves)."""
+def _motion(x, u, dt, lat):
+    """g(x, u) = p + dt·R(θ)[v, lat], θ + dt·ω without the heading wrap (residuals wrap themselves)."""
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
     return np.stack(
         [
-            x[:, 0] + dt * u[:, 0] * np.cos(x[:, 2]),
-            x[:, 1] + dt * u[:, 0] * np.sin(x[:, 2]),
+            x[:, 0] + dt * u[:, 0] * c - dt * lat * s,
+            x[:, 1] + dt * u[:, 0] * s + dt * lat * c,
             x[:, 2] + dt * u[:, 1],
         ],
         -1,
@@ -612,21 +669,23 @@ def sweep_poses_sequential(prob: Problem, W: Weights, poses, stats, iters: int =
     Wf = W.flat
     P = poses.tolist()
     U = prob.controls.tolist()
+    LAT = prob.lat.tolist()
     D = prob.odo_inc.tolist()
     ST = stats.T.tolist()
     cos, sin = math.cos, math.sin
     for t in range(1, T + 1):
         px, py, pth = P[t - 1]
         v0, w0 = U[t - 1]
-        gx, gy, gth = px + dt * v0 * cos(pth), py + dt * v0 * sin(pth), pth + dt * w0
+        l0, cp, sp = LAT[t - 1], cos(pth), sin(pth)
+        gx, gy, gth = px + dt * v0 * cp - dt * l0 * sp, py + dt * v0 * sp + dt * l0 * cp, pth + dt * w0
         d = D[t - 1]
         if t < T:
             nx, ny, nth = P[t + 1]
             v1, w1 = U[t]
             e = D[t]
-            ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 1.0, nx, ny, nth, v1, w1, e[0], e[1], e[2])
+            ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 1.0, nx, ny, nth, v1, w1, e[0], e[1], e[2], LAT[t])
         else:
-            ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         x, y, th = P[t]
         P[t] = list(cond_minimise_scalar(x, y, th, ctx, ST[t], Wf, dt, iters, tol))
     poses[:] = P
@@ -681,8 +740,12 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
     t = np.arange(1, T + 1)
     pose_cols = lambda tt: np.where(tt[:, None] >= 1, 3 * (tt[:, None] - 1) + np.arange(3)[None, :], -1)
     if W.use_motion and T > 0:
-        r = potentials.motion_residual(poses[:-1], prob.controls, poses[1:], prob.dt)
-        Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
+        r = wrap_angle_last(prob.motion_prediction(poses[:-1]) - poses[1:])
+        if prob.car_controls is not None:  # ∂g/∂x of the shared car model, ∂r/∂x_t = −I
+            Ja = ackermann_jacobians(poses[:-1], prob.car_controls, prob.dt, prob.vehicle)[0]
+            Jb = np.broadcast_to(-np.eye(3), Ja.shape).copy()
+        else:
+            Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
         add_block(r, np.sqrt(W.R), [(Ja, pose_cols(t - 1)), (Jb, pose_cols(t))])
     if W.use_odometry and T > 0:
         r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)

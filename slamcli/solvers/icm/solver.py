@@ -67,7 +67,6 @@ from typing import Literal
 import numpy as np
 
 from slamcli.models.angles import wrap_angle
-from slamcli.models.motion import integrate
 from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
@@ -232,7 +231,7 @@ def online_init(
     T, N = prob.T, prob.n_obs
     poses = np.empty((T + 1, 3))
     poses[0] = prob.x0
-    kin = integrate(prob.x0, prob.controls, prob.dt) if kinematic else None
+    kin = prob.kinematic_poses() if kinematic else None
     labels = np.full(N, -1, np.int64)
     msum = np.zeros((max(N, 1), 2))
     mcnt = np.zeros(max(N, 1))
@@ -242,6 +241,7 @@ def online_init(
     off = prob.offsets
     step_s = np.empty(T + 1)
     U = prob.controls.tolist()
+    LAT = prob.lat.tolist()
     D = prob.odo_inc.tolist()
     gps_st = en.gps_step_stats(prob, W)
     has_gps = np.zeros(T + 1, bool)
@@ -256,10 +256,11 @@ def online_init(
         else:
             px, py, pth = poses[t - 1]
             v0, w0 = U[t - 1]
+            l0, cp, sp = LAT[t - 1], math.cos(pth), math.sin(pth)  # g(x, u) of the problem's model (Problem)
             xh = np.array(
                 [
-                    px + prob.dt * v0 * math.cos(pth),
-                    py + prob.dt * v0 * math.sin(pth),
+                    px + prob.dt * v0 * cp - prob.dt * l0 * sp,
+                    py + prob.dt * v0 * sp + prob.dt * l0 * cp,
                     wrap_angle(pth + prob.dt * w0),
                 ]
             )
@@ -295,6 +296,7 @@ def online_init(
                 d[0],
                 d[1],
                 d[2],
+                0.0,
                 0.0,
                 0.0,
                 0.0,
@@ -368,6 +370,9 @@ class IcmSlam(BaseSolver):
 
     name = "icm"
     Params = IcmParams
+    #: ackermann: every motion term is the car model of the tracked point (energy.Problem); the sensor offset is
+    #: handled by api.solve's sensor-frame change, so the observation potentials stay offset-free
+    motion_models = ("ddmr", "ackermann")
     #: multi-robot datasets: one more potential per inter-robot reading (slamcli.solvers.icm.team)
     multi_robot = True
 
