@@ -282,10 +282,17 @@ def test_process_pool_matches_serial_and_survives_a_dying_worker(tmp_path):
     assert summary.counts.failed == 1 and "worker failed" in summary.failures[0]["error"]
 
 
+RUN_S = 1.2
+
+
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["kill-9", "ctrl-c"])
 def test_interrupt_leaves_no_half_run_and_resume_finishes(tmp_path, sig):
     env = dict(os.environ, PYTHONPATH=str(HERE) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    code = f"import test_sweep_helpers as h; h.main({str(tmp_path)!r}, 0.4)"
+    # runs of 1.2 s: the poll below must see two finished runs and signal before the next two finish, which
+    # on a loaded 2-core machine took > 0.4 s (all six finished before the Ctrl-C landed)
+    # the default Ctrl-C handler, whatever disposition the test process's own parent left for SIGINT
+    code = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            f"import test_sweep_helpers as h; h.main({str(tmp_path)!r}, {RUN_S})")
     proc = subprocess.Popen([sys.executable, "-c", code], env=env, start_new_session=True)
     exp_dir = tmp_path / "killme"
     deadline = time.time() + 30
@@ -302,7 +309,7 @@ def test_interrupt_leaves_no_half_run_and_resume_finishes(tmp_path, sig):
         assert run_status(exp_dir, d.name) == "completed"
     if sig == signal.SIGINT:  # a Ctrl-C still writes the tables of what finished
         assert "missing" in set(pd.read_csv(exp_dir / "manifest.csv")["status"])
-    cfg = fake_experiment("killme", replicates=6, solvers=[{"method": "a", "params": {"gain": 1.0, "sleep": 0.4}}])
+    cfg = fake_experiment("killme", replicates=6, solvers=[{"method": "a", "params": {"gain": 1.0, "sleep": RUN_S}}])
     exp = _expand(cfg)
     summary = run_sweep(exp, tmp_path, pipeline=FakePipeline(), workers=1)
     assert summary.counts.skipped == len(visible) and summary.counts.done == 6 - len(visible)

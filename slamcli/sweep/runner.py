@@ -494,6 +494,12 @@ class LocalPool:
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
         self.ex.shutdown(wait=wait, cancel_futures=cancel_futures)
 
+    def terminate(self) -> None:
+        """SIGTERM every live worker of the current pool (its runs are abandoned, not recorded)."""
+        for proc in (getattr(self.ex, "_processes", None) or {}).values():
+            if proc.is_alive():
+                proc.terminate()
+
     def rebuild(self) -> dict[int, int]:
         """Shut the broken pool down, start a new one; returns ``{pid: exit code}`` of workers that died."""
         self.ex.shutdown(wait=True, cancel_futures=True)  # joins the manager thread: exit codes are final
@@ -548,6 +554,12 @@ def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
         ex = LocalPool(workers)
         try:
             yield ex
+        except BaseException:
+            # Ctrl-C (or an error) in the coordinator: the runs already handed to a worker's pipe cannot be
+            # cancelled and would run to the end while shutdown waits for them; stop the workers instead
+            # (their unfinished runs leave only hidden temporary directories, cleared by the next resume)
+            ex.terminate()
+            raise
         finally:
             ex.shutdown(wait=True, cancel_futures=True)
         return
