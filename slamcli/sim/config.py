@@ -403,7 +403,9 @@ class WallsConfig:
     block_rows, block_cols : int
     corridor : float            corridor width, m.
     features : "corners" | "corners+mid" | "posts"
-        corners of every wall rectangle; plus the mid-point of every wall segment; or point landmarks
+        corners of every wall rectangle; plus the mid-point of every wall segment and, on the outer walls,
+        the point opposite the mid-point of every corridor stretch between crossings
+        (``walls.corridor_wall_midpoints``); or point landmarks
         (posts a quarter corridor width off the centre lines, ``post_spacing`` apart; Map 3 variant).
     post_spacing : float        m.
     resolution : float          cell side of the true occupancy grid, m.

@@ -55,6 +55,27 @@ def corner_features(segments_xyxy: np.ndarray, with_midpoints: bool) -> np.ndarr
     return np.vstack(pts)
 
 
+def corridor_wall_midpoints(width: float, height: float, rows: int, cols: int, corridor: float) -> np.ndarray:
+    """Points ``(2·(rows + cols), 2)`` on the outer walls opposite the mid-point of every corridor stretch
+    between two adjacent crossings ("mid-points of corridors", paper 001 §III).
+
+    A block wall's mid-point faces the same spot, but the outer walls are single segments as long as the
+    world (1 km on Map 4), whose one mid-point leaves stretches of the boundary corridors with a single
+    feature within 40 m (issue 15: 443 of Map 4's 14 400 steps, where one range-bearing pair cannot fix the
+    heading that σ_ω Δt = 0.18 rad of wheel noise loses every step). On Map 1 these points are exactly the
+    outer walls' mid-points.
+
+        x = 0 and x = width:   y = (s_r + s_{r+1}) / 2,   s_r = w/2 + r (b_h + w)   (street centre lines)
+        y = 0 and y = height:  x = (a_c + a_{c+1}) / 2,   a_c = w/2 + c (b_w + w)   (avenue centre lines)
+    """
+    bw, bh = block_size(width, height, rows, cols, corridor)
+    w = corridor
+    my = [w / 2 + r * (bh + w) + (bh + w) / 2 for r in range(rows)]
+    mx = [w / 2 + c * (bw + w) + (bw + w) / 2 for c in range(cols)]
+    pts = [(0.0, y) for y in my] + [(width, y) for y in my] + [(x, 0.0) for x in mx] + [(x, height) for x in mx]
+    return np.asarray(pts, float).reshape(-1, 2)
+
+
 def post_features(width: float, height: float, rows: int, cols: int, corridor: float, spacing: float) -> np.ndarray:
     """Point landmarks (Map 3 "third example"): posts on both sides of every corridor centre line, a quarter
     corridor width off the line, about ``spacing`` m apart along it."""

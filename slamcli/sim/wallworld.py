@@ -38,6 +38,10 @@ def build_world(cfg: ScenarioConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray
         feats = walls.post_features(w.width, w.height, w.block_rows, w.block_cols, w.corridor, w.post_spacing)
     else:
         feats = walls.corner_features(segs, with_midpoints=w.features == "corners+mid")
+        if w.features == "corners+mid":  # + the outer walls' points opposite every corridor stretch's mid-point
+            extra = walls.corridor_wall_midpoints(w.width, w.height, w.block_rows, w.block_cols, w.corridor)
+            gap = np.hypot(extra[:, None, 0] - feats[None, :, 0], extra[:, None, 1] - feats[None, :, 1]).min(axis=1)
+            feats = np.vstack([feats, extra[gap > 1e-6]])
     route = walls.ladder_route(w.width, w.height, w.block_rows, w.block_cols, w.corridor)
     return segs, feats, route
 

@@ -310,7 +310,15 @@ class EkfSlam(BaseSolver):
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
             used: set[tuple[int, int]] = set()
-            for z, g in _detections(z_all, sensor, rid, lo, hi, st.x[:3], p):
+            # Rows of landmarks not yet in the state (known: a new id; ml: no plausible state landmark) wait until
+            # the step's re-observations are fused: they are appended to ``dets`` and visited after the first
+            # pass, so h⁻¹ is linearised at the updated pose, not the predicted one (with σ_ω Δt ≈ 0.18 rad of
+            # heading noise per step, a landmark initialised 40 m away from the predicted pose is metres off
+            # the tangent line its linearised P_mx assumes; measured on hybrid-map4, issue 15). In the second
+            # pass a second row of a new id / ml match updates the landmark the first one created.
+            dets = _detections(z_all, sensor, rid, lo, hi, st.x[:3], p)
+            n_first = len(dets)
+            for k_det, (z, g) in enumerate(dets):
                 # z (2,): the measurement of one detection; g: its observation rows (several when grouped)
                 i = int(g[0])
                 if p.association == "known":
@@ -319,6 +327,9 @@ class EkfSlam(BaseSolver):
                         n_disc += len(g)
                         continue
                     j = id_to_lm.get(key)
+                    if j is None and k_det < n_first:
+                        dets.append((z, g))  # deferred to the second pass
+                        continue
                     if j is None:
                         j = _add_landmark(st, z, R)
                         id_to_lm[key] = j
@@ -328,6 +339,9 @@ class EkfSlam(BaseSolver):
                 else:
                     j, d2 = _ml_best(st, z, R, exclude=[lm for (s, lm) in used if s == sensor[i]]
                                      if p.exclusive_per_step else [])
+                    if (j < 0 or d2 > new_thr) and k_det < n_first:
+                        dets.append((z, g))  # deferred to the second pass
+                        continue
                     if j < 0 or d2 > new_thr:
                         # no plausible state landmark: start a new one (or a provisional candidate)
                         if p.provisional:
