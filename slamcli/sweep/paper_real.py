@@ -17,7 +17,7 @@ first :data:`VP_QUICK_S` s, 150 car-park scans, 45 s of MRCLAM robot 1) and a ch
 slow solvers.
 
 Data: the folder given by ``SLAMCLI_DATASETS``, else ``../shared/datasets`` next to the repository (or next
-to its parent folder). Every outcome sentence is computed from the numbers of the run.
+to its parent folder), else ``/work/shared/datasets``. Every outcome sentence is computed from the numbers of the run.
 """
 
 from __future__ import annotations
@@ -68,11 +68,15 @@ def repo_root() -> Path:
 
 
 def datasets_dir() -> Path | None:
-    """``$SLAMCLI_DATASETS``, else the first existing ``shared/datasets`` beside the repository or its parent."""
+    """``$SLAMCLI_DATASETS``, else the first existing ``shared/datasets`` beside the repository or its parent,
+    else ``/work/shared/datasets``; None when none exists."""
     env = os.environ.get("SLAMCLI_DATASETS")
     cands = [Path(env)] if env else []
     root = repo_root()
-    cands += [root.parent / "shared" / "datasets", root.parent.parent / "shared" / "datasets"]
+    # beside the repository (or its parent), else the workplace's shared folder, where a clone elsewhere
+    # (e.g. CI's clean clone in a temporary directory) finds it
+    cands += [root.parent / "shared" / "datasets", root.parent.parent / "shared" / "datasets",
+              Path("/work/shared/datasets")]
     return next((c for c in cands if c.is_dir()), None)
 
 

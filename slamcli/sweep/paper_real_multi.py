@@ -30,11 +30,14 @@ SAME_FRACTION = 0.02
 
 
 def dataset_dir() -> Path:
+    """``$SLAMCLI_MRCLAM7``, else ``mrclam_dataset7`` in the shared datasets folder the real-data section uses."""
     env = os.environ.get("SLAMCLI_MRCLAM7")
     if env:
         return Path(env)
-    here = Path(__file__).resolve().parents[2] / ".." / ".." / "shared" / "datasets" / "mrclam_dataset7"
-    return here if here.is_dir() else Path("/work/shared/datasets/mrclam_dataset7")
+    from slamcli.sweep.paper_real import datasets_dir
+
+    base = datasets_dir()
+    return (base if base is not None else Path("/work/shared/datasets")) / "mrclam_dataset7"
 
 
 def _ate(est: np.ndarray, true: np.ndarray) -> float:
