@@ -212,33 +212,30 @@ class CuikSlam(BaseSolver):
         def lm_vars(j: int) -> tuple[int, int]:
             return (base + 2 * j, base + 2 * j + 1)
 
+        def consistent(hyps: list[Hypothesis], add_edges) -> list[Hypothesis]:
+            """The hypotheses whose boxes stay non-empty after ``add_edges(h)`` (edge indices) is propagated."""
+            return [h for h in hyps if propagate(h.box, h.edges, h.adj, add_edges(h), narrow_theta=p.narrow_theta,
+                                                 tol=p.tol, counter=counter)]
+
         for t in range(n_poses):
             if t > 0:
                 edge = OdometryTurnMove(pose_vars(t - 1), pose_vars(t), float(legs[t - 1, 0]),
                                         float(legs[t - 1, 1]), h_d, h_a, leg=leg_vars(t - 1))
-                alive = []
-                for h in hyps:
-                    h.box[leg_vars(t - 1)[0]] = Interval(edge.D)
-                    h.box[leg_vars(t - 1)[1]] = Interval(edge.A)
-                    k = h.add_edge(edge)
-                    if propagate(h.box, h.edges, h.adj, [k], narrow_theta=p.narrow_theta, tol=p.tol,
-                                 counter=counter):
-                        alive.append(h)
-                hyps = alive
+
+                def add_leg(h: Hypothesis, edge=edge, leg=leg_vars(t - 1)) -> list[int]:
+                    h.box[leg[0]] = Interval(edge.D)
+                    h.box[leg[1]] = Interval(edge.A)
+                    return [h.add_edge(edge)]
+
+                hyps = consistent(hyps, add_leg)
                 if not hyps:
                     refuted = (t, -1)
                     break
             if neg and per_pose[t] == 0:
                 # a silent pose: no landmark of any type within [r_min, r_max] of pose t
                 silent.append(t)
-                alive = []
-                for h in hyps:
-                    start = [h.add_edge(OutsideBand(pose_vars(t), lm_vars(m), r_min, r_max))
-                             for m in range(h.n_landmarks)]
-                    if propagate(h.box, h.edges, h.adj, start, narrow_theta=p.narrow_theta, tol=p.tol,
-                                 counter=counter):
-                        alive.append(h)
-                hyps = alive
+                hyps = consistent(hyps, lambda h, t=t: [h.add_edge(OutsideBand(pose_vars(t), lm_vars(m), r_min, r_max))
+                                                        for m in range(h.n_landmarks)])
                 if not hyps:
                     refuted = (t, -1)
                     break
