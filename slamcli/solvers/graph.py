@@ -1019,6 +1019,20 @@ def robust_initial_poses(
     return gp.unpack(res.x)[0].copy(), res
 
 
+def _nearest_neighbour(poses, obs: Observations, inputs: SlamInputs, p: GraphParams) -> np.ndarray:
+    """``graph``'s nearest-neighbour association of ``obs`` from ``poses`` (T+1, 3), with its parameters
+    (gate, extra σ, drift-aware gating, segment distance); labels (N,), -1 = unassociated."""
+    assoc, _ = frontend.associate_nearest_neighbour(
+        poses,
+        obs,
+        inputs.noise.obs_cov,
+        gate_prob=p.gate_prob,
+        extra_std=p.nn_extra_std,
+        odometry_std=inputs.noise.odometry_std if p.nn_drift else None,
+        segment_dist=p.nn_segment_dist,
+    )
+    return assoc
+
 def incremental_initial_poses(inputs: SlamInputs, poses0: np.ndarray, params: GraphParams) -> np.ndarray:
     """Initial poses ``(T+1, 3)`` for unknown correspondences, built incrementally.
 
@@ -1055,15 +1069,7 @@ def incremental_initial_poses(inputs: SlamInputs, poses0: np.ndarray, params: Gr
         if n == 0:
             continue
         sub = Observations.from_rows(obs.step[:n], obs.z[:n], inputs.n_poses, sensor=obs.sensor[:n])
-        a_sub, _ = frontend.associate_nearest_neighbour(
-            poses,
-            sub,
-            inputs.noise.obs_cov,
-            gate_prob=params.gate_prob,
-            extra_std=params.nn_extra_std,
-            odometry_std=inputs.noise.odometry_std if params.nn_drift else None,
-            segment_dist=params.nn_segment_dist,
-        )
+        a_sub = _nearest_neighbour(poses, sub, inputs, params)
         assoc = np.full(len(obs), -1, np.int64)
         assoc[:n] = a_sub
         assoc, old_of_new = frontend.compact_labels(assoc, 1)
@@ -1153,15 +1159,7 @@ class GraphSlam(BaseSolver):
                 raise SolverError("graph: association=reported but the observations carry no reported_id")
             assoc = frontend.associate_reported(obs)
         else:
-            assoc, _ = frontend.associate_nearest_neighbour(
-                poses,
-                obs,
-                inputs.noise.obs_cov,
-                gate_prob=p.gate_prob,
-                extra_std=p.nn_extra_std,
-                odometry_std=inputs.noise.odometry_std if p.nn_drift else None,
-                segment_dist=p.nn_segment_dist,
-            )
+            assoc = _nearest_neighbour(poses, obs, inputs, p)
         assoc, old_of_new = frontend.compact_labels(assoc, p.min_obs)
         return assoc, old_of_new, mode
 
