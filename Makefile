@@ -5,12 +5,20 @@ BIN := $(VENV)/bin
 
 .PHONY: install test bench reproduce reproduce-quick lint clean-results
 
-install:  ## create the venv and install slamcli with every extra the tests use
+# CHOLMOD (extra "cholmod", scikit-sparse) is an opt-in accelerator: it compiles against SuiteSparse's headers,
+# so it is installed only when cholmod.h is found (override: make install SUITESPARSE_H=/path/to/cholmod.h, or
+# SUITESPARSE_H= to skip it). Without it the graph optimiser uses SciPy's SuperLU. No system package manager is run.
+COMMA := ,
+INCLUDE_DIRS ?= /usr/include /usr/local/include /opt/homebrew/include $(CONDA_PREFIX)/include
+SUITESPARSE_H ?= $(firstword $(wildcard $(addsuffix /suitesparse/cholmod.h,$(INCLUDE_DIRS))))
+EXTRAS := test,gtsam,dask,parquet,dev,interval$(if $(strip $(SUITESPARSE_H)),$(COMMA)cholmod)
+PIP ?= $(BIN)/pip
+
+install:  ## create the venv and install slamcli with every extra the tests use (cholmod only if its headers exist)
 	$(PY) -m venv $(VENV)
-	$(BIN)/pip install --upgrade --quiet pip
-	@# scikit-sparse (extra "cholmod") compiles against SuiteSparse's headers: Debian's libsuitesparse-dev
-	@dpkg -s libsuitesparse-dev >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq libsuitesparse-dev; }
-	$(BIN)/pip install --quiet -e ".[test,gtsam,dask,parquet,dev,interval,cholmod]"
+	$(PIP) install --upgrade --quiet pip
+	$(PIP) install --quiet -e ".[$(EXTRAS)]"
+	@$(BIN)/python -c "from slamcli.solvers.nls import cholmod_available as c; print('linear solver: ' + ('CHOLMOD (scikit-sparse, extra cholmod)' if c() else 'SciPy SuperLU (no SuiteSparse headers found: extra cholmod skipped)'))"
 
 test:  ## the whole test suite (what CI runs)
 	$(BIN)/pytest -q -n 2 --dist loadfile
