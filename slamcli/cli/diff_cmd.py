@@ -13,8 +13,11 @@ from slamcli.cli.app import app, handle_errors
 def diff_command(
     a: Path = typer.Argument(..., help="First dataset or result file (HDF5)."),
     b: Path = typer.Argument(..., help="Second dataset or result file (HDF5)."),
+    paths: bool = typer.Option(False, "--paths", help="Also compare recorded file paths (@dataset_path, "
+                               "source_dir, ...), which are skipped by default."),
 ) -> None:
-    """Compare two files field by field, ignoring only creation time and timings (docs/schema.md "Timings").
+    """Compare two files field by field, ignoring creation time, timings (docs/schema.md "Timings") and, unless
+    --paths, the recorded file paths (where the inputs were, not what they hold).
 
     Exit status 0 when they agree, 1 when any field differs (one summary line naming the first differences),
     2 when a file cannot be read.
@@ -22,6 +25,6 @@ def diff_command(
     with handle_errors(exit_code=2):
         from slamcli.io.diff import diff_files
 
-        d = diff_files(a, b)
+        d = diff_files(a, b, paths=paths)
     typer.echo(d.summary(str(a), str(b)))
     raise typer.Exit(0 if d.same else 1)

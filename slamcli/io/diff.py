@@ -5,6 +5,11 @@ of the two files must be equal (arrays bit for bit, NaN equal to NaN; JSON attri
 except the fields listed in :data:`~slamcli.io.schema.NONDETERMINISTIC_FIELDS` — the creation time and
 the wall-clock timings, documented in ``docs/schema.md`` ("Timings: the only non-deterministic fields").
 
+Recorded file-system paths (``@dataset_path``, and inside JSON attributes keys such as ``dataset_relpath``,
+``init_path``, ``source_dir``, ``source_file``: every name ending in one of :data:`PATH_KEY_SUFFIXES`) say where
+a file was, not what it holds, so they are skipped unless ``paths=True`` (``slamcli diff --paths``): two results of
+identical datasets stored in different folders are "same".
+
 Every array is checked against its declared shape and allocated storage before it is read
 (:meth:`Reader._check_declared`), so a forged header cannot make a diff allocate gigabytes.
 """
@@ -22,12 +27,39 @@ import numpy as np
 from slamcli.io.schema import NONDETERMINISTIC_FIELDS, Reader, open_for_read
 
 
+#: a key (attribute name or JSON key) whose name ends so records a file-system location, not content
+PATH_KEY_SUFFIXES = ("_path", "_relpath", "_dir", "_file")
+
+
+def is_path_key(key: str) -> bool:
+    """Whether ``key`` names a recorded file-system path (see :data:`PATH_KEY_SUFFIXES`)."""
+    return key.endswith(PATH_KEY_SUFFIXES)
+
+
+def _without_paths(v: Any) -> tuple[Any, int]:
+    """``v`` with every path key of its nested JSON objects removed, and how many were removed."""
+    if isinstance(v, dict):
+        out, n = {}, 0
+        for k, x in v.items():
+            if is_path_key(str(k)):
+                n += 1
+                continue
+            out[k], m = _without_paths(x)
+            n += m
+        return out, n
+    if isinstance(v, list):
+        parts = [_without_paths(x) for x in v]
+        return [x for x, _ in parts], sum(m for _, m in parts)
+    return v, 0
+
+
 @dataclass
 class FileDiff:
     """Outcome of :func:`diff_files`: how many fields were compared and which differ (with a short why)."""
 
     n_compared: int = 0
     differences: list[tuple[str, str]] = field(default_factory=list)  # (field, what differs)
+    n_paths_ignored: int = 0  # recorded paths skipped (attributes and JSON keys); 0 with paths=True
 
     @property
     def same(self) -> bool:
@@ -35,6 +67,8 @@ class FileDiff:
 
     def summary(self, a: str, b: str) -> str:
         ignored = ", ".join(NONDETERMINISTIC_FIELDS)
+        if self.n_paths_ignored:
+            ignored += f" and {self.n_paths_ignored} recorded paths; --paths compares them"
         if self.same:
             return f"same: {a} and {b} agree on all {self.n_compared} fields (ignoring {ignored})"
         shown = "; ".join(f"{k}: {why}" for k, why in self.differences[:3])
@@ -96,8 +130,10 @@ def _field_name(path: str, key: str | None = None) -> str:
     return f"{base}@{key}" if key is not None else base
 
 
-def diff_files(path_a: str | os.PathLike, path_b: str | os.PathLike) -> FileDiff:
+def diff_files(path_a: str | os.PathLike, path_b: str | os.PathLike, *, paths: bool = False) -> FileDiff:
     """Compare two HDF5 files written by slamcli; see the module docstring for what "equal" means.
+
+    ``paths=False`` skips recorded file-system paths (:func:`is_path_key`); ``True`` compares them too.
 
     Raises :class:`~slamcli.errors.SchemaError` (one line) for a missing/non-HDF5/corrupt file.
     """
@@ -121,11 +157,17 @@ def diff_files(path_a: str | os.PathLike, path_b: str | os.PathLike) -> FileDiff
                 fname = _field_name(name, key)
                 if fname in ignored:
                     continue
+                if not paths and is_path_key(key):
+                    out.n_paths_ignored += 1
+                    continue
                 out.n_compared += 1
                 if key not in oa.attrs or key not in ob.attrs:
                     out.differences.append((fname, f"only in {'A' if key in oa.attrs else 'B'}"))
                     continue
                 va, vb = _attr_value(oa, key), _attr_value(ob, key)
+                if not paths:
+                    (va, na), (vb, nb) = _without_paths(va), _without_paths(vb)
+                    out.n_paths_ignored += max(na, nb)
                 if not _equal(va, vb):
                     out.differences.append((fname, _describe(va, vb)))
             if isinstance(oa, h5py.Dataset) and label not in ignored:
