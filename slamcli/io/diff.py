@@ -26,7 +26,6 @@ import numpy as np
 
 from slamcli.io.schema import NONDETERMINISTIC_FIELDS, Reader, open_for_read
 
-
 #: a key (attribute name or JSON key) whose name ends so records a file-system location, not content
 PATH_KEY_SUFFIXES = ("_path", "_relpath", "_dir", "_file")
 
