@@ -34,13 +34,14 @@ def export_file(src: str | os.PathLike, fmt: str, out: str | os.PathLike, *, dat
     ----------
     src : result file (estimate; its dataset supplies time stamps, odometry and noise) or dataset file
           (ground truth poses and landmarks, observations attached by the true association).
-    fmt : "tum" | "kitti" | "g2o" | "csv".
+    fmt : "tum" | "kitti" | "g2o" | "gtsam" | "csv".
     data : dataset of a result; default the one recorded in it (hash-checked).
 
     Returns
     -------
     dict ``{"kind": "result"|"dataset", "format", "n_poses", "n_landmarks", "n_edges", "n_loop_closures"}``
-    (edges and loop closures: g2o only; ``n_edges`` counts odometry, loop-closure and landmark edges).
+    (edges and loop closures: g2o/gtsam only; ``n_edges`` counts odometry, loop-closure and landmark edges),
+    plus ``"warning"`` (one line) when the file cannot carry the whole graph for GTSAM.
     """
     from slamcli.io import DATASET_SCHEMA, RESULT_SCHEMA, read_dataset
     from slamcli.io import export as ex
@@ -101,12 +102,23 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
         # with edge_info=false; loop closures always (they carry nothing but their own information)
         use_edge_info = bool(result.params.get("edge_info", True)) if result is not None else True
         cons = inp.constraints
-        ex.write_g2o(out, poses, lms, inp.odometry_xyt, inp.noise.odometry_std, obs.step, obs.range_m,
-                     obs.bearing_rad, assoc, inp.noise.range_std, inp.noise.bearing_std,
-                     constraints=cons, use_edge_info=use_edge_info)
+        writer = ex.write_g2o if fmt == "g2o" else ex.write_gtsam
+        written = writer(out, poses, lms, inp.odometry_xyt, inp.noise.odometry_std, obs.step, obs.range_m,
+                         obs.bearing_rad, assoc, inp.noise.range_std, inp.noise.bearing_std,
+                         constraints=cons, use_edge_info=use_edge_info)
         n_between = cons.n_between if cons is not None else 0
-        summary["n_edges"] = int(len(poses) - 1 + n_between + np.count_nonzero(np.asarray(assoc) >= 0))
+        n_sightings = int(np.count_nonzero(np.asarray(assoc) >= 0))
+        summary["n_edges"] = int(len(poses) - 1 + n_between + n_sightings)
         summary["n_loop_closures"] = int(n_between)
+        if fmt == "g2o" and n_sightings:
+            summary["warning"] = (f"GTSAM's readG2o skips the {n_sightings} EDGE_SE2_XY landmark edges; "
+                                  "--format gtsam writes them as BR lines it reads")
+        elif fmt == "gtsam" and written[1]:
+            summary["warning"] = (f"{written[1]} landmark edges lose their bearing-range correlation "
+                                  "(GTSAM's BR lines carry two σ's)")
+        if np.any(np.asarray(inp.sensor_offset_xy) != 0) and n_sightings:
+            summary["warning"] = "; ".join(x for x in (summary.get("warning"), "landmark edges are from the body "
+                                                       "pose: the sensor offset is not in the file") if x)
     return summary
 
 

@@ -13,7 +13,7 @@ from slamcli.cli.app import app, check_output, handle_errors
 @app.command("export")
 def export_command(
     src: Annotated[Path, typer.Argument(help="Result file (estimate) or dataset file (ground truth).")],
-    fmt: Annotated[str, typer.Option("--format", "-f", help="tum | kitti | g2o | csv")],
+    fmt: Annotated[str, typer.Option("--format", "-f", help="tum | kitti | g2o | gtsam | csv (gtsam: GTSAM's text format, sightings as BR lines readG2o reads)")],
     output: Annotated[Path, typer.Option("-o", "--output", help="File to write (atomically).")],
     data: Annotated[Path | None, typer.Option(
         "--data", "-d", help="Dataset of a result; default: the one recorded in it.")] = None,
@@ -23,7 +23,8 @@ def export_command(
     """Export poses (and landmarks) for evo, GTSAM, g2o or pandas.
 
     TUM lifts [x, y, θ] to SE(3) (z = 0, rotation about z); g2o carries the information matrices the solvers
-    use (odometry exact, landmark sightings linearised to Cartesian).
+    use (odometry exact, landmark sightings linearised to Cartesian; GTSAM's reader skips those, so for GTSAM
+    use --format gtsam, whose BR sightings readG2o reads).
     """
     with handle_errors():
         from slamcli.api.interop import export_file
@@ -35,3 +36,5 @@ def export_command(
             what = "estimate" if s["kind"] == "result" else "ground truth"
             typer.echo(f"wrote {output} ({s['format']}: {what}, {s['n_poses']} poses, "
                        f"{s['n_landmarks']} landmarks{edges})")
+        if "warning" in s:
+            typer.echo(f"warning: {s['warning']}", err=True)

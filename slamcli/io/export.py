@@ -13,7 +13,16 @@ g2o        ``VERTEX_SE2 i x y θ`` (poses, ids ``0..T``), ``VERTEX_XY j x y`` (l
            ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (the odometry chain ``t → t+1`` first, then
            every loop closure / between-factor ``i → j`` of the dataset; information matrix upper triangle
            row by row) and ``EDGE_SE2_XY i j dx dy I11 I12 I22`` (landmark seen from pose i, in pose i's
-           frame). GTSAM's ``readG2o``, g2o and ``slamcli import g2o`` load it.
+           frame). g2o and ``slamcli import g2o`` load it all; GTSAM's ``readG2o`` skips the
+           ``EDGE_SE2_XY`` lines (the export then warns in one line).
+GTSAM      GTSAM's own 2-D text format, which ``gtsam.readG2o(path, False)`` reads completely (so does
+           ``gtsam.load2D`` with ``noiseFormat=NoiseFormatG2O``; its default AUTO takes the EDGE_SE2 numbers
+           for a covariance): the
+           same ``VERTEX_SE2`` / ``EDGE_SE2`` lines, landmarks as ``VERTEX_XY l x y`` (GTSAM key
+           ``L(l)``) and each sighting as ``BR i l bearing range σ_b σ_r`` (a ``BearingRangeFactor2D``
+           with diagonal noise). Exact for range-bearing data with one σ each (simulated data); per-row
+           information is carried by its diagonal: ``σ = sqrt(diag Σ_rb)``, where an ``xy`` row's
+           ``Σ_rb = J⁻¹ Σ_xy J⁻ᵀ`` (first order, ``J`` below); a dropped correlation is warned about.
 CSV        tidy table ``kind, index, t_s, x_m, y_m, theta_rad`` (+ covariance columns when present);
            ``kind`` is ``pose`` or ``landmark``.
 =========  ==============================================================================================
@@ -53,7 +62,10 @@ from slamcli.errors import SchemaError
 from slamcli.io.atomic import atomic_path
 from slamcli.models.angles import wrap_angle
 
-FORMATS = ("tum", "kitti", "g2o", "csv")
+FORMATS = ("tum", "kitti", "g2o", "gtsam", "csv")
+#: |correlation| of a sighting's (bearing, range) covariance above which the GTSAM export warns that its
+#: diagonal BR noise drops it
+BR_CORRELATION_TOL = 1e-6
 
 
 def _g(v: float) -> str:
@@ -144,6 +156,68 @@ def observation_xy_information(range_m, bearing_rad, range_std: float, bearing_s
     return rb_to_xy_information(range_m, bearing_rad, np.diag([range_std**2, bearing_std**2]))
 
 
+def _graph_parts(poses_xyt, odometry_xyt, odometry_std, obs_step, obs_range_m, obs_bearing_rad, obs_landmark,
+                 range_std: float, bearing_std: float, constraints, use_edge_info: bool) -> dict:
+    """The factor graph ``graph`` optimises, as arrays shared by the g2o and GTSAM writers.
+
+    Returns ``edges_ij (E, 2)``, ``edges_xyt (E, 3)``, ``edges_info (E, 3, 3)`` (odometry chain first, then
+    the constraints' between-factors) and for the M attached sightings ``rows (M,)`` (observation rows),
+    ``r, b (M,)``, ``info_xy (M, 2, 2)`` (Cartesian, body frame) and ``cov_rb (M, 2, 2)`` over (r, b).
+    """
+    from slamcli.models import se2
+
+    poses = np.asarray(poses_xyt, float).reshape(-1, 3)
+    odo = np.asarray(odometry_xyt, float).reshape(-1, 3)
+    n = len(poses)
+    if len(odo) != n:
+        raise ValueError(f"{len(odo)} odometry poses for {n} poses")
+    c = constraints
+    d = se2.between(odo[:-1], odo[1:])
+    if c is not None and use_edge_info and c.odometry_info is not None:
+        I_odo = np.asarray(c.odometry_info, float).reshape(-1, 3, 3)
+        if len(I_odo) != n - 1:
+            raise ValueError(f"{len(I_odo)} odometry information matrices for {n - 1} increments")
+    else:
+        I_odo = np.broadcast_to(odometry_information(odometry_std), (n - 1, 3, 3))
+    ij = np.column_stack([np.arange(n - 1), np.arange(1, n)]).astype(np.int64)
+    if c is not None and c.n_between:
+        ij = np.concatenate([ij, np.asarray(c.between_ij, np.int64).reshape(-1, 2)])
+        d = np.concatenate([d, np.asarray(c.between_xyt, float).reshape(-1, 3)])
+        I_odo = np.concatenate([I_odo, np.asarray(c.between_info, float).reshape(-1, 3, 3)])
+    lab = np.asarray(obs_landmark, np.int64).reshape(-1)
+    keep = np.flatnonzero(lab >= 0)
+    r = np.asarray(obs_range_m, float).reshape(-1)[keep]
+    b = np.asarray(obs_bearing_rad, float).reshape(-1)[keep]
+    cs, sn = np.cos(b), np.sin(b)
+    J = np.stack([np.stack([cs, -r * sn], -1), np.stack([sn, r * cs], -1)], -2)  # ∂(x, y)/∂(r, b), (M,2,2)
+    obs_info = c.observation_info if (c is not None and use_edge_info) else None
+    if obs_info is None:
+        cov_rb = np.broadcast_to(np.diag([range_std**2, bearing_std**2]), (len(keep), 2, 2))
+        I_xy = rb_to_xy_information(r, b, cov_rb)
+    elif c.observation_model == "xy":  # already over the body-frame offset: exact for g2o
+        I_xy = np.asarray(obs_info, float).reshape(-1, 2, 2)[keep]
+        Jinv = np.linalg.inv(J)
+        cov_rb = Jinv @ np.linalg.inv(I_xy) @ np.swapaxes(Jinv, -1, -2)  # Σ_rb = J⁻¹ Σ_xy J⁻ᵀ
+    else:  # per-row information over (r, b): first order for g2o, as for the σ's
+        cov_rb = np.linalg.inv(np.asarray(obs_info, float)[keep])
+        I_xy = rb_to_xy_information(r, b, cov_rb)
+    return {"n": n, "edges_ij": ij, "edges_xyt": d, "edges_info": I_odo,
+            "step": np.asarray(obs_step, np.int64).reshape(-1)[keep], "landmark": lab[keep],
+            "r": r, "b": b, "info_xy": I_xy, "cov_rb": np.asarray(cov_rb)}
+
+
+def _vertex_and_se2_lines(poses, lms, parts: dict, landmark_id0: int):
+    """``VERTEX_SE2`` / ``VERTEX_XY`` / ``EDGE_SE2`` lines (no comment line: GTSAM stops at one it does not
+    understand); landmark l gets vertex id ``landmark_id0 + l``."""
+    iu3 = np.triu_indices(3)
+    for i, (x, y, th) in enumerate(poses):
+        yield f"VERTEX_SE2 {i} {_g(x)} {_g(y)} {_g(th)}"
+    for l, (x, y) in enumerate(lms):
+        yield f"VERTEX_XY {landmark_id0 + l} {_g(x)} {_g(y)}"
+    for (i, j), m, info in zip(parts["edges_ij"], parts["edges_xyt"], parts["edges_info"]):
+        yield f"EDGE_SE2 {int(i)} {int(j)} {_g(m[0])} {_g(m[1])} {_g(m[2])} " + " ".join(_g(v) for v in info[iu3])
+
+
 def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_step, obs_range_m,
               obs_bearing_rad, obs_landmark, range_std: float, bearing_std: float, *,
               constraints=None, use_edge_info: bool = True) -> Path:
@@ -165,62 +239,48 @@ def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_ste
                                   ``observation_info`` (N, 2, 2) instead of the σ's (the graph solver's
                                   ``edge_info``).
     """
-    from slamcli.models import se2
-
     poses = np.asarray(poses_xyt, float).reshape(-1, 3)
     lms = np.asarray(landmarks_xy, float).reshape(-1, 2)
-    odo = np.asarray(odometry_xyt, float).reshape(-1, 3)
-    n = len(poses)
-    if len(odo) != n:
-        raise ValueError(f"{len(odo)} odometry poses for {n} poses")
-    c = constraints
-    d = se2.between(odo[:-1], odo[1:])
-    if c is not None and use_edge_info and c.odometry_info is not None:
-        I_odo = np.asarray(c.odometry_info, float).reshape(-1, 3, 3)
-        if len(I_odo) != n - 1:
-            raise ValueError(f"{len(I_odo)} odometry information matrices for {n - 1} increments")
-    else:
-        I_odo = np.broadcast_to(odometry_information(odometry_std), (n - 1, 3, 3))
-    if c is not None and c.n_between:
-        b_ij = np.asarray(c.between_ij, np.int64).reshape(-1, 2)
-        b_xyt = np.asarray(c.between_xyt, float).reshape(-1, 3)
-        b_info = np.asarray(c.between_info, float).reshape(-1, 3, 3)
-    else:
-        b_ij, b_xyt, b_info = np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3))
-    iu3 = np.triu_indices(3)
-    step = np.asarray(obs_step, np.int64).reshape(-1)
-    lab = np.asarray(obs_landmark, np.int64).reshape(-1)
-    r = np.asarray(obs_range_m, float).reshape(-1)
-    b = np.asarray(obs_bearing_rad, float).reshape(-1)
-    keep = np.flatnonzero(lab >= 0)
-    obs_info = c.observation_info if (c is not None and use_edge_info) else None
-    if obs_info is None:
-        I_obs = observation_xy_information(r[keep], b[keep], range_std, bearing_std)
-    elif c.observation_model == "xy":  # already over the body-frame offset: exact
-        I_obs = np.asarray(obs_info, float).reshape(-1, 2, 2)[keep]
-    else:  # per-row information over (r, b): first order, as for the σ's
-        I_obs = rb_to_xy_information(r[keep], b[keep], np.linalg.inv(np.asarray(obs_info, float)[keep]))
-    xy = np.column_stack([r[keep] * np.cos(b[keep]), r[keep] * np.sin(b[keep])])
-
-    def se2_edge(i, j, m, info):
-        return f"EDGE_SE2 {i} {j} {_g(m[0])} {_g(m[1])} {_g(m[2])} " + " ".join(_g(v) for v in info[iu3])
+    g = _graph_parts(poses, odometry_xyt, odometry_std, obs_step, obs_range_m, obs_bearing_rad, obs_landmark,
+                     range_std, bearing_std, constraints, use_edge_info)
+    n = g["n"]
+    xy = np.column_stack([g["r"] * np.cos(g["b"]), g["r"] * np.sin(g["b"])])
 
     def lines():
-        # no comment line: GTSAM's readG2o stops parsing at the first line it does not understand
-        for i, (x, y, th) in enumerate(poses):
-            yield f"VERTEX_SE2 {i} {_g(x)} {_g(y)} {_g(th)}"
-        for l, (x, y) in enumerate(lms):
-            yield f"VERTEX_XY {n + l} {_g(x)} {_g(y)}"
-        for t in range(n - 1):
-            yield se2_edge(t, t + 1, d[t], I_odo[t])
-        for k in range(len(b_ij)):
-            yield se2_edge(int(b_ij[k, 0]), int(b_ij[k, 1]), b_xyt[k], b_info[k])
-        for k, row in enumerate(keep):
-            I = I_obs[k]
-            yield (f"EDGE_SE2_XY {int(step[row])} {n + int(lab[row])} {_g(xy[k, 0])} {_g(xy[k, 1])} "
+        yield from _vertex_and_se2_lines(poses, lms, g, n)
+        for k in range(len(xy)):
+            I = g["info_xy"][k]
+            yield (f"EDGE_SE2_XY {int(g['step'][k])} {n + int(g['landmark'][k])} {_g(xy[k, 0])} {_g(xy[k, 1])} "
                    f"{_g(I[0, 0])} {_g(I[0, 1])} {_g(I[1, 1])}")
 
     return _write_lines(path, lines())
+
+
+def write_gtsam(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_step, obs_range_m,
+                obs_bearing_rad, obs_landmark, range_std: float, bearing_std: float, *,
+                constraints=None, use_edge_info: bool = True) -> tuple[Path, int]:
+    """GTSAM 2-D text file (module docstring): what :func:`write_g2o` writes, with each sighting as a
+    ``BR i l bearing range σ_b σ_r`` line that ``gtsam.readG2o`` turns into a
+    ``BearingRangeFactor2D(i, L(l))``; landmark vertices are ``VERTEX_XY l`` (key ``L(l)``).
+
+    Parameters are those of :func:`write_g2o`. Returns the path and the number of sightings whose
+    (bearing, range) correlation exceeds :data:`BR_CORRELATION_TOL` (dropped by the diagonal BR noise).
+    """
+    poses = np.asarray(poses_xyt, float).reshape(-1, 3)
+    lms = np.asarray(landmarks_xy, float).reshape(-1, 2)
+    g = _graph_parts(poses, odometry_xyt, odometry_std, obs_step, obs_range_m, obs_bearing_rad, obs_landmark,
+                     range_std, bearing_std, constraints, use_edge_info)
+    cov = g["cov_rb"]
+    sd_r, sd_b = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1])
+    n_correlated = int(np.count_nonzero(np.abs(cov[:, 0, 1]) > BR_CORRELATION_TOL * sd_r * sd_b))
+
+    def lines():
+        yield from _vertex_and_se2_lines(poses, lms, g, 0)
+        for k in range(len(sd_r)):
+            yield (f"BR {int(g['step'][k])} {int(g['landmark'][k])} {_g(g['b'][k])} {_g(g['r'][k])} "
+                   f"{_g(sd_b[k])} {_g(sd_r[k])}")
+
+    return _write_lines(path, lines()), n_correlated
 
 
 _COV3 = ("cov_xx", "cov_xy", "cov_xt", "cov_yy", "cov_yt", "cov_tt")
