@@ -5,6 +5,7 @@ from __future__ import annotations
 # Each module registers its commands on ``app`` when imported; they import only typer at module level.
 from slamcli.cli import (
     aggregate_cmd,  # noqa: F401
+    datasets_cmd,  # noqa: F401
     diff_cmd,  # noqa: F401
     evaluate_cmd,  # noqa: F401
     export_cmd,  # noqa: F401

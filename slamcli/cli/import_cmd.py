@@ -66,7 +66,8 @@ def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, s
 @import_app.command("mrclam")
 def import_mrclam_command(
     directory: Annotated[
-        Path, typer.Argument(help="MRCLAM dataset folder (Barcodes.dat, RobotN_*.dat, ...).")
+        Path, typer.Argument(help="MRCLAM dataset folder (Barcodes.dat, RobotN_*.dat, ...) or a dataset name "
+                             "(mrclam1..mrclam9, see `slamcli datasets list`).")
     ],
     robot: Annotated[int, typer.Option("--robot", "-r", help="Robot number N (RobotN_*.dat).")] = 1,
     dt: Annotated[float, typer.Option(help="Sampling period of the dataset, s.")] = 0.1,
@@ -124,8 +125,10 @@ def import_mrclam_command(
         import numpy as np
 
         from slamcli.datasets.mrclam import default_noise, import_mrclam
+        from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
 
+        directory = resolve_source(directory, "mrclam")
         if non_landmark not in ("drop", "clutter"):
             fail(f"--non-landmark: must be drop or clutter, got {non_landmark!r}")
         for name, v in (
@@ -205,7 +208,8 @@ def import_g2o_command(
         Path,
         typer.Argument(
             help="Pose or landmark graph file: g2o (EDGE_SE2/EDGE_SE2_XY), TORO (EDGE2/LANDMARK2) or GTSAM "
-            "text (ODOMETRY/LANDMARK/BR), e.g. dlr.g2o, intel.g2o or victoria_park.txt."
+            "text (ODOMETRY/LANDMARK/BR), e.g. dlr.g2o, or a dataset name (dlr, intel, manhattan, "
+            "victoria-park-graph, ...; see `slamcli datasets list`)."
         ),
     ],
     dt: Annotated[float, typer.Option(help="Nominal sampling period, s (a graph has no time).")] = 1.0,
@@ -240,8 +244,10 @@ def import_g2o_command(
             fail("-o/--out is required")
         check_output(out)
         from slamcli.datasets.g2o import import_graph
+        from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
 
+        path = resolve_source(path, "g2o")
         ds = import_graph(
             path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std, max_poses=max_poses
         )
@@ -285,7 +291,8 @@ def _import_car_recording(out: Path | None, quiet: bool, load, summary) -> None:
 @import_app.command("victoria-park")
 def import_victoria_park_command(
     directory: Annotated[
-        Path, typer.Argument(help="Victoria Park ASCII folder (inputs.dat, measurements.dat, gps.dat).")
+        Path, typer.Argument(help="Victoria Park ASCII folder (inputs.dat, measurements.dat, gps.dat) or the "
+                             "dataset name victoria-park.")
     ],
     start: Annotated[float, typer.Option(help="Window start, s after the first input row.")] = 0.0,
     duration: Annotated[float | None, typer.Option(help="Window length, s (default: to the end).")] = None,
@@ -303,10 +310,11 @@ def import_victoria_park_command(
     detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
 
     def load():
+        from slamcli.datasets.registry import resolve_source
         from slamcli.datasets.victoria_park import default_noise, import_victoria_park
 
         noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
-        return import_victoria_park(directory, start=start, duration=duration, max_range=max_range, noise=noise)
+        return import_victoria_park(resolve_source(directory, "victoria-park"), start=start, duration=duration, max_range=max_range, noise=noise)
 
     def summary(ds):
         inp, md = ds.inputs, ds.metadata
@@ -319,7 +327,8 @@ def import_victoria_park_command(
 
 @import_app.command("carpark")
 def import_carpark_command(
-    directory: Annotated[Path, typer.Argument(help="ACFR car-park folder (data_set.mat, beac_juan3.mat).")],
+    directory: Annotated[Path, typer.Argument(help="ACFR car-park folder (data_set.mat, beac_juan3.mat) or the dataset "
+                                                    "name acfr-carpark.")],
     max_range: Annotated[float, typer.Option(help="Drop beacon returns beyond this range, m.")] = 81.0,
     range_std: _RangeStd = None,
     bearing_std: _BearingStd = None,
@@ -335,9 +344,10 @@ def import_carpark_command(
 
     def load():
         from slamcli.datasets.carpark import default_noise, import_carpark
+        from slamcli.datasets.registry import resolve_source
 
         noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
-        return import_carpark(directory, max_range=max_range, noise=noise)
+        return import_carpark(resolve_source(directory, "carpark"), max_range=max_range, noise=noise)
 
     def summary(ds):
         inp, md = ds.inputs, ds.metadata
