@@ -410,6 +410,7 @@ def fetch(name: str, progress=None) -> tuple[Path, list[str]]:
     """
     import pooch
 
+    pooch.get_logger().setLevel("WARNING")  # its "Downloading ..." lines: the CLI prints its own progress
     e = entry(name)
     if not e.files:
         raise DatasetFetchError(f"{name}: the registry has no download URL for it; use `slamcli datasets add {name} DIR`")
