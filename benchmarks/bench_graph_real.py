@@ -1,7 +1,7 @@
 """``graph`` vs GTSAM on real recordings (issue 10): same factor graph, same initial values, same run.
 
 Rows: Victoria Park (GTSAM's ``victoria_park.txt``: all of it, and the prefixes with pose ids < 2000 and
-< 1000), UTIAS MRCLAM Dataset 7 robot 1 (Dataset 6, named in the issue, is not in /work/shared) and the DLR
+< 1000), UTIAS MRCLAM Dataset 7 robot 1 (Dataset 6, named in the issue, was not among the project's shared recordings) and the DLR
 landmark graph. Each is imported by slamcli's importers (``slamcli.datasets``), associated by the reported
 ids, initialised from chained odometry and the mean inverse observation, and built twice: as our ``gtsam``
 model problem and as a GTSAM graph of the same factors (PriorFactorPose2, BetweenFactorPose2,
@@ -38,9 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-SHARED = Path(__file__).resolve().parent.parent.parent.parent / "shared" / "datasets"
-if not SHARED.is_dir():  # a clone at /work/clones/X sees /work/shared; CI gets a copy beside the clone
-    SHARED = Path("/work/shared/datasets")
+# recordings by registry name (slamcli datasets add NAME DIR / fetch NAME): victoria-park-graph, mrclam7, dlr
 REL_TOL = 1e-10
 MAX_IT = 500
 
@@ -48,7 +46,9 @@ MAX_IT = 500
 def victoria_prefix(n_ids: int | None, out_dir: Path) -> Path:
     """``victoria_park.txt`` restricted to pose ids < ``n_ids`` (odometry edges ending there, landmark
     sightings from there); the whole file for None."""
-    src = SHARED / "victoria_park" / "gtsam" / "victoria_park.txt"
+    from slamcli.datasets.registry import locate
+
+    src = locate("victoria-park-graph")
     if n_ids is None:
         return src
     out = out_dir / f"victoria_park_lt{n_ids}.txt"
@@ -67,6 +67,7 @@ def load_cases(quick: bool, tmp: Path) -> list[tuple[str, object, list[tuple[str
     sides start from the poses of our Cauchy solve, :func:`slamcli.solvers.graph.robust_initial_poses`)."""
     from slamcli.datasets.g2o import import_graph
     from slamcli.datasets.mrclam import import_mrclam
+    from slamcli.datasets.registry import locate
 
     plain = [("", {})]
     cases = [
@@ -84,8 +85,8 @@ def load_cases(quick: bool, tmp: Path) -> list[tuple[str, object, list[tuple[str
         ]
         cases += [
             ("Victoria Park, full", lambda: import_graph(victoria_prefix(None, tmp)).inputs, vp_rows),
-            ("MRCLAM Dataset 7, robot 1", lambda: import_mrclam(SHARED / "mrclam_dataset7", 1).inputs, plain),
-            ("DLR", lambda: import_graph(SHARED / "dlr_g2o" / "dlr.g2o").inputs, plain),
+            ("MRCLAM Dataset 7, robot 1", lambda: import_mrclam(locate("mrclam7"), 1).inputs, plain),
+            ("DLR", lambda: import_graph(locate("dlr")).inputs, plain),
         ]
     return cases
 

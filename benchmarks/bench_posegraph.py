@@ -1,7 +1,7 @@
 """Pose-graph benchmarks with loop closures: ``graph`` vs GTSAM (LM, Dogleg, ISAM2) from the same initial values.
 
-Data: ``shared/datasets/pose_graphs`` (Intel, MIT, CSAIL, Manhattan M3500, City10000, KITTI 00; see its
-PROVENANCE.txt), imported with :func:`slamcli.datasets.g2o.import_graph` (odometry chain + between-factors with
+Data: the SE-Sync benchmark graphs by registry name (``slamcli datasets fetch intel`` etc.: Intel, MIT, CSAIL,
+Manhattan M3500, City10000, KITTI 00; ``slamcli datasets info NAME`` names the sources), imported with :func:`slamcli.datasets.g2o.import_graph` (odometry chain + between-factors with
 every edge's information matrix). For each dataset and each initialisation (``odometry``: the chained
 odometry; ``chordal``: chordal relaxation of the rotations + linear translations,
 :mod:`slamcli.solvers.pose_init`) both optimisers get the same factor graph (PriorFactorPose2 on x_0 with
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parent.parent.parent.parent / "shared" / "datasets" / "pose_graphs"
-if not DATA.is_dir():  # a clone outside /work/clones
-    DATA = Path("/work/shared/datasets/pose_graphs")
+#: file stem -> registry name (slamcli datasets)
+DATASET_NAMES = {"intel": "intel", "MIT": "mit", "CSAIL": "csail", "manhattan": "manhattan",
+                 "city10000": "city10000", "kitti_00": "kitti-00"}
 NAMES = ("intel", "MIT", "CSAIL", "manhattan", "city10000", "kitti_00")
 QUICK = ("MIT", "intel")
 TOL = 1e-10
@@ -63,9 +63,10 @@ def run_one(name: str, init: str) -> dict:
     import gtsam
 
     from slamcli.datasets.g2o import import_graph
+    from slamcli.datasets.registry import locate
     from slamcli.solvers import graph, nls
 
-    ds = import_graph(DATA / f"{name}.g2o")
+    ds = import_graph(locate(DATASET_NAMES[name]))
     inp = ds.inputs
     n = inp.n_poses
     params = graph.GraphParams(rel_cost_tol=TOL, step_tol=TOL, max_iterations=MAX_IT)

@@ -3,7 +3,7 @@
 Cases, each solved with ``robust = none | huber | cauchy | geman_mcclure`` (GTSAM's m-estimators, default
 widths 1.345 / 2.3849 / 1.0; the kernel acts on the observation factors, never on odometry or the prior):
 
-* **MRCLAM Dataset 7, robots 1-5** — imported with ``slamcli import mrclam DIR --robot N`` (defaults: rows that
+* **MRCLAM Dataset 7, robots 1-5** — imported with ``slamcli import mrclam mrclam7 --robot N`` (defaults: rows that
   see another robot or an unknown barcode dropped), sensor-reported barcode ids as the association
   (``association = auto`` → ``reported``). Misread barcodes are the outliers.
 * **Simulator with clutter** — scenario ``loop`` with ``clutter.rate = 0.5`` false returns per scan, no reported
@@ -30,9 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-MRCLAM = Path(__file__).resolve().parent.parent.parent.parent / "shared" / "datasets" / "mrclam_dataset7"
-if not MRCLAM.is_dir():
-    MRCLAM = Path("/work/shared/datasets/mrclam_dataset7")
+MRCLAM = "mrclam7"  # registry name: slamcli datasets add mrclam7 DIR / fetch mrclam7
 KERNELS = ("none", "huber", "cauchy", "geman_mcclure")
 CLUTTER_RATE = 0.5
 
@@ -41,7 +39,7 @@ def _import_mrclam(robot: int, out: Path):
     from slamcli.io import read_dataset
 
     cli = Path(sys.executable).with_name("slamcli")
-    cmd = [str(cli), "import", "mrclam", str(MRCLAM), "--robot", str(robot), "-q", "-o", str(out)]
+    cmd = [str(cli), "import", "mrclam", MRCLAM, "--robot", str(robot), "-q", "-o", str(out)]
     subprocess.run(cmd, check=True, capture_output=True, text=True)
     return read_dataset(out)
 

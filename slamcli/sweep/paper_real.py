@@ -16,14 +16,15 @@ DDMR controls); the table shows that line. Quick mode runs the excerpts shipped 
 first :data:`VP_QUICK_S` s, 150 car-park scans, 45 s of MRCLAM robot 1) and a cheaper configuration of the
 slow solvers.
 
-Data: the folder given by ``SLAMCLI_DATASETS``, else ``../shared/datasets`` next to the repository (or next
-to its parent folder), else ``/work/shared/datasets``. Every outcome sentence is computed from the numbers of the run.
+Data: the registered recordings ``victoria-park``, ``mrclam7`` and ``acfr-carpark``
+(:func:`slamcli.datasets.registry.locate`: ``slamcli datasets add NAME DIR`` or ``slamcli datasets fetch NAME``);
+a missing one makes the section "not run" with the fetch command. Every outcome sentence is computed from the
+numbers of the run.
 """
 
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -67,17 +68,24 @@ def repo_root() -> Path:
     return Path(__file__).resolve().parents[2]
 
 
-def datasets_dir() -> Path | None:
-    """``$SLAMCLI_DATASETS``, else the first existing ``shared/datasets`` beside the repository or its parent,
-    else ``/work/shared/datasets``; None when none exists."""
-    env = os.environ.get("SLAMCLI_DATASETS")
-    cands = [Path(env)] if env else []
-    root = repo_root()
-    # beside the repository (or its parent), else the workplace's shared folder, where a clone elsewhere
-    # (e.g. CI's clean clone in a temporary directory) finds it
-    cands += [root.parent / "shared" / "datasets", root.parent.parent / "shared" / "datasets",
-              Path("/work/shared/datasets")]
-    return next((c for c in cands if c.is_dir()), None)
+#: the registry names of the section's recordings (slamcli datasets)
+RECORDINGS = {"vp": "victoria-park", "cp": "acfr-carpark", "mr": "mrclam7"}
+
+
+def recording_dirs() -> tuple[dict[str, Path], str]:
+    """``({"vp"|"cp"|"mr": folder}, how they were found)`` from the dataset registry; raises
+    :class:`~slamcli.datasets.registry.DatasetMissingError` (one line naming the fetch command)."""
+    from slamcli.datasets import registry
+
+    found = {key: registry.where(name) for key, name in RECORDINGS.items()}
+    missing = [RECORDINGS[k] for k, v in found.items() if v is None]
+    if missing:
+        raise registry.DatasetMissingError(
+            f"not on this machine: {', '.join(missing)}; run "
+            + "; ".join(f"`slamcli datasets fetch {n}`" for n in missing)
+            + " (or `slamcli datasets add NAME DIR`)")
+    how = ", ".join(f"`{RECORDINGS[k]}` ({v[0]})" for k, v in found.items())
+    return {k: v[1] for k, v in found.items()}, how
 
 
 def _solver_names() -> list[str]:
@@ -318,20 +326,21 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rel = out.name
-    data = datasets_dir()
     excerpts = repo_root() / "tests" / "data"
     if quick and (excerpts / "victoria_park_excerpt").is_dir():
         vp_dir, cp_dir, mr_dir = (excerpts / "victoria_park_excerpt", excerpts / "carpark_excerpt",
                                   excerpts / "mrclam_excerpt")
         source = "the excerpts shipped in `tests/data` (`tests/data/victoria_park_excerpt`, `tests/data/carpark_excerpt`, `tests/data/mrclam_excerpt`)"
-    elif data is not None:
-        vp_dir, cp_dir, mr_dir = (data / "victoria_park" / "rfs_slam_ascii", data / "acfr_carpark",
-                                  data / "mrclam_dataset7")
-        source = ("the public recordings (Victoria Park ASCII logs, MRCLAM Dataset 7, ACFR car-park .mat files) from the "
-                  "datasets folder (`SLAMCLI_DATASETS`, else the project's datasets folder beside the repository)")
     else:
-        return ("## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)\n\n> **Not run**: no "
-                "datasets folder (set `SLAMCLI_DATASETS`) and no test excerpts.", False)
+        from slamcli.datasets.registry import DatasetMissingError
+
+        try:
+            dirs, how = recording_dirs()
+        except DatasetMissingError as exc:
+            return ("## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)\n\n> **Not run**: "
+                    f"{exc}.", False)
+        vp_dir, cp_dir, mr_dir = dirs["vp"], dirs["cp"], dirs["mr"]
+        source = f"the public recordings {how} of `slamcli datasets`"
     lines = ["## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)", "",
              f"Data: {source}. Every solver registered runs with the parameters listed; a solver that cannot "
              "run a recording refuses in one line, shown in the table. Implementation: `slamcli/sweep/paper_real.py`."]

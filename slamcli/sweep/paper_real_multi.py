@@ -8,14 +8,12 @@ capture: dead reckoning, solo and joint for both solvers. Every outcome sentence
 
 Full mode: the whole common window of the five robots (891 s at dt = 0.1 s). Quick mode: the first
 :data:`QUICK_DURATION_S` seconds and :data:`QUICK_ICM_SWEEPS` ICM sweeps (< 30 s). The dataset folder is
-``$SLAMCLI_MRCLAM7`` if set, else ``shared/datasets/mrclam_dataset7`` two levels above the repository, else
-``/work/shared/datasets/mrclam_dataset7``.
+the registered recording ``mrclam7`` (``slamcli datasets add mrclam7 DIR`` or ``slamcli datasets fetch mrclam7``).
 """
 
 from __future__ import annotations
 
 import csv
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,14 +28,11 @@ SAME_FRACTION = 0.02
 
 
 def dataset_dir() -> Path:
-    """``$SLAMCLI_MRCLAM7``, else ``mrclam_dataset7`` in the shared datasets folder the real-data section uses."""
-    env = os.environ.get("SLAMCLI_MRCLAM7")
-    if env:
-        return Path(env)
-    from slamcli.sweep.paper_real import datasets_dir
+    """The folder of the registered recording ``mrclam7``; :class:`~slamcli.datasets.registry.DatasetMissingError`
+    (one line naming the fetch command) when it is not on this machine."""
+    from slamcli.datasets.registry import locate
 
-    base = datasets_dir()
-    return (base if base is not None else Path("/work/shared/datasets")) / "mrclam_dataset7"
+    return locate("mrclam7")
 
 
 def _ate(est: np.ndarray, true: np.ndarray) -> float:
@@ -125,9 +120,12 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     md = ["## Real data: MRCLAM Dataset 7, five robots jointly vs each alone (`graph`, `icm`)", ""]
-    d = dataset_dir()
-    if not (d / "Barcodes.dat").is_file():
-        md.append(f"> **Section failed**: MRCLAM Dataset 7 not found at {d} (set SLAMCLI_MRCLAM7 to its folder).")
+    from slamcli.datasets.registry import DatasetMissingError
+
+    try:
+        d = dataset_dir()
+    except DatasetMissingError as exc:
+        md.append(f"> **Section failed**: {exc}.")
         return "\n".join(md), False
     t0 = time.perf_counter()
     try:
