@@ -10,9 +10,20 @@ import typer
 from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console, stdout_console
 
 
+def _shipped_names() -> str:
+    from slamcli import experiments
+
+    return ", ".join(experiments.names()) or "none"
+
+
 @app.command("sweep")
 def sweep_command(
-    experiment: Annotated[Path, typer.Argument(help="Experiment file (TOML), e.g. experiments/compare.toml.")],
+    experiment: Annotated[str | None, typer.Argument(
+        help=f"Experiment: a shipped name ({_shipped_names()}; see --list) or a TOML file.", show_default=False)] = None,
+    overrides: Annotated[list[str] | None, typer.Argument(
+        help="Overrides key=value (fixed) or key=v1,v2 (a grid axis), validated like the file: "
+             "solver.ekf.gate_prob=0.9,0.99 replicates=20 scenario.n_steps=200.", show_default=False)] = None,
+    list_names: Annotated[bool, typer.Option("--list", help="List the shipped experiments and exit.")] = False,
     workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
     executor: Annotated[str, typer.Option("--executor", help="local (process pool, spawn) or dask.")] = "local",
     scheduler: Annotated[
@@ -29,16 +40,23 @@ def sweep_command(
 ) -> None:
     """Run every configuration of an experiment: results/<experiment>/<run_id>/ + manifest.csv + results.csv."""
     with handle_errors():
-        from slamcli.sweep.config import load_experiment, quick_variant
-        from slamcli.sweep.expand import expand
+        from slamcli.sweep.config import apply_overrides, load_experiment, quick_variant
+        from slamcli.sweep.expand import RegistryResolver, expand
 
+        if list_names:
+            _print_list()
+            return
+        if experiment is None:
+            fail("give an experiment name or file (slamcli sweep --list shows the shipped ones)")
         if executor not in ("local", "dask"):
             fail(f"--executor: {executor!r} is not one of local, dask")
         if workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
-        cfg = load_experiment(experiment)
+        cfg = load_experiment(_experiment_file(experiment))
         if quick:
             cfg = quick_variant(cfg)
+        if overrides:
+            cfg = apply_overrides(cfg, overrides, RegistryResolver().known_keys)
         expansion = expand(cfg)
         if dry_run:
             _print_dry_run(expansion, out)
@@ -48,6 +66,31 @@ def sweep_command(
         _print_summary(summary)
         if not summary.ok:
             raise typer.Exit(1)
+
+
+def _experiment_file(arg: str) -> Path:
+    """An existing file as given, else the shipped experiment of that name; one line naming both otherwise."""
+    from slamcli import experiments
+    from slamcli.errors import ConfigError
+
+    p = Path(arg)
+    if p.is_file():
+        return p
+    found = experiments.find(arg)
+    if found is None:
+        raise ConfigError(f"{arg}: no such experiment file, and not a shipped experiment ({_shipped_names()})")
+    return found
+
+
+def _print_list() -> None:
+    import tomllib
+
+    from slamcli import experiments
+
+    for name in experiments.names():
+        with open(experiments.path() / f"{name}.toml", "rb") as fh:
+            desc = tomllib.load(fh).get("experiment", {}).get("description", "")
+        typer.echo(f"{name:<16} {desc}")
 
 
 def _run(expansion, out, workers, executor, scheduler, resume, quiet):

@@ -529,3 +529,66 @@ def quick_variant(cfg: ExperimentConfig) -> ExperimentConfig:
     q = dict(cfg.quick)
     reps = q.pop("replicates", None)
     return apply_fixed(cfg, q, replicates=reps)
+
+
+def _override_values(text: str) -> tuple[Any, ...]:
+    """``0.9,0.99`` → ``(0.9, 0.99)``; each piece a TOML literal (``true``, ``"a,b"``, ``[1.0, 2.0]``), else the
+    bare text as a string. A value starting with ``[`` is one array, not a list of values."""
+    def literal(piece: str) -> Any:
+        try:
+            return tomllib.loads(f"v = {piece}")["v"]
+        except tomllib.TOMLDecodeError:
+            return piece
+
+    text = text.strip()
+    if text.startswith("[") or text.startswith('"'):
+        return (literal(text),)
+    return tuple(literal(p.strip()) for p in text.split(","))
+
+
+def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[str, str], Any]) -> ExperimentConfig:
+    """Hydra-style command-line overrides on ``cfg``, validated like the TOML (:func:`check_keys`).
+
+    ``key=value`` fixes a sweep key (``scenario.<dotted key>``, ``solver.<label>.<param>``, ``evaluate.<opt>``;
+    an axis of that key is dropped); ``key=v1,v2,...`` makes it a grid axis (replacing the file's values of that
+    axis); ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
+    ``"<file> (command line): <key>: ..."`` with the TOML checks' "did you mean".
+    """
+    import dataclasses
+
+    c = _Checker(f"{cfg.source} (command line)")
+    labels = {s.label for s in cfg.solvers}
+    fixed: dict[str, Any] = {}
+    axes: dict[str, tuple[Any, ...]] = {}
+    replicates = None
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key or not text.strip():
+            raise c.fail(repr(item), "expected key=value or key=v1,v2 (e.g. solver.ekf.gate_prob=0.9,0.99)")
+        if key in ("replicates", "seed"):
+            raw = text.strip()
+            vals = _override_values(raw)
+            replicates = c.replicates(raw if raw.startswith("range(") else list(vals) if len(vals) > 1 else vals[0],
+                                      key)
+            continue
+        c.sweep_key(key, "override", labels)
+        if key in fixed or key in axes:
+            raise c.fail(key, "given twice on the command line")
+        values = _override_values(text)
+        if len(values) == 1:
+            fixed[key] = values[0]
+        elif any(key == k for g in cfg.sweep.zips for k, _ in g):
+            raise c.fail(key, "is a zipped axis of the file: give one value, or edit the file's [sweep.zip]")
+        else:
+            axes[key] = values
+    probe = dataclasses.replace(cfg, source=c.source, scenario_params={}, evaluate={}, quick={},
+                                solvers=tuple(dataclasses.replace(s, params={}) for s in cfg.solvers),
+                                sweep=SweepSpec(grid=tuple({**{k: (v,) for k, v in fixed.items()}, **axes}.items())))
+    try:
+        check_keys(probe, known)
+    except ConfigError as exc:  # name the override as typed, not the probe's sweep.grid table
+        raise ConfigError(re.sub(r"sweep\.grid '([^']+)'", r"\1", str(exc))) from None
+    out = apply_fixed(cfg, fixed, replicates=replicates)
+    grid = [(k, axes.pop(k) if k in axes else v) for k, v in out.sweep.grid] + list(axes.items())
+    return dataclasses.replace(out, sweep=dataclasses.replace(out.sweep, grid=tuple(grid)))
