@@ -333,13 +333,14 @@ def locate(name: str) -> Path:
 
 
 def resolve_source(arg: str | os.PathLike, importer: str) -> Path:
-    """An importer's input given as a path or a dataset name: an existing path is used as it is; otherwise a
-    registered name of this importer is located (:func:`locate`)."""
+    """An importer's input given as a path or a dataset name: an existing path, or anything that looks like a
+    path (a folder separator or a file suffix), is used as it is (the importer names a missing file); otherwise
+    a registered name of this importer is located (:func:`locate`)."""
     p = Path(arg)
-    if p.exists():
+    name = str(arg)
+    if p.exists() or os.sep in name or "/" in name or p.suffix:
         return p
     reg = registry()
-    name = str(arg)
     if name not in reg:
         raise DatasetImportError(f"{arg}: no such file or folder, and not a dataset name "
                                  f"(`slamcli datasets list` shows them)")
