@@ -93,6 +93,9 @@ def test_fetch_checks_sha256_and_import_by_name_equals_import_by_path(env):
         assert _sha(folder / n) == _sha(VP / n)
     assert _run("datasets", "path", "vp-test").stdout.strip() == str(folder)
     assert "vp-test" in _run("datasets", "list").stdout.split("fetched")[0].splitlines()[-1]
+    info = _run("datasets", "info", "vp-test").stdout
+    assert f"file: ascii/gps.dat <- {(VP / 'gps.dat').as_uri()} (sha256 {_sha(VP / 'gps.dat')})" in info
+    assert f"here: {folder} (fetched)" in info
     a = _run("import", "victoria-park", "vp-test", "--duration", "5", "-q", "-o", env / "a.h5")
     b = _run("import", "victoria-park", VP, "--duration", "5", "-q", "-o", env / "b.h5")
     assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from slamcli.cli import app
 from slamcli.sweep.reproduce import Reproduction
 
-EXPERIMENTS = Path(__file__).resolve().parents[1] / "slamcli" / "experiments"
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"  # the shipped files (a wheel: copies in the package)
 
 
 def _table_rows(report: str, section: str) -> dict[str, list[str]]:

@@ -111,14 +111,12 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
         summary["n_edges"] = int(len(poses) - 1 + n_between + n_sightings)
         summary["n_loop_closures"] = int(n_between)
         if fmt == "g2o" and n_sightings:
-            summary["warning"] = (f"GTSAM's readG2o skips the {n_sightings} EDGE_SE2_XY landmark edges; "
-                                  "--format gtsam writes them as BR lines it reads")
+            summary["warning"] = f"GTSAM's readG2o skips the {n_sightings} EDGE_SE2_XY lines: use --format gtsam"
         elif fmt == "gtsam" and written[1]:
-            summary["warning"] = (f"{written[1]} landmark edges lose their bearing-range correlation "
-                                  "(GTSAM's BR lines carry two σ's)")
+            summary["warning"] = f"{written[1]} BR lines drop a bearing-range correlation (BR has two σ)"
         if np.any(np.asarray(inp.sensor_offset_xy) != 0) and n_sightings:
-            summary["warning"] = "; ".join(x for x in (summary.get("warning"), "landmark edges are from the body "
-                                                       "pose: the sensor offset is not in the file") if x)
+            summary["warning"] = "; ".join(x for x in (summary.get("warning"),
+                                                       "sensor offset not in the file (edges from the body pose)") if x)
     return summary
 
 
