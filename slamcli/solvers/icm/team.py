@@ -86,7 +86,7 @@ def team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels) -> 
 
 def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progress=None) -> SolverResult:
     """ICM on a multi-robot dataset (module docstring); ``solver`` is the :class:`IcmSlam` instance."""
-    from slamcli.datasets.team import solo_inputs
+    from slamcli.types import solo_inputs
     from slamcli.solvers.icm.solver import online_init, reported_labels, stop_decision
 
     t_start = time.perf_counter()
