@@ -14,7 +14,6 @@ pytest.importorskip("slamcli.solvers.cuik.contractors")  # loads codac after h5p
 
 from slamcli.api.solve import solve_dataset
 from slamcli.metrics import sets
-from slamcli.sim.simulate import simulate_scenario
 from slamcli.reproduce.paper004 import (
     PAPER_SET,
     corrupt_loop_closure,
@@ -24,6 +23,7 @@ from slamcli.reproduce.paper004 import (
     table1_widths,
     with_true_association,
 )
+from slamcli.sim.simulate import simulate_scenario
 from slamcli.types import Status
 
 

@@ -13,10 +13,10 @@ import pytest
 from test_ackermann_solvers import car_world
 from typer.testing import CliRunner
 
+from slamcli.api.calibrate import observation_noise, robust_std, scan_pair_residuals
 from slamcli.api.solve import solve_dataset
 from slamcli.cli import app
 from slamcli.datasets import carpark, victoria_park
-from slamcli.api.calibrate import observation_noise, robust_std, scan_pair_residuals
 from slamcli.io import read_dataset
 from slamcli.metrics.reference import mean_nis_band
 from slamcli.solvers.sensor_frame import to_sensor_frame

@@ -706,8 +706,8 @@ class Reproduction:
         from slamcli.api.solve import make_solver
         from slamcli.io import atomic_path
         from slamcli.metrics.summary import EvaluationParams, evaluate_result
-        from slamcli.sim import simulate_scenario
         from slamcli.reproduce import outcomes as oc
+        from slamcli.sim import simulate_scenario
 
         sec = Section("postprocess", "ICM as a post-processor of other solvers' results")
         cfg = self.POSTPROCESS_QUICK if self.quick else self.POSTPROCESS_FULL
