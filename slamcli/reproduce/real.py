@@ -343,7 +343,7 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
         source = f"the public recordings {how} of `slamcli datasets`"
     lines = ["## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)", "",
              f"Data: {source}. Every solver registered runs with the parameters listed; a solver that cannot "
-             "run a recording refuses in one line, shown in the table. Implementation: `slamcli/sweep/paper_real.py`."]
+             "run a recording refuses in one line, shown in the table. Implementation: `slamcli/reproduce/real.py`."]
     ok = True
 
     # --- Victoria Park ------------------------------------------------------------------------------------
