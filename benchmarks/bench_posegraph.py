@@ -18,14 +18,14 @@ gtsam_lm_s`` (goal ≤ 1.5), iterations. ISAM2 runs one batch update with every 
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parent.parent.parent.parent / "shared" / "datasets" / "pose_graphs"
-if not DATA.is_dir():  # a clone outside /work/clones
-    DATA = Path("/work/shared/datasets/pose_graphs")
+DATA = Path(os.environ.get("SLAMCLI_POSE_GRAPHS", Path(__file__).resolve().parents[3] / "shared" / "datasets"
+                           / "pose_graphs"))  # the shared datasets beside the clones, or $SLAMCLI_POSE_GRAPHS
 NAMES = ("intel", "MIT", "CSAIL", "manhattan", "city10000", "kitti_00")
 QUICK = ("MIT", "intel")
 TOL = 1e-10
