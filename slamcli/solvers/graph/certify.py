@@ -37,7 +37,7 @@ from slamcli.models.angles import wrap_angle
 #: η of the certificate relative to the largest diagonal entry of S (the scale of the problem's weights)
 ETA_REL = 1e-9
 #: Gauss-Newton refinement on F: stop at a relative cost decrease below this, or after REFINE_MAX_ITERS
-REFINE_REL_TOL = 1e-15
+REFINE_REL_TOL = 1e-13
 REFINE_MAX_ITERS = 60
 #: dense eigenvalues below this size of S; Lanczos restarts of the uncertified λ_min
 DENSE_EIG_MAX = 600
@@ -144,13 +144,14 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     r, J = _residuals(x, ij, xyt, kappa, tau)
     cost = float(r @ r)
     free = np.arange(3, 3 * x.shape[0])
+    solve = _spd_solver()
     for _ in range(REFINE_MAX_ITERS):
         Jf = J[:, free].tocsc()
         H = (Jf.T @ Jf).tocsc()
         g = Jf.T @ r
         try:
-            h = spla.spsolve(H, -g)
-        except RuntimeError:
+            h = solve(H, -g)
+        except (RuntimeError, np.linalg.LinAlgError):
             break
         if not np.all(np.isfinite(h)):
             break
@@ -172,6 +173,29 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
             break
     x[:, 2] = wrap_angle(x[:, 2])
     return x
+
+
+def _spd_solver():
+    """``solve(H, b)`` for the Gauss-Newton systems of :func:`refine_sesync`: CHOLMOD with its symbolic
+    analysis done once (the pattern of H is the same every iteration), else SuperLU in symmetric mode."""
+    try:
+        from sksparse.cholmod import CholmodError, analyze
+    except ImportError:
+        def superlu(H, b):
+            return spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                             options={"SymmetricMode": True}).solve(b)
+        return superlu
+    state: dict = {}
+
+    def cholmod(H, b):
+        try:
+            if "f" not in state:
+                state["f"] = analyze(H)
+            state["f"].cholesky_inplace(H)
+        except CholmodError as exc:
+            raise np.linalg.LinAlgError(str(exc)) from None
+        return state["f"](b)
+    return cholmod
 
 
 def data_matrix(n: int, ij, xyt, kappa, tau) -> sp.csc_matrix:
