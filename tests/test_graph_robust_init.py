@@ -173,3 +173,36 @@ def test_incremental_init_refuses_known_correspondences(victoria):
     inputs, _ = victoria  # the graph file's landmark ids are reported ids
     with pytest.raises(SolverError, match="init=incremental builds a nearest-neighbour association"):
         _solve(inputs, init="incremental")
+
+
+def test_stall_rule_on_hand_built_traces():
+    from slamcli.solvers.graph import solver as gs
+    from slamcli.solvers.graph.params import STALL_REL_DECREASE, STALL_WINDOW
+
+    class _Res:
+        status = Status.MAX_ITERATIONS
+
+    flat = gs._Run(assoc=np.zeros(0, np.int64), rounds=0, budget=1, paper_Q=None, res=_Res())
+    flat.objective = [100.0] * 5 + [50.0] + [50.0 * (1 - 0.1 * STALL_REL_DECREASE * k / STALL_WINDOW)
+                                              for k in range(1, STALL_WINDOW + 1)]
+    assert gs._stalled(flat)
+    falling = gs._Run(assoc=np.zeros(0, np.int64), rounds=0, budget=1, paper_Q=None, res=_Res())
+    falling.objective = [100.0 - k for k in range(STALL_WINDOW + 2)]  # still 10 % lower over the window
+    assert not gs._stalled(falling)
+    _Res.status = Status.CONVERGED
+    assert not gs._stalled(flat)  # converged runs are never re-solved
+
+
+def test_stalled_landmark_graph_is_re_solved_from_init_robust(victoria, monkeypatch):
+    """The restart wiring: a run judged stalled is re-solved from init=robust, the lower cost is kept and the
+    message says so; the result is the Gaussian optimum that the converged run from the chain reaches."""
+    from slamcli.solvers.graph import solver as gs
+
+    inputs, _ = victoria
+    reference = _solve(inputs, restart="off")  # converges from the chain (58 iterations)
+    monkeypatch.setattr(gs, "_stalled", lambda run: run.res.iterations < 20)  # cap the first run, judge it
+    capped = _solve(inputs, max_iterations=15)
+    assert capped.extra["restart"]["from"] == "robust" and "kept" not in capped.extra["restart"]
+    assert capped.extra["restart"]["first_cost"] > capped.extra["final_cost"]
+    assert "LM stalled at the iteration cap from the odometry start" in capped.message
+    assert capped.extra["final_cost"] == pytest.approx(reference.extra["final_cost"], rel=1e-9)

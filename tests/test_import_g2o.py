@@ -153,8 +153,16 @@ def test_noise_free_graph_is_recovered_exactly(tmp_path):
         ("EDGE_SE2 0 1.5 1 0 0 1 0 0 1 0 1\n", "toy.g2o:1: ids must be non-negative integers"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", "toy.g2o:1: matrix is not positive definite"),
         ("# only a comment\nVERTEX_SE2 0 0 0 0\n", "no odometry edges"),
-        ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 0 2 1 0 0 1 0 0 1 0 1\n",
-         "toy.g2o: no edge from pose 1 to pose 2 (the next pose id): the odometry chain is broken"),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 0 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n",
+         "toy.g2o:2: duplicate vertex id 0 (first declared at line 1)"),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_XY 0 1 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n",
+         "toy.g2o:2: duplicate vertex id 0"),
+        ("EDGE_SE2 0 9223372036854775808 1 0 0 1 0 0 1 0 1\n", "toy.g2o:1: id 9223372036854775808 ≥ 2^63"),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n",
+         "toy.g2o:4: edge to unknown pose vertex 2"),
+        ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2_XY 1 0 1 0 1 0 1\n", "toy.g2o:2: landmark id 0 is also a pose id"),
+        ("VERTEX_XY 5 1 1\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2_XY 1 6 1 0 1 0 1\n",
+         "toy.g2o:3: sighting of unknown landmark vertex 6"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 1 1 0 0 1 0 0 1 0 1\n", "toy.g2o:2: edge from pose 1 to itself"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nBR 1 5 0.1 2 0 0.1\n", "toy.g2o:2: BR needs σ_bearing > 0"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nBR 1 5 0.1 2 0.1 0.1\nEDGE_SE2_XY 0 5 1 0 1 0 1\n",
@@ -202,3 +210,60 @@ def test_cli_import_g2o_solve_and_evaluate_says_no_truth(tmp_path):
     res = runner.invoke(app, ["import", "g2o", str(tmp_path / "missing.g2o"), "-o", str(tmp_path / "x.h5")])
     assert res.exit_code == 1 and res.stderr.startswith("error: ") and "file not found" in res.stderr
     assert not (tmp_path / "x.h5").exists()
+
+
+def _graph_text(truth, edges, vertices=None):
+    """A g2o file with exact EDGE_SE2 measurements between ``truth`` poses along ``edges``."""
+    from slamcli.models import se2
+
+    lines = [f"VERTEX_SE2 {k} {v[0]:.17g} {v[1]:.17g} {v[2]:.17g}" for k, v in enumerate(vertices)] if vertices is not None else []
+    for i, j in edges:
+        d = se2.between(truth[i], truth[j])
+        lines.append(f"EDGE_SE2 {i} {j} {d[0]:.17g} {d[1]:.17g} {d[2]:.17g} 100 0 0 100 0 400")
+    return "\n".join(lines) + "\n"
+
+
+def _truth(n=10):
+    th = np.linspace(0.0, 1.5, n)
+    return np.column_stack([np.cumsum(np.cos(th)), np.cumsum(np.sin(th)), th])
+
+
+@pytest.mark.parametrize("with_vertices", [True, False])
+def test_any_connected_graph_imports_and_solves_to_the_truth(tmp_path, with_vertices):
+    """Two runs merged into one file: poses 0-4 and 5-9, no edge 4 → 5 but 0 → 5 and 2 → 7 tie them
+    (GTSAM and g2o read such graphs). Exact measurements: the optimum is the truth."""
+    truth = _truth()
+    edges = [(k, k + 1) for k in range(4)] + [(k, k + 1) for k in range(5, 9)] + [(0, 5), (2, 7)]
+    rng = np.random.default_rng(4)
+    verts = truth + rng.normal(scale=0.05, size=truth.shape) if with_vertices else None
+    f = tmp_path / "merged.g2o"
+    f.write_text(_graph_text(truth, edges, verts))
+    ds = import_graph(f)
+    assert ds.metadata["components"] == 1 and ds.metadata["virtual_odometry_steps"] == 1
+    assert "1 consecutive pose id pair(s) without an edge" in ds.metadata["import_note"]
+    assert ("vertices" in ds.metadata["init_source"]) == with_vertices
+    res = solve_dataset(ds.inputs, "graph", {"covariance": False})
+    from slamcli.models import se2
+
+    # the prior holds x_0 at the file's (perturbed) start vertex: compare the poses relative to x_0
+    np.testing.assert_allclose(se2.between(res.poses_xyt[[0] * 10], res.poses_xyt),
+                               se2.between(truth[[0] * 10], truth), atol=1e-6)
+
+
+def test_disconnected_graph_gets_one_prior_per_component(tmp_path):
+    truth = _truth()
+    edges = [(k, k + 1) for k in range(4)] + [(k, k + 1) for k in range(5, 9)]  # two runs, nothing between
+    f = tmp_path / "two.g2o"
+    f.write_text(_graph_text(truth, edges))
+    ds = import_graph(f)
+    md = ds.metadata
+    assert md["components"] == 2 and md["component_priors"] == [5]
+    assert "2 disconnected components, one prior per component (on poses 5)" in md["import_note"]
+    res = runner.invoke(app, ["import", "g2o", str(f), "-o", str(tmp_path / "two.h5")])
+    assert res.exit_code == 0 and res.stdout.count("one prior per component") == 1
+    sol = solve_dataset(ds.inputs, "graph", {"covariance": False})
+    from slamcli.models import se2
+
+    for a, b in [(0, 4), (5, 9), (6, 8)]:  # relative poses within each component are the truth's
+        np.testing.assert_allclose(se2.between(sol.poses_xyt[a], sol.poses_xyt[b]), se2.between(truth[a], truth[b]),
+                                   atol=1e-6)

@@ -260,7 +260,8 @@ def import_g2o_command(
             f"{path.name}: {inp.n_poses} poses, {md['n_loop_closures']} loop closures, {md['n_landmarks']} "
             f"landmarks, {len(inp.observations)} observations, "
             f"forward axis {md['forward_axis']}; median σ odometry {[round(float(s), 5) for s in n.odometry_std]}, "
-            f"range {n.range_std:.4g} m, bearing {n.bearing_std:.4g} rad; no ground truth → {out}",
+            f"range {n.range_std:.4g} m, bearing {n.bearing_std:.4g} rad; no ground truth → {out}"
+            + (f"\n  note: {md['import_note']}" if md.get("import_note") else ""),
             highlight=False,
             markup=False,
             soft_wrap=True,

@@ -127,6 +127,12 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
         rows.append(("χ² outliers 95/99 %", "; ".join(
             f"{name} {d.get('over_95')}/{d.get('over_99')} of {d.get('factors')}" for name, d in outliers.items()
             if isinstance(d, dict))))
+    cert = res.extra.get("certificate")
+    if isinstance(cert, dict) and "certified" in cert:
+        verdict = "certified global optimum" if cert["certified"] else "NOT certified"
+        rows.append(("optimality certificate", f"{verdict} (SE-Sync dual: λ_min(S) = {cert.get('lambda_min', float('nan')):.3g},"
+                     f" η = {cert.get('eta', float('nan')):.3g}, suboptimality bound "
+                     f"{cert.get('suboptimality_bound', float('nan')):.3g})"))
     extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path", "chi2_outliers")}
     params = _flatten({"params": res.params, "extra": extra})
     return rows, params

@@ -28,8 +28,11 @@ C23 C33``                                    its loader detects for victoria_par
 Conversion
 ----------
 * **Pose order** – pose ids are the ids used by pose-pose edges, in ascending order; pose ``p_k`` becomes step
-  ``k``. The first edge (file order) from ``p_k`` to ``p_{k+1}`` is the odometry of step ``k`` (every public
-  benchmark numbers its poses along the trajectory); a missing one is an error naming the pair.
+  ``k`` (pose ids: those of the pose vertices and of the pose-pose edges). The first edge (file order) from
+  ``p_k`` to ``p_{k+1}`` is the odometry of step ``k`` (every public benchmark numbers its poses along the
+  trajectory). Any graph imports: where that edge is missing the step is completed from the initial estimate
+  (vertices, or a spanning tree) with a near-zero information, and each further disconnected component gets
+  one prior (:func:`_chain`); the import says so in one line (``metadata["import_note"]``).
 * **Loop closures** – every other pose-pose edge (any two poses, either direction, duplicates too) becomes a
   between-factor of ``inputs.constraints`` (``/inputs/constraints`` in the schema) with its own measurement
   and information matrix. ``max_poses = N`` keeps the first N poses and the edges and sightings among them.
@@ -69,6 +72,7 @@ from typing import Literal
 import numpy as np
 
 from slamcli.datasets import DatasetImportError
+from slamcli.models import se2
 from slamcli.models.angles import wrap_angle
 from slamcli.models.motion import chain_increments
 from slamcli.types import Dataset, NoiseSpec, Observations, PoseConstraints, SlamInputs
@@ -126,7 +130,9 @@ def read_graph(path: str | Path) -> dict:
     Raises
     ------
     DatasetImportError  missing file, unknown tag, wrong field count, non-numeric/non-finite value, non-integer
-        id, a matrix that is not positive definite, a BR σ ≤ 0 (names the line).
+        id or one ≥ 2^63, a duplicate vertex id, an edge to a vertex the file does not declare (when it declares
+        vertices of that kind; for poses more than the start pose's), a landmark id equal to a pose id, a matrix that is not positive definite, a BR
+        σ ≤ 0 (each names file:line).
     """
     path = Path(path)
     if not path.is_file():
@@ -135,6 +141,8 @@ def read_graph(path: str | Path) -> dict:
     pose_edges: list = []
     landmark_obs: list = []
     n_lm_vertices = 0
+    vertex_line: dict[int, int] = {}  # id → line of its VERTEX_* declaration
+    lm_vertices: set[int] = set()
     with open(path, encoding="utf-8", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             s = line.strip()
@@ -157,13 +165,17 @@ def read_graph(path: str | Path) -> dict:
             if not all(math.isfinite(v) for v in vals):
                 raise DatasetImportError(f"{where}: non-finite value")
             n_ids = 1 if tag.startswith("VERTEX") else 2
-            if any(v != int(v) or v < 0 for v in vals[:n_ids]):
-                raise DatasetImportError(f"{where}: ids must be non-negative integers")
-            ids = [int(v) for v in vals[:n_ids]]
+            ids = _ids(parts[:n_ids], vals[:n_ids], where)
+            if tag.startswith("VERTEX"):
+                first = vertex_line.get(ids[0])
+                if first is not None:
+                    raise DatasetImportError(f"{where}: duplicate vertex id {ids[0]} (first declared at line {first})")
+                vertex_line[ids[0]] = lineno
             if tag in ("VERTEX_SE2", "VERTEX2"):
                 vertices[ids[0]] = tuple(vals[1:4])
             elif tag == "VERTEX_XY":
                 n_lm_vertices += 1
+                lm_vertices.add(ids[0])
             elif tag in _POSE_EDGES:
                 if ids[0] == ids[1]:
                     raise DatasetImportError(f"{where}: edge from pose {ids[0]} to itself")
@@ -186,6 +198,7 @@ def read_graph(path: str | Path) -> dict:
                 _check_pd(m, where)
                 cov, info = (m, np.linalg.inv(m)) if tag == "LANDMARK" else (np.linalg.inv(m), m)
                 landmark_obs.append((ids[0], ids[1], np.array(vals[2:4]), cov, info, lineno, "xy"))
+    _check_references(path, vertices, lm_vertices, pose_edges, landmark_obs)
     return {
         "vertices": vertices,
         "pose_edges": pose_edges,
@@ -194,6 +207,53 @@ def read_graph(path: str | Path) -> dict:
         "landmark_obs": [(o[0], o[1], o[2], o[3], o[5]) for o in landmark_obs],
         "n_landmark_vertices": n_lm_vertices,
     }
+
+
+#: ids are stored as signed 64-bit integers (HDF5, numpy int64)
+MAX_ID = 2**63 - 1
+
+
+def _ids(texts: list[str], vals: list[float], where: str) -> list[int]:
+    """Exact non-negative integer ids of a line (parsed from the text, not through a float)."""
+    out = []
+    for s, v in zip(texts, vals):
+        try:
+            i = int(s)
+        except ValueError:
+            if v != int(v):
+                raise DatasetImportError(f"{where}: ids must be non-negative integers") from None
+            i = int(v)
+        if i < 0:
+            raise DatasetImportError(f"{where}: ids must be non-negative integers")
+        if i > MAX_ID:
+            raise DatasetImportError(f"{where}: id {s} ≥ 2^63 does not fit a 64-bit signed integer")
+        out.append(i)
+    return out
+
+
+def _check_references(path: Path, vertices: dict, lm_vertices: set, pose_edges: list, sightings: list) -> None:
+    """Refuse an edge to an undeclared vertex (when the file declares vertices of that kind — for poses, more
+    than one: a single VERTEX_SE2 only gives the start pose) and a landmark id that is also a pose id, naming
+    file:line of the first offending edge."""
+    if len(vertices) > 1:
+        for e in pose_edges:
+            for v in (e[0], e[1]):
+                if v not in vertices:
+                    raise DatasetImportError(f"{path}:{e[5]}: edge to unknown pose vertex {v} (no VERTEX_SE2 {v})")
+        for o in sightings:
+            if o[0] not in vertices:
+                raise DatasetImportError(f"{path}:{o[5]}: sighting from unknown pose vertex {o[0]}")
+    if lm_vertices:
+        for o in sightings:
+            if o[1] not in lm_vertices:
+                raise DatasetImportError(f"{path}:{o[5]}: sighting of unknown landmark vertex {o[1]} (no VERTEX_XY)")
+    pose_ids = set(vertices) | {e[0] for e in pose_edges} | {e[1] for e in pose_edges}
+    for o in sightings:
+        if o[1] in pose_ids:
+            raise DatasetImportError(f"{path}:{o[5]}: landmark id {o[1]} is also a pose id")
+    clash = sorted(lm_vertices & pose_ids)
+    if clash:
+        raise DatasetImportError(f"{path}: landmark vertex id {clash[0]} is also a pose id")
 
 
 def _is_float(p: str) -> bool:
@@ -210,21 +270,98 @@ def _check_pd(m: np.ndarray, where: str) -> np.ndarray:
     return m
 
 
-def _split_chain(pose_edges: list, pose_ids: list[int], path: Path) -> tuple[list, list]:
-    """The odometry edge ``p_k → p_{k+1}`` of every step (first in file order) and all other edges."""
+#: information of an odometry step the file has no edge for, relative to the median information of the file's
+#: edges: such a step only completes the chain t → t+1 that slamcli's datasets carry; at ε its pull on the
+#: optimum is ½ ε ‖e‖² (e = how far the optimum moves that relative pose from its initial estimate)
+VIRTUAL_INFO_REL = 1e-9
+
+
+def _chain(pose_edges: list, pose_ids: list[int], vertices: dict) -> tuple[list, list, dict]:
+    """The odometry step ``p_k → p_{k+1}`` of every step and all other edges, for any pose graph.
+
+    A step is the first edge (file order) from ``p_k`` to ``p_{k+1}``. Where the file has none (a graph
+    merged from several runs, a trajectory that restarts), the step is *virtual*: its measurement is the
+    relative pose of the initial estimate (the file's vertices, or a breadth-first spanning tree of the edges
+    from the first pose of each connected component) and its information ``VIRTUAL_INFO_REL`` × the median
+    edge information — except the first step into each further connected component, which is that
+    component's one prior: the median information, relative to poses already anchored. A prior that links
+    otherwise disconnected components is satisfied exactly at the optimum (nothing else constrains the
+    relative placement), so it fixes the gauge without moving any estimate.
+
+    Returns
+    -------
+    chain : list of ``(i, j, d (3,), cov (3,3), info (3,3), line)``, ``line = None`` for a virtual step;
+    others : the remaining edges;  layout : metadata (components, virtual steps, init source, one-line note).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    step_of = {pid: k for k, pid in enumerate(pose_ids)}
+    n = len(pose_ids)
     first: dict[tuple[int, int], int] = {}
-    for n, e in enumerate(pose_edges):
-        first.setdefault((e[0], e[1]), n)
-    chain_idx = []
-    for a, b in zip(pose_ids[:-1], pose_ids[1:]):
-        n = first.get((a, b))
-        if n is None:
-            raise DatasetImportError(
-                f"{path}: no edge from pose {a} to pose {b} (the next pose id): the odometry chain is broken"
-            )
-        chain_idx.append(n)
-    used = set(chain_idx)
-    return [pose_edges[n] for n in chain_idx], [e for n, e in enumerate(pose_edges) if n not in used]
+    for m, e in enumerate(pose_edges):
+        first.setdefault((e[0], e[1]), m)
+    ij = np.array([[step_of[e[0]], step_of[e[1]]] for e in pose_edges], np.int64).reshape(-1, 2)
+    _, comp = connected_components(coo_matrix((np.ones(len(ij)), (ij[:, 0], ij[:, 1])), shape=(n, n)), directed=False)
+    missing = [k for k, (a, b) in enumerate(zip(pose_ids[:-1], pose_ids[1:])) if (a, b) not in first]
+    layout = {"components": int(comp.max(initial=0) + 1), "virtual_odometry_steps": len(missing)}
+    if not missing:
+        idx = [first[(a, b)] for a, b in zip(pose_ids[:-1], pose_ids[1:])]
+        used = set(idx)
+        return [pose_edges[m] for m in idx], [e for m, e in enumerate(pose_edges) if m not in used], layout
+    from_vertices = all(pid in vertices for pid in pose_ids)
+    init = (np.array([vertices[pid] for pid in pose_ids], float) if from_vertices
+            else _spanning_tree_estimate(n, ij, np.array([e[2] for e in pose_edges]).reshape(-1, 3), comp))
+    med = np.median(np.array([e[4] for e in pose_edges]), axis=0)
+    med = 0.5 * (med + med.T) if np.all(np.linalg.eigvalsh(0.5 * (med + med.T)) > 0) else np.eye(3)
+    seen = {int(comp[0])}
+    chain, used, priors = [], set(), []
+    for k, (a, b) in enumerate(zip(pose_ids[:-1], pose_ids[1:])):
+        m = first.get((a, b))
+        if m is not None:
+            chain.append(pose_edges[m])
+            used.add(m)
+            continue
+        new_component = int(comp[k + 1]) not in seen
+        seen.add(int(comp[k + 1]))
+        info = med if new_component else VIRTUAL_INFO_REL * med
+        if new_component:
+            priors.append(b)
+        chain.append((a, b, se2.between(init[k], init[k + 1]), np.linalg.inv(info), info, None))
+    source = "the file's vertices" if from_vertices else "a spanning tree of the edges"
+    layout.update(init_source=source, component_priors=[int(b) for b in priors])
+    layout["import_note"] = (
+        f"{len(missing)} consecutive pose id pair(s) without an edge: chain completed from {source}"
+        + (f"; {layout['components']} disconnected components, one prior per component (on poses "
+           f"{', '.join(map(str, priors[:5]))}{', …' if len(priors) > 5 else ''})" if priors else "")
+    )
+    return chain, [e for m, e in enumerate(pose_edges) if m not in used], layout
+
+
+def _spanning_tree_estimate(n: int, ij: np.ndarray, d: np.ndarray, comp: np.ndarray) -> np.ndarray:
+    """Poses ``(n, 3)`` composed along a breadth-first spanning tree of the edges ``ij (E, 2)`` with
+    measurements ``d (E, 3)`` (``x_j = x_i ⊕ d``), from the origin at the first pose of each component."""
+    adj: list[list[tuple[int, int, bool]]] = [[] for _ in range(n)]
+    for e, (i, j) in enumerate(ij.tolist()):
+        adj[i].append((j, e, True))
+        adj[j].append((i, e, False))
+    poses = np.zeros((n, 3))
+    done = np.zeros(n, bool)
+    for root in range(n):
+        if done[root]:
+            continue
+        done[root] = True
+        queue = [root]
+        while queue:
+            u = queue.pop(0)
+            for v, e, forward in adj[u]:
+                if done[v]:
+                    continue
+                step = d[e] if forward else se2.inverse(d[e])
+                poses[v] = se2.compose(poses[u], step)
+                done[v] = True
+                queue.append(v)
+    return poses
 
 
 def import_graph(
@@ -257,19 +394,20 @@ def import_graph(
     edges = g["pose_edges"]
     if not edges:
         raise DatasetImportError(f"{path}: no odometry edges (EDGE_SE2, EDGE2 or ODOMETRY)")
-    pose_ids = sorted({e[0] for e in edges} | {e[1] for e in edges})
+    pose_ids = sorted({e[0] for e in edges} | {e[1] for e in edges} | set(g["vertices"]))
     n_poses_file = len(pose_ids)
     if max_poses is not None and max_poses < len(pose_ids):
         pose_ids = pose_ids[:max_poses]
         keep = set(pose_ids)
         edges = [e for e in edges if e[0] in keep and e[1] in keep]
     step_of = {pid: k for k, pid in enumerate(pose_ids)}
-    chain, others = _split_chain(edges, pose_ids, path)
+    chain, others, layout = _chain(edges, pose_ids, g["vertices"])
     T = len(chain)
+    real = np.array([e[5] is not None for e in chain], bool)  # steps with an edge of the file
 
     d_file = np.array([e[2] for e in chain])  # (T, 3) in the file's body axes
     if forward == "auto":
-        total = d_file[:, :2].sum(axis=0)
+        total = d_file[real, :2].sum(axis=0)
         ax = int(np.argmax(np.abs(total)))
         forward = ("" if total[ax] >= 0 else "-") + "xy"[ax]
     phi = _FORWARD_ANGLE[forward]
@@ -303,7 +441,7 @@ def import_graph(
         obs_rows = [r for r in obs_rows if r[0] in step_of]
     obs, info, sr, sb, obs_model, lm_ids = _sightings(path, obs_rows, step_of, R, T)
 
-    s_inc = np.sqrt(np.diagonal(cov_inc, axis1=1, axis2=2))  # (T, 3)
+    s_inc = np.sqrt(np.diagonal(cov_inc, axis1=1, axis2=2))[real]  # (T', 3), the file's own steps
     odo_std = np.median(s_inc, axis=0)
     noise = NoiseSpec(
         motion_std=np.array([odo_std[0], odo_std[2]]) / dt,
@@ -337,6 +475,7 @@ def import_graph(
 
     metadata = _metadata(path, dt, forward, max_poses, obs_model, T, n_poses_file, lm_ids, between_ij, pose_ids,
                          s_inc, sr, sb)
+    metadata.update(layout)
     return Dataset(inputs=inputs, truth=None, metadata=metadata)
 
 

@@ -38,6 +38,7 @@ from slamcli.solvers.graph.build import (  # noqa: F401
     located,
     pack_state,
 )
+from slamcli.solvers.graph.certify import Certificate, certify_pose_graph  # noqa: F401
 from slamcli.solvers.graph.factors import (  # noqa: F401
     bearing_range_error,
     between_error,

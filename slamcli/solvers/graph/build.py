@@ -78,19 +78,53 @@ def build_gtsam_problem(
     params = params or GraphParams()
     n_poses = inputs.n_poses
     L = int(np.asarray(init_landmarks).reshape(-1, 2).shape[0])
-    pc = np.arange(3 * n_poses, dtype=np.int64).reshape(-1, 3)
-    lc = 3 * n_poses + np.arange(2 * L, dtype=np.int64).reshape(-1, 2)
     P = 3 * n_poses
+    lay = _Layout(
+        pc=np.arange(P, dtype=np.int64).reshape(-1, 3),
+        lc=P + np.arange(2 * L, dtype=np.int64).reshape(-1, 2),
+        P=P,
+        L=L,
+        bias_col=P + 2 * L if params.estimate_range_bias else None,
+    )
+    cons = inputs.constraints if params.edge_info else None
+    blocks = _pose_blocks(inputs, params, lay, cons)
+    obs_blocks, n_rows = _observation_blocks(inputs, np.asarray(assoc, np.int64), params, lay, cons)
+    blocks += obs_blocks + _team_and_gps_blocks(inputs, params, lay)
+    n_vars = P + 2 * L + (lay.bias_col is not None)
+    if lay.bias_col is not None and not n_rows:
+        raise SolverError("graph: estimate_range_bias needs associated observations")
+    problem = nls.NlsProblem(
+        n_vars=n_vars, blocks=blocks, angle_cols=lay.pc[:, 2].copy(), chain=(n_poses, 3), se2_poses=n_poses
+    )
+    x0 = pack_state(init_poses, init_landmarks)
+    if lay.bias_col is not None:
+        x0 = np.concatenate([x0, [0.0]])
+    return GraphProblem(problem, x0, n_poses, L, lay.bias_col)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """State layout of :func:`build_gtsam_problem`: pose columns ``pc (T+1, 3)``, landmark columns
+    ``lc (L, 2)``, ``P = 3 (T+1)``, the range-bias column (or None)."""
+
+    pc: np.ndarray
+    lc: np.ndarray
+    P: int
+    L: int
+    bias_col: int | None
+
+    def poses_of(self, x):
+        return x[: self.P].reshape(-1, 3)
+
+    def lms_of(self, x):
+        return x[self.P : self.P + 2 * self.L].reshape(-1, 2)
+
+
+def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) -> list:
+    """Prior(s), odometry, loop closures and (optional) motion factors."""
+    pc, poses_of = lay.pc, lay.poses_of
+    n_poses = inputs.n_poses
     blocks: list[nls.FactorBlock] = []
-
-    def poses_of(x):
-        return x[:P].reshape(-1, 3)
-
-    def lms_of(x):
-        return x[P : P + 2 * L].reshape(-1, 2)
-
-    bias_col = P + 2 * L if params.estimate_range_bias else None
-
     team = inputs.robots
     # one prior per robot (its known start pose); a single robot: x_0. The odometry chain stays in one robot.
     first = np.zeros(1, np.int64) if team is None else team.first_pose[:-1]
@@ -118,7 +152,6 @@ def build_gtsam_problem(
         cols = np.concatenate([pc[chain], pc[chain + 1]], axis=1)
         return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info)
 
-    cons = inputs.constraints if params.edge_info else None
     if n_poses > 1 and params.use_odometry:
         d = motion.odometry_increments(inputs.odometry_xyt)
         odo_L = None
@@ -152,9 +185,15 @@ def build_gtsam_problem(
         sv, sw = inputs.noise.motion_std
         cov = np.diag([(sv * dt) ** 2, params.motion_lateral_std**2, (sw * dt) ** 2])
         blocks.append(between_block("motion", d, cov))
+    return blocks
 
+
+def _observation_blocks(inputs: SlamInputs, assoc: np.ndarray, params: GraphParams, lay: _Layout, cons):
+    """Landmark sightings labelled by ``assoc``: per-row information (lossless imports) or the NoiseSpec
+    bearing-range model; returns ``(blocks, number of associated rows)``."""
+    pc, lc, poses_of, lms_of, bias_col, L = lay.pc, lay.lc, lay.poses_of, lay.lms_of, lay.bias_col, lay.L
+    blocks: list[nls.FactorBlock] = []
     obs = inputs.observations
-    assoc = np.asarray(assoc, np.int64)
     rows = np.flatnonzero(assoc >= 0)
     obs_info = cons.observation_info if cons is not None else None
     if rows.size and obs_info is not None:
@@ -208,7 +247,14 @@ def build_gtsam_problem(
                 "bearing_range", cols, ev_obs, sqrt_info_from_cov(inputs.noise.obs_cov), robust=True
             )
         )
+    return blocks, int(rows.size)
 
+
+def _team_and_gps_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout) -> list:
+    """Inter-robot range-bearing factors (multi-robot datasets) and GPS position factors."""
+    pc, poses_of = lay.pc, lay.poses_of
+    team = inputs.robots
+    blocks: list[nls.FactorBlock] = []
     if team is not None and len(team.range_m):
         ri, rj, rz = np.asarray(team.observer_pose), np.asarray(team.observed_pose), team.z
 
@@ -231,17 +277,7 @@ def build_gtsam_problem(
             return e, J
 
         blocks.append(nls.FactorBlock("gps", pc[gsteps], ev_gps, np.eye(2) / inputs.gps_std, robust=True))
-
-    n_vars = P + 2 * L + (bias_col is not None)
-    if bias_col is not None and not rows.size:
-        raise SolverError("graph: estimate_range_bias needs associated observations")
-    problem = nls.NlsProblem(
-        n_vars=n_vars, blocks=blocks, angle_cols=pc[:, 2].copy(), chain=(n_poses, 3), se2_poses=n_poses
-    )
-    x0 = pack_state(init_poses, init_landmarks)
-    if bias_col is not None:
-        x0 = np.concatenate([x0, [0.0]])
-    return GraphProblem(problem, x0, n_poses, L, bias_col)
+    return blocks
 
 
 def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.ndarray]:

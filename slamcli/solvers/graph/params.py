@@ -116,6 +116,16 @@ class GraphParams:
         Initial poses: chained odometry increments from x_0 (default) or the ``--init`` result's poses.
     covariance : bool
         Compute Laplace marginal covariances (default True).
+    certify : bool
+        Pose graphs (no landmarks, ``model=gtsam``, no kernel, single robot): test global optimality with the
+        SE-Sync Lagrangian-dual certificate (:mod:`slamcli.solvers.graph.certify`) and report it in
+        ``extra["certificate"]`` (default True).
+    restart : "auto" | "off"
+        ``auto`` (default): a pose-graph solve from the odometry (or spanning-tree) start that is not
+        certified is solved again from the chordal relaxation, and the lower cost is kept; a landmark-graph
+        solve that stalls (iteration cap reached with a relative decrease below ``STALL_REL_DECREASE`` over
+        its last ``STALL_WINDOW`` iterations) is solved again from ``init=robust``. Both are said in
+        ``extra["restart"]`` and the message.
     """
 
     model: Literal["gtsam", "paper"] = "gtsam"
@@ -153,6 +163,8 @@ class GraphParams:
     paper_Q: tuple[tuple[float, ...], ...] | None = None
     init_from: Literal["odometry", "init"] = "odometry"
     covariance: bool = True
+    certify: bool = True
+    restart: Literal["auto", "off"] = "auto"
 
     def __post_init__(self) -> None:
         if self.max_iterations < 1:
@@ -194,6 +206,12 @@ class GraphParams:
     def kernel_scale(self, kernel: str) -> float:
         """The scale parameter of ``kernel`` (``huber_k``, ``cauchy_k`` or ``geman_mcclure_c``)."""
         return {"cauchy": self.cauchy_k, "geman_mcclure": self.geman_mcclure_c}.get(kernel, self.huber_k)
+
+
+#: a landmark-graph LM run "stalls" when it reaches max_iterations and its cost fell by less than this
+#: fraction over its last STALL_WINDOW iterations (GraphParams.restart)
+STALL_REL_DECREASE = 1e-3
+STALL_WINDOW = 10
 
 
 def resolve_robust(robust: str, association: str, id_source: str = "unknown") -> str:

@@ -4,6 +4,7 @@ merges → marginals).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -13,16 +14,50 @@ from slamcli.errors import SolverError
 from slamcli.solvers import frontend, nls
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.graph.build import GraphProblem, build_gtsam_problem, laplace_marginals
+from slamcli.solvers.graph.certify import certify_pose_graph
 from slamcli.solvers.graph.init import (
     incremental_initial_poses,
     initial_poses,
     nearest_neighbour_association,
+    pose_graph_edges,
     robust_initial_poses,
 )
 from slamcli.solvers.graph.merge import merge_candidates
 from slamcli.solvers.graph.paper import build_paper_problem, default_paper_weights
-from slamcli.solvers.graph.params import GraphParams, resolve_robust
+from slamcli.solvers.graph.params import STALL_REL_DECREASE, STALL_WINDOW, GraphParams, resolve_robust
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
+
+
+def chi2_cdf(x: float, k: int) -> float:
+    """χ² distribution function with ``k ≥ 1`` (integer) degrees of freedom: the regularised lower incomplete
+    gamma ``P(k/2, x/2)``, from ``P(1/2, y) = erf(√y)``, ``P(1, y) = 1 − e^{−y}`` and the recurrence
+    ``P(a+1, y) = P(a, y) − yᵃ e^{−y} / Γ(a+1)`` (closed forms: no scipy.stats / scipy.special import, which
+    costs ≈ 1 s of start-up per solve)."""
+    if x <= 0.0:
+        return 0.0
+    y = 0.5 * x
+    a = 0.5 if k % 2 else 1.0
+    P = math.erf(math.sqrt(y)) if k % 2 else -math.expm1(-y)
+    while a < 0.5 * k:
+        P -= math.exp(a * math.log(y) - y - math.lgamma(a + 1.0))
+        a += 1.0
+    return min(max(P, 0.0), 1.0)
+
+
+def chi2_quantile(p: float, k: int) -> float:
+    """``x`` with ``chi2_cdf(x, k) = p`` (0 < p < 1) by bisection to ``CHI2_QUANTILE_RTOL`` (the CDF is
+    monotone; the bracket doubles until it holds ``p``)."""
+    lo, hi = 0.0, max(1.0, float(k))
+    while chi2_cdf(hi, k) < p:
+        lo, hi = hi, 2.0 * hi
+    while hi - lo > CHI2_QUANTILE_RTOL * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chi2_cdf(mid, k) < p else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+#: relative width of the bisection bracket of chi2_quantile
+CHI2_QUANTILE_RTOL = 1e-13
 
 
 def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
@@ -37,8 +72,6 @@ def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
     dict ``{block name: {"factors": F, "dof": k, "over_95": n, "over_99": n}}`` (blocks of the same name
     merged).
     """
-    from scipy.stats import chi2
-
     out: dict[str, dict] = {}
     for b in problem.blocks:
         r, _ = b.evaluate(x)
@@ -46,7 +79,7 @@ def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
         rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
         s2 = np.einsum("fk,fk->f", rw, rw)
         k = int(r.shape[1])
-        t95, t99 = chi2.ppf([0.95, 0.99], k)
+        t95, t99 = chi2_quantile(0.95, k), chi2_quantile(0.99, k)
         d = out.setdefault(b.name, {"factors": 0, "dof": k, "over_95": 0, "over_99": 0})
         d["factors"] += int(s2.size)
         d["over_95"] += int(np.sum(s2 > t95))
@@ -141,7 +174,9 @@ class GraphSlam(BaseSolver):
             lm0 = np.asarray(init.landmarks_xy, float).reshape(-1, 2)[old_of_new]
         kernel = resolve_robust(p.robust, mode, inputs.reported_id_source)
         run = self._optimise(inputs, assoc, poses0, lm0, mode, kernel, progress)
+        run, cert, restart = self._certify_or_restart(inputs, run, assoc, poses0, mode, kernel, progress)
         extra, message = self._summary(run, mode, kernel, robust_init)
+        message = self._report_restart(extra, message, cert, restart)
         pose_cov, landmark_cov, message = self._covariances(inputs, run, extra, message)
         if run.notes:
             extra["numerical_notes"] = run.notes
@@ -244,6 +279,66 @@ class GraphSlam(BaseSolver):
             x_init_poses, x_init_lms = merged
         return run
 
+    def _is_pose_graph(self, inputs: SlamInputs, run: _Run, kernel: str) -> bool:
+        """Whether the solved graph is a plain pose graph (the SE-Sync certificate applies): ``gtsam`` model,
+        no landmarks, no kernel, GPS, controls, range bias or second robot."""
+        p = self.params
+        has_gps = p.use_gps and np.asarray(getattr(inputs, "gps_step", ())).size > 0
+        return (p.model == "gtsam" and run.gp.n_landmarks == 0 and kernel == "none" and inputs.robots is None
+                and not p.use_controls and not has_gps and not p.estimate_range_bias and inputs.n_poses >= 2)
+
+    def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress):
+        """Certify a pose graph's optimum, re-solving from the chordal relaxation when the first start is not
+        certified; re-solve a stalled landmark graph from ``init=robust`` (GraphParams.restart).
+
+        Returns ``(run, certificate or None, restart dict or None)``; the run kept has the lower cost."""
+        p = self.params
+        auto = p.restart == "auto" and p.init_from == "odometry"
+        if self._is_pose_graph(inputs, run, kernel):
+            if not p.certify:
+                return run, None, None
+            ij, xyt, info = pose_graph_edges(inputs, p.edge_info)
+            cert = certify_pose_graph(run.gp.unpack(run.res.x)[0], ij, xyt, info)
+            if cert.certified or not auto or p.init == "chordal":
+                return run, cert, None
+            restart = {"from": "chordal", "first_cost": float(run.res.cost),
+                       "first_lambda_min": float(cert.lambda_min), "first_init": p.init}
+            run2 = self._optimise(inputs, assoc, initial_poses(inputs, "chordal"), np.zeros((0, 2)), mode, kernel,
+                                  progress)
+            cert2 = certify_pose_graph(run2.gp.unpack(run2.res.x)[0], ij, xyt, info)
+            if run2.res.cost <= run.res.cost:
+                return run2, cert2, restart
+            return run, cert, {**restart, "kept": "first"}
+        if not (auto and p.model == "gtsam" and p.init == "odometry" and run.gp.n_landmarks and _stalled(run)):
+            return run, None, None
+        poses_r, robust_res = robust_initial_poses(inputs, assoc, poses0, p)
+        lm_r = frontend.landmarks_from_observations(poses_r, inputs.observations, assoc, int(assoc.max(initial=-1)) + 1)
+        run2 = self._optimise(inputs, assoc, poses_r, lm_r, mode, kernel, progress)
+        restart = {"from": "robust", "first_cost": float(run.res.cost), "first_init": p.init,
+                   "robust_cost": float(robust_res.cost)}
+        if run2.res.cost <= run.res.cost:
+            return run2, None, restart
+        return run, None, {**restart, "kept": "first"}
+
+    @staticmethod
+    def _report_restart(extra: dict, message: str, cert, restart) -> str:
+        """Put the certificate and the restart into ``extra`` and the message."""
+        if restart is not None:
+            extra["restart"] = restart
+            kept = "kept the first run (lower cost)" if restart.get("kept") == "first" else "kept the restart"
+            why = ("not certified" if restart["from"] == "chordal"
+                   else "LM stalled at the iteration cap")
+            message += (f"; {why} from the {restart['first_init']} start (cost {restart['first_cost']:.6g}), "
+                        f"re-solved from init={restart['from']}: {kept}")
+        if cert is not None:
+            extra["certificate"] = cert.as_extra()
+            if cert.certified:
+                message += (f"; certified global optimum (SE-Sync dual: λ_min(S) = {cert.lambda_min:.3g} ≥ −η, "
+                            f"bound {cert.suboptimality_bound:.3g} on the SE-Sync objective)")
+            else:
+                message += f"; not certified (SE-Sync dual: λ_min(S) = {cert.lambda_min:.3g} < −η = {-cert.eta:.3g})"
+        return message
+
     def _merge_round(self, inputs: SlamInputs, run: _Run):
         """Merge the landmark pairs that pass the correspondence test at ``run``'s optimum; the next round's
         start ``(poses (T+1, 3), landmarks (L', 2))``, or None when nothing merges."""
@@ -323,6 +418,15 @@ class GraphSlam(BaseSolver):
                     if not np.any(run.paper_Q):
                         landmark_cov = None  # landmarks were held fixed
         return pose_cov, landmark_cov, message
+
+
+def _stalled(run: _Run) -> bool:
+    """LM reached its iteration cap with a relative decrease below STALL_REL_DECREASE over the last
+    STALL_WINDOW iterations."""
+    obj = run.objective
+    if run.res.status != Status.MAX_ITERATIONS or len(obj) <= STALL_WINDOW:
+        return False
+    return (obj[-STALL_WINDOW - 1] - obj[-1]) <= STALL_REL_DECREASE * abs(obj[-STALL_WINDOW - 1])
 
 
 @dataclass

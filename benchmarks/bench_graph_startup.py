@@ -1,0 +1,90 @@
+"""Start-up + solve of a 1k-pose pose graph, whole process: ``slamcli solve --method graph`` (defaults) vs a
+Python script that reads the same g2o file with GTSAM and runs its LM (issue 25 item 1: within 1.5×).
+
+The graph: 1000 poses on a seeded random walk around a square loop with a loop closure every 50 poses back to
+the pose 200 steps earlier (noise from a seeded numpy Generator), written as a g2o file and imported once
+(not timed). Each side runs in a fresh interpreter; CPU = user + system time of the child
+(``resource.getrusage(RUSAGE_CHILDREN)``), single-threaded BLAS, median of ``REPEATS`` alternating runs.
+Columns: ``cpu_slamcli_s`` (defaults: certificate and marginals included), ``cpu_slamcli_nocov_s``
+(``-p covariance=false``), ``cpu_gtsam_s`` and the ratios. The machine may be loaded: read the ratios.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+N_POSES = 1000
+REPEATS = 3
+GTSAM_SCRIPT = """
+import sys, gtsam
+graph, values = gtsam.readG2o(sys.argv[1], False)
+graph.add(gtsam.PriorFactorPose2(0, values.atPose2(0), gtsam.noiseModel.Diagonal.Sigmas([1e-4, 1e-4, 1e-4])))
+out = gtsam.LevenbergMarquardtOptimizer(graph, values, gtsam.LevenbergMarquardtParams()).optimize()
+print(graph.error(out))
+"""
+
+
+def write_graph(path: Path, n: int = N_POSES, seed: int = 0) -> None:
+    """Seeded synthetic pose graph (see module docstring) as EDGE_SE2 / VERTEX_SE2 lines."""
+    from slamcli.models import se2
+
+    rng = np.random.default_rng(seed)
+    d_true = np.tile([1.0, 0.0, 0.0], (n - 1, 1))
+    d_true[np.arange(n - 1) % 50 == 49, 2] = np.pi / 2  # a square every 200 steps
+    poses = np.zeros((n, 3))
+    for k in range(n - 1):
+        poses[k + 1] = se2.compose(poses[k], d_true[k])
+    sig = np.array([0.05, 0.05, 0.01])
+    info = "{:.6g} 0 0 {:.6g} 0 {:.6g}".format(*(1 / sig**2))
+    lines, odo = [], poses[:1].copy()
+    for k in range(n - 1):
+        m = d_true[k] + sig * rng.normal(size=3)
+        odo = np.vstack([odo, se2.compose(odo[-1], m)])
+        lines.append(f"EDGE_SE2 {k} {k + 1} {m[0]:.9g} {m[1]:.9g} {m[2]:.9g} {info}")
+    for j in range(249, n, 50):
+        i = j - 200
+        m = se2.between(poses[i], poses[j]) + sig * rng.normal(size=3)
+        lines.append(f"EDGE_SE2 {i} {j} {m[0]:.9g} {m[1]:.9g} {m[2]:.9g} {info}")
+    verts = [f"VERTEX_SE2 {k} {p[0]:.9g} {p[1]:.9g} {p[2]:.9g}" for k, p in enumerate(odo)]
+    path.write_text("\n".join(verts + lines) + "\n")
+
+
+def _child_cpu(cmd: list[str], env: dict) -> float:
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(cmd, env=env, check=True, capture_output=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def run(quick: bool = False) -> list[dict]:
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    cli = [sys.executable, "-m", "slamcli"]
+    with tempfile.TemporaryDirectory() as tmp:
+        g2o, ds = Path(tmp) / "g.g2o", Path(tmp) / "g.h5"
+        write_graph(g2o)
+        subprocess.run(cli + ["import", "g2o", str(g2o), "-q", "-o", str(ds)], env=env, check=True)
+        ours, nocov, gt = [], [], []
+        for k in range(1 if quick else REPEATS):
+            out = str(Path(tmp) / f"r{k}.h5")
+            ours.append(_child_cpu(cli + ["solve", str(ds), "--method", "graph", "-q", "-o", out], env))
+            nocov.append(_child_cpu(cli + ["solve", str(ds), "--method", "graph", "-p", "covariance=false", "-q",
+                                           "-o", out + ".nc.h5"], env))
+            gt.append(_child_cpu([sys.executable, "-c", GTSAM_SCRIPT, str(g2o)], env))
+    med = {k: float(np.median(v)) for k, v in (("ours", ours), ("nocov", nocov), ("gtsam", gt))}
+    return [{
+        "poses": N_POSES,
+        "repeats": len(ours),
+        "cpu_slamcli_s": round(med["ours"], 3),
+        "cpu_slamcli_nocov_s": round(med["nocov"], 3),
+        "cpu_gtsam_s": round(med["gtsam"], 3),
+        "ratio": round(med["ours"] / med["gtsam"], 2),
+        "ratio_nocov": round(med["nocov"] / med["gtsam"], 2),
+        "goal_ratio": 1.5,
+    }]

@@ -1,0 +1,298 @@
+"""Global-optimality certificate of a planar pose-graph estimate (SE-Sync's Lagrangian dual).
+
+Objective. SE-Sync (Rosen, Carlone, Bandeira & Leonard, IJRR 2019) and Carlone et al. (TRO 2016) pose
+planar pose-graph optimisation with isotropic noise as::
+
+    F(t, R) = Σ_e κ_e ‖R_j − R_i R̃_e‖²_F + τ_e ‖t_j − t_i − R_i t̃_e‖²        R_i ∈ SO(2), t_i ∈ ℝ²
+
+Conversion from a g2o / GTSAM edge with information ``Λ_e`` over ``[x, y, θ]`` (SE-Sync's reader, the
+isotropic fit that minimises the information divergence): ``κ_e = Λ_e[θ, θ]`` and
+``τ_e = 2 / tr((Λ_e[xy, xy])⁻¹)``. ``F`` is not GTSAM's ``½ Σ Log(·)ᵀ Λ Log(·)`` (chordal rotation
+distance, isotropic translation weight), so the certificate is for ``F``: the LM estimate is refined to a
+stationary point of ``F`` by Gauss-Newton (:func:`refine_sesync`) and that point is certified.
+
+Certificate. With ``X = [t_1 … t_n | R_1 … R_n] ∈ ℝ^{2×3n}``, ``F = tr(X M Xᵀ)`` for the sparse
+``M = Σ_e κ_e A_e A_eᵀ + τ_e a_e a_eᵀ`` (``A_e = E_{R_j} − E_{R_i} R̃_e``, ``a_e = e_{t_j} − e_{t_i} −
+E_{R_i} t̃_e``; ``E`` the column selectors). At a stationary point the Lagrange multipliers of
+``R_iᵀR_i = I`` are ``Λ_i = Sym((M Xᵀ)_{R_i} R_i)`` and::
+
+    S = M − blkdiag(0_t, Λ_1, …, Λ_n)  ⪰ 0   ⟹   X is a global minimiser of F        (weak duality)
+
+with ``F(X) − tr(Λ)`` the duality gap (0 at a stationary point, ``S Xᵀ = 0``). ``S`` always has the
+gauge null space (the two rows of X and the common translation), so ``λ_min(S) = 0`` at best; the test is
+a sparse Cholesky of ``S + η I`` with ``η = ETA_REL · max diag(S)`` (:data:`ETA_REL`), i.e.
+``λ_min(S) ≥ −η``. ``λ_min`` is reported from a Lanczos run (``scipy.sparse.linalg.eigsh``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from slamcli.models.angles import wrap_angle
+
+#: η of the certificate relative to the largest diagonal entry of S (the scale of the problem's weights)
+ETA_REL = 1e-9
+#: Gauss-Newton refinement on F: stop at a relative cost decrease below this, or after REFINE_MAX_ITERS
+REFINE_REL_TOL = 1e-13
+REFINE_MAX_ITERS = 60
+#: dense eigenvalues below this size of S; Lanczos restarts of the uncertified λ_min
+DENSE_EIG_MAX = 600
+LANCZOS_MAX_ITERS = 2000
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """Outcome of :func:`certify_pose_graph`.
+
+    Attributes
+    ----------
+    certified : bool            ``S + ηI`` is positive definite: the refined estimate minimises F globally.
+    lambda_min : float          smallest eigenvalue of ``S`` (Lanczos; NaN when it did not converge).
+    eta : float                 the tolerance η of the test.
+    sesync_cost : float         ``F`` at the refined estimate.
+    dual_bound : float          ``tr(Λ)``, a lower bound on the global minimum of F when certified.
+    suboptimality_bound : float ``F − tr(Λ)`` when certified (the estimate is within it of the optimum of F;
+                                 exact up to the slack η‖X*‖²_F), else NaN (no bound).
+    poses_xyt : ndarray (n, 3)  the refined stationary point of F.
+    """
+
+    certified: bool
+    lambda_min: float
+    eta: float
+    sesync_cost: float
+    dual_bound: float
+    suboptimality_bound: float
+    poses_xyt: np.ndarray
+
+    def as_extra(self) -> dict:
+        """The result's ``extra["certificate"]`` entry (JSON-able)."""
+        return {
+            "certified": bool(self.certified),
+            "lambda_min": float(self.lambda_min),
+            "eta": float(self.eta),
+            "sesync_cost": float(self.sesync_cost),
+            "dual_bound": float(self.dual_bound),
+            "suboptimality_bound": float(self.suboptimality_bound),
+        }
+
+
+def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SE-Sync's ``κ (E,)`` and ``τ (E,)`` from edge information matrices ``info (E, 3, 3)`` over ``[x, y, θ]``."""
+    info = np.asarray(info, float).reshape(-1, 3, 3)
+    kappa = info[:, 2, 2].copy()
+    tran_cov = np.linalg.inv(info[:, :2, :2])
+    tau = 2.0 / np.trace(tran_cov, axis1=1, axis2=2)
+    return kappa, tau
+
+
+def sesync_cost(poses_xyt, ij, xyt, kappa, tau) -> float:
+    """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``."""
+    r, _ = _residuals(np.asarray(poses_xyt, float), ij, xyt, kappa, tau, jacobian=False)
+    return float(r @ r)
+
+
+def _residuals(poses, ij, xyt, kappa, tau, jacobian: bool = True):
+    """Stacked residuals ``r (4E,)`` with ``F = ‖r‖²`` and (optionally) their sparse Jacobian w.r.t.
+    ``[x, y, θ]`` of every pose.
+
+    rotation:    ``√(2κ) (u_j − R(Δθ) u_i)``, ``u = [cos θ, sin θ]``   (``‖R_j − R_i R̃‖²_F = 2 ‖·‖²``)
+    translation: ``√τ (t_j − t_i − R(θ_i) t̃)``
+    """
+    i, j = ij[:, 0], ij[:, 1]
+    th_i, th_j = poses[i, 2], poses[j, 2]
+    sk, st = np.sqrt(2.0 * kappa), np.sqrt(tau)
+    a = th_i + xyt[:, 2]
+    r_rot = sk[:, None] * np.column_stack([np.cos(th_j) - np.cos(a), np.sin(th_j) - np.sin(a)])
+    c, s = np.cos(th_i), np.sin(th_i)
+    tx, ty = xyt[:, 0], xyt[:, 1]
+    rt = np.column_stack([c * tx - s * ty, s * tx + c * ty])
+    r_tr = st[:, None] * (poses[j, :2] - poses[i, :2] - rt)
+    r = np.concatenate([r_rot, r_tr], axis=1).ravel()  # per edge [rot_x, rot_y, tr_x, tr_y]
+    if not jacobian:
+        return r, None
+    E = len(i)
+    row0 = 4 * np.arange(E)
+    rows, cols, vals = [], [], []
+
+    def put(rr, cc, vv):
+        rows.append(rr)
+        cols.append(cc)
+        vals.append(vv)
+
+    put(row0, 3 * j + 2, -sk * np.sin(th_j))
+    put(row0 + 1, 3 * j + 2, sk * np.cos(th_j))
+    put(row0, 3 * i + 2, sk * np.sin(a))
+    put(row0 + 1, 3 * i + 2, -sk * np.cos(a))
+    for k in (0, 1):
+        put(row0 + 2 + k, 3 * j + k, st)
+        put(row0 + 2 + k, 3 * i + k, -st)
+    put(row0 + 2, 3 * i + 2, st * (s * tx + c * ty))  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
+    put(row0 + 3, 3 * i + 2, -st * (c * tx - s * ty))
+    J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(4 * E, 3 * poses.shape[0]))
+    return r, J
+
+
+def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
+    """A stationary point of ``F`` near ``poses_xyt (n, 3)``: Gauss-Newton with step halving, pose 0 held
+    (F is invariant under a global SE(2) motion, so the held pose is stationary too)."""
+    x = np.array(poses_xyt, float, copy=True)
+    r, J = _residuals(x, ij, xyt, kappa, tau)
+    cost = float(r @ r)
+    free = np.arange(3, 3 * x.shape[0])
+    solve = _spd_solver()
+    for _ in range(REFINE_MAX_ITERS):
+        Jf = J[:, free].tocsc()
+        H = (Jf.T @ Jf).tocsc()
+        g = Jf.T @ r
+        try:
+            h = solve(H, -g)
+        except (RuntimeError, np.linalg.LinAlgError):
+            break
+        if not np.all(np.isfinite(h)):
+            break
+        alpha, improved = 1.0, False
+        while alpha > 1e-4:
+            xn = x.copy()
+            xn.reshape(-1)[free] += alpha * h
+            rn, Jn = _residuals(xn, ij, xyt, kappa, tau)
+            cn = float(rn @ rn)
+            if cn <= cost:
+                improved = True
+                break
+            alpha *= 0.5
+        if not improved:
+            break
+        done = cost - cn <= REFINE_REL_TOL * cost
+        x, r, J, cost = xn, rn, Jn, cn
+        if done:
+            break
+    x[:, 2] = wrap_angle(x[:, 2])
+    return x
+
+
+def _spd_solver():
+    """``solve(H, b)`` for the Gauss-Newton systems of :func:`refine_sesync`: CHOLMOD with its symbolic
+    analysis done once (the pattern of H is the same every iteration), else SuperLU in symmetric mode."""
+    try:
+        from sksparse.cholmod import CholmodError, analyze
+    except ImportError:
+        def superlu(H, b):
+            return spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                             options={"SymmetricMode": True}).solve(b)
+        return superlu
+    state: dict = {}
+
+    def cholmod(H, b):
+        try:
+            if "f" not in state:
+                state["f"] = analyze(H)
+            state["f"].cholesky_inplace(H)
+        except CholmodError as exc:
+            raise np.linalg.LinAlgError(str(exc)) from None
+        return state["f"](b)
+    return cholmod
+
+
+def data_matrix(n: int, ij, xyt, kappa, tau) -> sp.csc_matrix:
+    """``M (3n, 3n)`` of the module docstring, columns ``[t_1 … t_n | R_1 (2) … R_n (2)]``."""
+    i, j = ij[:, 0], ij[:, 1]
+    E = len(i)
+    c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
+    sk, st = np.sqrt(kappa), np.sqrt(tau)
+    Ri = n + 2 * i  # first column of R_i
+    Rj = n + 2 * j
+    rows, cols, vals = [], [], []
+    # A_e = E_Rj − E_Ri R̃ (two columns 2e, 2e+1): column m of R̃ is [c, s] (m=0) or [−s, c] (m=1)
+    for m, (r0, r1) in enumerate(((c, s), (-s, c))):
+        col = 3 * np.arange(E) + m
+        rows += [Rj + m, Ri, Ri + 1]
+        cols += [col, col, col]
+        vals += [sk, -sk * r0, -sk * r1]
+    # a_e = e_tj − e_ti − E_Ri t̃
+    col = 3 * np.arange(E) + 2
+    rows += [j, i, Ri, Ri + 1]
+    cols += [col, col, col, col]
+    vals += [st, -st, -st * xyt[:, 0], -st * xyt[:, 1]]
+    B = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * E))
+    return (B @ B.T).tocsc()
+
+
+def certify_pose_graph(poses_xyt, ij, xyt, info) -> Certificate:
+    """Refine ``poses_xyt (n, 3)`` to a stationary point of F and test the dual certificate (module docstring).
+
+    Parameters
+    ----------
+    poses_xyt : (n, 3) estimate (e.g. LM's on GTSAM's objective);  ij : (E, 2) edges ``x_i⁻¹ ⊕ x_j``;
+    xyt : (E, 3) measurements;  info : (E, 3, 3) information over ``[x, y, θ]``.
+    """
+    ij = np.asarray(ij, np.int64).reshape(-1, 2)
+    xyt = np.asarray(xyt, float).reshape(-1, 3)
+    kappa, tau = isotropic_weights(info)
+    n = int(np.asarray(poses_xyt).shape[0])
+    x = refine_sesync(poses_xyt, ij, xyt, kappa, tau)
+    F = sesync_cost(x, ij, xyt, kappa, tau)
+    M = data_matrix(n, ij, xyt, kappa, tau)
+    X = np.zeros((2, 3 * n))
+    X[:, :n] = x[:, :2].T
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+    X[0, n::2], X[1, n::2] = c, s  # R_i = [[c, −s], [s, c]]: columns n+2i (first), n+2i+1 (second)
+    X[0, n + 1 :: 2], X[1, n + 1 :: 2] = -s, c
+    G = (M @ X.T)[n:].reshape(n, 2, 2)  # (M Xᵀ)_{R_i}, 2×2 each
+    R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], 1)  # (n, 2, 2)
+    Lam = G @ R
+    Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
+    dual = float(np.trace(Lam, axis1=1, axis2=2).sum())
+    rr = n + 2 * np.arange(n)[:, None, None] + np.arange(2)[None, :, None]
+    cc = n + 2 * np.arange(n)[:, None, None] + np.arange(2)[None, None, :]
+    rr, cc = np.broadcast_to(rr, (n, 2, 2)).ravel(), np.broadcast_to(cc, (n, 2, 2)).ravel()
+    S = (M - sp.csc_matrix((Lam.ravel(), (rr, cc)), shape=M.shape)).tocsc()
+    S = 0.5 * (S + S.T)
+    eta = ETA_REL * float(np.max(np.abs(S.diagonal()))) if n else 0.0
+    certified = _is_positive_definite((S + eta * sp.identity(3 * n, format="csc")).tocsc())
+    lam_min = _lambda_min(S, eta, certified)
+    gap = max(F - dual, 0.0) if certified else float("nan")
+    return Certificate(bool(certified), lam_min, eta, F, dual, gap, x)
+
+
+def _is_positive_definite(A: sp.csc_matrix) -> bool:
+    """Whether the sparse symmetric ``A`` has a Cholesky factorisation (CHOLMOD, else an LDLᵀ-type SuperLU
+    elimination with every pivot > 0)."""
+    try:
+        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
+    except ImportError:
+        try:
+            lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        except RuntimeError:
+            return False
+        return bool(np.array_equal(lu.perm_r, lu.perm_c) and np.all(lu.U.diagonal() > 0))
+    try:  # supernodal mode is always an LLᵀ factorisation, which stops at the first pivot ≤ 0
+        cholesky(A, mode="supernodal")
+    except CholmodNotPositiveDefiniteError:
+        return False
+    return True
+
+
+def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool) -> float:
+    """Smallest eigenvalue of ``S``; NaN when the Lanczos run does not converge.
+
+    Certified (every eigenvalue ≥ −η): shift-invert Lanczos at ``σ = −2η``, whose nearest eigenvalue is the
+    smallest (one factorisation of the positive definite ``S + 2ηI``, a few iterations). Otherwise the
+    smallest-algebraic Lanczos run, with a bounded budget (the value then only says how negative)."""
+    n = S.shape[0]
+    if n <= DENSE_EIG_MAX:
+        return float(np.linalg.eigvalsh(S.toarray())[0])
+    v0 = np.ones(n) / np.sqrt(n)
+    try:
+        if certified:
+            vals = spla.eigsh(S, k=1, sigma=-2.0 * eta, which="LM", v0=v0, return_eigenvectors=False)
+        else:
+            vals = spla.eigsh(S, k=1, which="SA", tol=1e-4, maxiter=LANCZOS_MAX_ITERS, v0=v0,
+                              return_eigenvectors=False)
+    except (spla.ArpackNoConvergence, RuntimeError):
+        return float("nan")
+    return float(vals[0])

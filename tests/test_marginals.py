@@ -1,0 +1,70 @@
+"""The one marginals path (``slamcli.solvers.nls.marginals.block_marginals``) against dense inverses, on all
+three of its algorithms, and its one policy on a singular / indefinite H: refuse, naming the variable."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from slamcli.solvers.nls import marginals as mg
+from slamcli.solvers.nls import selinv
+
+
+def _chain_border(n=6, m=2, seed=0):
+    """SPD H: a block-tridiagonal chain of n 3-blocks plus m 2-blocks of border coupled to every pose."""
+    rng = np.random.default_rng(seed)
+    D = 3 * n + 2 * m
+    A = np.zeros((D, D))
+    for i in range(n):
+        J = rng.normal(size=(3, 6 if i < n - 1 else 3))
+        cols = np.arange(3 * i, 3 * i + J.shape[1])
+        A[np.ix_(cols, cols)] += J.T @ J
+    for j in range(m):
+        for i in range(n):
+            J = rng.normal(size=(2, 5))
+            cols = np.r_[3 * i : 3 * i + 3, 3 * n + 2 * j : 3 * n + 2 * j + 2]
+            A[np.ix_(cols, cols)] += J.T @ J
+    A += 0.1 * np.eye(D)
+    return sp.csc_matrix(A), n, m
+
+
+@pytest.mark.parametrize("path", ["selinv", "chain", "superlu"])
+def test_blocks_equal_the_dense_inverse(monkeypatch, path):
+    H, n, m = _chain_border()
+    if path == "selinv" and not selinv.available():
+        pytest.skip("CHOLMOD not installed")
+    if path != "selinv":
+        monkeypatch.setattr(selinv, "available", lambda: False)
+    poses = np.arange(3 * n).reshape(n, 3)
+    lms = 3 * n + np.arange(2 * m).reshape(m, 2)
+    pc, lc = mg.block_marginals(H, (poses, lms), names=("pose", "landmark"), chain=n if path == "chain" else 0)
+    C = np.linalg.inv(H.toarray())
+    for i in range(n):
+        np.testing.assert_allclose(pc[i], C[3 * i : 3 * i + 3, 3 * i : 3 * i + 3], rtol=1e-10, atol=1e-13)
+    for j in range(m):
+        s = 3 * n + 2 * j
+        np.testing.assert_allclose(lc[j], C[s : s + 2, s : s + 2], rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize("path", ["selinv", "fallback"])
+def test_singular_information_is_refused_with_the_variable_named(monkeypatch, path):
+    H, n, m = _chain_border()
+    H = H.tolil()
+    s = 3 * n + 2  # landmark 1, first column: no factor constrains it
+    H[s, :] = 0.0
+    H[:, s] = 0.0
+    H = H.tocsc()
+    if path == "selinv" and not selinv.available():
+        pytest.skip("CHOLMOD not installed")
+    if path != "selinv":
+        monkeypatch.setattr(selinv, "available", lambda: False)
+    poses = np.arange(3 * n).reshape(n, 3)
+    lms = 3 * n + np.arange(2 * m).reshape(m, 2)
+
+    def locate(c):
+        return f"pose {c // 3}" if c < 3 * n else f"landmark {(c - 3 * n) // 2}"
+
+    with pytest.raises(np.linalg.LinAlgError) as exc:
+        mg.block_marginals(H, (poses, lms), names=("pose", "landmark"), chain=n, locate=locate)
+    assert "landmark" in str(exc.value)
