@@ -56,8 +56,10 @@ def plot_command(
         if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:
             what = "sweep folder" if kind == "compare" else "result"
             fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
-        check_output(output)
+        check_output(output, inputs=[*results, *(data or [])])
         w, h = parse_size(size, _SIZES[kind])
+        _check_raster(w, h, dpi)
+        _check_title(title)
         check = not no_hash_check
         data_paths = list(data) if data else [None] * len(results)
         echo = (lambda msg: None) if quiet else typer.echo
