@@ -249,7 +249,7 @@ def memory_limit_bytes() -> int:
     return limit
 
 
-def check_allocation(name: str, value: Any, n_bytes: float, what: str) -> None:
+def check_allocation(name: str, value: Any, n_bytes: float, what: str, hint: str = "use a smaller value") -> None:
     """Refuse a parameter value whose estimated allocation ``n_bytes`` exceeds :func:`memory_limit_bytes`.
 
     One line naming the parameter, its value, the estimate and what it is for, e.g. ``n_particles=1e+08:
@@ -258,4 +258,4 @@ def check_allocation(name: str, value: Any, n_bytes: float, what: str) -> None:
     limit = memory_limit_bytes()
     if not n_bytes <= limit:  # also nan
         raise ConfigError(f"{name}={value}: needs about {n_bytes / 1e9:.3g} GB for {what} (limit "
-                          f"{limit / 1e9:.3g} GB); use a smaller value")
+                          f"{limit / 1e9:.3g} GB); {hint}")
