@@ -106,7 +106,7 @@ def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_p
     out, report = quick_report
     fig5 = pd.read_csv(out / "runs" / "fig5-sim1" / "results.csv")
     row = fig5[fig5.status == "completed"].iloc[0]
-    result = read_result(Path(row["path"]) / "result.h5")
+    result = read_result(out / "runs" / "fig5-sim1" / row["path"] / "result.h5")  # relative to the sweep folder
     assert result.trace.poses_xyt is not None and len(result.trace) >= 3  # ICM records every iteration
     rep = Reproduction(tmp_path / "out", quick=True, workers=1, experiments_dir=EXPERIMENTS, log=lambda s: None)
     sec = Section("t", "t")
