@@ -183,7 +183,7 @@ def test_result_file_given_as_dataset(data, tmp_path):
 def test_refuses_to_overwrite_the_dataset(data):
     before = data.read_bytes()
     res = run("solve", data, "--method", "odometry", "-o", data)
-    assert_one_line_error(res, "refusing to overwrite the input dataset")
+    assert_one_line_error(res, "refusing to overwrite an input")
     assert data.read_bytes() == before
 
 

@@ -11,6 +11,7 @@ directory (:func:`clean_stale_temporaries`); those of live processes are never t
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import shutil
@@ -22,6 +23,10 @@ from slamcli.errors import SlamcliError
 
 #: head-room kept free when checking a write of n bytes against the free space (metadata, the directory entry)
 FREE_SPACE_MARGIN = 4096
+
+#: errno values of a write that failed because of the medium: a full disk or quota, a file beyond
+#: RLIMIT_FSIZE or the file system's size limit, an I/O error, a read-only file system
+WRITE_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS})
 
 _TMP_RE = re.compile(r"^\..*\.tmp-(\d+)-[0-9a-f]{8}$")
 
@@ -104,9 +109,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, final)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError, IsADirectoryError, NotADirectoryError):
             tmp.unlink()
+        if isinstance(exc, OSError) and exc.errno in WRITE_FAULTS:  # name the file the user asked for
+            raise SlamcliError(write_fault_message(final, exc)) from None
         raise
 
 
