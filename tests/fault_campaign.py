@@ -141,7 +141,7 @@ def guard_cases(W: World) -> list[Fault]:
     ev.mkdir()
     shutil.copyfile(W.res, ev / "R.h5")
     for how in ALIASES:
-        A = lambda p: _alias(p, how, links)  # noqa: E731
+        A = lambda p: _alias(p, how, links)
         add(f"solve-over-data-{how}", ["solve", W.ds, "-m", "odometry", "-o", A(W.ds), "-q"], "input", [W.ds])
         add(f"solve-over-init-{how}", ["solve", W.ds, "-m", "icm", "--init", W.res, "-o", A(W.res), "-q"], "input",
             [W.res])
@@ -200,7 +200,7 @@ def guard_cases(W: World) -> list[Fault]:
     running = w / "running"
     (running / "run1").mkdir(parents=True)
     (running / "results.csv").write_text("run_id,label,status\n")
-    fh = open(running / ".sweep.lock", "a+")  # noqa: SIM115 - held until the campaign ends
+    fh = open(running / ".sweep.lock", "a+")
     fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
     W.held.append(fh)
     for cid, args in (("simulate", ["simulate", "-s", "loop", "--set", "n_steps=20", "-o", running / "d.h5", "-q"]),
