@@ -230,7 +230,6 @@ def _writers(W: World, d: Path, tag: str) -> list[tuple[str, list, Path]]:
     """(id, args, output) of every writing command with its output in folder ``d``."""
     return [
         ("simulate", ["simulate", "-s", "loop", "--set", "n_steps=400", "-o", d / "s.h5", "-q"], d / "s.h5"),
-        ("solve-icm", ["solve", W.ds, "-m", "icm", "-o", d / "icm.h5", "-q"], d / "icm.h5"),
         ("solve-ekf", ["solve", W.ds, "-m", "ekf", "-o", d / "ekf.h5", "-q"], d / "ekf.h5"),
         ("solve-odometry", ["solve", W.ds, "-m", "odometry", "-o", d / "odo.h5", "-q"], d / "odo.h5"),
         ("import-g2o", ["import", "g2o", W.g2o, "-o", d / "g.h5", "-q"], d / "g.h5"),
@@ -244,7 +243,6 @@ def _writers(W: World, d: Path, tag: str) -> list[tuple[str, list, Path]]:
         ("export-kitti", ["export", W.res, "-f", "kitti", "-o", d / "t.kitti", "-q"], d / "t.kitti"),
         ("plot-png", ["plot", "map", W.res, "--data", W.ds, "-o", d / "m.png", "-q"], d / "m.png"),
         ("plot-pdf", ["plot", "map", W.res, "--data", W.ds, "-o", d / "m.pdf", "-q"], d / "m.pdf"),
-        ("plot-svg", ["plot", "map", W.res, "--data", W.ds, "-o", d / "m.svg", "-q"], d / "m.svg"),
         ("evaluate", ["evaluate", W.res, "--data", W.ds, "-o", d / "ev", "-q"], d / "ev"),
     ]
 

@@ -55,7 +55,7 @@ def test_resume_redoes_a_run_whose_metrics_were_corrupted(tmp_path):
     # an untouched run is skipped, not redone: its status.json is the same file
     other = table.run_id[1]
     assert json.loads((exp / other / "status.json").read_text())["sha256"]["metrics.json"].startswith("sha256:")
-    assert runner.invoke(app, ["aggregate", str(exp), "-q"]).exit_code == 0
+    assert runner.invoke(app, ["aggregate", str(exp), "-m", "ate_rmse_m", "-q"]).exit_code == 0
 
 
 def test_results_paths_are_relative_and_equal_for_one_and_two_workers(tmp_path):
