@@ -174,7 +174,7 @@ def guard_cases(W: World) -> list[Fault]:
             [W.carpark / name])
     add("mrclam-solo-dir-is-input", ["import", "mrclam", W.team, "--robots", "1,2", "--solo-dir", W.team, "-o",
                                       out / "team.h5", "-q"], "input", [W.team / "Robot1_Odometry.dat"])
-    add("sweep-out-is-experiment-dir", ["reproduce", "--experiments", w / "sw", "--out", w / "sw", "-q"], "input",
+    add("reproduce-out-is-experiments-dir", ["reproduce", "--experiments", w / "sw", "--out", w / "sw", "-q"], "input",
         [W.sweep / "results.csv"])
     # special files: the atomic rename would replace them by a regular file
     special = w / "special"

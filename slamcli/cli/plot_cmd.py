@@ -56,7 +56,8 @@ def plot_command(
         if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:
             what = "sweep folder" if kind == "compare" else "result"
             fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
-        check_output(output, inputs=[*results, *(data or [])])
+        # a sweep folder (plot compare) is read through its results.csv: figures beside it may be re-drawn
+        check_output(output, inputs=[*(r / "results.csv" if r.is_dir() else r for r in results), *(data or [])])
         w, h = parse_size(size, _SIZES[kind])
         _check_raster(w, h, dpi)
         _check_title(title)

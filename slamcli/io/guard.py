@@ -4,8 +4,9 @@ An atomic write (temporary sibling + ``os.replace``) replaces whatever is at the
 ``-o`` loses data without a trace. :func:`guard_output` refuses, with one line naming the option and the
 path (:class:`OutputRefused`, exit status 2):
 
-* an output that resolves (after symlinks, ``os.path.samefile``) to one of the command's inputs, or to a
-  file inside an input folder (``import mrclam DIR -o DIR/Robot1_Odometry.dat``);
+* an output that resolves (after symlinks, ``os.path.samefile``) to one of the command's inputs, or to an
+  existing file inside an input folder (``import mrclam DIR -o DIR/Robot1_Odometry.dat``) unless it is a
+  previous output of the same ``kind``;
 * a folder output that *is* an input folder, or that holds an input when the command replaces the folder
   as a whole (``evaluate R.h5 -o .`` would move the folder with ``R.h5`` in it aside and delete it);
 * an output that exists and is not a regular file (a character device such as ``/dev/null``, a FIFO, a
@@ -115,7 +116,8 @@ def guard_output(out: str | os.PathLike, inputs: Iterable[str | os.PathLike | No
         rq = _real(q)
         if _same(p, q) or real == rq:
             raise OutputRefused(f"{where}: is the input {q}; refusing to overwrite an input")
-        if q.is_dir() and not folder and _inside(real, rq) and p.exists():
+        if q.is_dir() and not folder and _inside(real, rq) and p.exists() and not (kind and file_kind(p) == kind):
+            # (a previous output of the same kind inside the folder, e.g. DIR/robot1.h5, may be replaced)
             raise OutputRefused(f"{where}: is a file inside the input folder {q}; refusing to overwrite it")
         if folder and replaces_folder and _inside(rq, real):
             raise OutputRefused(f"{where}: contains the input {q}, and the folder is replaced as a whole")
