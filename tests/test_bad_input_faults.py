@@ -88,3 +88,18 @@ def test_force_replaces_a_file_of_another_kind_and_same_kind_needs_none(tmp_path
     assert runner.invoke(app, [*args, str(notes)]).exit_code == 2 and notes.read_text() == "x"
     assert runner.invoke(app, [*args, str(notes), "--force"]).exit_code == 0 and notes.read_bytes()[:4] == b"\x89HDF"
     assert runner.invoke(app, [*args, str(notes)]).exit_code == 0  # a result over a result: re-running is the point
+
+
+def test_a_previous_output_inside_an_input_folder_may_be_replaced_an_input_may_not(tmp_path):
+    import shutil
+
+    from fault_campaign import DATA, sha
+
+    d = tmp_path / "mr"
+    shutil.copytree(DATA / "mrclam_excerpt", d)
+    args = ["import", "mrclam", str(d), "-q", "-o"]
+    assert runner.invoke(app, [*args, str(d / "r1.h5")]).exit_code == 0
+    assert runner.invoke(app, [*args, str(d / "r1.h5")]).exit_code == 0  # re-running the import
+    before = sha(d / "Robot1_Odometry.dat")
+    res = runner.invoke(app, [*args, str(d / "Robot1_Odometry.dat")])
+    assert res.exit_code == 2 and sha(d / "Robot1_Odometry.dat") == before
