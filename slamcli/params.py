@@ -73,7 +73,14 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
         try:
             return int(str(value))
         except ValueError:
-            raise ConfigError(f"{where}: expected an integer, got {value!r}") from None
+            pass
+        try:  # 1e8: an integer written in exponent notation (exact up to 2^53)
+            f = float(str(value))
+        except ValueError:
+            f = math.nan
+        if math.isfinite(f) and f.is_integer() and abs(f) <= 2**53:
+            return int(f)
+        raise ConfigError(f"{where}: expected an integer, got {value!r}")
     if tp is float:
         if isinstance(value, bool):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
@@ -212,3 +219,43 @@ def allowed_values(tp: Any) -> list[str]:
     if tp is bool:
         return ["true", "false"]
     return []
+
+
+#: ceiling of the memory a parameter may ask for, whatever the machine has, bytes (SLAMCLI_MEMORY_LIMIT_MB
+#: overrides it); below it the limit is half of the memory available now (``MemAvailable``)
+MEMORY_CEILING_BYTES = 8 << 30
+
+
+def memory_limit_bytes() -> int:
+    """The allocation a parameter may imply: ``min(MEMORY_CEILING_BYTES, MemAvailable / 2)``, or the
+    ``SLAMCLI_MEMORY_LIMIT_MB`` environment variable when set."""
+    import os
+
+    env = os.environ.get("SLAMCLI_MEMORY_LIMIT_MB")
+    if env:
+        try:
+            return int(float(env) * 2**20)
+        except ValueError:
+            raise ConfigError(f"SLAMCLI_MEMORY_LIMIT_MB: expected a number of MiB, got {env!r}") from None
+    limit = MEMORY_CEILING_BYTES
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    limit = min(limit, int(line.split()[1]) * 1024 // 2)
+                    break
+    except OSError:
+        pass
+    return limit
+
+
+def check_allocation(name: str, value: Any, n_bytes: float, what: str, hint: str = "use a smaller value") -> None:
+    """Refuse a parameter value whose estimated allocation ``n_bytes`` exceeds :func:`memory_limit_bytes`.
+
+    One line naming the parameter, its value, the estimate and what it is for, e.g. ``n_particles=1e+08:
+    needs about 18.6 GB for the particle maps (limit 4.0 GB)``; raised before anything is allocated.
+    """
+    limit = memory_limit_bytes()
+    if not n_bytes <= limit:  # also nan
+        raise ConfigError(f"{name}={value}: needs about {n_bytes / 1e9:.3g} GB for {what} (limit "
+                          f"{limit / 1e9:.3g} GB); {hint}")

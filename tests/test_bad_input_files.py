@@ -69,11 +69,13 @@ def test_temporaries_of_dead_processes_are_removed_by_the_next_write(files, tmp_
 
 
 def test_kill9_during_write_then_next_run_cleans_up(files, tmp_path):
-    """A real kill -9 in the middle of writing the result (the writer SIGKILLs itself after creating it)."""
+    """A real kill -9 in the middle of writing the result: while the HDF5 image is built in memory nothing is
+    on disk; once its bytes are in the temporary (the writer SIGKILLs itself after its first os.write) one hidden
+    temporary is left, and the next write removes it."""
     _, ds, _, _ = files
     code = f"""
-import os, signal, h5py
-from slamcli.io import schema
+import os, signal
+from slamcli.io import atomic, schema
 orig = schema.write_array
 def dying(*a, **k):
     orig(*a, **k)
@@ -84,6 +86,12 @@ r.write_array = dying
 from slamcli.api.solve import solve_file
 solve_file({str(ds)!r}, "odometry", {{}}, {str(tmp_path / "r.h5")!r})
 """
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True)
+    assert p.returncode == -9
+    assert not [q for q in tmp_path.iterdir() if ".tmp-" in q.name] and not (tmp_path / "r.h5").exists()
+    code = code.replace("schema.write_array = dying", "w = os.write\n"
+                        "atomic.os.write = lambda fd, b: (w(fd, b), os.kill(os.getpid(), 9))[0]")
+    code = code.replace("r.write_array = dying", "")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True)
     assert p.returncode == -9
     left = [q for q in tmp_path.iterdir() if ".tmp-" in q.name]

@@ -55,6 +55,8 @@ for line in sys.stdin:
             sys.stderr = io.TextIOWrapper(os.fdopen(2, "wb", closefd=False), encoding="utf-8", line_buffering=True)
             limit = vm_bytes() + 1536 * 2**20
             resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+            if req.get("fsize"):  # a size-limited file: writes beyond it fail with EFBIG (SIGXFSZ is ignored)
+                resource.setrlimit(resource.RLIMIT_FSIZE, (req["fsize"], req["fsize"]))
             args = [os.fsdecode(os.fsencode(a)) if isinstance(a, str) else a for a in req["args"]]
             try:
                 app(args=args, prog_name="slamcli", standalone_mode=True)
@@ -83,11 +85,13 @@ class CliServer:
                                      text=True, env=env)
         self.n = 0
 
-    def run(self, args: list[str], cwd: Path) -> dict:
+    def run(self, args: list[str], cwd: Path, fsize: int | None = None) -> dict:
+        """``fsize``: RLIMIT_FSIZE of the child, bytes (None = unlimited)."""
         self.n += 1
         out, err = self.workdir / f"case{self.n}.out", self.workdir / f"case{self.n}.err"
         # non-UTF-8 file names travel as surrogate escapes: JSON keeps the lone surrogates as \udcxx
-        req = {"args": list(map(str, args)), "cwd": str(cwd), "stdout": str(out), "stderr": str(err)}
+        req = {"args": list(map(str, args)), "cwd": str(cwd), "stdout": str(out), "stderr": str(err),
+               "fsize": fsize}
         self.proc.stdin.write(json.dumps(req) + "\n")
         self.proc.stdin.flush()
         line = self.proc.stdout.readline()

@@ -31,8 +31,8 @@ def run(*args):
     return runner.invoke(app, [str(a) for a in args], terminal_width=200)
 
 
-def assert_one_line_error(res, *fragments):
-    assert res.exit_code == 1, res.output
+def assert_one_line_error(res, *fragments, code=1):
+    assert res.exit_code == code, res.output
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr
     assert lines[0].startswith("error: ")
@@ -183,7 +183,7 @@ def test_result_file_given_as_dataset(data, tmp_path):
 def test_refuses_to_overwrite_the_dataset(data):
     before = data.read_bytes()
     res = run("solve", data, "--method", "odometry", "-o", data)
-    assert_one_line_error(res, "refusing to overwrite the input dataset")
+    assert_one_line_error(res, "refusing to overwrite an input", code=2)  # the output guard's usage error
     assert data.read_bytes() == before
 
 

@@ -102,9 +102,10 @@ def test_missing_solver_is_reported_not_faked(tmp_path):
 def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_path):
     from slamcli.io import read_result
     from slamcli.reproduce.report import Section, snapshot_path_xy
+    from slamcli.sweep.runner import load_results
 
     out, report = quick_report
-    fig5 = pd.read_csv(out / "runs" / "fig5-sim1" / "results.csv")
+    fig5 = load_results(out / "runs" / "fig5-sim1")  # path columns joined onto the sweep folder
     row = fig5[fig5.status == "completed"].iloc[0]
     result = read_result(Path(row["path"]) / "result.h5")
     assert result.trace.poses_xyt is not None and len(result.trace) >= 3  # ICM records every iteration

@@ -49,7 +49,7 @@ def test_cli_simulate_writes_file_equal_to_library_run(tmp_path):
         (["--set", "sensor.nope=1"], "error: --set: unknown key 'sensor.nope'; known: dt, n_steps"),
         (["--set", "nokeyvalue"], "error: --set: expected key=value"),
         (["--set", "sensor.detection_prob=2"], "detection_prob must be in [0, 1]"),
-        (["--seed", "-3"], "error: --seed: must be >= 0"),
+        (["--seed", "-3"], "error: --seed: must be in [0, 2^63)"),
         (["--set", "world.n_landmarks=500"], "error: world: cannot place 500 random landmarks"),
     ],
 )

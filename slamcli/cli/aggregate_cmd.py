@@ -35,8 +35,8 @@ def aggregate_command(
             raise ConfigError(f"--confidence: must be in (0, 1), got {confidence}")
         from slamcli.metrics.aggregate import aggregate_dir, cell_text
 
-        if out_dir is not None:
-            check_output(out_dir, folder=True)
+        check_output(out_dir if out_dir is not None else exp_dir, folder=True,
+                     inputs=[exp_dir / "results.csv"])
         try:
             a = aggregate_dir(exp_dir, _split(by), _split(metric), out_dir, confidence)
         except KeyError as exc:  # a results.csv that lacks a column every sweep writes

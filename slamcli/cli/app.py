@@ -89,22 +89,45 @@ def one_line(text: str) -> str:
 @contextlib.contextmanager
 def handle_errors(exit_code: int = 1) -> Iterator[None]:
     """Turn a :class:`~slamcli.errors.SlamcliError` (or an operating-system error the library did not
-    anticipate, e.g. a read-only folder) into one line on stderr and exit status ``exit_code``."""
+    anticipate, e.g. a read-only folder) into one line on stderr and exit status ``exit_code``.
+
+    numpy's RuntimeWarnings (overflow, divide by zero, invalid value on bad numbers in user data) are
+    collected and reported as ONE counted ``warning:`` line when the command succeeds; on an error only the
+    error line is printed. Other warnings pass through unchanged.
+    """
+    import warnings
+
     from slamcli.errors import SlamcliError
 
-    try:
-        yield
-    except SlamcliError as exc:
-        msg = one_line(str(exc)) or type(exc).__name__
-        typer.echo(f"error: {msg}", err=True)
-        raise typer.Exit(exit_code) from None
-    except OSError as exc:
-        where = f"{exc.filename}: " if exc.filename is not None else ""
-        typer.echo(f"error: {one_line(where + (exc.strerror or str(exc) or type(exc).__name__))}", err=True)
-        raise typer.Exit(exit_code) from None
-    except KeyboardInterrupt:
-        typer.echo("interrupted", err=True)
-        raise typer.Exit(130) from None
+    ok = False
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            yield
+            ok = True
+        except SlamcliError as exc:
+            msg = one_line(str(exc)) or type(exc).__name__
+            typer.echo(f"error: {msg}", err=True)
+            raise typer.Exit(getattr(exc, "exit_code", exit_code)) from None  # OutputRefused: 2
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename is not None else ""
+            typer.echo(f"error: {one_line(where + (exc.strerror or str(exc) or type(exc).__name__))}", err=True)
+            raise typer.Exit(exit_code) from None
+        except MemoryError:
+            typer.echo("error: out of memory (a parameter or an input too large for this machine)", err=True)
+            raise typer.Exit(exit_code) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(130) from None
+        finally:
+            numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+            for w in caught:
+                if not issubclass(w.category, RuntimeWarning):
+                    warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+            if numeric and ok:
+                kinds = sorted({str(w.message).split(" encountered")[0] for w in numeric})
+                typer.echo(f"warning: {len(numeric)} numeric warning(s) on this input ({'; '.join(kinds)[:160]}); "
+                           "the result may hold inf/nan", err=True)
 
 
 @contextlib.contextmanager
@@ -152,11 +175,15 @@ def is_tty() -> bool:
     return sys.stderr.isatty()
 
 
-def check_output(path, *, folder: bool = False, option: str = "-o") -> None:
+def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), replaces_folder: bool = False,
+                 kind: str | None = None, force: bool = False) -> None:
     """Refuse an output path that cannot be written, before any work is done (one line, exit 1).
 
     A directory where a file is expected (or a file where a folder is expected), a name longer than the
-    file system allows, a parent that is a file, or a parent folder this process may not write into.
+    file system allows, a parent that is a file, or a parent folder this process may not write into. Then
+    the output guard (:func:`slamcli.io.guard.guard_output`, exit 2): an output that is one of ``inputs``
+    or a file inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or
+    (with ``kind``, unless ``force``) an existing file of another kind.
     """
     import os
     from pathlib import Path
@@ -176,6 +203,9 @@ def check_output(path, *, folder: bool = False, option: str = "-o") -> None:
         fail(f"{option} {p}: {anc} is a file, not a folder")
     if not os.access(anc, os.W_OK | os.X_OK):
         fail(f"{option} {p}: folder {anc} is not writable")
+    from slamcli.io.guard import guard_output
+
+    guard_output(p, inputs, folder=folder, replaces_folder=replaces_folder, option=option, kind=kind, force=force)
 
 
 def iteration_count(result) -> int | None:

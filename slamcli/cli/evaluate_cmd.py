@@ -84,7 +84,8 @@ def evaluate_command(
         from slamcli.api.evaluate import evaluate_files
 
         out = out_dir if out_dir is not None else result.parent / f"{result.stem}_eval"
-        check_output(out, folder=True, option="-o" if out_dir is not None else "output folder")
+        check_output(out, folder=True, option="-o" if out_dir is not None else "output folder",
+                     inputs=[result, data, against], replaces_folder=True)
         m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
                            rpe_unit=rpe_unit, check_hash=not no_hash_check, against=against)
         if quiet:

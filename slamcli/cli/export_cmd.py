@@ -29,7 +29,7 @@ def export_command(
     with handle_errors():
         from slamcli.api.interop import export_file
 
-        check_output(output)
+        check_output(output, inputs=[src, data])
         s = export_file(src, fmt, output, data=data, check_hash=not no_hash_check)
         if not quiet:
             edges = f", {s['n_edges']} edges" if "n_edges" in s else ""

@@ -9,6 +9,8 @@ import typer
 
 from slamcli.cli.app import app, check_output, fail, handle_errors, stdout_console
 
+_Force = Annotated[bool, typer.Option("--force", help="Replace an existing -o that is not a slamcli dataset.")]
+
 import_app = typer.Typer(
     help="Import a recording, a landmark graph or another estimator's trajectory: then solve/evaluate/plot work on it.",
     no_args_is_help=True,
@@ -42,7 +44,7 @@ def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, s
         except ValueError:
             fail(f"--robots: expected comma-separated robot numbers like 1,2,3, got {robots!r}")
     if solo_dir is not None:
-        check_output(solo_dir, folder=True, option="--solo-dir")
+        check_output(solo_dir, folder=True, option="--solo-dir", inputs=[directory, out])
     ds = import_mrclam_team(directory, numbers, **kw)
     write_dataset(out, ds)
     written = [out]
@@ -113,13 +115,14 @@ def import_mrclam_command(
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
     ] = None,
+    force: _Force = False,
 ) -> None:
     """Import robot --robot of a UTIAS MRCLAM dataset: controls resampled to --dt, barcode ids as reported ids,
     motion-capture ground truth for evaluation. --robots / --all-robots: one multi-robot dataset."""
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
-        check_output(out)
+        check_output(out, inputs=[directory], kind="dataset", force=force)
         import dataclasses
 
         import numpy as np
@@ -235,6 +238,7 @@ def import_g2o_command(
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
     ] = None,
+    force: _Force = False,
 ) -> None:
     """Import a pose graph or landmark graph losslessly: the odometry chain, loop closures as between-factors,
     landmark sightings as range-bearing rows with the file's landmark ids as reported ids, every edge's
@@ -242,7 +246,7 @@ def import_g2o_command(
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
-        check_output(out)
+        check_output(out, inputs=[path], kind="dataset", force=force)
         from slamcli.datasets.g2o import import_graph
         from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
@@ -274,13 +278,13 @@ _VStd = Annotated[float | None, typer.Option(help="σ of the encoder speed, m/s 
 _SteerStd = Annotated[float | None, typer.Option(help="σ of the steering angle, rad (default: the importer's).")]
 
 
-def _import_car_recording(out: Path | None, quiet: bool, load, summary) -> None:
+def _import_car_recording(out: Path | None, quiet: bool, load, summary, directory: Path, force: bool) -> None:
     """The shared body of the car-recording imports: ``load()`` → Dataset, written atomically to ``out``, then
     ``summary(ds)`` (one line) unless ``quiet``; every failure is one line (handle_errors)."""
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
-        check_output(out)
+        check_output(out, inputs=[directory], kind="dataset", force=force)
         from slamcli.io import write_dataset
 
         ds = load()
@@ -306,6 +310,7 @@ def import_victoria_park_command(
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
     ] = None,
+    force: _Force = False,
 ) -> None:
     """Import Sydney Victoria Park: 40 Hz speed/steering as Ackermann controls, laser at (3.78, 0.50) m, tree
     detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
@@ -323,7 +328,7 @@ def import_victoria_park_command(
                 f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
                 f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s)")
 
-    _import_car_recording(out, quiet, load, summary)
+    _import_car_recording(out, quiet, load, summary, directory, force)
 
 
 @import_app.command("carpark")
@@ -339,6 +344,7 @@ def import_carpark_command(
     out: Annotated[
         Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
     ] = None,
+    force: _Force = False,
 ) -> None:
     """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
     ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
@@ -357,4 +363,4 @@ def import_carpark_command(
                 f"{md['beacon_intensity_threshold']}), {md['n_surveyed_beacons']} surveyed beacons, "
                 f"{md['n_gps_fixes']} GPS fixes")
 
-    _import_car_recording(out, quiet, load, summary)
+    _import_car_recording(out, quiet, load, summary, directory, force)

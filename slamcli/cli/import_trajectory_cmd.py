@@ -23,6 +23,7 @@ def import_trajectory_command(
         help="Dataset stamps outside the file's span: error, or hold the end pose.")] = "error",
     name: Annotated[str | None, typer.Option(help="Solver name to record (default imported:<format>).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing -o that is not a slamcli result.")] = False,
 ) -> None:
     """Import another estimator's TUM/KITTI trajectory as a result.
 
@@ -31,7 +32,7 @@ def import_trajectory_command(
     with handle_errors():
         from slamcli.api.interop import import_trajectory_file
 
-        check_output(output)
+        check_output(output, inputs=[path, data, times], kind="result", force=force)
         r = import_trajectory_file(path, data, output, fmt=fmt, times=times, time_offset=time_offset,
                                    extrapolate=extrapolate, name=name)
         if not quiet:

@@ -56,8 +56,11 @@ def plot_command(
         if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:
             what = "sweep folder" if kind == "compare" else "result"
             fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
-        check_output(output)
+        # a sweep folder (plot compare) is read through its results.csv: figures beside it may be re-drawn
+        check_output(output, inputs=[*(r / "results.csv" if r.is_dir() else r for r in results), *(data or [])])
         w, h = parse_size(size, _SIZES[kind])
+        _check_raster(w, h, dpi)
+        _check_title(title)
         check = not no_hash_check
         data_paths = list(data) if data else [None] * len(results)
         echo = (lambda msg: None) if quiet else typer.echo
@@ -77,6 +80,42 @@ def plot_command(
                 _nees(ax, results, data_paths, check, title, echo, log=not linear)
         save_figure(fig, output, dpi=dpi)
         echo(f"wrote {output}")
+
+
+#: matplotlib's Agg renderer refuses images of 2^16 pixels or more per side
+MAX_PIXELS_PER_SIDE = 2**16
+#: bytes per pixel of the Agg canvas (RGBA, 8 bits each)
+RGBA_BYTES = 4
+
+
+def _check_raster(width_in: float, height_in: float, dpi: int) -> None:
+    """Refuse a ``--dpi`` whose canvas matplotlib cannot allocate (before any file is read)."""
+    from slamcli.params import check_allocation
+
+    px_w, px_h = round(width_in * dpi), round(height_in * dpi)
+    if max(px_w, px_h) >= MAX_PIXELS_PER_SIDE:
+        fail(f"--dpi {dpi}: a {width_in:g}x{height_in:g} in figure would be {px_w}x{px_h} pixels; matplotlib "
+             f"draws at most {MAX_PIXELS_PER_SIDE - 1} per side")
+    check_allocation("--dpi", dpi, float(px_w) * px_h * RGBA_BYTES, f"a {px_w}x{px_h} pixel canvas")
+
+
+def _check_title(title: str | None) -> None:
+    """Refuse a ``--title`` whose ``$...$`` part matplotlib's mathtext cannot parse (one line, not at save)."""
+    if not title:
+        return
+    from matplotlib import cbook
+    from matplotlib.mathtext import MathTextParser
+
+    if not cbook.is_math_text(title):
+        return
+    try:
+        MathTextParser("path").parse(title)
+    except ValueError as exc:
+        import re
+
+        m = re.search(r"(found .*?)\s*\(at char (\d+)\)", str(exc))
+        why = f"{m.group(1)} at character {m.group(2)}" if m else "parse error"
+        fail(f"--title {title!r}: not valid mathtext ({why}); escape a literal dollar sign as \\$")
 
 
 def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.echo):

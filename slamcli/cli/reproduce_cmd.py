@@ -36,7 +36,7 @@ def reproduce_command(
 
         if workers is not None and workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
-        check_output(out, folder=True, option="--out")
+        check_output(out, folder=True, option="--out", inputs=[experiments])
         con = stderr_console()
         if experiments is not None and not experiments.is_dir():
             fail(f"--experiments: {experiments} is not a directory")

@@ -21,6 +21,7 @@ def simulate_command(
     keys: bool = typer.Option(False, "--keys", help="List the override keys of --scenario with their values."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no summary."),
     out: Path = typer.Option(None, "-o", "--out", help="Dataset file to write (HDF5, written atomically)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing -o that is not a slamcli dataset file."),
 ) -> None:
     """Simulate --scenario with --seed and write the dataset (inputs + ground truth) to -o."""
     with handle_errors():
@@ -39,8 +40,8 @@ def simulate_command(
         from slamcli.api.simulate import parse_overrides, simulate_to_file
         from slamcli.sim import config_to_dict, resolve_scenario
 
-        if seed < 0:
-            fail(f"--seed: must be >= 0, got {seed}")
+        if not 0 <= seed < 2**63:
+            fail(f"--seed: must be in [0, 2^63), got {seed}")
         overrides = parse_overrides(list(set_ or []))
         cfg = resolve_scenario(scenario, overrides)  # validate before anything runs
         if keys:
@@ -55,7 +56,7 @@ def simulate_command(
             return
         if out is None:
             fail("-o/--out is required")
-        check_output(out)
+        check_output(out, kind="dataset", force=force)
         # The bar opens on the first progress report (after the world is built), so errors print one line.
         with contextlib.ExitStack() as stack:
             bar: list = []

@@ -7,7 +7,15 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, check_output, handle_errors, iteration_count, progress_bar, stdout_console
+from slamcli.cli.app import (
+    app,
+    check_output,
+    fail,
+    handle_errors,
+    iteration_count,
+    progress_bar,
+    stdout_console,
+)
 
 
 @app.command("solve")
@@ -26,13 +34,16 @@ def solve_command(
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no summary."),
     out: Path = typer.Option(..., "-o", "--out", help="Result file to write (HDF5, written atomically)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing -o that is not a slamcli result file."),
 ) -> None:
     """Solve DATA with --method and write the estimate (poses, landmarks, association, ...) to -o."""
     with handle_errors():
         from slamcli.api.solve import make_solver, solve_file
 
+        if not 0 <= seed < 2**63:
+            fail(f"--seed: must be in [0, 2^63), got {seed}")
         make_solver(method, list(param or []))  # validate method and params before reading data
-        check_output(out)
+        check_output(out, inputs=[data, init], kind="result", force=force)
         # The bar opens on the solver's first progress report, so input errors print only their one line.
         with contextlib.ExitStack() as stack:
             bar: list = []

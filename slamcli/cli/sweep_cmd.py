@@ -61,7 +61,7 @@ def sweep_command(
         if dry_run:
             _print_dry_run(expansion, out)
             return
-        check_output(out, folder=True, option="--out")
+        check_output(out, folder=True, option="--out", inputs=[experiment])
         summary = _run(expansion, out, workers, executor, scheduler, resume, quiet)
         _print_summary(summary)
         if not summary.ok:

@@ -101,6 +101,8 @@ def import_carpark(directory, *, max_range: float = NO_RETURN_M, noise: NoiseSpe
     import scipy.io as sio
 
     d = Path(directory)
+    if not (max_range > 0):  # negative, zero and nan keep no beacon (or every one): a mistyped option
+        raise DatasetImportError(f"--max-range: must be > 0 m (or inf), got {max_range}")
     if not d.is_dir():
         raise DatasetImportError(f"{d}: not a directory")
     p_data, p_beac = d / "data_set.mat", d / "beac_juan3.mat"
@@ -129,6 +131,12 @@ def import_carpark(directory, *, max_range: float = NO_RETURN_M, noise: NoiseSpe
         raise DatasetImportError(f"{p_data}: Laser/Intensity must be (len(TimeLaser), 361), got {laser.shape}")
     if beacons.ndim != 2 or beacons.shape[1] != 2:
         raise DatasetImportError(f"{p_beac}: estbeac must be (L, 2), got {beacons.shape}")
+    for key, a in (("Laser", laser), ("Time_VS", t_vs), ("Velocity", vel), ("Steering", steer), ("TimeLaser", t_l)):
+        if not np.isfinite(a).all():
+            raise DatasetImportError(f"{p_data}: field {key!r}: non-finite value at index {int(np.argmax(~np.isfinite(a)))}")
+    if (laser < 0).any():
+        i, j = np.argwhere(laser < 0)[0]
+        raise DatasetImportError(f"{p_data}: field 'Laser': range {laser[i, j]:g} m at scan {i}, beam {j} must be >= 0")
     if not (np.diff(t_vs) > 0).all():
         raise DatasetImportError(f"{p_data}: Time_VS not strictly increasing")
     dt = float(np.median(np.diff(t_vs)))

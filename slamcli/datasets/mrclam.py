@@ -75,6 +75,10 @@ DEFAULT_MOTION_STD = (0.015, 0.07)
 DEFAULT_LATERAL_STD_PER_M = 0.05  # lateral slip σ per metre travelled, for odometry_std[1]
 
 
+#: memory one resampled pose step takes while importing (stamps, controls, odometry, truth and temporaries), B
+BYTES_PER_STEP = 256
+
+
 def default_noise(dt: float) -> NoiseSpec:
     """The default :class:`NoiseSpec` for sampling period ``dt`` (see the module constants).
 
@@ -428,6 +432,10 @@ def import_mrclam(
     T = math.floor(duration / dt + 1e-9)
     if T < 1:
         raise DatasetImportError(f"--duration: {duration:g} s is shorter than one step (dt = {dt:g} s)")
+    from slamcli.params import check_allocation
+
+    check_allocation("--dt", dt, (T + 1.0) * BYTES_PER_STEP, f"{T + 1} pose steps over {duration:g} s",
+                     "use a larger --dt or a shorter --duration")
     timestamps = start + dt * np.arange(T + 1)
 
     # --- controls (ZOH time average) and dead-reckoned odometry ----------------------------------------------

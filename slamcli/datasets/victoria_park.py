@@ -115,6 +115,41 @@ def _load(path: Path, ncol: int) -> np.ndarray:
     return a
 
 
+#: the SICK laser's field of view in its own frame: bearings 0..π (π/2 straight ahead), rad
+LASER_FOV_RAD = (0.0, math.pi)
+#: slack on the field-of-view bounds for values printed with 5 decimals, rad
+FOV_SLACK_RAD = 1e-5
+
+
+def data_line(path: Path, row: int) -> int:
+    """1-based line number in ``path`` of data row ``row`` (0-based; blank and ``#`` lines are skipped)."""
+    n = -1
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for i, line in enumerate(fh, 1):
+            if line.strip() and not line.lstrip().startswith("#"):
+                n += 1
+                if n == row:
+                    return i
+    return row + 1
+
+
+def check_readings(path: Path, meas: np.ndarray) -> None:
+    """Refuse physically impossible detections (one line naming the file, line and field).
+
+    Ranges must be > 0 (a trunk at the sensor is not a detection), bearings inside the laser's field of view
+    :data:`LASER_FOV_RAD`, trunk diameters >= 0.
+    """
+    lo, hi = LASER_FOV_RAD
+    checks = (("range", 1, meas[:, 1] > 0, "must be > 0 m"),
+              ("bearing", 2, (meas[:, 2] >= lo - FOV_SLACK_RAD) & (meas[:, 2] <= hi + FOV_SLACK_RAD),
+               f"must lie in the laser's field of view [{lo:g}, {hi:.5f}] rad"),
+              ("diameter", 3, meas[:, 3] >= 0, "must be >= 0 m"))
+    for field_name, col, ok, what in checks:
+        if not ok.all():
+            row = int(np.argmax(~ok))
+            raise DatasetImportError(f"{path}: line {data_line(path, row)}: {field_name} {meas[row, col]:g} {what}")
+
+
 def import_victoria_park(directory, *, start: float = 0.0, duration: float | None = None,
                          max_range: float = float("inf"), noise: NoiseSpec | None = None) -> Dataset:
     """Read a Victoria Park ASCII directory (see the module docstring) into a :class:`Dataset`.
@@ -131,6 +166,9 @@ def import_victoria_park(directory, *, start: float = 0.0, duration: float | Non
         raise DatasetImportError(f"{d}: not a directory")
     inputs = _load(d / "inputs.dat", 3)
     meas = _load(d / "measurements.dat", 4)
+    check_readings(d / "measurements.dat", meas)
+    if not (max_range > 0):  # nan, 0 and negative; inf = unlimited
+        raise DatasetImportError(f"--max-range: must be > 0 (or inf), got {max_range}")
     gps = _load(d / "gps.dat", 3)
     t_in = inputs[:, 0]
     if len(t_in) < 2 or not (np.diff(t_in) > 0).all():

@@ -510,6 +510,20 @@ def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
             raise r.fail(name, f"declared length {shp[0]} does not match {what} ({n})")
 
 
+#: largest magnitude of a pose coordinate, control or odometry value, m (m/s, rad): beyond it squared distances
+#: overflow float64 within a few products (1e300² = inf) and a solver writes a result nobody can read
+MAX_INPUT_MAGNITUDE = 1e9
+
+
+def check_magnitude(r: Reader, name: str, a: np.ndarray) -> None:
+    """Refuse values of magnitude above :data:`MAX_INPUT_MAGNITUDE` (one line naming the field and index)."""
+    big = np.abs(a) > MAX_INPUT_MAGNITUDE
+    if big.any():
+        idx = np.unravel_index(int(np.argmax(big)), a.shape)
+        raise r.fail(name, f"value {a[idx]:g} at index {tuple(int(i) for i in idx)} is beyond ±{MAX_INPUT_MAGNITUDE:g} "
+                           "(not a physical pose or control)")
+
+
 def _read_inputs(r: Reader, dt: float) -> SlamInputs:
     r.group("inputs")
     ts = r.array("inputs/timestamps", dtype="f", shape=(None,))
@@ -528,6 +542,8 @@ def _read_inputs(r: Reader, dt: float) -> SlamInputs:
     r.expect_len("inputs/controls", controls, T, "T = len(timestamps) - 1")
     odo = r.array("inputs/odometry_xyt", dtype="f", shape=(None, 3))
     r.expect_len("inputs/odometry_xyt", odo, n_poses, "T+1 = len(timestamps)")
+    for name, a in (("inputs/x0", x0), ("inputs/controls", controls), ("inputs/odometry_xyt", odo)):
+        check_magnitude(r, name, a)
     max_range = float(r.array("inputs/max_range", dtype="f", shape=(), finite=False))
     if np.isnan(max_range) or not max_range > 0:
         raise r.fail("inputs/max_range", f"must be > 0 (inf allowed), got {max_range}")

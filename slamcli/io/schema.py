@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import itertools
 import json
 import math
 import os
@@ -19,7 +20,7 @@ import h5py
 import numpy as np
 
 from slamcli.errors import SchemaError, SlamcliError
-from slamcli.io.atomic import atomic_path
+from slamcli.io.atomic import write_bytes_atomic
 
 DATASET_SCHEMA = "slamcli.dataset"
 RESULT_SCHEMA = "slamcli.result"
@@ -87,16 +88,28 @@ def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, f
 def create_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
     """Open a new HDF5 file for writing at ``path`` atomically (see :func:`~slamcli.io.atomic.atomic_path`).
 
-    Operating-system failures (directory in the way, permission denied, disk full) become a one-line
-    :class:`SlamcliError` naming the file; nothing is left behind.
+    The file is built in memory (HDF5's ``core`` driver, no backing store) and its image written in one
+    piece by :func:`~slamcli.io.atomic.write_bytes_atomic`: a full disk or an I/O error then fails in plain
+    Python (one line naming the file, the temporary removed) instead of inside HDF5's close, where h5py
+    raised and then crashed the interpreter at exit (exit 139) when it closed the file a second time.
     """
     if Path(path).is_dir():
         raise SlamcliError(f"{path}: is a directory, expected a file name")
+    name = f"slamcli-{os.getpid()}-{id(path):x}-{next(_CORE_IDS)}.h5"  # unique per open in-memory file
     try:
-        with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f = h5py.File(name, "w", driver="core", backing_store=False)
+        try:
             yield f
-    except OSError as exc:
+            f.flush()
+            image = f.id.get_file_image()
+        finally:
+            f.close()
+    except OSError as exc:  # raised by HDF5 while building the image (nothing is on disk yet)
         raise SlamcliError(f"{path}: cannot write file ({_one_line(exc)})") from None
+    write_bytes_atomic(path, image)
+
+
+_CORE_IDS = itertools.count()
 
 
 def check_path(path: str | os.PathLike) -> Path:

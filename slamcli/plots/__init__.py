@@ -55,13 +55,16 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 200) -> Path:
     """Save ``fig`` to ``path`` (``.png``, ``.pdf`` or ``.svg``, by extension) atomically: temp file in the
     same directory, then ``os.replace``, so a crash never leaves a half-written image. ``dpi`` sets the
     raster resolution (PNG; PDF/SVG are vector)."""
+    import io
+
     from slamcli.errors import ConfigError
-    from slamcli.io import atomic_path
+    from slamcli.io.atomic import write_bytes_atomic
 
     final = Path(path)
     fmt = check_format(final)
     if not dpi > 0:
         raise ConfigError(f"--dpi: must be > 0, got {dpi}")
-    with atomic_path(final) as tmp:
-        fig.savefig(tmp, format=fmt, dpi=dpi)
+    buf = io.BytesIO()  # rendered in memory: matplotlib's PDF writer crashed on a full disk (AttributeError)
+    fig.savefig(buf, format=fmt, dpi=dpi)
+    write_bytes_atomic(final, buf.getbuffer())
     return final

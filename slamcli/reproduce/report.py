@@ -215,7 +215,7 @@ class Reproduction:
         import pandas as pd
 
         from slamcli.sweep.expand import expand
-        from slamcli.sweep.runner import run_sweep
+        from slamcli.sweep.runner import load_results, run_sweep
 
         cfg, missing = self.prepare(file, add_all_solvers=add_all_solvers)
         if not cfg.solvers:
@@ -223,7 +223,7 @@ class Reproduction:
         expansion = expand(cfg)
         self.log(f"{cfg.name}: {len(expansion.runs)} runs")
         summary = run_sweep(expansion, self.runs_dir, workers=self.workers)
-        table = pd.read_csv(summary.exp_dir / "results.csv")
+        table = load_results(summary.exp_dir)  # path columns joined onto the sweep folder
         return SweepOutcome(cfg, expansion, summary, table, summary.exp_dir, missing)
 
     # -- report pieces ---------------------------------------------------------------------------------------------

@@ -72,6 +72,7 @@ from slamcli.models.ackermann import ackermann_jacobians, ackermann_step
 from slamcli.models.angles import circular_mean, wrap_angle
 from slamcli.models.motion import ddmr_step
 from slamcli.models.observation import range_bearing
+from slamcli.params import check_allocation
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.resampling import RESAMPLERS, effective_sample_size, normalise_log_weights
 from slamcli.types import SlamInputs, SolverResult, Status
@@ -552,6 +553,7 @@ class FastSlam(BaseSolver):
             M_std = np.asarray(inputs.noise.odometry_std, float) * p.motion_noise_scale
             increments = se2.between(inputs.odometry_xyt[:-1], inputs.odometry_xyt[1:])
 
+        check_allocation("n_particles", P, 2.0 * P * (max(capacity, 1) * 53 + 40), "the particle maps (×2 for resampling)")
         ps = ParticleSet.create(inputs.x0, P, capacity)
         resample = RESAMPLERS[p.resampling]
         self._log_p0 = log_p0

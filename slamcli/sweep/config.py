@@ -348,7 +348,29 @@ def load_experiment(path: str | Path) -> ExperimentConfig:
                           f"offset {exc.start})") from None
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read: {exc.strerror}") from None
+    except RecursionError:  # tomllib parses nested arrays/tables recursively
+        raise ConfigError(f"{p}: not valid TOML for an experiment: nested deeper than {MAX_TOML_DEPTH} "
+                          "levels (the parser's recursion limit was reached)") from None
+    depth = _depth(raw)
+    if depth > MAX_TOML_DEPTH:
+        raise ConfigError(f"{p}: arrays/tables nested more than {MAX_TOML_DEPTH} levels deep (the limit of "
+                          "an experiment file)")
     return parse_experiment(raw, source=str(p))
+
+
+#: deepest nesting of tables/arrays an experiment file may have (far above what the schema needs)
+MAX_TOML_DEPTH = 32
+
+
+def _depth(v: Any) -> int:
+    """Nesting depth of a parsed TOML value (a scalar 0), capped at MAX_TOML_DEPTH + 1; iterative."""
+    best, stack = 0, [(v, 0)]
+    while stack:
+        x, d = stack.pop()
+        best = max(best, d)
+        if d <= MAX_TOML_DEPTH and isinstance(x, (dict, list)):
+            stack.extend((y, d + 1) for y in (x.values() if isinstance(x, dict) else x))
+    return best
 
 
 def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> ExperimentConfig:

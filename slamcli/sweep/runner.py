@@ -69,6 +69,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError, SlamcliError
+from slamcli.io.atomic import write_bytes_atomic
 from slamcli.sweep.expand import DatasetSpec, Expansion, RunSpec, canonical_json
 
 ARTEFACTS = ("config.json", "dataset.h5", "result.h5", "metrics.json", "status.json", "run.log")
@@ -160,11 +161,8 @@ def _json_default(obj: Any) -> Any:
 
 def write_json(path: Path, obj: Any) -> None:
     """Write JSON under a temporary name in the same directory, then ``os.replace``."""
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    with tmp.open("w") as fh:
-        json.dump(obj, fh, indent=2, sort_keys=True, default=_json_default, allow_nan=True)
-        fh.write("\n")
-    os.replace(tmp, path)
+    text = json.dumps(obj, indent=2, sort_keys=True, default=_json_default, allow_nan=True) + "\n"
+    write_bytes_atomic(path, text.encode())  # a full disk: one line, the temporary removed
 
 
 def read_json(path: Path) -> dict[str, Any] | None:
@@ -191,9 +189,28 @@ def run_status(exp_dir: Path, run_id: str) -> str:
     st = read_json(d / "status.json")
     if st is None or st.get("run_id") != run_id:
         return MISSING
-    if st.get("status") == COMPLETED and all((d / a).exists() for a in ARTEFACTS):
+    if st.get("status") == COMPLETED and all((d / a).exists() for a in ARTEFACTS) and _artefacts_valid(d, st):
         return COMPLETED
     return FAILED if st.get("status") == FAILED else MISSING
+
+
+#: artefacts whose sha256 a completed run records in status.json and a resume checks (the dataset is
+#: checked by its own sidecar)
+HASHED = ("config.json", "result.h5", "metrics.json")
+
+
+def _artefacts_valid(d: Path, st: dict[str, Any]) -> bool:
+    """Whether the finished run ``d`` still holds what it recorded: every hash in ``status.json`` matches
+    and ``metrics.json`` is a JSON object. A run written before hashes were recorded is checked by the
+    schema part only. A run that fails is redone by the resume (a corrupted ``metrics.json`` value never
+    reaches results.csv)."""
+    recorded = st.get("sha256")
+    if isinstance(recorded, dict):
+        for name in HASHED:
+            if recorded.get(name) != file_sha256(d / name):
+                log.warning("%s: %s does not match its recorded hash; the run is redone", d, name)
+                return False
+    return isinstance(read_json(d / "metrics.json"), dict)
 
 
 def clean_temporaries(exp_dir: Path) -> int:
@@ -336,6 +353,19 @@ def execute_run(
         "python": platform.python_version(),
         "git": git_revision(),  # not part of the run id (the slamcli version is); recorded for provenance
     }
+    try:
+        return _execute_in(tmp, final, run, status, t0, dataset_path, pipeline, dataset_error)
+    except OSError as exc:  # a full disk while writing the run's own files: no half run is left behind
+        _remove(tmp)
+        raise SlamcliError(f"{final}: cannot write the run ({exc.strerror or exc})") from None
+    except SlamcliError:
+        _remove(tmp)
+        raise
+
+
+def _execute_in(tmp: Path, final: Path, run: RunSpec, status: dict[str, Any], t0: float, dataset_path: Path,
+                pipeline: Pipeline, dataset_error: str | None) -> dict[str, Any]:
+    """The body of :func:`execute_run` inside its temporary folder ``tmp``."""
     write_json(tmp / "config.json", {"run_id": run.run_id, "point": run.point, **run.config()})
     with _run_log(tmp / "run.log") as rlog:
         rlog.info("run %s (%s, replicate %d) on dataset %s", run.run_id, run.label, run.replicate, dataset_path)
@@ -366,6 +396,8 @@ def execute_run(
             last = str(exc).strip().splitlines()
             status.update(status=FAILED, error=f"{type(exc).__name__}: {last[-1] if last else ''}", traceback=tb)
     status.update(finished_utc=_utc_now(), wall_time_s=time.perf_counter() - t0)
+    if status.get("status") == COMPLETED:
+        status["sha256"] = {name: file_sha256(tmp / name) for name in HASHED}
     write_json(tmp / "status.json", status)
     if final.is_symlink() or final.exists():
         _remove(final)
@@ -853,7 +885,7 @@ def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
             "error": st.get("error", "") if status == FAILED else "",
             "wall_time_s": st.get("wall_time_s"),
             "solve_time_s": st.get("solve_time_s"),
-            "path": str(exp_dir / r.run_id),
+            "path": r.run_id,  # relative to the sweep folder: the same for -j 1, -j 2 and a moved folder
         }
         for axis in expansion.axes:
             row[axis] = _cell(r.point.get(axis))
@@ -875,6 +907,7 @@ def write_tables(expansion: Expansion, exp_dir: Path) -> dict[str, Path]:
         if row["status"] == COMPLETED:
             metrics = read_json(exp_dir / row["run_id"] / "metrics.json") or {}
             for k, v in _scalar_items(metrics):
+                v = _relative(v, exp_dir) if k.endswith("_path") else v
                 if k not in full:
                     full[k] = v
                 else:
@@ -887,7 +920,6 @@ def write_tables(expansion: Expansion, exp_dir: Path) -> dict[str, Path]:
     except ImportError:
         return out
     pq = exp_dir / "results.parquet"
-    tmp = pq.with_name(f".{pq.name}.tmp-{os.getpid()}")
     # mixed-type object columns (e.g. None and str) are stored as strings so Arrow accepts them
     safe = tidy.copy()
     for col in safe.columns:
@@ -895,21 +927,32 @@ def write_tables(expansion: Expansion, exp_dir: Path) -> dict[str, Path]:
             kinds = {type(v) for v in safe[col] if v is not None and not (isinstance(v, float) and math.isnan(v))}
             if len(kinds) > 1:
                 safe[col] = safe[col].map(lambda v: None if v is None else str(v))
-    safe.to_parquet(tmp, index=False)
-    os.replace(tmp, pq)
+    write_bytes_atomic(pq, safe.to_parquet(None, index=False))
     out["parquet"] = pq
     return out
 
 
 def _write_csv(df, path: Path) -> Path:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    df.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    write_bytes_atomic(path, df.to_csv(index=False).encode())
     return path
 
 
+def _relative(v: Any, exp_dir: Path) -> Any:
+    """A path inside ``exp_dir`` as a path relative to it (``<run_id>/result.h5``); anything else unchanged."""
+    if not isinstance(v, str) or not v:
+        return v
+    real, root = os.path.realpath(v), os.path.realpath(exp_dir)
+    return os.path.relpath(real, root) if real.startswith(root + os.sep) else v
+
+
 def load_results(exp_dir: str | Path):
-    """The tidy table of a finished sweep as a DataFrame."""
+    """The tidy table of a finished sweep as a DataFrame; its path columns (``path``, ``*_path``), stored
+    relative to the sweep folder, are returned joined onto ``exp_dir``."""
     import pandas as pd
 
-    return pd.read_csv(Path(exp_dir) / "results.csv")
+    exp_dir = Path(exp_dir)
+    df = pd.read_csv(exp_dir / "results.csv")
+    for col in df.columns:
+        if col == "path" or col.endswith("_path"):
+            df[col] = [v if not isinstance(v, str) or os.path.isabs(v) else str(exp_dir / v) for v in df[col]]
+    return df

@@ -1,0 +1,469 @@
+"""The fault campaign of issue 23 ("nothing lost, ever"), re-runnable: ``python -m benchmarks.faults`` prints
+its totals, ``tests/test_bad_input_faults.py`` asserts them.
+
+Families (each case one CLI invocation in a forked child of :class:`test_bad_input_helpers.CliServer`):
+
+guard     an output that is an input (direct, symlink, hard link, ``x/..`` alias, relative), a file inside an
+          input folder, a device / FIFO / socket, a path inside a running sweep's folder, a file of another
+          kind: exit 2, the input byte-identical.
+disk      a full 256 kB tmpfs (when this process may mount one) and a size-limited file (RLIMIT_FSIZE in the
+          child): exit != 0, one line naming the file, no temporary, an existing output left as it was.
+import    Victoria Park bearings outside the field of view, ranges <= 0; car park --max-range <= 0; mrclam
+          --dt bounds.
+bounds    parameters bounded by memory (n_particles, --dpi, mrclam --dt), seeds >= 2^63, bad mathtext titles,
+          deeply nested TOML, inputs of magnitude 1e300.
+
+Every case is judged the same way: exit status != 0 (== ``exit`` when given), no traceback, one ``error:``
+line naming ``names``, no ``.tmp-`` entry left under the campaign folder, every watched file byte-identical
+(sha256 before and after; "data loss" otherwise), nothing at ``absent``, child peak RSS < 500 MB.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import os
+import shutil
+import socket
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+
+HERE = Path(__file__).parent
+DATA = HERE / "data"
+PEAK_MB = 500.0
+#: the child's file-size limit in the RLIMIT_FSIZE family, bytes (every output here is larger)
+FSIZE_BYTES = 2048
+TMPFS_BYTES = 256 * 1024
+
+
+@dataclass
+class Fault:
+    family: str
+    id: str
+    args: list
+    names: str  # substring the error line must contain
+    exit: int | None = None  # exact exit status expected; None: any non-zero
+    watch: tuple = ()  # files that must be byte-identical afterwards
+    absent: Path | None = None  # must not exist afterwards
+    fsize: int | None = None
+    one_line: bool = True  # a sweep prints its failure table; then only "no traceback" is asked
+
+
+def sha(p: Path) -> str:
+    return hashlib.sha256(Path(p).read_bytes()).hexdigest()
+
+
+def _alias(p: Path, how: str, links: Path) -> Path:
+    """Another name of the existing file ``p``."""
+    links.mkdir(exist_ok=True)
+    q = links / f"{how}-{p.parent.name}-{p.name}"
+    if how == "direct":
+        return p
+    if how == "symlink":
+        if not q.is_symlink():
+            q.symlink_to(p)
+        return q
+    if how == "hardlink":
+        if not q.exists():
+            os.link(p, q)
+        return q
+    if how == "dotdot":
+        (p.parent / "sub").mkdir(exist_ok=True)
+        return p.parent / "sub" / ".." / p.name
+    return Path(os.path.relpath(p, links.parent))  # relative to the campaign folder (the cwd)
+
+
+ALIASES = ("direct", "symlink", "hardlink", "dotdot", "relative")
+
+
+@dataclass
+class World:
+    w: Path
+    ds: Path
+    ds2: Path
+    res: Path
+    tum: Path
+    g2o: Path
+    toml: Path
+    sweep: Path
+    mrclam: Path
+    team: Path
+    vp: Path
+    carpark: Path
+    held: list = field(default_factory=list)
+
+
+def make_world(w: Path) -> World:
+    from slamcli.api.interop import export_file
+    from slamcli.api.simulate import simulate_to_file
+    from slamcli.api.solve import solve_file
+
+    w.mkdir(parents=True, exist_ok=True)
+    ds, ds2, res = w / "D.h5", w / "D2.h5", w / "R.h5"
+    simulate_to_file("loop", 1, {"n_steps": 120}, ds)
+    simulate_to_file("loop", 2, {"n_steps": 120}, ds2)
+    solve_file(ds, "odometry", {}, res)
+    tum = w / "t.tum"
+    export_file(res, "tum", tum)
+    g2o = w / "g.g2o"
+    shutil.copyfile(DATA / "intel_excerpt.g2o", g2o)
+    toml = w / "e.toml"
+    toml.write_text('[experiment]\nname = "e"\n[scenario]\nname = "loop"\nparameters = {n_steps = 20}\n'
+                    '[[solver]]\nmethod = "odometry"\n')
+    sweep = w / "sw"
+    sweep.mkdir()
+    (sweep / "results.csv").write_text("run_id,label,status\n")
+    dirs = {}
+    for name, src in (("mrclam", "mrclam_excerpt"), ("team", "mrclam_team_excerpt"), ("vp", "victoria_park_excerpt"),
+                      ("carpark", "carpark_excerpt")):
+        dirs[name] = w / name
+        shutil.copytree(DATA / src, dirs[name])
+    return World(w, ds, ds2, res, tum, g2o, toml, sweep, **dirs)
+
+
+def guard_cases(W: World) -> list[Fault]:
+    w, links, out = W.w, W.w / "links", W.w / "out"
+    out.mkdir(exist_ok=True)
+    cases: list[Fault] = []
+
+    def add(cid, args, names, watch):
+        cases.append(Fault("guard", cid, args, names, exit=2, watch=tuple(watch)))
+
+    # the plot kinds read a result by content, not by extension: a result named *.png is a careless-user case
+    res_png = w / "R.png"
+    shutil.copyfile(W.res, res_png)
+    ev = w / "ev"
+    ev.mkdir()
+    shutil.copyfile(W.res, ev / "R.h5")
+    for how in ALIASES:
+        A = lambda p: _alias(p, how, links)
+        add(f"solve-over-data-{how}", ["solve", W.ds, "-m", "odometry", "-o", A(W.ds), "-q"], "input", [W.ds])
+        add(f"solve-over-init-{how}", ["solve", W.ds, "-m", "icm", "--init", W.res, "-o", A(W.res), "-q"], "input",
+            [W.res])
+        add(f"export-over-result-{how}", ["export", W.res, "-f", "tum", "-o", A(W.res), "-q"], "input", [W.res])
+        add(f"export-over-dataset-{how}", ["export", W.ds, "-f", "csv", "-o", A(W.ds), "-q"], "input", [W.ds])
+        add(f"export-over-data-{how}", ["export", W.res, "-f", "tum", "--data", W.ds, "-o", A(W.ds), "-q"],
+            "input", [W.ds])
+        add(f"trajectory-over-tum-{how}", ["import", "trajectory", W.tum, "-d", W.ds, "-o", A(W.tum), "-q"],
+            "input", [W.tum])
+        add(f"trajectory-over-data-{how}", ["import", "trajectory", W.tum, "-d", W.ds, "-o", A(W.ds), "-q"],
+            "input", [W.ds])
+        add(f"g2o-over-input-{how}", ["import", "g2o", W.g2o, "-o", A(W.g2o), "-q"], "input", [W.g2o])
+        add(f"plot-over-result-{how}", ["plot", "map", res_png, "--data", W.ds, "-o", A(res_png), "-q"], "input",
+            [res_png])
+    add("evaluate-folder-holds-input", ["evaluate", ev / "R.h5", "--data", W.ds, "-o", ev, "-q"], "contains the input",
+        [ev / "R.h5"])
+    add("evaluate-folder-dot", ["evaluate", "R.h5", "--data", W.ds, "-o", ".", "-q"], "contains the input", [W.res])
+    # files inside an input folder (directly and through a symlinked folder)
+    mr_link = links / "mrclam-dir"
+    mr_link.symlink_to(W.mrclam)
+    for folder, tag in ((W.mrclam, "dir"), (mr_link, "linked-dir")):
+        for name in ("Robot1_Odometry.dat", "Robot1_Measurement.dat", "Robot1_Groundtruth.dat", "Barcodes.dat",
+                     "Landmark_Groundtruth.dat"):
+            add(f"mrclam-{tag}-{name}", ["import", "mrclam", W.mrclam, "-o", folder / name, "-q"], "input folder",
+                [W.mrclam / name])
+    for name in ("inputs.dat", "measurements.dat", "gps.dat"):
+        add(f"vp-{name}", ["import", "victoria-park", W.vp, "-o", W.vp / name, "-q"], "input folder", [W.vp / name])
+    for name in ("data_set.mat", "beac_juan3.mat"):
+        add(f"carpark-{name}", ["import", "carpark", W.carpark, "-o", W.carpark / name, "-q"], "input folder",
+            [W.carpark / name])
+    add("mrclam-solo-dir-is-input", ["import", "mrclam", W.team, "--robots", "1,2", "--solo-dir", W.team, "-o",
+                                      out / "team.h5", "-q"], "input", [W.team / "Robot1_Odometry.dat"])
+    add("reproduce-out-is-experiments-dir", ["reproduce", "--experiments", w / "sw", "--out", w / "sw", "-q"], "input",
+        [W.sweep / "results.csv"])
+    # special files: the atomic rename would replace them by a regular file
+    special = w / "special"
+    special.mkdir()
+    nodes = {"fifo": special / "fifo"}
+    os.mkfifo(nodes["fifo"])
+    sock = socket.socket(socket.AF_UNIX)
+    sock.bind(str(special / "sock"))
+    W.held.append(sock)
+    nodes["socket"] = special / "sock"
+    with contextlib.suppress(OSError):  # a character device like /dev/null (needs root)
+        os.mknod(special / "null", 0o666 | 0o020000, os.makedev(1, 3))
+        nodes["chardev"] = special / "null"
+    for kind, node in nodes.items():
+        for cid, args in (("simulate", ["simulate", "-s", "loop", "--set", "n_steps=20", "-o", node, "-q"]),
+                          ("solve", ["solve", W.ds, "-m", "odometry", "-o", node, "-q"]),
+                          ("export", ["export", W.res, "-f", "tum", "-o", node, "-q"]),
+                          ("trajectory", ["import", "trajectory", W.tum, "-d", W.ds, "-o", node, "-q"]),
+                          ("g2o", ["import", "g2o", W.g2o, "-o", node, "-q"]),
+                          ("mrclam", ["import", "mrclam", W.mrclam, "-o", node, "-q"])):
+            cases.append(Fault("guard", f"{cid}-to-{kind}", args, "not a regular file", exit=2))
+    # a running sweep's results folder (its lock is held by this process for the whole campaign)
+    running = w / "running"
+    (running / "run1").mkdir(parents=True)
+    (running / "results.csv").write_text("run_id,label,status\n")
+    fh = open(running / ".sweep.lock", "a+")
+    fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    W.held.append(fh)
+    for cid, args in (("simulate", ["simulate", "-s", "loop", "--set", "n_steps=20", "-o", running / "d.h5", "-q"]),
+                      ("solve", ["solve", W.ds, "-m", "odometry", "-o", running / "run1" / "r.h5", "-q"]),
+                      ("evaluate", ["evaluate", W.res, "--data", W.ds, "-o", running / "e", "-q"]),
+                      ("export", ["export", W.res, "-f", "tum", "-o", running / "t.tum", "-q"]),
+                      ("plot", ["plot", "map", W.res, "--data", W.ds, "-o", running / "m.png", "-q"]),
+                      ("aggregate", ["aggregate", running, "-q"]),
+                      ("g2o", ["import", "g2o", W.g2o, "-o", running / "g.h5", "-q"])):
+        cases.append(Fault("guard", f"{cid}-into-running-sweep", args, "running sweep", exit=2,
+                           watch=(running / "results.csv",)))
+    # an existing file of another kind (--force would replace it)
+    notes = w / "notes.txt"
+    notes.write_text("my notes\n")
+    for cid, args, target in (("simulate-over-result", ["simulate", "-s", "loop", "-o", W.res, "-q"], W.res),
+                              ("solve-over-other-dataset", ["solve", W.ds, "-m", "odometry", "-o", W.ds2, "-q"], W.ds2),
+                              ("solve-over-notes", ["solve", W.ds, "-m", "odometry", "-o", notes, "-q"], notes),
+                              ("g2o-over-result", ["import", "g2o", W.g2o, "-o", W.res, "-q"], W.res),
+                              ("trajectory-over-dataset", ["import", "trajectory", W.tum, "-d", W.ds, "-o", W.ds2,
+                                                           "-q"], W.ds2),
+                              ("mrclam-over-notes", ["import", "mrclam", W.mrclam, "-o", notes, "-q"], notes)):
+        cases.append(Fault("guard", cid, args, "--force", exit=2, watch=(target,)))
+    return cases
+
+
+def _writers(W: World, d: Path, tag: str) -> list[tuple[str, list, Path]]:
+    """(id, args, output) of every writing command with its output in folder ``d``."""
+    return [
+        ("simulate", ["simulate", "-s", "loop", "--set", "n_steps=400", "-o", d / "s.h5", "-q"], d / "s.h5"),
+        ("solve-ekf", ["solve", W.ds, "-m", "ekf", "-o", d / "ekf.h5", "-q"], d / "ekf.h5"),
+        ("solve-odometry", ["solve", W.ds, "-m", "odometry", "-o", d / "odo.h5", "-q"], d / "odo.h5"),
+        ("import-g2o", ["import", "g2o", W.g2o, "-o", d / "g.h5", "-q"], d / "g.h5"),
+        ("import-mrclam", ["import", "mrclam", W.mrclam, "-o", d / "m.h5", "-q"], d / "m.h5"),
+        ("import-vp", ["import", "victoria-park", W.vp, "-o", d / "vp.h5", "-q"], d / "vp.h5"),
+        ("import-carpark", ["import", "carpark", W.carpark, "-o", d / "cp.h5", "-q"], d / "cp.h5"),
+        ("import-trajectory", ["import", "trajectory", W.tum, "-d", W.ds, "-o", d / "tr.h5", "-q"], d / "tr.h5"),
+        ("export-tum", ["export", W.res, "-f", "tum", "-o", d / "t.tum", "-q"], d / "t.tum"),
+        ("export-csv", ["export", W.res, "-f", "csv", "-o", d / "t.csv", "-q"], d / "t.csv"),
+        ("export-g2o", ["export", W.res, "-f", "g2o", "-o", d / "t.g2o", "-q"], d / "t.g2o"),
+        ("export-kitti", ["export", W.res, "-f", "kitti", "-o", d / "t.kitti", "-q"], d / "t.kitti"),
+        ("plot-png", ["plot", "map", W.res, "--data", W.ds, "-o", d / "m.png", "-q"], d / "m.png"),
+        ("plot-pdf", ["plot", "map", W.res, "--data", W.ds, "-o", d / "m.pdf", "-q"], d / "m.pdf"),
+        ("evaluate", ["evaluate", W.res, "--data", W.ds, "-o", d / "ev", "-q"], d / "ev"),
+    ]
+
+
+def disk_cases(W: World, full: Path | None) -> list[Fault]:
+    """The RLIMIT_FSIZE family always; the tmpfs family when ``full`` is a mounted, nearly full tmpfs."""
+    cases: list[Fault] = []
+    lim = W.w / "fsize"
+    lim.mkdir(exist_ok=True)
+    for cid, args, target in _writers(W, lim, "fsize"):
+        name = target.name if cid != "evaluate" else "ev"
+        cases.append(Fault("disk", f"fsize-{cid}", args, name, absent=target, fsize=FSIZE_BYTES))
+    if full is None:
+        return cases
+    old = full / "old.h5"  # an existing output on the full disk: a failed overwrite must leave it whole
+    for cid, args, target in _writers(W, full, "tmpfs"):
+        name = target.name if cid != "evaluate" else "ev"
+        cases.append(Fault("disk", f"tmpfs-{cid}", args, name, absent=target))
+    cases.append(Fault("disk", "tmpfs-solve-over-existing", ["solve", W.ds, "-m", "icm", "-o", old, "-q"], "old.h5",
+                       watch=(old,)))
+    cases.append(Fault("disk", "tmpfs-sweep", ["sweep", W.toml, "--out", full / "sweeps", "-q"], "",
+                       one_line=False))
+    return cases
+
+
+def _vp_copy(W: World, cid: str, col: int, value: float) -> Path:
+    d = W.w / "imports" / cid
+    shutil.copytree(W.vp, d)
+    p = d / "measurements.dat"
+    lines = p.read_text().splitlines()
+    parts = lines[3].split()
+    parts[col] = repr(value)
+    lines[3] = "  ".join(parts)
+    p.write_text("\n".join(lines) + "\n")
+    return d
+
+
+def import_cases(W: World) -> list[Fault]:
+    out = W.w / "out"
+    cases: list[Fault] = []
+    for cid, col, v in (("bearing-10rad", 2, 10.0), ("bearing-minus-10rad", 2, -10.0), ("bearing-3.2rad", 2, 3.2),
+                        ("bearing-minus-0.01", 2, -0.01), ("range-zero", 1, 0.0), ("range-negative", 1, -1.0),
+                        ("diameter-negative", 3, -0.3)):
+        d = _vp_copy(W, cid, col, v)
+        t = out / f"vp-{cid}.h5"
+        field_name = {1: "range", 2: "bearing", 3: "diameter"}[col]
+        cases.append(Fault("import", f"vp-{cid}", ["import", "victoria-park", d, "-o", t, "-q"],
+                           f"measurements.dat: line 4: {field_name}", absent=t, watch=(d / "measurements.dat",)))
+    for v in ("-1", "0", "nan", "-inf"):
+        t = out / f"cp-{v}.h5"
+        cases.append(Fault("import", f"carpark-max-range-{v}", ["import", "carpark", W.carpark, "--max-range", v,
+                                                                  "-o", t, "-q"], "--max-range", absent=t))
+    for v in ("1e-9", "1e-7", "0", "-1", "nan", "inf"):
+        t = out / f"mr-{v}.h5"
+        cases.append(Fault("import", f"mrclam-dt-{v}", ["import", "mrclam", W.mrclam, "--dt", v, "-o", t, "-q"],
+                           "--dt", absent=t))
+    t = out / "mr-team-dt.h5"
+    cases.append(Fault("import", "mrclam-team-dt-1e-9", ["import", "mrclam", W.team, "--robots", "1,2", "--dt", "1e-9",
+                                                         "-o", t, "-q"], "--dt", absent=t))
+    t = out / "mr-std-dt.h5"
+    cases.append(Fault("import", "mrclam-dt-1e-9-with-noise", ["import", "mrclam", W.mrclam, "--dt", "1e-9",
+                                                               "--range-std", "0.1", "-o", t, "-q"], "--dt", absent=t))
+    return cases
+
+
+def _edit(W: World, cid: str, name: str, fn) -> Path:
+    p = W.w / "bounds" / f"{cid}.h5"
+    p.parent.mkdir(exist_ok=True)
+    shutil.copyfile(W.ds, p)
+    with h5py.File(p, "r+") as f:
+        a = f[name][...]
+        fn(a)
+        del f[name]
+        f.create_dataset(name, data=a)
+    return p
+
+
+def bounds_cases(W: World) -> list[Fault]:
+    out = W.w / "out"
+    cases: list[Fault] = []
+
+    def add(cid, args, names, target):
+        cases.append(Fault("bounds", cid, args, names, absent=target))
+
+    for v in ("1e8", "1e12", "100000000", str(2**63)):
+        t = out / f"np-{v}.h5"
+        add(f"n_particles-{v}", ["solve", W.ds, "-m", "fastslam", "-p", f"n_particles={v}", "-o", t, "-q"],
+            "n_particles", t)
+    for cmd in ("simulate", "solve"):
+        for v in (str(2**63), str(2**70), "-1"):
+            t = out / f"seed-{cmd}-{v}.h5"
+            head = ["simulate", "-s", "loop"] if cmd == "simulate" else ["solve", W.ds, "-m", "odometry"]
+            add(f"seed-{cmd}-{v}", [*head, "--seed", v, "-o", t, "-q"], "--seed", t)
+    for v in ("100000", "70000", "9000", "0", "-5"):
+        t = out / f"dpi-{v}.png"
+        add(f"plot-dpi-{v}", ["plot", "map", W.res, "--data", W.ds, "--dpi", v, "-o", t, "-q"], "--dpi", t)
+    for i, title in enumerate(("$x^$", r"$\frac{1}$", r"$\sqrt{$", "$a_$", r"$\left($")):
+        t = out / f"title-{i}.png"
+        add(f"plot-title-mathtext-{i}", ["plot", "map", W.res, "--data", W.ds, "--title", title, "-o", t, "-q"],
+            "--title", t)
+    base = W.toml.read_text()
+    for cid, extra in (("arrays-1e5", "[extra]\nv = " + "[" * 100000 + "]" * 100000 + "\n"),
+                       ("arrays-100", "[extra]\nv = " + "[" * 100 + "]" * 100 + "\n"),
+                       ("inline-tables-1e4", "[extra]\nv = " + "{a = " * 10000 + "1" + "}" * 10000 + "\n")):
+        p = W.w / "bounds" / f"{cid}.toml"
+        p.parent.mkdir(exist_ok=True)
+        p.write_text(base + extra)
+        add(f"toml-nested-{cid}", ["sweep", p, "--out", out / f"sw-{cid}", "--dry-run", "-q"], p.name, None)
+    for cid, name, fn in (("odometry-1e300", "inputs/odometry_xyt", lambda a: a.__setitem__((slice(5, None), 0), 1e300)),
+                          ("odometry-minus-1e300", "inputs/odometry_xyt", lambda a: a.__setitem__((7, 1), -1e300)),
+                          ("controls-1e300", "inputs/controls", lambda a: a.__setitem__((3, 0), 1e300)),
+                          ("x0-1e300", "inputs/x0", lambda a: a.__setitem__(0, 1e300))):
+        p = _edit(W, cid, name, fn)
+        for method in ("icm", "ekf", "graph", "odometry"):
+            t = out / f"{cid}-{method}.h5"
+            cases.append(Fault("bounds", f"{cid}-{method}", ["solve", p, "-m", method, "-o", t, "-q"], name,
+                               absent=t, watch=(p,)))
+    return cases
+
+
+@contextlib.contextmanager
+def full_tmpfs(path: Path):
+    """A 256 kB tmpfs at ``path`` with an existing dataset ``old.h5`` and a filler leaving ~4 kB free; yields
+    None when mounting is not possible here (not root, no CAP_SYS_ADMIN)."""
+    path.mkdir(parents=True, exist_ok=True)
+    ok = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={TMPFS_BYTES}", "tmpfs", str(path)],
+                        capture_output=True).returncode == 0
+    if not ok:
+        yield None
+        return
+    try:
+        from slamcli.api.simulate import simulate_to_file
+
+        simulate_to_file("loop", 3, {"n_steps": 20}, path / "old.h5")
+        free = shutil.disk_usage(path).free
+        (path / "filler").write_bytes(b"\0" * max(free - 4096, 0))
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)], capture_output=True)
+
+
+def judge(c: Fault, r: dict, before: dict[Path, str], w: Path) -> tuple[str, list[str]]:
+    """('clean' | 'traceback' | 'loss' | 'unclear', reasons) for one finished case."""
+    why, kind = [], "clean"
+    err = r["stderr"]
+    lines = err.strip().splitlines()
+    if "Traceback" in err or r["code"] not in range(1, 128):
+        kind = "traceback"
+        why.append(f"exit {r['code']}" + (", traceback" if "Traceback" in err else ""))
+    elif c.exit is not None and r["code"] != c.exit:
+        why.append(f"exit {r['code']}, expected {c.exit}")
+    if c.one_line and (len(lines) != 1 or not lines[0].startswith("error: ") or c.names not in lines[0]):
+        why.append(f"not one error line naming {c.names!r}")
+    lost = [str(p) for p, h in before.items() if not p.exists() or sha(p) != h]
+    if c.absent is not None and os.path.lexists(c.absent):
+        lost.append(f"{c.absent} exists")
+    temps = [str(p) for p in w.rglob("*") if ".tmp-" in p.name]
+    if lost or temps:
+        kind = "loss"
+        why += [f"changed/left: {', '.join(lost + temps)[:200]}"]
+        for p in temps:  # so that one leftover is not blamed on every later case
+            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+    if r["maxrss_mb"] >= PEAK_MB:
+        why.append(f"peak RSS {r['maxrss_mb']:.0f} MB")
+    if why and kind == "clean":
+        kind = "unclear"
+    return kind, why
+
+
+def run_campaign(w: Path) -> dict:
+    """Build every case under ``w``, run them, return totals and the problems (one line each)."""
+    from test_bad_input_helpers import CliServer
+
+    W = make_world(w / "world")
+    totals = {"cases": 0, "clean": 0, "traceback": 0, "loss": 0, "unclear": 0, "peak_mb": 0.0}
+    problems: list[str] = []
+    families: dict[str, int] = {}
+    times: list[tuple[float, str]] = []
+    server = CliServer(w)
+    try:
+        with full_tmpfs(W.w / "full") as full:
+            cases = guard_cases(W) + disk_cases(W, full) + import_cases(W) + bounds_cases(W)
+            totals["tmpfs"] = full is not None
+            for c in cases:
+                watch = {Path(p): sha(p) for p in (*c.watch, W.ds, W.res, W.tum, W.g2o)}
+                t0 = time.perf_counter()
+                r = server.run(c.args, W.w, fsize=c.fsize)
+                times.append((time.perf_counter() - t0, f"{c.family}/{c.id}"))
+                kind, why = judge(c, r, watch, W.w)
+                totals["cases"] += 1
+                totals[kind] += 1
+                families[c.family] = families.get(c.family, 0) + 1
+                totals["peak_mb"] = max(totals["peak_mb"], r["maxrss_mb"])
+                if why:
+                    problems.append(f"{c.family}/{c.id}: {'; '.join(why)}: {r['stderr'].strip()[-240:]!r}")
+    finally:
+        server.close()
+        for h in W.held:
+            h.close()
+    totals["families"] = families
+    totals["slowest"] = sorted(times, reverse=True)[:8]
+    totals["wall_s"] = sum(t for t, _ in times)
+    totals["problems"] = problems
+    return totals
+
+
+def report(t: dict) -> str:
+    fam = ", ".join(f"{k} {v}" for k, v in t["families"].items())
+    return (f"cases {t['cases']} ({fam}; tmpfs {'mounted' if t['tmpfs'] else 'not available'}), clean errors "
+            f"{t['clean']}, tracebacks {t['traceback']}, data loss {t['loss']}, other problems {t['unclear']}, "
+            f"peak RSS {t['peak_mb']:.0f} MB")
+
+
+if __name__ == "__main__":  # pragma: no cover - see benchmarks/faults.py
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        res = run_campaign(Path(d))
+    print(report(res))
+    print(f"  wall {res['wall_s']:.1f} s; slowest: " + ", ".join(f"{n} {t:.1f} s" for t, n in res["slowest"]))
+    for line in res["problems"]:
+        print(" ", line)
+    sys.exit(1 if res["problems"] else 0)
