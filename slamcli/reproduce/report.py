@@ -25,7 +25,7 @@ non-zero with a summary.
 Other papers' sections hook in with one line in :data:`SECTIONS`: ``("key", "module:function")`` where
 ``function(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool)`` writes its own figures under
 ``out_dir`` and returns its markdown (starting with its own ``## `` heading) and whether it succeeded;
-``progress`` is a ``Callable[[str], None]`` for one-line messages.
+``progress`` is a :data:`slamcli.types.LogFn` (one-line messages).
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ from typing import Any
 
 from slamcli.errors import ConfigError, SlamcliError
 from slamcli.sweep.config import ExperimentConfig, SolverSpec, load_experiment, quick_variant
+from slamcli.types import LogFn
 
 # The paper's numbers (paper 000 §5-§6), quoted where the report puts ours beside them.
 PAPER = {
@@ -165,7 +166,7 @@ class Reproduction:
     """Runs the sections and assembles the report."""
 
     def __init__(self, out_dir: Path, *, quick: bool, workers: int, experiments_dir: Path,
-                 log: Callable[[str], None]) -> None:
+                 log: LogFn) -> None:
         self.out = Path(out_dir)
         self.runs_dir = self.out / "runs"
         self.fig_dir = self.out / "figures"
@@ -893,7 +894,7 @@ def reproduce(
     quick: bool = False,
     workers: int | None = None,
     experiments_dir: str | Path | None = None,
-    log: Callable[[str], None] = lambda s: None,
+    log: LogFn = lambda s: None,
     only: list[str] | None = None,
 ) -> ReproduceOutcome:
     """Run the sections of :data:`SECTIONS` (or the keys in ``only``), write figures and ``REPORT.md`` into

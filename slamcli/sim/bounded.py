@@ -21,7 +21,6 @@ Paper 004 (Fig. 2) measures θ from +y clockwise (x₂ − x₁ = d·sin θ, y�
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -31,9 +30,7 @@ from slamcli.models.angles import wrap_angle
 from slamcli.sim import world
 from slamcli.sim.config import ScenarioConfig, config_to_dict
 from slamcli.sim.streams import STREAMS, stream
-from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, SlamInputs
-
-ProgressFn = Callable[[int, int], None]
+from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, ProgressFn, SlamInputs
 
 
 def heading_from_paper004(theta_paper):

@@ -9,7 +9,6 @@ change the noise on true returns. Wall worlds (:mod:`~slamcli.sim.wallworld`) an
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -19,9 +18,7 @@ from slamcli.errors import ConfigError
 from slamcli.sim import robot, sensors, world
 from slamcli.sim.config import ScenarioConfig, config_to_dict
 from slamcli.sim.streams import STREAMS, stream
-from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
-
-ProgressFn = Callable[[int, int], None]
+from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, ProgressFn, SlamInputs
 
 
 def noise_spec(cfg: ScenarioConfig) -> NoiseSpec:
