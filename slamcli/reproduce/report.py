@@ -31,7 +31,6 @@ Other papers' sections hook in with one line in :data:`SECTIONS`: ``("key", "mod
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 import math
 import os
 import time
@@ -41,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from slamcli.errors import ConfigError, SlamcliError
+from slamcli.io.schema import utc_now
 from slamcli.sweep.config import ExperimentConfig, SolverSpec, load_experiment, quick_variant
 from slamcli.types import LogFn
 
@@ -942,7 +942,7 @@ def reproduce(
         "# slamcli reproduction of paper 000 (ICM-SLAM, Int. J. Automation and Computing 15(3), 2018)",
         "",
         (
-            f"Generated {_dt.datetime.now(_dt.UTC).isoformat(timespec='seconds')} by "
+            f"Generated {utc_now()} by "
             f"`slamcli reproduce{' --quick' if quick else ''}` (slamcli {slamcli.__version__}, git {git_revision()}), "
             f"{workers} worker(s), {elapsed:.0f} s. Runs: `runs/<experiment>/<run_id>/` (config, dataset, "
             "result, metrics, status, log); tables: `runs/<experiment>/results.csv`."

@@ -64,11 +64,11 @@ import traceback
 import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError, SlamcliError
+from slamcli.io.schema import utc_now, write_json
 from slamcli.sweep.expand import DatasetSpec, Expansion, RunSpec, canonical_json
 
 ARTEFACTS = ("config.json", "dataset.h5", "result.h5", "metrics.json", "status.json", "run.log")
@@ -144,27 +144,6 @@ def git_revision() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return f"{sha}{'+dirty' if dirty else ''}" if sha else "unknown"
-
-
-def _utc_now() -> str:
-    return datetime.now(UTC).isoformat(timespec="seconds")
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if hasattr(obj, "value"):
-        return obj.value
-    return str(obj)
-
-
-def write_json(path: Path, obj: Any) -> None:
-    """Write JSON under a temporary name in the same directory, then ``os.replace``."""
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    with tmp.open("w") as fh:
-        json.dump(obj, fh, indent=2, sort_keys=True, default=_json_default, allow_nan=True)
-        fh.write("\n")
-    os.replace(tmp, path)
 
 
 def read_json(path: Path) -> dict[str, Any] | None:
@@ -321,7 +300,7 @@ def execute_run(
     final = exp_dir / run.run_id
     tmp = exp_dir / f".{run.run_id}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp.mkdir(parents=True)
-    started = _utc_now()
+    started = utc_now()
     t0 = time.perf_counter()
     status: dict[str, Any] = {
         "run_id": run.run_id,
@@ -365,7 +344,7 @@ def execute_run(
             rlog.error("run failed:\n%s", tb)
             last = str(exc).strip().splitlines()
             status.update(status=FAILED, error=f"{type(exc).__name__}: {last[-1] if last else ''}", traceback=tb)
-    status.update(finished_utc=_utc_now(), wall_time_s=time.perf_counter() - t0)
+    status.update(finished_utc=utc_now(), wall_time_s=time.perf_counter() - t0)
     write_json(tmp / "status.json", status)
     if final.is_symlink() or final.exists():
         _remove(final)
@@ -397,7 +376,7 @@ def record_dead_run(run: RunSpec, exp_dir: Path, error: str) -> dict[str, Any]:
     tmp = exp_dir / f".{run.run_id}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp.mkdir(parents=True)
     write_json(tmp / "config.json", {"run_id": run.run_id, "point": run.point, **run.config()})
-    now = _utc_now()
+    now = utc_now()
     status = {"run_id": run.run_id, "experiment": run.experiment, "label": run.label, "method": run.method,
               "replicate": run.replicate, "dataset_id": run.dataset.dataset_id, "status": FAILED, "error": error,
               "started_utc": now, "finished_utc": now, "host": platform.node(), "git": git_revision()}
@@ -639,7 +618,7 @@ def run_sweep(
 
 def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress) -> SweepSummary:
     clean_temporaries(exp_dir)
-    since = _utc_now()
+    since = utc_now()
     t0 = time.perf_counter()
     counts = Counts(total=len(expansion.runs))
     pending: list[RunSpec] = []
