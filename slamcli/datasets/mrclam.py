@@ -60,6 +60,7 @@ from slamcli.datasets import DatasetImportError
 from slamcli.models.angles import angle_diff, wrap_angle
 from slamcli.models.motion import integrate
 from slamcli.models.observation import range_bearing
+from slamcli.models.se2 import interpolate_poses
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
 #: Standard deviations a solver may assume for MRCLAM, measured with :func:`residual_noise` against the
@@ -290,31 +291,6 @@ def zoh_average(t_rows: np.ndarray, u_rows: np.ndarray, t_grid: np.ndarray) -> n
     i = np.searchsorted(t_rows, t_grid, side="right") - 1
     F = F_rows[i] + u_rows[i] * (t_grid - t_rows[i])[:, None]
     return np.diff(F, axis=0) / np.diff(t_grid)[:, None]
-
-
-def interpolate_poses(t_rows: np.ndarray, xyt_rows: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Interpolate a pose track at times ``t``: x, y linearly, θ along the shorter arc.
-
-    ``θ(t) = wrap(θ_i + w · angle_diff(θ_{i+1}, θ_i))``, ``w = (t − t_i)/(t_{i+1} − t_i)``.
-
-    Parameters
-    ----------
-    t_rows : ndarray (G,)       strictly increasing stamps (G ≥ 2).
-    xyt_rows : ndarray (G, 3)   poses.
-    t : ndarray (n,)            query times within ``[t_rows[0], t_rows[-1]]``.
-
-    Returns
-    -------
-    ndarray (n, 3)
-    """
-    t_rows = np.asarray(t_rows, float)
-    p = np.asarray(xyt_rows, float)
-    t = np.asarray(t, float)
-    i = np.clip(np.searchsorted(t_rows, t, side="right") - 1, 0, len(t_rows) - 2)
-    w = (t - t_rows[i]) / (t_rows[i + 1] - t_rows[i])
-    xy = p[i, :2] + w[:, None] * (p[i + 1, :2] - p[i, :2])
-    th = wrap_angle(p[i, 2] + w * angle_diff(p[i + 1, 2], p[i, 2]))
-    return np.column_stack([xy, th])
 
 
 def nearest_steps(t: np.ndarray, t_start: float, dt: float) -> np.ndarray:
