@@ -73,9 +73,9 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write ``obj`` as a JSON text file (indent 2, sorted keys, :func:`json_default` — unknown types raise
     ``TypeError`` — ``inf``/``nan`` kept, final newline) under a temporary name, renamed onto ``path``
     atomically (:func:`~slamcli.io.atomic.atomic_path`; on any error ``path`` is left as it was)."""
-    with atomic_path(path) as tmp, open(tmp, "w") as fh:
-        json.dump(obj, fh, indent=2, sort_keys=True, default=json_default, allow_nan=True)
-        fh.write("\n")
+    text = json.dumps(obj, indent=2, sort_keys=True, default=json_default, allow_nan=True) + "\n"
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text)
 
 
 def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, frame: str, doc: str) -> None:
