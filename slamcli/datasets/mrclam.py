@@ -301,6 +301,152 @@ def nearest_steps(t: np.ndarray, t_start: float, dt: float) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------
 # import
 # --------------------------------------------------------------------------------------------------------
+def _check_arguments(dt: float, start: float, duration: float | None, non_landmark: str, max_range: float,
+                     misread_gate: float, control_delay: float) -> None:
+    """The argument checks of :func:`import_mrclam` (one-line :class:`DatasetImportError` naming the option)."""
+    if not (math.isfinite(dt) and dt > 0):
+        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
+    if not (math.isfinite(start) and start >= 0):
+        raise DatasetImportError(f"--start: must be a finite number >= 0, got {start}")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise DatasetImportError(f"--duration: must be a finite number > 0, got {duration}")
+    if non_landmark not in ("drop", "clutter"):
+        raise DatasetImportError(f"non_landmark: must be 'drop' or 'clutter', got {non_landmark!r}")
+    if not max_range > 0:
+        raise DatasetImportError(f"--max-range: must be > 0, got {max_range}")
+    if not misread_gate > 0:
+        raise DatasetImportError(f"misread_gate: must be > 0, got {misread_gate}")
+    if not (math.isfinite(control_delay) and abs(control_delay) <= 5.0):
+        raise DatasetImportError(
+            f"--control-delay: must be a number of seconds in [-5, 5], got {control_delay}"
+        )
+
+
+def _landmark_rows(raw: MrclamRaw, t_ref: float, start: float, dt: float, T: int, timestamps: np.ndarray,
+                   non_landmark: str) -> dict[str, np.ndarray]:
+    """The measurement rows :func:`import_mrclam` keeps, in time order: ``step`` (n,) nearest pose step,
+    ``m`` (n, 4) file rows, ``m_t`` (n,) s on the ``t_ref`` axis, ``lm_index`` (n,) landmark index or −1 —
+    plus, over all rows, the masks ``in_window``, ``is_robot``, ``is_unknown`` and the kept rows'
+    ``timing_err`` (n,) s, which the metadata counts."""
+    m = raw.measurements
+    order = np.argsort(m[:, 0], kind="stable")  # the files are time-sorted; be lenient
+    m = m[order]
+    m_t = m[:, 0] - t_ref
+    step = nearest_steps(m_t, start, dt)
+    in_window = (step >= 0) & (step <= T)
+    barcode_to_subject = dict(zip(raw.barcodes[:, 1].tolist(), raw.barcodes[:, 0].tolist()))
+    subject_to_index = {int(s): i for i, s in enumerate(raw.landmark_subjects)}
+    subject = np.array([barcode_to_subject.get(int(b), -1) for b in m[:, 1]], dtype=np.int64)
+    lm_index = np.array([subject_to_index.get(int(s), -1) for s in subject], dtype=np.int64)
+    is_robot = (subject >= 0) & (lm_index < 0)
+    is_unknown = subject < 0
+    keep_row = in_window & ((lm_index >= 0) | (non_landmark == "clutter"))
+    step, m, m_t, lm_index = step[keep_row], m[keep_row], m_t[keep_row], lm_index[keep_row]
+    timing_err = np.abs(m_t - timestamps[step]) if len(step) else np.zeros(0)
+    return {"step": step, "m": m, "m_t": m_t, "lm_index": lm_index, "in_window": in_window, "is_robot": is_robot,
+            "is_unknown": is_unknown, "timing_err": timing_err}
+
+
+def _metadata(raw: MrclamRaw, robot: int, dt: float, start: float, T: int, non_landmark: str, control_delay: float,
+              max_range: float, misread_gate: float, no_truth: bool, t_ref: float, timestamps: np.ndarray,
+              truth_max_gap: float, rows: dict[str, np.ndarray], true_lm: np.ndarray) -> dict:
+    """The dataset metadata of :func:`import_mrclam`: provenance, the import's parameters, the sensor and the
+    row counts of :func:`_landmark_rows`."""
+    d = raw.directory
+    in_window, is_robot, is_unknown = rows["in_window"], rows["is_robot"], rows["is_unknown"]
+    lm_index, timing_err = rows["lm_index"], rows["timing_err"]
+    return {
+        "scenario": f"mrclam:{d.name}:robot{robot}",
+        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
+        "source_dir": str(d.resolve()),
+        "importer": "slamcli.datasets.mrclam",
+        "scenario_params": {
+            "robot": int(robot),
+            "dt": float(dt),
+            "start_s": float(start),
+            "duration_s": float(T * dt),
+            "non_landmark": non_landmark,
+            "control_delay_s": float(control_delay),
+            "controls": "zero-order-hold time average per step",
+            "odometry": "integrate(x0, controls, dt)",
+            "measurement_step": "nearest pose step",
+        },
+        "robot": {
+            "number": int(robot),
+            "platform": "iRobot Create (differential drive)",
+            "odometry": "velocity log, ~100 Hz",
+        },
+        "sensor": {
+            "type": "monocular camera reading barcoded cylinders",
+            "reports_ids": True,
+            "max_range": float(max_range),
+            "landmark_subjects": raw.landmark_subjects.tolist(),
+            # what the whole measurement file shows (the camera has no published range or field of view)
+            "file_range_min_max_m": [float(raw.measurements[:, 2].min()), float(raw.measurements[:, 2].max())]
+            if len(raw.measurements)
+            else [],
+            "file_abs_bearing_max_rad": float(np.abs(raw.measurements[:, 3]).max())
+            if len(raw.measurements)
+            else 0.0,
+        },
+        "time_origin_unix_s": float(t_ref),
+        "window_unix_s": [float(t_ref + timestamps[0]), float(t_ref + timestamps[-1])],
+        "max_timing_error_s": float(dt / 2),
+        "observed_max_timing_error_s": float(timing_err.max()) if len(timing_err) else 0.0,
+        "truth_max_gap_s": truth_max_gap,
+        "n_rows_in_window": int(in_window.sum()),
+        "n_landmark_rows": int(np.sum(lm_index >= 0)),
+        "n_robot_rows_in_window": int(np.sum(is_robot & in_window)),
+        "n_unknown_barcode_rows_in_window": int(np.sum(is_unknown & in_window)),
+        "misread_gate_rad": float(misread_gate),
+        "n_misread_rows": int(np.sum((lm_index >= 0) & (true_lm < 0))),
+        "truth": "none (imported with no_truth: x0 = [0, 0, 0], the robot's own frame)" if no_truth else "motion capture",
+    }
+
+
+def _time_window(raw: MrclamRaw, robot: int, dt: float, start: float, duration: float | None,
+                 control_delay: float, no_truth: bool, time_origin_unix: float | None):
+    """The window of :func:`import_mrclam` on the axis ``t_ref = 0``: returns ``t_ref`` (Unix s), the
+    odometry stamps ``(n_odo,)`` and ground-truth stamps ``(n_gt,)`` in Unix s (odometry shifted by
+    ``control_delay``; without truth the odometry's two ends), ``T`` steps and ``timestamps (T+1,)``."""
+    d = raw.directory
+    p_odo, p_gt = d / f"Robot{robot}_Odometry.dat", d / f"Robot{robot}_Groundtruth.dat"
+
+    odo_t_abs = raw.odometry[:, 0] + control_delay
+    # without truth the odometry alone spans the window
+    gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
+    t_ref = max(odo_t_abs[0], gt_t_abs[0])
+    if time_origin_unix is not None:
+        if time_origin_unix < t_ref - 1e-9:
+            raise DatasetImportError(f"time origin {time_origin_unix:.3f} lies before robot {robot}'s first moment "
+                                     f"with both odometry and ground truth ({t_ref:.3f})")
+        t_ref = float(time_origin_unix)
+    t_hi = min(odo_t_abs[-1], gt_t_abs[-1]) - t_ref
+    if t_hi < dt:
+        raise DatasetImportError(
+            f"{p_odo.name} [{odo_t_abs[0]:.3f}, {odo_t_abs[-1]:.3f}] and {p_gt.name} [{gt_t_abs[0]:.3f}, "
+            f"{gt_t_abs[-1]:.3f}] do not overlap in time by at least one step (dt = {dt:g} s)"
+        )
+    if start > t_hi - dt:
+        raise DatasetImportError(
+            f"--start: {start:g} s is past the last full step; odometry and ground truth "
+            f"overlap for {t_hi:.3f} s"
+        )
+    avail = t_hi - start
+    if duration is None:
+        duration = avail
+    elif duration > avail + 1e-9:
+        raise DatasetImportError(
+            f"--duration: {duration:g} s exceeds the {avail:.3f} s of overlapping odometry and "
+            f"ground truth after --start {start:g}"
+        )
+    T = math.floor(duration / dt + 1e-9)
+    if T < 1:
+        raise DatasetImportError(f"--duration: {duration:g} s is shorter than one step (dt = {dt:g} s)")
+    timestamps = start + dt * np.arange(T + 1)
+    return t_ref, odo_t_abs, gt_t_abs, T, timestamps
+
+
 def import_mrclam(
     directory: str | Path,
     robot: int = 1,
@@ -351,60 +497,12 @@ def import_mrclam(
     DatasetImportError  bad files (see :func:`load_mrclam`), bad arguments, or a window outside the overlap of
         odometry and ground truth.
     """
-    if not (math.isfinite(dt) and dt > 0):
-        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
-    if not (math.isfinite(start) and start >= 0):
-        raise DatasetImportError(f"--start: must be a finite number >= 0, got {start}")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise DatasetImportError(f"--duration: must be a finite number > 0, got {duration}")
-    if non_landmark not in ("drop", "clutter"):
-        raise DatasetImportError(f"non_landmark: must be 'drop' or 'clutter', got {non_landmark!r}")
-    if not max_range > 0:
-        raise DatasetImportError(f"--max-range: must be > 0, got {max_range}")
-    if not misread_gate > 0:
-        raise DatasetImportError(f"misread_gate: must be > 0, got {misread_gate}")
-    if not (math.isfinite(control_delay) and abs(control_delay) <= 5.0):
-        raise DatasetImportError(
-            f"--control-delay: must be a number of seconds in [-5, 5], got {control_delay}"
-        )
+    _check_arguments(dt, start, duration, non_landmark, max_range, misread_gate, control_delay)
     if raw is None:
         raw = load_mrclam(directory, robot, with_truth=not no_truth)
-    d = raw.directory
-    p_odo, p_gt = d / f"Robot{robot}_Odometry.dat", d / f"Robot{robot}_Groundtruth.dat"
-
     # --- time window on the axis t_ref = 0 ---------------------------------------------------------------
-    odo_t_abs = raw.odometry[:, 0] + control_delay
-    # without truth the odometry alone spans the window
-    gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
-    t_ref = max(odo_t_abs[0], gt_t_abs[0])
-    if time_origin_unix is not None:
-        if time_origin_unix < t_ref - 1e-9:
-            raise DatasetImportError(f"time origin {time_origin_unix:.3f} lies before robot {robot}'s first moment "
-                                     f"with both odometry and ground truth ({t_ref:.3f})")
-        t_ref = float(time_origin_unix)
-    t_hi = min(odo_t_abs[-1], gt_t_abs[-1]) - t_ref
-    if t_hi < dt:
-        raise DatasetImportError(
-            f"{p_odo.name} [{odo_t_abs[0]:.3f}, {odo_t_abs[-1]:.3f}] and {p_gt.name} [{gt_t_abs[0]:.3f}, "
-            f"{gt_t_abs[-1]:.3f}] do not overlap in time by at least one step (dt = {dt:g} s)"
-        )
-    if start > t_hi - dt:
-        raise DatasetImportError(
-            f"--start: {start:g} s is past the last full step; odometry and ground truth "
-            f"overlap for {t_hi:.3f} s"
-        )
-    avail = t_hi - start
-    if duration is None:
-        duration = avail
-    elif duration > avail + 1e-9:
-        raise DatasetImportError(
-            f"--duration: {duration:g} s exceeds the {avail:.3f} s of overlapping odometry and "
-            f"ground truth after --start {start:g}"
-        )
-    T = math.floor(duration / dt + 1e-9)
-    if T < 1:
-        raise DatasetImportError(f"--duration: {duration:g} s is shorter than one step (dt = {dt:g} s)")
-    timestamps = start + dt * np.arange(T + 1)
+    t_ref, odo_t_abs, gt_t_abs, T, timestamps = _time_window(raw, robot, dt, start, duration, control_delay,
+                                                             no_truth, time_origin_unix)
 
     # --- controls (ZOH time average) and dead-reckoned odometry ----------------------------------------------
     odo_t = odo_t_abs - t_ref
@@ -423,21 +521,8 @@ def import_mrclam(
     truth_max_gap = float(np.max(np.diff(gt_in)))
 
     # --- measurements ---------------------------------------------------------------------------------------
-    m = raw.measurements
-    order = np.argsort(m[:, 0], kind="stable")  # the files are time-sorted; be lenient
-    m = m[order]
-    m_t = m[:, 0] - t_ref
-    step = nearest_steps(m_t, start, dt)
-    in_window = (step >= 0) & (step <= T)
-    barcode_to_subject = dict(zip(raw.barcodes[:, 1].tolist(), raw.barcodes[:, 0].tolist()))
-    subject_to_index = {int(s): i for i, s in enumerate(raw.landmark_subjects)}
-    subject = np.array([barcode_to_subject.get(int(b), -1) for b in m[:, 1]], dtype=np.int64)
-    lm_index = np.array([subject_to_index.get(int(s), -1) for s in subject], dtype=np.int64)
-    is_robot = (subject >= 0) & (lm_index < 0)
-    is_unknown = subject < 0
-    keep_row = in_window & ((lm_index >= 0) | (non_landmark == "clutter"))
-    step, m, m_t, lm_index = step[keep_row], m[keep_row], m_t[keep_row], lm_index[keep_row]
-    timing_err = np.abs(m_t - timestamps[step]) if len(step) else np.zeros(0)
+    rows = _landmark_rows(raw, t_ref, start, dt, T, timestamps, non_landmark)
+    step, m, m_t, lm_index = rows["step"], rows["m"], rows["m_t"], rows["lm_index"]
     obs = Observations.from_rows(step, m[:, 2:4], T + 1, reported_id=lm_index)
 
     noise = default_noise(dt) if noise is None else noise
@@ -463,53 +548,8 @@ def import_mrclam(
     truth = GroundTruth(poses_xyt=truth_xyt, landmarks_xy=raw.landmarks_xy.copy(), obs_landmark=true_lm)
     if no_truth:
         truth = None
-    metadata = {
-        "scenario": f"mrclam:{d.name}:robot{robot}",
-        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
-        "source_dir": str(d.resolve()),
-        "importer": "slamcli.datasets.mrclam",
-        "scenario_params": {
-            "robot": int(robot),
-            "dt": float(dt),
-            "start_s": float(start),
-            "duration_s": float(T * dt),
-            "non_landmark": non_landmark,
-            "control_delay_s": float(control_delay),
-            "controls": "zero-order-hold time average per step",
-            "odometry": "integrate(x0, controls, dt)",
-            "measurement_step": "nearest pose step",
-        },
-        "robot": {
-            "number": int(robot),
-            "platform": "iRobot Create (differential drive)",
-            "odometry": "velocity log, ~100 Hz",
-        },
-        "sensor": {
-            "type": "monocular camera reading barcoded cylinders",
-            "reports_ids": True,
-            "max_range": float(max_range),
-            "landmark_subjects": raw.landmark_subjects.tolist(),
-            # what the whole measurement file shows (the camera has no published range or field of view)
-            "file_range_min_max_m": [float(raw.measurements[:, 2].min()), float(raw.measurements[:, 2].max())]
-            if len(raw.measurements)
-            else [],
-            "file_abs_bearing_max_rad": float(np.abs(raw.measurements[:, 3]).max())
-            if len(raw.measurements)
-            else 0.0,
-        },
-        "time_origin_unix_s": float(t_ref),
-        "window_unix_s": [float(t_ref + timestamps[0]), float(t_ref + timestamps[-1])],
-        "max_timing_error_s": float(dt / 2),
-        "observed_max_timing_error_s": float(timing_err.max()) if len(timing_err) else 0.0,
-        "truth_max_gap_s": truth_max_gap,
-        "n_rows_in_window": int(in_window.sum()),
-        "n_landmark_rows": int(np.sum(lm_index >= 0)),
-        "n_robot_rows_in_window": int(np.sum(is_robot & in_window)),
-        "n_unknown_barcode_rows_in_window": int(np.sum(is_unknown & in_window)),
-        "misread_gate_rad": float(misread_gate),
-        "n_misread_rows": int(np.sum((lm_index >= 0) & (true_lm < 0))),
-        "truth": "none (imported with no_truth: x0 = [0, 0, 0], the robot's own frame)" if no_truth else "motion capture",
-    }
+    metadata = _metadata(raw, robot, dt, start, T, non_landmark, control_delay, max_range, misread_gate, no_truth,
+                         t_ref, timestamps, truth_max_gap, rows, true_lm)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
 
 
