@@ -628,6 +628,84 @@ def robot_rows(
             "z": m[:, 2:4].copy(), "t": t}
 
 
+def _team_readings(raws: list[MrclamRaw], numbers: list[int], t_ref: float, start: float, dt: float, T: int,
+                   n1: int):
+    """The inter-robot readings of :func:`import_mrclam_team`: every robot's :func:`robot_rows`, the kept
+    readings' stacked observer / observed poses ``(K,)`` and ``[range, bearing]`` ``(K, 2)`` sorted by
+    (observer, observed), and the count of rows per fate."""
+    # inter-robot readings
+    index_of = {n: k for k, n in enumerate(numbers)}
+    rows = [robot_rows(rw, numbers, t_ref, start, dt, T) for rw in raws]
+    oi, oj, oz, counts = [], [], [], {"kept": 0, "outside": 0, "not_in_team": 0, "self": 0}
+    for k, rr in enumerate(rows):
+        for f in counts:
+            counts[f] += int(np.sum(rr["fate"] == f))
+        keep = rr["fate"] == "kept"
+        oi.append(k * n1 + rr["step"][keep])
+        oj.append(np.array([index_of[int(s)] for s in rr["observed"][keep]], np.int64) * n1 + rr["step"][keep])
+        oz.append(rr["z"][keep])
+    oi, oj, oz = np.concatenate(oi), np.concatenate(oj), np.concatenate(oz)
+    order = np.lexsort((oj, oi))
+    oi, oj, oz = oi[order], oj[order], oz[order]
+    return rows, oi, oj, oz, counts
+
+
+def _reading_residual(truth_poses: np.ndarray, oi: np.ndarray, oj: np.ndarray, team) -> dict:
+    """Median and robust σ of the kept readings' range and bearing against the motion capture."""
+    resid = {}
+    if len(oi):
+        zh = range_bearing(truth_poses[oi], truth_poses[oj, :2])
+        dr = team.range_m - zh[:, 0]
+        db = angle_diff(team.bearing_rad, zh[:, 1])
+        for name, r_ in (("range", dr), ("bearing", db)):
+            med = float(np.median(r_))
+            resid[f"{name}_median"] = med
+            resid[f"{name}_robust_std"] = float(1.4826 * np.median(np.abs(r_ - med)))
+        resid["n_bearing_over_0.5rad"] = int(np.sum(np.abs(db) > 0.5))
+    return resid
+
+
+def _team_metadata(directory: str | Path, numbers: list[int], dt: float, start: float, T: int, control_delay: float,
+                   t_ref: float, ts: np.ndarray, solo: list[Dataset], rows: list[dict], counts: dict,
+                   resid: dict) -> dict:
+    """The dataset metadata of :func:`import_mrclam_team` (provenance, parameters, reading counts)."""
+    d = Path(directory)
+    return {
+        "scenario": f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
+        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
+        "source_dir": str(d.resolve()),
+        "importer": "slamcli.datasets.mrclam.import_mrclam_team",
+        "scenario_params": {
+            "robots": numbers,
+            "dt": float(dt),
+            "start_s": float(start),
+            "duration_s": float(T * dt),
+            "control_delay_s": float(control_delay),
+            "layout": "poses stacked robot-major; robot k owns stacked poses k*(T+1) .. k*(T+1)+T",
+            "start_poses": "motion capture at the first grid time of each robot (one world frame)",
+        },
+        "robot": {"numbers": numbers, "platform": "iRobot Create (differential drive)"},
+        "sensor": solo[0].metadata["sensor"],
+        "time_origin_unix_s": t_ref,
+        "window_unix_s": [float(t_ref + ts[0]), float(t_ref + ts[-1])],
+        "max_timing_error_s": float(dt / 2),
+        "robot_rows": {
+            "n_rows_with_robot_barcode": int(sum(rr["n_robot_rows"] for rr in rows)),
+            "kept": counts["kept"],
+            "dropped_outside_time_base": counts["outside"],
+            "dropped_robot_not_imported": counts["not_in_team"],
+            "dropped_self": counts["self"],
+            "truth_residual": resid,
+        },
+        "per_robot": [
+            {k: ds.metadata[k] for k in ("n_landmark_rows", "n_misread_rows", "observed_max_timing_error_s",
+                                         "truth_max_gap_s")} | {"robot": n}
+            for n, ds in zip(numbers, solo)
+        ],
+        "truth": "motion capture",
+    }
+
+
 def import_mrclam_team(
     directory: str | Path,
     robots: list[int] | tuple[int, ...] = (1, 2, 3, 4, 5),
@@ -701,19 +779,7 @@ def import_mrclam_team(
     obs = Observations.from_rows(steps, z, R * n1, reported_id=rid)
 
     # inter-robot readings
-    index_of = {n: k for k, n in enumerate(numbers)}
-    rows = [robot_rows(rw, numbers, t_ref, start, dt, T) for rw in raws]
-    oi, oj, oz, counts = [], [], [], {"kept": 0, "outside": 0, "not_in_team": 0, "self": 0}
-    for k, rr in enumerate(rows):
-        for f in counts:
-            counts[f] += int(np.sum(rr["fate"] == f))
-        keep = rr["fate"] == "kept"
-        oi.append(k * n1 + rr["step"][keep])
-        oj.append(np.array([index_of[int(s)] for s in rr["observed"][keep]], np.int64) * n1 + rr["step"][keep])
-        oz.append(rr["z"][keep])
-    oi, oj, oz = np.concatenate(oi), np.concatenate(oj), np.concatenate(oz)
-    order = np.lexsort((oj, oi))
-    oi, oj, oz = oi[order], oj[order], oz[order]
+    rows, oi, oj, oz, counts = _team_readings(raws, numbers, t_ref, start, dt, T, n1)
     x0s = np.stack([ds.inputs.x0 for ds in solo])
     team = RobotTeam(pose_robot=pose_robot, robot_number=np.asarray(numbers, np.int64), x0_xyt=x0s,
                      observer_pose=oi.astype(np.int64), observed_pose=oj.astype(np.int64),
@@ -735,49 +801,6 @@ def import_mrclam_team(
     truth = GroundTruth(poses_xyt=truth_poses, landmarks_xy=solo[0].truth.landmarks_xy.copy(),
                         obs_landmark=np.concatenate([ds.truth.obs_landmark for ds in solo]))
     # residual of the kept readings against the motion capture (documentation; solvers never see it)
-    resid = {}
-    if len(oi):
-        zh = range_bearing(truth_poses[oi], truth_poses[oj, :2])
-        dr = team.range_m - zh[:, 0]
-        db = angle_diff(team.bearing_rad, zh[:, 1])
-        for name, r_ in (("range", dr), ("bearing", db)):
-            med = float(np.median(r_))
-            resid[f"{name}_median"] = med
-            resid[f"{name}_robust_std"] = float(1.4826 * np.median(np.abs(r_ - med)))
-        resid["n_bearing_over_0.5rad"] = int(np.sum(np.abs(db) > 0.5))
-    d = Path(directory)
-    metadata = {
-        "scenario": f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
-        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
-        "source_dir": str(d.resolve()),
-        "importer": "slamcli.datasets.mrclam.import_mrclam_team",
-        "scenario_params": {
-            "robots": numbers,
-            "dt": float(dt),
-            "start_s": float(start),
-            "duration_s": float(T * dt),
-            "control_delay_s": float(control_delay),
-            "layout": "poses stacked robot-major; robot k owns stacked poses k*(T+1) .. k*(T+1)+T",
-            "start_poses": "motion capture at the first grid time of each robot (one world frame)",
-        },
-        "robot": {"numbers": numbers, "platform": "iRobot Create (differential drive)"},
-        "sensor": solo[0].metadata["sensor"],
-        "time_origin_unix_s": t_ref,
-        "window_unix_s": [float(t_ref + ts[0]), float(t_ref + ts[-1])],
-        "max_timing_error_s": float(dt / 2),
-        "robot_rows": {
-            "n_rows_with_robot_barcode": int(sum(rr["n_robot_rows"] for rr in rows)),
-            "kept": counts["kept"],
-            "dropped_outside_time_base": counts["outside"],
-            "dropped_robot_not_imported": counts["not_in_team"],
-            "dropped_self": counts["self"],
-            "truth_residual": resid,
-        },
-        "per_robot": [
-            {k: ds.metadata[k] for k in ("n_landmark_rows", "n_misread_rows", "observed_max_timing_error_s",
-                                         "truth_max_gap_s")} | {"robot": n}
-            for n, ds in zip(numbers, solo)
-        ],
-        "truth": "motion capture",
-    }
+    resid = _reading_residual(truth_poses, oi, oj, team)
+    metadata = _team_metadata(directory, numbers, dt, start, T, control_delay, t_ref, ts, solo, rows, counts, resid)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
