@@ -49,6 +49,7 @@ from a dataset against its ground truth.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,6 +89,40 @@ def default_noise(dt: float) -> NoiseSpec:
         odometry_std=np.array([sv * dt, DEFAULT_LATERAL_STD_PER_M * 0.1 * dt, sw * dt], float),
         range_std=DEFAULT_RANGE_STD,
         bearing_std=DEFAULT_BEARING_STD,
+    )
+
+
+def noise_from_options(dt: float, range_std: float | None = None, bearing_std: float | None = None,
+                       v_std: float | None = None, omega_std: float | None = None) -> NoiseSpec | None:
+    """The :class:`NoiseSpec` of ``slamcli import mrclam --range-std/--bearing-std/--v-std/--omega-std``:
+    :func:`default_noise` ``(dt)`` with the given values (σ_v also sets the odometry's ``σ_v·dt``, σ_ω its
+    ``σ_ω·dt``); ``None`` when none is given (the importer's default). One-line
+    :class:`DatasetImportError` for a negative or non-finite value."""
+    for name, v in (
+        ("--range-std", range_std),
+        ("--bearing-std", bearing_std),
+        ("--v-std", v_std),
+        ("--omega-std", omega_std),
+    ):
+        if v is not None and not (np.isfinite(v) and v >= 0):
+            raise DatasetImportError(f"{name}: must be a finite number >= 0, got {v}")
+    if all(v is None for v in (range_std, bearing_std, v_std, omega_std)):
+        return None
+    if not (np.isfinite(dt) and dt > 0):
+        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
+    base = default_noise(dt)
+    m = base.motion_std.copy()
+    o = base.odometry_std.copy()
+    if v_std is not None:
+        m[0], o[0] = v_std, v_std * dt
+    if omega_std is not None:
+        m[1], o[2] = omega_std, omega_std * dt
+    return dataclasses.replace(
+        base,
+        motion_std=m,
+        odometry_std=o,
+        range_std=base.range_std if range_std is None else float(range_std),
+        bearing_std=base.bearing_std if bearing_std is None else float(bearing_std),
     )
 
 
