@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from slamcli.errors import ConfigError, SchemaError, SlamcliError
+from slamcli.numerics import STAMP_MATCH_TOL_S
 
 
 def _schema_of(path: Path) -> str:
@@ -111,7 +112,7 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
     return summary
 
 
-def trajectory_at(t_src, poses_src, t_query, *, tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def trajectory_at(t_src, poses_src, t_query, *, tol: float = STAMP_MATCH_TOL_S) -> tuple[np.ndarray, np.ndarray]:
     """Poses of a time-stamped trajectory at ``t_query`` (module docstring).
 
     Parameters
@@ -140,7 +141,7 @@ def trajectory_at(t_src, poses_src, t_query, *, tol: float = 1e-6) -> tuple[np.n
 
 def import_trajectory_file(path: str | os.PathLike, data_path: str | os.PathLike, out_path: str | os.PathLike, *,
                            fmt: str = "auto", times: str | os.PathLike | None = None, time_offset: float = 0.0,
-                           extrapolate: str = "error", tol: float = 1e-6, name: str | None = None):
+                           extrapolate: str = "error", tol: float = STAMP_MATCH_TOL_S, name: str | None = None):
     """Turn a foreign TUM/KITTI trajectory into a result file on ``data_path`` (written atomically).
 
     Parameters

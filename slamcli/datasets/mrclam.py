@@ -62,6 +62,7 @@ from slamcli.models.angles import angle_diff, wrap_angle
 from slamcli.models.motion import integrate
 from slamcli.models.observation import range_bearing
 from slamcli.models.se2 import interpolate_poses
+from slamcli.numerics import TIME_EPS_S
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
 #: Standard deviations a solver may assume for MRCLAM, measured with :func:`residual_noise` against the
@@ -452,7 +453,7 @@ def _time_window(raw: MrclamRaw, robot: int, dt: float, start: float, duration: 
     gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
     t_ref = max(odo_t_abs[0], gt_t_abs[0])
     if time_origin_unix is not None:
-        if time_origin_unix < t_ref - 1e-9:
+        if time_origin_unix < t_ref - TIME_EPS_S:
             raise DatasetImportError(f"time origin {time_origin_unix:.3f} lies before robot {robot}'s first moment "
                                      f"with both odometry and ground truth ({t_ref:.3f})")
         t_ref = float(time_origin_unix)
@@ -470,12 +471,12 @@ def _time_window(raw: MrclamRaw, robot: int, dt: float, start: float, duration: 
     avail = t_hi - start
     if duration is None:
         duration = avail
-    elif duration > avail + 1e-9:
+    elif duration > avail + TIME_EPS_S:
         raise DatasetImportError(
             f"--duration: {duration:g} s exceeds the {avail:.3f} s of overlapping odometry and "
             f"ground truth after --start {start:g}"
         )
-    T = math.floor(duration / dt + 1e-9)
+    T = math.floor(duration / dt + TIME_EPS_S)
     if T < 1:
         raise DatasetImportError(f"--duration: {duration:g} s is shorter than one step (dt = {dt:g} s)")
     timestamps = start + dt * np.arange(T + 1)
