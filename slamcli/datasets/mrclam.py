@@ -383,6 +383,12 @@ def _landmark_rows(raw: MrclamRaw, t_ref: float, start: float, dt: float, T: int
             "is_unknown": is_unknown, "timing_err": timing_err}
 
 
+def _provenance(d: Path, scenario: str, importer: str) -> dict[str, str]:
+    """The provenance keys of an MRCLAM dataset's metadata."""
+    return {"scenario": scenario, "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)", "source_dir": str(d.resolve()),
+            "importer": importer}
+
+
 def _metadata(raw: MrclamRaw, robot: int, dt: float, start: float, T: int, non_landmark: str, control_delay: float,
               max_range: float, misread_gate: float, no_truth: bool, t_ref: float, timestamps: np.ndarray,
               truth_max_gap: float, rows: dict[str, np.ndarray], true_lm: np.ndarray) -> dict:
@@ -392,10 +398,7 @@ def _metadata(raw: MrclamRaw, robot: int, dt: float, start: float, T: int, non_l
     in_window, is_robot, is_unknown = rows["in_window"], rows["is_robot"], rows["is_unknown"]
     lm_index, timing_err = rows["lm_index"], rows["timing_err"]
     return {
-        "scenario": f"mrclam:{d.name}:robot{robot}",
-        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
-        "source_dir": str(d.resolve()),
-        "importer": "slamcli.datasets.mrclam",
+        **_provenance(d, f"mrclam:{d.name}:robot{robot}", "slamcli.datasets.mrclam"),
         "scenario_params": {
             "robot": int(robot),
             "dt": float(dt),
@@ -707,10 +710,8 @@ def _team_metadata(directory: str | Path, numbers: list[int], dt: float, start: 
     """The dataset metadata of :func:`import_mrclam_team` (provenance, parameters, reading counts)."""
     d = Path(directory)
     return {
-        "scenario": f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
-        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
-        "source_dir": str(d.resolve()),
-        "importer": "slamcli.datasets.mrclam.import_mrclam_team",
+        **_provenance(d, f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
+                      "slamcli.datasets.mrclam.import_mrclam_team"),
         "scenario_params": {
             "robots": numbers,
             "dt": float(dt),
