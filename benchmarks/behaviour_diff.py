@@ -11,7 +11,10 @@ and dataset files, compares the refusal lines as text, prints one table row per 
 differs or is missing on one side.
 
 Runs that would take longer than ~20 s are shortened with ``--set`` (simulator) or ``-p`` (solver); the
-whole set takes a few CPU minutes. ``--quick`` keeps ``loop``, ``cuik-room`` and the two excerpts only (a
+whole set takes a few CPU minutes. Files record absolute paths (a result its dataset's, an import its source
+folder), so every run works in one fixed scratch folder, :data:`SCRATCH` under the system's temporary
+directory, with copies of the two excerpts, and copies the files into ``--out`` at the end: runs from two
+clones then write the same paths. One run at a time (a second refuses while the first is alive). ``--quick`` keeps ``loop``, ``cuik-room`` and the two excerpts only (a
 smoke check; compare a quick run only with a quick run).
 
 Usage::
@@ -24,8 +27,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +39,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data"
 MANIFEST = "manifest.json"
+#: the fixed working folder of every run (see the module docstring)
+SCRATCH = Path(tempfile.gettempdir()) / "slamcli-behaviour-diff"
 
 
 @dataclass(frozen=True)
@@ -49,19 +57,22 @@ CASES: tuple[Case, ...] = (
     Case("loop", ("simulate", "-s", "loop", "--seed", "3")),
     Case(
         "paper-sim1",
-        ("simulate", "-s", "paper-sim1", "--seed", "1", "--set", "n_steps=400"),
-        {"icm": ("max_sweeps=10",), "fastslam": ("n_particles=20",)},
+        ("simulate", "-s", "paper-sim1", "--seed", "1", "--set", "n_steps=300"),
+        {"icm": ("max_sweeps=10",), "fastslam": ("n_particles=10",)},
         quick=False,
     ),
     Case("cuik-room", ("simulate", "-s", "cuik-room", "--seed", "2")),
     Case(
         "hybrid-map1",
-        ("simulate", "-s", "hybrid-map1", "--seed", "1", "--set", "walls.laps=1"),
-        {"fastslam": ("n_particles=20",), "icm": ("max_sweeps=10",)},
+        # paper001's quick variant of Map 1 (40 x 40 m, 60 beams, 1 m cells), one lap
+        ("simulate", "-s", "hybrid-map1", "--seed", "1", "--set", "walls.width=40", "--set", "walls.height=40",
+         "--set", "walls.corridor=8", "--set", "walls.resolution=1.0", "--set", "sensor.n_beams=60",
+         "--set", "walls.laps=1"),
+        {"fastslam": ("n_particles=10",), "icm": ("max_sweeps=10",)},
         quick=False,
     ),
-    Case("intel", ("import", "g2o", str(DATA / "intel_excerpt.g2o"))),
-    Case("mrclam", ("import", "mrclam", str(DATA / "mrclam_excerpt"), "--robot", "1")),
+    Case("intel", ("import", "g2o", str(SCRATCH / "inputs" / "intel_excerpt.g2o"))),
+    Case("mrclam", ("import", "mrclam", str(SCRATCH / "inputs" / "mrclam_excerpt"), "--robot", "1")),
 )
 
 SOLVER_SEED = "0"
@@ -85,23 +96,52 @@ def _solver_names() -> list[str]:
     return names()
 
 
+def _claim_scratch() -> None:
+    """Empty :data:`SCRATCH` and put fresh copies of the excerpts in it; refuse while another run lives."""
+    pid_file = SCRATCH / "pid"
+    if pid_file.exists():
+        try:
+            os.kill(int(pid_file.read_text()), 0)
+            raise SystemExit(f"error: {SCRATCH} is in use by process {pid_file.read_text().strip()}")
+        except (ProcessLookupError, ValueError):
+            pass
+    shutil.rmtree(SCRATCH, ignore_errors=True)
+    (SCRATCH / "inputs").mkdir(parents=True)
+    pid_file.write_text(str(os.getpid()))
+    shutil.copy2(DATA / "intel_excerpt.g2o", SCRATCH / "inputs")
+    shutil.copytree(DATA / "mrclam_excerpt", SCRATCH / "inputs" / "mrclam_excerpt")
+
+
 def run(out: Path, quick: bool) -> int:
-    """Make every dataset of the set, solve it with every solver, write the files and a manifest of timings."""
+    """Make every dataset of the set, solve it with every solver in :data:`SCRATCH`, then copy the files and a
+    manifest of timings into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
+    _claim_scratch()
+    try:
+        return _run_all(quick)
+    finally:
+        for f in SCRATCH.iterdir():
+            if f.suffix in (".h5", ".txt", ".json"):
+                shutil.copy2(f, out / f.name)
+        shutil.rmtree(SCRATCH, ignore_errors=True)
+
+
+def _run_all(quick: bool) -> int:
+    work = SCRATCH
     solvers = _solver_names()
     manifest: dict[str, dict] = {}
     bad = 0
     for case in CASES:
         if quick and not case.quick:
             continue
-        data = out / f"{case.name}.h5"
+        data = work / f"{case.name}.h5"
         t0 = time.perf_counter()
         proc = _slamcli([*case.make, "-q", "-o", str(data)])
         manifest[case.name] = {"args": list(case.make), "exit": proc.returncode,
                                "wall_s": round(time.perf_counter() - t0, 2)}
         print(f"{case.name:12s} {'':9s} exit {proc.returncode}  {manifest[case.name]['wall_s']:7.1f} s", flush=True)
         if proc.returncode != 0:
-            print(f"  error: {_one_line(proc, out)}", file=sys.stderr)
+            print(f"  error: {_one_line(proc, work)}", file=sys.stderr)
             bad += 1
             continue
         for solver in solvers:
@@ -109,19 +149,19 @@ def run(out: Path, quick: bool) -> int:
             params = [a for p in case.solver_params.get(solver, ()) for a in ("-p", p)]
             t0 = time.perf_counter()
             proc = _slamcli(["solve", str(data), "-m", solver, *params, "--seed", SOLVER_SEED, "-q",
-                             "-o", str(out / f"{key}.h5")])
+                             "-o", str(work / f"{key}.h5")])
             wall = round(time.perf_counter() - t0, 2)
             entry = {"params": params, "exit": proc.returncode, "wall_s": wall}
             if proc.returncode != 0:
-                line = _one_line(proc, out)
+                line = _one_line(proc, work)
                 entry["refused"] = line
-                (out / f"{key}.refused.txt").write_text(line + "\n")
+                (work / f"{key}.refused.txt").write_text(line + "\n")
                 if "Traceback" in proc.stderr:
                     bad += 1
             manifest[key] = entry
             status = "ok" if proc.returncode == 0 else f"refused: {entry['refused'][:70]}"
             print(f"{case.name:12s} {solver:9s} exit {proc.returncode}  {wall:7.1f} s  {status}", flush=True)
-    (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+    (work / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     return 1 if bad else 0
 
 
