@@ -13,10 +13,17 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+#: Progress of a long computation: ``progress(done, total)`` — called by the simulators, the solvers and the
+#: api workflows (e.g. ``(0, T)`` at the start, every few thousand steps, ``(T, T)`` at the end).
+ProgressFn = Callable[[int, int], None]
+#: One-line status messages (``log("fig5: 12 runs")``): the reproduce driver and its sections.
+LogFn = Callable[[str], None]
 
 
 @dataclass(frozen=True)

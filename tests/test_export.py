@@ -6,7 +6,7 @@ import pytest
 from typer.testing import CliRunner
 
 from slamcli.api.evaluate import evaluate_files
-from slamcli.api.interop import export_file, import_trajectory_file, interpolate_poses
+from slamcli.api.interop import export_file, import_trajectory_file, trajectory_at
 from slamcli.api.simulate import simulate_to_file
 from slamcli.api.solve import solve_file
 from slamcli.cli import app
@@ -137,7 +137,7 @@ def test_cli_export_and_errors(run, tmp_path):
 def test_interpolation_hand_values():
     t = np.array([0.0, 1.0, 2.0])
     P = np.array([[0.0, 0.0, 3.0], [2.0, 4.0, -3.0], [2.0, 6.0, 0.0]])
-    out, exact = interpolate_poses(t, P, [0.25, 1.0, 1.5, 2.5, -0.1])
+    out, exact = trajectory_at(t, P, [0.25, 1.0, 1.5, 2.5, -0.1])
     # heading 3.0 → -3.0 goes the short way through ±π: 3 + 0.25·(2π − 6)
     np.testing.assert_allclose(out[0], [0.5, 1.0, 3.0 + 0.25 * (2 * np.pi - 6.0)], atol=1e-12)
     np.testing.assert_allclose(out[1], P[1])

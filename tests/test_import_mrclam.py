@@ -20,7 +20,6 @@ from slamcli.datasets import DatasetImportError
 from slamcli.datasets.mrclam import (
     default_noise,
     import_mrclam,
-    interpolate_poses,
     load_mrclam,
     nearest_steps,
     residual_noise,
@@ -30,6 +29,7 @@ from slamcli.errors import SlamcliError
 from slamcli.io import dataset_hash, read_dataset, write_dataset
 from slamcli.models.angles import angle_diff
 from slamcli.models.motion import integrate
+from slamcli.models.se2 import interpolate_poses
 
 EXCERPT = Path(__file__).parent / "data" / "mrclam_excerpt"
 HEADER = "# UTIAS MRCLAM (test)\n# hand-written\n# format\n# columns\n"

@@ -4,10 +4,11 @@
 * :func:`import_trajectory_file`: another estimator's TUM/KITTI trajectory → a slamcli result file on a given
   dataset, so ``evaluate``, ``plot`` and sweeps score estimators that are not slamcli plugins.
 
-Time matching of an imported trajectory (:func:`interpolate_poses`): each dataset time stamp ``τ`` inside
+Time matching of an imported trajectory (:func:`trajectory_at`): each dataset time stamp ``τ`` inside
 the file's time span takes the file's pose at ``τ``: an exact stamp (``|Δt| ≤ tol``) is copied, otherwise
 the neighbours ``a`` (before) and ``b`` (after) are interpolated with ``s = (τ − t_a)/(t_b − t_a)``:
-positions linearly, the heading along the shorter arc ``θ = wrap(θ_a + s·angle_diff(θ_b, θ_a))``.
+positions linearly, the heading along the shorter arc ``θ = wrap(θ_a + s·angle_diff(θ_b, θ_a))``
+(:func:`slamcli.models.se2.interpolate_poses`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from slamcli.errors import ConfigError, SchemaError, SlamcliError
+from slamcli.numerics import STAMP_MATCH_TOL_S
 
 
 def _schema_of(path: Path) -> str:
@@ -120,7 +122,7 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
     return summary
 
 
-def interpolate_poses(t_src, poses_src, t_query, *, tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def trajectory_at(t_src, poses_src, t_query, *, tol: float = STAMP_MATCH_TOL_S) -> tuple[np.ndarray, np.ndarray]:
     """Poses of a time-stamped trajectory at ``t_query`` (module docstring).
 
     Parameters
@@ -132,7 +134,7 @@ def interpolate_poses(t_src, poses_src, t_query, *, tol: float = 1e-6) -> tuple[
     poses_xyt (m, 3)   NaN rows where ``t_query`` is outside ``[t_src[0] − tol, t_src[-1] + tol]``.
     exact (m,) bool    the query matched a source stamp within ``tol`` (no interpolation).
     """
-    from slamcli.models.angles import angle_diff, wrap_angle
+    from slamcli.models.se2 import interpolate_poses
 
     t = np.asarray(t_src, float)
     P = np.asarray(poses_src, float).reshape(-1, 3)
@@ -143,17 +145,13 @@ def interpolate_poses(t_src, poses_src, t_query, *, tol: float = 1e-6) -> tuple[
     exact = np.abs(t[near] - q) <= tol
     out[exact] = P[near[exact]]
     inside = (~exact) & (q > t[0]) & (q < t[-1])
-    b = j[inside]
-    a = b - 1
-    s = (q[inside] - t[a]) / (t[b] - t[a])
-    out[inside, :2] = P[a, :2] + s[:, None] * (P[b, :2] - P[a, :2])
-    out[inside, 2] = wrap_angle(P[a, 2] + s * angle_diff(P[b, 2], P[a, 2]))
+    out[inside] = interpolate_poses(t, P, q[inside])
     return out, exact
 
 
 def import_trajectory_file(path: str | os.PathLike, data_path: str | os.PathLike, out_path: str | os.PathLike, *,
                            fmt: str = "auto", times: str | os.PathLike | None = None, time_offset: float = 0.0,
-                           extrapolate: str = "error", tol: float = 1e-6, name: str | None = None):
+                           extrapolate: str = "error", tol: float = STAMP_MATCH_TOL_S, name: str | None = None):
     """Turn a foreign TUM/KITTI trajectory into a result file on ``data_path`` (written atomically).
 
     Parameters
@@ -211,7 +209,7 @@ def import_trajectory_file(path: str | os.PathLike, data_path: str | os.PathLike
         if t_src[-1] < ts[0] - tol or t_src[0] > ts[-1] + tol:
             raise SlamcliError(f"{path}: no time overlap: the file covers [{t_src[0]:.6g}, {t_src[-1]:.6g}] s, "
                                f"dataset {data_path} covers [{ts[0]:.6g}, {ts[-1]:.6g}] s (try --time-offset)")
-        poses, exact = interpolate_poses(t_src, P, ts, tol=tol)
+        poses, exact = trajectory_at(t_src, P, ts, tol=tol)
         missing = np.flatnonzero(np.isnan(poses[:, 0]))
         if missing.size:
             if extrapolate == "error":

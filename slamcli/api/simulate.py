@@ -7,13 +7,10 @@ bad ``--set`` leaves no file behind; the file itself is written atomically by :f
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from typing import Any
 
 from slamcli.errors import ConfigError
-from slamcli.types import Dataset
-
-ProgressFn = Callable[[int, int], None]
+from slamcli.types import Dataset, ProgressFn
 
 
 def parse_overrides(items: list[str] | dict[str, Any] | None) -> dict[str, Any]:

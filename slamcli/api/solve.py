@@ -13,19 +13,17 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from slamcli.errors import ConfigError, SlamcliError, SolverError
-from slamcli.types import SlamInputs, SolverResult, Status
+from slamcli.types import ProgressFn, SlamInputs, SolverResult, Status
 
 #: stream id of the solver's random generator: ``default_rng([SOLVER_STREAM, seed])``.
 SOLVER_STREAM = 0x50_17E5  # "SOLVEs"; distinct from every simulator stream id
 
-ProgressFn = Callable[[int, int], None]
 
 
 def solver_rng(seed: int) -> np.random.Generator:

@@ -130,15 +130,9 @@ def handle_errors(exit_code: int = 1) -> Iterator[None]:
                            "the result may hold inf/nan", err=True)
 
 
-@contextlib.contextmanager
-def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[[int, int], None]]:
-    """A rich progress bar on stderr, exposed as a ``progress(done, total)`` callback.
-
-    With ``quiet`` (or when stderr is not a terminal and ``quiet`` is forced), the callback does nothing.
-    """
-    if quiet:
-        yield lambda done, total: None
-        return
+def rich_progress(*status_columns):
+    """The one progress-bar layout of the CLI, on stderr: description, bar, done/total, ``status_columns``
+    (e.g. the sweep's done/failed/skipped counts), elapsed time, ETA. A ``rich.progress.Progress``."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -148,15 +142,29 @@ def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[
         TimeRemainingColumn,
     )
 
-    with Progress(
+    return Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
+        *status_columns,
         TimeElapsedColumn(),
+        TextColumn("ETA"),
         TimeRemainingColumn(),
         console=stderr_console(),
         transient=False,
-    ) as prog:
+    )
+
+
+@contextlib.contextmanager
+def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[[int, int], None]]:
+    """A rich progress bar on stderr, exposed as a ``progress(done, total)`` callback.
+
+    With ``quiet`` (or when stderr is not a terminal and ``quiet`` is forced), the callback does nothing.
+    """
+    if quiet:
+        yield lambda done, total: None
+        return
+    with rich_progress() as prog:
         task = prog.add_task(description, total=None)
 
         def update(done: int, total: int) -> None:

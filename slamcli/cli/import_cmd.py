@@ -123,43 +123,14 @@ def import_mrclam_command(
         if out is None:
             fail("-o/--out is required")
         check_output(out, inputs=[directory], kind="dataset", force=force)
-        import dataclasses
-
-        import numpy as np
-
-        from slamcli.datasets.mrclam import default_noise, import_mrclam
+        from slamcli.datasets.mrclam import import_mrclam, noise_from_options
         from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
 
         directory = resolve_source(directory, "mrclam")
         if non_landmark not in ("drop", "clutter"):
             fail(f"--non-landmark: must be drop or clutter, got {non_landmark!r}")
-        for name, v in (
-            ("--range-std", range_std),
-            ("--bearing-std", bearing_std),
-            ("--v-std", v_std),
-            ("--omega-std", omega_std),
-        ):
-            if v is not None and not (np.isfinite(v) and v >= 0):
-                fail(f"{name}: must be a finite number >= 0, got {v}")
-        noise = None
-        if any(v is not None for v in (range_std, bearing_std, v_std, omega_std)):
-            if not (np.isfinite(dt) and dt > 0):
-                fail(f"--dt: must be a finite number > 0, got {dt}")
-            base = default_noise(dt)
-            m = base.motion_std.copy()
-            o = base.odometry_std.copy()
-            if v_std is not None:
-                m[0], o[0] = v_std, v_std * dt
-            if omega_std is not None:
-                m[1], o[2] = omega_std, omega_std * dt
-            noise = dataclasses.replace(
-                base,
-                motion_std=m,
-                odometry_std=o,
-                range_std=base.range_std if range_std is None else float(range_std),
-                bearing_std=base.bearing_std if bearing_std is None else float(bearing_std),
-            )
+        noise = noise_from_options(dt, range_std, bearing_std, v_std, omega_std)
         if robots is not None or all_robots:
             _import_mrclam_team(directory, robots, all_robots, solo_dir, out, quiet, dt=dt, start=start,
                                 duration=duration, noise=noise, control_delay=control_delay, max_range=max_range,
@@ -180,29 +151,28 @@ def import_mrclam_command(
             no_truth=no_truth,
         )
         write_dataset(out, ds)
-        if quiet:
-            return
-        inp, md = ds.inputs, ds.metadata
-        T = inp.n_poses - 1
-        if ds.truth is None:
-            stdout_console().print(
-                f"MRCLAM {directory.name} robot {robot} (no ground truth): {T} steps of {inp.dt:g} s, "
+        if not quiet:
+            stdout_console().print(f"{_mrclam_summary(ds, directory, robot, non_landmark)} → {out}",
+                                   highlight=False, markup=False, soft_wrap=True)
+
+
+def _mrclam_summary(ds, directory: Path, robot: int, non_landmark: str) -> str:
+    """The one summary line of a single-robot MRCLAM import."""
+    import numpy as np
+
+    inp, md = ds.inputs, ds.metadata
+    T = inp.n_poses - 1
+    if ds.truth is None:
+        return (f"MRCLAM {directory.name} robot {robot} (no ground truth): {T} steps of {inp.dt:g} s, "
                 f"{len(inp.observations)} observations, odometry path "
-                f"{float(np.sum(np.hypot(*np.diff(inp.odometry_xyt[:, :2], axis=0).T))):.1f} m → {out}",
-                highlight=False, markup=False, soft_wrap=True)
-            return
-        path_len = float(np.sum(np.hypot(*np.diff(ds.truth.poses_xyt[:, :2], axis=0).T)))
-        n_clutter = int(np.sum(inp.observations.reported_id < 0))
-        stdout_console().print(
-            f"MRCLAM {directory.name} robot {robot}: {T} steps ({T * inp.dt:.1f} s from {inp.timestamps[0]:g} s, "
+                f"{float(np.sum(np.hypot(*np.diff(inp.odometry_xyt[:, :2], axis=0).T))):.1f} m")
+    path_len = float(np.sum(np.hypot(*np.diff(ds.truth.poses_xyt[:, :2], axis=0).T)))
+    n_clutter = int(np.sum(inp.observations.reported_id < 0))
+    return (f"MRCLAM {directory.name} robot {robot}: {T} steps ({T * inp.dt:.1f} s from {inp.timestamps[0]:g} s, "
             f"dt {inp.dt:g} s), {len(ds.truth.landmarks_xy)} landmarks, {len(inp.observations)} observations "
             f"({n_clutter} clutter; {md['n_robot_rows_in_window']} robot and "
-            f"{md['n_unknown_barcode_rows_in_window']} unknown-barcode rows {'kept' if non_landmark == 'clutter' else 'dropped'}), "
-            f"true path {path_len:.1f} m → {out}",
-            highlight=False,
-            markup=False,
-            soft_wrap=True,
-        )
+            f"{md['n_unknown_barcode_rows_in_window']} unknown-barcode rows "
+            f"{'kept' if non_landmark == 'clutter' else 'dropped'}), true path {path_len:.1f} m")
 
 
 @import_app.command("g2o")

@@ -7,7 +7,15 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console, stdout_console
+from slamcli.cli.app import (
+    app,
+    check_output,
+    fail,
+    handle_errors,
+    rich_progress,
+    stderr_console,
+    stdout_console,
+)
 
 
 def _shipped_names() -> str:
@@ -100,26 +108,11 @@ def _run(expansion, out, workers, executor, scheduler, resume, quiet):
         return run_sweep(
             expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume
         )
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+    from rich.progress import TextColumn
 
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("[green]{task.fields[done]} done[/] [red]{task.fields[failed]} failed[/] "
-                   "[dim]{task.fields[skipped]} skipped[/]"),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        console=stderr_console(),
-    ) as prog:
+    counts = TextColumn("[green]{task.fields[done]} done[/] [red]{task.fields[failed]} failed[/] "
+                        "[dim]{task.fields[skipped]} skipped[/]")
+    with rich_progress(counts) as prog:
         from rich.markup import escape
 
         task = prog.add_task(escape(f"sweep {expansion.experiment.name}"), total=len(expansion.runs),

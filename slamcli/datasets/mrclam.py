@@ -49,6 +49,7 @@ from a dataset against its ground truth.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +61,9 @@ from slamcli.datasets import DatasetImportError
 from slamcli.models.angles import angle_diff, wrap_angle
 from slamcli.models.motion import integrate
 from slamcli.models.observation import range_bearing
+from slamcli.models.se2 import interpolate_poses
+from slamcli.numerics import TIME_EPS_S
+from slamcli.params import check_allocation
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
 #: Standard deviations a solver may assume for MRCLAM, measured with :func:`residual_noise` against the
@@ -91,6 +95,40 @@ def default_noise(dt: float) -> NoiseSpec:
         odometry_std=np.array([sv * dt, DEFAULT_LATERAL_STD_PER_M * 0.1 * dt, sw * dt], float),
         range_std=DEFAULT_RANGE_STD,
         bearing_std=DEFAULT_BEARING_STD,
+    )
+
+
+def noise_from_options(dt: float, range_std: float | None = None, bearing_std: float | None = None,
+                       v_std: float | None = None, omega_std: float | None = None) -> NoiseSpec | None:
+    """The :class:`NoiseSpec` of ``slamcli import mrclam --range-std/--bearing-std/--v-std/--omega-std``:
+    :func:`default_noise` ``(dt)`` with the given values (σ_v also sets the odometry's ``σ_v·dt``, σ_ω its
+    ``σ_ω·dt``); ``None`` when none is given (the importer's default). One-line
+    :class:`DatasetImportError` for a negative or non-finite value."""
+    for name, v in (
+        ("--range-std", range_std),
+        ("--bearing-std", bearing_std),
+        ("--v-std", v_std),
+        ("--omega-std", omega_std),
+    ):
+        if v is not None and not (np.isfinite(v) and v >= 0):
+            raise DatasetImportError(f"{name}: must be a finite number >= 0, got {v}")
+    if all(v is None for v in (range_std, bearing_std, v_std, omega_std)):
+        return None
+    if not (np.isfinite(dt) and dt > 0):
+        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
+    base = default_noise(dt)
+    m = base.motion_std.copy()
+    o = base.odometry_std.copy()
+    if v_std is not None:
+        m[0], o[0] = v_std, v_std * dt
+    if omega_std is not None:
+        m[1], o[2] = omega_std, omega_std * dt
+    return dataclasses.replace(
+        base,
+        motion_std=m,
+        odometry_std=o,
+        range_std=base.range_std if range_std is None else float(range_std),
+        bearing_std=base.bearing_std if bearing_std is None else float(bearing_std),
     )
 
 
@@ -296,31 +334,6 @@ def zoh_average(t_rows: np.ndarray, u_rows: np.ndarray, t_grid: np.ndarray) -> n
     return np.diff(F, axis=0) / np.diff(t_grid)[:, None]
 
 
-def interpolate_poses(t_rows: np.ndarray, xyt_rows: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Interpolate a pose track at times ``t``: x, y linearly, θ along the shorter arc.
-
-    ``θ(t) = wrap(θ_i + w · angle_diff(θ_{i+1}, θ_i))``, ``w = (t − t_i)/(t_{i+1} − t_i)``.
-
-    Parameters
-    ----------
-    t_rows : ndarray (G,)       strictly increasing stamps (G ≥ 2).
-    xyt_rows : ndarray (G, 3)   poses.
-    t : ndarray (n,)            query times within ``[t_rows[0], t_rows[-1]]``.
-
-    Returns
-    -------
-    ndarray (n, 3)
-    """
-    t_rows = np.asarray(t_rows, float)
-    p = np.asarray(xyt_rows, float)
-    t = np.asarray(t, float)
-    i = np.clip(np.searchsorted(t_rows, t, side="right") - 1, 0, len(t_rows) - 2)
-    w = (t - t_rows[i]) / (t_rows[i + 1] - t_rows[i])
-    xy = p[i, :2] + w[:, None] * (p[i + 1, :2] - p[i, :2])
-    th = wrap_angle(p[i, 2] + w * angle_diff(p[i + 1, 2], p[i, 2]))
-    return np.column_stack([xy, th])
-
-
 def nearest_steps(t: np.ndarray, t_start: float, dt: float) -> np.ndarray:
     """Nearest pose step ``round((t − t_start)/dt)`` of each time (``|t − t_k| ≤ dt/2``), int64."""
     return np.rint((np.asarray(t, float) - t_start) / dt).astype(np.int64)
@@ -329,6 +342,157 @@ def nearest_steps(t: np.ndarray, t_start: float, dt: float) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------
 # import
 # --------------------------------------------------------------------------------------------------------
+def _check_arguments(dt: float, start: float, duration: float | None, non_landmark: str, max_range: float,
+                     misread_gate: float, control_delay: float) -> None:
+    """The argument checks of :func:`import_mrclam` (one-line :class:`DatasetImportError` naming the option)."""
+    if not (math.isfinite(dt) and dt > 0):
+        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
+    if not (math.isfinite(start) and start >= 0):
+        raise DatasetImportError(f"--start: must be a finite number >= 0, got {start}")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise DatasetImportError(f"--duration: must be a finite number > 0, got {duration}")
+    if non_landmark not in ("drop", "clutter"):
+        raise DatasetImportError(f"non_landmark: must be 'drop' or 'clutter', got {non_landmark!r}")
+    if not max_range > 0:
+        raise DatasetImportError(f"--max-range: must be > 0, got {max_range}")
+    if not misread_gate > 0:
+        raise DatasetImportError(f"misread_gate: must be > 0, got {misread_gate}")
+    if not (math.isfinite(control_delay) and abs(control_delay) <= 5.0):
+        raise DatasetImportError(
+            f"--control-delay: must be a number of seconds in [-5, 5], got {control_delay}"
+        )
+
+
+def _landmark_rows(raw: MrclamRaw, t_ref: float, start: float, dt: float, T: int, timestamps: np.ndarray,
+                   non_landmark: str) -> dict[str, np.ndarray]:
+    """The measurement rows :func:`import_mrclam` keeps, in time order: ``step`` (n,) nearest pose step,
+    ``m`` (n, 4) file rows, ``m_t`` (n,) s on the ``t_ref`` axis, ``lm_index`` (n,) landmark index or −1 —
+    plus, over all rows, the masks ``in_window``, ``is_robot``, ``is_unknown`` and the kept rows'
+    ``timing_err`` (n,) s, which the metadata counts."""
+    m = raw.measurements
+    order = np.argsort(m[:, 0], kind="stable")  # the files are time-sorted; be lenient
+    m = m[order]
+    m_t = m[:, 0] - t_ref
+    step = nearest_steps(m_t, start, dt)
+    in_window = (step >= 0) & (step <= T)
+    barcode_to_subject = dict(zip(raw.barcodes[:, 1].tolist(), raw.barcodes[:, 0].tolist()))
+    subject_to_index = {int(s): i for i, s in enumerate(raw.landmark_subjects)}
+    subject = np.array([barcode_to_subject.get(int(b), -1) for b in m[:, 1]], dtype=np.int64)
+    lm_index = np.array([subject_to_index.get(int(s), -1) for s in subject], dtype=np.int64)
+    is_robot = (subject >= 0) & (lm_index < 0)
+    is_unknown = subject < 0
+    keep_row = in_window & ((lm_index >= 0) | (non_landmark == "clutter"))
+    step, m, m_t, lm_index = step[keep_row], m[keep_row], m_t[keep_row], lm_index[keep_row]
+    timing_err = np.abs(m_t - timestamps[step]) if len(step) else np.zeros(0)
+    return {"step": step, "m": m, "m_t": m_t, "lm_index": lm_index, "in_window": in_window, "is_robot": is_robot,
+            "is_unknown": is_unknown, "timing_err": timing_err}
+
+
+def _provenance(d: Path, scenario: str, importer: str) -> dict[str, str]:
+    """The provenance keys of an MRCLAM dataset's metadata."""
+    return {"scenario": scenario, "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)", "source_dir": str(d.resolve()),
+            "importer": importer}
+
+
+def _metadata(raw: MrclamRaw, robot: int, dt: float, start: float, T: int, non_landmark: str, control_delay: float,
+              max_range: float, misread_gate: float, no_truth: bool, t_ref: float, timestamps: np.ndarray,
+              truth_max_gap: float, rows: dict[str, np.ndarray], true_lm: np.ndarray) -> dict:
+    """The dataset metadata of :func:`import_mrclam`: provenance, the import's parameters, the sensor and the
+    row counts of :func:`_landmark_rows`."""
+    d = raw.directory
+    in_window, is_robot, is_unknown = rows["in_window"], rows["is_robot"], rows["is_unknown"]
+    lm_index, timing_err = rows["lm_index"], rows["timing_err"]
+    return {
+        **_provenance(d, f"mrclam:{d.name}:robot{robot}", "slamcli.datasets.mrclam"),
+        "scenario_params": {
+            "robot": int(robot),
+            "dt": float(dt),
+            "start_s": float(start),
+            "duration_s": float(T * dt),
+            "non_landmark": non_landmark,
+            "control_delay_s": float(control_delay),
+            "controls": "zero-order-hold time average per step",
+            "odometry": "integrate(x0, controls, dt)",
+            "measurement_step": "nearest pose step",
+        },
+        "robot": {
+            "number": int(robot),
+            "platform": "iRobot Create (differential drive)",
+            "odometry": "velocity log, ~100 Hz",
+        },
+        "sensor": {
+            "type": "monocular camera reading barcoded cylinders",
+            "reports_ids": True,
+            "max_range": float(max_range),
+            "landmark_subjects": raw.landmark_subjects.tolist(),
+            # what the whole measurement file shows (the camera has no published range or field of view)
+            "file_range_min_max_m": [float(raw.measurements[:, 2].min()), float(raw.measurements[:, 2].max())]
+            if len(raw.measurements)
+            else [],
+            "file_abs_bearing_max_rad": float(np.abs(raw.measurements[:, 3]).max())
+            if len(raw.measurements)
+            else 0.0,
+        },
+        "time_origin_unix_s": float(t_ref),
+        "window_unix_s": [float(t_ref + timestamps[0]), float(t_ref + timestamps[-1])],
+        "max_timing_error_s": float(dt / 2),
+        "observed_max_timing_error_s": float(timing_err.max()) if len(timing_err) else 0.0,
+        "truth_max_gap_s": truth_max_gap,
+        "n_rows_in_window": int(in_window.sum()),
+        "n_landmark_rows": int(np.sum(lm_index >= 0)),
+        "n_robot_rows_in_window": int(np.sum(is_robot & in_window)),
+        "n_unknown_barcode_rows_in_window": int(np.sum(is_unknown & in_window)),
+        "misread_gate_rad": float(misread_gate),
+        "n_misread_rows": int(np.sum((lm_index >= 0) & (true_lm < 0))),
+        "truth": "none (imported with no_truth: x0 = [0, 0, 0], the robot's own frame)" if no_truth else "motion capture",
+    }
+
+
+def _time_window(raw: MrclamRaw, robot: int, dt: float, start: float, duration: float | None,
+                 control_delay: float, no_truth: bool, time_origin_unix: float | None):
+    """The window of :func:`import_mrclam` on the axis ``t_ref = 0``: returns ``t_ref`` (Unix s), the
+    odometry stamps ``(n_odo,)`` and ground-truth stamps ``(n_gt,)`` in Unix s (odometry shifted by
+    ``control_delay``; without truth the odometry's two ends), ``T`` steps and ``timestamps (T+1,)``."""
+    d = raw.directory
+    p_odo, p_gt = d / f"Robot{robot}_Odometry.dat", d / f"Robot{robot}_Groundtruth.dat"
+
+    odo_t_abs = raw.odometry[:, 0] + control_delay
+    # without truth the odometry alone spans the window
+    gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
+    t_ref = max(odo_t_abs[0], gt_t_abs[0])
+    if time_origin_unix is not None:
+        if time_origin_unix < t_ref - TIME_EPS_S:
+            raise DatasetImportError(f"time origin {time_origin_unix:.3f} lies before robot {robot}'s first moment "
+                                     f"with both odometry and ground truth ({t_ref:.3f})")
+        t_ref = float(time_origin_unix)
+    t_hi = min(odo_t_abs[-1], gt_t_abs[-1]) - t_ref
+    if t_hi < dt:
+        raise DatasetImportError(
+            f"{p_odo.name} [{odo_t_abs[0]:.3f}, {odo_t_abs[-1]:.3f}] and {p_gt.name} [{gt_t_abs[0]:.3f}, "
+            f"{gt_t_abs[-1]:.3f}] do not overlap in time by at least one step (dt = {dt:g} s)"
+        )
+    if start > t_hi - dt:
+        raise DatasetImportError(
+            f"--start: {start:g} s is past the last full step; odometry and ground truth "
+            f"overlap for {t_hi:.3f} s"
+        )
+    avail = t_hi - start
+    if duration is None:
+        duration = avail
+    elif duration > avail + TIME_EPS_S:
+        raise DatasetImportError(
+            f"--duration: {duration:g} s exceeds the {avail:.3f} s of overlapping odometry and "
+            f"ground truth after --start {start:g}"
+        )
+    T = math.floor(duration / dt + TIME_EPS_S)
+    if T < 1:
+        raise DatasetImportError(f"--duration: {duration:g} s is shorter than one step (dt = {dt:g} s)")
+    check_allocation("--dt", dt, (T + 1.0) * BYTES_PER_STEP, f"{T + 1} pose steps over {duration:g} s",
+                     "use a larger --dt or a shorter --duration")
+    timestamps = start + dt * np.arange(T + 1)
+    return t_ref, odo_t_abs, gt_t_abs, T, timestamps
+
+
 def import_mrclam(
     directory: str | Path,
     robot: int = 1,
@@ -379,64 +543,12 @@ def import_mrclam(
     DatasetImportError  bad files (see :func:`load_mrclam`), bad arguments, or a window outside the overlap of
         odometry and ground truth.
     """
-    if not (math.isfinite(dt) and dt > 0):
-        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
-    if not (math.isfinite(start) and start >= 0):
-        raise DatasetImportError(f"--start: must be a finite number >= 0, got {start}")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise DatasetImportError(f"--duration: must be a finite number > 0, got {duration}")
-    if non_landmark not in ("drop", "clutter"):
-        raise DatasetImportError(f"non_landmark: must be 'drop' or 'clutter', got {non_landmark!r}")
-    if not max_range > 0:
-        raise DatasetImportError(f"--max-range: must be > 0, got {max_range}")
-    if not misread_gate > 0:
-        raise DatasetImportError(f"misread_gate: must be > 0, got {misread_gate}")
-    if not (math.isfinite(control_delay) and abs(control_delay) <= 5.0):
-        raise DatasetImportError(
-            f"--control-delay: must be a number of seconds in [-5, 5], got {control_delay}"
-        )
+    _check_arguments(dt, start, duration, non_landmark, max_range, misread_gate, control_delay)
     if raw is None:
         raw = load_mrclam(directory, robot, with_truth=not no_truth)
-    d = raw.directory
-    p_odo, p_gt = d / f"Robot{robot}_Odometry.dat", d / f"Robot{robot}_Groundtruth.dat"
-
     # --- time window on the axis t_ref = 0 ---------------------------------------------------------------
-    odo_t_abs = raw.odometry[:, 0] + control_delay
-    # without truth the odometry alone spans the window
-    gt_t_abs = odo_t_abs[[0, -1]] if no_truth else raw.groundtruth[:, 0]
-    t_ref = max(odo_t_abs[0], gt_t_abs[0])
-    if time_origin_unix is not None:
-        if time_origin_unix < t_ref - 1e-9:
-            raise DatasetImportError(f"time origin {time_origin_unix:.3f} lies before robot {robot}'s first moment "
-                                     f"with both odometry and ground truth ({t_ref:.3f})")
-        t_ref = float(time_origin_unix)
-    t_hi = min(odo_t_abs[-1], gt_t_abs[-1]) - t_ref
-    if t_hi < dt:
-        raise DatasetImportError(
-            f"{p_odo.name} [{odo_t_abs[0]:.3f}, {odo_t_abs[-1]:.3f}] and {p_gt.name} [{gt_t_abs[0]:.3f}, "
-            f"{gt_t_abs[-1]:.3f}] do not overlap in time by at least one step (dt = {dt:g} s)"
-        )
-    if start > t_hi - dt:
-        raise DatasetImportError(
-            f"--start: {start:g} s is past the last full step; odometry and ground truth "
-            f"overlap for {t_hi:.3f} s"
-        )
-    avail = t_hi - start
-    if duration is None:
-        duration = avail
-    elif duration > avail + 1e-9:
-        raise DatasetImportError(
-            f"--duration: {duration:g} s exceeds the {avail:.3f} s of overlapping odometry and "
-            f"ground truth after --start {start:g}"
-        )
-    T = math.floor(duration / dt + 1e-9)
-    if T < 1:
-        raise DatasetImportError(f"--duration: {duration:g} s is shorter than one step (dt = {dt:g} s)")
-    from slamcli.params import check_allocation
-
-    check_allocation("--dt", dt, (T + 1.0) * BYTES_PER_STEP, f"{T + 1} pose steps over {duration:g} s",
-                     "use a larger --dt or a shorter --duration")
-    timestamps = start + dt * np.arange(T + 1)
+    t_ref, odo_t_abs, gt_t_abs, T, timestamps = _time_window(raw, robot, dt, start, duration, control_delay,
+                                                             no_truth, time_origin_unix)
 
     # --- controls (ZOH time average) and dead-reckoned odometry ----------------------------------------------
     odo_t = odo_t_abs - t_ref
@@ -455,21 +567,8 @@ def import_mrclam(
     truth_max_gap = float(np.max(np.diff(gt_in)))
 
     # --- measurements ---------------------------------------------------------------------------------------
-    m = raw.measurements
-    order = np.argsort(m[:, 0], kind="stable")  # the files are time-sorted; be lenient
-    m = m[order]
-    m_t = m[:, 0] - t_ref
-    step = nearest_steps(m_t, start, dt)
-    in_window = (step >= 0) & (step <= T)
-    barcode_to_subject = dict(zip(raw.barcodes[:, 1].tolist(), raw.barcodes[:, 0].tolist()))
-    subject_to_index = {int(s): i for i, s in enumerate(raw.landmark_subjects)}
-    subject = np.array([barcode_to_subject.get(int(b), -1) for b in m[:, 1]], dtype=np.int64)
-    lm_index = np.array([subject_to_index.get(int(s), -1) for s in subject], dtype=np.int64)
-    is_robot = (subject >= 0) & (lm_index < 0)
-    is_unknown = subject < 0
-    keep_row = in_window & ((lm_index >= 0) | (non_landmark == "clutter"))
-    step, m, m_t, lm_index = step[keep_row], m[keep_row], m_t[keep_row], lm_index[keep_row]
-    timing_err = np.abs(m_t - timestamps[step]) if len(step) else np.zeros(0)
+    rows = _landmark_rows(raw, t_ref, start, dt, T, timestamps, non_landmark)
+    step, m, m_t, lm_index = rows["step"], rows["m"], rows["m_t"], rows["lm_index"]
     obs = Observations.from_rows(step, m[:, 2:4], T + 1, reported_id=lm_index)
 
     noise = default_noise(dt) if noise is None else noise
@@ -495,53 +594,8 @@ def import_mrclam(
     truth = GroundTruth(poses_xyt=truth_xyt, landmarks_xy=raw.landmarks_xy.copy(), obs_landmark=true_lm)
     if no_truth:
         truth = None
-    metadata = {
-        "scenario": f"mrclam:{d.name}:robot{robot}",
-        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
-        "source_dir": str(d.resolve()),
-        "importer": "slamcli.datasets.mrclam",
-        "scenario_params": {
-            "robot": int(robot),
-            "dt": float(dt),
-            "start_s": float(start),
-            "duration_s": float(T * dt),
-            "non_landmark": non_landmark,
-            "control_delay_s": float(control_delay),
-            "controls": "zero-order-hold time average per step",
-            "odometry": "integrate(x0, controls, dt)",
-            "measurement_step": "nearest pose step",
-        },
-        "robot": {
-            "number": int(robot),
-            "platform": "iRobot Create (differential drive)",
-            "odometry": "velocity log, ~100 Hz",
-        },
-        "sensor": {
-            "type": "monocular camera reading barcoded cylinders",
-            "reports_ids": True,
-            "max_range": float(max_range),
-            "landmark_subjects": raw.landmark_subjects.tolist(),
-            # what the whole measurement file shows (the camera has no published range or field of view)
-            "file_range_min_max_m": [float(raw.measurements[:, 2].min()), float(raw.measurements[:, 2].max())]
-            if len(raw.measurements)
-            else [],
-            "file_abs_bearing_max_rad": float(np.abs(raw.measurements[:, 3]).max())
-            if len(raw.measurements)
-            else 0.0,
-        },
-        "time_origin_unix_s": float(t_ref),
-        "window_unix_s": [float(t_ref + timestamps[0]), float(t_ref + timestamps[-1])],
-        "max_timing_error_s": float(dt / 2),
-        "observed_max_timing_error_s": float(timing_err.max()) if len(timing_err) else 0.0,
-        "truth_max_gap_s": truth_max_gap,
-        "n_rows_in_window": int(in_window.sum()),
-        "n_landmark_rows": int(np.sum(lm_index >= 0)),
-        "n_robot_rows_in_window": int(np.sum(is_robot & in_window)),
-        "n_unknown_barcode_rows_in_window": int(np.sum(is_unknown & in_window)),
-        "misread_gate_rad": float(misread_gate),
-        "n_misread_rows": int(np.sum((lm_index >= 0) & (true_lm < 0))),
-        "truth": "none (imported with no_truth: x0 = [0, 0, 0], the robot's own frame)" if no_truth else "motion capture",
-    }
+    metadata = _metadata(raw, robot, dt, start, T, non_landmark, control_delay, max_range, misread_gate, no_truth,
+                         t_ref, timestamps, truth_max_gap, rows, true_lm)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
 
 
@@ -620,6 +674,82 @@ def robot_rows(
             "z": m[:, 2:4].copy(), "t": t}
 
 
+def _team_readings(raws: list[MrclamRaw], numbers: list[int], t_ref: float, start: float, dt: float, T: int,
+                   n1: int):
+    """The inter-robot readings of :func:`import_mrclam_team`: every robot's :func:`robot_rows`, the kept
+    readings' stacked observer / observed poses ``(K,)`` and ``[range, bearing]`` ``(K, 2)`` sorted by
+    (observer, observed), and the count of rows per fate."""
+    # inter-robot readings
+    index_of = {n: k for k, n in enumerate(numbers)}
+    rows = [robot_rows(rw, numbers, t_ref, start, dt, T) for rw in raws]
+    oi, oj, oz, counts = [], [], [], {"kept": 0, "outside": 0, "not_in_team": 0, "self": 0}
+    for k, rr in enumerate(rows):
+        for f in counts:
+            counts[f] += int(np.sum(rr["fate"] == f))
+        keep = rr["fate"] == "kept"
+        oi.append(k * n1 + rr["step"][keep])
+        oj.append(np.array([index_of[int(s)] for s in rr["observed"][keep]], np.int64) * n1 + rr["step"][keep])
+        oz.append(rr["z"][keep])
+    oi, oj, oz = np.concatenate(oi), np.concatenate(oj), np.concatenate(oz)
+    order = np.lexsort((oj, oi))
+    oi, oj, oz = oi[order], oj[order], oz[order]
+    return rows, oi, oj, oz, counts
+
+
+def _reading_residual(truth_poses: np.ndarray, oi: np.ndarray, oj: np.ndarray, team) -> dict:
+    """Median and robust σ of the kept readings' range and bearing against the motion capture."""
+    resid = {}
+    if len(oi):
+        zh = range_bearing(truth_poses[oi], truth_poses[oj, :2])
+        dr = team.range_m - zh[:, 0]
+        db = angle_diff(team.bearing_rad, zh[:, 1])
+        for name, r_ in (("range", dr), ("bearing", db)):
+            med = float(np.median(r_))
+            resid[f"{name}_median"] = med
+            resid[f"{name}_robust_std"] = float(1.4826 * np.median(np.abs(r_ - med)))
+        resid["n_bearing_over_0.5rad"] = int(np.sum(np.abs(db) > 0.5))
+    return resid
+
+
+def _team_metadata(directory: str | Path, numbers: list[int], dt: float, start: float, T: int, control_delay: float,
+                   t_ref: float, ts: np.ndarray, solo: list[Dataset], rows: list[dict], counts: dict,
+                   resid: dict) -> dict:
+    """The dataset metadata of :func:`import_mrclam_team` (provenance, parameters, reading counts)."""
+    d = Path(directory)
+    return {
+        **_provenance(d, f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
+                      "slamcli.datasets.mrclam.import_mrclam_team"),
+        "scenario_params": {
+            "robots": numbers,
+            "dt": float(dt),
+            "start_s": float(start),
+            "duration_s": float(T * dt),
+            "control_delay_s": float(control_delay),
+            "layout": "poses stacked robot-major; robot k owns stacked poses k*(T+1) .. k*(T+1)+T",
+            "start_poses": "motion capture at the first grid time of each robot (one world frame)",
+        },
+        "robot": {"numbers": numbers, "platform": "iRobot Create (differential drive)"},
+        "sensor": solo[0].metadata["sensor"],
+        "time_origin_unix_s": t_ref,
+        "window_unix_s": [float(t_ref + ts[0]), float(t_ref + ts[-1])],
+        "max_timing_error_s": float(dt / 2),
+        "robot_rows": {
+            "n_rows_with_robot_barcode": int(sum(rr["n_robot_rows"] for rr in rows)),
+            "kept": counts["kept"],
+            "dropped_outside_time_base": counts["outside"],
+            "dropped_robot_not_imported": counts["not_in_team"],
+            "dropped_self": counts["self"],
+            "truth_residual": resid,
+        },
+        "per_robot": [
+            {k: ds.metadata[k] for k in ("n_landmark_rows", "n_misread_rows", "observed_max_timing_error_s",
+                                         "truth_max_gap_s")} | {"robot": n}
+            for n, ds in zip(numbers, solo)
+        ],
+        "truth": "motion capture",
+    }
+
+
 def import_mrclam_team(
     directory: str | Path,
     robots: list[int] | tuple[int, ...] = (1, 2, 3, 4, 5),
@@ -693,19 +823,7 @@ def import_mrclam_team(
     obs = Observations.from_rows(steps, z, R * n1, reported_id=rid)
 
     # inter-robot readings
-    index_of = {n: k for k, n in enumerate(numbers)}
-    rows = [robot_rows(rw, numbers, t_ref, start, dt, T) for rw in raws]
-    oi, oj, oz, counts = [], [], [], {"kept": 0, "outside": 0, "not_in_team": 0, "self": 0}
-    for k, rr in enumerate(rows):
-        for f in counts:
-            counts[f] += int(np.sum(rr["fate"] == f))
-        keep = rr["fate"] == "kept"
-        oi.append(k * n1 + rr["step"][keep])
-        oj.append(np.array([index_of[int(s)] for s in rr["observed"][keep]], np.int64) * n1 + rr["step"][keep])
-        oz.append(rr["z"][keep])
-    oi, oj, oz = np.concatenate(oi), np.concatenate(oj), np.concatenate(oz)
-    order = np.lexsort((oj, oi))
-    oi, oj, oz = oi[order], oj[order], oz[order]
+    rows, oi, oj, oz, counts = _team_readings(raws, numbers, t_ref, start, dt, T, n1)
     x0s = np.stack([ds.inputs.x0 for ds in solo])
     team = RobotTeam(pose_robot=pose_robot, robot_number=np.asarray(numbers, np.int64), x0_xyt=x0s,
                      observer_pose=oi.astype(np.int64), observed_pose=oj.astype(np.int64),
@@ -727,49 +845,6 @@ def import_mrclam_team(
     truth = GroundTruth(poses_xyt=truth_poses, landmarks_xy=solo[0].truth.landmarks_xy.copy(),
                         obs_landmark=np.concatenate([ds.truth.obs_landmark for ds in solo]))
     # residual of the kept readings against the motion capture (documentation; solvers never see it)
-    resid = {}
-    if len(oi):
-        zh = range_bearing(truth_poses[oi], truth_poses[oj, :2])
-        dr = team.range_m - zh[:, 0]
-        db = angle_diff(team.bearing_rad, zh[:, 1])
-        for name, r_ in (("range", dr), ("bearing", db)):
-            med = float(np.median(r_))
-            resid[f"{name}_median"] = med
-            resid[f"{name}_robust_std"] = float(1.4826 * np.median(np.abs(r_ - med)))
-        resid["n_bearing_over_0.5rad"] = int(np.sum(np.abs(db) > 0.5))
-    d = Path(directory)
-    metadata = {
-        "scenario": f"mrclam:{d.name}:robots{'-'.join(map(str, numbers))}",
-        "source": "UTIAS MRCLAM (Leung et al., IJRR 2011)",
-        "source_dir": str(d.resolve()),
-        "importer": "slamcli.datasets.mrclam.import_mrclam_team",
-        "scenario_params": {
-            "robots": numbers,
-            "dt": float(dt),
-            "start_s": float(start),
-            "duration_s": float(T * dt),
-            "control_delay_s": float(control_delay),
-            "layout": "poses stacked robot-major; robot k owns stacked poses k*(T+1) .. k*(T+1)+T",
-            "start_poses": "motion capture at the first grid time of each robot (one world frame)",
-        },
-        "robot": {"numbers": numbers, "platform": "iRobot Create (differential drive)"},
-        "sensor": solo[0].metadata["sensor"],
-        "time_origin_unix_s": t_ref,
-        "window_unix_s": [float(t_ref + ts[0]), float(t_ref + ts[-1])],
-        "max_timing_error_s": float(dt / 2),
-        "robot_rows": {
-            "n_rows_with_robot_barcode": int(sum(rr["n_robot_rows"] for rr in rows)),
-            "kept": counts["kept"],
-            "dropped_outside_time_base": counts["outside"],
-            "dropped_robot_not_imported": counts["not_in_team"],
-            "dropped_self": counts["self"],
-            "truth_residual": resid,
-        },
-        "per_robot": [
-            {k: ds.metadata[k] for k in ("n_landmark_rows", "n_misread_rows", "observed_max_timing_error_s",
-                                         "truth_max_gap_s")} | {"robot": n}
-            for n, ds in zip(numbers, solo)
-        ],
-        "truth": "motion capture",
-    }
+    resid = _reading_residual(truth_poses, oi, oj, team)
+    metadata = _team_metadata(directory, numbers, dt, start, T, control_delay, t_ref, ts, solo, rows, counts, resid)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)

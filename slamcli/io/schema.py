@@ -66,7 +66,17 @@ def to_json(obj: Any) -> str:
 
 
 def utc_now() -> str:
+    """The current UTC time to the second, ``YYYY-MM-DDTHH:MM:SSZ`` (the one time format of files and runs)."""
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write ``obj`` as a JSON text file (indent 2, sorted keys, :func:`json_default` — unknown types raise
+    ``TypeError`` — ``inf``/``nan`` kept, final newline) under a temporary name, renamed onto ``path``
+    atomically (:func:`~slamcli.io.atomic.write_bytes_atomic`: a full disk is one line naming ``path``, the
+    temporary removed; on any error ``path`` is left as it was)."""
+    text = json.dumps(obj, indent=2, sort_keys=True, default=json_default, allow_nan=True) + "\n"
+    write_bytes_atomic(path, text.encode())
 
 
 def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, frame: str, doc: str) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from slamcli.models.angles import wrap_angle
+from slamcli.models.angles import angle_diff, wrap_angle
 
 
 def rot2(theta):
@@ -110,3 +110,32 @@ def log(p):
     vx = (A * p[..., 0] + B * p[..., 1]) / det
     vy = (-B * p[..., 0] + A * p[..., 1]) / det
     return np.stack([vx, vy, w], -1)
+
+
+def interpolate_poses(t_rows: np.ndarray, xyt_rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Interpolate a pose track at times ``t``: x, y linearly, θ along the shorter arc.
+
+    ``p(t) = p_i + w · (p_{i+1} − p_i)``, ``θ(t) = wrap(θ_i + w · angle_diff(θ_{i+1}, θ_i))``,
+    ``w = (t − t_i)/(t_{i+1} − t_i)`` with ``i`` the last stamp ``≤ t`` (the first or last segment outside the
+    track, so there it extrapolates linearly: callers keep ``t`` inside or mask it, as
+    :func:`slamcli.api.interop.trajectory_at` does). The one pose-track interpolation of the package (the
+    MRCLAM importer's ground truth, imported trajectories).
+
+    Parameters
+    ----------
+    t_rows : ndarray (G,)       strictly increasing stamps (G ≥ 2).
+    xyt_rows : ndarray (G, 3)   poses.
+    t : ndarray (n,)            query times within ``[t_rows[0], t_rows[-1]]``.
+
+    Returns
+    -------
+    ndarray (n, 3)
+    """
+    t_rows = np.asarray(t_rows, float)
+    p = np.asarray(xyt_rows, float)
+    t = np.asarray(t, float)
+    i = np.clip(np.searchsorted(t_rows, t, side="right") - 1, 0, len(t_rows) - 2)
+    w = (t - t_rows[i]) / (t_rows[i + 1] - t_rows[i])
+    xy = p[i, :2] + w[:, None] * (p[i + 1, :2] - p[i, :2])
+    th = wrap_angle(p[i, 2] + w * angle_diff(p[i + 1, 2], p[i, 2]))
+    return np.column_stack([xy, th])

@@ -15,13 +15,12 @@ smoke checks, named as such. Each section states every run's wall and CPU time.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-ProgressFn = Callable[[int, int], None] | None
+from slamcli.types import LogFn
 
 _QUICK_OVERRIDES = {"walls.width": 40.0, "walls.height": 40.0, "walls.corridor": 8.0, "walls.resolution": 1.0,
                     "sensor.n_beams": 60, "walls.laps": 2}
@@ -200,33 +199,28 @@ def _fmt(x, digits: int = 3) -> str:
     return f"{x:.{digits}g}"
 
 
-def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tuple[str, bool]:
+def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
     """Section ``paper001``: Maps 1-3 (both sensors), the posts variant and Fig. 2 (see :func:`_run_part`)."""
     return _run_part(out_dir, quick, progress, "maps")
 
 
-def run_section_map4(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tuple[str, bool]:
+def run_section_map4(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
     """Section ``paper001-map4``: Map 4 with the laser, 2 laps (the longest run; last in ``make reproduce``)."""
     return _run_part(out_dir, quick, progress, "map4")
 
 
-def _run_part(out_dir: Path, quick: bool, progress: ProgressFn, part: str) -> tuple[str, bool]:
+def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> tuple[str, bool]:
     """Run the paper 001 experiments of ``part`` into ``out_dir``; return the markdown section (figure paths
     relative to ``out_dir``'s parent, where the report lives) and whether every run completed.
 
-    ``progress`` is called as ``progress(done, total)``, or with one status string if it takes only that
-    (the reproduce driver passes its line logger)."""
+    ``progress`` gets one status line per finished run (the reproduce driver passes its line logger)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rel = out.name
 
     def report(done: int, total: int) -> None:
-        if progress is None:
-            return
-        try:
-            progress(done, total)
-        except TypeError:
-            progress(f"paper001: {done}/{total} runs")  # type: ignore[call-arg]
+        if progress is not None:
+            progress(f"paper001: {done}/{total} runs")
 
     runs = planned_runs(quick, part)
     if part == "map4":

@@ -26,12 +26,11 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-ProgressFn = Callable[[str], None] | None
+from slamcli.types import LogFn
 
 #: Victoria Park prefix of the full section, s (documented in the report)
 VP_PREFIX_S = 300.0
@@ -316,7 +315,7 @@ def _mrclam_sentences(rows) -> list[str]:
     return out
 
 
-def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tuple[str, bool]:
+def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
     """Run the three recordings into ``out_dir``; return the markdown (figure paths relative to the report's
     folder, ``out_dir``'s parent) and whether every recording could be run."""
     from slamcli.datasets.carpark import import_carpark

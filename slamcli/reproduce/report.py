@@ -25,13 +25,12 @@ non-zero with a summary.
 Other papers' sections hook in with one line in :data:`SECTIONS`: ``("key", "module:function")`` where
 ``function(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool)`` writes its own figures under
 ``out_dir`` and returns its markdown (starting with its own ``## `` heading) and whether it succeeded;
-``progress`` is a ``Callable[[str], None]`` for one-line messages.
+``progress`` is a :data:`slamcli.types.LogFn` (one-line messages).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 import math
 import os
 import time
@@ -41,7 +40,9 @@ from pathlib import Path
 from typing import Any
 
 from slamcli.errors import ConfigError, SlamcliError
+from slamcli.io.schema import utc_now
 from slamcli.sweep.config import ExperimentConfig, SolverSpec, load_experiment, quick_variant
+from slamcli.types import LogFn
 
 # The paper's numbers (paper 000 §5-§6), quoted where the report puts ours beside them.
 PAPER = {
@@ -165,7 +166,7 @@ class Reproduction:
     """Runs the sections and assembles the report."""
 
     def __init__(self, out_dir: Path, *, quick: bool, workers: int, experiments_dir: Path,
-                 log: Callable[[str], None]) -> None:
+                 log: LogFn) -> None:
         self.out = Path(out_dir)
         self.runs_dir = self.out / "runs"
         self.fig_dir = self.out / "figures"
@@ -893,7 +894,7 @@ def reproduce(
     quick: bool = False,
     workers: int | None = None,
     experiments_dir: str | Path | None = None,
-    log: Callable[[str], None] = lambda s: None,
+    log: LogFn = lambda s: None,
     only: list[str] | None = None,
 ) -> ReproduceOutcome:
     """Run the sections of :data:`SECTIONS` (or the keys in ``only``), write figures and ``REPORT.md`` into
@@ -941,7 +942,7 @@ def reproduce(
         "# slamcli reproduction of paper 000 (ICM-SLAM, Int. J. Automation and Computing 15(3), 2018)",
         "",
         (
-            f"Generated {_dt.datetime.now(_dt.UTC).isoformat(timespec='seconds')} by "
+            f"Generated {utc_now()} by "
             f"`slamcli reproduce{' --quick' if quick else ''}` (slamcli {slamcli.__version__}, git {git_revision()}), "
             f"{workers} worker(s), {elapsed:.0f} s. Runs: `runs/<experiment>/<run_id>/` (config, dataset, "
             "result, metrics, status, log); tables: `runs/<experiment>/results.csv`."

@@ -21,19 +21,15 @@ Paper 004 (Fig. 2) measures θ from +y clockwise (x₂ − x₁ = d·sin θ, y�
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
-import slamcli
 from slamcli.models.angles import wrap_angle
 from slamcli.sim import world
-from slamcli.sim.config import ScenarioConfig, config_to_dict
-from slamcli.sim.streams import STREAMS, stream
-from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, SlamInputs
-
-ProgressFn = Callable[[int, int], None]
+from slamcli.sim.assemble import simulated_inputs, simulated_metadata
+from slamcli.sim.config import ScenarioConfig
+from slamcli.sim.streams import stream
+from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, ProgressFn
 
 
 def heading_from_paper004(theta_paper):
@@ -162,35 +158,17 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
         range_std=h_r * scale / math.sqrt(3.0),
         bearing_std=h_b * scale / math.sqrt(3.0),
     )
-    inputs = SlamInputs(
-        dt=float(cfg.dt),
-        timestamps=np.arange(T + 1) * float(cfg.dt),
-        x0=poses[0].copy(),
-        controls=legs / float(cfg.dt),  # commanded [d, α] per leg, as rates over one leg
-        odometry_xyt=odometry_xyt,
-        observations=obs,
-        noise=noise,
-        max_range=float(s.max_range),
-        noise_bounds=bounds,
-    )
+    # controls: the commanded [d, α] per leg, as rates over one leg
+    inputs = simulated_inputs(cfg, T, poses, legs / float(cfg.dt), odometry_xyt, obs, noise, noise_bounds=bounds)
     truth = GroundTruth(poses_xyt=poses, landmarks_xy=landmarks, obs_landmark=obs_lm)
-    metadata: dict[str, Any] = {
-        "generator": "slamcli.sim.bounded",
-        "slamcli_version": slamcli.__version__,
-        "scenario": cfg.name,
-        "seed": int(seed),
-        "world_seed": world_seed,
-        "dt": float(cfg.dt),
-        "n_steps": T,
-        "sensor_kind": "point",
-        "config": config_to_dict(cfg),
-        "streams": dict(STREAMS),
-        "noise_bounds": {"odometry_model": "turn_move", "odometry_d_m": h_d * scale,
-                         "odometry_turn_rad": h_a * scale, "range_m": h_r * scale, "bearing_rad": h_b * scale,
-                         "closest_only": closest, "min_range_m": float(s.min_range),
-                         "min_separation_m": float(b.declared_separation)},
-        "landmark_types": types.tolist(),
-    }
+    metadata = simulated_metadata(
+        cfg, seed=seed, world_seed=world_seed, n_steps=T, sensor_kind="point", generator="slamcli.sim.bounded",
+        noise_bounds={"odometry_model": "turn_move", "odometry_d_m": h_d * scale,
+                      "odometry_turn_rad": h_a * scale, "range_m": h_r * scale, "bearing_rad": h_b * scale,
+                      "closest_only": closest, "min_range_m": float(s.min_range),
+                      "min_separation_m": float(b.declared_separation)},
+        landmark_types=types.tolist(),
+    )
     if progress is not None:
         progress(T, T)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from slamcli.numerics import GEOMETRY_EPS
+
 _CHUNK = 2_000_000  # beam × primitive pairs per chunk
 
 
@@ -62,7 +64,7 @@ def cast(
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = (px * ey[None] - py * ex[None]) / den  # cross(p − o, e) / cross(u, e)
                 s = (px * uy[sl, None] - py * ux[sl, None]) / den  # cross(p − o, u) / cross(u, e)
-            ok = (np.abs(den) > 1e-12) & (t >= 0.0) & (s >= 0.0) & (s <= 1.0)
+            ok = (np.abs(den) > GEOMETRY_EPS) & (t >= 0.0) & (s >= 0.0) & (s <= 1.0)
             t = np.where(ok, t, np.inf)
             j = np.argmin(t, axis=1)
             tj = t[np.arange(t.shape[0]), j]

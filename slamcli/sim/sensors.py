@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from slamcli.models.angles import wrap_angle
+from slamcli.numerics import GEOMETRY_EPS
 from slamcli.sim.config import ClutterConfig, SensorConfig
 
 _CHUNK_PAIRS = 400_000  # (scan, landmark) pairs per chunk: bounds memory to a few tens of MB
@@ -261,7 +262,7 @@ def laser_scans(
         S = len(steps)
         if L:
             # the robot inside a disc sees nothing of it; a disc farther than max_range + R cannot be hit
-            ci, cl, cd, cb = _candidates(poses_xyt[steps], landmarks_xy, landmark_radius * (1 + 1e-12),
+            ci, cl, cd, cb = _candidates(poses_xyt[steps], landmarks_xy, landmark_radius * (1 + GEOMETRY_EPS),
                                          cfg.max_range + landmark_radius)
             s_i, k_i, t_i, l_i = _ray_hits(ci, cl, cd, cb, landmark_radius, cfg)
         else:

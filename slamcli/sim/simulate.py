@@ -9,19 +9,16 @@ change the noise on true returns. Wall worlds (:mod:`~slamcli.sim.wallworld`) an
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-import slamcli
 from slamcli.errors import ConfigError
 from slamcli.sim import robot, sensors, world
-from slamcli.sim.config import ScenarioConfig, config_to_dict
-from slamcli.sim.streams import STREAMS, stream
-from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
-
-ProgressFn = Callable[[int, int], None]
+from slamcli.sim.assemble import simulated_inputs, simulated_metadata
+from slamcli.sim.config import ScenarioConfig
+from slamcli.sim.streams import stream
+from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, ProgressFn
 
 
 def noise_spec(cfg: ScenarioConfig) -> NoiseSpec:
@@ -118,32 +115,10 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
         gps_step = np.arange(0, T + 1, cfg.gps.period_steps, dtype=np.int64)
         gps_xy = poses[gps_step, :2] + stream("gps", seed).normal(0.0, cfg.gps.std, (len(gps_step), 2))
 
-    inputs = SlamInputs(
-        dt=float(cfg.dt),
-        timestamps=np.arange(T + 1) * float(cfg.dt),
-        x0=poses[0].copy(),
-        controls=controls,
-        odometry_xyt=odometry_xyt,
-        observations=obs,
-        noise=noise_spec(cfg),
-        max_range=float(cfg.sensor.max_range),
-        gps_step=gps_step,
-        gps_xy=gps_xy,
-        gps_std=float(cfg.gps.std) if cfg.gps.enabled else 0.0,
-    )
+    inputs = simulated_inputs(cfg, T, poses, controls, odometry_xyt, obs, noise_spec(cfg), gps_step=gps_step,
+                              gps_xy=gps_xy, gps_std=float(cfg.gps.std) if cfg.gps.enabled else 0.0)
     truth = GroundTruth(poses_xyt=poses, landmarks_xy=landmarks, obs_landmark=ret.landmark.astype(np.int64))
-    metadata: dict[str, Any] = {
-        "generator": "slamcli.sim",
-        "slamcli_version": slamcli.__version__,
-        "scenario": cfg.name,
-        "seed": seed,
-        "world_seed": world_seed,
-        "dt": float(cfg.dt),
-        "n_steps": T,
-        "sensor_kind": cfg.sensor.kind,
-        "config": config_to_dict(cfg),
-        "streams": dict(STREAMS),
-    }
+    metadata = simulated_metadata(cfg, seed=seed, world_seed=world_seed, n_steps=T, sensor_kind=cfg.sensor.kind)
     if progress is not None:
         progress(T, T)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)

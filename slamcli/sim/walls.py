@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from slamcli.models.occupancy import GridSpec, rasterise_segments
+from slamcli.numerics import POINT_EPS_M
 
 
 def _rect(x0: float, y0: float, x1: float, y1: float) -> list[list[float]]:
@@ -128,9 +129,9 @@ def ladder_route(width: float, height: float, rows: int, cols: int, corridor: fl
     # drop consecutive duplicates; the last point equals the start (the route is cyclic)
     out = [pts[0]]
     for q in pts[1:]:
-        if math.hypot(q[0] - out[-1][0], q[1] - out[-1][1]) > 1e-9:
+        if math.hypot(q[0] - out[-1][0], q[1] - out[-1][1]) > POINT_EPS_M:
             out.append(q)
-    if math.hypot(out[-1][0] - out[0][0], out[-1][1] - out[0][1]) < 1e-9:
+    if math.hypot(out[-1][0] - out[0][0], out[-1][1] - out[0][1]) < POINT_EPS_M:
         out.pop()
     return np.asarray(out, float)
 

@@ -16,15 +16,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
 
 import numpy as np
 
-import slamcli
 from slamcli.sim import raycast, robot, sensors, walls
-from slamcli.sim.config import ClutterConfig, ScenarioConfig, config_to_dict
+from slamcli.sim.assemble import simulated_inputs, simulated_metadata
+from slamcli.sim.config import ClutterConfig, ScenarioConfig
 from slamcli.sim.streams import stream
-from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, OccupancyGrid, SlamInputs
+from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, OccupancyGrid
 
 FEATURE_SENSOR = 0
 SCAN_SENSOR = 1
@@ -110,18 +109,10 @@ def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
                                  reported_id=rid_all[order], sensor=sensor_all[order])
 
     s = cfg.sensor
-    inputs = SlamInputs(
-        dt=float(cfg.dt),
-        timestamps=np.arange(T + 1) * float(cfg.dt),
-        x0=poses[0].copy(),
-        controls=controls,
-        odometry_xyt=odometry_xyt,
-        observations=obs,
-        noise=NoiseSpec(motion_std=np.asarray(cfg.robot.actuation_std, float),
-                        odometry_std=np.asarray(cfg.odometry.std, float),
-                        range_std=float(s.range_std), bearing_std=float(s.bearing_std)),
-        max_range=float(s.max_range),
-    )
+    noise = NoiseSpec(motion_std=np.asarray(cfg.robot.actuation_std, float),
+                      odometry_std=np.asarray(cfg.odometry.std, float),
+                      range_std=float(s.range_std), bearing_std=float(s.bearing_std))
+    inputs = simulated_inputs(cfg, T, poses, controls, odometry_xyt, obs, noise)
     occ = walls.true_grid(spec, segs)
     truth = GroundTruth(
         poses_xyt=poses,
@@ -132,21 +123,10 @@ def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
         walls_xyxy=segs,
         lap_end_step=laps.astype(np.int64),
     )
-    metadata: dict[str, Any] = {
-        "generator": "slamcli.sim",
-        "slamcli_version": slamcli.__version__,
-        "scenario": cfg.name,
-        "seed": int(seed),
-        "world_seed": int(seed),
-        "dt": float(cfg.dt),
-        "n_steps": T,
-        "sensor_kind": "walls",
-        "feature_sensor": FEATURE_SENSOR,
-        "scan_sensor": SCAN_SENSOR,
-        "n_beams": B,
-        "route_length_m": lap_len,
-        "config": config_to_dict(dataclasses.replace(cfg, n_steps=T)),
-    }
+    metadata = simulated_metadata(cfg, seed=seed, world_seed=seed, n_steps=T, sensor_kind="walls",
+                                  config=dataclasses.replace(cfg, n_steps=T), with_streams=False,
+                                  feature_sensor=FEATURE_SENSOR, scan_sensor=SCAN_SENSOR, n_beams=B,
+                                  route_length_m=lap_len)
     if progress is not None:
         progress(T, T)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)

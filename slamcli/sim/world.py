@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from slamcli.errors import ConfigError
+from slamcli.numerics import POINT_EPS_M
 from slamcli.sim.config import PathConfig, WorldConfig
 
 
@@ -78,7 +79,7 @@ def make_landmarks(cfg: WorldConfig, waypoints_xy: np.ndarray, cyclic: bool, rng
     ``jitter`` (Gaussian, m) is applied to generated layouts, not to ``extra_landmarks``.
     """
     if cfg.layout == "rows":
-        xs = np.arange(cfg.x_min, cfg.x_max + 1e-9, cfg.col_spacing)
+        xs = np.arange(cfg.x_min, cfg.x_max + POINT_EPS_M, cfg.col_spacing)
         ys = cfg.row_y0 + cfg.row_spacing * np.arange(cfg.n_rows)
         gx, gy = np.meshgrid(xs, ys)
         lm = np.stack([gx.ravel(), gy.ravel()], -1)

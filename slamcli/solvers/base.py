@@ -20,14 +20,11 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
-from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
 
-from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
-
-ProgressFn = Callable[[int, int], None]
+from slamcli.types import IterationTrace, ProgressFn, SlamInputs, SolverResult, Status
 
 
 @dataclasses.dataclass(frozen=True)

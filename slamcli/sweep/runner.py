@@ -64,12 +64,12 @@ import traceback
 import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError, SlamcliError
 from slamcli.io.atomic import write_bytes_atomic
+from slamcli.io.schema import utc_now, write_json
 from slamcli.sweep.expand import DatasetSpec, Expansion, RunSpec, canonical_json
 
 ARTEFACTS = ("config.json", "dataset.h5", "result.h5", "metrics.json", "status.json", "run.log")
@@ -145,24 +145,6 @@ def git_revision() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return f"{sha}{'+dirty' if dirty else ''}" if sha else "unknown"
-
-
-def _utc_now() -> str:
-    return datetime.now(UTC).isoformat(timespec="seconds")
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if hasattr(obj, "value"):
-        return obj.value
-    return str(obj)
-
-
-def write_json(path: Path, obj: Any) -> None:
-    """Write JSON under a temporary name in the same directory, then ``os.replace``."""
-    text = json.dumps(obj, indent=2, sort_keys=True, default=_json_default, allow_nan=True) + "\n"
-    write_bytes_atomic(path, text.encode())  # a full disk: one line, the temporary removed
 
 
 def read_json(path: Path) -> dict[str, Any] | None:
@@ -338,7 +320,7 @@ def execute_run(
     final = exp_dir / run.run_id
     tmp = exp_dir / f".{run.run_id}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp.mkdir(parents=True)
-    started = _utc_now()
+    started = utc_now()
     t0 = time.perf_counter()
     status: dict[str, Any] = {
         "run_id": run.run_id,
@@ -395,7 +377,7 @@ def _execute_in(tmp: Path, final: Path, run: RunSpec, status: dict[str, Any], t0
             rlog.error("run failed:\n%s", tb)
             last = str(exc).strip().splitlines()
             status.update(status=FAILED, error=f"{type(exc).__name__}: {last[-1] if last else ''}", traceback=tb)
-    status.update(finished_utc=_utc_now(), wall_time_s=time.perf_counter() - t0)
+    status.update(finished_utc=utc_now(), wall_time_s=time.perf_counter() - t0)
     if status.get("status") == COMPLETED:
         status["sha256"] = {name: file_sha256(tmp / name) for name in HASHED}
     write_json(tmp / "status.json", status)
@@ -429,7 +411,7 @@ def record_dead_run(run: RunSpec, exp_dir: Path, error: str) -> dict[str, Any]:
     tmp = exp_dir / f".{run.run_id}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp.mkdir(parents=True)
     write_json(tmp / "config.json", {"run_id": run.run_id, "point": run.point, **run.config()})
-    now = _utc_now()
+    now = utc_now()
     status = {"run_id": run.run_id, "experiment": run.experiment, "label": run.label, "method": run.method,
               "replicate": run.replicate, "dataset_id": run.dataset.dataset_id, "status": FAILED, "error": error,
               "started_utc": now, "finished_utc": now, "host": platform.node(), "git": git_revision()}
@@ -671,7 +653,7 @@ def run_sweep(
 
 def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress) -> SweepSummary:
     clean_temporaries(exp_dir)
-    since = _utc_now()
+    since = utc_now()
     t0 = time.perf_counter()
     counts = Counts(total=len(expansion.runs))
     pending: list[RunSpec] = []
