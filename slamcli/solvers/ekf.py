@@ -613,10 +613,11 @@ def update_inplace(x, P, z, j, R):
     The last line is one rank-2 update of the preallocated ``P`` in place: no (n, n) copy of ``P`` is made.
     It equals the textbook Joseph form to round-off (``tests/test_ekf_inplace.py`` checks 1e-10 on random
     problems); the Joseph form's extra robustness concerns a gain that is not ``U S⁻¹``, which never
-    occurs here. ``V Vᵀ`` is formed by BLAS ``gemm`` (``V @ V.T.copy()``): numpy's ``syrk`` path for
-    ``V @ V.T`` is exactly symmetric but, with its triangle copy, about twice as slow at n ≈ 2000
-    (measured), while ``gemm`` leaves an asymmetry at the level of round-off (≈ 1e-16 relative per
-    update); the solver symmetrises the covariance blocks it reports.
+    occurs here. ``P −= V Vᵀ`` is one BLAS ``dgemm`` with ``beta = 1`` written straight into ``P``
+    (:func:`_rank2_downdate`): one read and one write of ``P``, no (n, n) temporary (a temporary of 32 MB
+    at n ≈ 2000 costs more in page faults than the arithmetic, issue 25); ``gemm`` leaves an asymmetry at
+    the level of round-off (≈ 1e-16 relative per update); the solver symmetrises the covariance blocks it
+    reports.
 
     Parameters
     ----------
@@ -635,9 +636,23 @@ def update_inplace(x, P, z, j, R):
     K = U @ _inv2(S)  # (n, 2)
     x += K @ y
     x[2] = _wrap(x[2])
-    V = _sqrt_downdate_factor(U, S)
-    P -= V @ V.T.copy()  # one in-place rank-2 update (gemm; see the docstring on symmetry)
+    _rank2_downdate(P, _sqrt_downdate_factor(U, S))
     return y, S
+
+
+def _rank2_downdate(P, V) -> None:
+    """``P −= V Vᵀ`` in place, one BLAS ``dgemm`` pass over ``P (n, n)`` with ``beta = 1`` (no (n, n) temporary).
+
+    ``P`` C-contiguous is ``Pᵀ`` in Fortran order, which ``dgemm`` updates without a copy; ``V Vᵀ`` is
+    symmetric, so updating ``Pᵀ`` by it is updating ``P``. Other layouts (a strided window) fall back to
+    numpy's ``P −= V @ Vᵀ`` with its temporary.
+    """
+    if P.flags.c_contiguous:
+        from scipy.linalg.blas import dgemm  # lazy: scipy.linalg costs ≈ 0.1-1 s to import (issue 25)
+
+        dgemm(-1.0, V, V, 1.0, P.T, trans_b=1, overwrite_c=1)
+    else:
+        P -= V @ V.T
 
 
 def _sqrt_downdate_factor(U, S):
@@ -651,7 +666,7 @@ def _sqrt_downdate_factor(U, S):
     l11 = math.sqrt(S[0, 0])
     l21 = 0.5 * (S[0, 1] + S[1, 0]) / l11
     l22 = math.sqrt(S[1, 1] - l21 * l21)
-    V = np.empty_like(U)
+    V = np.empty(U.shape, order="F")  # Fortran order: dgemm reads it without a copy
     V[:, 0] = U[:, 0] / l11
     V[:, 1] = (U[:, 1] - l21 * V[:, 0]) / l22
     return V
@@ -740,8 +755,7 @@ def update_position_inplace(x, P, z_xy, R) -> None:
     U = P[:, :2].copy()  # (n, 2)
     S = U[:2] + R
     x += U @ _inv2(S) @ y
-    V = _sqrt_downdate_factor(U, S)
-    P -= V @ V.T.copy()
+    _rank2_downdate(P, _sqrt_downdate_factor(U, S))
 
 
 def landmark_init(x, P, z, R):
