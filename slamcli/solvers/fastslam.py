@@ -77,7 +77,11 @@ from slamcli.solvers.resampling import RESAMPLERS, effective_sample_size, normal
 from slamcli.types import SlamInputs, SolverResult, Status
 
 LOG_2PI = math.log(2.0 * math.pi)
-CHI2_2DOF_9999 = 18.420680743952367  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
+CHI2_2DOF_9999 = 18.420680743952367
+#: Batched kernels work on (P, k) arrays of at most this many float64 (64 KB): larger temporaries leave
+#: glibc's heap for mmap, and their page faults cost more than the batching saves (measured: 280 KB
+#: temporaries made the batched 1.0 update 1.5× slower than row by row at P = 1000).
+BATCH_ELEMENTS = 8192  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -827,6 +831,8 @@ class _Run:
 
     def _measure_v1(self, ps, z_all, rows, slot_of_obs):
         """FastSLAM 1.0 measurement step at the already-sampled poses ``ps.x``."""
+        if slot_of_obs is not None:
+            return self._measure_v1_known(ps, z_all, rows, slot_of_obs)
         slots_l, new_l = [], []
         for n in rows:
             z = z_all[n]
@@ -839,6 +845,50 @@ class _Run:
             if slot_of_obs is None:
                 ps.log_w += np.where(new, self._log_p0, 0.0)  # new-landmark likelihood p0
         return slots_l, new_l
+
+    def _measure_v1_known(self, ps, z_all, rows: range, slot_of_obs):
+        """FastSLAM 1.0 with known association, batched over particles AND the landmarks of the step.
+
+        Given the sampled poses, rows of distinct landmarks are independent (each updates its own 2×2 EKF,
+        eqs. 14.22-14.24, and adds its own ``log N(ν; 0, Q_n)`` to the weight, eq. 14.28), so all of them are
+        one update on ``(P, k)`` component arrays. A landmark seen again in the same step goes to the next
+        round (rows in order), as in the row-by-row filter. Returns ``(slots per row (int | None), [None…])``.
+        """
+        r = np.arange(rows.start, rows.stop)
+        s = slot_of_obs[r]
+        slots_l = [int(v) if v >= 0 else None for v in s]
+        r, s = r[s >= 0], s[s >= 0]
+        Q, x = self._Q, ps.x
+        xb, yb, thb = x[:, None, 0], x[:, None, 1], x[:, None, 2]  # (P, 1): broadcast over the k landmarks
+        k_max = max(1, BATCH_ELEMENTS // ps.n_particles)
+        while r.size:
+            if r.size <= k_max and len(set(s.tolist())) == r.size:  # the usual case: one round, no repeat
+                now_s, z, r, s = s, z_all[r], r[:0], s[:0]
+            else:
+                _, first = np.unique(s, return_index=True)
+                first = first[:k_max]
+                later = np.ones(r.size, bool)
+                later[first] = False
+                now_s, z = s[first], z_all[r[first]]  # (k,), (k, 2)
+                r, s = r[later], s[later]
+            mu, sig = ps.mu[:, now_s], ps.sig[:, now_s]  # (P, k, 2), (P, k, 2, 2)
+            new = ~ps.exists[:, now_s]  # (P, k)
+            comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
+            o = _obs_terms(xb, yb, thb, *comps, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+            mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
+            old = ~new
+            self._nis_sum += float(np.sum(nis, where=old))  # 1.0: NIS of the measurement update (pose given)
+            self._nis_n += int(np.count_nonzero(old))
+            if new.any():
+                init = _init_terms(xb, yb, thb, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+                mx, my, a, b, c = (np.where(new, i, u) for i, u in zip(init, (mx, my, a, b, c)))
+            ps.mu[:, now_s, 0], ps.mu[:, now_s, 1] = mx, my
+            ps.sig[:, now_s, 0, 0], ps.sig[:, now_s, 1, 1] = a, c
+            ps.sig[:, now_s, 0, 1] = ps.sig[:, now_s, 1, 0] = b
+            ps.count[:, now_s] = np.where(new, 1, ps.count[:, now_s] + 1)
+            ps.exists[:, now_s] = True
+            ps.log_w += np.where(new, 0.0, ll).sum(axis=1)
+        return slots_l, [None] * len(slots_l)
 
     def _proposal_v2(self, ps, x_hat, Sx, z_all, rows, slot_of_obs, rng):
         """FastSLAM 2.0: refine ``N(x̂, Σ_x)`` (``Σ_x (3, 3, P)``) with every observation of a mapped landmark,
