@@ -252,15 +252,15 @@ class EkfSlam(BaseSolver):
                 f"noise: range_std={noise.range_std} and bearing_std={noise.bearing_std} must both be > 0 for the "
                 "EKF (a noise-free sensor makes the innovation covariance S singular)"
             )
-        R = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
+        obs_cov = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
         Q_stab = np.diag(np.square(np.asarray(p.stabilising_pose_std, float)))
         if p.motion_input == "controls":
             if inputs.controls.shape[0] != T:
                 raise SolverError(f"controls: expected {T} rows, got {inputs.controls.shape[0]}")
-            M = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
+            motion_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
             controls = np.asarray(inputs.controls, float)
         else:
-            Sigma_d = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
+            odom_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
             incr = odometry_increments(inputs.odometry_xyt)
 
         gps_at: dict[int, np.ndarray] = {}
@@ -268,7 +268,7 @@ class EkfSlam(BaseSolver):
             if not inputs.gps_std > 0:
                 raise SolverError(f"gps_std={inputs.gps_std}: GPS fixes need a positive σ (or --param use_gps=false)")
             gps_at = {int(k): np.asarray(v, float) for k, v in zip(inputs.gps_step, inputs.gps_xy)}
-            R_gps = inputs.gps_std**2 * np.eye(2)
+            gps_cov = inputs.gps_std**2 * np.eye(2)
 
         st = _GrowingState(np.asarray(inputs.x0, float), np.diag(np.square(np.asarray(p.init_pose_std, float))))
         poses = np.empty((T + 1, 3))
@@ -284,25 +284,25 @@ class EkfSlam(BaseSolver):
             if t > 0:
                 x_r = st.x[:3]
                 if p.motion_input == "controls":
-                    # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ
+                    # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ  (M = motion_cov; Q: process noise in pose coordinates)
                     u = controls[t - 1]
                     if inputs.motion_model == "ackermann":  # car model of the tracked point (G&N 2001)
                         pose_new = ackermann_step(x_r, u, inputs.dt, inputs.vehicle)
                         F, G_u = ackermann_jacobians(x_r, u, inputs.dt, inputs.vehicle)
                     else:
                         pose_new, F, G_u = _ddmr_predict(x_r, u, inputs.dt)
-                    Q = G_u @ M @ G_u.T
+                    Q = G_u @ motion_cov @ G_u.T
                 else:
-                    # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
+                    # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ (Σ_d = odom_cov) with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
                     d = incr[t - 1]
                     F, G = compose_jacobians(x_r, d)
                     pose_new = compose(x_r, d)
-                    Q = G @ Sigma_d @ G.T
+                    Q = G @ odom_cov @ G.T
                 predict_inplace(st.xa, st.Pa, pose_new, F, Q + Q_stab)
 
             # ---------------- GPS position fix (linear update) ----------------
             if t in gps_at:
-                update_position_inplace(st.xa, st.Pa, gps_at[t], R_gps)
+                update_position_inplace(st.xa, st.Pa, gps_at[t], gps_cov)
 
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
@@ -328,13 +328,13 @@ class EkfSlam(BaseSolver):
                         dets.append((z, g))  # deferred to the second pass
                         continue
                     if j is None:
-                        j = _add_landmark(st, z, R)
+                        j = _add_landmark(st, z, obs_cov)
                         id_to_lm[key] = j
                         n_new += 1
                         assoc[g] = j
                         continue
                 else:
-                    j, d2 = _ml_best(st, z, R, exclude=[lm for (s, lm) in used if s == sensor[i]]
+                    j, d2 = _ml_best(st, z, obs_cov, exclude=[lm for (s, lm) in used if s == sensor[i]]
                                      if p.exclusive_per_step else [])
                     if (j < 0 or d2 > new_thr) and k_det < n_first:
                         dets.append((z, g))  # deferred to the second pass
@@ -342,12 +342,12 @@ class EkfSlam(BaseSolver):
                     if j < 0 or d2 > new_thr:
                         # no plausible state landmark: start a new one (or a provisional candidate)
                         if p.provisional:
-                            j = _provisional_step(st, candidates, z, R, t, g, gate, p, assoc)
+                            j = _provisional_step(st, candidates, z, obs_cov, t, g, gate, p, assoc)
                             if j >= 0:
                                 n_new += 1
                                 used.add((int(sensor[i]), j))
                         else:
-                            j = _add_landmark(st, z, R)
+                            j = _add_landmark(st, z, obs_cov)
                             n_new += 1
                             assoc[g] = j
                             used.add((int(sensor[i]), j))
@@ -356,7 +356,7 @@ class EkfSlam(BaseSolver):
                         n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
                         continue
                     used.add((int(sensor[i]), j))
-                y, S = update_inplace(st.xa, st.Pa, z, j, R)
+                y, S = update_inplace(st.xa, st.Pa, z, j, obs_cov)
                 assoc[g] = j
                 nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
@@ -543,7 +543,7 @@ def compose_jacobians(a, b):
     return J_a, J_b
 
 
-def predict(x, P, pose_pred, F, Q):
+def predict(x, P, pose_pred, F, motion_cov):
     """EKF-SLAM prediction: only the pose moves (pure: returns new arrays; see :func:`predict_inplace`).
 
     ::
@@ -559,20 +559,22 @@ def predict(x, P, pose_pred, F, Q):
     P : ndarray (n, n)       state covariance.
     pose_pred : ndarray (3,) predicted pose g(x_r, u).
     F : ndarray (3, 3)       motion Jacobian w.r.t. the pose.
-    Q : ndarray (3, 3)       process noise in pose coordinates (e.g. G_u M G_uᵀ).
+    motion_cov : ndarray (3, 3)  process noise in pose coordinates (e.g. G_u M G_uᵀ).
 
     Returns
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
+    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     predict_inplace(x, P, pose_pred, F, Q)
     return x, P
 
 
-def predict_inplace(x, P, pose_pred, F, Q) -> None:
+def predict_inplace(x, P, pose_pred, F, motion_cov) -> None:
     """:func:`predict` written into ``x (n,)`` and ``P (n, n)`` (touches 3 rows and 3 columns: O(n))."""
+    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
     x[:3] = pose_pred
     x[2] = _wrap(x[2])
     P[:3, :] = F @ P[:3, :]
@@ -580,25 +582,26 @@ def predict_inplace(x, P, pose_pred, F, Q) -> None:
     P[:3, :3] += Q
 
 
-def update(x, P, z, j, R):
+def update(x, P, z, j, obs_cov):
     """Range-bearing update of pose + landmark ``j``, O(n²) (pure: copies, then :func:`update_inplace`).
 
     Parameters
     ----------
     x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,) [range, bearing];  j : int landmark index;
-    R : ndarray (2, 2) measurement covariance.
+    obs_cov : ndarray (2, 2) measurement covariance.
 
     Returns
     -------
     x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
     """
+    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     y, S = update_inplace(x, P, z, j, R)
     return x, P, y, S
 
 
-def update_inplace(x, P, z, j, R):
+def update_inplace(x, P, z, j, obs_cov):
     """Range-bearing update of pose + landmark ``j`` written into ``x (n,)`` and ``P (n, n)``: O(n²).
 
     ::
@@ -625,12 +628,13 @@ def update_inplace(x, P, z, j, R):
     Parameters
     ----------
     x : ndarray (n,);  P : ndarray (n, n), C-contiguous for speed;  z : ndarray (2,) [range, bearing];
-    j : int landmark index;  R : ndarray (2, 2) measurement covariance.
+    j : int landmark index;  obs_cov : ndarray (2, 2) measurement covariance.
 
     Returns
     -------
     y : ndarray (2,) innovation, S : ndarray (2, 2) innovation covariance.
     """
+    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
     k = 3 + 2 * j
     y, Hs = _innovation_and_jacobian(x[0], x[1], x[2], x[k], x[k + 1], float(z[0]), float(z[1]))
     U = P[:, :3] @ Hs[:, :3].T  # (n, 2) = P Hᵀ, pose columns ...
@@ -729,20 +733,21 @@ def _inv2(S):
     return np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
 
 
-def update_position(x, P, z_xy, R):
+def update_position(x, P, z_xy, obs_cov):
     """Linear position-fix update (GPS), O(n²) (pure: copies, then :func:`update_position_inplace`).
 
     Returns
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
+    R = obs_cov  # R: the position-fix covariance inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     update_position_inplace(x, P, z_xy, R)
     return x, P
 
 
-def update_position_inplace(x, P, z_xy, R) -> None:
+def update_position_inplace(x, P, z_xy, obs_cov) -> None:
     """Linear position-fix update (GPS) written into ``x (n,)`` and ``P (n, n)``, O(n²).
 
     ::
@@ -752,8 +757,9 @@ def update_position_inplace(x, P, z_xy, R) -> None:
 
     Parameters
     ----------
-    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  obs_cov : ndarray (2, 2) position-fix covariance
     """
+    R = obs_cov  # R: the position-fix covariance inside the kernel
     y = np.asarray(z_xy, float) - x[:2]
     U = P[:, :2].copy()  # (n, 2)
     S = U[:2] + R
@@ -761,7 +767,7 @@ def update_position_inplace(x, P, z_xy, R) -> None:
     _rank2_downdate(P, _sqrt_downdate_factor(U, S))
 
 
-def landmark_init(x, P, z, R):
+def landmark_init(x, P, z, obs_cov):
     """Initialise a landmark from its first sighting (linearised inverse observation model).
 
     ::
@@ -774,6 +780,7 @@ def landmark_init(x, P, z, R):
     -------
     m : ndarray (2,), P_mx : ndarray (2, n), P_mm : ndarray (2, 2)
     """
+    R = obs_cov  # R: the measurement covariance inside the kernel
     x = np.asarray(x, float)
     P = np.asarray(P, float)
     M_x, M_z = inverse_range_bearing_jacobians(x[:3], z)
@@ -783,7 +790,7 @@ def landmark_init(x, P, z, R):
     return m, P_mx, 0.5 * (P_mm + P_mm.T)
 
 
-def innovation_stats(x, P, z, R):
+def innovation_stats(x, P, z, obs_cov):
     """Squared Mahalanobis distance ``d²_k = y_kᵀ S_k⁻¹ y_k`` of ``z`` to every landmark k, vectorised.
 
     ::
@@ -794,12 +801,13 @@ def innovation_stats(x, P, z, R):
 
     Parameters
     ----------
-    x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,);  R : ndarray (2, 2)
+    x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,);  obs_cov : ndarray (2, 2)
 
     Returns
     -------
     d2 : ndarray (L,)
     """
+    R = obs_cov  # R: the measurement covariance inside the kernel
     x = np.asarray(x, float)
     P = np.asarray(P, float)
     L = (x.shape[0] - 3) // 2

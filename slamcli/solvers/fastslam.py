@@ -359,7 +359,7 @@ def _mT(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(A, -1, -2)
 
 
-def landmark_ekf_update(x, mu, sig, z, Q):
+def landmark_ekf_update(x, mu, sig, z, obs_cov):
     """One landmark EKF measurement update per particle (paper 002 eqs. 14.21-14.24, 14.28-14.29).
 
     Parameters
@@ -368,7 +368,7 @@ def landmark_ekf_update(x, mu, sig, z, Q):
     mu : ndarray (..., 2)     landmark means before the update.
     sig : ndarray (..., 2, 2) landmark covariances before the update (symmetric).
     z : ndarray (2,)          measurement [range, bearing].
-    Q : ndarray (2, 2)        measurement noise covariance (diagonal).
+    obs_cov : ndarray (2, 2)  measurement noise covariance (diagonal; ``Q`` in the kernels, Thrun's letter).
 
     Returns
     -------
@@ -376,6 +376,7 @@ def landmark_ekf_update(x, mu, sig, z, Q):
     sig_new : ndarray (..., 2, 2)   ``(I − K H) Σ``.
     log_lik : ndarray (...)         ``log N(ν; 0, H Σ Hᵀ + Q)`` — the FastSLAM 1.0 importance weight.
     """
+    Q = obs_cov  # Q: the measurement covariance (Thrun's letter; R is the motion covariance in this module)
     x = np.asarray(x, float)
     mu = np.asarray(mu, float)
     sig = np.asarray(sig, float)
@@ -405,9 +406,11 @@ def _init_terms(x, y, th, zr, zb, qr, qb):
     )
 
 
-def init_landmark(x, z, Q):
+def init_landmark(x, z, obs_cov):
     """Initialise landmark Gaussians from poses ``x (..., 3)`` and one measurement ``z (2,)``:
-    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ``. Returns ``mu (..., 2)``, ``sig (..., 2, 2)``."""
+    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` with ``Q = obs_cov (2, 2)``. Returns ``mu (..., 2)``,
+    ``sig (..., 2, 2)``."""
+    Q = obs_cov  # Q: the measurement covariance (Thrun's letter)
     x = np.asarray(x, float)
     mx, my, a, b, c = _init_terms(x[..., 0], x[..., 1], x[..., 2], z[0], z[1], Q[0, 0], Q[1, 1])
     return np.stack([mx, my], -1), np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
