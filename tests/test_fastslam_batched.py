@@ -77,7 +77,7 @@ def test_batched_v1_equals_per_particle_reference():
     d = _known_loop(80)
     P = 40
     ref = per_particle_fastslam1(d.inputs, P, np.random.default_rng(5))
-    res = FastSlam(FastSlamParams(version=1, n_particles=P, association="known")).solve(
+    res = FastSlam(FastSlamParams(version=1, n_particles=P, association="known", group_returns=False)).solve(
         d.inputs, rng=np.random.default_rng(5))
     assert np.abs(res.poses_xyt[:, :2] - ref).max() < POSE_TOL
 
@@ -96,7 +96,7 @@ def test_batched_v1_landmark_seen_twice_in_a_step():
                                  reported_id=np.asarray(obs.reported_id)[keep])
     inputs = replace(d.inputs, observations=dup)
     ref = per_particle_fastslam1(inputs, 20, np.random.default_rng(1))
-    res = FastSlam(FastSlamParams(version=1, n_particles=20, association="known")).solve(
+    res = FastSlam(FastSlamParams(version=1, n_particles=20, association="known", group_returns=False)).solve(
         inputs, rng=np.random.default_rng(1))
     assert np.abs(res.poses_xyt[:, :2] - ref).max() < POSE_TOL
 

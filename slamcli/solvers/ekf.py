@@ -69,7 +69,7 @@ class EkfParams:
     association : "auto" | "known" | "ml"
         ``known``: the landmark of a row is its sensor-reported id (rows with id −1 are discarded);
         ``ml``: maximum-likelihood association by Mahalanobis distance (paper 002 §14.7, Fig. 14.5);
-        ``auto`` (default): ``known`` when the dataset reports ids, else ``ml`` (``ml`` with ``provisional``).
+        ``auto`` (default): ``known`` when the dataset reports ids, else ``ml``.
         The association used is recorded as ``extra["association"]``.
     motion_input : "controls" | "odometry"
         Drive the prediction by the commanded controls through the DDMR model (noise ``motion_std``) or by
@@ -81,7 +81,9 @@ class EkfParams:
         χ²(2) probability beyond which the best match is so unlikely that the row starts a new landmark
         (``d² > chi2.ppf(new_landmark_prob, 2)``; 0.9999 → 18.4). In between: ambiguous → discarded (−1).
     provisional : bool
-        Keep new landmarks on a provisional list first (ml only, paper 002 §14.1).
+        Keep new landmarks on a provisional list first (paper 002 §14.1); used by ``ml`` association only,
+        ignored with ``known`` ids. On by default: without it every clutter return that gates nowhere becomes
+        a landmark (paper-sim1 seed 0: 156 landmarks for 63 true; ``benchmarks/results/defaults.csv``).
     provisional_min_hits : int
         Consistent sightings (gated) needed before a provisional landmark enters the state.
     provisional_window : int
@@ -114,7 +116,7 @@ class EkfParams:
     motion_input: Literal["controls", "odometry"] = "controls"
     gate_prob: float = 0.99
     new_landmark_prob: float = 0.9999
-    provisional: bool = False
+    provisional: bool = True
     provisional_min_hits: int = 3
     provisional_window: int = 10
     exclusive_per_step: bool = False
@@ -128,8 +130,6 @@ class EkfParams:
     range_offset: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.provisional and self.association == "known":
-            raise ValueError("provisional=true needs association=ml (known ids need no provisional list)")
         if not 0.0 < self.gate_prob < 1.0:
             raise ValueError(f"gate_prob must be in (0, 1), got {self.gate_prob}")
         if not self.gate_prob <= self.new_landmark_prob < 1.0:
@@ -235,7 +235,7 @@ class EkfSlam(BaseSolver):
 
             from slamcli.solvers.frontend import resolve_association
 
-            p = replace(p, association=resolve_association(p.association, rid, force_ml=p.provisional))
+            p = replace(p, association=resolve_association(p.association, rid))
         if p.association == "known" and N > 0 and np.all(rid < 0):
             raise SolverError(
                 "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
@@ -313,7 +313,9 @@ class EkfSlam(BaseSolver):
             # heading noise per step, a landmark initialised 40 m away from the predicted pose is metres off
             # the tangent line its linearised P_mx assumes; measured on hybrid-map4, issue 15). In the second
             # pass a second row of a new id / ml match updates the landmark the first one created.
-            dets = _detections(z_all, sensor, rid, lo, hi, st.x[:3], p)
+            dets = group_detections(z_all, sensor, rid, lo, hi, st.x[:3], group=p.group_returns,
+                                    association=p.association, group_dist=p.group_dist,
+                                    range_offset=p.range_offset)
             n_first = len(dets)
             for k_det, (z, g) in enumerate(dets):
                 # z (2,): the measurement of one detection; g: its observation rows (several when grouped)
@@ -341,7 +343,7 @@ class EkfSlam(BaseSolver):
                         continue
                     if j < 0 or d2 > new_thr:
                         # no plausible state landmark: start a new one (or a provisional candidate)
-                        if p.provisional:
+                        if p.provisional:  # ml only (this branch): known ids need no provisional list
                             j = _provisional_step(st, candidates, z, obs_cov, t, g, gate, p, assoc)
                             if j >= 0:
                                 n_new += 1
@@ -415,10 +417,12 @@ class EkfSlam(BaseSolver):
 
 
 
-def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
-    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order.
+def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, association: str,
+                     group_dist: float, range_offset: float = 0.0):
+    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order (also FastSLAM's).
 
-    Without ``group_returns`` every row is its own detection. With it, the rows of one landmark are merged
+    Rows ``lo:hi`` of ``z_all (N, 2)``, ``sensor (N,)``, ``rid (N,)``; ``x_r (3,)`` an estimate of the pose.
+    Without ``group`` (``group_returns``) every row is its own detection. With it, the rows of one landmark are merged
     into one measurement at their mean range and circular-mean bearing (a laser hits one post on several
     adjacent beams; fusing each hit as an independent measurement of the centre overweights that pose-landmark
     pair): ``known`` groups by (sensor, reported id); ``ml`` by single-linkage clusters of the inverse
@@ -426,13 +430,13 @@ def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
     ``range_offset`` is added to every range first.
     """
     z = z_all[lo:hi]
-    if p.range_offset:
-        z = z + np.array([p.range_offset, 0.0])
+    if range_offset:
+        z = z + np.array([range_offset, 0.0])
     rows = np.arange(lo, hi, dtype=np.int64)
-    if not p.group_returns or hi - lo < 2:
+    if not group or hi - lo < 2:
         return [(z[k], rows[k : k + 1]) for k in range(hi - lo)]
     s = np.asarray(sensor[lo:hi], np.int64)
-    if p.association == "known":
+    if association == "known":
         r = np.asarray(rid[lo:hi], np.int64)
         # rows without an id stay single (they are discarded anyway)
         key = np.where(r >= 0, s * (int(r.max()) + 2) + r, -1 - np.arange(hi - lo))
@@ -442,7 +446,7 @@ def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
 
         # single-linkage clusters of the landmark-space points m̂ = h⁻¹(x_r, z) of one sensor: O(k²), k ≲ 10²
         pts = inverse_range_bearing(np.asarray(x_r, float)[None, :], z)
-        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < p.group_dist
+        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < group_dist
         near &= s[:, None] == s[None, :]
         _, key = connected_components(csr_matrix(near), directed=False)
     out = []
