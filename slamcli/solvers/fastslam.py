@@ -78,11 +78,11 @@ from slamcli.solvers.resampling import RESAMPLERS, effective_sample_size, normal
 from slamcli.types import SlamInputs, SolverResult, Status
 
 LOG_2PI = math.log(2.0 * math.pi)
-CHI2_2DOF_9999 = 18.420680743952367
+CHI2_2DOF_9999 = 18.420680743952367  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
 #: Batched kernels work on (P, k) arrays of at most this many float64 (64 KB): larger temporaries leave
 #: glibc's heap for mmap, and their page faults cost more than the batching saves (measured: 280 KB
 #: temporaries made the batched 1.0 update 1.5× slower than row by row at P = 1000).
-BATCH_ELEMENTS = 8192  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
+BATCH_ELEMENTS = 8192
 
 
 @dataclasses.dataclass(frozen=True)
