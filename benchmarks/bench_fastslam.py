@@ -204,10 +204,11 @@ def versus_reference(quick: bool) -> list[dict]:
     data and the same random stream, alternately in this process, best CPU time (``time.process_time``) of
     ``repeats`` each: ``throughput_ratio = reference CPU / ours`` (goal ≥ 1.0, issue 25 item 5) and the
     largest pose difference (the two draw the same numbers, so they compute the same filter)."""
+    steps = 100 if quick else 300
     worlds = {
         "loop": ("loop", KNOWN),
-        "paper-sim1/point 300 steps": ("paper-sim1", {**KNOWN, "sensor.kind": "point", "sensor.bearing_std": 0.01,
-                                                      "n_steps": 100 if quick else 300, "clutter.rate": 0.0}),
+        f"paper-sim1/point {steps} steps": ("paper-sim1", {**KNOWN, "sensor.kind": "point", "sensor.bearing_std": 0.01,
+                                                           "n_steps": steps, "clutter.rate": 0.0}),
     }
     P, repeats = 1000, 2 if quick else 3
     rows = []
