@@ -79,13 +79,15 @@ class EkfParams:
         ``d² ≤ chi2.ppf(gate_prob, 2)`` (0.99 → 9.21).
     new_landmark_prob : float
         χ²(2) probability beyond which the best match is so unlikely that the row starts a new landmark
-        (``d² > chi2.ppf(new_landmark_prob, 2)``; default 0.999999 → 27.6; 0.9999 → 18.4). In between:
+        (``d² > chi2.ppf(new_landmark_prob, 2)``; 0.9999 → 18.4; 0.999999 → 27.6). In between:
         ambiguous → discarded (−1). With 0.9999, paper-sim1 seed 0 (laser, defaults otherwise) made 78
         landmarks for 63 true; with 0.999999, 67.
     provisional : bool
         Keep new landmarks on a provisional list first (paper 002 §14.1); used by ``ml`` association only,
-        ignored with ``known`` ids. On by default: without it every clutter return that gates nowhere becomes
-        a landmark (paper-sim1 seed 0: 156 landmarks for 63 true; ``benchmarks/results/defaults.csv``).
+        ignored with ``known`` ids. Without it every clutter return that gates nowhere becomes a landmark
+        (paper-sim1 seed 0: 156 landmarks for 63 true; with it, ``group_returns`` and
+        ``new_landmark_prob=0.999999``: 67). Off by default: on the car-park recording it dropped every
+        sparsely seen beacon (0 of 13 matched, tests/test_import_carpark.py).
     provisional_min_hits : int
         Consistent sightings (gated) needed before a provisional landmark enters the state.
     provisional_window : int
@@ -105,8 +107,8 @@ class EkfParams:
         Fuse the dataset's GPS position fixes (if any) with a linear update ``H = [I₂ 0]``, σ = ``gps_std``.
     group_returns : bool
         Merge the returns of one landmark at one step into one measurement (mean range, circular-mean
-        bearing) before the update — for a laser's several hits on one post. Point sensors: no effect. On by
-        default (paper-sim1 seed 0, ml + provisional: 150 landmarks for 63 true without, 78 with).
+        bearing) before the update — for a laser's several hits on one post. Point sensors: no effect.
+        (paper-sim1 seed 0, ml + provisional: 150 landmarks for 63 true without, 78 with).
     group_dist : float
         ml + group_returns: returns whose landmark-space points are closer than this (m, single linkage) are
         one detection.
@@ -118,8 +120,8 @@ class EkfParams:
     association: Literal["auto", "known", "ml"] = "auto"
     motion_input: Literal["controls", "odometry"] = "controls"
     gate_prob: float = 0.99
-    new_landmark_prob: float = 0.999999
-    provisional: bool = True
+    new_landmark_prob: float = 0.9999
+    provisional: bool = False
     provisional_min_hits: int = 3
     provisional_window: int = 10
     exclusive_per_step: bool = False
@@ -128,7 +130,7 @@ class EkfParams:
     stabilising_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
     init_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
     use_gps: bool = True
-    group_returns: bool = True
+    group_returns: bool = False
     group_dist: float = 0.5
     range_offset: float = 0.0
 
