@@ -296,7 +296,7 @@ def test_known_and_ml_agree_when_landmarks_far_apart_and_noise_small(motion_inpu
 
 def test_ml_association_accuracy_on_loop_world():
     inputs, truth = make_world(10, T=400, report_ids=False)
-    res = EkfSlam(EkfParams(association="ml")).solve(inputs, rng=np.random.default_rng(0))
+    res = EkfSlam(EkfParams(association="ml", provisional=False)).solve(inputs, rng=np.random.default_rng(0))
     acc = association_accuracy(res.assoc, truth["obs_landmark"])
     assert acc >= 0.95, acc
     # and the map has (close to) one landmark per true landmark
@@ -315,7 +315,7 @@ def n_spurious(assoc, true_lm, n_landmarks):
 def test_provisional_list_reduces_spurious_landmarks_under_clutter():
     inputs, truth = make_world(11, T=200, report_ids=False, clutter_per_step=0.3)
     true_lm = truth["obs_landmark"]
-    off = EkfSlam(EkfParams(association="ml")).solve(inputs, rng=np.random.default_rng(0))
+    off = EkfSlam(EkfParams(association="ml", provisional=False)).solve(inputs, rng=np.random.default_rng(0))
     on = EkfSlam(EkfParams(association="ml", provisional=True, provisional_min_hits=3, provisional_window=10)).solve(
         inputs, rng=np.random.default_rng(0)
     )
@@ -402,7 +402,7 @@ def test_ml_handles_several_returns_per_landmark_per_step():
         sensor=o.sensor[rep], reported_id=o.reported_id[rep],
         offsets=Observations.offsets_from_steps(o.step[rep], inputs.n_poses),
     )
-    res = EkfSlam(EkfParams(association="ml")).solve(dataclasses.replace(inputs, observations=obs2),
+    res = EkfSlam(EkfParams(association="ml", provisional=False)).solve(dataclasses.replace(inputs, observations=obs2),
                                                       rng=np.random.default_rng(0))
     n_seen = np.unique(truth["obs_landmark"]).size
     assert res.landmarks_xy.shape[0] <= n_seen + 1
@@ -437,9 +437,17 @@ def test_gps_update_matches_dense_kalman_update_and_is_used():
     assert np.all(tr(a) < tr(b))
 
 
-def test_provisional_requires_ml():
-    with pytest.raises(ValueError, match="provisional"):
-        EkfParams(association="known", provisional=True)
+def test_provisional_list_is_ignored_with_known_ids():
+    inputs, _ = make_world(3, T=60, report_ids=True)
+    a = EkfSlam(EkfParams(association="known", provisional=True)).solve(inputs, rng=np.random.default_rng(0))
+    b = EkfSlam(EkfParams(association="known", provisional=False)).solve(inputs, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(a.poses_xyt, b.poses_xyt)
+    np.testing.assert_array_equal(a.assoc, b.assoc)
+
+
+def test_auto_with_reported_ids_stays_known_under_the_default_provisional_list():
+    inputs, _ = make_world(3, T=60, report_ids=True)
+    assert EkfSlam(EkfParams()).solve(inputs, rng=np.random.default_rng(0)).extra["association"] == "known"
 
 
 # ------------------------------------------------------------------------------------------------ sim scenario
@@ -449,7 +457,7 @@ def test_ml_association_accuracy_on_sim_loop_scenario():
     for seed in (0, 1, 2):
         ds = simulate_scenario("loop", seed=seed)  # clutter off, no reported ids
         assert np.all(ds.inputs.observations.reported_id < 0)
-        res = EkfSlam(EkfParams(association="ml")).solve(ds.inputs, rng=np.random.default_rng(0))
+        res = EkfSlam(EkfParams(association="ml", provisional=False)).solve(ds.inputs, rng=np.random.default_rng(0))
         acc = association_accuracy(res.assoc, ds.truth.obs_landmark)  # measured 0.990, 0.990, 0.991
         assert acc >= 0.95, (seed, acc)
         assert res.landmarks_xy.shape[0] == np.unique(ds.truth.obs_landmark).size
@@ -460,7 +468,7 @@ def test_provisional_list_on_sim_loop_with_clutter():
 
     ds = simulate_scenario("loop", seed=0, overrides={"clutter.rate": 0.3, "n_steps": 200})
     true_lm = ds.truth.obs_landmark
-    off = EkfSlam(EkfParams(association="ml")).solve(ds.inputs, rng=np.random.default_rng(0))
+    off = EkfSlam(EkfParams(association="ml", provisional=False)).solve(ds.inputs, rng=np.random.default_rng(0))
     on = EkfSlam(EkfParams(association="ml", provisional=True)).solve(ds.inputs, rng=np.random.default_rng(0))
     s_off = n_spurious(off.assoc, true_lm, off.landmarks_xy.shape[0])  # measured 83
     s_on = n_spurious(on.assoc, true_lm, on.landmarks_xy.shape[0])  # measured 0

@@ -21,8 +21,8 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
 
+from slamcli.metrics.consistency import chi2_ppf
 from slamcli.metrics.landmarks import assign_landmarks
 from slamcli.metrics.trajectory import umeyama_se2
 
@@ -138,8 +138,8 @@ def nis_summary(nis: np.ndarray, dof: np.ndarray | int, confidence: float = 0.95
         return {"nis_n": 0, "nis_mean": float("nan"), "nis_band_lo": float("nan"), "nis_band_hi": float("nan"),
                 "nis_frac_inside": float("nan")}
     a = 1.0 - confidence
-    lo, hi = chi2.ppf([a / 2, 1 - a / 2], dof.sum()) / N
-    lo1, hi1 = chi2.ppf(a / 2, dof), chi2.ppf(1 - a / 2, dof)
+    lo, hi = chi2_ppf(np.array([a / 2, 1 - a / 2]), dof.sum()) / N
+    lo1, hi1 = chi2_ppf(a / 2, dof), chi2_ppf(1 - a / 2, dof)
     return {"nis_n": int(N), "nis_mean": float(nis.mean()), "nis_mean_dof": float(dof.mean()),
             "nis_band_lo": float(lo), "nis_band_hi": float(hi),
             "nis_frac_inside": float(np.mean((nis >= lo1) & (nis <= hi1)))}
@@ -152,7 +152,7 @@ def mean_nis_band(mean_nis: float, n: int, dof: int = 2, confidence: float = 0.9
         return {"nis_mean": float("nan"), "nis_n": int(n or 0), "nis_band_lo": float("nan"),
                 "nis_band_hi": float("nan"), "nis_inside_band": None}
     a = 1.0 - confidence
-    lo, hi = chi2.ppf([a / 2, 1 - a / 2], n * dof) / n
+    lo, hi = chi2_ppf(np.array([a / 2, 1 - a / 2]), n * dof) / n
     return {"nis_mean": float(mean_nis), "nis_n": int(n), "nis_band_lo": float(lo), "nis_band_hi": float(hi),
             "nis_inside_band": bool(lo <= mean_nis <= hi)}
 

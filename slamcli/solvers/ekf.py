@@ -69,7 +69,7 @@ class EkfParams:
     association : "auto" | "known" | "ml"
         ``known``: the landmark of a row is its sensor-reported id (rows with id −1 are discarded);
         ``ml``: maximum-likelihood association by Mahalanobis distance (paper 002 §14.7, Fig. 14.5);
-        ``auto`` (default): ``known`` when the dataset reports ids, else ``ml`` (``ml`` with ``provisional``).
+        ``auto`` (default): ``known`` when the dataset reports ids, else ``ml``.
         The association used is recorded as ``extra["association"]``.
     motion_input : "controls" | "odometry"
         Drive the prediction by the commanded controls through the DDMR model (noise ``motion_std``) or by
@@ -79,9 +79,15 @@ class EkfParams:
         ``d² ≤ chi2.ppf(gate_prob, 2)`` (0.99 → 9.21).
     new_landmark_prob : float
         χ²(2) probability beyond which the best match is so unlikely that the row starts a new landmark
-        (``d² > chi2.ppf(new_landmark_prob, 2)``; 0.9999 → 18.4). In between: ambiguous → discarded (−1).
+        (``d² > chi2.ppf(new_landmark_prob, 2)``; 0.9999 → 18.4; 0.999999 → 27.6). In between:
+        ambiguous → discarded (−1). With 0.9999, paper-sim1 seed 0 (laser, defaults otherwise) made 78
+        landmarks for 63 true; with 0.999999, 67.
     provisional : bool
-        Keep new landmarks on a provisional list first (ml only, paper 002 §14.1).
+        Keep new landmarks on a provisional list first (paper 002 §14.1); used by ``ml`` association only,
+        ignored with ``known`` ids. Without it every clutter return that gates nowhere becomes a landmark
+        (paper-sim1 seed 0: 156 landmarks for 63 true; with it, ``group_returns`` and
+        ``new_landmark_prob=0.999999``: 67). Off by default: on the car-park recording it dropped every
+        sparsely seen beacon (0 of 13 matched, tests/test_import_carpark.py).
     provisional_min_hits : int
         Consistent sightings (gated) needed before a provisional landmark enters the state.
     provisional_window : int
@@ -102,6 +108,7 @@ class EkfParams:
     group_returns : bool
         Merge the returns of one landmark at one step into one measurement (mean range, circular-mean
         bearing) before the update — for a laser's several hits on one post. Point sensors: no effect.
+        (paper-sim1 seed 0, ml + provisional: 150 landmarks for 63 true without, 78 with).
     group_dist : float
         ml + group_returns: returns whose landmark-space points are closer than this (m, single linkage) are
         one detection.
@@ -128,8 +135,6 @@ class EkfParams:
     range_offset: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.provisional and self.association == "known":
-            raise ValueError("provisional=true needs association=ml (known ids need no provisional list)")
         if not 0.0 < self.gate_prob < 1.0:
             raise ValueError(f"gate_prob must be in (0, 1), got {self.gate_prob}")
         if not self.gate_prob <= self.new_landmark_prob < 1.0:
@@ -235,17 +240,14 @@ class EkfSlam(BaseSolver):
 
             from slamcli.solvers.frontend import resolve_association
 
-            p = replace(p, association=resolve_association(p.association, rid, force_ml=p.provisional))
+            p = replace(p, association=resolve_association(p.association, rid))
         if p.association == "known" and N > 0 and np.all(rid < 0):
             raise SolverError(
                 "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
                 "(use --param association=ml)"
             )
         if p.association == "ml":
-            from scipy.stats import chi2
-
-            gate = float(chi2.ppf(p.gate_prob, 2))
-            new_thr = float(chi2.ppf(p.new_landmark_prob, 2))
+            gate, new_thr = _chi2_2dof_ppf(p.gate_prob), _chi2_2dof_ppf(p.new_landmark_prob)
         else:
             gate = new_thr = np.inf
 
@@ -255,15 +257,15 @@ class EkfSlam(BaseSolver):
                 f"noise: range_std={noise.range_std} and bearing_std={noise.bearing_std} must both be > 0 for the "
                 "EKF (a noise-free sensor makes the innovation covariance S singular)"
             )
-        R = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
+        obs_cov = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
         Q_stab = np.diag(np.square(np.asarray(p.stabilising_pose_std, float)))
         if p.motion_input == "controls":
             if inputs.controls.shape[0] != T:
                 raise SolverError(f"controls: expected {T} rows, got {inputs.controls.shape[0]}")
-            M = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
+            motion_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
             controls = np.asarray(inputs.controls, float)
         else:
-            Sigma_d = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
+            odom_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
             incr = odometry_increments(inputs.odometry_xyt)
 
         gps_at: dict[int, np.ndarray] = {}
@@ -271,7 +273,7 @@ class EkfSlam(BaseSolver):
             if not inputs.gps_std > 0:
                 raise SolverError(f"gps_std={inputs.gps_std}: GPS fixes need a positive σ (or --param use_gps=false)")
             gps_at = {int(k): np.asarray(v, float) for k, v in zip(inputs.gps_step, inputs.gps_xy)}
-            R_gps = inputs.gps_std**2 * np.eye(2)
+            gps_cov = inputs.gps_std**2 * np.eye(2)
 
         st = _GrowingState(np.asarray(inputs.x0, float), np.diag(np.square(np.asarray(p.init_pose_std, float))))
         poses = np.empty((T + 1, 3))
@@ -287,25 +289,25 @@ class EkfSlam(BaseSolver):
             if t > 0:
                 x_r = st.x[:3]
                 if p.motion_input == "controls":
-                    # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ
+                    # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ  (M = motion_cov; Q: process noise in pose coordinates)
                     u = controls[t - 1]
                     if inputs.motion_model == "ackermann":  # car model of the tracked point (G&N 2001)
                         pose_new = ackermann_step(x_r, u, inputs.dt, inputs.vehicle)
                         F, G_u = ackermann_jacobians(x_r, u, inputs.dt, inputs.vehicle)
                     else:
                         pose_new, F, G_u = _ddmr_predict(x_r, u, inputs.dt)
-                    Q = G_u @ M @ G_u.T
+                    Q = G_u @ motion_cov @ G_u.T
                 else:
-                    # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
+                    # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ (Σ_d = odom_cov) with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
                     d = incr[t - 1]
                     F, G = compose_jacobians(x_r, d)
                     pose_new = compose(x_r, d)
-                    Q = G @ Sigma_d @ G.T
+                    Q = G @ odom_cov @ G.T
                 predict_inplace(st.xa, st.Pa, pose_new, F, Q + Q_stab)
 
             # ---------------- GPS position fix (linear update) ----------------
             if t in gps_at:
-                update_position_inplace(st.xa, st.Pa, gps_at[t], R_gps)
+                update_position_inplace(st.xa, st.Pa, gps_at[t], gps_cov)
 
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
@@ -316,7 +318,9 @@ class EkfSlam(BaseSolver):
             # heading noise per step, a landmark initialised 40 m away from the predicted pose is metres off
             # the tangent line its linearised P_mx assumes; measured on hybrid-map4, issue 15). In the second
             # pass a second row of a new id / ml match updates the landmark the first one created.
-            dets = _detections(z_all, sensor, rid, lo, hi, st.x[:3], p)
+            dets = group_detections(z_all, sensor, rid, lo, hi, st.x[:3], group=p.group_returns,
+                                    association=p.association, group_dist=p.group_dist,
+                                    range_offset=p.range_offset)
             n_first = len(dets)
             for k_det, (z, g) in enumerate(dets):
                 # z (2,): the measurement of one detection; g: its observation rows (several when grouped)
@@ -331,26 +335,26 @@ class EkfSlam(BaseSolver):
                         dets.append((z, g))  # deferred to the second pass
                         continue
                     if j is None:
-                        j = _add_landmark(st, z, R)
+                        j = _add_landmark(st, z, obs_cov)
                         id_to_lm[key] = j
                         n_new += 1
                         assoc[g] = j
                         continue
                 else:
-                    j, d2 = _ml_best(st, z, R, exclude=[lm for (s, lm) in used if s == sensor[i]]
+                    j, d2 = _ml_best(st, z, obs_cov, exclude=[lm for (s, lm) in used if s == sensor[i]]
                                      if p.exclusive_per_step else [])
                     if (j < 0 or d2 > new_thr) and k_det < n_first:
                         dets.append((z, g))  # deferred to the second pass
                         continue
                     if j < 0 or d2 > new_thr:
                         # no plausible state landmark: start a new one (or a provisional candidate)
-                        if p.provisional:
-                            j = _provisional_step(st, candidates, z, R, t, g, gate, p, assoc)
+                        if p.provisional:  # ml only (this branch): known ids need no provisional list
+                            j = _provisional_step(st, candidates, z, obs_cov, t, g, gate, p, assoc)
                             if j >= 0:
                                 n_new += 1
                                 used.add((int(sensor[i]), j))
                         else:
-                            j = _add_landmark(st, z, R)
+                            j = _add_landmark(st, z, obs_cov)
                             n_new += 1
                             assoc[g] = j
                             used.add((int(sensor[i]), j))
@@ -359,7 +363,7 @@ class EkfSlam(BaseSolver):
                         n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
                         continue
                     used.add((int(sensor[i]), j))
-                y, S = update_inplace(st.xa, st.Pa, z, j, R)
+                y, S = update_inplace(st.xa, st.Pa, z, j, obs_cov)
                 assoc[g] = j
                 nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
                 n_upd += 1
@@ -418,10 +422,12 @@ class EkfSlam(BaseSolver):
 
 
 
-def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
-    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order.
+def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, association: str,
+                     group_dist: float, range_offset: float = 0.0):
+    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order (also FastSLAM's).
 
-    Without ``group_returns`` every row is its own detection. With it, the rows of one landmark are merged
+    Rows ``lo:hi`` of ``z_all (N, 2)``, ``sensor (N,)``, ``rid (N,)``; ``x_r (3,)`` an estimate of the pose.
+    Without ``group`` (``group_returns``) every row is its own detection. With it, the rows of one landmark are merged
     into one measurement at their mean range and circular-mean bearing (a laser hits one post on several
     adjacent beams; fusing each hit as an independent measurement of the centre overweights that pose-landmark
     pair): ``known`` groups by (sensor, reported id); ``ml`` by single-linkage clusters of the inverse
@@ -429,13 +435,13 @@ def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
     ``range_offset`` is added to every range first.
     """
     z = z_all[lo:hi]
-    if p.range_offset:
-        z = z + np.array([p.range_offset, 0.0])
+    if range_offset:
+        z = z + np.array([range_offset, 0.0])
     rows = np.arange(lo, hi, dtype=np.int64)
-    if not p.group_returns or hi - lo < 2:
+    if not group or hi - lo < 2:
         return [(z[k], rows[k : k + 1]) for k in range(hi - lo)]
     s = np.asarray(sensor[lo:hi], np.int64)
-    if p.association == "known":
+    if association == "known":
         r = np.asarray(rid[lo:hi], np.int64)
         # rows without an id stay single (they are discarded anyway)
         key = np.where(r >= 0, s * (int(r.max()) + 2) + r, -1 - np.arange(hi - lo))
@@ -445,7 +451,7 @@ def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
 
         # single-linkage clusters of the landmark-space points m̂ = h⁻¹(x_r, z) of one sensor: O(k²), k ≲ 10²
         pts = inverse_range_bearing(np.asarray(x_r, float)[None, :], z)
-        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < p.group_dist
+        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < group_dist
         near &= s[:, None] == s[None, :]
         _, key = connected_components(csr_matrix(near), directed=False)
     out = []
@@ -458,6 +464,12 @@ def _detections(z_all, sensor, rid, lo: int, hi: int, x_r, p: EkfParams):
             b = math.atan2(float(np.sin(z[g, 1]).sum()), float(np.cos(z[g, 1]).sum()))
             out.append((np.array([float(z[g, 0].mean()), b]), rows[g]))
     return out
+
+
+def _chi2_2dof_ppf(q: float) -> float:
+    """χ²(2) quantile in closed form: ``F(x) = 1 − exp(−x/2)``, so ``F⁻¹(q) = −2 ln(1 − q)`` (0.99 → 9.21);
+    no ``scipy.stats`` import in the filter (≈ 0.4-1 s, issue 25)."""
+    return -2.0 * math.log1p(-q)
 
 
 def _add_landmark(st: _GrowingState, z, R) -> int:
@@ -540,7 +552,7 @@ def compose_jacobians(a, b):
     return J_a, J_b
 
 
-def predict(x, P, pose_pred, F, Q):
+def predict(x, P, pose_pred, F, motion_cov):
     """EKF-SLAM prediction: only the pose moves (pure: returns new arrays; see :func:`predict_inplace`).
 
     ::
@@ -556,20 +568,22 @@ def predict(x, P, pose_pred, F, Q):
     P : ndarray (n, n)       state covariance.
     pose_pred : ndarray (3,) predicted pose g(x_r, u).
     F : ndarray (3, 3)       motion Jacobian w.r.t. the pose.
-    Q : ndarray (3, 3)       process noise in pose coordinates (e.g. G_u M G_uᵀ).
+    motion_cov : ndarray (3, 3)  process noise in pose coordinates (e.g. G_u M G_uᵀ).
 
     Returns
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
+    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     predict_inplace(x, P, pose_pred, F, Q)
     return x, P
 
 
-def predict_inplace(x, P, pose_pred, F, Q) -> None:
+def predict_inplace(x, P, pose_pred, F, motion_cov) -> None:
     """:func:`predict` written into ``x (n,)`` and ``P (n, n)`` (touches 3 rows and 3 columns: O(n))."""
+    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
     x[:3] = pose_pred
     x[2] = _wrap(x[2])
     P[:3, :] = F @ P[:3, :]
@@ -577,25 +591,26 @@ def predict_inplace(x, P, pose_pred, F, Q) -> None:
     P[:3, :3] += Q
 
 
-def update(x, P, z, j, R):
+def update(x, P, z, j, obs_cov):
     """Range-bearing update of pose + landmark ``j``, O(n²) (pure: copies, then :func:`update_inplace`).
 
     Parameters
     ----------
     x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,) [range, bearing];  j : int landmark index;
-    R : ndarray (2, 2) measurement covariance.
+    obs_cov : ndarray (2, 2) measurement covariance.
 
     Returns
     -------
     x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
     """
+    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     y, S = update_inplace(x, P, z, j, R)
     return x, P, y, S
 
 
-def update_inplace(x, P, z, j, R):
+def update_inplace(x, P, z, j, obs_cov):
     """Range-bearing update of pose + landmark ``j`` written into ``x (n,)`` and ``P (n, n)``: O(n²).
 
     ::
@@ -613,20 +628,22 @@ def update_inplace(x, P, z, j, R):
     The last line is one rank-2 update of the preallocated ``P`` in place: no (n, n) copy of ``P`` is made.
     It equals the textbook Joseph form to round-off (``tests/test_ekf_inplace.py`` checks 1e-10 on random
     problems); the Joseph form's extra robustness concerns a gain that is not ``U S⁻¹``, which never
-    occurs here. ``V Vᵀ`` is formed by BLAS ``gemm`` (``V @ V.T.copy()``): numpy's ``syrk`` path for
-    ``V @ V.T`` is exactly symmetric but, with its triangle copy, about twice as slow at n ≈ 2000
-    (measured), while ``gemm`` leaves an asymmetry at the level of round-off (≈ 1e-16 relative per
-    update); the solver symmetrises the covariance blocks it reports.
+    occurs here. ``P −= V Vᵀ`` is one BLAS ``dgemm`` with ``beta = 1`` written straight into ``P``
+    (:func:`_rank2_downdate`): one read and one write of ``P``, no (n, n) temporary (a temporary of 32 MB
+    at n ≈ 2000 costs more in page faults than the arithmetic, issue 25); ``gemm`` leaves an asymmetry at
+    the level of round-off (≈ 1e-16 relative per update); the solver symmetrises the covariance blocks it
+    reports.
 
     Parameters
     ----------
     x : ndarray (n,);  P : ndarray (n, n), C-contiguous for speed;  z : ndarray (2,) [range, bearing];
-    j : int landmark index;  R : ndarray (2, 2) measurement covariance.
+    j : int landmark index;  obs_cov : ndarray (2, 2) measurement covariance.
 
     Returns
     -------
     y : ndarray (2,) innovation, S : ndarray (2, 2) innovation covariance.
     """
+    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
     k = 3 + 2 * j
     y, Hs = _innovation_and_jacobian(x[0], x[1], x[2], x[k], x[k + 1], float(z[0]), float(z[1]))
     U = P[:, :3] @ Hs[:, :3].T  # (n, 2) = P Hᵀ, pose columns ...
@@ -635,9 +652,23 @@ def update_inplace(x, P, z, j, R):
     K = U @ _inv2(S)  # (n, 2)
     x += K @ y
     x[2] = _wrap(x[2])
-    V = _sqrt_downdate_factor(U, S)
-    P -= V @ V.T.copy()  # one in-place rank-2 update (gemm; see the docstring on symmetry)
+    _rank2_downdate(P, _sqrt_downdate_factor(U, S))
     return y, S
+
+
+def _rank2_downdate(P, V) -> None:
+    """``P −= V Vᵀ`` in place, one BLAS ``dgemm`` pass over ``P (n, n)`` with ``beta = 1`` (no (n, n) temporary).
+
+    ``P`` C-contiguous is ``Pᵀ`` in Fortran order, which ``dgemm`` updates without a copy; ``V Vᵀ`` is
+    symmetric, so updating ``Pᵀ`` by it is updating ``P``. Other layouts (a strided window) fall back to
+    numpy's ``P −= V @ Vᵀ`` with its temporary.
+    """
+    if P.flags.c_contiguous:
+        from scipy.linalg.blas import dgemm  # lazy: scipy.linalg costs ≈ 0.1-1 s to import (issue 25)
+
+        dgemm(-1.0, V, V, 1.0, P.T, trans_b=1, overwrite_c=1)
+    else:
+        P -= V @ V.T
 
 
 def _sqrt_downdate_factor(U, S):
@@ -651,7 +682,7 @@ def _sqrt_downdate_factor(U, S):
     l11 = math.sqrt(S[0, 0])
     l21 = 0.5 * (S[0, 1] + S[1, 0]) / l11
     l22 = math.sqrt(S[1, 1] - l21 * l21)
-    V = np.empty_like(U)
+    V = np.empty(U.shape, order="F")  # Fortran order: dgemm reads it without a copy
     V[:, 0] = U[:, 0] / l11
     V[:, 1] = (U[:, 1] - l21 * V[:, 0]) / l22
     return V
@@ -711,20 +742,21 @@ def _inv2(S):
     return np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
 
 
-def update_position(x, P, z_xy, R):
+def update_position(x, P, z_xy, obs_cov):
     """Linear position-fix update (GPS), O(n²) (pure: copies, then :func:`update_position_inplace`).
 
     Returns
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
+    R = obs_cov  # R: the position-fix covariance inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     update_position_inplace(x, P, z_xy, R)
     return x, P
 
 
-def update_position_inplace(x, P, z_xy, R) -> None:
+def update_position_inplace(x, P, z_xy, obs_cov) -> None:
     """Linear position-fix update (GPS) written into ``x (n,)`` and ``P (n, n)``, O(n²).
 
     ::
@@ -734,17 +766,17 @@ def update_position_inplace(x, P, z_xy, R) -> None:
 
     Parameters
     ----------
-    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  R : ndarray (2, 2)
+    x : ndarray (n,);  P : ndarray (n, n);  z_xy : ndarray (2,);  obs_cov : ndarray (2, 2) position-fix covariance
     """
+    R = obs_cov  # R: the position-fix covariance inside the kernel
     y = np.asarray(z_xy, float) - x[:2]
     U = P[:, :2].copy()  # (n, 2)
     S = U[:2] + R
     x += U @ _inv2(S) @ y
-    V = _sqrt_downdate_factor(U, S)
-    P -= V @ V.T.copy()
+    _rank2_downdate(P, _sqrt_downdate_factor(U, S))
 
 
-def landmark_init(x, P, z, R):
+def landmark_init(x, P, z, obs_cov):
     """Initialise a landmark from its first sighting (linearised inverse observation model).
 
     ::
@@ -757,6 +789,7 @@ def landmark_init(x, P, z, R):
     -------
     m : ndarray (2,), P_mx : ndarray (2, n), P_mm : ndarray (2, 2)
     """
+    R = obs_cov  # R: the measurement covariance inside the kernel
     x = np.asarray(x, float)
     P = np.asarray(P, float)
     M_x, M_z = inverse_range_bearing_jacobians(x[:3], z)
@@ -766,7 +799,7 @@ def landmark_init(x, P, z, R):
     return m, P_mx, 0.5 * (P_mm + P_mm.T)
 
 
-def innovation_stats(x, P, z, R):
+def innovation_stats(x, P, z, obs_cov):
     """Squared Mahalanobis distance ``d²_k = y_kᵀ S_k⁻¹ y_k`` of ``z`` to every landmark k, vectorised.
 
     ::
@@ -777,12 +810,13 @@ def innovation_stats(x, P, z, R):
 
     Parameters
     ----------
-    x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,);  R : ndarray (2, 2)
+    x : ndarray (n,);  P : ndarray (n, n);  z : ndarray (2,);  obs_cov : ndarray (2, 2)
 
     Returns
     -------
     d2 : ndarray (L,)
     """
+    R = obs_cov  # R: the measurement covariance inside the kernel
     x = np.asarray(x, float)
     P = np.asarray(P, float)
     L = (x.shape[0] - 3) // 2

@@ -74,11 +74,16 @@ from slamcli.models.motion import ddmr_step
 from slamcli.models.observation import range_bearing
 from slamcli.params import check_allocation
 from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.solvers.ekf import group_detections
 from slamcli.solvers.resampling import RESAMPLERS, effective_sample_size, normalise_log_weights
 from slamcli.types import SlamInputs, SolverResult, Status
 
 LOG_2PI = math.log(2.0 * math.pi)
 CHI2_2DOF_9999 = 18.420680743952367  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
+#: Batched kernels work on (P, k) arrays of at most this many float64 (64 KB): larger temporaries leave
+#: glibc's heap for mmap, and their page faults cost more than the batching saves (measured: 280 KB
+#: temporaries made the batched 1.0 update 1.5× slower than row by row at P = 1000).
+BATCH_ELEMENTS = 8192
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,7 +93,9 @@ class FastSlamParams:
     Attributes
     ----------
     n_particles : int
-        Number of particles P.
+        Number of particles P. Default 50: with ``group_returns`` a default run of paper-sim1 (3251 steps,
+        ≈ 42 laser returns per step) finishes in under a minute (``benchmarks/results/defaults.csv``); 2.0's
+        proposal needs few particles (Montemerlo et al. 2003).
     version : 1 | 2
         1 = proposal from the motion model; 2 = proposal improved by the observations (sampled, not its mean).
     association : "auto" | "known" | "ml"
@@ -118,9 +125,18 @@ class FastSlamParams:
     removal_range_frac : float
         Negative evidence only counts for landmarks predicted within ``removal_range_frac · max_range``
         (misses right at the range edge are expected).
+    group_returns : bool
+        Merge the returns of one landmark at one step into one measurement (mean range, circular-mean
+        bearing; :func:`slamcli.solvers.ekf.group_detections`): ``known`` by reported id, ``ml`` by
+        single-linkage clusters of the inverse observations closer than ``group_dist`` (from the previous
+        estimate). A laser hits a post on several adjacent beams; fused one by one they overweight that
+        pose-landmark pair and cost one particle update each (paper-sim1: ≈ 42 returns per step). Point
+        sensors (one row per landmark and step) are unaffected. On by default.
+    group_dist : float
+        ``ml`` + ``group_returns``: cluster distance in metres.
     """
 
-    n_particles: int = 100
+    n_particles: int = 50
     version: Literal[1, 2] = 2
     association: Literal["auto", "known", "ml"] = "auto"
     motion_source: Literal["controls", "odometry"] = "controls"
@@ -132,6 +148,8 @@ class FastSlamParams:
     remove_unsupported: bool = False
     fov_rad: float = 2.0 * math.pi
     removal_range_frac: float = 0.95
+    group_returns: bool = True
+    group_dist: float = 0.5
 
     def __post_init__(self) -> None:
         if self.n_particles < 1:
@@ -154,6 +172,8 @@ class FastSlamParams:
             raise ValueError(f"p0 must be > 0, got {self.p0}")
         if not self.fov_rad > 0.0:
             raise ValueError(f"fov_rad must be > 0, got {self.fov_rad}")
+        if not self.group_dist > 0.0:
+            raise ValueError(f"group_dist must be > 0, got {self.group_dist}")
         if not 0.0 < self.removal_range_frac <= 1.0:
             raise ValueError(f"removal_range_frac must be in (0, 1], got {self.removal_range_frac}")
 
@@ -356,7 +376,7 @@ def _mT(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(A, -1, -2)
 
 
-def landmark_ekf_update(x, mu, sig, z, Q):
+def landmark_ekf_update(x, mu, sig, z, obs_cov):
     """One landmark EKF measurement update per particle (paper 002 eqs. 14.21-14.24, 14.28-14.29).
 
     Parameters
@@ -365,7 +385,7 @@ def landmark_ekf_update(x, mu, sig, z, Q):
     mu : ndarray (..., 2)     landmark means before the update.
     sig : ndarray (..., 2, 2) landmark covariances before the update (symmetric).
     z : ndarray (2,)          measurement [range, bearing].
-    Q : ndarray (2, 2)        measurement noise covariance (diagonal).
+    obs_cov : ndarray (2, 2)  measurement noise covariance (diagonal; ``Q`` in the kernels, Thrun's letter).
 
     Returns
     -------
@@ -373,6 +393,7 @@ def landmark_ekf_update(x, mu, sig, z, Q):
     sig_new : ndarray (..., 2, 2)   ``(I − K H) Σ``.
     log_lik : ndarray (...)         ``log N(ν; 0, H Σ Hᵀ + Q)`` — the FastSLAM 1.0 importance weight.
     """
+    Q = obs_cov  # Q: the measurement covariance (Thrun's letter; R is the motion covariance in this module)
     x = np.asarray(x, float)
     mu = np.asarray(mu, float)
     sig = np.asarray(sig, float)
@@ -402,9 +423,11 @@ def _init_terms(x, y, th, zr, zb, qr, qb):
     )
 
 
-def init_landmark(x, z, Q):
+def init_landmark(x, z, obs_cov):
     """Initialise landmark Gaussians from poses ``x (..., 3)`` and one measurement ``z (2,)``:
-    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ``. Returns ``mu (..., 2)``, ``sig (..., 2, 2)``."""
+    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` with ``Q = obs_cov (2, 2)``. Returns ``mu (..., 2)``,
+    ``sig (..., 2, 2)``."""
+    Q = obs_cov  # Q: the measurement covariance (Thrun's letter)
     x = np.asarray(x, float)
     mx, my, a, b, c = _init_terms(x[..., 0], x[..., 1], x[..., 2], z[0], z[1], Q[0, 0], Q[1, 1])
     return np.stack([mx, my], -1), np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
@@ -486,7 +509,8 @@ class FastSlam(BaseSolver):
     """FastSLAM 1.0 / 2.0 with known or maximum-likelihood correspondences (see the module docstring).
 
     A one-pass filter: ``solve`` ignores ``init`` (there is nothing to warm-start) and always ends COMPLETED;
-    every random draw (motion noise, proposal samples, resampling) comes from ``rng``.
+    every random draw (motion noise, proposal samples, resampling) comes from ``rng``. ``solve`` keeps no
+    per-run state on the solver (it lives in a :class:`_Run`), so one instance may serve concurrent runs.
     """
 
     name = "fastslam"
@@ -502,166 +526,232 @@ class FastSlam(BaseSolver):
         rng: np.random.Generator,
         progress: ProgressFn | None = None,
     ) -> SolverResult:
+        """Filter every step of ``inputs``.
+
+        Parameters
+        ----------
+        inputs : SlamInputs
+            ``controls (T, 2)`` or ``odometry_xyt (T+1, 3)`` (``motion_source``), ``observations`` (N rows,
+            ``offsets (T+2,)``), ``noise`` (``obs_cov (2, 2)``, ``motion_std (2,)`` / ``odometry_std (3,)``).
+        init : ignored (a one-pass filter).
+        rng : numpy.random.Generator
+            The only source of randomness.
+        progress : callable ``(done, total)`` or None.
+
+        Returns
+        -------
+        SolverResult
+            ``poses_xyt (T+1, 3)``, ``landmarks_xy (L, 2)``, ``assoc (N,)``, ``pose_cov (T+1, 3, 3)``,
+            ``landmark_cov (L, 2, 2)``, ``extra`` (see the module docstring).
+        """
         t_start = time.perf_counter()
-        p: FastSlamParams = self.params
-        obs = inputs.observations
+        run = _Run(_setup(inputs, self.params), inputs, rng)
         T1 = inputs.n_poses
-        T = T1 - 1
-        P = p.n_particles
-        Q = inputs.noise.obs_cov
-        z_all = obs.z
-        N = len(obs)
-        if len(obs.offsets) != T1 + 1:
+        every = max(1, T1 // 100)
+        for t in range(T1):
+            run.step(t)
+            if progress is not None and (t % every == 0 or t == T1 - 1):
+                progress(t + 1, T1)
+        return self.make_result(status=Status.COMPLETED, t_start=t_start, **run.outputs())
+
+
+@dataclasses.dataclass(frozen=True)
+class _Setup:
+    """What one run needs besides the data, resolved from the parameters and checked once.
+
+    Attributes
+    ----------
+    p : FastSlamParams            with ``association`` resolved (never "auto").
+    slot_of_obs : ndarray (N,) | None   known association: landmark slot of every row (−1 = no id).
+    capacity : int                initial landmark slots.
+    log_p0 : float                ML new-landmark log-likelihood.
+    obs_cov : ndarray (2, 2)      measurement covariance (``Q`` in the kernels, Thrun's letter).
+    motion_std : ndarray (2,) | (3,)  scaled σ of the controls or of the odometry increment.
+    increments : ndarray (T, 3) | None  odometry increments (``motion_source="odometry"``).
+    """
+
+    p: FastSlamParams
+    slot_of_obs: np.ndarray | None
+    capacity: int
+    log_p0: float
+    obs_cov: np.ndarray
+    motion_std: np.ndarray
+    increments: np.ndarray | None
+
+
+def _setup(inputs: SlamInputs, p: FastSlamParams) -> _Setup:
+    """Resolve the correspondences and the motion model; one-line :class:`SolverError` on unusable input."""
+    obs = inputs.observations
+    T1 = inputs.n_poses
+    obs_cov = inputs.noise.obs_cov
+    if len(obs.offsets) != T1 + 1:
+        raise SolverError(f"observations.offsets: length {len(obs.offsets)}, expected n_poses+1 = {T1 + 1}")
+    if p.association == "auto":
+        from slamcli.solvers.frontend import resolve_association
+
+        p = dataclasses.replace(p, association=resolve_association(p.association, obs.reported_id))
+    slot_of_obs, capacity = None, 16
+    if p.association == "known":
+        rid = np.asarray(obs.reported_id, np.int64)
+        ids = np.unique(rid[rid >= 0])
+        if len(obs) > 0 and ids.size == 0:
             raise SolverError(
-                f"observations.offsets: length {len(obs.offsets)}, expected n_poses+1 = {T1 + 1}"
+                "observations.reported_id: no sensor-reported landmark ids (all -1); use association=ml "
+                "or solve with --oracle-association"
             )
+        slot_of_obs = np.where(rid >= 0, np.searchsorted(ids, rid), -1)
+        capacity = ids.size
+    log_p0 = (
+        math.log(p.p0)
+        if p.p0 is not None
+        else -0.5 * CHI2_2DOF_9999 - LOG_2PI - 0.5 * math.log(float(np.linalg.det(obs_cov)))
+    )
+    if p.motion_source == "controls":
+        if inputs.controls.shape[0] < T1 - 1:
+            raise SolverError(f"controls: {inputs.controls.shape[0]} rows, need {T1 - 1} for motion_source=controls")
+        motion_std = np.asarray(inputs.noise.motion_std, float) * p.motion_noise_scale
+        increments = None
+    else:
+        motion_std = np.asarray(inputs.noise.odometry_std, float) * p.motion_noise_scale
+        increments = se2.between(inputs.odometry_xyt[:-1], inputs.odometry_xyt[1:])
+    return _Setup(p, slot_of_obs, capacity, log_p0, obs_cov, motion_std, increments)
 
-        # ---- correspondences -----------------------------------------------------------------------------
-        if p.association == "auto":
-            from slamcli.solvers.frontend import resolve_association
 
-            p = dataclasses.replace(p, association=resolve_association(p.association, obs.reported_id))
-        known = p.association == "known"
-        if known:
-            rid = np.asarray(obs.reported_id, np.int64)
-            ids = np.unique(rid[rid >= 0])
-            if N > 0 and ids.size == 0:
-                raise SolverError(
-                    "observations.reported_id: no sensor-reported landmark ids (all -1); use association=ml "
-                    "or solve with --oracle-association"
-                )
-            slot_of_obs = np.where(rid >= 0, np.searchsorted(ids, rid), -1)
-            capacity = ids.size
-        else:
-            slot_of_obs = None
-            capacity = 16
-        log_p0 = (
-            math.log(p.p0)
-            if p.p0 is not None
-            else -0.5 * CHI2_2DOF_9999 - LOG_2PI - 0.5 * math.log(float(np.linalg.det(Q)))
-        )
+class _Run:
+    """The state of one :meth:`FastSlam.solve` call: particles, records and counters (re-entrancy: nothing
+    of a run lives on the solver). ``step(t)`` advances one step, ``outputs()`` builds the result fields."""
 
-        # ---- motion model --------------------------------------------------------------------------------
-        if p.motion_source == "controls":
-            if inputs.controls.shape[0] < T:
-                raise SolverError(
-                    f"controls: {inputs.controls.shape[0]} rows, need {T} for motion_source=controls"
-                )
-            M_std = np.asarray(inputs.noise.motion_std, float) * p.motion_noise_scale
-            increments = None
-        else:
-            M_std = np.asarray(inputs.noise.odometry_std, float) * p.motion_noise_scale
-            increments = se2.between(inputs.odometry_xyt[:-1], inputs.odometry_xyt[1:])
-
-        check_allocation("n_particles", P, 2.0 * P * (max(capacity, 1) * 53 + 40), "the particle maps (×2 for resampling)")
-        ps = ParticleSet.create(inputs.x0, P, capacity)
-        resample = RESAMPLERS[p.resampling]
-        self._log_p0 = log_p0
-        self._Q = Q
-        self._nis_sum, self._nis_n = 0.0, 0
-
-        # ---- records -------------------------------------------------------------------------------------
-        mean_xyt = np.empty((T1, 3))
-        pose_cov = np.zeros((T1, 3, 3))
+    def __init__(self, setup: _Setup, inputs: SlamInputs, rng: np.random.Generator) -> None:
+        p = setup.p
+        self.setup, self.p, self.inputs, self.rng = setup, p, inputs, rng
+        self._Q = setup.obs_cov  # Q: the measurement covariance in the kernels' (Thrun's) letters
+        self._log_p0 = setup.log_p0
+        self.known = p.association == "known"
+        T1, P, N = inputs.n_poses, p.n_particles, len(inputs.observations)
+        check_allocation("n_particles", P, 2.0 * P * (max(setup.capacity, 1) * 53 + 40),
+                         "the particle maps (×2 for resampling)")
+        self.ps = ParticleSet.create(inputs.x0, P, setup.capacity)
+        self.resample = RESAMPLERS[p.resampling]
+        self.mean_xyt = np.empty((T1, 3))
+        self.pose_cov = np.zeros((T1, 3, 3))
         # anc[t][j]: the pre-resampling particle at t that post-resampling particle j copies
-        anc = np.empty((T1, P), np.int32)
-        keep_path = p.output == "best"
-        pose_hist = np.empty((T1, P, 3)) if keep_path else None
+        self.anc = np.empty((T1, P), np.int32)
+        self.pose_hist = np.empty((T1, P, 3)) if p.output == "best" else None
         # Slot of every observation: shared by all particles with known association (N,), per particle with
         # ML association (N, P) (pre-resampling; traced back through ``anc`` for the best particle).
-        assoc_hist = np.full((N,) if known else (N, P), -1, np.int32)
-        arP = np.arange(P)
-        R_buf = np.zeros((3, 3, P))  # 2.0 motion covariance, rewritten each step (the proposal copies it)
-        n_updates = 0
-        n_resample = 0
-        ess_sum = 0.0
-        every = max(1, T1 // 100)
+        self.assoc_hist = np.full((N,) if self.known else (N, P), -1, np.int32)
+        self.R_buf = np.zeros((3, 3, P))  # 2.0 motion covariance, rewritten each step (the proposal copies it)
+        self.n_updates = self.n_resample = 0
+        self.ess_sum = self._nis_sum = 0.0
+        self._nis_n = 0
 
-        for t in range(T1):
-            # ---- 1. proposal prior: sample (1.0) or linearise (2.0) the motion model --------------------------
-            R = None
-            if t == 0:
-                x_hat = ps.x.copy()
-            elif p.motion_source == "controls":
-                u = inputs.controls[t - 1]
-                if inputs.motion_model == "ackermann":  # car model of the tracked point, u = [v_e, α]
-                    x_hat, R = _predict_ackermann(ps.x, u, inputs.dt, inputs.vehicle, M_std, p.version, rng, R_buf)
-                elif p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
-                    x_hat = ddmr_step(ps.x, u + M_std * rng.standard_normal((P, 2)), inputs.dt)
-                else:
-                    x_hat, R = _predict_controls(ps.x, u, inputs.dt, M_std[0], M_std[1], R_buf)
+    # ---- one step --------------------------------------------------------------------------------------
+    def _prior(self, t: int):
+        """Proposal prior of step ``t``: sampled poses (1.0, ``R = None``) or ``x̂`` and ``R (3, 3, P)`` (2.0)."""
+        ps, p, inputs, rng, M_std = self.ps, self.p, self.inputs, self.rng, self.setup.motion_std
+        P = ps.n_particles
+        if t == 0:
+            return ps.x.copy(), None
+        if p.motion_source == "controls":
+            u = inputs.controls[t - 1]
+            if inputs.motion_model == "ackermann":  # car model of the tracked point, u = [v_e, α]
+                return _predict_ackermann(ps.x, u, inputs.dt, inputs.vehicle, M_std, p.version, rng, self.R_buf)
+            if p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
+                return ddmr_step(ps.x, u + M_std * rng.standard_normal((P, 2)), inputs.dt), None
+            return _predict_controls(ps.x, u, inputs.dt, M_std[0], M_std[1], self.R_buf)
+        d = self.setup.increments[t - 1]
+        if p.version == 1:  # x_t = x_{t-1} ⊕ (d + ε), ε ~ N(0, diag(odometry_std²))
+            return se2.compose(ps.x, d + M_std * rng.standard_normal((P, 3))), None
+        return se2.compose(ps.x, d), _motion_cov_odometry(ps.x[:, 2], M_std)
+
+    def step(self, t: int) -> None:
+        """Prior → measurement (1.0 / 2.0) → negative evidence → estimate → resampling, for step ``t``."""
+        p, inputs = self.p, self.inputs
+        z_all, slot_of_obs, groups = self._detections(t)
+        x_hat, R = self._prior(t)
+        rows = range(len(groups))  # detection k: measurement z_all[k], observation rows groups[k]
+        # NaN from unused slots of particles that start a new landmark is masked out with np.where.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if R is None:  # FastSLAM 1.0, or step 0 (x0 known)
+                self.ps.x = x_hat
+                step_slots, _ = self._measure_v1(self.ps, z_all, rows, slot_of_obs)
             else:
-                d = increments[t - 1]
-                if p.version == 1:  # x_t = x_{t-1} ⊕ (d + ε), ε ~ N(0, diag(odometry_std²))
-                    x_hat = se2.compose(ps.x, d + M_std * rng.standard_normal((P, 3)))
-                else:
-                    x_hat = se2.compose(ps.x, d)
-                    R = _motion_cov_odometry(ps.x[:, 2], M_std)
+                step_slots, step_new, lin = self._proposal_v2(self.ps, x_hat, R, z_all, rows, slot_of_obs, self.rng)
+                # ---- landmark EKFs at the sampled pose ----------------------------------------------------
+                for i, n in enumerate(rows):
+                    if step_slots[i] is not None:
+                        terms = None if lin[i] is None else _shift_terms(lin[i][1], self.ps.x - lin[i][0])
+                        self._update_or_init(self.ps, step_slots[i], step_new[i], z_all[n], weight=False, terms=terms)
+        for i, g in enumerate(groups):
+            if step_slots[i] is not None:
+                self.assoc_hist[g] = step_slots[i]
+                self.n_updates += self.ps.n_particles
+        if not self.known and p.remove_unsupported and len(rows) > 0:  # negative evidence (§14.4.2)
+            self._negative_evidence(self.ps, step_slots, inputs.max_range)
+        self._estimate_and_resample(t)
 
-            rows = range(int(obs.offsets[t]), int(obs.offsets[t + 1]))
-            # NaN from unused slots of particles that start a new landmark is masked out with np.where.
-            with np.errstate(divide="ignore", invalid="ignore"):
-                if R is None:  # FastSLAM 1.0, or step 0 (x0 known)
-                    ps.x = x_hat
-                    step_slots, step_new = self._measure_v1(ps, z_all, rows, slot_of_obs)
-                else:
-                    step_slots, step_new, lin = self._proposal_v2(ps, x_hat, R, z_all, rows, slot_of_obs, rng)
-                    # ---- landmark EKFs at the sampled pose ------------------------------------------------
-                    for i, n in enumerate(rows):
-                        if step_slots[i] is not None:
-                            terms = None if lin[i] is None else _shift_terms(lin[i][1], ps.x - lin[i][0])
-                            self._update_or_init(
-                                ps, step_slots[i], step_new[i], z_all[n], weight=False, terms=terms
-                            )
-            for i, n in enumerate(rows):
-                if step_slots[i] is not None:
-                    assoc_hist[n] = step_slots[i]
-                    n_updates += P
+    def _detections(self, t: int):
+        """Step ``t``'s detections: measurements ``z (k, 2)``, their slots ``(k,)`` (known association, else
+        None) and observation rows ``[rows (m,) int64] * k`` — one row each, or merged returns
+        (``group_returns``)."""
+        obs, p = self.inputs.observations, self.p
+        lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
+        if not p.group_returns or hi - lo < 2:
+            groups = [np.array([n], np.int64) for n in range(lo, hi)]
+            z = obs.z[lo:hi]
+        else:
+            x_r = self.mean_xyt[t - 1] if t > 0 else np.asarray(self.inputs.x0, float)
+            dets = group_detections(obs.z, np.asarray(obs.sensor), np.asarray(obs.reported_id), lo, hi, x_r,
+                                    group=True, association=p.association, group_dist=p.group_dist)
+            groups = [g for _, g in dets]
+            z = np.array([zd for zd, _ in dets]).reshape(-1, 2)
+        slots = None if self.setup.slot_of_obs is None else self.setup.slot_of_obs[[int(g[0]) for g in groups]]
+        return z, slots, groups
 
-            # ---- negative evidence (§14.4.2) ---------------------------------------------------------------
-            if not known and p.remove_unsupported and len(rows) > 0:
-                self._negative_evidence(ps, step_slots, inputs.max_range)
+    def _estimate_and_resample(self, t: int) -> None:
+        """Weighted estimate at ``t`` (weights before resampling, EVALUATION-METHOD §A2); then resample if the
+        ESS is low — never on the last step, so the final weights still rank the particles."""
+        ps, T = self.ps, self.inputs.n_poses - 1
+        w = normalise_log_weights(ps.log_w)
+        m = self.mean_xyt[t]
+        m[:2] = w @ ps.x[:, :2]
+        m[2] = circular_mean(ps.x[:, 2], w)
+        e = ps.x - m
+        e[:, 2] = wrap_angle(e[:, 2])
+        self.pose_cov[t] = (w[:, None] * e).T @ e
+        if self.pose_hist is not None:
+            self.pose_hist[t] = ps.x
+        ess = effective_sample_size(w)
+        self.ess_sum += ess
+        if t < T and ess < self.p.resample_threshold * ps.n_particles:
+            idx = self.resample(w, self.rng)
+            self.ps = ps.take(idx)
+            self.anc[t] = idx
+            self.n_resample += 1
+        else:
+            self.anc[t] = np.arange(ps.n_particles)
 
-            # ---- estimate at t (weights before resampling), EVALUATION-METHOD §A2 ---------------------------
-            w = normalise_log_weights(ps.log_w)
-            mean_xyt[t, :2] = w @ ps.x[:, :2]
-            mean_xyt[t, 2] = circular_mean(ps.x[:, 2], w)
-            e = ps.x - mean_xyt[t]
-            e[:, 2] = wrap_angle(e[:, 2])
-            pose_cov[t] = (w[:, None] * e).T @ e
-            if keep_path:
-                pose_hist[t] = ps.x
-            ess = effective_sample_size(w)
-            ess_sum += ess
-
-            # ---- resampling (never on the last step, so the final weights still rank particles) -------------
-            if t < T and ess < p.resample_threshold * P:
-                idx = resample(w, rng)
-                ps = ps.take(idx)
-                anc[t] = idx
-                n_resample += 1
-            else:
-                anc[t] = arP
-            if progress is not None and (t % every == 0 or t == T):
-                progress(t + 1, T1)
-
-        # ---- outputs -------------------------------------------------------------------------------------
+    # ---- result ----------------------------------------------------------------------------------------
+    def outputs(self) -> dict:
+        """Result fields: the best final particle traced back through ``anc`` for paths / ML associations."""
+        ps, p, known = self.ps, self.p, self.known
+        T1 = self.inputs.n_poses
+        N = len(self.inputs.observations)
         w = normalise_log_weights(ps.log_w)
         best = int(np.argmax(w))
         # Trace the best final particle back: its index at t (pre-resampling) → post-resampling index at t-1.
         lineage = np.empty(T1, np.int64)
         j = best
-        for t in range(T, -1, -1):
+        for t in range(T1 - 1, -1, -1):
             lineage[t] = j
             if t > 0:
-                j = int(anc[t - 1][j])
-        obs_step = np.asarray(obs.step, np.int64)
+                j = int(self.anc[t - 1][j])
+        obs_step = np.asarray(self.inputs.observations.step, np.int64)
         if known or N == 0:
-            assoc_slots = assoc_hist.reshape(N, -1)[:, 0] if N else np.zeros(0, np.int64)
+            assoc_slots = self.assoc_hist.reshape(N, -1)[:, 0] if N else np.zeros(0, np.int64)
         else:
-            assoc_slots = assoc_hist[np.arange(N), lineage[obs_step]]
-        poses = pose_hist[np.arange(T1), lineage] if keep_path else mean_xyt
-
+            assoc_slots = self.assoc_hist[np.arange(N), lineage[obs_step]]
+        poses = self.pose_hist[np.arange(T1), lineage] if self.pose_hist is not None else self.mean_xyt
         live = ps.exists[best]
         if known:
             lm_xy, lm_cov = moment_matched_landmarks(ps.mu[:, live], ps.sig[:, live], w)
@@ -670,28 +760,20 @@ class FastSlam(BaseSolver):
         row_of_slot = np.cumsum(live) - 1
         alive = (assoc_slots >= 0) & live[np.clip(assoc_slots, 0, None)]
         assoc = np.where(alive, row_of_slot[np.clip(assoc_slots, 0, None)], -1)
-
         extra = {
             "association": p.association,
             "version": int(p.version),
-            "n_resamples": n_resample,
-            "mean_ess": ess_sum / T1,
-            "particle_landmark_updates": int(n_updates),
+            "n_resamples": self.n_resample,
+            "mean_ess": self.ess_sum / T1,
+            "particle_landmark_updates": int(self.n_updates),
             "best_particle_weight": float(w[best]),
             "mean_nis": self._nis_sum / self._nis_n if self._nis_n else float("nan"),
             "landmark_cov_kind": "moment_matched" if known else "best_particle",
         }
-        return self.make_result(
-            status=Status.COMPLETED,
-            poses_xyt=poses,
-            landmarks_xy=lm_xy,
-            assoc=assoc,
-            t_start=t_start,
-            message=f"FastSLAM {p.version}.0, {P} particles, {n_resample} resamplings, {len(lm_xy)} landmarks",
-            pose_cov=pose_cov,
-            landmark_cov=lm_cov,
-            extra=extra,
-        )
+        message = (f"FastSLAM {p.version}.0, {ps.n_particles} particles, {self.n_resample} resamplings, "
+                   f"{len(lm_xy)} landmarks")
+        return {"poses_xyt": poses, "landmarks_xy": lm_xy, "assoc": assoc, "message": message,
+                "pose_cov": self.pose_cov, "landmark_cov": lm_cov, "extra": extra}
 
     # -----------------------------------------------------------------------------------------------------
     @staticmethod
@@ -788,6 +870,8 @@ class FastSlam(BaseSolver):
 
     def _measure_v1(self, ps, z_all, rows, slot_of_obs):
         """FastSLAM 1.0 measurement step at the already-sampled poses ``ps.x``."""
+        if slot_of_obs is not None:
+            return self._measure_v1_known(ps, z_all, rows, slot_of_obs)
         slots_l, new_l = [], []
         for n in rows:
             z = z_all[n]
@@ -800,6 +884,50 @@ class FastSlam(BaseSolver):
             if slot_of_obs is None:
                 ps.log_w += np.where(new, self._log_p0, 0.0)  # new-landmark likelihood p0
         return slots_l, new_l
+
+    def _measure_v1_known(self, ps, z_all, rows: range, slot_of_obs):
+        """FastSLAM 1.0 with known association, batched over particles AND the landmarks of the step.
+
+        Given the sampled poses, rows of distinct landmarks are independent (each updates its own 2×2 EKF,
+        eqs. 14.22-14.24, and adds its own ``log N(ν; 0, Q_n)`` to the weight, eq. 14.28), so all of them are
+        one update on ``(P, k)`` component arrays. A landmark seen again in the same step goes to the next
+        round (rows in order), as in the row-by-row filter. Returns ``(slots per row (int | None), [None…])``.
+        """
+        r = np.arange(rows.start, rows.stop)
+        s = slot_of_obs[r]
+        slots_l = [int(v) if v >= 0 else None for v in s]
+        r, s = r[s >= 0], s[s >= 0]
+        Q, x = self._Q, ps.x
+        xb, yb, thb = x[:, None, 0], x[:, None, 1], x[:, None, 2]  # (P, 1): broadcast over the k landmarks
+        k_max = max(1, BATCH_ELEMENTS // ps.n_particles)
+        while r.size:
+            if r.size <= k_max and len(set(s.tolist())) == r.size:  # the usual case: one round, no repeat
+                now_s, z, r, s = s, z_all[r], r[:0], s[:0]
+            else:
+                _, first = np.unique(s, return_index=True)
+                first = first[:k_max]
+                later = np.ones(r.size, bool)
+                later[first] = False
+                now_s, z = s[first], z_all[r[first]]  # (k,), (k, 2)
+                r, s = r[later], s[later]
+            mu, sig = ps.mu[:, now_s], ps.sig[:, now_s]  # (P, k, 2), (P, k, 2, 2)
+            new = ~ps.exists[:, now_s]  # (P, k)
+            comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
+            o = _obs_terms(xb, yb, thb, *comps, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+            mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
+            old = ~new
+            self._nis_sum += float(np.sum(nis, where=old))  # 1.0: NIS of the measurement update (pose given)
+            self._nis_n += int(np.count_nonzero(old))
+            if new.any():
+                init = _init_terms(xb, yb, thb, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+                mx, my, a, b, c = (np.where(new, i, u) for i, u in zip(init, (mx, my, a, b, c)))
+            ps.mu[:, now_s, 0], ps.mu[:, now_s, 1] = mx, my
+            ps.sig[:, now_s, 0, 0], ps.sig[:, now_s, 1, 1] = a, c
+            ps.sig[:, now_s, 0, 1] = ps.sig[:, now_s, 1, 0] = b
+            ps.count[:, now_s] = np.where(new, 1, ps.count[:, now_s] + 1)
+            ps.exists[:, now_s] = True
+            ps.log_w += np.where(new, 0.0, ll).sum(axis=1)
+        return slots_l, [None] * len(slots_l)
 
     def _proposal_v2(self, ps, x_hat, Sx, z_all, rows, slot_of_obs, rng):
         """FastSLAM 2.0: refine ``N(x̂, Σ_x)`` (``Σ_x (3, 3, P)``) with every observation of a mapped landmark,
@@ -892,11 +1020,12 @@ class FastSlam(BaseSolver):
         live = ps.exists
         safe_mu = np.where(live[..., None], ps.mu, ps.x[:, None, :2] + 1.0)
         zh = range_bearing(ps.x[:, None, :], safe_mu)
-        rng_lim = self.params.removal_range_frac * max_range
-        visible = live & (zh[..., 0] <= rng_lim) & (np.abs(zh[..., 1]) <= 0.5 * self.params.fov_rad)
+        rng_lim = self.p.removal_range_frac * max_range
+        visible = live & (zh[..., 0] <= rng_lim) & (np.abs(zh[..., 1]) <= 0.5 * self.p.fov_rad)
         missed = visible & ~observed
         ps.count = ps.count - missed.astype(np.int32)
         ps.exists = live & ~(ps.count < 0)
+
 
 
 def moment_matched_landmarks(mu: np.ndarray, sig: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
