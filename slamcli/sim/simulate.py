@@ -7,6 +7,7 @@ world nor the trajectory, and adding clutter does not change the noise on true r
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any
@@ -116,6 +117,8 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     obs = Observations.from_rows(
         ret.step, np.column_stack([ret.range_m, ret.bearing_rad]), T + 1, reported_id=reported
     )
+    if cfg.sensor.kind == "laser" and cfg.sensor.report_size:  # the declared landmark size (surface models)
+        obs = dataclasses.replace(obs, diameter_m=np.full(len(obs), 2.0 * float(cfg.world.landmark_radius)))
 
     # 5) optional GPS
     gps_step = np.zeros(0, np.int64)

@@ -72,6 +72,7 @@ from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
+from slamcli.solvers.icm import surface as surf
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
@@ -121,6 +122,12 @@ class IcmParams:
                                  s uniform in [−ρ, ρ], so ``range_offset = π/4 · ρ`` re-centres the returns of
                                  a post of known radius ρ (use ρ itself for a sensor that returns the nearest
                                  surface point). See ``benchmarks/bench_icm_study.py``.
+    surface : bool               beyond the paper (default off = paper-exact): the surface-aware observation model
+                                 (:mod:`slamcli.solvers.icm.surface`) with the landmark radius the dataset
+                                 declares (``observations.diameter_m``): per-return offsets √(ρ² − s²) from the
+                                 current estimate, refreshed every sweep.
+    range_bias : "none" | "estimate"  beyond the paper: one more node, a common range bias estimated in every
+                                 sweep (its closed-form conditional mode), with or without ``surface``.
     trace_poses_every : int      record the poses of iteration 0 (the initialisation), of every k-th iteration
                                  and of the last one in ``result.trace`` (paper Figs 5b-d / 6b / 9b-c draw the
                                  trajectory after iterations 10, 20, 30, …); 0 = no poses in the trace. Memory:
@@ -150,6 +157,8 @@ class IcmParams:
     covariance: bool = False
     range_offset: float = 0.0
     trace_poses_every: int = 1
+    surface: bool = False
+    range_bias: Literal["none", "estimate"] = "none"
 
     def __post_init__(self) -> None:
         en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
@@ -387,6 +396,11 @@ class IcmSlam(BaseSolver):
         if inputs.robots is not None:
             from slamcli.solvers.icm.team import solve_team
 
+            if self.params.surface or self.params.range_bias != "none":
+                from slamcli.errors import ConfigError
+
+                raise ConfigError("icm: surface / range_bias are not implemented for multi-robot datasets")
+
             return solve_team(self, inputs, init=init, progress=progress)
         t_start = time.perf_counter()
         p: IcmParams = self.params
@@ -399,6 +413,9 @@ class IcmSlam(BaseSolver):
                 W.gps_obs_weight()  # the GPS pseudo-observation needs an isotropic Q
         except ValueError as exc:
             raise ConfigError(f"icm: {exc}") from None
+        rho, base_z, bias = self._surface_setup(inputs, prob)  # surface=true / range_bias=estimate
+        if base_z is not None:
+            prob = surf.with_range_offsets(prob, base_z, surf.initial_offsets(rho, prob.n_obs))
         T, N = prob.T, prob.n_obs
         reported = p.correspondences == "reported"
         fixed = reported_labels(inputs.observations.reported_id) if reported else None
@@ -451,6 +468,10 @@ class IcmSlam(BaseSolver):
         joint_errors: list[str] = []
         for n in range(1, p.max_sweeps + 1):
             t0 = time.perf_counter()
+            if base_z is not None:  # the sweep's surface offsets / range bias, then its starting energy
+                prob, bias = surf.refresh(prob, base_z, rho, bias, p.range_bias == "estimate", W, poses,
+                                          landmarks, labels)
+                E = en.energy(prob, W, poses, landmarks, labels)
             E_start = E
             prev_landmarks = landmarks
             # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i}), every observation in the model
@@ -525,6 +546,7 @@ class IcmSlam(BaseSolver):
             energy_increases=increases,
             joint_steps_accepted=joint_accepted,
             n_out_of_model=int((labels < 0).sum()),
+            surface=bool(p.surface), range_bias_m=float(bias),
             **{f"energy_{k}": v for k, v in en.energy_terms(prob, W, poses, landmarks, labels).items()},
         )
         if joint_errors:
@@ -556,6 +578,21 @@ class IcmSlam(BaseSolver):
         )
 
     # -- helpers ---------------------------------------------------------------------------------------------
+    def _surface_setup(self, inputs, prob):
+        """``(ρ (N,) | None, the unshifted z (N, 2) | None, bias 0.0)``; None, None when the paper-exact model
+        is used. One-line refusal when ``surface`` is asked for on a dataset that declares no radius."""
+        from slamcli.errors import ConfigError
+
+        p: IcmParams = self.params
+        if not p.surface and p.range_bias == "none":
+            return None, None, 0.0
+        rho = surf.declared_radius(inputs) if p.surface else None
+        if p.surface and rho is None and p.range_bias == "none":
+            raise ConfigError("icm: surface=true needs the landmark radius the dataset declares "
+                              "(inputs/observations/diameter_m), this dataset declares none; "
+                              "add -p range_bias=estimate to estimate a range offset instead")
+        return rho, prob.z.copy(), 0.0
+
     @staticmethod
     def _means_keep(prob, poses, labels, landmarks):
         """Eq. (17) for fixed labels; a label without observations keeps its previous point."""
