@@ -17,7 +17,7 @@ def _brute_range(x, m, bearing, rho):
     """First point of the beam inside the disc: a coarse march, then bisection on ‖p + t u − m‖ − ρ."""
     p = np.asarray(x[:2], float)
     u = np.array([np.cos(x[2] + bearing), np.sin(x[2] + bearing)])
-    f = lambda t: np.linalg.norm(p + t * u - m) - rho  # noqa: E731
+    f = lambda t: np.linalg.norm(p + t * u - m) - rho
     ts = np.linspace(0.0, 60.0, 600001)
     inside = np.flatnonzero(np.linalg.norm(p + ts[:, None] * u - m, axis=1) <= rho)
     if not inside.size:
