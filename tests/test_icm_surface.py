@@ -90,3 +90,13 @@ def test_surface_offsets_put_every_return_on_its_centres_foot():
     along = ((tr.landmarks_xy[labels[ok]] - pts[ok]) * u).sum(-1)
     assert np.abs(along).max() < 1e-9
     assert np.linalg.norm(tr.landmarks_xy[labels[ok]] - pts[ok], axis=1).max() <= 0.25 + 1e-9
+
+
+def test_graph_surface_option_reads_the_declared_radius(sim1_short):
+    rng = np.random.default_rng(0)
+    plain = make_solver("graph", {}).solve(sim1_short.inputs, rng=rng)
+    aware = make_solver("graph", {"surface": True}).solve(sim1_short.inputs, rng=rng)
+    assert _err(sim1_short, aware) < 0.5 * _err(sim1_short, plain)
+    ds = simulate_scenario("loop", seed=0, overrides={"n_steps": 30})
+    with pytest.raises(ConfigError, match="graph: surface=true needs the landmark radius"):
+        make_solver("graph", {"surface": True}).solve(ds.inputs, rng=rng)

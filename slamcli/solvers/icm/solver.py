@@ -53,11 +53,12 @@ again to the nearest remaining map point in the next sweep — they stay in the 
 energies are compared over the observations in the model at the start of each sweep).
 
 * **filtered="drop" is the default** — a deviation from eq. 13, chosen by measurement on the octagon (Fig. 9,
-  ς = 500, 100 sweeps, seeds 0-2; both columns of the Fig. 9 section of ``slamcli reproduce``): re-matching the few hundred returns of the
-  removed points (clutter, rarely seen objects) to the nearest remaining cone raises the energy after the init
-  from ≈ 115 to ≈ 91,000 and drags the map from 0.12 m to 0.69-0.73 m (ATE 1.9-2.3 m); dropping them keeps the
-  energy at ≈ 115 and brings the map from 0.12 m to 0.10-0.11 m, its change per sweep falling from ≈ 6 mm to
-  0.1 mm. With ς = 1 (the default) nothing is removed and the two are the same.
+  R = Q = S = I, ς = 500, 100 sweeps, seeds 0-2; the two columns of the Fig. 9 section of ``slamcli
+  reproduce``): re-matching the returns of the removed points (clutter, rarely seen objects) to the nearest
+  remaining cone puts the energy after the init at 31,000-93,000 and takes the map from 0.11-0.12 m to
+  0.41-0.73 m mean landmark error (ATE 0.7-2.3 m); dropping them leaves the energy at 115-126 and takes the map
+  from 0.11-0.12 m to 0.10-0.11 m (ATE 0.16-0.17 m), the map change per sweep falling from 4.9-6.1 mm in sweep
+  1 to 0.07-0.11 mm in sweep 100. With ς = 1 (the default) nothing is removed and the two are the same.
 
 Beyond the paper (separate options, default off):
 
@@ -91,6 +92,7 @@ from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm import surface as surf
+from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
@@ -607,9 +609,10 @@ class IcmSlam(BaseSolver):
             return None, None, 0.0
         rho = surf.declared_radius(inputs) if p.surface else None
         if p.surface and rho is None and p.range_bias == "none":
-            raise ConfigError("icm: surface=true needs the landmark radius the dataset declares "
-                              "(inputs/observations/diameter_m), this dataset declares none; "
-                              "add -p range_bias=estimate to estimate a range offset instead")
+            try:
+                require_radius(inputs, "icm")
+            except ConfigError as exc:
+                raise ConfigError(f"{exc}; add -p range_bias=estimate to estimate a range offset instead") from None
         return rho, prob.z.copy(), 0.0
 
     @staticmethod

@@ -31,15 +31,7 @@ import numpy as np
 
 from slamcli.models.observation import mean_surface_offset, surface_centre_offset
 from slamcli.solvers.icm import energy as en
-
-
-def declared_radius(inputs) -> np.ndarray | None:
-    """ρ_i ``(N,)`` from the dataset's declared object size (``observations.diameter_m / 2``), or None."""
-    d = getattr(inputs.observations, "diameter_m", None)
-    if d is None:
-        return None
-    rho = 0.5 * np.asarray(d, float).reshape(-1)
-    return np.where(np.isfinite(rho) & (rho > 0), rho, 0.0)
+from slamcli.solvers.surface import declared_radius  # noqa: F401 - re-exported for ICM's callers
 
 
 def with_range_offsets(prob: en.Problem, base_z: np.ndarray, offsets: np.ndarray) -> en.Problem:
