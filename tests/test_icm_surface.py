@@ -100,3 +100,22 @@ def test_graph_surface_option_reads_the_declared_radius(sim1_short):
     ds = simulate_scenario("loop", seed=0, overrides={"n_steps": 30})
     with pytest.raises(ConfigError, match="graph: surface=true needs the landmark radius"):
         make_solver("graph", {"surface": True}).solve(ds.inputs, rng=rng)
+
+
+@pytest.mark.parametrize("seed", [1])
+def test_octagon_default_drop_map_change_falls_and_map_not_worse_than_init(seed):
+    """Issue 22, Fig. 9 with the default filtered="drop": against the simulator's true cones, the final map is no
+    worse than the init's and the map change per sweep falls; the paper's re-matching (eq. 13) makes it worse."""
+    ds = simulate_scenario("octagon", seed=seed, overrides={"n_steps": 700})
+    truth = ds.truth.landmarks_xy
+
+    def err(lm):  # the paper's metric: each estimate to its nearest true landmark
+        return float(np.mean(np.min(np.linalg.norm(lm[:, None] - truth[None], axis=-1), axis=1)))
+
+    params = dict(S=[1.0], min_observations=200, max_sweeps=15, energy_rtol=0.0)
+    res = make_solver("icm", params).solve(ds.inputs, rng=np.random.default_rng(0))
+    mc = np.asarray(res.trace.map_change)[1:]
+    assert err(res.landmarks_xy) <= err(res.trace.landmarks_at(0))
+    assert mc[-3:].mean() < 0.5 * mc[:3].mean()
+    paper = make_solver("icm", dict(params, filtered="rematch")).solve(ds.inputs, rng=np.random.default_rng(0))
+    assert err(paper.landmarks_xy) > 2 * err(res.landmarks_xy)
