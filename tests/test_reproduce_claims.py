@@ -23,8 +23,9 @@ def test_crossing_radius_interpolates_and_sensitivity_names_it():
             {"rho": 0.2, "model": "surface", "err": 0.03}]
     s = oc.sensitivity_sentence(rows, 0.148)
     assert "≈ 0.124 m" in s and "surface-aware 0.030" in s
-    above = oc.sensitivity_sentence([{"rho": 0.1, "model": "exact", "err": 0.2}], 0.148)
-    assert "stays above" in above
+    above = oc.sensitivity_sentence([{"rho": 0.1, "model": "exact", "err": 0.2},
+                                     {"rho": 0.05, "model": "exact", "err": float("nan")}], 0.148)
+    assert "stays above" in above and "ρ = 0.05 m: no landmark estimated" in above
 
 
 def test_map_not_worse_counts_the_seeds_made_worse():

@@ -198,7 +198,11 @@ def sensitivity_sentence(rows: Sequence[dict], paper: float) -> str:
         return [mean_sd(by.get((model, rho), []))[0] for rho in radii]
 
     ex, aw = means("exact"), means("surface")
-    part = "; ".join(f"ρ = {rho:.2f} m: {e:.3f} m" + (f" (surface-aware {a:.3f} m)" if math.isfinite(a) else "")
+
+    def num(e):
+        return f"{e:.3f} m" if math.isfinite(e) else "no landmark estimated"
+
+    part = "; ".join(f"ρ = {rho:.2f} m: {num(e)}" + (f" (surface-aware {num(a)})" if (("surface", rho) in by) else "")
                      for rho, e, a in zip(radii, ex, aw))
     cross = crossing_radius(radii, ex, paper)
     if cross is not None:
