@@ -549,13 +549,24 @@ class Reproduction:
     RADIUS_QUICK = {"radii": (0.10, 0.25), "seeds": (0,), "overrides": {"n_steps": 300}, "sweeps": 3,
                     "varsigma": 20}
 
+    def _write_table(self, name: str, rows: list[dict]):
+        """``rows`` as a DataFrame, also written atomically to ``runs/<name>/results.csv``."""
+        import pandas as pd
+
+        from slamcli.io import atomic_path
+
+        table = pd.DataFrame(rows)
+        out = self.runs_dir / name / "results.csv"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(out) as tmp:
+            table.to_csv(tmp, index=False)
+        return table
+
     def _surface_sensitivity(self, sec: Section) -> None:
         """paper-sim1's paper metric against the post radius, paper-exact and surface-aware ICM (S = 0)."""
         import numpy as np
-        import pandas as pd
 
         from slamcli.api.solve import make_solver
-        from slamcli.io import atomic_path
         from slamcli.metrics.summary import EvaluationParams, evaluate_result
         from slamcli.sim import simulate_scenario
         from slamcli.sweep import outcomes as oc
@@ -577,11 +588,7 @@ class Reproduction:
                                  "paper_err_mean_m": sc.get("paper_err_mean_m"), "lm_ospa_m": sc.get("lm_ospa_m"),
                                  "n_landmarks_est": sc.get("n_landmarks_est")})
             self.log(f"fig5 radius study: ρ = {rho} done")
-        table = pd.DataFrame(rows)
-        out = self.runs_dir / "fig5-radius" / "results.csv"
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(out) as tmp:
-            table.to_csv(tmp, index=False)
+        table = self._write_table("fig5-radius", rows)
         md = [[f"{rho:.2f}"] + [oc.pm(g[g.model == m]["paper_err_mean_m"]) for m in ("exact", "surface")]
               + [oc.pm(g[g.model == "exact"]["n_landmarks_est"], 1)] for rho, g in table.groupby("rho_m")]
         sec.add(f"**Surface bias: sensitivity to the post radius** (beyond the paper, which gives no radius). The "
@@ -850,10 +857,8 @@ class Reproduction:
 
     def postprocess_section(self) -> Section:
         import numpy as np
-        import pandas as pd
 
         from slamcli.api.solve import make_solver
-        from slamcli.io import atomic_path
         from slamcli.metrics.summary import EvaluationParams, evaluate_result
         from slamcli.sim import simulate_scenario
         from slamcli.sweep import outcomes as oc
@@ -898,11 +903,7 @@ class Reproduction:
                                      "n_landmarks_est": sc.get("n_landmarks_est"),
                                      "icm_sweeps": res.extra.get("sweeps") if stage == "icm" else None})
                 self.log(f"postprocess: {scen} seed {seed} done")
-        table = pd.DataFrame(rows)
-        out = self.runs_dir / "postprocess" / "results.csv"
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(out) as tmp:
-            table.to_csv(tmp, index=False)
+        table = self._write_table("postprocess", rows)
         if table.empty:
             sec.add("_No completed run; nothing to show._")
             sec.fail("no completed run")
