@@ -21,8 +21,8 @@ range bias b added to every range, visited before the c-step: its conditional mo
     b* = Σ_i u_iᵀ Q (m_{c_i} − p_i − (r_i + δ_i) u_i) / Σ_i u_iᵀ Q u_i        (labelled returns i)
 
 — without a declared radius it estimates the whole surface offset (as graph's ``estimate_range_bias``).
-Measured on ``paper-sim1`` seed 0 (S = 0, ς = 500, filtered = rematch, 100 sweeps): b reaches 0.194 m (π/4 · 0.25 = 0.196 m), yet
-the map ends at 0.257 m (paper-exact 0.309 m, ``surface=true`` 0.032 m): the init has already placed the map
+Measured on ``paper-sim1`` seed 0 (S = 0, ς = 500, filtered = rematch, 100 sweeps): b reaches 0.194 m
+(π/4 · 0.25 = 0.196 m), yet the map ends at 0.257 m (paper-exact 0.309 m, ``surface=true`` 0.032 m): the init has already placed the map
 with the biased ranges, and the sweeps move it little afterwards; the declared radius, which enters the init,
 is the better switch.
 """
