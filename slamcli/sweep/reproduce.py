@@ -1021,7 +1021,7 @@ class ReproduceOutcome:
 
     def summary(self) -> str:
         if self.ok:
-            return f"all sections ok; report: {self.report}"
+            return f"all sections completed (paper-claim verdicts in the report); report: {self.report}"
         return (f"{len(self.failed)} section(s) failed — " + "; ".join(f"{k}: {why}" for k, why in self.failed)
                 + f"; report: {self.report}")
 
