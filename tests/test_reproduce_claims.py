@@ -1,9 +1,9 @@
-"""Paper-claim verdicts of REPORT.md (slamcli.sweep.outcomes, issue 22): every verdict is computed from the rows
+"""Paper-claim verdicts of REPORT.md (slamcli.reproduce.outcomes, issue 22): every verdict is computed from the rows
 it is given — each test feeds rows on both sides of the stated condition and checks that the verdict flips."""
 
 import pytest
 
-from slamcli.sweep import outcomes as oc
+from slamcli.reproduce import outcomes as oc
 
 R, P, N = oc.REPRODUCED, oc.PARTLY, oc.NOT_REPRODUCED
 

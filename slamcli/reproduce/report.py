@@ -18,7 +18,7 @@ order of :data:`SECTIONS`:
 
 Experiment files ship inside the package (:mod:`slamcli.experiments`); another directory is used only when
 given (``--experiments``). Every figure section runs several seeds and reports mean ± standard deviation.
-Every outcome sentence comes from :mod:`slamcli.sweep.outcomes` with the numbers of this run. A section whose
+Every outcome sentence comes from :mod:`slamcli.reproduce.outcomes` with the numbers of this run. A section whose
 solver is missing or whose runs fail is marked FAILED in the report, and ``slamcli reproduce`` then exits
 non-zero with a summary.
 
@@ -138,13 +138,13 @@ class Section:
         self.markdown.append(text)
 
     def add_claim(self, verdict_and_line: tuple[str, str]) -> None:
-        """A paper claim's computed verdict and its sentence (:mod:`slamcli.sweep.outcomes`)."""
+        """A paper claim's computed verdict and its sentence (:mod:`slamcli.reproduce.outcomes`)."""
         self.claims.append(verdict_and_line[0])
         self.add(verdict_and_line[1])
 
     def status_line(self) -> str:
         """The closing line: the claim verdicts when the section checks paper claims, else the run status."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         if self.claims:
             return oc.claims_status(self.claims, self.ok, self.problems)
@@ -408,7 +408,7 @@ class Reproduction:
         }
 
     def _icm_rows(self, key, done, stats) -> list[list[str]]:
-        from slamcli.sweep.outcomes import pm
+        from slamcli.reproduce.outcomes import pm
 
         paper = key == "fig5"
 
@@ -493,7 +493,7 @@ class Reproduction:
                     names: dict | None = None) -> None:
         """Outcome sentences shared by Figs. 5, 6, 7: does ICM lower the error of its initialisation, how does
         the result compare with the paper, does S = I converge faster than S = 0."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         names = names or {}
         for lb in done:
@@ -533,7 +533,7 @@ class Reproduction:
     def _fig5_checks(self, sec: Section, stats: dict, done: list[str]) -> None:
         """Fig. 5's outcome sentences, its claim verdict (paper-exact and surface-aware ICM against 0.148 m) and
         the post-radius sensitivity study; keeps the initial errors for Fig. 7 and the initialisation study."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         self._icm_checks(sec, stats, done, paper_final=PAPER["sim1_final_mean_err_m"])
         self.fig5_init_errs = [x["init_err"] for x in stats.get("icm-S0", [])]
@@ -568,8 +568,8 @@ class Reproduction:
 
         from slamcli.api.solve import make_solver
         from slamcli.metrics.summary import EvaluationParams, evaluate_result
+        from slamcli.reproduce import outcomes as oc
         from slamcli.sim import simulate_scenario
-        from slamcli.sweep import outcomes as oc
 
         if "icm" not in self.solvers:
             return
@@ -625,7 +625,7 @@ class Reproduction:
     def _init_checks(self, sec: Section, stats: dict, done: list[str]) -> None:
         """The study's question answered: do MobileSim's properties make the initial map visibly worse (as the
         paper's Fig. 5a) than `paper-sim1`'s, and does ICM then move away from it?"""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         self._icm_checks(sec, stats, done, paper_final=PAPER["sim1_final_mean_err_m"], close_rel=0.1)
         s0 = stats.get("icm-S0", [])
@@ -647,7 +647,7 @@ class Reproduction:
 
     def _fig6_checks(self, sec: Section, stats: dict, done: list[str]) -> None:
         """Fig. 6's claim: ICM recovers from the kinematic-only initialisation (error falls, landmarks found)."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         self._icm_checks(sec, stats, done, paper_final=None)
         for lb in done:
@@ -666,7 +666,7 @@ class Reproduction:
 
     def _fig7_checks(self, sec: Section, stats: dict, done: list[str]) -> None:
         """Fig. 7's claim: the 10 m laser gives a better initial map than Fig. 5's full-range laser."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         self._icm_checks(sec, stats, done, paper_final=None, close_rel=0.1)
         st = stats.get("icm-S0", [])
@@ -679,7 +679,7 @@ class Reproduction:
                                               reason))
 
     def octagon_section(self) -> Section:
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         sec = Section("fig9", "Fig. 9: octagon world, map change per iteration")
         sec.add("Paper §6: R = Q = S = I, ϑ = 1 m, ς = 500; the map changes by less than 35 mm from the initial "
@@ -820,7 +820,7 @@ class Reproduction:
                 ax.grid(True, axis="y", lw=0.3, alpha=0.5)
                 ax.set_title(f"{len(reps)} replicates, same datasets for every solver")
             self._save(sec, fig, "compare")
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         def vals(label, col):
             sub = done[done["label"] == label] if len(done) else done
@@ -860,8 +860,8 @@ class Reproduction:
 
         from slamcli.api.solve import make_solver
         from slamcli.metrics.summary import EvaluationParams, evaluate_result
+        from slamcli.reproduce import outcomes as oc
         from slamcli.sim import simulate_scenario
-        from slamcli.sweep import outcomes as oc
 
         sec = Section("postprocess", "ICM as a post-processor of other solvers' results")
         cfg = self.POSTPROCESS_QUICK if self.quick else self.POSTPROCESS_FULL
@@ -980,7 +980,7 @@ class Reproduction:
                 ax.set_yscale("log")
             self._save(sec, fig, "nees")
         sec.add(_md_table(["solver", "runs", "95 % band", "steps inside band", "time-average ε̄", "note"], rows))
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         for label, avg in curves:
             sec.add(oc.nees_verdict(avg.fraction_inside, avg.mean, avg.lower, avg.upper, label))
@@ -990,7 +990,7 @@ class Reproduction:
 
 # The report's sections, in order. An entry is (key, builder): a method name of Reproduction (paper 000), or
 # "module:function" with run_section(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool).
-# Other papers hook in with one line each, e.g. ("paper001", "slamcli.sweep.paper001:run_section").
+# Other papers hook in with one line each, e.g. ("paper001", "slamcli.reproduce.paper001:run_section").
 SECTIONS: list[tuple[str, str]] = [
     ("fig5", "fig5_section"),
     ("init", "init_study_section"),
@@ -1000,11 +1000,11 @@ SECTIONS: list[tuple[str, str]] = [
     ("postprocess", "postprocess_section"),
     ("compare", "compare_section"),
     ("nees", "nees_section"),
-    ("paper001", "slamcli.sweep.paper001:run_section"),
-    ("paper004", "slamcli.sweep.paper004:run_section"),
-    ("real", "slamcli.sweep.paper_real:run_section"),
-    ("real-multi", "slamcli.sweep.paper_real_multi:run_section"),
-    ("paper001-map4", "slamcli.sweep.paper001:run_section_map4"),
+    ("paper001", "slamcli.reproduce.paper001:run_section"),
+    ("paper004", "slamcli.reproduce.paper004:run_section"),
+    ("real", "slamcli.reproduce.real:run_section"),
+    ("real-multi", "slamcli.reproduce.real_multi:run_section"),
+    ("paper001-map4", "slamcli.reproduce.paper001:run_section_map4"),
 ]
 
 
@@ -1082,7 +1082,7 @@ def reproduce(
             sec.add(f"> **Section failed**: {msg}")
             sec.fail(msg)
         if ":" not in target and not any(b.startswith("Section status") for b in sec.markdown):
-            from slamcli.sweep.outcomes import section_status
+            from slamcli.reproduce.outcomes import section_status
 
             sec.add(section_status(sec.ok, sec.problems))
         sections.append(sec)
