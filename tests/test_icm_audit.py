@@ -120,21 +120,21 @@ def test_guard_rejects_only_fusion_and_keeps_eq17(close_pair):
                                              res.landmarks_xy, res.assoc), rel=1e-12)
 
 
-# -- 3. ς-filtered observations are re-matched (eq. 13) -------------------------------------------------------------
+# -- 3. ς-filtered observations re-matched (eq. 13, filtered="rematch") or dropped (the default since issue 22) ----
 
 
-def test_filtered_observations_rematched_by_default():
+def test_filtered_observations_rematched_on_request_dropped_by_default():
     inputs, _ = _world(LM_CLOSE[[0, 2, 3, 4, 5, 6]], seed=2)
     counts = np.bincount(inputs.observations.reported_id)
     sigma = int(np.sort(counts[counts > 0])[1]) + 1  # removes the two least-seen landmarks
-    res = IcmSlam(IcmParams(min_observations=sigma, max_sweeps=5)).solve(inputs, rng=np.random.default_rng(0))
+    res = IcmSlam(IcmParams(min_observations=sigma, max_sweeps=5, filtered="rematch")).solve(
+        inputs, rng=np.random.default_rng(0))
     assert len(res.landmarks_xy) >= 1 and np.all(res.assoc >= 0)  # every observation stays in the energy
     prob = en.Problem.from_inputs(inputs)
     W = IcmParams().design_weights()
     assert res.trace.objective[-1] == pytest.approx(en.energy(prob, W, res.poses_xyt, res.landmarks_xy, res.assoc))
-    drop = IcmSlam(IcmParams(min_observations=sigma, max_sweeps=5, filtered="drop")).solve(
-        inputs, rng=np.random.default_rng(0))
-    assert np.any(drop.assoc < 0)
+    drop = IcmSlam(IcmParams(min_observations=sigma, max_sweeps=5)).solve(inputs, rng=np.random.default_rng(0))
+    assert IcmParams().filtered == "drop" and np.any(drop.assoc < 0)
     # dropping terms lowers the energy without any optimisation: the kept variant's energy is higher
     assert drop.trace.objective[0] < res.trace.objective[0]
 

@@ -162,3 +162,80 @@ def inverse_range_bearing_offset_jacobians(x, z, offset_xy):
     """Jacobians of :func:`inverse_range_bearing_offset`: ``M_x (..., 2, 3)``, ``M_z (..., 2, 2)``."""
     M_s, M_z = inverse_range_bearing_jacobians(sensor_pose(x, offset_xy), z)
     return M_s @ sensor_pose_jacobian(x, offset_xy), M_z
+
+
+# --------------------------------------------------------------------------------------------------------
+# surface-aware model (beyond paper 000): a disc landmark of radius ρ centred at m, seen by a beam sensor.
+# A beam from the sensor position p along φ = θ + b (b: the beam's bearing), u = [cos φ, sin φ],
+# u⊥ = [−sin φ, cos φ], w = m − p, meets the disc's near surface at
+#
+#     a = u·w   (along the beam),   s = u⊥·w   (lateral),   q = √(ρ² − s²)   (|s| ≤ ρ)
+#     r(x, m, b; ρ) = a − q                               (r = d − ρ for the beam through the centre, s = 0)
+#
+# Jacobians (∂a/∂m = u, ∂s/∂m = u⊥, ∂a/∂φ = s, ∂s/∂φ = −a, ∂(p, φ)/∂x = I):
+#
+#     ∂r/∂m = u + (s/q) u⊥        ∂r/∂p = −∂r/∂m        ∂r/∂θ = s − s·a/q        ∂r/∂ρ = −ρ/q
+#
+# The along-beam distance from the hit point to the foot of the centre is q; averaged over a lateral offset
+# uniform on [−ρ, ρ] (a post swept by evenly spaced beams) it is E[q] = π/4 · ρ.
+# --------------------------------------------------------------------------------------------------------
+def _beam_frame(x, m, bearing):
+    """``(a, s, u, u⊥)`` of the beam ``bearing (...,)`` from pose(s) ``x (..., 3)`` towards centre(s) ``m (..., 2)``."""
+    x = np.asarray(x, float)
+    m = np.asarray(m, float)
+    phi = x[..., 2] + np.asarray(bearing, float)
+    u = np.stack([np.cos(phi), np.sin(phi)], -1)
+    u_perp = np.stack([-u[..., 1], u[..., 0]], -1)
+    w = m - x[..., :2]
+    return (u * w).sum(-1), (u_perp * w).sum(-1), u, u_perp
+
+
+def surface_range(x, m, bearing, radius):
+    """Range ``(...,)`` along the beam ``bearing`` from pose(s) ``x (..., 3)`` to the surface of the disc(s) of
+    radius ``radius`` centred at ``m (..., 2)``; NaN where the beam misses the disc (``|s| > ρ``)."""
+    a, s, _, _ = _beam_frame(x, m, bearing)
+    rho = np.asarray(radius, float)
+    with np.errstate(invalid="ignore"):
+        return a - np.sqrt(rho * rho - s * s)
+
+
+def surface_range_jacobians(x, m, bearing, radius):
+    """Jacobians of :func:`surface_range`: ``H_x (..., 3)``, ``H_m (..., 2)``, ``H_rho (...,)`` (NaN / inf where
+    the beam misses or grazes the disc)."""
+    a, s, u, u_perp = _beam_frame(x, m, bearing)
+    rho = np.asarray(radius, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q = np.sqrt(rho * rho - s * s)
+        k = s / q
+        H_m = u + k[..., None] * u_perp
+        H_x = np.concatenate([-H_m, (s - k * a)[..., None]], -1)
+        H_rho = -rho / q
+    return H_x, H_m, np.broadcast_to(H_rho, a.shape).copy()
+
+
+def surface_range_bearing(x, m, radius):
+    """``[‖m − p‖ − ρ, bearing to the centre] (..., 2)``: the surface model for the beam through the centre.
+    Its Jacobians in ``x`` and ``m`` are those of :func:`range_bearing`; ``∂h/∂ρ = [−1, 0]``."""
+    z = range_bearing(x, m)
+    return np.stack([z[..., 0] - np.asarray(radius, float), z[..., 1]], -1)
+
+
+def inverse_surface_range_bearing(x, z, radius):
+    """Centre ``(..., 2)`` of a disc of radius ``radius`` whose surface the beam of ``z (..., 2)`` hits through
+    the centre: ``p + (r + ρ)·[cos(θ + b), sin(θ + b)]`` (inverse of :func:`surface_range_bearing`)."""
+    z = np.asarray(z, float)
+    zc = np.stack([z[..., 0] + np.asarray(radius, float), z[..., 1]], -1)
+    return inverse_range_bearing(x, zc)
+
+
+def surface_centre_offset(x, m, bearing, radius):
+    """Along-beam distance ``q = √(ρ² − s²) (...,)`` from the surface hit to the foot of the centre ``m`` on the
+    beam; 0 where the beam misses the disc (``|s| ≥ ρ``, grazing)."""
+    _, s, _, _ = _beam_frame(x, m, bearing)
+    rho = np.asarray(radius, float)
+    return np.sqrt(np.maximum(rho * rho - s * s, 0.0))
+
+
+def mean_surface_offset(radius):
+    """``E[q] = π/4 · ρ``: the mean of :func:`surface_centre_offset` over a lateral offset uniform on [−ρ, ρ]."""
+    return np.pi / 4.0 * np.asarray(radius, float)

@@ -265,6 +265,9 @@ class SensorConfig:
     drop_max_range : bool    laser preprocessing.
     drop_isolated : bool     laser preprocessing.
     isolation_gap : float    laser: neighbouring-return range difference still called "similar", m.
+    report_size : bool       laser: declare the size of what the beams hit — every return carries
+                             ``observations.diameter_m = 2 · world.landmark_radius`` (clutter too), the radius a
+                             surface-aware model reads (``-p surface=true``); off = no size declared.
     """
 
     kind: Literal["point", "laser"] = "point"
@@ -280,6 +283,7 @@ class SensorConfig:
     drop_max_range: bool = True
     drop_isolated: bool = True
     isolation_gap: float = 0.5
+    report_size: bool = False
 
     def __post_init__(self) -> None:
         _check(self.max_range > 0 and math.isfinite(self.max_range), "sensor.max_range must be a finite number > 0")

@@ -83,7 +83,7 @@ def _paper_sim(max_range: float, name: str) -> ScenarioConfig:
         odometry=OdometryConfig(std=(0.001, 0.001, 0.0005)),
         sensor=SensorConfig(kind="laser", max_range=max_range, min_range=0.1, fov_deg=180.0, n_beams=181,
                             range_std=0.01, bearing_std=0.0, detection_prob=1.0, drop_max_range=True,
-                            drop_isolated=True, isolation_gap=0.5),
+                            drop_isolated=True, isolation_gap=0.5, report_size=True),
         clutter=ClutterConfig(rate=0.2),
     )
 
@@ -138,7 +138,7 @@ def _octagon() -> ScenarioConfig:
         robot=RobotConfig(v_max=0.5, w_max=0.6, k_heading=1.5, waypoint_tol=0.5, actuation_std=(0.03, 0.03)),
         odometry=OdometryConfig(std=(0.003, 0.003, 0.003), turn_bias=0.01),
         sensor=SensorConfig(kind="laser", max_range=30.0, min_range=0.1, fov_deg=180.0, n_beams=181,
-                            range_std=0.02, bearing_std=0.0, detection_prob=0.98),
+                            range_std=0.02, bearing_std=0.0, detection_prob=0.98, report_size=True),
         clutter=ClutterConfig(rate=1.0),
     )
 

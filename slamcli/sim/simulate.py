@@ -8,6 +8,7 @@ change the noise on true returns. Wall worlds (:mod:`~slamcli.sim.wallworld`) an
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -107,6 +108,8 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     obs = Observations.from_rows(
         ret.step, np.column_stack([ret.range_m, ret.bearing_rad]), T + 1, reported_id=reported
     )
+    if cfg.sensor.kind == "laser" and cfg.sensor.report_size:  # the declared landmark size (surface models)
+        obs = dataclasses.replace(obs, diameter_m=np.full(len(obs), 2.0 * float(cfg.world.landmark_radius)))
 
     # 5) optional GPS
     gps_step = np.zeros(0, np.int64)

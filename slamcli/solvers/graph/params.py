@@ -109,6 +109,10 @@ class GraphParams:
         ``gtsam`` model: add one unknown range offset ``b`` to the state, ``r̂ = ‖m − p‖ − b`` (default
         False). A laser measures the surface of a post, on average ≈ π/4 · radius nearer than its centre;
         estimating ``b`` recovers the centres. Reported as ``extra["range_bias"]``.
+    surface : bool
+        Beyond the paper: the surface-aware model with the landmark radius ρ the dataset declares
+        (``observations.diameter_m``, :mod:`slamcli.solvers.surface`): every range lengthened by π/4 · ρ, the
+        mean distance from a post's surface hit to its centre (default False; refused when none is declared).
     paper_R, paper_S, paper_Q : tuple of rows or None
         Weight matrices of the ``paper`` model (3×3, 3×3, 2×2). ``None`` → R = 0, S = ½ diag(σ_odo)⁻²,
         Q = ½ σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).
@@ -158,6 +162,7 @@ class GraphParams:
     use_gps: bool = True
     group_returns: bool = True
     estimate_range_bias: bool = False
+    surface: bool = False
     paper_R: tuple[tuple[float, ...], ...] | None = None
     paper_S: tuple[tuple[float, ...], ...] | None = None
     paper_Q: tuple[tuple[float, ...], ...] | None = None

@@ -163,6 +163,10 @@ class GraphSlam(BaseSolver):
         """
         t_start = time.perf_counter()
         p = self.params
+        if p.surface:  # the declared landmark radius (issue 22)
+            from slamcli.solvers.surface import mean_offset_inputs
+
+            inputs = mean_offset_inputs(inputs, "graph")
         self._check_inputs(inputs, init)
         poses0 = self._initial_poses(inputs, init)
         assoc, old_of_new, mode = self._associate(inputs, init, poses0)
