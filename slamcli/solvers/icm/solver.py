@@ -72,6 +72,9 @@ from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
+from slamcli.solvers.icm.init_gated import gated_init
+from slamcli.solvers.icm.joint import joint_refine
+from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
@@ -93,7 +96,13 @@ class IcmParams:
                                  Default 1 keeps every map point (a deviation from the paper's 500, see above).
     filtered : "rematch" | "drop"  observations of removed map points: matched again to the nearest remaining
                                  point in the next sweep (paper eq. 13, default) or out of the model for good.
-    init : "online" | "kinematic"  Algorithm 2 step 1 as written, or poses from g(x, u) only (Fig. 6).
+    init : "online" | "kinematic" | "gated"  Algorithm 2 step 1 as written, poses from g(x, u) only (Fig. 6),
+                                 or (beyond the paper) the on-line init whose gate and gain follow a propagated
+                                 pose covariance (:mod:`slamcli.solvers.icm.init_gated`).
+    gate_prob : float            init=gated: χ² probability of the association gate (2 dof; 0.99 → 9.21).
+    birth_prob : float           init=gated: χ² probability of the birth test — a sighting farther than this
+                                 from every label starts a new one (0.9999 → 18.4); in between it stays
+                                 unlabelled until the sweeps re-match it.
     correspondences : "nearest" | "reported"  nearest-map-point matchings (eqs. 9-13), or fixed labels from the
                                  sensor-reported ids (known correspondences; no fusion, no filter).
     max_sweeps : int             maximum number of ICM iterations N.
@@ -105,6 +114,16 @@ class IcmParams:
     schedule : "sequential" | "parallel"  paper visit order, or odd/even coding scheme (beyond the paper).
     accelerate : "none" | "joint"  occasional joint Gauss-Newton step (beyond the paper).
     accelerate_every : int       sweeps between joint steps.
+    joint_iters : int            accelerate=joint: Gauss-Newton steps per joint refinement (1 = one step, as
+                                 before); more steps stop early on ``joint_step_tol`` or a negligible energy
+                                 decrease (:mod:`slamcli.solvers.icm.joint`).
+    joint_step_tol : float       stop the joint refinement when its largest step is below this (m / rad).
+    merge : bool                 beyond the paper: after each map step, merge labels that pass a χ² test and
+                                 were never seen in one scan (:mod:`slamcli.solvers.icm.merge`).
+    merge_prob : float           χ² probability of the merge test (2 dof; 0.999 → 13.8).
+    label_cost : float           λ: cost per landmark added to the reported energy (``extra["energy_label_cost"]``,
+                                 0 = the paper's Φ_m); with weights=information, merging by the χ² test is
+                                 merging when it lowers H + λ·L for λ = χ²₂(merge_prob).
     monotone : bool              apply label fusion and the ς filter only when they do not raise the energy
                                  above the sweep's starting energy (eq. 17 always applies); False = the
                                  paper's unguarded map step.
@@ -133,7 +152,7 @@ class IcmParams:
     Q: tuple[float, ...] = (1.0,)
     fusion_radius: float = 1.0
     min_observations: int = 1
-    init: Literal["online", "kinematic"] = "online"
+    init: Literal["online", "kinematic", "gated"] = "online"
     correspondences: Literal["nearest", "reported"] = "nearest"
     max_sweeps: int = 100
     energy_rtol: float = 1e-6
@@ -150,6 +169,13 @@ class IcmParams:
     covariance: bool = False
     range_offset: float = 0.0
     trace_poses_every: int = 1
+    gate_prob: float = 0.99
+    birth_prob: float = 0.9999
+    joint_iters: int = 1
+    joint_step_tol: float = 1e-4
+    merge: bool = False
+    merge_prob: float = 0.999
+    label_cost: float = 0.0
 
     def __post_init__(self) -> None:
         en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
@@ -157,7 +183,7 @@ class IcmParams:
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
         if self.min_observations < 0:
             raise ValueError(f"min_observations must be >= 0, got {self.min_observations}")
-        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every"):
+        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters"):
             if getattr(self, name) < (0 if name == "max_sweeps" else 1):
                 raise ValueError(
                     f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
@@ -166,6 +192,15 @@ class IcmParams:
             raise ValueError(f"energy_rtol must be >= 0, got {self.energy_rtol}")
         if not (self.range_offset >= 0 and math.isfinite(self.range_offset)):
             raise ValueError(f"range_offset must be a finite number >= 0, got {self.range_offset}")
+        if not (0.0 < self.merge_prob < 1.0):
+            raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
+        for name in ("joint_step_tol", "label_cost"):
+            v = getattr(self, name)
+            if not (v >= 0 and math.isfinite(v)):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+        if not (0.0 < self.gate_prob <= self.birth_prob < 1.0):
+            raise ValueError(f"need 0 < gate_prob <= birth_prob < 1, got gate_prob={self.gate_prob}, "
+                             f"birth_prob={self.birth_prob}")
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
 
@@ -415,6 +450,13 @@ class IcmSlam(BaseSolver):
         if init is not None:
             poses, labels, landmarks = self._from_result(prob, init, fixed, W)
             extra["init"] = f"result:{init.solver}"
+        elif p.init == "gated":
+            try:
+                poses, labels, landmarks, step_s, _ = gated_init(
+                    prob, inputs, gate_prob=p.gate_prob, birth_prob=p.birth_prob, fixed_labels=fixed)
+            except ValueError as exc:
+                raise ConfigError(f"icm: {exc}") from None
+            extra["init"] = p.init
         else:
             poses, labels, landmarks, step_s = online_init(
                 prob,
@@ -425,6 +467,7 @@ class IcmSlam(BaseSolver):
                 fixed_labels=fixed,
             )
             extra["init"] = p.init
+        if init is None:
             timings["init_ms_per_step"] = float(1e3 * step_s.mean()) if step_s.size else 0.0
             timings["init_ms_per_step_max"] = float(1e3 * step_s.max()) if step_s.size else 0.0
             if not reported:  # end of step 1: the three-step map update of §4 (+ ς filter)
@@ -447,8 +490,9 @@ class IcmSlam(BaseSolver):
         status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
         parts_log: list[str] = []
         rejected = increases = 0
-        joint_accepted = 0
+        joint_accepted = merges = 0
         joint_errors: list[str] = []
+        joint_log: list[str] = []
         for n in range(1, p.max_sweeps + 1):
             t0 = time.perf_counter()
             E_start = E
@@ -459,10 +503,12 @@ class IcmSlam(BaseSolver):
                 labels = labels.copy()
                 labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
             if p.accelerate == "joint" and n % p.accelerate_every == 0:
-                poses, landmarks, _, ok, err = en.joint_gn_step(prob, W, poses, landmarks, labels)
-                joint_accepted += int(ok)
-                if err:
-                    joint_errors.append(f"sweep {n}: {err}")
+                poses, landmarks, jo = joint_refine(prob, W, poses, landmarks, labels, max_iters=p.joint_iters,
+                                                    step_tol=p.joint_step_tol)
+                joint_accepted += jo.steps
+                joint_log.append(f"{jo.steps}:{jo.reason}")
+                if jo.reason.startswith("error"):
+                    joint_errors.append(f"sweep {n}: {jo.reason[7:]}")
             # x_1..x_T (eq. 14)
             stats = en.step_stats(prob, labels, landmarks, W)
             poses = poses.copy()
@@ -490,6 +536,10 @@ class IcmSlam(BaseSolver):
                     else:
                         labels, landmarks = cand_labels, cand_lm
                         parts = f"eq17+{what}"
+                if p.merge:
+                    labels, landmarks, k = self._merge(prob, inputs, poses, pts, labels, landmarks, p.merge_prob)
+                    merges += k
+                    parts += f"+merge({k})" if k else ""
             # the energy over the observations in the model at the start of this sweep (the stopping rule's
             # comparison), then the model of the next sweep
             lab_same = _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
@@ -524,6 +574,9 @@ class IcmSlam(BaseSolver):
             map_step_parts=parts_log,
             energy_increases=increases,
             joint_steps_accepted=joint_accepted,
+            joint_refinements=joint_log,
+            labels_merged=merges,
+            energy_label_cost=label_cost_energy(landmarks.shape[0], p.label_cost),
             n_out_of_model=int((labels < 0).sum()),
             **{f"energy_{k}": v for k, v in en.energy_terms(prob, W, poses, landmarks, labels).items()},
         )
@@ -556,6 +609,18 @@ class IcmSlam(BaseSolver):
         )
 
     # -- helpers ---------------------------------------------------------------------------------------------
+    @staticmethod
+    def _merge(prob, inputs, poses, pts, labels, landmarks, merge_prob):
+        """χ² label merge (:mod:`slamcli.solvers.icm.merge`) and eq. (17) for the merged labels."""
+        nz = inputs.noise
+        cov, _ = label_covariances(prob.step, prob.z, poses, labels, landmarks.shape[0], float(nz.range_std),
+                                   float(nz.bearing_std))
+        new, k, _ = merge_labels(landmarks, labels, prob.step, cov, merge_prob=merge_prob)
+        if not k:
+            return labels, landmarks, 0
+        new_labels, new_lm = mp.eq17(pts, new)
+        return new_labels, new_lm, k
+
     @staticmethod
     def _means_keep(prob, poses, labels, landmarks):
         """Eq. (17) for fixed labels; a label without observations keeps its previous point."""
