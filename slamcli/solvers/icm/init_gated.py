@@ -105,7 +105,7 @@ def point_jacobian(theta: float, v_body: np.ndarray) -> np.ndarray:
     return J
 
 
-def _inv2(A: np.ndarray) -> np.ndarray:
+def inv2x2(A: np.ndarray) -> np.ndarray:
     """Inverses of ``(..., 2, 2)`` symmetric matrices (closed form)."""
     det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
     out = np.empty_like(A)
@@ -189,13 +189,13 @@ def _associate(index: _LabelIndex, pts, Sz, JPJ, gate: float, birth: float):
             continue
         nu = pts[i] - index.means(js)
         S = JPJ[i] + Sz[i] * (1.0 + 1.0 / index.cnt[js])[:, None, None] + index.C[js]
-        Si = _inv2(S)
+        Si = inv2x2(S)
         d2 = np.einsum("ki,kij,kj->k", nu, Si, nu)
         best_d2[i] = d2.min()
         ok = d2 <= gate
         pairs += [(float(d), i, int(j)) for d, j in zip(d2[ok], js[ok])]
     used: set[int] = set()
-    for d, i, j in sorted(pairs):  # one label per sighting and scan, nearest first
+    for _d, i, j in sorted(pairs):  # one label per sighting and scan, nearest first
         if match[i] == -1 and j not in used:
             match[i] = j
             used.add(j)
@@ -283,7 +283,7 @@ def _scan(prob, index: _LabelIndex, labels, a: int, b: int, x, P, sr, sb, gate, 
             c, s = math.cos(x[2]), math.sin(x[2])
             p = x[:2] + vb[ok] @ np.array([[c, s], [-s, c]])
             Jk = point_jacobian(x[2], vb[ok])
-            Wk = _inv2(Rj)
+            Wk = inv2x2(Rj)
             JtW = np.einsum("kai,kab->kib", Jk, Wk)
             H = Pi + np.einsum("kib,kbj->ij", JtW, Jk)
             r0 = x - xh

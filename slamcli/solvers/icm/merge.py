@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from slamcli.solvers.icm.init_gated import _inv2, chi2_2dof, sighting_cov
+from slamcli.solvers.icm.init_gated import chi2_2dof, inv2x2, sighting_cov
 
 #: candidate pairs are searched within this many standard deviations of the larger label spread
 SEARCH_SIGMAS = 6.0
@@ -70,7 +70,7 @@ def merge_labels(landmarks_xy, labels, step, label_cov, *, merge_prob: float):
         return labels, 0, group
     i, j = pairs[:, 0], pairs[:, 1]
     d = landmarks_xy[i] - landmarks_xy[j]
-    d2 = np.einsum("ka,kab,kb->k", d, _inv2(label_cov[i] + label_cov[j]), d)
+    d2 = np.einsum("ka,kab,kb->k", d, inv2x2(label_cov[i] + label_cov[j]), d)
     keep = d2 <= thr
     i, j, d2 = i[keep], j[keep], d2[keep]
     ok = labels >= 0
