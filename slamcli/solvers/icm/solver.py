@@ -75,6 +75,7 @@ from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
+from slamcli.solvers.icm.presets import apply_preset
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
@@ -121,6 +122,10 @@ class IcmParams:
     merge : bool                 beyond the paper: after each map step, merge labels that pass a χ² test and
                                  were never seen in one scan (:mod:`slamcli.solvers.icm.merge`).
     merge_prob : float           χ² probability of the merge test (2 dof; 0.999 → 13.8).
+    preset : "paper" | "real"    named setting (:mod:`slamcli.solvers.icm.presets`): "paper" = these defaults;
+                                 "real" = accelerate=joint, accelerate_every=1, joint_iters=20, max_sweeps=5,
+                                 merge=true, weights=design (each key still at its paper default takes the
+                                 preset's value; other explicit values win).
     label_cost : float           λ: cost per landmark added to the reported energy (``extra["energy_label_cost"]``,
                                  0 = the paper's Φ_m); with weights=information, merging by the χ² test is
                                  merging when it lowers H + λ·L for λ = χ²₂(merge_prob).
@@ -176,8 +181,12 @@ class IcmParams:
     merge: bool = False
     merge_prob: float = 0.999
     label_cost: float = 0.0
+    preset: Literal["paper", "real"] = "paper"
 
     def __post_init__(self) -> None:
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for key, value in apply_preset(self, defaults).items():
+            object.__setattr__(self, key, value)
         en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
         if not (self.fusion_radius >= 0 and math.isfinite(self.fusion_radius)):
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
