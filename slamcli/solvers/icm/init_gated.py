@@ -34,7 +34,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from slamcli.models.angles import wrap_angle
+from slamcli.models.angles import wrap_angle_fast as wrap_angle
 from slamcli.solvers.icm import energy as en
 from slamcli.types import SlamInputs
 
@@ -183,19 +183,19 @@ def _associate(index: _LabelIndex, pts, Sz, JPJ, gate: float, birth: float):
     c_max = float(np.max(index.C[: index.L, 0, 0] + index.C[: index.L, 1, 1]))
     radius = np.minimum(np.sqrt(birth * (spread * 2.0 + c_max)), MAX_SEARCH_M)
     cands = index.candidates(pts, radius)
-    pairs = []  # (d2, i, j) for every gated pair
-    for i, js in enumerate(cands):
-        if js.size == 0:
-            continue
-        nu = pts[i] - index.means(js)
-        S = JPJ[i] + Sz[i] * (1.0 + 1.0 / index.cnt[js])[:, None, None] + index.C[js]
-        Si = inv2x2(S)
-        d2 = np.einsum("ki,kij,kj->k", nu, Si, nu)
-        best_d2[i] = d2.min()
-        ok = d2 <= gate
-        pairs += [(float(d), i, int(j)) for d, j in zip(d2[ok], js[ok])]
+    ii = np.repeat(np.arange(n), [c.size for c in cands])
+    if ii.size == 0:
+        match[:] = -2
+        return match, best_d2
+    jj = np.concatenate(cands)
+    nu = pts[ii] - index.means(jj)
+    S = JPJ[ii] + Sz[ii] * (1.0 + 1.0 / index.cnt[jj])[:, None, None] + index.C[jj]
+    d2 = np.einsum("ki,kij,kj->k", nu, inv2x2(S), nu)
+    np.minimum.at(best_d2, ii, d2)
+    ok = d2 <= gate
+    pairs = sorted(zip(d2[ok].tolist(), ii[ok].tolist(), jj[ok].tolist()))  # every gated pair (d², i, j)
     used: set[int] = set()
-    for _d, i, j in sorted(pairs):  # one label per sighting and scan, nearest first
+    for _d, i, j in pairs:  # one label per sighting and scan, nearest first
         if match[i] == -1 and j not in used:
             match[i] = j
             used.add(j)
