@@ -53,6 +53,16 @@ Beyond the paper (separate options, default off):
   bias of the paper-exact inverse observation pulls map points towards the robot and drags the poses with them
   (``benchmarks/bench_icm_study.py``).
 
+For long real runs (issue 22; separate options, default off, bundled as ``preset="real"``,
+:mod:`slamcli.solvers.icm.presets`):
+
+* ``init="gated"`` — the on-line init gates a sighting with a χ² test on a propagated pose covariance, and the
+  pose's gain follows that covariance (:mod:`slamcli.solvers.icm.init_gated`, KD-tree search of the map);
+* ``joint_iters`` — with ``accelerate="joint"``, Gauss-Newton steps until the step or the decrease is negligible
+  (:mod:`slamcli.solvers.icm.joint`);
+* ``merge`` — χ² label merge after each map step, never across labels seen in one scan; ``label_cost`` adds
+  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`).
+
 The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
 writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).
 """
