@@ -35,6 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from slamcli.models.angles import wrap_angle_fast as wrap_angle
+from slamcli.solvers.frontend import _inv2 as inv2x2  # closed-form 2×2 inverses
 from slamcli.solvers.icm import energy as en
 from slamcli.types import SlamInputs
 
@@ -103,17 +104,6 @@ def point_jacobian(theta: float, v_body: np.ndarray) -> np.ndarray:
     J[:, 0, 2] = -s * v_body[:, 0] - c * v_body[:, 1]
     J[:, 1, 2] = c * v_body[:, 0] - s * v_body[:, 1]
     return J
-
-
-def inv2x2(A: np.ndarray) -> np.ndarray:
-    """Inverses of ``(..., 2, 2)`` symmetric matrices (closed form)."""
-    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
-    out = np.empty_like(A)
-    out[..., 0, 0] = A[..., 1, 1] / det
-    out[..., 1, 1] = A[..., 0, 0] / det
-    out[..., 0, 1] = -A[..., 0, 1] / det
-    out[..., 1, 0] = -A[..., 1, 0] / det
-    return out
 
 
 def _floor_xy(P: np.ndarray, C: np.ndarray) -> np.ndarray:
