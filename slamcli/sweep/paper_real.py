@@ -464,7 +464,9 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
 
     lines += ["", "### ICM on real recordings: `preset=real` against its goals (issue 22)", "",
               "ICM runs three ways on every recording: the paper's defaults (row `icm`), the information weights "
-              "and `preset=real` (" + _preset_text() + "). Each verdict is computed from the rows above.", ""]
+              "and `preset=real` (" + _preset_text() + "). Each verdict is computed from the rows above."
+              + (" Quick mode: the rows are the excerpts, the goals are the full recordings' (indicative only)."
+                 if quick else ""), ""]
     lines += ["- " + v for v in icm_verdicts(vp_rows, cp_rows, mr_rows, f"the first {dur:g} s of Victoria Park")]
     lines += ["", f"Section time: {time.perf_counter() - t0:.0f} s."]
     return "\n".join(lines), ok
