@@ -48,9 +48,9 @@ def street_world(T: int, seed: int = 0) -> SlamInputs:
                       odometry_xyt=motion.integrate(x0, u_meas, dt), observations=obs, noise=NOISE)
 
 
-def _time(fn) -> tuple[float, object]:
+def _time(fn, *args, **kw) -> tuple[float, object]:
     t0 = time.process_time()
-    out = fn()
+    out = fn(*args, **kw)
     return time.process_time() - t0, out
 
 
@@ -59,13 +59,13 @@ def run(quick: bool = False) -> list[dict]:
     for T in [10_000] if quick else [10_000, 100_000]:
         inputs = street_world(T)
         prob = en.Problem.from_inputs(inputs)
-        cpu, out = _time(lambda: gated_init(prob, inputs, gate_prob=0.99, birth_prob=0.9999))
+        cpu, out = _time(gated_init, prob, inputs, gate_prob=0.99, birth_prob=0.9999)
         rows.append({"init": "gated", "poses": T, "sightings": prob.n_obs, "labels": int(out[2].shape[0]),
                      "cpu_s": cpu, "goal_s": 10.0 if T == 100_000 else None,
                      "met": (cpu <= 10.0) if T == 100_000 else None})
         if T == 10_000:
             W = en.Weights.from_params(1.0, 0.0, 1.0)
-            cpu_p, out_p = _time(lambda: online_init(prob, W, radius=1.0))
+            cpu_p, out_p = _time(online_init, prob, W, radius=1.0)
             rows.append({"init": "online (paper)", "poses": T, "sightings": prob.n_obs,
                          "labels": int(out_p[2].shape[0]), "cpu_s": cpu_p, "goal_s": None, "met": None})
     return rows

@@ -11,6 +11,9 @@
 * **ACFR car park**: every solver; GPS ATE (aligned), beacons found of the 15 surveyed ones (matched within 2 m
   after the trajectory's alignment) and their RMSE.
 
+ICM runs three ways on every recording — its paper defaults, the information weights and ``preset=real`` — and
+the section ends with one computed verdict per ``preset=real`` goal of issue 22 (:func:`icm_verdicts`).
+
 Solvers that do not support a recording refuse in one line (``cuik`` needs error bounds, ``hybrid`` walls and
 DDMR controls); the table shows that line. Quick mode runs the excerpts shipped in ``tests/data`` (Victoria Park
 first :data:`VP_QUICK_S` s, 150 car-park scans, 45 s of MRCLAM robot 1) and a cheaper configuration of the
