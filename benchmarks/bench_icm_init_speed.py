@@ -1,6 +1,6 @@
 """Issue 25 item 5, ICM row: the on-line initialisation at 10k and 100k poses (goal: ≤ 10 s at 100k).
 
-The paper's init (:func:`slamcli.solvers.icm.solver.online_init`) compares every sighting with every map point
+The paper's init (:func:`slamcli.solvers.icm.common.online_init`) compares every sighting with every map point
 (O(L) per sighting: 49 of 70 s at 100k poses in the issue's profile). The gated init
 (:mod:`slamcli.solvers.icm.init_gated`) searches the map through a KD-tree (``scipy.spatial.cKDTree``) and
 carries a pose covariance. World: a random walk on a 5 m street grid, landmarks near the grid nodes, a point
@@ -18,8 +18,8 @@ from scipy.spatial import cKDTree
 
 from slamcli.models import motion, observation
 from slamcli.solvers.icm import energy as en
+from slamcli.solvers.icm.common import online_init
 from slamcli.solvers.icm.init_gated import gated_init
-from slamcli.solvers.icm.solver import online_init
 from slamcli.types import NoiseSpec, Observations, SlamInputs
 
 #: sensor range, m, and noise of the world
