@@ -37,3 +37,21 @@ def test_mrclam_sentences_mean_over_robots():
     text = " ".join(pr._mrclam_sentences(rows))
     assert "`ekf` has the lowest mean ATE (0.500 m)" in text and "`graph` 0.700 m" in text
     assert "Runs worse than dead reckoning: `graph` robot 2." in text  # not odometry: it is the reference
+
+
+def test_icm_verdicts_follow_the_rows():
+    def gps(ate, found=15):
+        return [{"solver": pr.ICM_PRESET_ROW, "refused": None, "gps_ate": ate, "survey_matched": found,
+                 "n_survey": 15}]
+
+    def mr(icm, graph):
+        return [{"robot": 1, "solver": pr.ICM_PRESET_ROW, "refused": None, "ate": icm},
+                {"robot": 1, "solver": "graph", "refused": None, "ate": graph}]
+
+    good = pr.icm_verdicts(gps(1.39), gps(0.44), mr(0.33, 0.31), "VP")
+    assert [("**met**" in v) for v in good] == [True, True, True]
+    assert "GPS ATE 1.390 m, goal ≤ 1.4 m" in good[0] and "robot 1 0.330 vs 0.310 m" in good[2]
+    bad = pr.icm_verdicts(gps(1.41), gps(0.44, found=14), mr(0.35, 0.31), "VP")  # 0.35 > 1.1 · 0.31 = 0.341
+    assert [("**not met**" in v) for v in bad] == [True, True, True]
+    missing = pr.icm_verdicts([], None, [], "VP")
+    assert all("not checked" in v for v in missing)

@@ -38,6 +38,7 @@ import scipy.sparse.linalg as spla
 from slamcli.models import motion, observation, potentials, se2
 from slamcli.models.ackermann import ackermann_jacobians, ackermann_step, centre_twist, integrate_ackermann
 from slamcli.models.angles import wrap_angle, wrap_angle_fast
+from slamcli.solvers.nls import factorize_information
 from slamcli.solvers.nls.marginals import block_marginals
 from slamcli.types import SlamInputs
 
@@ -812,7 +813,8 @@ def solve_normal_schur(J, r, n_pose: int, damping: float = 1e-9) -> np.ndarray:
 
 def solve_normal_sparse(J, r, damping: float = 1e-9) -> np.ndarray:
     """Gauss-Newton step ``δ = −(JᵀJ)⁻¹Jᵀr`` by one sparse LU of the whole normal matrix with a fill-reducing
-    minimum-degree ordering of ``H + Hᵀ`` (symmetric mode).
+    minimum-degree ordering of ``H + Hᵀ`` (symmetric mode) — :func:`slamcli.solvers.nls.factorize_information`,
+    the factorisation graph SLAM uses; a singular system raises ``numpy.linalg.LinAlgError``.
 
     Nothing dense of size poses × landmarks is ever formed (:func:`solve_normal_schur`'s ``H_pp⁻¹ H_pm`` is a
     dense ``3T × 2L`` block: 9.2 GB at 100k poses and ~5k landmarks). The ordering adapts to both shapes of the
@@ -824,8 +826,7 @@ def solve_normal_sparse(J, r, damping: float = 1e-9) -> np.ndarray:
     g = J.T @ r
     diag = H.diagonal()
     H = (H + sp.diags(damping * (diag + (diag == 0)), format="csc")).tocsc()
-    lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    return -lu.solve(g)
+    return -factorize_information(H).solve(g)
 
 
 def pack(poses, landmarks) -> np.ndarray:

@@ -72,6 +72,16 @@ Beyond the paper (separate options, default off):
   bias of the paper-exact inverse observation pulls map points towards the robot and drags the poses with them
   (``benchmarks/bench_icm_study.py``).
 
+For long real runs (issue 22; separate options, default off, bundled as ``preset="real"``,
+:mod:`slamcli.solvers.icm.presets`):
+
+* ``init="gated"`` — the on-line init gates a sighting with a χ² test on a propagated pose covariance, and the
+  pose's gain follows that covariance (:mod:`slamcli.solvers.icm.init_gated`, KD-tree search of the map);
+* ``joint_iters`` — with ``accelerate="joint"``, Gauss-Newton steps until the step or the decrease is negligible
+  (:mod:`slamcli.solvers.icm.joint`);
+* ``merge`` — χ² label merge after each map step, never across labels seen in one scan; ``label_cost`` adds
+  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`).
+
 The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
 writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).
 """
@@ -90,6 +100,10 @@ from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm import surface as surf
 from slamcli.solvers.icm.common import online_init, reported_labels, stop_decision
+from slamcli.solvers.icm.init_gated import gated_init
+from slamcli.solvers.icm.joint import joint_refine
+from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
+from slamcli.solvers.icm.presets import apply_preset
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -113,7 +127,13 @@ class IcmParams:
     filtered : "rematch" | "drop"  observations of removed map points: matched again to the nearest remaining
                                  point in the next sweep (paper eq. 13) or out of the model for good (default,
                                  chosen by measurement, see the module docstring).
-    init : "online" | "kinematic"  Algorithm 2 step 1 as written, or poses from g(x, u) only (Fig. 6).
+    init : "online" | "kinematic" | "gated"  Algorithm 2 step 1 as written, poses from g(x, u) only (Fig. 6),
+                                 or (beyond the paper) the on-line init whose gate and gain follow a propagated
+                                 pose covariance (:mod:`slamcli.solvers.icm.init_gated`).
+    gate_prob : float            init=gated: χ² probability of the association gate (2 dof; 0.99 → 9.21).
+    birth_prob : float           init=gated: χ² probability of the birth test — a sighting farther than this
+                                 from every label starts a new one (0.9999 → 18.4); in between it stays
+                                 unlabelled until the sweeps re-match it.
     correspondences : "nearest" | "reported"  nearest-map-point matchings (eqs. 9-13), or fixed labels from the
                                  sensor-reported ids (known correspondences; no fusion, no filter).
     max_sweeps : int             maximum number of ICM iterations N.
@@ -125,6 +145,20 @@ class IcmParams:
     schedule : "sequential" | "parallel"  paper visit order, or odd/even coding scheme (beyond the paper).
     accelerate : "none" | "joint"  occasional joint Gauss-Newton step (beyond the paper).
     accelerate_every : int       sweeps between joint steps.
+    joint_iters : int            accelerate=joint: Gauss-Newton steps per joint refinement (1 = one step, as
+                                 before); more steps stop early on ``joint_step_tol`` or a negligible energy
+                                 decrease (:mod:`slamcli.solvers.icm.joint`).
+    joint_step_tol : float       stop the joint refinement when its largest step is below this (m / rad).
+    merge : bool                 beyond the paper: after each map step, merge labels that pass a χ² test and
+                                 were never seen in one scan (:mod:`slamcli.solvers.icm.merge`).
+    merge_prob : float           χ² probability of the merge test (2 dof; 0.999 → 13.8).
+    preset : "paper" | "real"    named setting (:mod:`slamcli.solvers.icm.presets`): "paper" = these defaults;
+                                 "real" = accelerate=joint, accelerate_every=1, joint_iters=20, max_sweeps=5,
+                                 merge=true, weights=design (each key still at its paper default takes the
+                                 preset's value; other explicit values win).
+    label_cost : float           λ: cost per landmark added to the reported energy (``extra["energy_label_cost"]``,
+                                 0 = the paper's Φ_m); with weights=information, merging by the χ² test is
+                                 merging when it lowers H + λ·L for λ = χ²₂(merge_prob).
     monotone : bool              apply label fusion and the ς filter only when they do not raise the energy
                                  above the sweep's starting energy (eq. 17 always applies); False = the
                                  paper's unguarded map step.
@@ -159,7 +193,7 @@ class IcmParams:
     Q: tuple[float, ...] = (1.0,)
     fusion_radius: float = 1.0
     min_observations: int = 1
-    init: Literal["online", "kinematic"] = "online"
+    init: Literal["online", "kinematic", "gated"] = "online"
     correspondences: Literal["nearest", "reported"] = "nearest"
     max_sweeps: int = 100
     energy_rtol: float = 1e-6
@@ -178,14 +212,25 @@ class IcmParams:
     trace_poses_every: int = 1
     surface: bool = False
     range_bias: Literal["none", "estimate"] = "none"
+    gate_prob: float = 0.99
+    birth_prob: float = 0.9999
+    joint_iters: int = 1
+    joint_step_tol: float = 1e-4
+    merge: bool = False
+    merge_prob: float = 0.999
+    label_cost: float = 0.0
+    preset: Literal["paper", "real"] = "paper"
 
     def __post_init__(self) -> None:
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for key, value in apply_preset(self, defaults).items():
+            object.__setattr__(self, key, value)
         en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
         if not (self.fusion_radius >= 0 and math.isfinite(self.fusion_radius)):
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
         if self.min_observations < 0:
             raise ValueError(f"min_observations must be >= 0, got {self.min_observations}")
-        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every"):
+        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters"):
             if getattr(self, name) < (0 if name == "max_sweeps" else 1):
                 raise ValueError(
                     f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
@@ -194,6 +239,15 @@ class IcmParams:
             raise ValueError(f"energy_rtol must be >= 0, got {self.energy_rtol}")
         if not (self.range_offset >= 0 and math.isfinite(self.range_offset)):
             raise ValueError(f"range_offset must be a finite number >= 0, got {self.range_offset}")
+        if not (0.0 < self.merge_prob < 1.0):
+            raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
+        for name in ("joint_step_tol", "label_cost"):
+            v = getattr(self, name)
+            if not (v >= 0 and math.isfinite(v)):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+        if not (0.0 < self.gate_prob <= self.birth_prob < 1.0):
+            raise ValueError(f"need 0 < gate_prob <= birth_prob < 1, got gate_prob={self.gate_prob}, "
+                             f"birth_prob={self.birth_prob}")
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
 
@@ -276,6 +330,13 @@ class IcmSlam(BaseSolver):
         if init is not None:
             poses, labels, landmarks = self._from_result(prob, init, fixed, W)
             extra["init"] = f"result:{init.solver}"
+        elif p.init == "gated":
+            try:
+                poses, labels, landmarks, step_s, _ = gated_init(
+                    prob, inputs, gate_prob=p.gate_prob, birth_prob=p.birth_prob, fixed_labels=fixed)
+            except ValueError as exc:
+                raise ConfigError(f"icm: {exc}") from None
+            extra["init"] = p.init
         else:
             poses, labels, landmarks, step_s = online_init(
                 prob,
@@ -286,6 +347,7 @@ class IcmSlam(BaseSolver):
                 fixed_labels=fixed,
             )
             extra["init"] = p.init
+        if init is None:
             timings["init_ms_per_step"] = float(1e3 * step_s.mean()) if step_s.size else 0.0
             timings["init_ms_per_step_max"] = float(1e3 * step_s.max()) if step_s.size else 0.0
             if not reported:  # end of step 1: the three-step map update of §4 (+ ς filter)
@@ -308,8 +370,9 @@ class IcmSlam(BaseSolver):
         status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
         parts_log: list[str] = []
         rejected = increases = 0
-        joint_accepted = 0
+        joint_accepted = merges = 0
         joint_errors: list[str] = []
+        joint_log: list[str] = []
         for n in range(1, p.max_sweeps + 1):
             t0 = time.perf_counter()
             if base_z is not None:  # the sweep's surface offsets / range bias, then its starting energy
@@ -324,10 +387,12 @@ class IcmSlam(BaseSolver):
                 labels = labels.copy()
                 labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
             if p.accelerate == "joint" and n % p.accelerate_every == 0:
-                poses, landmarks, _, ok, err = en.joint_gn_step(prob, W, poses, landmarks, labels)
-                joint_accepted += int(ok)
-                if err:
-                    joint_errors.append(f"sweep {n}: {err}")
+                poses, landmarks, jo = joint_refine(prob, W, poses, landmarks, labels, max_iters=p.joint_iters,
+                                                    step_tol=p.joint_step_tol)
+                joint_accepted += jo.steps
+                joint_log.append(f"{jo.steps}:{jo.reason}")
+                if jo.reason.startswith("error"):
+                    joint_errors.append(f"sweep {n}: {jo.reason[7:]}")
             # x_1..x_T (eq. 14)
             stats = en.step_stats(prob, labels, landmarks, W)
             poses = poses.copy()
@@ -355,6 +420,10 @@ class IcmSlam(BaseSolver):
                     else:
                         labels, landmarks = cand_labels, cand_lm
                         parts = f"eq17+{what}"
+                if p.merge:
+                    labels, landmarks, k = self._merge(prob, inputs, poses, pts, labels, landmarks, p.merge_prob)
+                    merges += k
+                    parts += f"+merge({k})" if k else ""
             # the energy over the observations in the model at the start of this sweep (the stopping rule's
             # comparison), then the model of the next sweep
             lab_same = _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
@@ -389,6 +458,9 @@ class IcmSlam(BaseSolver):
             map_step_parts=parts_log,
             energy_increases=increases,
             joint_steps_accepted=joint_accepted,
+            joint_refinements=joint_log,
+            labels_merged=merges,
+            energy_label_cost=label_cost_energy(landmarks.shape[0], p.label_cost),
             n_out_of_model=int((labels < 0).sum()),
             surface=bool(p.surface), range_bias_m=float(bias),
             **{f"energy_{k}": v for k, v in en.energy_terms(prob, W, poses, landmarks, labels).items()},
@@ -444,6 +516,18 @@ class IcmSlam(BaseSolver):
             except ConfigError as exc:
                 raise ConfigError(f"{exc}; add -p range_bias=estimate to estimate a range offset instead") from None
         return rho, prob.z.copy(), 0.0
+
+    @staticmethod
+    def _merge(prob, inputs, poses, pts, labels, landmarks, merge_prob):
+        """χ² label merge (:mod:`slamcli.solvers.icm.merge`) and eq. (17) for the merged labels."""
+        nz = inputs.noise
+        cov, _ = label_covariances(prob.step, prob.z, poses, labels, landmarks.shape[0], float(nz.range_std),
+                                   float(nz.bearing_std))
+        new, k, _ = merge_labels(landmarks, labels, prob.step, cov, merge_prob=merge_prob)
+        if not k:
+            return labels, landmarks, 0
+        new_labels, new_lm = mp.eq17(pts, new)
+        return new_labels, new_lm, k
 
     @staticmethod
     def _means_keep(prob, poses, labels, landmarks):
