@@ -75,87 +75,144 @@ def with_true_association(dataset):
     return dataclasses.replace(inp, observations=obs)
 
 
-def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200, closest: bool = True):
-    """Two feasible solutions minimising / maximising one coordinate, found by SLSQP over the bounded errors.
+class FeasibleSet:
+    """The bounded-error problem of one run under a given association, over its normalised errors.
 
-    Variables: the normalised errors ``u ∈ [-1, 1]`` of every odometry leg (d, α) and observation (r, b);
-    poses follow by chaining, each landmark from its first observation, and every later observation of the
-    same (true) landmark must reproduce it (equality constraints). A point returned with ``|constraint| <
-    1e-6`` is a genuine solution of the bounded-error problem, so ANY sound enclosure must contain both
-    extremes: their distance is a lower bound on the box width of that coordinate (local optimisation may
-    miss a wider solution; it never overstates the bound).
-
-    ``closest``: also require the closest-landmark sensor's negative information (inequalities): from every
+    Variables ``u ∈ [-1, 1]^n``: the errors of every odometry leg (d, α) and observation (r, b), divided by
+    their declared half-widths. Poses follow by chaining (turn, then move), each landmark from its first
+    observation, and every later observation of the same landmark must reproduce it (equality constraints,
+    :meth:`residual`). With a closest-landmark sensor (``NoiseBounds.closest_only``) and ``closest``: from every
     observing pose, every other landmark is at least as far as the true range of the one reported
-    (``‖l_m − p_t‖ ≥ r̃ + u_r``; stricter than the sensor model's "or closer than the minimum range", so the
-    points found stay genuine solutions). ``max_violation`` covers equalities and inequalities.
+    (``‖l_m − p_t‖ ≥ r̃ + u_r``, :meth:`farther`; stricter than the sensor model's "or closer than the minimum
+    range", so a point satisfying it is a genuine solution), and a pose that reported nothing has every
+    landmark beyond ``max_range``. A point with ``violation(u) < FEASIBLE_TOL`` is a solution of the
+    bounded-error problem, so every sound enclosure contains its poses and landmarks.
 
-    ``coordinate``: ("pose", t, c) or ("landmark", true index, c). Returns ``(lo, hi, max_violation)``.
+    Written from paper 004 §3-§6 independently of the solver's contractors (plain floats, no intervals).
     """
-    from scipy.optimize import minimize
 
-    from slamcli.sim.bounded import legs_from_odometry
+    def __init__(self, inputs, association, closest: bool = True) -> None:
+        from slamcli.sim.bounded import legs_from_odometry
 
-    inp = dataset.inputs
-    nb = inp.noise_bounds
-    obs = inp.observations
-    lab = dataset.truth.obs_landmark
-    legs = legs_from_odometry(inp.odometry_xyt)
-    T, N = len(legs), len(obs)
-    hd, ha = (float(x) for x in nb.odometry_half_width)
-    hr, hb = float(nb.range_half_width), float(nb.bearing_half_width)
+        nb = inputs.noise_bounds
+        self.inputs, self.obs = inputs, inputs.observations
+        self.lab = np.asarray(association, np.int64)
+        self.legs = legs_from_odometry(inputs.odometry_xyt)
+        self.T, self.N = len(self.legs), len(self.obs)
+        self.h = np.concatenate([np.full(self.T, float(nb.odometry_half_width[0])),
+                                 np.full(self.T, float(nb.odometry_half_width[1])),
+                                 np.full(self.N, float(nb.range_half_width)),
+                                 np.full(self.N, float(nb.bearing_half_width))])
+        self.n = 2 * self.T + 2 * self.N
+        labels = sorted(set(self.lab.tolist()))
+        self.others = ([(i, m) for i in range(self.N) for m in labels if m != int(self.lab[i])]
+                       if closest and nb.closest_only else [])
+        per_pose = np.diff(np.asarray(self.obs.offsets))
+        self.silent = ([(t, m) for t in np.flatnonzero(per_pose == 0) for m in labels]
+                       if closest and nb.closest_only and np.isfinite(inputs.max_range) else [])
 
-    def unpack(u):
-        du, au = u[:T] * hd, u[T:2 * T] * ha
-        ru, bu = u[2 * T:2 * T + N] * hr, u[2 * T + N:] * hb
+    def unpack(self, u):
+        """Poses ``(T+1, 3)``, landmarks ``{label: (2,)}`` and the re-observation residuals of ``u``."""
+        e = u * self.h
+        T, N, obs, legs = self.T, self.N, self.obs, self.legs
         P = np.zeros((T + 1, 3))
-        P[0] = inp.x0
+        P[0] = self.inputs.x0
         for t in range(T):
-            th = P[t, 2] + legs[t, 1] + au[t]
-            d = legs[t, 0] + du[t]
+            th = P[t, 2] + legs[t, 1] + e[T + t]
+            d = legs[t, 0] + e[t]
             P[t + 1] = [P[t, 0] + d * math.cos(th), P[t, 1] + d * math.sin(th), th]
         L: dict[int, np.ndarray] = {}
         res = []
         for i in range(N):
             t = int(obs.step[i])
-            ph = P[t, 2] + obs.bearing_rad[i] + bu[i]
-            q = P[t, :2] + (obs.range_m[i] + ru[i]) * np.array([math.cos(ph), math.sin(ph)])
-            if int(lab[i]) in L:
-                res.append(q - L[int(lab[i])])
+            ph = P[t, 2] + obs.bearing_rad[i] + e[2 * T + N + i]
+            q = P[t, :2] + (obs.range_m[i] + e[2 * T + i]) * np.array([math.cos(ph), math.sin(ph)])
+            j = int(self.lab[i])
+            if j in L:
+                res.append(q - L[j])
             else:
-                L[int(lab[i])] = q
+                L[j] = q
         return P, L, (np.concatenate(res) if res else np.zeros(0))
 
-    n = 2 * T + 2 * N
-    cons = [{"type": "eq", "fun": lambda u: unpack(u)[2]}]
-    others = [(i, m) for i in range(N) for m in sorted(set(lab.tolist())) if m != int(lab[i])]
+    def residual(self, u) -> np.ndarray:
+        return self.unpack(u)[2]
 
-    def farther(u):  # ‖l_m − p_t‖ − r_i ≥ 0 for every observation i and other landmark m
-        P, L, _ = unpack(u)
-        ru = u[2 * T:2 * T + N] * hr
-        return np.array([np.hypot(*(L[m] - P[int(obs.step[i]), :2])) - (obs.range_m[i] + ru[i])
-                         for i, m in others])
+    def farther(self, u) -> np.ndarray:
+        """``‖l_m − p_t‖ − r_i ≥ 0`` per (observation, other landmark) and ``‖l_m − p_t‖ − r_max`` per (silent
+        pose, landmark)."""
+        P, L, _ = self.unpack(u)
+        r = self.obs.range_m + u[2 * self.T:2 * self.T + self.N] * self.h[2 * self.T:2 * self.T + self.N]
+        near = [np.hypot(*(L[m] - P[int(self.obs.step[i]), :2])) - r[i] for i, m in self.others]
+        far = [np.hypot(*(L[m] - P[t, :2])) - self.inputs.max_range for t, m in self.silent]
+        return np.asarray(near + far, float)
 
-    if closest and others:
-        cons.append({"type": "ineq", "fun": farther})
-    box = [(-1.0, 1.0)] * n
-    kind, idx, c = coordinate
+    def violation(self, u) -> float:
+        """Largest constraint violation of ``u`` (equalities and inequalities; bounds are clipped)."""
+        return max(float(np.abs(self.residual(u)).max(initial=0.0)), float(-self.farther(u).min(initial=0.0)))
 
-    def value(u):
-        P, L, _ = unpack(u)
-        return P[idx, c] if kind == "pose" else L[idx][c]
+    def value(self, u, coordinate) -> float:
+        kind, idx, c = coordinate
+        P, L, _ = self.unpack(u)
+        return float(P[idx, c] if kind == "pose" else L[idx][c])
 
-    start = minimize(lambda u: u @ u, np.zeros(n), constraints=cons, bounds=box, method="SLSQP",
-                     options={"maxiter": maxiter}).x
-    ext, viol = [], 0.0
-    for sgn in (1.0, -1.0):
-        r = minimize(lambda u, s=sgn: s * value(u), start, constraints=cons, bounds=box, method="SLSQP",
-                     options={"maxiter": maxiter})
-        u = np.clip(r.x, -1.0, 1.0)
-        viol = max(viol, float(np.abs(unpack(u)[2]).max(initial=0.0)),
-                   float(-farther(u).min(initial=0.0)) if closest and others else 0.0)
-        ext.append(value(u))
-    return float(ext[0]), float(ext[1]), viol
+    def constraints(self) -> list[dict]:
+        cons = [{"type": "eq", "fun": self.residual}]
+        if self.others or self.silent:
+            cons.append({"type": "ineq", "fun": self.farther})
+        return cons
+
+    def extremes(self, coordinate, starts, maxiter: int = 200) -> tuple[float, float, float]:
+        """Smallest and largest value of one coordinate over the feasible points SLSQP finds from each of
+        ``starts`` (rows of ``u``, each first projected onto the feasible set), and the largest violation among
+        the points kept (those with violation ``< FEASIBLE_TOL``; NaN bounds when none). Returns
+        ``(lo, hi, max_violation)``: an INNER bound of the feasible hull (local optimisation can miss a wider
+        solution, never overstate it)."""
+        from scipy.optimize import minimize
+
+        cons, box = self.constraints(), [(-1.0, 1.0)] * self.n
+        lo, hi, worst = math.inf, -math.inf, 0.0
+        for u0 in np.atleast_2d(starts):
+            x0 = minimize(lambda u, u0=u0: (u - u0) @ (u - u0), u0, constraints=cons, bounds=box,
+                          method="SLSQP", options={"maxiter": maxiter}).x
+            for sgn in (1.0, -1.0):
+                r = minimize(lambda u, s=sgn: s * self.value(u, coordinate), x0, constraints=cons, bounds=box,
+                             method="SLSQP", options={"maxiter": maxiter})
+                for u in (np.clip(r.x, -1.0, 1.0), np.clip(x0, -1.0, 1.0)):
+                    v = self.violation(u)
+                    if v < FEASIBLE_TOL:
+                        val = self.value(u, coordinate)
+                        lo, hi, worst = min(lo, val), max(hi, val), max(worst, v)
+        return (lo, hi, worst) if lo <= hi else (math.nan, math.nan, math.inf)
+
+
+#: a point whose largest constraint violation is below this is taken as a solution of the bounded-error
+#: problem (m; the boxes are compared with this slack too)
+FEASIBLE_TOL = 1e-6
+
+
+def hull_starts(n: int, n_starts: int, seed: int = 0) -> np.ndarray:
+    """``(n_starts, n)`` starting points: zero errors, then uniform draws in ``[-1, 1]^n`` (seeded)."""
+    rng = np.random.default_rng(seed)
+    return np.vstack([np.zeros((1, n)), rng.uniform(-1.0, 1.0, (max(n_starts - 1, 0), n))])
+
+
+def inner_hull(dataset, coordinates, n_starts: int = 4, seed: int = 0, maxiter: int = 200,
+               closest: bool = True) -> dict:
+    """Inner bound of the feasible hull per coordinate under the TRUE association (harness: reads the truth).
+
+    Returns ``{coordinate: (lo, hi, max_violation)}`` from :meth:`FeasibleSet.extremes` with
+    :func:`hull_starts`; every sound box must contain ``[lo, hi]``.
+    """
+    fs = FeasibleSet(dataset.inputs, dataset.truth.obs_landmark, closest=closest)
+    starts = hull_starts(fs.n, n_starts, seed)
+    return {c: fs.extremes(c, starts, maxiter) for c in coordinates}
+
+
+def feasible_extent(dataset, coordinate: tuple[str, int, int], maxiter: int = 200, closest: bool = True):
+    """Two feasible solutions minimising / maximising one coordinate from the zero-error start (see
+    :class:`FeasibleSet`; ``coordinate``: ("pose", t, c) or ("landmark", true index, c)). Returns
+    ``(lo, hi, max_violation)``."""
+    return inner_hull(dataset, [coordinate], 1, 0, maxiter, closest)[coordinate]
 
 
 def loop_closure_rows(dataset) -> np.ndarray:

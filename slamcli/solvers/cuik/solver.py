@@ -78,6 +78,16 @@ class CuikParams:
                                "does notice the closest landmark"). Sound; False = the paper's graphs only.
     separation : bool          when the data declare ``NoiseBounds.min_separation > 0`` (a map prior, not a
                                sensor fact): every pair of landmark labels is at least that far apart.
+    hull_leaves : int          0 = off; else a final branch-and-bound pass (runs after 3B and bisection) that
+                               moves each end of every ``hull_targets`` variable to the extreme over a cover
+                               by propagated leaves, bisecting at most this many leaves per end (sound; the
+                               boxes approach the hull of the feasible set, paper 004's "sharp" boxes).
+    hull_targets : "landmarks" | "all"
+                               the variables whose ends the hull pass tightens (landmark coordinates, or
+                               every pose and landmark coordinate).
+    hull_split : "legs" | "poses" | "all"
+                               what the hull pass bisects: the odometry legs (d, α) — the independent
+                               errors — or pose positions and headings, or both with landmarks.
     rank : str                 order used by the cap and for the output (a heuristic, not a guarantee):
                                ``parsimony_volume`` = fewest landmarks, then the LARGEST box log-volume (under
                                uniform errors an association's likelihood is proportional to the volume of
@@ -103,6 +113,9 @@ class CuikParams:
     recovery_slack: float = 1e-9
     negative_information: bool = True
     separation: bool = True
+    hull_leaves: int = 0
+    hull_targets: Literal["landmarks", "all"] = "landmarks"
+    hull_split: Literal["legs", "poses", "all"] = "poses"
     rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_volume"
 
     def __post_init__(self) -> None:
@@ -110,6 +123,8 @@ class CuikParams:
             raise ValueError("tol must be > 0")
         if self.max_hypotheses < 1:
             raise ValueError("max_hypotheses must be >= 1")
+        if self.hull_leaves < 0:
+            raise ValueError("hull_leaves must be >= 0")
         if self.shave_slices < 0 or self.shave_rounds < 1:
             raise ValueError("shave_slices must be >= 0 and shave_rounds >= 1")
         if self.recovery_slack < 0:
@@ -329,7 +344,7 @@ class CuikSlam(BaseSolver):
                 assoc=np.full(len(obs), -1, np.int64), t_start=t_start, extra=extra,
                 message=f"every hypothesis became empty at {where}: the data contradict the declared bounds")
 
-        if p.shave_slices > 0 or p.bisect_leaves > 0:
+        if p.shave_slices > 0 or p.bisect_leaves > 0 or p.hull_leaves > 0:
             kept = []
             for h in hyps:
                 variables = [v for v, x in enumerate(h.box) if x.diam() > 10 * p.tol]
@@ -340,6 +355,8 @@ class CuikSlam(BaseSolver):
                     ok = bisect_hull(h.box, h.edges, h.adj, [3 * t + 2 for t in range(n_poses)],
                                      narrow_theta=p.narrow_theta, tol=p.tol, max_leaves=p.bisect_leaves,
                                      counter=counter)
+                if ok and p.hull_leaves > 0:
+                    ok = _hull(h, p, n_poses, base, counter)
                 if ok:
                     kept.append(h)
             hyps = kept
@@ -368,6 +385,28 @@ class CuikSlam(BaseSolver):
                                landmarks_xy=lms, assoc=boxes.assoc[0], t_start=t_start, message=message,
                                extra=extra)
         return dataclasses.replace(res, hypotheses=boxes)
+
+
+def _hull(h, p: CuikParams, n_poses: int, base: int, counter) -> bool:
+    """The final branch-and-bound pass (``hull_leaves``) on one hypothesis; False when it is refuted."""
+    from slamcli.solvers.cuik.propagate import hull_pass
+
+    poses = [v for t in range(1, n_poses) for v in (3 * t, 3 * t + 1, 3 * t + 2)]
+    legs = list(range(3 * n_poses, base))
+    lms = list(range(base, len(h.box)))
+    targets = lms if p.hull_targets == "landmarks" else poses + lms
+    split = {"legs": legs, "poses": poses, "all": poses + legs + lms}[p.hull_split]
+    # widths compared in metres: an angle times HULL_LEVER (a heading or turn error moves a point that far)
+    scales = [HULL_LEVER if (v < 3 * n_poses and v % 3 == 2) or (3 * n_poses <= v < base and (v - 3 * n_poses) % 2)
+              else 1.0 for v in split]
+    return hull_pass(h.box, h.edges, h.adj, targets, split, scales, narrow_theta=p.narrow_theta, tol=p.tol,
+                     max_leaves=p.hull_leaves, min_width=HULL_MIN_WIDTH, counter=counter)
+
+
+#: lever arm (m) that turns an angle width into a length for the hull pass's choice of split variable
+HULL_LEVER = 10.0
+#: the hull pass stops splitting a leaf once every scaled split variable is narrower than this (m)
+HULL_MIN_WIDTH = 1e-3
 
 
 def _to_arrays(hyps, n_poses: int, n_obs: int, base: int) -> BoxHypotheses:
