@@ -4,7 +4,7 @@ Data: ``shared/datasets/pose_graphs`` (Intel, MIT, CSAIL, Manhattan M3500, City1
 PROVENANCE.txt), imported with :func:`slamcli.datasets.g2o.import_graph` (odometry chain + between-factors with
 every edge's information matrix). For each dataset and each initialisation (``odometry``: the chained
 odometry; ``chordal``: chordal relaxation of the rotations + linear translations,
-:mod:`slamcli.solvers.pose_init`) both optimisers get the same factor graph (PriorFactorPose2 on x_0 with
+:mod:`slamcli.solvers.graph.init`) both optimisers get the same factor graph (PriorFactorPose2 on x_0 with
 σ = 1e-4, BetweenFactorPose2 with ``noiseModel.Gaussian.Information``) and the same initial values, the same
 relative-decrease tolerance (1e-10) and iteration budget (100).
 

@@ -21,7 +21,7 @@ machine — and ``rss_ratio`` for peak RSS):
   ``LevenbergMarquardtOptimizer`` on the same factor graph and start + ``gtsam.Marginals`` of every pose
   and landmark. Goal: peak RSS < 4 GB at 100k, time ≤ 1.5× GTSAM. ``details`` also hold the marginals'
   own share on both sides (``marginals_s`` / ``marginals_cpu_s``; ours: the selected inverse of H on
-  CHOLMOD's factor, :mod:`slamcli.solvers.selinv`, or the SciPy Schur path without CHOLMOD).
+  CHOLMOD's factor, :mod:`slamcli.solvers.nls.selinv`, or the SciPy Schur path without CHOLMOD).
 * ``icm-joint`` — ``icm`` with ``accelerate=joint``, reported correspondences, vs GTSAM LM (no marginals)
   on the same data. Goal: < 4 GB at 100k.
 * ``ekf`` (size = state dimension n = 103 / 403 / 2003) — :mod:`benchmarks.bench_ekf`'s scale world, our
@@ -166,7 +166,8 @@ def _task(task: dict) -> dict:
     rss0, cpu0, t0 = _rss_mb(), _cpu_s(), time.perf_counter()
     status = "ok"
     if kind == "graph":
-        from slamcli.solvers import graph, selinv
+        from slamcli.solvers import graph
+        from slamcli.solvers.nls import selinv
 
         marg: dict = {}
         laplace = graph.laplace_marginals

@@ -109,8 +109,10 @@ def test_init_robust_reaches_the_gaussian_optimum_from_inside_its_basin(victoria
 
 def test_init_robust_needs_the_gtsam_model(victoria):
     inputs, _ = victoria
-    with pytest.raises(SolverError, match="init=robust needs model=gtsam"):
+    with pytest.raises(ValueError, match="init=robust needs model=gtsam"):
         _solve(inputs, init="robust", model="paper")
+    with pytest.raises(ValueError, match="init=incremental builds a nearest-neighbour association"):
+        graph.GraphParams(init="incremental", association="reported")
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -253,9 +253,9 @@ def test_fixed_columns_do_not_move():
 # ---------------------------------------------------------------------------------------------------------
 def test_chain_solver_equals_dense_solve():
     _, gp = _small_problem("gtsam", T=30, n_landmarks=6)
-    asm = nls._Assembler(gp.problem)
+    asm = nls.Assembler(gp.problem)
     _, data, g = asm.linearize(gp.x0, nls.NlsParams())
-    cs = nls._ChainSolver(asm, gp.n_poses, 3)
+    cs = nls.ChainSolver(asm, gp.n_poses, 3)
     assert cs.ok
     H = asm.matrix(data).toarray()
     np.testing.assert_allclose(cs.solve(data, -g), np.linalg.solve(H, -g), rtol=1e-9, atol=1e-12)
@@ -323,9 +323,9 @@ def _exploding_chain(n=6, d0=1e-24):
 
 def test_banded_cholesky_breakdown_falls_back_and_gauss_newton_takes_damped_steps():
     prob, x0 = _exploding_chain()
-    asm = nls._Assembler(prob)
+    asm = nls.Assembler(prob)
     _, data, g = asm.linearize(x0, nls.NlsParams())
-    assert nls._ChainSolver(asm, 6, 1).solve(data, -g) is None  # the breakdown this test is about
+    assert nls.ChainSolver(asm, 6, 1).solve(data, -g) is None  # the breakdown this test is about
     # before the fix GN stopped at x0 with FAILED "singular normal equations"
     gn = nls.solve(prob, x0, nls.NlsParams(method="gn", linear_solver="chain"))
     assert gn.status == Status.CONVERGED and np.all(np.isfinite(gn.x))
@@ -365,7 +365,7 @@ def test_iterations_are_accepted_steps_and_the_message_says_so():
 
 def test_marginals_refuse_an_indefinite_information_matrix():
     prob, x0 = _exploding_chain()
-    asm = nls._Assembler(prob)
+    asm = nls.Assembler(prob)
     H = asm.matrix(asm.linearize(x0, nls.NlsParams())[1])  # H at the near-singular start
     with pytest.raises(nls.NotPositiveDefiniteError) as exc:
         nls.marginals_chain_border(H, 6, 1)

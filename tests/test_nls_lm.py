@@ -166,7 +166,7 @@ def test_lm_stops_as_converged_when_lambda_exceeds_lambda_max():
 @pytest.mark.parametrize("kind", ["superlu", "chain"] + (["cholmod"] if nls.cholmod_available() else []))
 def test_linear_solvers_equal_the_dense_solve_and_reuse_their_analysis(small, kind):
     _, _, gp = small
-    asm = nls._Assembler(gp.problem)
+    asm = nls.Assembler(gp.problem)
     lin = nls.make_linear_solver(asm, nls.NlsParams(linear_solver=kind))
     assert lin.name == kind
     for x in (gp.x0, gp.x0 + 0.01):  # second factorisation: the ordering/analysis of the first is reused

@@ -17,7 +17,8 @@ from slamcli.api.solve import solve_dataset
 from slamcli.datasets.g2o import import_graph
 from slamcli.io import read_dataset, write_dataset
 from slamcli.models import motion, se2
-from slamcli.solvers import graph, nls, pose_init
+from slamcli.solvers import graph, nls
+from slamcli.solvers.graph import init as pose_init
 from slamcli.types import NoiseSpec, Observations, PoseConstraints, SlamInputs
 
 DATA = Path(__file__).parent / "data"

@@ -1,4 +1,4 @@
-"""Selected inverse (Takahashi recurrence on the sparse factor, ``slamcli.solvers.selinv``) against dense
+"""Selected inverse (Takahashi recurrence on the sparse factor, ``slamcli.solvers.nls.selinv``) against dense
 ``inv(H)``, against the SciPy marginals path it replaced, and on held-fixed / uncoupled variables."""
 
 from __future__ import annotations
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from slamcli.solvers import graph, nls, selinv
+from slamcli.solvers import graph, nls
+from slamcli.solvers.nls import selinv
 
 pytestmark = pytest.mark.skipif(not selinv.available(), reason="needs scikit-sparse (extra cholmod)")
 
@@ -103,7 +104,7 @@ def test_uncoupled_blocks_need_their_pattern_and_get_it():
 
 def test_not_positive_definite_names_a_column():
     H = sp.csc_matrix(np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 3.0], [0.0, 3.0, 1.0]]))  # eigenvalue < 0
-    with pytest.raises(selinv.NotPositiveDefinite) as info:
+    with pytest.raises(selinv.NotPositiveDefiniteError) as info:
         selinv.SelectedInverse.from_matrix(H)
     assert 0 <= info.value.column < 3
     assert isinstance(info.value, np.linalg.LinAlgError)  # graph reports it as "no covariances"

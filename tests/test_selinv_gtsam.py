@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from slamcli.models import observation
-from slamcli.solvers import frontend, graph, selinv
+from slamcli.solvers import frontend, graph
+from slamcli.solvers.nls import selinv
 from slamcli.types import Status
 
 gtsam = pytest.importorskip("gtsam")

@@ -252,15 +252,7 @@ def import_graph(
         observation from a pose that is not on the chain, xy and BR sightings mixed, bad arguments.
     """
     path = Path(path)
-    if not (math.isfinite(dt) and dt > 0):
-        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
-    if forward != "auto" and forward not in _FORWARD_ANGLE:
-        raise DatasetImportError(f"--forward: must be auto, x, y, -x or -y, got {forward!r}")
-    for name, v in (("--range-std", range_std), ("--bearing-std", bearing_std)):
-        if v is not None and not (math.isfinite(v) and v >= 0):
-            raise DatasetImportError(f"{name}: must be a finite number >= 0, got {v}")
-    if max_poses is not None and max_poses < 2:
-        raise DatasetImportError(f"--max-poses: must be >= 2, got {max_poses}")
+    _check_arguments(dt, forward, range_std, bearing_std, max_poses)
     g = read_graph(path)
     edges = g["pose_edges"]
     if not edges:
@@ -306,10 +298,70 @@ def import_graph(
     between_xyt = to_body([e[2] for e in others])
     between_info = info_to_body([e[4] for e in others])
 
-    # --- landmark observations --------------------------------------------------------------------------------
     obs_rows = g["sightings"]
     if max_poses is not None:
         obs_rows = [r for r in obs_rows if r[0] in step_of]
+    obs, info, sr, sb, obs_model, lm_ids = _sightings(path, obs_rows, step_of, R, T)
+
+    s_inc = np.sqrt(np.diagonal(cov_inc, axis1=1, axis2=2))  # (T, 3)
+    odo_std = np.median(s_inc, axis=0)
+    noise = NoiseSpec(
+        motion_std=np.array([odo_std[0], odo_std[2]]) / dt,
+        odometry_std=odo_std,
+        range_std=float(range_std) if range_std is not None else float(np.median(sr)) if len(sr) else 0.0,
+        bearing_std=float(bearing_std)
+        if bearing_std is not None
+        else float(np.median(sb))
+        if len(sb)
+        else 0.0,
+    )
+    constraints = PoseConstraints(
+        between_ij=between_ij,
+        between_xyt=between_xyt,
+        between_info=between_info,
+        odometry_info=info_inc,
+        observation_info=info,
+        observation_model=obs_model,
+    )
+    inputs = SlamInputs(
+        dt=float(dt),
+        timestamps=dt * np.arange(T + 1),
+        x0=x0,
+        controls=controls,
+        odometry_xyt=odometry_xyt,
+        observations=obs,
+        noise=noise,
+        constraints=constraints,
+        reported_id_source="file",
+    )
+
+    metadata = _metadata(path, dt, forward, max_poses, obs_model, T, n_poses_file, lm_ids, between_ij, pose_ids,
+                         s_inc, sr, sb)
+    return Dataset(inputs=inputs, truth=None, metadata=metadata)
+
+
+def _check_arguments(dt, forward, range_std, bearing_std, max_poses) -> None:
+    """Refuse bad importer arguments (one line naming the option)."""
+    if not (math.isfinite(dt) and dt > 0):
+        raise DatasetImportError(f"--dt: must be a finite number > 0, got {dt}")
+    if forward != "auto" and forward not in _FORWARD_ANGLE:
+        raise DatasetImportError(f"--forward: must be auto, x, y, -x or -y, got {forward!r}")
+    for name, v in (("--range-std", range_std), ("--bearing-std", bearing_std)):
+        if v is not None and not (math.isfinite(v) and v >= 0):
+            raise DatasetImportError(f"{name}: must be a finite number >= 0, got {v}")
+    if max_poses is not None and max_poses < 2:
+        raise DatasetImportError(f"--max-poses: must be >= 2, got {max_poses}")
+
+
+def _sightings(path: Path, obs_rows: list, step_of: dict, R: np.ndarray, T: int):
+    """The graph's landmark sightings as slamcli observations (range, bearing in the slamcli body frame).
+
+    Returns
+    -------
+    obs : Observations over ``T+1`` steps (reported ids = landmark rows);  info : (N, 2, 2) information of
+    each sighting (over x, y or range, bearing, see ``obs_model``);  sr, sb : (N,) range and bearing σ;
+    obs_model : "xy" | "br";  lm_ids : sorted landmark ids of the file.
+    """
     for i, _l, _z, _c, _m, line, _k in obs_rows:
         if i not in step_of:
             raise DatasetImportError(
@@ -361,43 +413,16 @@ def import_graph(
         rng = brg = sr = sb = np.zeros(0)
         info = np.zeros((0, 2, 2))
     obs = Observations.from_rows(step, np.column_stack([rng, brg]), T + 1, reported_id=rid)
+    return obs, info, sr, sb, obs_model, lm_ids
 
-    s_inc = np.sqrt(np.diagonal(cov_inc, axis1=1, axis2=2))  # (T, 3)
-    odo_std = np.median(s_inc, axis=0)
-    noise = NoiseSpec(
-        motion_std=np.array([odo_std[0], odo_std[2]]) / dt,
-        odometry_std=odo_std,
-        range_std=float(range_std) if range_std is not None else float(np.median(sr)) if len(sr) else 0.0,
-        bearing_std=float(bearing_std)
-        if bearing_std is not None
-        else float(np.median(sb))
-        if len(sb)
-        else 0.0,
-    )
-    constraints = PoseConstraints(
-        between_ij=between_ij,
-        between_xyt=between_xyt,
-        between_info=between_info,
-        odometry_info=info_inc,
-        observation_info=info,
-        observation_model=obs_model,
-    )
-    inputs = SlamInputs(
-        dt=float(dt),
-        timestamps=dt * np.arange(T + 1),
-        x0=x0,
-        controls=controls,
-        odometry_xyt=odometry_xyt,
-        observations=obs,
-        noise=noise,
-        constraints=constraints,
-        reported_id_source="file",
-    )
+
+def _metadata(path, dt, forward, max_poses, obs_model, T, n_poses_file, lm_ids, between_ij, pose_ids, s_inc, sr, sb):
+    """The dataset's metadata dict (provenance, counts, spread of the per-edge σ's)."""
 
     def spread(a):
         return [float(np.min(a)), float(np.median(a)), float(np.max(a))] if len(a) else []
 
-    metadata = {
+    return {
         "scenario": f"graph:{path.name}",
         "source_file": str(path.resolve()),
         "importer": "slamcli.datasets.g2o",
@@ -424,4 +449,3 @@ def import_graph(
         },
         "ground_truth": "none (a graph file holds measurements only)",
     }
-    return Dataset(inputs=inputs, truth=None, metadata=metadata)

@@ -38,6 +38,7 @@ import scipy.sparse.linalg as spla
 from slamcli.models import motion, observation, potentials, se2
 from slamcli.models.ackermann import ackermann_jacobians, ackermann_step, centre_twist, integrate_ackermann
 from slamcli.models.angles import wrap_angle, wrap_angle_fast
+from slamcli.solvers.nls.marginals import block_marginals
 from slamcli.types import SlamInputs
 
 PI = math.pi
@@ -893,35 +894,27 @@ def laplace_covariances(prob: Problem, W: Weights, poses, landmarks, labels, *, 
     The weight matrices are read as information matrices (Gibbs temperature 2, so P ∝ exp(−H/2) is the
     Gaussian with information JᵀJ). Returns ``pose_cov (T+1, 3, 3)`` (zero at the fixed x_0) and
     ``landmark_cov (L, 2, 2)``: the diagonal blocks of the inverse — marginals, not the conditional curvature
-    ICM uses internally. Columns of the inverse are solved in chunks with one sparse LU factorisation.
+    ICM uses internally — by the one marginals path of slamcli,
+    :func:`slamcli.solvers.nls.marginals.block_marginals` (``chunk`` columns of the inverse per batch when it
+    solves for columns).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``JᵀJ`` is not numerically positive definite (e.g. a landmark no kept sighting constrains); the
+        message names the pose ``t`` (1..T) or landmark.
     """
     T, L = prob.T, landmarks.shape[0]
     _, J = joint_residuals(prob, W, poses, landmarks, labels)
     H = (J.T @ J).tocsc()
-    n = H.shape[0]
-    diag = H.diagonal()
-    H = H + sp.diags(1e-12 * (diag + (diag == 0)), format="csc")
-    lu = spla.splu(H)
-    starts = np.concatenate([3 * np.arange(T), 3 * T + 2 * np.arange(L)]).astype(int)
-    sizes = np.concatenate([np.full(T, 3), np.full(L, 2)]).astype(int)
-    diag_blocks = np.zeros((n, 3))  # row i: inverse entries (i, start_of_its_block + 0..k-1)
-    b0 = 0
-    while b0 < len(starts):
-        b1 = b0
-        while b1 < len(starts) and starts[b1] + sizes[b1] - starts[b0] <= chunk:
-            b1 += 1
-        b1 = max(b1, b0 + 1)
-        c0, c1 = int(starts[b0]), int(starts[b1 - 1] + sizes[b1 - 1])
-        E = np.zeros((n, c1 - c0))
-        E[np.arange(c0, c1), np.arange(c1 - c0)] = 1.0
-        X = lu.solve(E)
-        for b in range(b0, b1):
-            s0, k = int(starts[b]), int(sizes[b])
-            diag_blocks[s0 : s0 + k, :k] = X[s0 : s0 + k, s0 - c0 : s0 - c0 + k]
-        b0 = b1
+    pose_cols = np.arange(3 * T).reshape(T, 3)  # x_1..x_T; x_0 is held fixed
+    lm_cols = 3 * T + np.arange(2 * L).reshape(L, 2)
+
+    def locate(c: int) -> str:
+        return f"pose {c // 3 + 1}" if c < 3 * T else f"landmark {(c - 3 * T) // 2}"
+
+    pc, lm_cov = block_marginals(H, (pose_cols, lm_cols), names=("pose", "landmark"), chain=T, locate=locate,
+                                 batch_size=chunk)
     pose_cov = np.zeros((T + 1, 3, 3))
-    pose_cov[1:] = diag_blocks[: 3 * T].reshape(T, 3, 3)
-    lm_cov = diag_blocks[3 * T :, :2].reshape(L, 2, 2)
-    pose_cov = 0.5 * (pose_cov + np.swapaxes(pose_cov, 1, 2))
-    lm_cov = 0.5 * (lm_cov + np.swapaxes(lm_cov, 1, 2))
+    pose_cov[1:] = pc
     return pose_cov, lm_cov

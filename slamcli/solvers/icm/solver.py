@@ -530,8 +530,14 @@ class IcmSlam(BaseSolver):
         if joint_errors:
             extra["joint_step_errors"] = joint_errors[:10]
         pose_cov = lm_cov = None
+        cov_note = ""
         if p.covariance and landmarks.shape[0] + T > 0:
-            pose_cov, lm_cov = en.laplace_covariances(prob, W, poses, landmarks, labels)
+            try:
+                pose_cov, lm_cov = en.laplace_covariances(prob, W, poses, landmarks, labels)
+            except np.linalg.LinAlgError as exc:  # the one marginals policy: refuse, never regularise H
+                why = f"the information matrix is not numerically positive definite at the estimate ({exc})"
+                extra["covariance_error"] = why
+                cov_note = f"; no covariances: {why}"
         K = len(objective)
         if every and pose_iters[-1] != K - 1:  # the last iteration is always recorded
             pose_iters.append(K - 1)
@@ -547,7 +553,8 @@ class IcmSlam(BaseSolver):
             t_start=t_start,
             message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}"
             + (f"; energy rose in {increases} sweep(s)" if increases else "")
-            + (f"; joint step failed: {joint_errors[0]}" if joint_errors else ""),
+            + (f"; joint step failed: {joint_errors[0]}" if joint_errors else "")
+            + cov_note,
             pose_cov=pose_cov,
             landmark_cov=lm_cov,
             trace=trace,

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 
-class NotPositiveDefinite(np.linalg.LinAlgError):
+class NotPositiveDefiniteError(np.linalg.LinAlgError):
     """The factorisation met a pivot ≤ 0; ``column`` is the column of ``H`` (original order) where."""
 
     def __init__(self, message: str, column: int) -> None:
@@ -77,7 +77,7 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
     Raises
     ------
     ImportError            scikit-sparse is not installed.
-    NotPositiveDefinite    a pivot ≤ 0 (``H`` is not numerically positive definite).
+    NotPositiveDefiniteError    a pivot ≤ 0 (``H`` is not numerically positive definite).
     """
     from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
 
@@ -88,7 +88,7 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
         col = getattr(exc, "column", None)
         perm = getattr(getattr(exc, "factor", None), "P", lambda: None)()
         where = int(perm[col]) if perm is not None and col is not None and col < len(perm) else int(col or 0)
-        raise NotPositiveDefinite(f"sparse Cholesky of H: pivot ≤ 0 ({exc})", where) from None
+        raise NotPositiveDefiniteError(f"sparse Cholesky of H: pivot ≤ 0 ({exc})", where) from None
     perm = np.asarray(F.P(), np.int64)
     # F.L() (L Lᵀ) keeps the symbolic pattern, explicit zeros included; F.L_D() would drop them
     L = sp.csc_matrix(F.L())
@@ -98,7 +98,7 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
         raise ValueError("CHOLMOD's L does not store its diagonal first")
     if not np.all(diag > 0.0):
         k = int(np.argmin(diag))
-        raise NotPositiveDefinite(f"pivot ≤ 0 in the sparse Cholesky of H ({diag[k]:.3g})", perm[k])
+        raise NotPositiveDefiniteError(f"pivot ≤ 0 in the sparse Cholesky of H ({diag[k]:.3g})", perm[k])
     L.data /= np.repeat(diag, np.diff(L.indptr))  # unit lower triangular: P H Pᵀ = L D Lᵀ, D = diag²
     d = diag * diag
     return LdlFactor(L, d, perm)

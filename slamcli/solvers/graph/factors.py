@@ -1,0 +1,198 @@
+"""GTSAM-exact factor errors and Jacobians in world coordinates ``[x, y, θ]``, vectorised over factors,
+and the square-root information helpers of the noise models.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slamcli.errors import SolverError
+from slamcli.models import observation, se2
+from slamcli.models.angles import wrap_angle
+
+
+# ----------------------------------------------------------------------------------------------------------
+# GTSAM-exact factor errors and Jacobians (world coordinates [x, y, θ]), vectorised over factors
+# ----------------------------------------------------------------------------------------------------------
+def log_jacobian(p: np.ndarray) -> np.ndarray:
+    """Jacobian ``(..., 3, 3)`` of :func:`slamcli.models.se2.log` w.r.t. the pose coordinates ``[x, y, θ]``.
+
+    ``Log(x, y, θ) = [α x + (θ/2) y, −(θ/2) x + α y, θ]`` with ``α = (θ/2) cot(θ/2)``, hence
+    ``∂/∂(x, y, θ) = [[α, θ/2, α' x + y/2], [−θ/2, α, −x/2 + α' y], [0, 0, 1]]``,
+    ``α' = ½ cot(θ/2) − (θ/4) / sin²(θ/2)`` (series ``1 − θ²/12``, ``−θ/6 − θ³/180`` near 0).
+    """
+    p = np.asarray(p, float)
+    w = wrap_angle(p[..., 2])
+    small = np.abs(w) < 1e-4
+    ws = np.where(small, 1.0, w)
+    half = 0.5 * ws
+    cot = np.cos(half) / np.sin(half)
+    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
+    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / np.sin(half) ** 2)
+    x, y = p[..., 0], p[..., 1]
+    J = np.zeros(p.shape[:-1] + (3, 3))
+    J[..., 0, 0] = alpha
+    J[..., 0, 1] = 0.5 * w
+    J[..., 0, 2] = dalpha * x + 0.5 * y
+    J[..., 1, 0] = -0.5 * w
+    J[..., 1, 1] = alpha
+    J[..., 1, 2] = -0.5 * x + dalpha * y
+    J[..., 2, 2] = 1.0
+    return J
+
+
+def _compose_left_jacobian(a: np.ndarray) -> np.ndarray:
+    """``∂ compose(a, b) / ∂b = blkdiag(R(θ_a), 1)``, ``(..., 3, 3)``."""
+    a = np.asarray(a, float)
+    J = np.zeros(a.shape[:-1] + (3, 3))
+    J[..., :2, :2] = se2.rot2(a[..., 2])
+    J[..., 2, 2] = 1.0
+    return J
+
+
+def between_error(x_i, x_j, measured):
+    """GTSAM ``BetweenFactorPose2`` error ``e = Log(d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` and its Jacobians.
+
+    Parameters
+    ----------
+    x_i, x_j, measured : ndarray (F, 3)
+
+    Returns
+    -------
+    e : ndarray (F, 3);  J_i, J_j : ndarray (F, 3, 3)  (w.r.t. world coordinates of x_i, x_j)
+    """
+    d_inv = se2.inverse(measured)
+    b = se2.between(x_i, x_j)
+    p = se2.compose(d_inv, b)
+    e = se2.log(p)
+    A = log_jacobian(p) @ _compose_left_jacobian(d_inv)
+    Ba, Bb = se2.between_jacobians(x_i, x_j)
+    return e, A @ Ba, A @ Bb
+
+
+def prior_error(x, prior):
+    """GTSAM ``PriorFactorPose2`` error ``e = Log(p⁻¹ ⊕ x)`` and Jacobian ``(F, 3, 3)``."""
+    p_inv = se2.inverse(prior)
+    q = se2.compose(p_inv, x)
+    return se2.log(q), log_jacobian(q) @ _compose_left_jacobian(p_inv)
+
+
+def bearing_range_error(x, m, z):
+    """Range-bearing error ``e = [r̂ − r, wrap(b̂ − b)]`` (GTSAM's ``BearingRangeFactor2D`` up to row order).
+
+    As in GTSAM (``Rot2::relativeBearing``), a landmark within 1e-5 m of the pose has bearing ``b̂ = 0`` and a
+    zero bearing Jacobian: the bearing is undefined there, and a solution that put a landmark on a pose
+    (misread ids, a stalled optimisation) must have the cost GTSAM recomputes for it (issue 10, item 4).
+
+    Parameters
+    ----------
+    x : ndarray (F, 3);  m : ndarray (F, 2);  z : ndarray (F, 2) as ``[range, bearing]``
+
+    Returns
+    -------
+    e : ndarray (F, 2);  J_x : ndarray (F, 2, 3);  J_m : ndarray (F, 2, 2)
+    """
+    zh = observation.range_bearing(x, m)
+    e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
+    J_x, J_m = observation.range_bearing_jacobians(x, m)
+    near = zh[:, 0] <= 1e-5
+    if np.any(near):  # GTSAM's Rot2::relativeBearing: within 1e-5 m the bearing is 0, its Jacobian zero
+        e[near, 1] = wrap_angle(-z[near, 1])
+        J_x[near, 1] = 0.0
+        J_m[near, 1] = 0.0
+    return e, J_x, J_m
+
+
+def landmark_offset_error(x, m, z_xy):
+    """g2o ``EDGE_SE2_XY`` error ``e = R(θ)ᵀ (m − p) − z`` (landmark in the body frame) and its Jacobians.
+
+    Parameters
+    ----------
+    x : ndarray (F, 3);  m : ndarray (F, 2);  z_xy : ndarray (F, 2) measured offset in the body frame
+
+    Returns
+    -------
+    e : ndarray (F, 2);  J_x : ndarray (F, 2, 3);  J_m : ndarray (F, 2, 2)
+        ``∂e/∂p = −R(θ)ᵀ``, ``∂e/∂θ = [[−s, c], [−c, −s]] (m − p)``, ``∂e/∂m = R(θ)ᵀ``.
+    """
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+    dx, dy = m[:, 0] - x[:, 0], m[:, 1] - x[:, 1]
+    e = np.stack([c * dx + s * dy - z_xy[:, 0], -s * dx + c * dy - z_xy[:, 1]], -1)
+    Jm = np.empty((x.shape[0], 2, 2))
+    Jm[:, 0, 0], Jm[:, 0, 1], Jm[:, 1, 0], Jm[:, 1, 1] = c, s, -s, c
+    Jx = np.empty((x.shape[0], 2, 3))
+    Jx[:, :, :2] = -Jm
+    Jx[:, 0, 2] = -s * dx + c * dy
+    Jx[:, 1, 2] = -c * dx - s * dy
+    return e, Jx, Jm
+
+
+def robot_range_bearing_error(x_i, x_j, z):
+    """Inter-robot range-bearing error: robot ``i`` at pose ``x_i`` measures robot ``j``'s body origin.
+
+    ``e = [‖p_j − p_i‖ − r,  wrap(atan2(p_j − p_i) − θ_i − b)]`` — :func:`bearing_range_error` with the
+    landmark replaced by the position of another pose; the heading of ``x_j`` does not enter, so the last
+    column of ``J_j`` is zero. (Multi-robot MRCLAM, issue 14 item 7.)
+
+    Parameters
+    ----------
+    x_i, x_j : ndarray (F, 3);  z : ndarray (F, 2) as ``[range, bearing]``
+
+    Returns
+    -------
+    e : ndarray (F, 2);  J_i : ndarray (F, 2, 3);  J_j : ndarray (F, 2, 3)
+    """
+    x_j = np.asarray(x_j, float)
+    e, J_i, J_m = bearing_range_error(np.asarray(x_i, float), x_j[:, :2], z)
+    J_j = np.concatenate([J_m, np.zeros((J_m.shape[0], 2, 1))], axis=2)
+    return e, J_i, J_j
+
+
+def sqrt_info_batch(info: np.ndarray) -> np.ndarray:
+    """``L (F, k, k)`` with ``LᵀL = Λ`` for each information matrix of ``info (F, k, k)``."""
+    return np.swapaxes(np.linalg.cholesky(np.asarray(info, float)), 1, 2)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# problem construction
+# ----------------------------------------------------------------------------------------------------------
+def sqrt_info_from_cov(cov: np.ndarray) -> np.ndarray:
+    """``L`` with ``LᵀL = Σ⁻¹``."""
+    return np.linalg.cholesky(np.linalg.inv(np.asarray(cov, float))).T
+
+
+def sqrt_of_weight(W: np.ndarray, name: str = "weight") -> np.ndarray | None:
+    """``L`` with ``LᵀL = 2W`` for a symmetric PSD weight ``W`` (so ``½‖L r‖² = rᵀ W r``); None if W = 0."""
+    W = np.asarray(W, float)
+    if not np.all(np.isfinite(W)):
+        raise SolverError(f"graph: paper {name} has non-finite entries")
+    if not np.any(W):
+        return None
+    if not np.allclose(W, W.T, atol=1e-12 * max(1.0, np.abs(W).max())):
+        raise SolverError(f"graph: paper {name} must be symmetric, got {W.tolist()}")
+    lam, V = np.linalg.eigh(0.5 * (W + W.T))
+    if lam.min() < -1e-12 * max(1.0, lam.max()):
+        raise SolverError(f"graph: paper {name} must be positive semi-definite (eigenvalues {lam.tolist()})")
+    return np.sqrt(2.0 * np.clip(lam, 0.0, None))[:, None] * V.T
+
+
+def group_returns(steps: np.ndarray, labels: np.ndarray, z: np.ndarray, n_landmarks: int):
+    """One measurement per (pose, landmark) pair: mean range and circular-mean bearing of its rows.
+
+    A laser gives several returns from one post at one pose (surface points spread over the post's width);
+    treating each as an independent point measurement of the centre would overweight that pose-landmark pair
+    and put the spread into the bearing residuals. Point sensors have one row per pair, so nothing changes.
+
+    Returns
+    -------
+    steps (G,), labels (G,), z (G, 2) of the groups, ordered by (step, label).
+    """
+    key = steps * max(n_landmarks, 1) + labels
+    ukey, inv = np.unique(key, return_inverse=True)
+    if ukey.size == key.size:
+        order = np.argsort(key, kind="stable")
+        return steps[order], labels[order], z[order]
+    cnt = np.bincount(inv).astype(float)
+    r = np.bincount(inv, z[:, 0]) / cnt
+    b = np.arctan2(np.bincount(inv, np.sin(z[:, 1])), np.bincount(inv, np.cos(z[:, 1])))
+    return ukey // max(n_landmarks, 1), ukey % max(n_landmarks, 1), np.stack([r, wrap_angle(b)], -1)

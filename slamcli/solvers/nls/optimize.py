@@ -1,0 +1,345 @@
+"""Gauss-Newton, Levenberg-Marquardt (GTSAM's schedule) and Powell's dogleg over an :class:`NlsProblem`
+(see :mod:`slamcli.solvers.nls` for the equations).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from slamcli.solvers.nls.kernels import whiten
+from slamcli.solvers.nls.linear import FACTOR_NAMES, Assembler, SuperLUFactor, make_linear_solver
+from slamcli.solvers.nls.problem import NlsParams, NlsProblem, NlsResult, retract
+from slamcli.types import Status
+
+
+# ----------------------------------------------------------------------------------------------------------
+# optimiser
+# ----------------------------------------------------------------------------------------------------------
+def evaluate_cost(problem: NlsProblem, x: np.ndarray, params: NlsParams | None = None) -> float:
+    """``½ Σ ρ(‖L r‖)`` at ``x``."""
+    return Assembler(problem).cost(np.asarray(x, float), params or NlsParams())
+
+
+def residual_vector(problem: NlsProblem, x: np.ndarray) -> np.ndarray:
+    """Stacked whitened residuals ``(Σ F k,)`` at ``x`` (``cost = ½‖·‖²`` without robust kernel)."""
+    return np.concatenate([whiten(b.sqrt_info, b.evaluate(x)[0]).ravel() for b in problem.blocks])
+
+
+def jacobian_matrix(problem: NlsProblem, x: np.ndarray) -> sp.csr_matrix:
+    """Whitened sparse Jacobian ``(Σ F k, D)`` at ``x``."""
+    rows, cols, vals = [], [], []
+    off = 0
+    for b in problem.blocks:
+        r, J = b.evaluate(x)
+        F, k = r.shape
+        n = b.cols.shape[1]
+        Jw = np.matmul(b.sqrt_info, J)
+        rows.append((off + np.arange(F * k).reshape(F, k, 1) + np.zeros((1, 1, n), np.int64)).ravel())
+        cols.append(np.broadcast_to(np.asarray(b.cols)[:, None, :], (F, k, n)).ravel())
+        vals.append(Jw.ravel())
+        off += F * k
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(off, problem.n_vars)
+    )
+
+
+def solve(
+    problem: NlsProblem,
+    x0: np.ndarray,
+    params: NlsParams | None = None,
+    callback: Callable[[int, np.ndarray, float], None] | None = None,
+) -> NlsResult:
+    """Minimise the problem's cost from ``x0 (D,)``.
+
+    ``callback(k, x, cost)`` is called with the start (k = 0) and after every accepted step (k = iteration).
+    """
+    params = params or NlsParams()
+    asm = Assembler(problem)
+    x = np.array(x0, dtype=float, copy=True)
+    if x.shape != (problem.n_vars,):
+        raise ValueError(f"x0 has shape {x.shape}, expected ({problem.n_vars},)")
+    stats: dict = {"fallbacks": 0, "damped_gn": 0, "solves": 0, "marquardt_trials": 0}
+    lin = make_linear_solver(asm, params)
+    backup: list = []  # SuperLU, created on the first breakdown of the primary factorisation
+
+    def lin_solve(data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
+        """``H(data) h = rhs``; None if no factorisation gives a finite solution."""
+        stats["solves"] += 1
+        h = lin.solve(rhs) if lin.factorize(data) else None
+        if h is None and lin.name != "superlu":
+            stats["fallbacks"] += 1
+            if not backup:
+                backup.append(SuperLUFactor(asm))
+            h = backup[0].solve(rhs) if backup[0].factorize(data) else None
+        return h
+
+    cost, data, g = asm.linearize(x, params)
+    if not np.isfinite(cost):
+        return NlsResult(
+            x,
+            cost,
+            Status.FAILED,
+            "non-finite initial cost",
+            0,
+            np.array([cost]),
+            np.zeros(1),
+            asm.matrix(data),
+        )
+    costs, times = [cost], [0.0]
+    if callback is not None:
+        callback(0, x, cost)
+    st = _Damping(lam=params.lambda_init, nu=2.0, delta=params.delta_init)
+    status = Status.MAX_ITERATIONS
+    message = f"stopped after {params.max_iterations} iterations (max_iterations)"
+    it = 0
+    t_last = time.perf_counter()
+
+    def small(h: np.ndarray) -> bool:
+        return bool(np.linalg.norm(h) <= params.step_tol * (np.linalg.norm(x) + params.step_tol))
+
+    while it < params.max_iterations:
+        if cost <= params.abs_cost_tol:
+            status, message = Status.CONVERGED, "cost below abs_cost_tol"
+            break
+        diag = data[asm.diag_pos]
+        Dvec = np.clip(diag, 1e-6, 1e32) if params.damping == "marquardt" else np.ones(asm.D)
+        stop = None  # (status, message) that ends the optimisation inside this iteration
+        if params.method == "lm":
+            stop, x_new, new_cost = _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st, stats,
+                                                  small)
+        elif params.method == "dogleg":
+            stop, x_new, new_cost, st.delta = _dogleg_iteration(
+                problem, asm, params, lin_solve, x, cost, data, g, st.delta, small
+            )
+        else:
+            stop, x_new, new_cost = _gn_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, stats,
+                                                  small)
+        if stop is not None:
+            status, message = stop
+            break
+        it += 1
+        decrease = cost - new_cost
+        x = x_new
+        cost, data, g = asm.linearize(x, params)
+        now = time.perf_counter()
+        costs.append(cost)
+        times.append(now - t_last)
+        t_last = now
+        if callback is not None:
+            callback(it, x, cost)
+        if decrease <= params.rel_cost_tol * max(cost + decrease, 0.0):
+            status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
+            break
+    notes = _notes(stats, lin.name)
+    if params.pose_chart == "body" and problem.se2_poses > 0:  # H for the marginals: world coordinates
+        data = asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
+    return NlsResult(
+        x=x,
+        cost=cost,
+        status=status,
+        message=message,
+        iterations=it,
+        cost_trace=np.asarray(costs),
+        time_trace=np.asarray(times),
+        information=asm.matrix(data),
+        linear_solves=int(stats["solves"]),
+        notes=tuple(notes),
+        linear_solver=lin.name,
+    )
+
+
+@dataclass
+class _Damping:
+    """LM's damping λ and Nielsen's growth factor ν; dogleg's trust radius Δ (carried across iterations)."""
+
+    lam: float
+    nu: float
+    delta: float
+
+
+def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _Damping, stats, small):
+    """One LM iteration: raise λ until a trial step is accepted (GTSAM's inner loop). Returns ``(stop,
+    x_new, new_cost)`` with ``stop`` None or the ``(status, message)`` that ends the optimisation."""
+    diag = data[asm.diag_pos]
+    stop = x_new = new_cost = None
+    while True:
+        damped = data.copy()
+        damped[asm.diag_pos] += st.lam * Dvec
+        h = lin_solve(damped, -g)
+        if h is None and params.damping == "levenberg":
+            # λI cannot regularise an H that is numerically indefinite because of entries many orders
+            # above the rest (a landmark on top of a pose): this trial uses Marquardt's D = diag(H)
+            Dvec = np.clip(diag, 1e-6, 1e32)
+            damped = data.copy()
+            damped[asm.diag_pos] += st.lam * Dvec
+            h = lin_solve(damped, -g)
+            stats["marquardt_trials"] += 1
+        ok = False
+        if h is not None:
+            if small(h):
+                stop = (Status.CONVERGED, "step norm below step_tol")
+                break
+            # predicted decrease of the undamped model: −gᵀh − ½hᵀHh = ½hᵀ(λDh − g)
+            pred = 0.5 * float(h @ (st.lam * Dvec * h - g))
+            if pred >= 0.0:
+                x_new = retract(problem, params, x, h)
+                new_cost = asm.cost(x_new, params)
+                change = cost - new_cost
+                if not np.isfinite(new_cost):
+                    ok = False
+                elif pred > np.finfo(float).eps * cost:
+                    rho = change / pred
+                    ok = rho > params.min_model_fidelity
+                else:  # the model predicts (almost) nothing: accept any decrease
+                    rho, ok = 1.0, change >= 0.0
+                if not ok and abs(change) < params.rel_cost_tol * cost:
+                    stop = (Status.CONVERGED, "trial cost change below rel_cost_tol")
+                    break
+        if ok:
+            if params.lambda_update == "fixed":
+                st.lam /= params.lambda_factor
+            else:
+                st.lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                st.nu = 2.0
+            st.lam = max(st.lam, params.lambda_min)
+            break
+        if params.lambda_update == "fixed":
+            st.lam *= params.lambda_factor
+        else:
+            st.lam *= st.nu
+            st.nu *= 2.0
+        if st.lam >= params.lambda_max:  # GTSAM: give up once the raised λ reaches lambdaUpperBound
+            if h is None:
+                stop = (
+                    Status.FAILED,
+                    f"normal equations unsolvable even with damping λ ≥ {params.lambda_max:.3g}",
+                )
+            else:
+                stop = (
+                    Status.CONVERGED,
+                    f"no cost decrease with damping λ < {params.lambda_max:.3g} (lambda_max reached)",
+                )
+            break
+    return stop, x_new, new_cost
+
+
+def _gn_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, stats, small):
+    """One Gauss-Newton step with its safeguards (damped when H is not numerically positive definite,
+    halved when the cost rises). Returns ``(stop, x_new, new_cost)`` as :func:`_lm_iteration`."""
+    diag = data[asm.diag_pos]
+    stop = x_new = new_cost = None
+    h = lin_solve(data, -g)
+    if h is not None and small(h):
+        stop = (Status.CONVERGED, "step norm below step_tol")
+    elif h is None or not float(g @ h) < 0.0:
+        # H numerically not positive definite: damped step (H + λD) h = −g, λ raised ×10 until the
+        # system is solvable and h points downhill (for λ → ∞, h → −g/λ, a descent direction)
+        stats["damped_gn"] += 1
+        scale = max(float(np.max(np.abs(diag))), 1.0)
+        lam_gn = params.lambda_init * scale
+        h = None
+        while lam_gn <= 1e16 * scale:
+            damped = data.copy()
+            damped[asm.diag_pos] += lam_gn * Dvec
+            h = lin_solve(damped, -g)
+            if h is not None and float(g @ h) < 0.0:
+                break
+            h = None
+            lam_gn *= 10.0
+        if h is None:
+            stop = (Status.FAILED, "singular normal equations (is every variable constrained?)")
+    if stop is None:
+        x_new = retract(problem, params, x, h)
+        new_cost = asm.cost(x_new, params)
+        alpha = 1.0
+        while not (new_cost <= cost) and alpha > 1e-3:  # safeguard: halve the GN step
+            alpha *= 0.5
+            x_new = retract(problem, params, x, alpha * h)
+            new_cost = asm.cost(x_new, params)
+        if not new_cost <= cost:
+            stop = (Status.CONVERGED, "no decrease along the Gauss-Newton step")
+    return stop, x_new, new_cost
+
+
+def _notes(stats: dict, lin_name: str) -> list[str]:
+    """The numerical fallbacks an optimisation needed, one sentence each (``NlsResult.notes``)."""
+    notes = []
+    if stats["fallbacks"]:
+        notes.append(
+            f"{FACTOR_NAMES[lin_name]} failed {stats['fallbacks']}× (H not numerically positive definite); "
+            "solved with SuperLU instead"
+        )
+    if stats["marquardt_trials"]:
+        notes.append(
+            f"{stats['marquardt_trials']} LM trial(s) damped with D = diag(H): the λI-damped system was not "
+            "solvable (H not numerically positive definite)"
+        )
+    if stats["damped_gn"]:
+        notes.append(
+            f"{stats['damped_gn']} Gauss-Newton step(s) damped: the undamped normal equations were not solvable "
+            "or gave no descent direction"
+        )
+    return notes
+
+
+def _dogleg_iteration(problem, asm, params, lin_solve, x, cost, data, g, delta, small):
+    """One Powell dogleg iteration (Nocedal & Wright, *Numerical Optimization*, §4.1; GTSAM's
+    ``DoglegOptimizerImpl``): shrink the trust region ``Δ`` until a step lowers the cost.
+
+    Steepest-descent (Cauchy) point ``h_sd = −(gᵀg / gᵀHg) g``, Gauss-Newton point ``h_gn = −H⁻¹g``::
+
+        h = h_gn                          if ‖h_gn‖ ≤ Δ
+            Δ h_sd / ‖h_sd‖               if ‖h_sd‖ ≥ Δ
+            h_sd + τ (h_gn − h_sd)        else, τ ∈ [0, 1] with ‖h‖ = Δ
+
+    gain ratio ``ϱ = (F(x) − F(x + h)) / (−gᵀh − ½hᵀHh)``; ``ϱ ≥ 0.75``: ``Δ ← max(Δ, 3‖h‖)``;
+    ``0.25 ≤ ϱ < 0.75``: Δ kept; ``0 < ϱ < 0.25``: ``Δ ← Δ/2`` (step accepted); ``ϱ ≤ 0``: ``Δ ← Δ/2``
+    and the step is tried again. ``H`` is factorised once per iteration (Δ does not change the system).
+
+    Returns ``(stop, x_new, new_cost, delta)`` with ``stop`` None when a step was accepted.
+    """
+    H = asm.matrix(data)
+    h_gn = lin_solve(data, -g)
+    if h_gn is not None and not float(g @ h_gn) < 0.0:
+        h_gn = None  # H not positive definite along h_gn: no Gauss-Newton point
+    if h_gn is not None and small(h_gn):
+        return (Status.CONVERGED, "step norm below step_tol"), None, None, delta
+    gg = float(g @ g)
+    gHg = float(g @ (H @ g))
+    h_sd = -(gg / gHg) * g if gHg > 0.0 else -g * (np.inf if gg > 0 else 0.0)
+    n_sd = float(np.linalg.norm(h_sd))
+    n_gn = float(np.linalg.norm(h_gn)) if h_gn is not None else np.inf
+    delta_min = params.step_tol * (np.linalg.norm(x) + params.step_tol)
+    while True:
+        if n_gn <= delta:
+            h = h_gn
+        elif n_sd >= delta:
+            h = (delta / np.linalg.norm(g)) * -g  # the steepest-descent direction, cut at Δ
+        else:
+            d = h_gn - h_sd  # solve ‖h_sd + τ d‖² = Δ², τ ∈ [0, 1]
+            a, b, c = float(d @ d), float(2.0 * (h_sd @ d)), n_sd**2 - delta**2
+            tau = (-b + np.sqrt(max(b * b - 4.0 * a * c, 0.0))) / (2.0 * a)
+            h = h_sd + tau * d
+        pred = -float(g @ h) - 0.5 * float(h @ (H @ h))
+        x_new = retract(problem, params, x, h)
+        new_cost = asm.cost(x_new, params)
+        rho = (cost - new_cost) / pred if pred > 0.0 else -1.0
+        n_h = float(np.linalg.norm(h))
+        if not np.isfinite(new_cost):
+            rho = -1.0
+        if rho >= 0.75:
+            delta = max(delta, 3.0 * n_h)
+        elif rho < 0.25:
+            delta = 0.5 * min(delta, n_h)
+        if rho > 0.0 and new_cost <= cost:
+            return None, x_new, new_cost, delta
+        if abs(cost - new_cost) < params.rel_cost_tol * cost and np.isfinite(new_cost):
+            return (Status.CONVERGED, "trial cost change below rel_cost_tol"), None, None, delta
+        if delta <= delta_min:
+            return (Status.CONVERGED, "trust region collapsed below step_tol"), None, None, delta

@@ -1,0 +1,256 @@
+"""Problem description of the sparse least-squares engine: factor blocks, the problem, its parameters
+and result, and the retraction ``x ⊞ h`` (see :mod:`slamcli.solvers.nls`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import scipy.sparse as sp
+
+from slamcli.models import se2
+from slamcli.models.angles import wrap_angle
+from slamcli.types import Status
+
+
+# ----------------------------------------------------------------------------------------------------------
+# problem description
+# ----------------------------------------------------------------------------------------------------------
+@dataclass
+class FactorBlock:
+    """``F`` factors of one type.
+
+    Attributes
+    ----------
+    name : str
+        Label used in cost breakdowns (``"odometry"``, ``"bearing_range"``, ...).
+    cols : ndarray (F, n) int64
+        State-vector column of each Jacobian column of each factor.
+    evaluate : callable ``x (D,) -> (r (F, k), J (F, k, n))``
+        Unwhitened residuals and their Jacobians w.r.t. the ``n`` columns in ``cols``.
+    sqrt_info : ndarray (k, k) or (F, k, k)
+        Whitening ``L`` with ``LᵀL = Λ`` (information of the residual).
+    robust : bool
+        Whether the problem's robust kernel (if any) applies to this block (observations: yes; priors and
+        odometry: usually no).
+    """
+
+    name: str
+    cols: np.ndarray
+    evaluate: EvaluateFn
+    sqrt_info: np.ndarray
+    robust: bool = False
+
+    @property
+    def n_factors(self) -> int:
+        return int(self.cols.shape[0])
+
+
+EvaluateFn = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass
+class NlsProblem:
+    """A factor graph over a flat state vector ``x (D,)``.
+
+    Attributes
+    ----------
+    n_vars : int
+        ``D``, the state dimension.
+    blocks : list[FactorBlock]
+    angle_cols : ndarray (A,) int64
+        Columns holding headings; they are wrapped to ``[-pi, pi)`` after every update.
+    fixed_cols : ndarray (C,) int64
+        Columns held constant (their rows/columns of ``H`` become identity, their gradient zero, so every
+        step leaves them unchanged). Their "marginal covariance" is meaningless (identity).
+    chain : (n_chain, k) or None
+        Declares that the first ``n_chain·k`` columns are a chain of ``k``-blocks whose block of ``H`` is
+        block tridiagonal (a pose chain); linear systems are then solved by banded Cholesky of the chain and
+        a dense Schur complement on the remaining (border) columns (:class:`ChainSolver`) when the border
+        has at most ``NlsParams.max_border`` columns; otherwise SuperLU.
+    retract : callable ``(x (D,), h (D,)) -> x (D,)`` or None
+        Manifold update; default ``x + h`` followed by wrapping ``angle_cols``.
+    se2_poses : int
+        The first ``3·se2_poses`` columns are SE(2) poses ``[x, y, θ]`` (world coordinates). With
+        ``NlsParams.pose_chart = "body"`` the optimiser then steps in GTSAM's Pose2 chart (see
+        :func:`solve`); 0 = every column is Euclidean (``retract``/``angle_cols`` apply).
+    """
+
+    n_vars: int
+    blocks: list[FactorBlock]
+    angle_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    fixed_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    chain: tuple[int, int] | None = None
+    retract: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    se2_poses: int = 0
+
+    def apply_step(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+        if self.retract is not None:
+            return self.retract(x, h)
+        out = x + h
+        if self.angle_cols.size:
+            out[self.angle_cols] = wrap_angle(out[self.angle_cols])
+        return out
+
+
+@dataclass(frozen=True)
+class NlsParams:
+    """Optimiser settings (defaults = GTSAM 4.3's ``LevenbergMarquardtParams`` / ``DoglegParams``).
+
+    Attributes
+    ----------
+    method : "lm" | "gn" | "dogleg"
+        Levenberg-Marquardt (default), Gauss-Newton (with step halving when the cost rises, and a damped
+        step when the undamped normal equations cannot be solved or give no descent direction), or Powell's
+        dogleg trust region (GTSAM's ``DoglegOptimizer``, Ceres's ``DOGLEG``).
+    max_iterations : int
+        Budget of iterations = accepted steps (an LM iteration may solve several damped systems, as in
+        GTSAM's ``LevenbergMarquardtOptimizer``; a dogleg iteration may shrink its region several times).
+    rel_cost_tol : float
+        Converged when an accepted step lowers the cost by less than ``rel_cost_tol · cost``.
+    abs_cost_tol : float
+        Converged when the cost is below this value.
+    step_tol : float
+        Converged when ``‖h‖ ≤ step_tol · (‖x‖ + step_tol)``.
+    lambda_init : float
+        Initial damping λ₀ (absolute, GTSAM's ``lambdaInitial`` = 1e-5).
+    lambda_factor : float
+        λ is multiplied by this after a rejected trial and divided by it after an accepted step
+        (``lambda_update = "fixed"``; GTSAM's ``lambdaFactor`` = 10, ``useFixedLambdaFactor`` = true).
+    lambda_update : "fixed" | "nielsen"
+        λ schedule: GTSAM's fixed factor, or Nielsen's ``λ ← λ·max(1/3, 1 − (2ϱ − 1)³)`` on success and
+        ``λ ← λν, ν ← 2ν`` on failure (Madsen, Nielsen & Tingleff 2004, §3.2; Ceres's LM strategy).
+    lambda_min, lambda_max : float
+        Bounds of λ (GTSAM's ``lambdaLowerBound`` = 0 and ``lambdaUpperBound`` = 1e5). When a rejected trial
+        raises λ to ``lambda_max`` or above, LM stops as converged (no decrease possible) without trying that
+        λ, as GTSAM's ``tryLambda`` does.
+    min_model_fidelity : float
+        A trial step is accepted when the gain ratio ``ϱ = actual / predicted decrease`` exceeds this
+        (GTSAM's ``minModelFidelity`` = 1e-3).
+    damping : "levenberg" | "marquardt"
+        ``D = I`` (default, GTSAM's ``diagonalDamping = false``) or ``D = diag(H)`` clamped to
+        ``[1e-6, 1e32]`` (GTSAM's ``diagonalDamping = true`` with its min/max diagonal). Marquardt scaling
+        is what stalled LM on long real chains (Victoria Park): see the module docstring.
+    delta_init : float
+        Initial trust-region radius of the dogleg (GTSAM's ``deltaInitial`` = 1).
+    linear_solver : "auto" | "cholmod" | "superlu" | "chain"
+        Sparse Cholesky of CHOLMOD (``scikit-sparse``; symbolic analysis with its fill-reducing ordering
+        once per problem, numeric factorisation in place every solve); SciPy's SuperLU in symmetric mode
+        with a minimum-degree ordering computed once; or the banded chain + dense border Schur solver.
+        ``auto`` = CHOLMOD when installed, else SuperLU. A factorisation that breaks down (pivot ≤ 0 of a
+        numerically indefinite ``H``) falls back to SuperLU for that system (noted in the result).
+    pose_chart : "body" | "world"
+        For the SE(2) pose columns of ``NlsProblem.se2_poses``: ``body`` (default) steps as GTSAM's Pose2
+        does, ``x ← x ⊕ Exp(ξ)`` with ``ξ`` in the body frame and the Jacobian columns of a pose rotated
+        into it (``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``), so that damping, trust region and the finite steps
+        follow GTSAM's path (on non-convex real problems another path can end in another local minimum);
+        ``world`` adds ``h`` to the world coordinates and wraps θ.
+    robust : "none" | "huber" | "cauchy" | "geman_mcclure"
+        Kernel applied to blocks with ``robust=True`` (:func:`robust_kernel`).
+    huber_k : float
+        Width ``k`` of the kernel on the whitened residual norm (Huber threshold, Cauchy scale, Geman-McClure c).
+    max_border : int
+        Largest border (non-chain) dimension for the chain/Schur linear solver (see ``NlsProblem.chain``).
+    """
+
+    method: Literal["lm", "gn", "dogleg"] = "lm"
+    max_iterations: int = 100
+    rel_cost_tol: float = 1e-12
+    abs_cost_tol: float = 1e-20
+    step_tol: float = 1e-12
+    lambda_init: float = 1e-5
+    lambda_factor: float = 10.0
+    lambda_update: Literal["fixed", "nielsen"] = "fixed"
+    lambda_min: float = 0.0
+    lambda_max: float = 1e5
+    min_model_fidelity: float = 1e-3
+    damping: Literal["levenberg", "marquardt"] = "levenberg"
+    delta_init: float = 1.0
+    linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = "auto"
+    pose_chart: Literal["body", "world"] = "body"
+    robust: Literal["none", "huber", "cauchy", "geman_mcclure"] = "none"
+    huber_k: float = 1.345
+    max_border: int = 1500
+
+    def __post_init__(self) -> None:
+        if self.method not in ("lm", "gn", "dogleg"):
+            raise ValueError(f"method must be lm, gn or dogleg, got {self.method!r}")
+        if self.linear_solver not in ("auto", "cholmod", "superlu", "chain"):
+            raise ValueError(
+                f"linear_solver must be auto, cholmod, superlu or chain, got {self.linear_solver!r}"
+            )
+        if not self.lambda_factor > 1.0:
+            raise ValueError("lambda_factor must be > 1")
+        if not 0.0 <= self.lambda_min <= self.lambda_init <= self.lambda_max:
+            raise ValueError("need 0 ≤ lambda_min ≤ lambda_init ≤ lambda_max")
+        if not self.delta_init > 0.0:
+            raise ValueError("delta_init must be > 0")
+        if self.pose_chart not in ("body", "world"):
+            raise ValueError(f"pose_chart must be body or world, got {self.pose_chart!r}")
+
+
+@dataclass(frozen=True)
+class NlsResult:
+    """Outcome of :func:`solve`.
+
+    Attributes
+    ----------
+    x : ndarray (D,)             the estimate.
+    cost : float                 final cost (½ Σ ρ).
+    status : Status              CONVERGED, MAX_ITERATIONS or FAILED.
+    message : str
+    iterations : int             accepted steps ``K`` (``len(cost_trace) − 1``).
+    cost_trace : ndarray (K+1,)  cost at the start and after every accepted step.
+    time_trace : ndarray (K+1,)  wall time of each accepted step (0 for the start), s.
+    information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` in world coordinates (also with
+                                 the body pose chart) — for :func:`marginal_covariances`.
+    linear_solves : int          linear systems solved (accepted + rejected steps + GN damping retries).
+    notes : tuple[str, ...]      numerical fallbacks that were taken (SuperLU instead of CHOLMOD or the
+                                 banded Cholesky, damped Gauss-Newton steps); empty when none were needed.
+    linear_solver : str          the linear solver used (``cholmod``, ``superlu`` or ``chain``).
+    """
+
+    x: np.ndarray
+    cost: float
+    status: Status
+    message: str
+    iterations: int
+    cost_trace: np.ndarray
+    time_trace: np.ndarray
+    information: sp.csc_matrix
+    linear_solves: int = 0
+    notes: tuple[str, ...] = ()
+    linear_solver: str = ""
+
+
+def pose_offsets(cols: np.ndarray, n_poses: int) -> list[int]:
+    """Offsets ``o`` of the Jacobian columns ``cols[:, o:o+3]`` that are one SE(2) pose ``[x, y, θ]`` (one of
+    the first ``n_poses`` triplets) in every factor of a block. A pose column outside such a triplet is an
+    error (the body chart could not be applied to it)."""
+    if n_poses <= 0 or cols.size == 0:
+        return []
+    P = 3 * n_poses
+    offs, covered = [], np.zeros(cols.shape, bool)
+    for o in range(cols.shape[1] - 2):
+        c = cols[:, o]
+        if np.all((c < P) & (c % 3 == 0) & (cols[:, o + 1] == c + 1) & (cols[:, o + 2] == c + 2)):
+            offs.append(o)
+            covered[:, o : o + 3] = True
+    if np.any((cols < P) & ~covered):
+        raise ValueError("a factor block touches pose columns that are not whole [x, y, θ] triplets")
+    return offs
+
+
+def retract(problem: NlsProblem, params: NlsParams, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The update ``x ⊞ h``: GTSAM's Pose2 retraction ``x ⊕ Exp(ξ)`` on the SE(2) poses in the body chart
+    (``NlsParams.pose_chart``), :meth:`NlsProblem.apply_step` on everything else."""
+    n = problem.se2_poses
+    if params.pose_chart != "body" or n <= 0:
+        return problem.apply_step(x, h)
+    P = 3 * n
+    out = problem.apply_step(x, np.concatenate([np.zeros(P), h[P:]]))
+    out[:P] = se2.compose(x[:P].reshape(-1, 3), se2.exp(h[:P].reshape(-1, 3))).ravel()
+    return out
