@@ -75,21 +75,28 @@ def test_paper_leg_length_scenario_has_sqrt60_legs():
     np.testing.assert_allclose(ds.truth.poses_xyt[0, :2], [15.0, 5.0])
 
 
+def _arc():
+    """Pose (0, 0, θ ∈ [0, π/2]) seeing a landmark at range 10, bearing 0 (exact), and a fixed pose (0, 10, 0)
+    that has it at least 9 m away; propagated (call inside :func:`interval_rounding`)."""
+    from slamcli.solvers.cuik.contractors import OutsideBand, RangeBearing, unbounded
+    from slamcli.solvers.cuik.hypotheses import Hypothesis
+
+    box = [Interval(0.0), Interval(0.0), Interval(0.0, math.pi / 2), unbounded(), unbounded(),
+           Interval(0.0), Interval(10.0), Interval(0.0)]
+    h = Hypothesis(box=box)
+    e = [h.add_edge(RangeBearing((0, 1, 2), (3, 4), 10.0, 0.0, 0.0, 0.0)),
+         h.add_edge(OutsideBand((5, 6, 7), (3, 4), 0.0, 9.0))]
+    assert propagate(h.box, h.edges, h.adj, e, narrow_theta=True, tol=1e-9)
+    return h
+
+
 def test_tighten_bound_reaches_the_exact_end_on_a_hand_built_arc():
     # a pose at the origin with heading θ ∈ [0, π/2] sees a landmark at range 10, bearing 0 (exact readings):
     # the landmark is on the quarter arc l = 10·(cos θ, sin θ). A second, fixed pose at (0, 10) adds "the
     # landmark is at least 9 m away" (OutsideBand). Closed form: ‖l − (0, 10)‖² = 200 − 200 sin θ ≥ 81, so
     # sin θ ≤ 0.595 and the exact lower end of l_x is 10·cos(asin 0.595) = 8.04 m
-    from slamcli.solvers.cuik.contractors import OutsideBand, RangeBearing, unbounded
-    from slamcli.solvers.cuik.hypotheses import Hypothesis
-
     with interval_rounding():
-        box = [Interval(0.0), Interval(0.0), Interval(0.0, math.pi / 2), unbounded(), unbounded(),
-               Interval(0.0), Interval(10.0), Interval(0.0)]
-        h = Hypothesis(box=box)
-        e = [h.add_edge(RangeBearing((0, 1, 2), (3, 4), 10.0, 0.0, 0.0, 0.0)),
-             h.add_edge(OutsideBand((5, 6, 7), (3, 4), 0.0, 9.0))]
-        assert propagate(h.box, h.edges, h.adj, e, narrow_theta=True, tol=1e-9)
+        h = _arc()
         before = h.box[3].lb()
         lo = tighten_bound(h.box, h.edges, h.adj, 3, 0, [2, 4], [10.0, 1.0], narrow_theta=True, tol=1e-9,
                            max_leaves=200, min_width=1e-4)
@@ -100,17 +107,10 @@ def test_tighten_bound_reaches_the_exact_end_on_a_hand_built_arc():
 
 def test_hull_pass_moves_every_target_to_the_hull_on_the_hand_built_arc():
     # the same arc and constraint: the feasible θ ∈ [0, asin 0.595], so l_x ∈ [8.04, 10] and l_y ∈ [0, 5.95]
-    from slamcli.solvers.cuik.contractors import OutsideBand, RangeBearing, unbounded
-    from slamcli.solvers.cuik.hypotheses import Hypothesis
     from slamcli.solvers.cuik.propagate import hull_pass
 
     with interval_rounding():
-        box = [Interval(0.0), Interval(0.0), Interval(0.0, math.pi / 2), unbounded(), unbounded(),
-               Interval(0.0), Interval(10.0), Interval(0.0)]
-        h = Hypothesis(box=box)
-        e = [h.add_edge(RangeBearing((0, 1, 2), (3, 4), 10.0, 0.0, 0.0, 0.0)),
-             h.add_edge(OutsideBand((5, 6, 7), (3, 4), 0.0, 9.0))]
-        assert propagate(h.box, h.edges, h.adj, e, narrow_theta=True, tol=1e-9)
+        h = _arc()
         assert hull_pass(h.box, h.edges, h.adj, [3, 4], [2, 3, 4], [10.0, 1.0, 1.0], narrow_theta=True,
                          tol=1e-9, max_leaves=200, min_width=1e-4)
         x, y = (h.box[3].lb(), h.box[3].ub()), (h.box[4].lb(), h.box[4].ub())
