@@ -1,7 +1,9 @@
 """Reproduction section for paper 004 (Kubica & Szynkiewicz, "CuikSLAM with Unknown Correspondence –
 Preliminary Results"): Tables 1-6 side by side with ``cuik`` on ``cuik-room``, hypothesis counts, our tighter
-boxes with θ narrowing (+ 3B shaving and bisection), Monte-Carlo soundness, the wrong-bound check, the
-``graph`` cross-check and a lower bound on any sound box from feasible solutions.
+boxes with θ narrowing (+ 3B shaving, bisection and the branch-and-bound hull pass), their tightness against an
+independent inner bound of the feasible hull (:class:`FeasibleSet`, SLSQP from several starts), Porta's setting
+(``cuik-room-porta``) and the paper's leg length (``cuik-room-paper-legs``), Monte-Carlo soundness, the
+wrong-bound check and the ``graph`` cross-check.
 
 Hook: ``run_section(out_dir, quick, progress) -> (markdown, ok)``; every outcome sentence is computed from the
 numbers of the run. This module is the experiment harness: it reads ground truth (for metrics and for the
