@@ -119,3 +119,23 @@ def test_hull_pass_moves_every_target_to_the_hull_on_the_hand_built_arc():
     for (lo, hi), (e_lo, e_hi) in ((x, hull_x), (y, hull_y)):
         assert lo <= e_lo + 1e-9 and hi >= e_hi - 1e-9  # sound
         assert lo > e_lo - 0.02 and hi < e_hi + 0.02  # at the hull
+
+
+def test_paper_set_on_the_paper_legs_reproduces_table1_bound_for_bound():
+    # with the paper's √60 m legs and its operator set, every printed bound of paper 004's Table 1 (x, y, and
+    # θ converted from its clockwise-from-+y convention) is reproduced to the printed precision
+    from slamcli.sim.bounded import heading_from_paper004
+    from slamcli.sweep.paper004 import PAPER_SET, TABLE1, with_true_association
+
+    legs = simulate_scenario("cuik-room-paper-legs", 0, {"bounded.exact_readings": True})
+    hb = solve_dataset(with_true_association(legs), "cuik", {**PAPER_SET, "association": "reported"}).hypotheses
+    for t in range(9):
+        x_lo, x_hi, y_lo, y_hi, th_lo, th_hi = TABLE1[f"r{t + 1}"]
+        ours = np.r_[hb.pose_lo[0, t, :2], hb.pose_hi[0, t, :2]]
+        np.testing.assert_allclose(ours, [x_lo, y_lo, x_hi, y_hi], atol=2e-5, err_msg=f"r{t + 1}")
+        th = np.sort(heading_from_paper004([th_lo, th_hi]))
+        np.testing.assert_allclose([hb.pose_lo[0, t, 2], hb.pose_hi[0, t, 2]], th, atol=2e-6, err_msg=f"θ r{t + 1}")
+    for j in range(4):
+        x_lo, x_hi, y_lo, y_hi = TABLE1[f"l{j + 1}"][:4]
+        ours = np.r_[hb.landmark_lo[0, j], hb.landmark_hi[0, j]]
+        np.testing.assert_allclose(ours, [x_lo, y_lo, x_hi, y_hi], atol=2e-5, err_msg=f"l{j + 1}")
