@@ -316,6 +316,65 @@ def _claim_row(run: Run, m: dict) -> dict:
             "final_logodds": None if not lf else float(lf["mean_abs_error"]), "nees": [m["nees_mean"]]}
 
 
+def _claim_lines(results: list, ce: dict | None, part: str, quick: bool, rel: str) -> list[str]:
+    """The claims subsection: the verdict table (:func:`claim_verdicts`) and one sentence per run and claim,
+    each computed from the numbers."""
+    lines = ["### The paper's claims beside our numbers", ""]
+    if part != "map4":
+        verdicts = claim_verdicts([_claim_row(r, m) for r, m in results if "posts" not in r.label])
+        lines += ["| claim | verdict | evidence |", "|---|---|---|"]
+        lines += [f"| {c} | {v} | {e} |" for c, v, e in verdicts] + [""]
+    by = {(r.map_no, r.sensor): m for r, m in results if "posts" not in r.label}
+    for k in sorted({mk for mk, _ in by}):
+        if (k, "laser") in by and (k, "noisy") in by:
+            el = by[(k, "laser")]["frequentist_final"]["mean_abs_error"]
+            en = by[(k, "noisy")]["frequentist_final"]["mean_abs_error"]
+            verdict = "holds" if el < en else "does NOT hold"
+            lines.append(f"- *The laser maps better than the noisy sensor* — Map {k}: final per-cell error "
+                         f"{_fmt(el)} (laser) vs {_fmt(en)} (noisy): the claim {verdict} here (condition: laser < noisy).")
+    for run, m in results:
+        e = m["frequentist_lap"]
+        if len(e) >= 2 and np.all(np.isfinite(e)):
+            falls = bool(np.all(np.diff(e) < 0))
+            ratios = e[1:] / e[:-1]
+            geo = bool(falls and len(ratios) >= 2 and np.ptp(ratios) < 0.5 * np.mean(ratios))
+            lines.append(
+                f"- *Map error falls roughly exponentially with laps* — {run.label}: total error at the lap ends "
+                + " → ".join(_fmt(x, 4) for x in e) + f" (ratios {', '.join(_fmt(x) for x in ratios)}): "
+                + ("falls every lap" if falls else "does NOT fall every lap")
+                + ("; roughly geometric (ratios within ±25 % of their mean)." if geo else
+                   ("; one ratio only, the shape of the decay cannot be judged." if falls and len(ratios) < 2 else
+                    ("; the per-lap ratios are not constant, so not clearly exponential." if falls else "."))))
+    for run, m in results:
+        ff, lf = m["frequentist_final"], m.get("logodds_final")
+        if lf:
+            better = ff["mean_abs_error"] < lf["mean_abs_error"]
+            lines.append(f"- *The frequentist map is consistent where the log-odds map with the same belief mean "
+                         f"is not* — {run.label}: final per-cell error {_fmt(ff['mean_abs_error'])} (frequentist) vs "
+                         f"{_fmt(lf['mean_abs_error'])} (log-odds): the frequentist map is "
+                         + ("better" if better else "NOT better") + " on this run.")
+    for run, m in results:
+        lines.append(f"- *The EKF with stabilising noise stays consistent* — {run.label}: mean pose NEES "
+                     f"{_fmt(m['nees_mean'])} (3 = calibrated; below 3 = conservative), "
+                     f"{100 * m['inside_3sigma']:.0f} % of steps have all three errors inside ±3σ.")
+    if ce is not None:
+        lines.append(f"- *Fig. 2: the frequentist update converges to the true map from every start* — "
+                     f"{ce['n_starts']} starts, γ_t = 1/({ce['a']:g}·t), largest final distance to (0, 1) after "
+                     f"{ce['n_steps']} updates: "
+                     f"{_fmt(ce['max_final_dist'])}: "
+                     + ("converged (< 0.05)." if ce["max_final_dist"] < 0.05 else "NOT converged within 0.05.")
+                     + f" Figure: `{rel}/fig2_counterexample.png`.")
+    if part == "map4":
+        for run, m in results:
+            if not quick:
+                within = m["cpu_time_s"] < 900.0
+                lines.append(f"- *Map 4 with the laser, 2 laps, in under 15 min* (our target, on 2 cores) — "
+                             f"{run.label}: {m['n_steps']} steps, solve {m['cpu_time_s']:.0f} s CPU "
+                             f"({m['wall_time_s']:.0f} s wall): " + ("within" if within else "NOT within")
+                             + " 900 s of CPU time.")
+    return lines
+
+
 def _run_part(out_dir: Path, quick: bool, progress: ProgressFn, part: str) -> tuple[str, bool]:
     """Run the paper 001 experiments of ``part`` into ``out_dir``; return the markdown section (figure paths
     relative to ``out_dir``'s parent, where the report lives) and whether every run completed.
@@ -387,60 +446,7 @@ def _run_part(out_dir: Path, quick: bool, progress: ProgressFn, part: str) -> tu
                               for r, m in results)
                   + f"; total {sum(walls):.0f} s wall / {np.nansum(cpus):.0f} s CPU. Finished runs are reused.", ""]
 
-    # ---- claims, each sentence computed from the numbers ----
-    lines += ["### The paper's claims beside our numbers", ""]
-    if part != "map4":
-        verdicts = claim_verdicts([_claim_row(r, m) for r, m in results if "posts" not in r.label])
-        lines += ["| claim | verdict | evidence |", "|---|---|---|"]
-        lines += [f"| {c} | {v} | {e} |" for c, v, e in verdicts] + [""]
-    by = {(r.map_no, r.sensor): m for r, m in results if "posts" not in r.label}
-    for k in sorted({mk for mk, _ in by}):
-        if (k, "laser") in by and (k, "noisy") in by:
-            el = by[(k, "laser")]["frequentist_final"]["mean_abs_error"]
-            en = by[(k, "noisy")]["frequentist_final"]["mean_abs_error"]
-            verdict = "holds" if el < en else "does NOT hold"
-            lines.append(f"- *The laser maps better than the noisy sensor* — Map {k}: final per-cell error "
-                         f"{_fmt(el)} (laser) vs {_fmt(en)} (noisy): the claim {verdict} here (condition: laser < noisy).")
-    for run, m in results:
-        e = m["frequentist_lap"]
-        if len(e) >= 2 and np.all(np.isfinite(e)):
-            falls = bool(np.all(np.diff(e) < 0))
-            ratios = e[1:] / e[:-1]
-            geo = bool(falls and len(ratios) >= 2 and np.ptp(ratios) < 0.5 * np.mean(ratios))
-            lines.append(
-                f"- *Map error falls roughly exponentially with laps* — {run.label}: total error at the lap ends "
-                + " → ".join(_fmt(x, 4) for x in e) + f" (ratios {', '.join(_fmt(x) for x in ratios)}): "
-                + ("falls every lap" if falls else "does NOT fall every lap")
-                + ("; roughly geometric (ratios within ±25 % of their mean)." if geo else
-                   ("; one ratio only, the shape of the decay cannot be judged." if falls and len(ratios) < 2 else
-                    ("; the per-lap ratios are not constant, so not clearly exponential." if falls else "."))))
-    for run, m in results:
-        ff, lf = m["frequentist_final"], m.get("logodds_final")
-        if lf:
-            better = ff["mean_abs_error"] < lf["mean_abs_error"]
-            lines.append(f"- *The frequentist map is consistent where the log-odds map with the same belief mean "
-                         f"is not* — {run.label}: final per-cell error {_fmt(ff['mean_abs_error'])} (frequentist) vs "
-                         f"{_fmt(lf['mean_abs_error'])} (log-odds): the frequentist map is "
-                         + ("better" if better else "NOT better") + " on this run.")
-    for run, m in results:
-        lines.append(f"- *The EKF with stabilising noise stays consistent* — {run.label}: mean pose NEES "
-                     f"{_fmt(m['nees_mean'])} (3 = calibrated; below 3 = conservative), "
-                     f"{100 * m['inside_3sigma']:.0f} % of steps have all three errors inside ±3σ.")
-    if ce is not None:
-        lines.append(f"- *Fig. 2: the frequentist update converges to the true map from every start* — "
-                     f"{ce['n_starts']} starts, γ_t = 1/({ce['a']:g}·t), largest final distance to (0, 1) after "
-                     f"{ce['n_steps']} updates: "
-                     f"{_fmt(ce['max_final_dist'])}: "
-                     + ("converged (< 0.05)." if ce["max_final_dist"] < 0.05 else "NOT converged within 0.05.")
-                     + f" Figure: `{rel}/fig2_counterexample.png`.")
-    if part == "map4":
-        for run, m in results:
-            if not quick:
-                within = m["cpu_time_s"] < 900.0
-                lines.append(f"- *Map 4 with the laser, 2 laps, in under 15 min* (our target, on 2 cores) — "
-                             f"{run.label}: {m['n_steps']} steps, solve {m['cpu_time_s']:.0f} s CPU "
-                             f"({m['wall_time_s']:.0f} s wall): " + ("within" if within else "NOT within")
-                             + " 900 s of CPU time.")
+    lines += _claim_lines(results, ce, part, quick, rel)
     lines += ["", "Setting (the paper gives the sizes, robot, noise levels, 40 m range and laps); our deviations: "
               + "; ".join(DEVIATIONS) + " (see docs and `slamcli solvers hybrid`).", ""]
     return "\n".join(lines), ok and len(results) == len(runs)
