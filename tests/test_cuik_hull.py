@@ -139,3 +139,18 @@ def test_paper_set_on_the_paper_legs_reproduces_table1_bound_for_bound():
         x_lo, x_hi, y_lo, y_hi = TABLE1[f"l{j + 1}"][:4]
         ours = np.r_[hb.landmark_lo[0, j], hb.landmark_hi[0, j]]
         np.testing.assert_allclose(ours, [x_lo, y_lo, x_hi, y_hi], atol=2e-5, err_msg=f"l{j + 1}")
+
+
+def test_unknown_correspondence_true_graph_contains_the_feasible_extremes():
+    # noisy seed 2, types only: the true hypothesis' boxes contain both feasible extremes of the widest
+    # coordinates (l3 y, l4 x, l4 y), computed under the true association by the independent FeasibleSet
+    from slamcli.sweep.paper004 import box_vs_hull
+
+    ds = simulate_scenario("cuik-room", 2)
+    r = solve_dataset(ds.inputs, "cuik", {})
+    h = sets.true_hypothesis(r.hypotheses, ds.truth.obs_landmark)
+    assert h >= 0
+    hull = inner_hull(ds, [("landmark", 2, 1), ("landmark", 3, 0), ("landmark", 3, 1)], n_starts=1, maxiter=100)
+    assert all(v < FEASIBLE_TOL for _lo, _hi, v in hull.values())
+    for _width, ratio, inside in box_vs_hull(r.hypotheses, h, ds.truth.obs_landmark, hull):
+        assert inside and ratio >= 1.0 - 1e-9
