@@ -12,9 +12,9 @@ from slamcli.sweep.paper001 import CLAIMS, DEVIATIONS, claim_verdicts, nees_band
 def _rows(**change):
     base = [
         {"map": 1, "sensor": "laser", "lap_errors": [0.0073, 0.0037, 0.0027], "final_freq": 0.0027,
-         "final_logodds": 0.0040, "nees": [3.1, 2.9]},
+         "final_logodds": 0.0040, "nees": [3.1, 2.9] * 10},
         {"map": 1, "sensor": "noisy", "lap_errors": [0.142, 0.135, 0.130], "final_freq": 0.130,
-         "final_logodds": 0.136, "nees": [2.8, 3.2]},
+         "final_logodds": 0.136, "nees": [2.8, 3.2] * 10},
     ]
     for k, v in change.items():
         base[1][k] = v
@@ -36,12 +36,21 @@ def test_every_claim_holds_on_good_rows_and_is_marked_untested_without_data():
     ({"lap_errors": [0.142, 0.135, 0.139]}, "convergence over laps"),  # the noisy plateau
     ({"final_freq": 0.001}, "laser better than noisy"),
     ({"final_logodds": 0.12}, "frequentist vs Bayesian map"),
-    ({"nees": [0.47, 0.50]}, "consistency"),  # the measured conservative filter
+    ({"nees": [0.47, 0.50] * 10}, "consistency"),  # the measured conservative filter, over 20 seeds
 ])
 def test_one_bad_row_flips_its_claim_only(change, claim):
     v = verdicts(_rows(**change))
     assert v[claim] in ("partly", "does NOT hold")
     assert all(v[c] == "holds" for c in CLAIMS[:4] if c != claim)
+
+
+def test_one_seed_is_not_judged_for_consistency():
+    v = claim_verdicts(_rows(nees=[0.5]))
+    claim, verdict, evidence = v[3]
+    assert claim == "consistency" and verdict == "holds" and "not judged" in evidence  # the other run decides
+    rows = _rows(nees=[0.5])
+    rows[0]["nees"] = [3.0]
+    assert verdicts(rows)["consistency"] == "not tested"
 
 
 def test_complexity_and_association_verdicts_follow_their_numbers():
