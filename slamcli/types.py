@@ -11,6 +11,7 @@ Observations are a flat table in time order with CSR offsets: the observations t
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass, field
 from typing import Any
@@ -298,6 +299,40 @@ class SlamInputs:
     def n_poses(self) -> int:
         """T+1."""
         return int(self.odometry_xyt.shape[0])
+
+
+def robot_slice(inputs: SlamInputs, robot: int) -> tuple[int, int, np.ndarray]:
+    """Where robot index ``robot`` sits in a multi-robot problem: its stacked poses ``a:b`` and its observation
+    rows ``(N_r,)``. ``ValueError`` for a single-robot problem or an index out of range."""
+    team = inputs.robots
+    if team is None:
+        raise ValueError("a multi-robot dataset is needed (inputs.robots is None)")
+    if not 0 <= robot < team.n_robots:
+        raise ValueError(f"robot index {robot} out of range 0..{team.n_robots - 1}")
+    fp = team.first_pose
+    a, b = int(fp[robot]), int(fp[robot + 1])
+    obs = inputs.observations
+    return a, b, np.arange(int(obs.offsets[a]), int(obs.offsets[b]))
+
+
+def solo_inputs(inputs: SlamInputs, robot: int) -> SlamInputs:
+    """Robot index ``robot`` (0-based, into ``inputs.robots.robot_number``) of a multi-robot problem, alone: its
+    poses' timestamps, controls, odometry and landmark observations, its start pose as ``x0``, no robots group.
+    Solvers use it for per-robot work (it never touches ground truth); :func:`slamcli.datasets.team.solo_dataset`
+    adds that robot's slice of the truth."""
+    a, b, rows = robot_slice(inputs, robot)
+    obs = inputs.observations
+    solo_obs = Observations.from_rows(obs.step[rows] - a, obs.z[rows], b - a, reported_id=obs.reported_id[rows],
+                                      sensor=obs.sensor[rows])
+    return dataclasses.replace(
+        inputs,
+        timestamps=np.asarray(inputs.timestamps)[a:b].copy(),
+        x0=np.asarray(inputs.robots.x0_xyt[robot], float).copy(),
+        controls=np.asarray(inputs.controls)[a : b - 1].copy(),
+        odometry_xyt=np.asarray(inputs.odometry_xyt)[a:b].copy(),
+        observations=solo_obs,
+        robots=None,
+    )
 
 
 @dataclass(frozen=True)

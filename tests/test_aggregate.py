@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from slamcli.cli import app
 from slamcli.errors import ConfigError
-from slamcli.sweep.aggregate import aggregate_dir, read_table, resolve_column, summarise, typed_frame
+from slamcli.metrics.aggregate import aggregate_dir, read_table, resolve_column, summarise, typed_frame
 
 runner = CliRunner()
 
@@ -114,9 +114,9 @@ def test_plot_compare(tmp_path):
     assert r.exit_code == 0, r.output
     assert "9 runs in 2 groups; 1 failed run(s) excluded" in r.output
     assert out.read_bytes()[:4] == b"\x89PNG"
+    from slamcli.metrics.aggregate import compare_groups
     from slamcli.plots import new_figure
     from slamcli.plots.curves import plot_compare
-    from slamcli.sweep.aggregate import compare_groups
 
     labels, values, *_ = compare_groups(tmp_path / "exp", "ate_rmse", "solver")
     assert labels == ["ekf", "odometry"] and sorted(values[1]) == [10.0, 12.0, 14.0]

@@ -1,6 +1,6 @@
 """cuik on the paper 004 room and beyond: soundness, correspondence, wrong bounds, Table 1, graph cross-check.
 
-Every number asserted here is measured in the test; the paper's Table 1 comes from slamcli.sweep.paper004.
+Every number asserted here is measured in the test; the paper's Table 1 comes from slamcli.reproduce.paper004.
 """
 
 from __future__ import annotations
@@ -14,8 +14,7 @@ pytest.importorskip("slamcli.solvers.cuik.contractors")  # loads codac after h5p
 
 from slamcli.api.solve import solve_dataset
 from slamcli.metrics import sets
-from slamcli.sim.simulate import simulate_scenario
-from slamcli.sweep.paper004 import (
+from slamcli.reproduce.paper004 import (
     PAPER_SET,
     corrupt_loop_closure,
     feasible_extent,
@@ -24,6 +23,7 @@ from slamcli.sweep.paper004 import (
     table1_widths,
     with_true_association,
 )
+from slamcli.sim.simulate import simulate_scenario
 from slamcli.types import Status
 
 

@@ -424,10 +424,10 @@ def test_cli_import_all_robots_solo_dir_and_refusals(tmp_path):
 
 
 def test_reproduce_outcome_sentences_follow_the_numbers():
-    from slamcli.sweep.paper_real_multi import outcome_sentences
-    from slamcli.sweep.reproduce import SECTIONS
+    from slamcli.reproduce.real_multi import outcome_sentences
+    from slamcli.reproduce.report import SECTIONS
 
-    assert ("real-multi", "slamcli.sweep.paper_real_multi:run_section") in SECTIONS
+    assert ("real-multi", "slamcli.reproduce.real_multi:run_section") in SECTIONS
     rows = [{"robot": 1, "odometry": 1.0, "graph_solo": 0.5, "graph_joint": 0.25, "icm_solo": 1.0, "icm_joint": 1.0},
             {"robot": 2, "odometry": 1.0, "graph_solo": 0.5, "graph_joint": 0.75, "icm_solo": 1.0, "icm_joint": 1.005}]
     s = outcome_sentences(rows)

@@ -1,4 +1,4 @@
-"""The importers' noise measurements (slamcli/datasets/calibrate.py, the "Noise" sections of the Victoria Park
+"""The importers' noise measurements (slamcli/api/calibrate.py, the "Noise" sections of the Victoria Park
 and car-park importers): the scan-to-scan estimator recovers a known simulated σ, is robust to mismatches,
 and on the shipped car-park excerpt the documented trade-off holds — the NIS-calibrated noise puts the EKF's
 mean NIS inside its χ² band while the conservative defaults sit far below it, and the calibrated noise turns
@@ -13,10 +13,10 @@ import pytest
 from test_ackermann_solvers import car_world
 from typer.testing import CliRunner
 
+from slamcli.api.calibrate import observation_noise, robust_std, scan_pair_residuals
 from slamcli.api.solve import solve_dataset
 from slamcli.cli import app
 from slamcli.datasets import carpark, victoria_park
-from slamcli.datasets.calibrate import observation_noise, robust_std, scan_pair_residuals
 from slamcli.io import read_dataset
 from slamcli.metrics.reference import mean_nis_band
 from slamcli.solvers.sensor_frame import to_sensor_frame

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from slamcli.sweep import paper_real as pr
+from slamcli.reproduce import real as pr
 
 
 def _row(name, ate, odo, refused=None, n_lm=10):

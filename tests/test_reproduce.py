@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from slamcli.cli import app
-from slamcli.sweep.reproduce import Reproduction
+from slamcli.reproduce.report import Reproduction
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "slamcli" / "experiments"
 
@@ -101,7 +101,7 @@ def test_missing_solver_is_reported_not_faked(tmp_path):
 
 def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_path):
     from slamcli.io import read_result
-    from slamcli.sweep.reproduce import Section, snapshot_path_xy
+    from slamcli.reproduce.report import Section, snapshot_path_xy
 
     out, report = quick_report
     fig5 = pd.read_csv(out / "runs" / "fig5-sim1" / "results.csv")
@@ -126,7 +126,7 @@ def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_p
 
 
 def test_snapshot_path_without_trace_poses_only_on_last_panel():
-    from slamcli.sweep.reproduce import snapshot_path_xy
+    from slamcli.reproduce.report import snapshot_path_xy
     from slamcli.types import IterationTrace, SolverResult, Status
 
     poses = np.arange(12.0).reshape(4, 3)
@@ -153,7 +153,7 @@ def test_failed_section_makes_reproduce_exit_nonzero_with_a_summary(tmp_path):
 
 
 def test_packaged_experiments_are_the_default_not_the_cwd(tmp_path, monkeypatch):
-    from slamcli.sweep.reproduce import default_experiments_dir
+    from slamcli.reproduce.report import default_experiments_dir
 
     (tmp_path / "experiments").mkdir()
     (tmp_path / "experiments" / "fig5-sim1.toml").write_text("not toml [")
@@ -204,7 +204,7 @@ def _stat(init, final, below, iters=30):
 
 
 def test_icm_figure_sentences_flip_with_the_numbers():
-    from slamcli.sweep.reproduce import Section
+    from slamcli.reproduce.report import Section
 
     def text(stats, **kw):
         sec = Section("t", "t")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from slamcli.sweep import outcomes as oc
+from slamcli.reproduce import outcomes as oc
 
 
 def test_lowers_every_none_some():

@@ -19,7 +19,7 @@ from slamcli.sim import (
     simulate_scenario,
     world,
 )
-from slamcli.sim.simulate import stream
+from slamcli.sim.streams import stream
 
 
 def _arrays(ds):

@@ -208,8 +208,8 @@ def import_trajectory(path: PathLike, data: PathLike, out: PathLike, **kwargs) -
 
 def aggregate(exp_dir: PathLike, by=None, metrics=None, confidence: float = 0.95):
     """Per-configuration mean / std / t-CI / n of a finished sweep (completed runs only) as a DataFrame."""
-    from slamcli.sweep.aggregate import aggregate as agg
-    from slamcli.sweep.aggregate import completed, read_table
+    from slamcli.metrics.aggregate import aggregate as agg
+    from slamcli.metrics.aggregate import completed, read_table
 
     ok, _ = completed(read_table(exp_dir))
     return agg(ok, by, metrics, confidence)[0]

@@ -76,8 +76,8 @@ def nees(results, datasets, *, ax=None, confidence: float = 0.95, log: bool = Tr
 
 def compare(exp_dir, metric: str = "ate_rmse_m", by: str = "solver", *, ax=None, title: str | None = None):
     """Box + strip plot of a metric per solver / parameter value over a sweep's completed runs."""
+    from slamcli.metrics.aggregate import compare_groups
     from slamcli.plots.curves import plot_compare
-    from slamcli.sweep.aggregate import compare_groups
 
     labels, values, metric_col, by_col, _ = compare_groups(exp_dir, metric, by)
     return plot_compare(_ax(ax), labels, values, metric_col, by_col, title=title)

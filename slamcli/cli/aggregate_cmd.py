@@ -33,7 +33,7 @@ def aggregate_command(
 
         if not 0 < confidence < 1:
             raise ConfigError(f"--confidence: must be in (0, 1), got {confidence}")
-        from slamcli.sweep.aggregate import aggregate_dir, cell_text
+        from slamcli.metrics.aggregate import aggregate_dir, cell_text
 
         if out_dir is not None:
             check_output(out_dir, folder=True)

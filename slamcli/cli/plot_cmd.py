@@ -153,8 +153,8 @@ def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
 
 def _compare(ax, exp_dir, metric, by, title, echo):
     from slamcli.errors import SlamcliError
+    from slamcli.metrics.aggregate import compare_groups
     from slamcli.plots.curves import plot_compare
-    from slamcli.sweep.aggregate import compare_groups
 
     labels, values, metric_col, by_col, n_excluded = compare_groups(exp_dir, metric, by)
     if not labels or all(len(v) == 0 for v in values):

@@ -32,7 +32,7 @@ def reproduce_command(
     """Run the paper experiments (Figs. 5, 6, 7, 9, post-processing, solver comparison, Monte-Carlo NEES) and
     write REPORT.md; exits 1 with a summary when any section fails."""
     with handle_errors():
-        from slamcli.sweep.reproduce import reproduce
+        from slamcli.reproduce.report import reproduce
 
         if workers is not None and workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")

@@ -23,7 +23,7 @@ Conversion
 Noise
 -----
 Defaults σ_v 0.5 m/s, σ_α 3°, σ_r 0.1 m, σ_b 0.5°. Measured on the whole run (procedure:
-:mod:`slamcli.datasets.calibrate`; EKF ``association=ml``; 15 beacons exist):
+:mod:`slamcli.api.calibrate`; EKF ``association=ml``; 15 beacons exist):
 
 1. **Scan-to-scan residuals** of the same beacon (783 pairs): robust σ_r = 0.0104 m, σ_b = 0.0026 rad.
 2. **EKF NIS** (95 % band ≈ [1.86, 2.15] for ~800 updates) and the map it gives, with the scan-to-scan σ

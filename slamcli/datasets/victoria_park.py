@@ -31,7 +31,7 @@ Conversion
 Noise
 -----
 The defaults (σ_v 0.5 m/s, σ_α 3°, σ_r 0.5 m, σ_b 0.5°) are deliberately conservative; the measurements behind
-that choice (procedure: :mod:`slamcli.datasets.calibrate`; first 120 s of the run, EKF ``association=ml``):
+that choice (procedure: :mod:`slamcli.api.calibrate`; first 120 s of the run, EKF ``association=ml``):
 
 1. **Scan-to-scan residuals** of the same trunk in consecutive scans (4002 pairs): robust σ_r = 0.034 m,
    σ_b = 0.0024 rad — the detector's noise at a fixed viewpoint, 15× / 3.6× below the defaults.

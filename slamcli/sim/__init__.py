@@ -33,7 +33,8 @@ from slamcli.sim.config import (
     known_keys,
 )
 from slamcli.sim.scenarios import SCENARIOS, list_scenarios, resolve_scenario
-from slamcli.sim.simulate import STREAMS, noise_spec, simulate, simulate_scenario
+from slamcli.sim.simulate import noise_spec, simulate, simulate_scenario
+from slamcli.sim.streams import STREAMS
 
 __all__ = [
     "SCENARIOS",

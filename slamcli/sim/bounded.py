@@ -30,6 +30,7 @@ import slamcli
 from slamcli.models.angles import wrap_angle
 from slamcli.sim import world
 from slamcli.sim.config import ScenarioConfig, config_to_dict
+from slamcli.sim.streams import STREAMS, stream
 from slamcli.types import Dataset, GroundTruth, NoiseBounds, NoiseSpec, Observations, SlamInputs
 
 ProgressFn = Callable[[int, int], None]
@@ -104,8 +105,6 @@ def closest_visible(pose_xyt: np.ndarray, landmarks_xy: np.ndarray, min_range: f
 
 def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None = None) -> Dataset:
     """Simulate one bounded-noise turn-and-move run (see the module docstring); ``Dataset`` like ``simulate``."""
-    from slamcli.sim.simulate import STREAMS, stream
-
     b = cfg.bounded
     T = int(cfg.n_steps)
     world_seed = seed if cfg.world.seed < 0 else int(cfg.world.seed)

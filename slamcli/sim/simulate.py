@@ -1,8 +1,9 @@
 """``simulate(config, seed) -> Dataset``: the only producer of ground truth.
 
-Random streams are independent and derived from ``(stream id, seed)`` with NumPy's recommended list seeding,
-``np.random.default_rng([stream_id, seed])``, so changing e.g. the sensor noise level changes neither the
-world nor the trajectory, and adding clutter does not change the noise on true returns.
+Random streams are independent and derived from ``(stream id, seed)`` (:mod:`slamcli.sim.streams`), so
+changing e.g. the sensor noise level changes neither the world nor the trajectory, and adding clutter does not
+change the noise on true returns. Wall worlds (:mod:`~slamcli.sim.wallworld`) and bounded-noise runs
+(:mod:`~slamcli.sim.bounded`) have their own drivers; :func:`simulate` dispatches to them.
 """
 
 from __future__ import annotations
@@ -17,17 +18,10 @@ import slamcli
 from slamcli.errors import ConfigError
 from slamcli.sim import robot, sensors, world
 from slamcli.sim.config import ScenarioConfig, config_to_dict
+from slamcli.sim.streams import STREAMS, stream
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
-#: Stream ids for ``np.random.default_rng([stream_id, seed])``.
-STREAMS = {"world": 0, "motion": 1, "odometry": 2, "sensor": 3, "clutter": 4, "gps": 5}
-
 ProgressFn = Callable[[int, int], None]
-
-
-def stream(name: str, seed: int) -> np.random.Generator:
-    """The generator of one named stream (``STREAMS``) for ``seed``."""
-    return np.random.default_rng([STREAMS[name], int(seed)])
 
 
 def noise_spec(cfg: ScenarioConfig) -> NoiseSpec:
@@ -78,7 +72,7 @@ def simulate(config: ScenarioConfig, seed: int = 0, progress: ProgressFn | None 
     if cfg.walls.layout != "none":  # paper 001 wall worlds: ray-cast scans + features (sim/wallworld.py)
         from slamcli.sim.wallworld import simulate_walls
 
-        return simulate_walls(cfg, seed, stream, progress)
+        return simulate_walls(cfg, seed, progress)
     if cfg.bounded.enabled:  # paper 004: turn-and-move robot, uniform bounded errors, type labels
         from slamcli.sim.bounded import simulate_bounded
 

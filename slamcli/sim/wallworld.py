@@ -9,7 +9,7 @@ Observation table of the dataset:
   ``max_range`` reads exactly ``max_range`` (the row is kept: it says "free up to max range").
 
 Truth: poses, features, the wall segments, the true occupancy grid and the step at which each lap ended.
-Random streams as in :mod:`sim.simulate` (the scan uses the *sensor* stream after the feature draws).
+Random streams from :mod:`sim.streams` (the scan uses the *sensor* stream after the feature draws).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import numpy as np
 import slamcli
 from slamcli.sim import raycast, robot, sensors, walls
 from slamcli.sim.config import ClutterConfig, ScenarioConfig, config_to_dict
+from slamcli.sim.streams import stream
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, OccupancyGrid, SlamInputs
 
 FEATURE_SENSOR = 0
@@ -46,7 +47,7 @@ def build_world(cfg: ScenarioConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return segs, feats, route
 
 
-def simulate_walls(cfg: ScenarioConfig, seed: int, stream, progress=None) -> Dataset:
+def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
     """Simulate one run in a wall world (called by :func:`slamcli.sim.simulate.simulate`)."""
     segs, feats, route = build_world(cfg)
     spec = walls.grid_spec_for(segs, cfg.walls.resolution, cfg.walls.grid_margin)

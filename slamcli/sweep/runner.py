@@ -863,7 +863,7 @@ def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
 
 def write_tables(expansion: Expansion, exp_dir: Path) -> dict[str, Path]:
     """``manifest.csv`` and the tidy ``results.csv`` (+ ``results.parquet`` when pyarrow is importable)."""
-    from slamcli.sweep.aggregate import typed_frame
+    from slamcli.metrics.aggregate import typed_frame
 
     rows = manifest_rows(expansion, exp_dir)
     manifest = typed_frame(rows)  # an int parameter absent for some solvers stays Int64 (10, not 10.0)

@@ -47,7 +47,7 @@ def odometry_initial_poses(inputs: SlamInputs) -> np.ndarray:
     from its own start pose)."""
     team = inputs.robots
     if team is not None:
-        from slamcli.datasets.team import solo_inputs
+        from slamcli.types import solo_inputs
 
         return np.concatenate([odometry_initial_poses(solo_inputs(inputs, r)) for r in range(team.n_robots)])
     d = motion.odometry_increments(inputs.odometry_xyt)

@@ -32,7 +32,8 @@ from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
-from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
+from slamcli.solvers.icm.common import online_init, reported_labels, stop_decision
+from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status, solo_inputs
 
 
 def _add_stats(out: np.ndarray, step: np.ndarray, v: np.ndarray, m: np.ndarray) -> None:
@@ -86,9 +87,6 @@ def team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels) -> 
 
 def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progress=None) -> SolverResult:
     """ICM on a multi-robot dataset (module docstring); ``solver`` is the :class:`IcmSlam` instance."""
-    from slamcli.datasets.team import solo_inputs
-    from slamcli.solvers.icm.solver import online_init, reported_labels, stop_decision
-
     t_start = time.perf_counter()
     p = solver.params
     unsupported = [

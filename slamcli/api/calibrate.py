@@ -1,5 +1,8 @@
 """Noise of a recording estimated from the recording itself (used to set the importers' default noise).
 
+A workflow, so it sits in ``api`` (it runs the EKF through :func:`slamcli.api.solve.solve_dataset`); the
+importers in :mod:`slamcli.datasets` only quote the numbers it found.
+
 Observation noise: scan-to-scan residuals
 ----------------------------------------
 Two consecutive scans at poses ``s_1``, ``s_2`` (sensor frame) see mostly the same landmarks. Dead reckoning

@@ -334,7 +334,7 @@ def run_section(out_dir: Path, quick: bool, progress: ProgressFn = None) -> tupl
                 "datasets folder (set `SLAMCLI_DATASETS`) and no test excerpts.", False)
     lines = ["## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)", "",
              f"Data: {source}. Every solver registered runs with the parameters listed; a solver that cannot "
-             "run a recording refuses in one line, shown in the table. Implementation: `slamcli/sweep/paper_real.py`."]
+             "run a recording refuses in one line, shown in the table. Implementation: `slamcli/reproduce/real.py`."]
     ok = True
 
     # --- Victoria Park ------------------------------------------------------------------------------------

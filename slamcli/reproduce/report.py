@@ -18,7 +18,7 @@ order of :data:`SECTIONS`:
 
 Experiment files ship inside the package (:mod:`slamcli.experiments`); another directory is used only when
 given (``--experiments``). Every figure section runs several seeds and reports mean ± standard deviation.
-Every outcome sentence comes from :mod:`slamcli.sweep.outcomes` with the numbers of this run. A section whose
+Every outcome sentence comes from :mod:`slamcli.reproduce.outcomes` with the numbers of this run. A section whose
 solver is missing or whose runs fail is marked FAILED in the report, and ``slamcli reproduce`` then exits
 non-zero with a summary.
 
@@ -303,7 +303,7 @@ class Reproduction:
         """One ICM figure over several seeds: error curves (every seed), map snapshots of the first seed of the
         first configuration, a table of seed means ± standard deviations, and the figure's outcome sentences
         (``checks(sec, per_label_seed_stats, labels)``)."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         sec = Section(key, title)
         sec.add(intro)
@@ -391,7 +391,7 @@ class Reproduction:
         }
 
     def _icm_rows(self, key, done, stats) -> list[list[str]]:
-        from slamcli.sweep.outcomes import pm
+        from slamcli.reproduce.outcomes import pm
 
         paper = key == "fig5"
 
@@ -476,7 +476,7 @@ class Reproduction:
                     names: dict | None = None) -> None:
         """Outcome sentences shared by Figs. 5, 6, 7: does ICM lower the error of its initialisation, how does
         the result compare with the paper, does S = I converge faster than S = 0."""
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         names = names or {}
         for lb in done:
@@ -542,7 +542,7 @@ class Reproduction:
             checks=lambda sec, st, done: self._icm_checks(sec, st, done, paper_final=None, close_rel=0.1))
 
     def octagon_section(self) -> Section:
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         sec = Section("fig9", "Fig. 9: octagon world, map change per iteration")
         sec.add("Paper §6: R = Q = S = I, ϑ = 1 m, ς = 500; the map changes by less than 35 mm from the initial "
@@ -672,7 +672,7 @@ class Reproduction:
                 ax.grid(True, axis="y", lw=0.3, alpha=0.5)
                 ax.set_title(f"{len(reps)} replicates, same datasets for every solver")
             self._save(sec, fig, "compare")
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         def vals(label, col):
             sub = done[done["label"] == label] if len(done) else done
@@ -706,8 +706,8 @@ class Reproduction:
         from slamcli.api.solve import make_solver
         from slamcli.io import atomic_path
         from slamcli.metrics.summary import EvaluationParams, evaluate_result
+        from slamcli.reproduce import outcomes as oc
         from slamcli.sim import simulate_scenario
-        from slamcli.sweep import outcomes as oc
 
         sec = Section("postprocess", "ICM as a post-processor of other solvers' results")
         cfg = self.POSTPROCESS_QUICK if self.quick else self.POSTPROCESS_FULL
@@ -826,7 +826,7 @@ class Reproduction:
                 ax.set_yscale("log")
             self._save(sec, fig, "nees")
         sec.add(_md_table(["solver", "runs", "95 % band", "steps inside band", "time-average ε̄", "note"], rows))
-        from slamcli.sweep import outcomes as oc
+        from slamcli.reproduce import outcomes as oc
 
         for label, avg in curves:
             sec.add(oc.nees_verdict(avg.fraction_inside, avg.mean, avg.lower, avg.upper, label))
@@ -836,7 +836,7 @@ class Reproduction:
 
 # The report's sections, in order. An entry is (key, builder): a method name of Reproduction (paper 000), or
 # "module:function" with run_section(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool).
-# Other papers hook in with one line each, e.g. ("paper001", "slamcli.sweep.paper001:run_section").
+# Other papers hook in with one line each, e.g. ("paper001", "slamcli.reproduce.paper001:run_section").
 SECTIONS: list[tuple[str, str]] = [
     ("fig5", "fig5_section"),
     ("init", "init_study_section"),
@@ -846,11 +846,11 @@ SECTIONS: list[tuple[str, str]] = [
     ("postprocess", "postprocess_section"),
     ("compare", "compare_section"),
     ("nees", "nees_section"),
-    ("paper001", "slamcli.sweep.paper001:run_section"),
-    ("paper004", "slamcli.sweep.paper004:run_section"),
-    ("real", "slamcli.sweep.paper_real:run_section"),
-    ("real-multi", "slamcli.sweep.paper_real_multi:run_section"),
-    ("paper001-map4", "slamcli.sweep.paper001:run_section_map4"),
+    ("paper001", "slamcli.reproduce.paper001:run_section"),
+    ("paper004", "slamcli.reproduce.paper004:run_section"),
+    ("real", "slamcli.reproduce.real:run_section"),
+    ("real-multi", "slamcli.reproduce.real_multi:run_section"),
+    ("paper001-map4", "slamcli.reproduce.paper001:run_section_map4"),
 ]
 
 
@@ -928,7 +928,7 @@ def reproduce(
             sec.add(f"> **Section failed**: {msg}")
             sec.fail(msg)
         if ":" not in target and not any(b.startswith("Section status") for b in sec.markdown):
-            from slamcli.sweep.outcomes import section_status
+            from slamcli.reproduce.outcomes import section_status
 
             sec.add(section_status(sec.ok, sec.problems))
         sections.append(sec)

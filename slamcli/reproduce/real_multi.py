@@ -34,7 +34,7 @@ def dataset_dir() -> Path:
     env = os.environ.get("SLAMCLI_MRCLAM7")
     if env:
         return Path(env)
-    from slamcli.sweep.paper_real import datasets_dir
+    from slamcli.reproduce.real import datasets_dir
 
     base = datasets_dir()
     return (base if base is not None else Path("/work/shared/datasets")) / "mrclam_dataset7"
