@@ -17,10 +17,10 @@ pytest.importorskip("slamcli.solvers.cuik.contractors")  # loads codac after h5p
 
 from slamcli.api.solve import solve_dataset
 from slamcli.metrics import sets
+from slamcli.reproduce.paper004 import FEASIBLE_TOL, FeasibleSet, inner_hull
 from slamcli.sim.simulate import simulate_scenario
 from slamcli.solvers.cuik.contractors import Interval, interval_rounding
 from slamcli.solvers.cuik.propagate import propagate, tighten_bound
-from slamcli.sweep.paper004 import FEASIBLE_TOL, FeasibleSet, inner_hull
 from slamcli.types import Status
 
 
@@ -124,8 +124,8 @@ def test_hull_pass_moves_every_target_to_the_hull_on_the_hand_built_arc():
 def test_paper_set_on_the_paper_legs_reproduces_table1_bound_for_bound():
     # with the paper's √60 m legs and its operator set, every printed bound of paper 004's Table 1 (x, y, and
     # θ converted from its clockwise-from-+y convention) is reproduced to the printed precision
+    from slamcli.reproduce.paper004 import PAPER_SET, TABLE1, with_true_association
     from slamcli.sim.bounded import heading_from_paper004
-    from slamcli.sweep.paper004 import PAPER_SET, TABLE1, with_true_association
 
     legs = simulate_scenario("cuik-room-paper-legs", 0, {"bounded.exact_readings": True})
     hb = solve_dataset(with_true_association(legs), "cuik", {**PAPER_SET, "association": "reported"}).hypotheses
@@ -144,7 +144,7 @@ def test_paper_set_on_the_paper_legs_reproduces_table1_bound_for_bound():
 def test_unknown_correspondence_true_graph_contains_the_feasible_extremes():
     # noisy seed 2, types only: the true hypothesis' boxes contain both feasible extremes of the widest
     # coordinates (l3 y, l4 x, l4 y), computed under the true association by the independent FeasibleSet
-    from slamcli.sweep.paper004 import box_vs_hull
+    from slamcli.reproduce.paper004 import box_vs_hull
 
     ds = simulate_scenario("cuik-room", 2)
     r = solve_dataset(ds.inputs, "cuik", {})

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from slamcli.sweep.paper001 import CLAIMS, DEVIATIONS, claim_verdicts, nees_band
+from slamcli.reproduce.paper001 import CLAIMS, DEVIATIONS, claim_verdicts, nees_band
 
 
 def _rows(**change):
