@@ -6,7 +6,8 @@ Rows (seed 1 unless said otherwise):
   closest-landmark negative information, declared 5 m landmark separation), the same without the separation
   prior (``bounded.declared_separation=0``), and the paper operator set without it; the full set with the
   final 3B shaving (4 slices) + bisection (64 leaves) pass; and the unique correspondence (true association,
-  one graph) as the reference for the cost of branching — ``ratio`` = seconds of the row / seconds of the
+  one graph) as the reference for the cost of branching; the unique correspondence with the branch-and-bound
+  hull pass (``hull_leaves``, 10 quick / 100 full) and in Porta's setting (``cuik-room-porta``) — ``ratio`` = seconds of the row / seconds of the
   unique-correspondence full-set run in the same process.
 * ``cuik-corridors`` (14 typed landmarks, 45 legs, declared 4 m separation) with the hypothesis cap 16 and the
   two cap rankings ``parsimony_volume`` (default: fewest landmarks, then largest box volume) and
@@ -74,6 +75,11 @@ def run(quick: bool = False) -> list[dict]:
                      {"narrow_theta": False, "negative_information": False}, repeats))
     rows.append(_row("cuik-room/unique", _known(room), room,
                      {"association": "reported", "shave_slices": 4, "bisect_leaves": 64}, repeats))
+    rows.append(_row("cuik-room/unique", _known(room), room,
+                     {"association": "reported", "shave_slices": 4, "bisect_leaves": 64,
+                      "hull_leaves": 10 if quick else 100}, 1))
+    porta = simulate_scenario("cuik-room-porta", 1)
+    rows.append(_row("cuik-room-porta/unique", porta.inputs, porta, {"association": "reported"}, repeats))
     corr = simulate_scenario("cuik-corridors", 1)
     for rank in ("parsimony_volume",) if quick else ("parsimony_volume", "parsimony_area"):
         rows.append(_row("cuik-corridors/unknown", corr.inputs, corr, {"max_hypotheses": 16, "rank": rank}, 1))

@@ -140,7 +140,9 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
             rows_z.append([max(r, 0.0), br])
             rows_lm.append(int(j))
     obs_lm = np.asarray(rows_lm, np.int64)
-    obs = Observations.from_rows(np.asarray(rows_step, np.int64), np.asarray(rows_z, float).reshape(-1, 2), T + 1)
+    # ``sensor.report_ids``: the sensor also reports each landmark's identity (Porta's setting, paper 004 §1)
+    obs = Observations.from_rows(np.asarray(rows_step, np.int64), np.asarray(rows_z, float).reshape(-1, 2), T + 1,
+                                 reported_id=obs_lm.copy() if cfg.sensor.report_ids else None)
     obs = Observations(step=obs.step, range_m=obs.range_m, bearing_rad=obs.bearing_rad, sensor=obs.sensor,
                        reported_id=obs.reported_id, offsets=obs.offsets, landmark_type=types[obs_lm])
 

@@ -29,6 +29,7 @@ and whose experiment used a Pioneer 3-AT with an outdoor SICK laser):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -181,24 +182,34 @@ _MAPS = {  # paper 001 §III: (width, height, block rows, block cols, corridor w
 }
 
 
-def _cuik_room() -> ScenarioConfig:
+#: paper 004's leg length: its Table 1 r2 box is centred √60 m from r1
+PAPER004_LEG = math.sqrt(60.0)
+
+
+def _cuik_room(name: str = "cuik-room", leg: float | None = None, porta: bool = False) -> ScenarioConfig:
     """Paper 004 §6: a 30 m square room, doors (type 0) at (15, 0) and (15, 30), corridors (type 1) at
     (30, 15) and (0, 15); 8 turn-and-move legs of 7.65 m around an octagon of radius 10 m centred at
     (15, 15), turning +45° (paper: −45°, its θ runs clockwise) per leg and closing the loop at pose 9 (our
     pose 8). Start r1 = (15, 5, 1.963495) in the paper's heading convention (Table 1). Declares a landmark
-    separation of 5 m (a map prior the paper does not state; ``bounded.declared_separation=0`` drops it)."""
+    separation of 5 m (a map prior the paper does not state; ``bounded.declared_separation=0`` drops it).
+
+    ``leg``: legs of this length instead (octagon radius ``leg / (2 sin 22.5°)``, centred above the start so
+    r1 stays (15, 5)); ``porta``: Porta's setting (paper 004 §1, §6) — the sensor reports every landmark
+    within 40 m with its identity, instead of the closest one within 12 m with its type only."""
     from slamcli.sim.bounded import heading_from_paper004
 
+    radius = 10.0 if leg is None else leg / (2.0 * math.sin(math.pi / 8))
     a = np.deg2rad(-90.0 + 45.0 * np.arange(8))
-    wp = np.column_stack([15.0 + 10.0 * np.cos(a), 15.0 + 10.0 * np.sin(a)]).round(12)
+    wp = np.column_stack([15.0 + radius * np.cos(a), 5.0 + radius + radius * np.sin(a)]).round(12)
     return ScenarioConfig(
-        name="cuik-room", dt=1.0, n_steps=8,
+        name=name, dt=1.0, n_steps=8,
         world=WorldConfig(layout="none", extra_landmarks=(15.0, 0.0, 30.0, 15.0, 15.0, 30.0, 0.0, 15.0)),
         path=PathConfig(kind="explicit", waypoints=tuple(wp.ravel().tolist()), cyclic=True),
         robot=RobotConfig(start=(15.0, 5.0, float(heading_from_paper004(1.9634954)))),
-        sensor=SensorConfig(kind="point", max_range=12.0, min_range=0.1, fov_deg=360.0),
+        sensor=SensorConfig(kind="point", max_range=40.0 if porta else 12.0, min_range=0.1, fov_deg=360.0,
+                            report_ids=porta),
         bounded=BoundedConfig(enabled=True, odometry_d=0.25, odometry_turn_deg=5.0, range=0.025,
-                              bearing_deg=0.5, closest_only=True, landmark_types=(0, 1, 0, 1),
+                              bearing_deg=0.5, closest_only=not porta, landmark_types=(0, 1, 0, 1),
                               declared_separation=5.0),  # map prior (true minimum 21.2 m); 0 = the paper's
     )
 
@@ -244,6 +255,10 @@ SCENARIOS: dict[str, tuple[Callable[[], ScenarioConfig], str]] = {
     "hybrid-map3-posts": (lambda: _hybrid("hybrid-map3-posts", "laser", *_MAPS[3], features="posts"),
                           "paper 001 Map 3 with point landmarks (posts) instead of corners, laser"),
     "cuik-room": (_cuik_room, "paper 004 §6: 30 m room, 2 doors + 2 corridors, 8 turn-and-move legs, bounded noise"),
+    "cuik-room-porta": (lambda: _cuik_room("cuik-room-porta", porta=True),
+                        "cuik-room in Porta's setting (paper 004 §1): every landmark within 40 m, with its id"),
+    "cuik-room-paper-legs": (lambda: _cuik_room("cuik-room-paper-legs", leg=PAPER004_LEG),
+                             "cuik-room with paper 004's leg length √60 = 7.746 m (ours 7.654 m)"),
     "cuik-corridors": (_cuik_corridors, "paper 004 beyond: 40×20 m corridors, 14 typed landmarks, 45 legs, bounded"),
     "paper-sim1-mobilesim": (_paper_sim_mobilesim, "paper-sim1 with MobileSim's documented Pioneer P3-DX "
                              "acceleration limits, odometry error and SICK LMS-200 noise"),

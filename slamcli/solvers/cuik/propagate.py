@@ -12,6 +12,7 @@ constraint network has no solution in the box (the hypothesis is refuted).
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from dataclasses import dataclass
 
@@ -137,4 +138,82 @@ def bisect_hull(box: list, edges: list[Contractor], adj: dict[int, list[int]], s
         for leaf in leaves[1:]:
             h = h | leaf[i]
         box[i] = box[i] & h
+    return True
+
+
+def _candidates(leaf: list, split_vars: list[int], scales: list[float], min_width: float, k: int) -> list[int]:
+    """The ``k`` split variables of ``leaf`` with the largest scaled widths ``w·scale`` above ``min_width``
+    (unbounded ones skipped)."""
+    w = [(leaf[u].diam() * s, u) for u, s in zip(split_vars, scales)]
+    return [u for wu, u in sorted(w, reverse=True)[:k] if min_width < wu < float("inf")]
+
+
+def tighten_bound(box: list, edges: list[Contractor], adj: dict[int, list[int]], target: int, side: int,
+                  split_vars: list[int], scales: list[float], *, narrow_theta: bool, tol: float, max_leaves: int,
+                  min_width: float, n_candidates: int = 6, counter: Counter | None = None) -> float | None:
+    """Interval branch and bound on one end of ``box[target]``: the smallest lower end (``side`` 0) or the
+    largest upper end (``side`` 1) over a cover of the box by propagated leaves.
+
+    Best first: the leaf holding the current extreme end is bisected, both halves propagated and refuted
+    halves dropped. The split variable is chosen by strong branching: each of the ``n_candidates`` widest
+    scaled split variables (:func:`_candidates`) is tried, and the one whose worse surviving half moves the end
+    furthest inwards is kept. Every solution in ``box`` stays in some leaf, so the extreme end over the leaves
+    is a sound new bound. Stops after ``max_leaves`` expansions or when the extreme leaf is narrower than
+    ``min_width`` in every scaled split variable. Returns the new end, or None when every leaf is refuted (no
+    solution in the box). ``box`` is not modified.
+    """
+    sign = 1.0 if side == 0 else -1.0
+
+    def end(leaf: list) -> float:  # the end in "smaller is more extreme" form
+        return sign * (leaf[target].lb() if side == 0 else leaf[target].ub())
+
+    heap = [(end(box), 0, [Interval(x) for x in box])]
+    n_made = 1
+    for _ in range(max_leaves):
+        leaf = heap[0][2]
+        best: tuple[float, list] | None = None
+        for v in _candidates(leaf, split_vars, scales, min_width, n_candidates):
+            mid, kids = leaf[v].mid(), []
+            for half in (Interval(leaf[v].lb(), mid), Interval(mid, leaf[v].ub())):
+                child = [Interval(x) for x in leaf]
+                child[v] = half
+                if propagate(child, edges, adj, adj.get(v, []), narrow_theta=narrow_theta, tol=tol,
+                             counter=counter):
+                    kids.append(child)
+            score = min((end(c) for c in kids), default=float("inf"))
+            if best is None or score > best[0]:
+                best = (score, kids)
+        if best is None:  # the extreme leaf is too small to split: its end stands
+            break
+        heapq.heappop(heap)
+        for child in best[1]:
+            heapq.heappush(heap, (end(child), n_made, child))
+            n_made += 1
+        if not heap:
+            return None
+    return sign * heap[0][0]
+
+
+def hull_pass(box: list, edges: list[Contractor], adj: dict[int, list[int]], targets: list[int],
+              split_vars: list[int], scales: list[float], *, narrow_theta: bool, tol: float, max_leaves: int,
+              min_width: float, rounds: int = 1, counter: Counter | None = None) -> bool:
+    """Tighten both ends of every ``targets`` variable by :func:`tighten_bound`, propagating the narrowed box
+    after each end (so later targets start from the tighter box); ``rounds`` passes. Sound; returns False when
+    the box is refuted."""
+    for _ in range(rounds):
+        for v in targets:
+            for side in (0, 1):
+                if not box[v].diam() > 10 * tol:
+                    continue
+                new = tighten_bound(box, edges, adj, v, side, split_vars, scales, narrow_theta=narrow_theta,
+                                    tol=tol, max_leaves=max_leaves, min_width=min_width, counter=counter)
+                if new is None:
+                    return False
+                lo, hi = (new, box[v].ub()) if side == 0 else (box[v].lb(), new)
+                if lo > hi:
+                    return False
+                box[v] = box[v] & Interval(lo, hi)
+                if not propagate(box, edges, adj, adj.get(v, []), narrow_theta=narrow_theta, tol=tol,
+                                 counter=counter):
+                    return False
     return True

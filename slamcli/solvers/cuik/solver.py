@@ -78,6 +78,16 @@ class CuikParams:
                                "does notice the closest landmark"). Sound; False = the paper's graphs only.
     separation : bool          when the data declare ``NoiseBounds.min_separation > 0`` (a map prior, not a
                                sensor fact): every pair of landmark labels is at least that far apart.
+    hull_leaves : int          0 = off; else a final branch-and-bound pass (runs after 3B and bisection) that
+                               moves each end of every ``hull_targets`` variable to the extreme over a cover
+                               by propagated leaves, bisecting at most this many leaves per end (sound; the
+                               boxes approach the hull of the feasible set, paper 004's "sharp" boxes).
+    hull_targets : "landmarks" | "all"
+                               the variables whose ends the hull pass tightens (landmark coordinates, or
+                               every pose and landmark coordinate).
+    hull_split : "legs" | "poses" | "all"
+                               what the hull pass bisects: the odometry legs (d, α) — the independent
+                               errors — or pose positions and headings, or both with landmarks.
     rank : str                 order used by the cap and for the output (a heuristic, not a guarantee):
                                ``parsimony_volume`` = fewest landmarks, then the LARGEST box log-volume (under
                                uniform errors an association's likelihood is proportional to the volume of
@@ -103,6 +113,9 @@ class CuikParams:
     recovery_slack: float = 1e-9
     negative_information: bool = True
     separation: bool = True
+    hull_leaves: int = 0
+    hull_targets: Literal["landmarks", "all"] = "landmarks"
+    hull_split: Literal["legs", "poses", "all"] = "poses"
     rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_volume"
 
     def __post_init__(self) -> None:
@@ -110,6 +123,8 @@ class CuikParams:
             raise ValueError("tol must be > 0")
         if self.max_hypotheses < 1:
             raise ValueError("max_hypotheses must be >= 1")
+        if self.hull_leaves < 0:
+            raise ValueError("hull_leaves must be >= 0")
         if self.shave_slices < 0 or self.shave_rounds < 1:
             raise ValueError("shave_slices must be >= 0 and shave_rounds >= 1")
         if self.recovery_slack < 0:
@@ -138,236 +153,300 @@ class CuikSlam(BaseSolver):
             return self._solve(inputs, progress)
 
     def _solve(self, inputs: SlamInputs, progress: ProgressFn | None) -> SolverResult:
-        from slamcli.solvers.cuik.contractors import (
-            Interval,
-            OdometryTurnMove,
-            OutsideBand,
-            RangeBearing,
-            Separated,
-            SeparatedLocal,
-            SharedLandmarkLeg,
-            unbounded,
-        )
-        from slamcli.solvers.cuik.hypotheses import Hypothesis, merge_relabelled
-        from slamcli.solvers.cuik.propagate import Counter, bisect_hull, propagate, shave
-
         t_start = time.perf_counter()
-        p = self.params
         nb = inputs.noise_bounds
-        n_poses = inputs.n_poses
-        obs = inputs.observations
         why = ("the dataset declares no guaranteed error bounds (inputs/noise_bounds); simulate with "
                "bounded.enabled=true (e.g. scenario cuik-room)" if nb is None else
                f"odometry model {nb.odometry_model!r} not supported (turn_move only)"
                if nb.odometry_model != "turn_move" else None)
         if why is not None:  # no bounds, no guaranteed boxes: a documented failure, not a guess
-            return self.make_result(status=Status.FAILED, poses_xyt=np.full((n_poses, 3), np.nan),
-                                    landmarks_xy=np.zeros((0, 2)), assoc=np.full(len(obs), -1, np.int64),
-                                    t_start=t_start, message=f"cuik: {why}")
-        types = (np.asarray(obs.landmark_type, np.int64) if obs.landmark_type is not None
-                 else np.zeros(len(obs), np.int64))
-        h_d, h_a = (float(x) + p.recovery_slack for x in nb.odometry_half_width)
-        h_r, h_b = float(nb.range_half_width), float(nb.bearing_half_width)
+            return self._failed(inputs, t_start, f"cuik: {why}", None)
+        run = _Run(inputs, self.params)
+        for t in range(inputs.n_poses):
+            if not run.add_pose(t):
+                break
+            if progress is not None:
+                progress(t + 1, inputs.n_poses)
+        extra = run.extra()
+        if run.refuted is not None:
+            t, i = run.refuted
+            where = f"pose {t}" + (f", observation row {i}" if i >= 0 else " (odometry edge)")
+            extra.update(refuted_at_pose=t, refuted_at_observation=i)
+            return self._failed(inputs, t_start, f"every hypothesis became empty at {where}: the data contradict "
+                                "the declared bounds", extra)
+        if not run.final_pass():
+            return self._failed(inputs, t_start, "the 3B / bisection / hull pass refuted every hypothesis: the data "
+                                "contradict the declared bounds", run.extra())
+        return self._completed(inputs, run, t_start)
 
+    def _failed(self, inputs: SlamInputs, t_start: float, message: str, extra: dict | None) -> SolverResult:
+        """The one FAILED result: no estimate, NaN poses, every observation unassociated."""
+        return self.make_result(status=Status.FAILED, poses_xyt=np.full((inputs.n_poses, 3), np.nan),
+                                landmarks_xy=np.zeros((0, 2)), assoc=np.full(len(inputs.observations), -1, np.int64),
+                                t_start=t_start, message=message, extra=extra)
+
+    def _completed(self, inputs: SlamInputs, run: _Run, t_start: float) -> SolverResult:
+        """Rank the survivors; the point estimate is the box midpoint of the first one."""
+        p = self.params
+        hyps = sorted(run.hyps, key=run.rank)
+        boxes = _to_arrays(hyps, inputs.n_poses, len(inputs.observations), run.base)
+        poses = 0.5 * (boxes.pose_lo[0] + boxes.pose_hi[0])
+        poses[:, 2] = wrap_angle(poses[:, 2])
+        L0 = int(boxes.n_landmarks[0])
+        lms = 0.5 * (boxes.landmark_lo[0, :L0] + boxes.landmark_hi[0, :L0])
+        capped = run.capped_steps
+        extra = run.extra()
+        extra.update(n_hypotheses=len(hyps), n_landmarks_best=L0)
+        message = (f"{len(hyps)} kinematic graph(s) survive; the hypothesis cap ({p.max_hypotheses}) removed "
+                   f"{run.dropped} at steps {capped[:5]}{'...' if len(capped) > 5 else ''} — the "
+                   "surviving set may miss the true correspondence" if capped
+                   else f"{len(hyps)} kinematic graph(s) survive; boxes are guaranteed under the declared bounds")
+        res = self.make_result(status=Status.TRUNCATED if capped else Status.COMPLETED, poses_xyt=poses,
+                               landmarks_xy=lms, assoc=boxes.assoc[0], t_start=t_start, message=message,
+                               extra=extra)
+        return dataclasses.replace(res, hypotheses=boxes)
+
+
+class _Run:
+    """One solve's state: the live hypotheses, the variable layout and the bookkeeping of :class:`CuikSlam`.
+
+    Variables: poses ``(x, y, θ)`` at ``3t..3t+2``, legs ``(d, α)`` at ``3·n_poses + 2t``, landmarks ``(x, y)``
+    from :attr:`base` on. Call :meth:`add_pose` for t = 0, 1, … (False once every hypothesis is refuted, then
+    :attr:`refuted` = (pose, observation row or −1)), then :meth:`final_pass`.
+    """
+
+    def __init__(self, inputs: SlamInputs, p: CuikParams) -> None:
+        from slamcli.solvers.cuik.contractors import Interval, unbounded
+        from slamcli.solvers.cuik.hypotheses import Hypothesis
+        from slamcli.solvers.cuik.propagate import Counter
+
+        self.p, self.inputs = p, inputs
+        nb = inputs.noise_bounds
+        obs = self.obs = inputs.observations
+        self.n_poses = n = inputs.n_poses
+        self.types = (np.asarray(obs.landmark_type, np.int64) if obs.landmark_type is not None
+                      else np.zeros(len(obs), np.int64))
+        self.h_d, self.h_a = (float(x) + p.recovery_slack for x in nb.odometry_half_width)
+        self.h_r, self.h_b = float(nb.range_half_width), float(nb.bearing_half_width)
         odo = np.asarray(inputs.odometry_xyt, float)
-        legs = np.column_stack([np.hypot(*(odo[1:, :2] - odo[:-1, :2]).T), wrap_angle(odo[1:, 2] - odo[:-1, 2])])
-
-        # variables: poses (x, y, θ) at 3t.., legs (d, α) at 3(T+1) + 2t.., landmarks (x, y) from `base` on
-        n_legs = n_poses - 1
-        base = 3 * n_poses + 2 * n_legs
-        box0 = [unbounded() for _ in range(base)]
+        self.legs = np.column_stack([np.hypot(*(odo[1:, :2] - odo[:-1, :2]).T),
+                                     wrap_angle(odo[1:, 2] - odo[:-1, 2])])
+        self.base = 3 * n + 2 * (n - 1)
+        box0 = [unbounded() for _ in range(self.base)]
         for k in range(3):
             box0[k] = Interval(float(inputs.x0[k]))
         # negative information of the closest-landmark sensor (one reading per pose at most, or the declaration
         # is contradicted by the data and not used)
-        per_pose = np.diff(np.asarray(obs.offsets))
-        neg = bool(p.negative_information and nb.closest_only and (per_pose <= 1).all())
-        r_min, r_max = float(nb.min_range), float(inputs.max_range)
-        if neg and not np.isfinite(r_max):
-            r_max = float("inf")
+        self.per_pose = np.diff(np.asarray(obs.offsets))
+        self.neg = bool(p.negative_information and nb.closest_only and (self.per_pose <= 1).all())
+        self.r_min, self.r_max = float(nb.min_range), float(inputs.max_range)
         # lower end of each true range: R.lb of the outward-rounded reading interval [r̃ ± h_r] ∩ [0, ∞), less
         # recovery_slack (the simulator treats landmarks within 1 nm of the closest as tied)
-        r_lo = [max(0.0, ((Interval(float(r)) + Interval(-h_r, h_r)) & Interval(0.0, float("inf"))).lb()
-                    - p.recovery_slack) for r in np.asarray(obs.range_m, float)]
-        silent: list[int] = []  # poses that reported no landmark
-        sep = float(nb.min_separation) if p.separation else 0.0
-        rank = {"parsimony_area": lambda h: (h.n_landmarks, h.landmark_area()),
-                "parsimony_width": lambda h: (h.n_landmarks, h.total_width()),
-                "parsimony_volume": lambda h: (h.n_landmarks, -h.log_volume(3))}[p.rank]
-        hyps = [Hypothesis(box=box0)]
-        counter = Counter()
-        live_per_step: list[int] = []
-        branches_per_step: list[int] = []
-        merged_total = 0
-        capped_steps: list[int] = []
-        dropped = 0
-        refuted: tuple[int, int] | None = None
+        self.r_lo = [max(0.0, ((Interval(float(r)) + Interval(-self.h_r, self.h_r)) & Interval(0.0, float("inf")))
+                         .lb() - p.recovery_slack) for r in np.asarray(obs.range_m, float)]
+        self.silent: list[int] = []  # poses that reported no landmark
+        self.sep = float(nb.min_separation) if p.separation else 0.0
+        self.rank = {"parsimony_area": lambda h: (h.n_landmarks, h.landmark_area()),
+                     "parsimony_width": lambda h: (h.n_landmarks, h.total_width()),
+                     "parsimony_volume": lambda h: (h.n_landmarks, -h.log_volume(3))}[p.rank]
+        self.hyps = [Hypothesis(box=box0)]
+        self.counter = Counter()
+        self.live_per_step: list[int] = []
+        self.branches_per_step: list[int] = []
+        self.merged_total = self.dropped = 0
+        self.capped_steps: list[int] = []
+        self.refuted: tuple[int, int] | None = None
 
-        def pose_vars(t: int) -> tuple[int, int, int]:
-            return (3 * t, 3 * t + 1, 3 * t + 2)
+    # -- variable layout ------------------------------------------------------------------------------------
+    def pose_vars(self, t: int) -> tuple[int, int, int]:
+        return (3 * t, 3 * t + 1, 3 * t + 2)
 
-        def leg_vars(t: int) -> tuple[int, int]:
-            return (3 * n_poses + 2 * t, 3 * n_poses + 2 * t + 1)
+    def leg_vars(self, t: int) -> tuple[int, int]:
+        return (3 * self.n_poses + 2 * t, 3 * self.n_poses + 2 * t + 1)
 
-        def lm_vars(j: int) -> tuple[int, int]:
-            return (base + 2 * j, base + 2 * j + 1)
+    def lm_vars(self, j: int) -> tuple[int, int]:
+        return (self.base + 2 * j, self.base + 2 * j + 1)
 
-        def consistent(hyps: list[Hypothesis], add_edges) -> list[Hypothesis]:
-            """The hypotheses whose boxes stay non-empty after ``add_edges(h)`` (edge indices) is propagated."""
-            return [h for h in hyps if propagate(h.box, h.edges, h.adj, add_edges(h), narrow_theta=p.narrow_theta,
-                                                 tol=p.tol, counter=counter)]
+    def _propagate(self, h, start: list[int]) -> bool:
+        from slamcli.solvers.cuik.propagate import propagate
 
-        for t in range(n_poses):
-            if t > 0:
-                edge = OdometryTurnMove(pose_vars(t - 1), pose_vars(t), float(legs[t - 1, 0]),
-                                        float(legs[t - 1, 1]), h_d, h_a, leg=leg_vars(t - 1))
+        return propagate(h.box, h.edges, h.adj, start, narrow_theta=self.p.narrow_theta, tol=self.p.tol,
+                         counter=self.counter)
 
-                def add_leg(h: Hypothesis, edge=edge, leg=leg_vars(t - 1)) -> list[int]:
-                    h.box[leg[0]] = Interval(edge.D)
-                    h.box[leg[1]] = Interval(edge.A)
-                    return [h.add_edge(edge)]
+    def _keep_consistent(self, add_edges) -> bool:
+        """Keep the hypotheses whose boxes stay non-empty after ``add_edges(h)`` (edge indices) is propagated."""
+        self.hyps = [h for h in self.hyps if self._propagate(h, add_edges(h))]
+        return bool(self.hyps)
 
-                hyps = consistent(hyps, add_leg)
-                if not hyps:
-                    refuted = (t, -1)
-                    break
-            if neg and per_pose[t] == 0:
-                # a silent pose: no landmark of any type within [r_min, r_max] of pose t
-                silent.append(t)
-                hyps = consistent(hyps, lambda h, t=t: [h.add_edge(OutsideBand(pose_vars(t), lm_vars(m), r_min, r_max))
-                                                        for m in range(h.n_landmarks)])
-                if not hyps:
-                    refuted = (t, -1)
-                    break
-            n_branch = 0
-            for i in range(int(obs.offsets[t]), int(obs.offsets[t + 1])):
-                r, b, ty = float(obs.range_m[i]), float(obs.bearing_rad[i]), int(types[i])
-                rid = int(obs.reported_id[i])
-                children = []
-                for h in hyps:
-                    options: list[int]
-                    if p.association == "reported" and rid >= 0:
-                        options = [h.reported[rid]] if rid in h.reported else [-1]
-                    else:
-                        options = [j for j, tj in enumerate(h.landmark_type) if tj == ty]
-                        if p.new_landmarks or not options:
-                            options.append(-1)
-                    for n_opt, j in enumerate(options):
-                        g = h if n_opt == len(options) - 1 else h.copy()
-                        is_new = j < 0
-                        if is_new:
-                            j = g.n_landmarks
-                            g.box += [unbounded(), unbounded()]
-                            g.landmark_type.append(ty)
-                            if p.association == "reported" and rid >= 0:
-                                g.reported[rid] = j
-                        lv = lm_vars(j)
-                        start = [g.add_edge(RangeBearing(pose_vars(t), lv, r, b, h_r, h_b))]
-                        if neg:
-                            # closest-landmark sensor: every other landmark is outside [r_min, r) of pose t ...
-                            start += [g.add_edge(OutsideBand(pose_vars(t), lm_vars(m), r_min, r_lo[i]))
-                                      for m in range(g.n_landmarks) if m != j]
-                            if is_new:  # ... and a new landmark was never closer than what earlier poses saw
-                                start += [g.add_edge(OutsideBand(pose_vars(int(obs.step[k])), lv, r_min, r_lo[k]))
-                                          for k in range(i)]
-                                start += [g.add_edge(OutsideBand(pose_vars(s), lv, r_min, r_max)) for s in silent]
-                        if sep > 0 and t > 0:  # a different label seen from pose t−1: separated, in its frame
-                            start += [g.add_edge(SeparatedLocal(
-                                leg_vars(t - 1), (float(obs.range_m[k]), float(obs.bearing_rad[k])), (r, b), h_r,
-                                h_b, sep)) for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t]))
-                                if g.assoc[k] != j]
-                        if is_new and sep > 0:
-                            start += [g.add_edge(Separated(lm_vars(m), lv, sep)) for m in range(g.n_landmarks)
-                                      if m != j]
-                        if p.narrow_theta and t > 0:  # the same landmark seen from pose t−1: a local cycle
-                            for k in range(int(obs.offsets[t - 1]), int(obs.offsets[t])):
-                                if g.assoc[k] == j:
-                                    start.append(g.add_edge(SharedLandmarkLeg(
-                                        leg_vars(t - 1), (float(obs.range_m[k]), float(obs.bearing_rad[k])),
-                                        (r, b), h_r, h_b)))
-                        n_branch += 1
-                        if propagate(g.box, g.edges, g.adj, start, narrow_theta=p.narrow_theta, tol=p.tol,
-                                     counter=counter):
-                            g.assoc.append(j)
-                            children.append(g)
-                hyps, m = merge_relabelled(children)
-                merged_total += m
-                if not hyps:
-                    refuted = (t, i)
-                    break
-                if len(hyps) > p.max_hypotheses:
-                    hyps.sort(key=rank)
-                    dropped += len(hyps) - p.max_hypotheses
-                    hyps = hyps[: p.max_hypotheses]
-                    capped_steps.append(t)
-            if refuted is not None:
-                break
-            live_per_step.append(len(hyps))
-            branches_per_step.append(n_branch)
-            if progress is not None:
-                progress(t + 1, n_poses)
+    # -- one pose -------------------------------------------------------------------------------------------
+    def add_pose(self, t: int) -> bool:
+        """Odometry edge t−1 → t, the silent-pose band, then every observation of pose t (branching)."""
+        from slamcli.solvers.cuik.contractors import Interval, OdometryTurnMove, OutsideBand
 
-        extra = {
-            "contractions": counter.contractions,
-            "propagations": counter.propagations,
-            "live_hypotheses_per_step": live_per_step,
-            "branches_per_step": branches_per_step,
-            "merged_relabelled": merged_total,
-            "hypotheses_dropped_by_cap": dropped,
-            "cap_hit_at_steps": capped_steps,
-            "operator_set": "full" if p.narrow_theta else "paper",
-            "negative_information": neg,
-            "min_separation": sep,
+        if t > 0:
+            leg = self.leg_vars(t - 1)
+            edge = OdometryTurnMove(self.pose_vars(t - 1), self.pose_vars(t), float(self.legs[t - 1, 0]),
+                                    float(self.legs[t - 1, 1]), self.h_d, self.h_a, leg=leg)
+
+            def add_leg(h) -> list[int]:
+                h.box[leg[0]] = Interval(edge.D)
+                h.box[leg[1]] = Interval(edge.A)
+                return [h.add_edge(edge)]
+
+            if not self._keep_consistent(add_leg):
+                self.refuted = (t, -1)
+                return False
+        if self.neg and self.per_pose[t] == 0:  # a silent pose: no landmark of any type within [r_min, r_max]
+            self.silent.append(t)
+            band = (self.r_min, self.r_max)
+            if not self._keep_consistent(lambda h: [h.add_edge(OutsideBand(self.pose_vars(t), self.lm_vars(m), *band))
+                                                    for m in range(h.n_landmarks)]):
+                self.refuted = (t, -1)
+                return False
+        n_branch = 0
+        for i in range(int(self.obs.offsets[t]), int(self.obs.offsets[t + 1])):
+            n_branch += self._observe(t, i)
+            if not self.hyps:
+                self.refuted = (t, i)
+                return False
+        self.live_per_step.append(len(self.hyps))
+        self.branches_per_step.append(n_branch)
+        return True
+
+    def _options(self, h, i: int) -> list[int]:
+        """Labels observation ``i`` may have in ``h`` (−1 = a new landmark)."""
+        rid = int(self.obs.reported_id[i])
+        if self.p.association == "reported" and rid >= 0:
+            return [h.reported[rid]] if rid in h.reported else [-1]
+        options = [j for j, tj in enumerate(h.landmark_type) if tj == int(self.types[i])]
+        if self.p.new_landmarks or not options:
+            options.append(-1)
+        return options
+
+    def _observe(self, t: int, i: int) -> int:
+        """Branch every hypothesis over the labels of observation ``i`` (pose t), propagate, merge, cap;
+        returns the number of branches tried."""
+        from slamcli.solvers.cuik.contractors import unbounded
+        from slamcli.solvers.cuik.hypotheses import merge_relabelled
+
+        children, n_branch = [], 0
+        for h in self.hyps:
+            options = self._options(h, i)
+            for n_opt, j in enumerate(options):
+                g = h if n_opt == len(options) - 1 else h.copy()
+                is_new = j < 0
+                if is_new:
+                    j = g.n_landmarks
+                    g.box += [unbounded(), unbounded()]
+                    g.landmark_type.append(int(self.types[i]))
+                    rid = int(self.obs.reported_id[i])
+                    if self.p.association == "reported" and rid >= 0:
+                        g.reported[rid] = j
+                n_branch += 1
+                if self._propagate(g, self._observation_edges(g, t, i, j, is_new)):
+                    g.assoc.append(j)
+                    children.append(g)
+        self.hyps, m = merge_relabelled(children)
+        self.merged_total += m
+        if len(self.hyps) > self.p.max_hypotheses:
+            self.hyps.sort(key=self.rank)
+            self.dropped += len(self.hyps) - self.p.max_hypotheses
+            self.hyps = self.hyps[: self.p.max_hypotheses]
+            self.capped_steps.append(t)
+        return n_branch
+
+    def _observation_edges(self, g, t: int, i: int, j: int, is_new: bool) -> list[int]:
+        """Add the edges of observation ``i`` (pose t) read as landmark label ``j`` to ``g``; their indices."""
+        from slamcli.solvers.cuik.contractors import (
+            OutsideBand,
+            RangeBearing,
+            Separated,
+            SeparatedLocal,
+            SharedLandmarkLeg,
+        )
+
+        obs, p, lv = self.obs, self.p, self.lm_vars(j)
+        r, b = float(obs.range_m[i]), float(obs.bearing_rad[i])
+        start = [g.add_edge(RangeBearing(self.pose_vars(t), lv, r, b, self.h_r, self.h_b))]
+        if self.neg:
+            # closest-landmark sensor: every other landmark is outside [r_min, r) of pose t ...
+            start += [g.add_edge(OutsideBand(self.pose_vars(t), self.lm_vars(m), self.r_min, self.r_lo[i]))
+                      for m in range(g.n_landmarks) if m != j]
+            if is_new:  # ... and a new landmark was never closer than what earlier poses saw
+                start += [g.add_edge(OutsideBand(self.pose_vars(int(obs.step[k])), lv, self.r_min, self.r_lo[k]))
+                          for k in range(i)]
+                start += [g.add_edge(OutsideBand(self.pose_vars(s), lv, self.r_min, self.r_max)) for s in self.silent]
+        prev = range(int(obs.offsets[t - 1]), int(obs.offsets[t])) if t > 0 else range(0)
+        z = {k: (float(obs.range_m[k]), float(obs.bearing_rad[k])) for k in prev}
+        if self.sep > 0:  # a different label seen from pose t−1: separated, in its frame
+            start += [g.add_edge(SeparatedLocal(self.leg_vars(t - 1), z[k], (r, b), self.h_r, self.h_b, self.sep))
+                      for k in prev if g.assoc[k] != j]
+        if is_new and self.sep > 0:
+            start += [g.add_edge(Separated(self.lm_vars(m), lv, self.sep)) for m in range(g.n_landmarks) if m != j]
+        if p.narrow_theta:  # the same landmark seen from pose t−1: a local cycle
+            start += [g.add_edge(SharedLandmarkLeg(self.leg_vars(t - 1), z[k], (r, b), self.h_r, self.h_b))
+                      for k in prev if g.assoc[k] == j]
+        return start
+
+    # -- after the last pose --------------------------------------------------------------------------------
+    def final_pass(self) -> bool:
+        """The optional 3B shaving, heading bisection and hull passes on every survivor; False when they
+        refute every hypothesis."""
+        from slamcli.solvers.cuik.propagate import bisect_hull, shave
+
+        p, c = self.p, self.counter
+        if not (p.shave_slices > 0 or p.bisect_leaves > 0 or p.hull_leaves > 0):
+            return True
+        kept = []
+        for h in self.hyps:
+            variables = [v for v, x in enumerate(h.box) if x.diam() > 10 * p.tol]
+            ok = p.shave_slices == 0 or shave(h.box, h.edges, h.adj, variables, narrow_theta=p.narrow_theta,
+                                              tol=p.tol, slices=p.shave_slices, rounds=p.shave_rounds, counter=c)
+            if ok and p.bisect_leaves > 0:
+                ok = bisect_hull(h.box, h.edges, h.adj, [3 * t + 2 for t in range(self.n_poses)],
+                                 narrow_theta=p.narrow_theta, tol=p.tol, max_leaves=p.bisect_leaves, counter=c)
+            if ok and p.hull_leaves > 0:
+                ok = _hull(h, p, self.n_poses, self.base, c)
+            if ok:
+                kept.append(h)
+        self.hyps = kept
+        return bool(kept)
+
+    def extra(self) -> dict:
+        return {
+            "contractions": self.counter.contractions,
+            "propagations": self.counter.propagations,
+            "live_hypotheses_per_step": self.live_per_step,
+            "branches_per_step": self.branches_per_step,
+            "merged_relabelled": self.merged_total,
+            "hypotheses_dropped_by_cap": self.dropped,
+            "cap_hit_at_steps": self.capped_steps,
+            "operator_set": "full" if self.p.narrow_theta else "paper",
+            "negative_information": self.neg,
+            "min_separation": self.sep,
         }
-        if refuted is not None:
-            t, i = refuted
-            where = f"pose {t}" + (f", observation row {i}" if i >= 0 else " (odometry edge)")
-            extra.update(refuted_at_pose=t, refuted_at_observation=i)
-            nan = np.full((n_poses, 3), np.nan)
-            return self.make_result(
-                status=Status.FAILED, poses_xyt=nan, landmarks_xy=np.zeros((0, 2)),
-                assoc=np.full(len(obs), -1, np.int64), t_start=t_start, extra=extra,
-                message=f"every hypothesis became empty at {where}: the data contradict the declared bounds")
 
-        if p.shave_slices > 0 or p.bisect_leaves > 0:
-            kept = []
-            for h in hyps:
-                variables = [v for v, x in enumerate(h.box) if x.diam() > 10 * p.tol]
-                ok = p.shave_slices == 0 or shave(h.box, h.edges, h.adj, variables, narrow_theta=p.narrow_theta,
-                                                  tol=p.tol, slices=p.shave_slices, rounds=p.shave_rounds,
-                                                  counter=counter)
-                if ok and p.bisect_leaves > 0:
-                    ok = bisect_hull(h.box, h.edges, h.adj, [3 * t + 2 for t in range(n_poses)],
-                                     narrow_theta=p.narrow_theta, tol=p.tol, max_leaves=p.bisect_leaves,
-                                     counter=counter)
-                if ok:
-                    kept.append(h)
-            hyps = kept
-            extra["contractions"] = counter.contractions
-            extra["propagations"] = counter.propagations
-            if not hyps:
-                return self.make_result(
-                    status=Status.FAILED, poses_xyt=np.full((n_poses, 3), np.nan), landmarks_xy=np.zeros((0, 2)),
-                    assoc=np.full(len(obs), -1, np.int64), t_start=t_start, extra=extra,
-                    message="the 3B / bisection pass refuted every hypothesis: the data contradict the declared bounds")
 
-        hyps.sort(key=rank)
-        boxes = _to_arrays(hyps, n_poses, len(obs), base)
-        best_lo, best_hi = boxes.pose_lo[0], boxes.pose_hi[0]
-        poses = 0.5 * (best_lo + best_hi)
-        poses[:, 2] = wrap_angle(poses[:, 2])
-        L0 = int(boxes.n_landmarks[0])
-        lms = 0.5 * (boxes.landmark_lo[0, :L0] + boxes.landmark_hi[0, :L0])
-        truncated = bool(capped_steps)
-        extra.update(n_hypotheses=len(hyps), n_landmarks_best=L0)
-        message = (f"{len(hyps)} kinematic graph(s) survive; the hypothesis cap ({p.max_hypotheses}) removed "
-                   f"{dropped} at steps {capped_steps[:5]}{'...' if len(capped_steps) > 5 else ''} — the "
-                   "surviving set may miss the true correspondence" if truncated
-                   else f"{len(hyps)} kinematic graph(s) survive; boxes are guaranteed under the declared bounds")
-        res = self.make_result(status=Status.TRUNCATED if truncated else Status.COMPLETED, poses_xyt=poses,
-                               landmarks_xy=lms, assoc=boxes.assoc[0], t_start=t_start, message=message,
-                               extra=extra)
-        return dataclasses.replace(res, hypotheses=boxes)
+def _hull(h, p: CuikParams, n_poses: int, base: int, counter) -> bool:
+    """The final branch-and-bound pass (``hull_leaves``) on one hypothesis; False when it is refuted."""
+    from slamcli.solvers.cuik.propagate import hull_pass
+
+    poses = [v for t in range(1, n_poses) for v in (3 * t, 3 * t + 1, 3 * t + 2)]
+    legs = list(range(3 * n_poses, base))
+    lms = list(range(base, len(h.box)))
+    targets = lms if p.hull_targets == "landmarks" else poses + lms
+    split = {"legs": legs, "poses": poses, "all": poses + legs + lms}[p.hull_split]
+    # widths compared in metres: an angle times HULL_LEVER (a heading or turn error moves a point that far)
+    scales = [HULL_LEVER if (v < 3 * n_poses and v % 3 == 2) or (3 * n_poses <= v < base and (v - 3 * n_poses) % 2)
+              else 1.0 for v in split]
+    return hull_pass(h.box, h.edges, h.adj, targets, split, scales, narrow_theta=p.narrow_theta, tol=p.tol,
+                     max_leaves=p.hull_leaves, min_width=HULL_MIN_WIDTH, counter=counter)
+
+
+#: lever arm (m) that turns an angle width into a length for the hull pass's choice of split variable
+HULL_LEVER = 10.0
+#: the hull pass stops splitting a leaf once every scaled split variable is narrower than this (m)
+HULL_MIN_WIDTH = 1e-3
 
 
 def _to_arrays(hyps, n_poses: int, n_obs: int, base: int) -> BoxHypotheses:
