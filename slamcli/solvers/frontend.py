@@ -156,73 +156,119 @@ def associate_nearest_neighbour(
     assoc = np.full(N, -1, np.int64)
     if N == 0:
         return assoc, np.zeros((0, 2))
-    m_all = observation.inverse_range_bearing(poses[obs.step], obs.z)  # (N, 2)
-    _, Mz = observation.inverse_range_bearing_jacobians(poses[obs.step], obs.z)
-    C_all = Mz @ np.asarray(obs_cov, float) @ np.swapaxes(Mz, 1, 2) + extra_std**2 * np.eye(2)
+    m_all, C_all = _inverse_observations(poses, obs, obs_cov, extra_std)
     drift = _DriftModel(poses, odometry_std) if odometry_std is not None else None
-    cap = 64
-    mu = np.empty((cap, 2))
-    P = np.empty((cap, 2, 2))
-    last = np.zeros(cap, np.int64)
-    L = 0
+    lm = _LandmarkMap()
     offsets = np.asarray(obs.offsets, np.int64)
     bearings = np.asarray(obs.bearing_rad, float)
     for t in range(offsets.size - 1):  # sequential by nature: each step sees the map built so far
         a, b = int(offsets[t]), int(offsets[t + 1])
         if a == b:
             continue
-        seg = segment_returns(m_all[a:b], bearings[a:b], segment_dist)  # (n,) detection of each row
-        ns = int(seg.max()) + 1
-        cnt = np.bincount(seg, minlength=ns).astype(float)
-        m = np.stack([np.bincount(seg, m_all[a:b, i], ns) for i in range(2)], -1) / cnt[:, None]
-        C = (
-            np.stack(
-                [np.bincount(seg, C_all[a:b, i, j], ns) for i in range(2) for j in range(2)], -1
-            ).reshape(ns, 2, 2)
-            / cnt[:, None, None]
-        )  # one return's covariance (spread on a disc is systematic)
-        lab = np.full(ns, -1, np.int64)
+        seg, m, C = _step_detections(m_all[a:b], C_all[a:b], bearings[a:b], segment_dist)
+        lab = np.full(m.shape[0], -1, np.int64)
+        L = lm.size
         if L and drift is not None:
-            P[:L] += drift.landmark_cov(last[:L], t, mu[:L])
-            last[:L] = t
+            lm.P[:L] += drift.landmark_cov(lm.last[:L], t, lm.mu[:L])
+            lm.last[:L] = t
         if L:
-            diff = m[:, None, :] - mu[None, :L, :]  # (ns, L, 2)
-            Sinv = _inv2(C[:, None] + P[None, :L])  # (ns, L, 2, 2)
-            d2 = np.einsum("nli,nlij,nlj->nl", diff, Sinv, diff)
-            cand = np.argwhere(d2 <= thr)
-            if cand.size:
-                order = np.argsort(d2[cand[:, 0], cand[:, 1]], kind="stable")
-                used_lm = set()
-                for i, j in cand[order]:  # greedy exclusive choice; candidates ≈ detections of the step
-                    if lab[i] >= 0 or j in used_lm:
-                        continue
-                    used_lm.add(int(j))
-                    lab[i] = j
-                hit = np.flatnonzero(lab >= 0)
-                if hit.size:  # information fusion of all matched pairs at once
-                    js = lab[hit]
-                    Pi, Ci = _inv2(P[js]), _inv2(C[hit])
-                    Pn = _inv2(Pi + Ci)
-                    mu[js] = np.einsum(
-                        "kij,kj->ki",
-                        Pn,
-                        np.einsum("kij,kj->ki", Pi, mu[js]) + np.einsum("kij,kj->ki", Ci, m[hit]),
-                    )
-                    P[js] = Pn
+            lab = _match_and_fuse(m, C, lm, thr)
         new = np.flatnonzero(lab < 0)
         if new.size:
-            while L + new.size > cap:
-                cap *= 2
-                mu = np.resize(mu, (cap, 2))
-                P = np.resize(P, (cap, 2, 2))
-                last = np.resize(last, cap)
-            mu[L : L + new.size] = m[new]
-            P[L : L + new.size] = C[new]
-            last[L : L + new.size] = t
-            lab[new] = np.arange(L, L + new.size)
-            L += new.size
+            lab[new] = lm.add(m[new], C[new], t)
         assoc[a:b] = lab[seg]
-    return assoc, mu[:L].copy()
+    return assoc, lm.mu[: lm.size].copy()
+
+
+def _inverse_observations(
+    poses: np.ndarray, obs: Observations, obs_cov: np.ndarray, extra_std: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse observations ``m̂ = h⁻¹(x_t, z) (N, 2)`` of all rows and their covariances
+    ``C = M_z Σ_z M_zᵀ + σ_e² I (N, 2, 2)`` (see :func:`associate_nearest_neighbour`)."""
+    m_all = observation.inverse_range_bearing(poses[obs.step], obs.z)  # (N, 2)
+    _, Mz = observation.inverse_range_bearing_jacobians(poses[obs.step], obs.z)
+    C_all = Mz @ np.asarray(obs_cov, float) @ np.swapaxes(Mz, 1, 2) + extra_std**2 * np.eye(2)
+    return m_all, C_all
+
+
+def _step_detections(
+    m_rows: np.ndarray, C_rows: np.ndarray, bearings: np.ndarray, segment_dist: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The detections of one time step's rows (:func:`segment_returns`): ``seg (n,)`` detection of each
+    row, the mean inverse observation ``m (ns, 2)`` of each detection and its covariance ``C (ns, 2, 2)``
+    (the mean of its rows' covariances: one return's)."""
+    seg = segment_returns(m_rows, bearings, segment_dist)  # (n,) detection of each row
+    ns = int(seg.max()) + 1
+    cnt = np.bincount(seg, minlength=ns).astype(float)
+    m = np.stack([np.bincount(seg, m_rows[:, i], ns) for i in range(2)], -1) / cnt[:, None]
+    C = (
+        np.stack(
+            [np.bincount(seg, C_rows[:, i, j], ns) for i in range(2) for j in range(2)], -1
+        ).reshape(ns, 2, 2)
+        / cnt[:, None, None]
+    )  # one return's covariance (spread on a disc is systematic)
+    return seg, m, C
+
+
+def _match_and_fuse(m: np.ndarray, C: np.ndarray, lm: _LandmarkMap, thr: float) -> np.ndarray:
+    """Gate the detections ``(m, C)`` of one step against the landmarks of ``lm``, choose greedily in order
+    of ``d²`` (each detection and each landmark at most once) and fuse every matched pair into its landmark
+    (``P⁺ = (P⁻¹ + C⁻¹)⁻¹, μ⁺ = P⁺(P⁻¹μ + C⁻¹m̂)``, in place). Returns ``lab (ns,)``: landmark of each
+    detection, -1 = none admissible."""
+    L = lm.size
+    mu, P = lm.mu, lm.P
+    lab = np.full(m.shape[0], -1, np.int64)
+    diff = m[:, None, :] - mu[None, :L, :]  # (ns, L, 2)
+    Sinv = _inv2(C[:, None] + P[None, :L])  # (ns, L, 2, 2)
+    d2 = np.einsum("nli,nlij,nlj->nl", diff, Sinv, diff)
+    cand = np.argwhere(d2 <= thr)
+    if cand.size:
+        order = np.argsort(d2[cand[:, 0], cand[:, 1]], kind="stable")
+        used_lm = set()
+        for i, j in cand[order]:  # greedy exclusive choice; candidates ≈ detections of the step
+            if lab[i] >= 0 or j in used_lm:
+                continue
+            used_lm.add(int(j))
+            lab[i] = j
+        hit = np.flatnonzero(lab >= 0)
+        if hit.size:  # information fusion of all matched pairs at once
+            js = lab[hit]
+            Pi, Ci = _inv2(P[js]), _inv2(C[hit])
+            Pn = _inv2(Pi + Ci)
+            mu[js] = np.einsum(
+                "kij,kj->ki",
+                Pn,
+                np.einsum("kij,kj->ki", Pi, mu[js]) + np.einsum("kij,kj->ki", Ci, m[hit]),
+            )
+            P[js] = Pn
+    return lab
+
+
+class _LandmarkMap:
+    """The front end's growing landmark table: fused estimates ``mu (L, 2)``, covariances ``P (L, 2, 2)``
+    and the pose ``last (L,)`` each was last updated at (arrays of capacity ``cap ≥ L``, doubled as needed)."""
+
+    def __init__(self, cap: int = 64) -> None:
+        self.cap = cap
+        self.mu = np.empty((cap, 2))
+        self.P = np.empty((cap, 2, 2))
+        self.last = np.zeros(cap, np.int64)
+        self.size = 0
+
+    def add(self, m: np.ndarray, C: np.ndarray, t: int) -> np.ndarray:
+        """Append new landmarks at ``m (k, 2)`` with covariances ``C (k, 2, 2)``, seen at pose ``t``;
+        returns their labels ``(k,)``."""
+        L, k = self.size, m.shape[0]
+        while L + k > self.cap:
+            self.cap *= 2
+            self.mu = np.resize(self.mu, (self.cap, 2))
+            self.P = np.resize(self.P, (self.cap, 2, 2))
+            self.last = np.resize(self.last, self.cap)
+        self.mu[L : L + k] = m
+        self.P[L : L + k] = C
+        self.last[L : L + k] = t
+        self.size = L + k
+        return np.arange(L, L + k)
 
 
 class _DriftModel:
