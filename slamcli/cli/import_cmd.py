@@ -10,6 +10,8 @@ import typer
 from slamcli.cli.app import app, check_output, fail, handle_errors, stdout_console
 
 _Force = Annotated[bool, typer.Option("--force", help="Replace an existing -o that is not a slamcli dataset.")]
+_Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")]
+_Out = Annotated[Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")]
 
 import_app = typer.Typer(
     help="Import a recording, a landmark graph or another estimator's trajectory: then solve/evaluate/plot work on it.",
@@ -111,10 +113,8 @@ def import_mrclam_command(
     solo_dir: Annotated[Path | None, typer.Option(
         "--solo-dir", help="With --robots: also write each robot alone on the same time grid, robotN.h5 in this "
                            "folder (to compare solo and joint solves).")] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
-    out: Annotated[
-        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
-    ] = None,
+    quiet: _Quiet = False,
+    out: _Out = None,
     force: _Force = False,
 ) -> None:
     """Import robot --robot of a UTIAS MRCLAM dataset: controls resampled to --dt, barcode ids as reported ids,
@@ -204,10 +204,8 @@ def import_g2o_command(
         int | None,
         typer.Option("--max-poses", help="Keep only the first N poses (ascending ids) and the edges among them."),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
-    out: Annotated[
-        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
-    ] = None,
+    quiet: _Quiet = False,
+    out: _Out = None,
     force: _Force = False,
 ) -> None:
     """Import a pose graph or landmark graph losslessly: the odometry chain, loop closures as between-factors,
@@ -276,10 +274,8 @@ def import_victoria_park_command(
     bearing_std: _BearingStd = None,
     v_std: _VStd = None,
     steer_std: _SteerStd = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
-    out: Annotated[
-        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
-    ] = None,
+    quiet: _Quiet = False,
+    out: _Out = None,
     force: _Force = False,
 ) -> None:
     """Import Sydney Victoria Park: 40 Hz speed/steering as Ackermann controls, laser at (3.78, 0.50) m, tree
@@ -310,10 +306,8 @@ def import_carpark_command(
     bearing_std: _BearingStd = None,
     v_std: _VStd = None,
     steer_std: _SteerStd = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")] = False,
-    out: Annotated[
-        Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")
-    ] = None,
+    quiet: _Quiet = False,
+    out: _Out = None,
     force: _Force = False,
 ) -> None:
     """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
