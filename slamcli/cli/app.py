@@ -96,12 +96,25 @@ def handle_errors(exit_code: int = 1) -> Iterator[None]:
     error line is printed. Other warnings pass through unchanged.
     """
     import warnings
+    from collections import Counter
 
     from slamcli.errors import SlamcliError
 
     ok = False
-    with warnings.catch_warnings(record=True) as caught:
+    # kind -> count, not a record per warning: a long command (reproduce) raises millions of RuntimeWarnings,
+    # and recording each one grew a test worker to 15 GB
+    numeric: Counter[str] = Counter()
+    with warnings.catch_warnings():
         warnings.simplefilter("always", RuntimeWarning)
+        passthrough = warnings.showwarning
+
+        def count_numeric(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, RuntimeWarning):
+                numeric[str(message).split(" encountered")[0]] += 1
+            else:
+                passthrough(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = count_numeric  # catch_warnings restores it
         try:
             yield
             ok = True
@@ -120,13 +133,10 @@ def handle_errors(exit_code: int = 1) -> Iterator[None]:
             typer.echo("interrupted", err=True)
             raise typer.Exit(130) from None
         finally:
-            numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
-            for w in caught:
-                if not issubclass(w.category, RuntimeWarning):
-                    warnings.showwarning(w.message, w.category, w.filename, w.lineno)
             if numeric and ok:
-                kinds = sorted({str(w.message).split(" encountered")[0] for w in numeric})
-                typer.echo(f"warning: {len(numeric)} numeric warning(s) on this input ({'; '.join(kinds)[:160]}); "
+                kinds = sorted(numeric)
+                typer.echo(f"warning: {sum(numeric.values())} numeric warning(s) on this input "
+                           f"({'; '.join(kinds)[:160]}); "
                            "the result may hold inf/nan", err=True)
 
 
