@@ -87,7 +87,15 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
         "near_path_m": p.near_path_m,
         "nees_convention": "un-normalised, E[NEES] = d (pose d=3, landmark d=2); world-frame [x, y, theta]",
     }
+    per_step = _trajectory_metrics(s, est_xyt, true_xyt, odometry_xyt, p)
+    per_landmark, t_of_e = _landmark_metrics(s, est_lm, true_lm, true_path, p)
+    _consistency_metrics(s, result, est_xyt, true_xyt, est_lm, true_lm, t_of_e, per_step, per_landmark, p)
+    per_it = _iteration_metrics(s, result, truth, true_lm, true_path, p)
+    return Evaluation(s, per_it, per_step, per_landmark)
 
+
+def _trajectory_metrics(s: dict, est_xyt, true_xyt, odometry_xyt, p: EvaluationParams) -> pd.DataFrame:
+    """Add the ATE (raw and aligned), RPE and odometry ATE to ``s``; return the per-step table."""
     # --- trajectory ------------------------------------------------------------------------------------
     s.update(trajectory.ate(est_xyt, true_xyt, align=False))
     s.update({f"aligned_{k}": v for k, v in trajectory.ate(est_xyt, true_xyt, align=True).items()})
@@ -106,7 +114,14 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
     if odometry_xyt is not None:
         e_od, _ = trajectory.ate_errors(odometry_xyt, true_xyt)
         per_step["odometry_trans_err_m"] = e_od
+    return per_step
 
+
+def _landmark_metrics(s: dict, est_lm, true_lm, true_path, p: EvaluationParams):
+    """Add the paper-convention and honest (assignment, OSPA/GOSPA) map errors to ``s``.
+
+    Returns the per-landmark table and ``t_of_e (L',)``, the true landmark assigned to each estimate.
+    """
     # --- landmarks: paper convention ---------------------------------------------------------------------
     if len(est_lm) and len(true_lm):
         nn_err, nn_idx = landmarks.nearest_true_errors(est_lm, true_lm)
@@ -139,7 +154,12 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
     })
     if near is not None:
         per_landmark["near_path"] = near
+    return per_landmark, t_of_e
 
+
+def _consistency_metrics(s: dict, result: SolverResult, est_xyt, true_xyt, est_lm, true_lm, t_of_e,
+                         per_step: pd.DataFrame, per_landmark: pd.DataFrame, p: EvaluationParams) -> None:
+    """Add the pose and landmark NEES (or why not available) to ``s`` and their columns to the tables."""
     # --- consistency ---------------------------------------------------------------------------------------
     why = consistency.covariance_unavailable_reason(result.pose_cov, "pose", result.solver)
     if why is None:
@@ -167,6 +187,10 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
         s["landmark_nees_mean"] = None
         s["landmark_nees_note"] = why or "not available: the result has no landmarks"
 
+
+def _iteration_metrics(s: dict, result: SolverResult, truth: GroundTruth, true_lm, true_path,
+                       p: EvaluationParams) -> pd.DataFrame:
+    """Add the iteration count and set-membership metrics (cuik) to ``s``; return the per-iteration table."""
     # --- per iteration ---------------------------------------------------------------------------------------
     if result.trace is not None and len(result.trace) and len(true_lm):
         per_it = landmarks.paper_error_per_iteration(result.trace, true_lm, true_path, p.near_path_m)
@@ -181,7 +205,7 @@ def evaluate_result(result: SolverResult, truth: GroundTruth, odometry_xyt=None,
 
         s.update({f"set_{k}": v for k, v in set_metrics(result.hypotheses, truth.poses_xyt, truth.landmarks_xy,
                                                          truth.obs_landmark).items()})
-    return Evaluation(s, per_it, per_step, per_landmark)
+    return per_it
 
 
 def monte_carlo_pose_nees(pairs, confidence: float = 0.95):

@@ -235,45 +235,9 @@ class EkfSlam(BaseSolver):
         N = z_all.shape[0]
         sensor = np.asarray(obs.sensor)
         rid = np.asarray(obs.reported_id, np.int64)
-        if p.association == "auto":
-            from dataclasses import replace
-
-            from slamcli.solvers.frontend import resolve_association
-
-            p = replace(p, association=resolve_association(p.association, rid))
-        if p.association == "known" and N > 0 and np.all(rid < 0):
-            raise SolverError(
-                "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
-                "(use --param association=ml)"
-            )
-        if p.association == "ml":
-            gate, new_thr = _chi2_2dof_ppf(p.gate_prob), _chi2_2dof_ppf(p.new_landmark_prob)
-        else:
-            gate = new_thr = np.inf
-
-        noise = inputs.noise
-        if not (noise.range_std * p.obs_std_scale > 0 and noise.bearing_std * p.obs_std_scale > 0):
-            raise SolverError(
-                f"noise: range_std={noise.range_std} and bearing_std={noise.bearing_std} must both be > 0 for the "
-                "EKF (a noise-free sensor makes the innovation covariance S singular)"
-            )
-        obs_cov = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
-        Q_stab = np.diag(np.square(np.asarray(p.stabilising_pose_std, float)))
-        if p.motion_input == "controls":
-            if inputs.controls.shape[0] != T:
-                raise SolverError(f"controls: expected {T} rows, got {inputs.controls.shape[0]}")
-            motion_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
-            controls = np.asarray(inputs.controls, float)
-        else:
-            odom_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
-            incr = odometry_increments(inputs.odometry_xyt)
-
-        gps_at: dict[int, np.ndarray] = {}
-        if p.use_gps and len(inputs.gps_step):
-            if not inputs.gps_std > 0:
-                raise SolverError(f"gps_std={inputs.gps_std}: GPS fixes need a positive σ (or --param use_gps=false)")
-            gps_at = {int(k): np.asarray(v, float) for k, v in zip(inputs.gps_step, inputs.gps_xy)}
-            gps_cov = inputs.gps_std**2 * np.eye(2)
+        p, gate, new_thr = _resolve_association(p, rid, N)
+        obs_cov, Q_stab, motion_cov, drive = _noise_and_drive(inputs, p, T)
+        gps_at, gps_cov = _gps_fixes(inputs, p)
 
         st = _GrowingState(np.asarray(inputs.x0, float), np.diag(np.square(np.asarray(p.init_pose_std, float))))
         poses = np.empty((T + 1, 3))
@@ -281,29 +245,13 @@ class EkfSlam(BaseSolver):
         assoc = np.full(N, -1, np.int64)
         id_to_lm: dict[int, int] = {}
         candidates: list[_Candidate] = []
-        nis_sum, n_upd, n_new, n_disc, n_dropped = 0.0, 0, 0, 0, 0
+        tally = _Tally()
         report_every = max(1, (T + 1) // 100)
 
         for t in range(T + 1):
             # ---------------- predict (pose block only) ----------------
             if t > 0:
-                x_r = st.x[:3]
-                if p.motion_input == "controls":
-                    # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ  (M = motion_cov; Q: process noise in pose coordinates)
-                    u = controls[t - 1]
-                    if inputs.motion_model == "ackermann":  # car model of the tracked point (G&N 2001)
-                        pose_new = ackermann_step(x_r, u, inputs.dt, inputs.vehicle)
-                        F, G_u = ackermann_jacobians(x_r, u, inputs.dt, inputs.vehicle)
-                    else:
-                        pose_new, F, G_u = _ddmr_predict(x_r, u, inputs.dt)
-                    Q = G_u @ motion_cov @ G_u.T
-                else:
-                    # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ (Σ_d = odom_cov) with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
-                    d = incr[t - 1]
-                    F, G = compose_jacobians(x_r, d)
-                    pose_new = compose(x_r, d)
-                    Q = G @ odom_cov @ G.T
-                predict_inplace(st.xa, st.Pa, pose_new, F, Q + Q_stab)
+                _predict_pose(st, inputs, p.motion_input, drive[t - 1], motion_cov, Q_stab)
 
             # ---------------- GPS position fix (linear update) ----------------
             if t in gps_at:
@@ -311,7 +259,6 @@ class EkfSlam(BaseSolver):
 
             # ---------------- update with the rows of step t ----------------
             lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
-            used: set[tuple[int, int]] = set()
             # Rows of landmarks not yet in the state (known: a new id; ml: no plausible state landmark) wait until
             # the step's re-observations are fused: they are appended to ``dets`` and visited after the first
             # pass, so h⁻¹ is linearised at the updated pose, not the predicted one (with σ_ω Δt ≈ 0.18 rad of
@@ -321,61 +268,10 @@ class EkfSlam(BaseSolver):
             dets = group_detections(z_all, sensor, rid, lo, hi, st.x[:3], group=p.group_returns,
                                     association=p.association, group_dist=p.group_dist,
                                     range_offset=p.range_offset)
-            n_first = len(dets)
-            for k_det, (z, g) in enumerate(dets):
-                # z (2,): the measurement of one detection; g: its observation rows (several when grouped)
-                i = int(g[0])
-                if p.association == "known":
-                    key = int(rid[i])
-                    if key < 0:
-                        n_disc += len(g)
-                        continue
-                    j = id_to_lm.get(key)
-                    if j is None and k_det < n_first:
-                        dets.append((z, g))  # deferred to the second pass
-                        continue
-                    if j is None:
-                        j = _add_landmark(st, z, obs_cov)
-                        id_to_lm[key] = j
-                        n_new += 1
-                        assoc[g] = j
-                        continue
-                else:
-                    j, d2 = _ml_best(st, z, obs_cov, exclude=[lm for (s, lm) in used if s == sensor[i]]
-                                     if p.exclusive_per_step else [])
-                    if (j < 0 or d2 > new_thr) and k_det < n_first:
-                        dets.append((z, g))  # deferred to the second pass
-                        continue
-                    if j < 0 or d2 > new_thr:
-                        # no plausible state landmark: start a new one (or a provisional candidate)
-                        if p.provisional:  # ml only (this branch): known ids need no provisional list
-                            j = _provisional_step(st, candidates, z, obs_cov, t, g, gate, p, assoc)
-                            if j >= 0:
-                                n_new += 1
-                                used.add((int(sensor[i]), j))
-                        else:
-                            j = _add_landmark(st, z, obs_cov)
-                            n_new += 1
-                            assoc[g] = j
-                            used.add((int(sensor[i]), j))
-                        continue
-                    if d2 > gate:
-                        n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
-                        continue
-                    used.add((int(sensor[i]), j))
-                y, S = update_inplace(st.xa, st.Pa, z, j, obs_cov)
-                assoc[g] = j
-                nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
-                n_upd += 1
+            _update_step(st, dets, t, p, sensor, rid, obs_cov, gate, new_thr, assoc, id_to_lm, candidates, tally)
 
             if p.provisional and candidates:
-                keep = []
-                for c in candidates:
-                    if t - c.first_step >= p.provisional_window:
-                        n_dropped += 1
-                    else:
-                        keep.append(c)
-                candidates[:] = keep
+                tally.n_dropped += _drop_stale_candidates(candidates, t, p.provisional_window)
 
             poses[t] = st.x[:3]
             P_rr = st.P[:3, :3]
@@ -384,17 +280,11 @@ class EkfSlam(BaseSolver):
                 progress(t + 1, T + 1)
 
         L = (st.n - 3) // 2
-        P = st.P
-        if not (np.all(np.isfinite(poses)) and np.all(np.isfinite(P))):
+        if not (np.all(np.isfinite(poses)) and np.all(np.isfinite(st.P))):
             status, message = Status.FAILED, "non-finite state or covariance (numerical breakdown)"
         else:
-            status, message = Status.COMPLETED, f"filtered {T + 1} steps, {n_upd} updates, {L} landmarks"
-        landmarks = st.x[3:].reshape(L, 2).copy()
-        idx = 3 + 2 * np.arange(L)
-        landmark_cov = np.empty((L, 2, 2))
-        for a in range(2):
-            for b in range(2):
-                landmark_cov[:, a, b] = 0.5 * (P[idx + a, idx + b] + P[idx + b, idx + a])
+            status, message = Status.COMPLETED, f"filtered {T + 1} steps, {tally.n_upd} updates, {L} landmarks"
+        landmarks, landmark_cov = _landmark_blocks(st)
         return self.make_result(
             status=status,
             poses_xyt=poses,
@@ -406,11 +296,11 @@ class EkfSlam(BaseSolver):
             landmark_cov=landmark_cov,
             extra={
                 "association": p.association,
-                "mean_nis": nis_sum / n_upd if n_upd else None,
-                "n_updates": n_upd,
-                "n_new_landmarks": n_new,
-                "n_discarded": n_disc,
-                "n_provisional_dropped": n_dropped,
+                "mean_nis": tally.nis_sum / tally.n_upd if tally.n_upd else None,
+                "n_updates": tally.n_upd,
+                "n_new_landmarks": tally.n_new,
+                "n_discarded": tally.n_disc,
+                "n_provisional_dropped": tally.n_dropped,
             },
         )
 
@@ -420,6 +310,174 @@ class EkfSlam(BaseSolver):
 # ------------------------------------------------------------------------------------------------------
 
 
+class _Tally:
+    """Running counters of :meth:`EkfSlam.solve` (``extra`` of the result): NIS sum and update/landmark counts."""
+
+    __slots__ = ("n_disc", "n_dropped", "n_new", "n_upd", "nis_sum")
+
+    def __init__(self):
+        self.nis_sum, self.n_upd, self.n_new, self.n_disc, self.n_dropped = 0.0, 0, 0, 0, 0
+
+
+def _resolve_association(p: EkfParams, rid, N: int) -> tuple[EkfParams, float, float]:
+    """``p`` with ``association="auto"`` resolved, and the χ²(2) gate and new-landmark thresholds (inf unless ml)."""
+    if p.association == "auto":
+        from dataclasses import replace
+
+        from slamcli.solvers.frontend import resolve_association
+
+        p = replace(p, association=resolve_association(p.association, rid))
+    if p.association == "known" and N > 0 and np.all(rid < 0):
+        raise SolverError(
+            "observations.reported_id: every row is -1; association=known needs sensor-reported ids "
+            "(use --param association=ml)"
+        )
+    if p.association == "ml":
+        gate, new_thr = _chi2_2dof_ppf(p.gate_prob), _chi2_2dof_ppf(p.new_landmark_prob)
+    else:
+        gate = new_thr = np.inf
+    return p, gate, new_thr
+
+
+def _noise_and_drive(inputs: SlamInputs, p: EkfParams, T: int):
+    """``(obs_cov (2, 2), Q_stab (3, 3), motion_cov, drive)``: the filter's noise and the input of the predict.
+
+    ``motion_input="controls"``: ``motion_cov`` is the actuation covariance and ``drive (T, 2)`` the controls;
+    ``"odometry"``: ``motion_cov`` is the body-frame increment covariance and ``drive (T, 3)`` the increments.
+    """
+    noise = inputs.noise
+    if not (noise.range_std * p.obs_std_scale > 0 and noise.bearing_std * p.obs_std_scale > 0):
+        raise SolverError(
+            f"noise: range_std={noise.range_std} and bearing_std={noise.bearing_std} must both be > 0 for the "
+            "EKF (a noise-free sensor makes the innovation covariance S singular)"
+        )
+    obs_cov = np.diag([(p.obs_std_scale * noise.range_std) ** 2, (p.obs_std_scale * noise.bearing_std) ** 2])
+    Q_stab = np.diag(np.square(np.asarray(p.stabilising_pose_std, float)))
+    if p.motion_input == "controls":
+        if inputs.controls.shape[0] != T:
+            raise SolverError(f"controls: expected {T} rows, got {inputs.controls.shape[0]}")
+        motion_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.motion_std, float)))
+        controls = np.asarray(inputs.controls, float)
+        return obs_cov, Q_stab, motion_cov, controls
+    odom_cov = np.diag(np.square(p.motion_std_scale * np.asarray(noise.odometry_std, float)))
+    incr = odometry_increments(inputs.odometry_xyt)
+    return obs_cov, Q_stab, odom_cov, incr
+
+
+def _gps_fixes(inputs: SlamInputs, p: EkfParams):
+    """``({step: xy (2,)}, gps_cov (2, 2) or None)`` of the GPS fixes the filter fuses (empty unless ``use_gps``)."""
+    gps_at: dict[int, np.ndarray] = {}
+    gps_cov = None
+    if p.use_gps and len(inputs.gps_step):
+        if not inputs.gps_std > 0:
+            raise SolverError(f"gps_std={inputs.gps_std}: GPS fixes need a positive σ (or --param use_gps=false)")
+        gps_at = {int(k): np.asarray(v, float) for k, v in zip(inputs.gps_step, inputs.gps_xy)}
+        gps_cov = inputs.gps_std**2 * np.eye(2)
+    return gps_at, gps_cov
+
+
+def _predict_pose(st: _GrowingState, inputs: SlamInputs, motion_input: str, step_input, motion_cov, Q_stab) -> None:
+    """Predict the pose block in place by one step's control ``u`` or odometry increment ``d`` (``step_input``)."""
+    x_r = st.x[:3]
+    if motion_input == "controls":
+        # x_r⁻ = g(x_r, u),  F = ∂g/∂x,  Q = G_u M G_uᵀ  (M = motion_cov; Q: process noise in pose coordinates)
+        u = step_input
+        if inputs.motion_model == "ackermann":  # car model of the tracked point (G&N 2001)
+            pose_new = ackermann_step(x_r, u, inputs.dt, inputs.vehicle)
+            F, G_u = ackermann_jacobians(x_r, u, inputs.dt, inputs.vehicle)
+        else:
+            pose_new, F, G_u = _ddmr_predict(x_r, u, inputs.dt)
+        Q = G_u @ motion_cov @ G_u.T
+    else:
+        # x_r⁻ = x_r ⊕ d,  F = ∂(a⊕b)/∂a,  Q = G Σ_d Gᵀ (Σ_d = odom_cov) with G = ∂(a⊕b)/∂b = blkdiag(R(θ), 1)
+        d = step_input
+        odom_cov = motion_cov
+        F, G = compose_jacobians(x_r, d)
+        pose_new = compose(x_r, d)
+        Q = G @ odom_cov @ G.T
+    predict_inplace(st.xa, st.Pa, pose_new, F, Q + Q_stab)
+
+
+def _update_step(st: _GrowingState, dets, t: int, p: EkfParams, sensor, rid, obs_cov, gate, new_thr, assoc,
+                 id_to_lm: dict[int, int], candidates: list[_Candidate], tally: _Tally) -> None:
+    """Associate and fuse the detections ``dets`` of step ``t`` (in place: state, ``assoc``, ids, candidates, tally).
+
+    Detections of landmarks not yet in the state are appended to ``dets`` in the first pass (deferred) and
+    handled in the second (see :meth:`EkfSlam.solve`).
+    """
+    used: set[tuple[int, int]] = set()
+    n_first = len(dets)
+    for k_det, (z, g) in enumerate(dets):
+        # z (2,): the measurement of one detection; g: its observation rows (several when grouped)
+        i = int(g[0])
+        if p.association == "known":
+            key = int(rid[i])
+            if key < 0:
+                tally.n_disc += len(g)
+                continue
+            j = id_to_lm.get(key)
+            if j is None and k_det < n_first:
+                dets.append((z, g))  # deferred to the second pass
+                continue
+            if j is None:
+                j = _add_landmark(st, z, obs_cov)
+                id_to_lm[key] = j
+                tally.n_new += 1
+                assoc[g] = j
+                continue
+        else:
+            j, d2 = _ml_best(st, z, obs_cov, exclude=[lm for (s, lm) in used if s == sensor[i]]
+                             if p.exclusive_per_step else [])
+            if (j < 0 or d2 > new_thr) and k_det < n_first:
+                dets.append((z, g))  # deferred to the second pass
+                continue
+            if j < 0 or d2 > new_thr:
+                # no plausible state landmark: start a new one (or a provisional candidate)
+                if p.provisional:  # ml only (this branch): known ids need no provisional list
+                    j = _provisional_step(st, candidates, z, obs_cov, t, g, gate, p, assoc)
+                    if j >= 0:
+                        tally.n_new += 1
+                        used.add((int(sensor[i]), j))
+                else:
+                    j = _add_landmark(st, z, obs_cov)
+                    tally.n_new += 1
+                    assoc[g] = j
+                    used.add((int(sensor[i]), j))
+                continue
+            if d2 > gate:
+                tally.n_disc += len(g)  # ambiguous: neither clearly this landmark nor clearly a new one
+                continue
+            used.add((int(sensor[i]), j))
+        y, S = update_inplace(st.xa, st.Pa, z, j, obs_cov)
+        assoc[g] = j
+        tally.nis_sum += float(y @ _inv2(S) @ y)  # NIS = yᵀ S⁻¹ y
+        tally.n_upd += 1
+
+
+def _drop_stale_candidates(candidates: list[_Candidate], t: int, window: int) -> int:
+    """Remove (in place) the candidates not confirmed within ``window`` steps of their first sighting; return how many."""
+    keep = []
+    n_dropped = 0
+    for c in candidates:
+        if t - c.first_step >= window:
+            n_dropped += 1
+        else:
+            keep.append(c)
+    candidates[:] = keep
+    return n_dropped
+
+
+def _landmark_blocks(st: _GrowingState):
+    """Final map ``(L, 2)`` and symmetrised landmark covariance blocks ``(L, 2, 2)`` of the state."""
+    L = (st.n - 3) // 2
+    P = st.P
+    landmarks = st.x[3:].reshape(L, 2).copy()
+    idx = 3 + 2 * np.arange(L)
+    landmark_cov = np.empty((L, 2, 2))
+    for a in range(2):
+        for b in range(2):
+            landmark_cov[:, a, b] = 0.5 * (P[idx + a, idx + b] + P[idx + b, idx + a])
+    return landmarks, landmark_cov
 
 
 def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, association: str,
