@@ -272,6 +272,37 @@ def _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts=None) -> np.n
     return out
 
 
+@dataclasses.dataclass
+class _SweepLog:
+    """What :meth:`IcmSlam.solve` records per iteration (the :class:`~slamcli.types.IterationTrace` lists, the
+    poses of every ``every``-th iteration) and the sweep counters reported in ``extra``."""
+
+    objective: list
+    changes: list
+    times: list
+    lms: list
+    every: int
+    pose_iters: list = dataclasses.field(default_factory=list)
+    pose_snaps: list = dataclasses.field(default_factory=list)
+    parts_log: list = dataclasses.field(default_factory=list)
+    joint_errors: list = dataclasses.field(default_factory=list)
+    joint_log: list = dataclasses.field(default_factory=list)
+    rejected: int = 0
+    increases: int = 0
+    joint_accepted: int = 0
+    merges: int = 0
+
+    def record(self, n, E, change, seconds, landmarks, poses) -> None:
+        """Sweep ``n``'s energy, map change, wall-clock time and map points (and poses every ``every`` sweeps)."""
+        self.objective.append(E)
+        self.changes.append(change)
+        self.times.append(seconds)
+        self.lms.append(landmarks.copy())
+        if self.every and n % self.every == 0:
+            self.pose_iters.append(n)
+            self.pose_snaps.append(poses.copy())
+
+
 class IcmSlam(BaseSolver):
     """ICM-SLAM (paper 000, Algorithm 2) — see the module docstring."""
 
@@ -292,29 +323,13 @@ class IcmSlam(BaseSolver):
         progress: ProgressFn | None = None,
     ) -> SolverResult:
         if inputs.robots is not None:
-            from slamcli.solvers.icm.team import solve_team
-
-            if self.params.surface or self.params.range_bias != "none":
-                from slamcli.errors import ConfigError
-
-                raise ConfigError("icm: surface / range_bias are not implemented for multi-robot datasets")
-
-            return solve_team(self, inputs, init=init, progress=progress)
+            return self._solve_team(inputs, init, progress)
         t_start = time.perf_counter()
         p: IcmParams = self.params
         from slamcli.errors import ConfigError
 
-        try:
-            W = p.weights_for(inputs)
-            prob = en.Problem.from_inputs(inputs, p.range_offset, use_gps=p.use_gps and W.K > 0)
-            if prob.gps_step.size:
-                W.gps_obs_weight()  # the GPS pseudo-observation needs an isotropic Q
-        except ValueError as exc:
-            raise ConfigError(f"icm: {exc}") from None
-        rho, base_z, bias = self._surface_setup(inputs, prob)  # surface=true / range_bias=estimate
-        if base_z is not None:
-            prob = surf.with_range_offsets(prob, base_z, surf.initial_offsets(rho, prob.n_obs))
-        T, N = prob.T, prob.n_obs
+        W, prob, rho, base_z, bias = self._problem(inputs)
+        N = prob.n_obs
         reported = p.correspondences == "reported"
         fixed = reported_labels(inputs.observations.reported_id) if reported else None
         if reported and N and not np.any(fixed >= 0):
@@ -327,6 +342,101 @@ class IcmSlam(BaseSolver):
 
         # ---- step 1: initialisation ----------------------------------------------------------------------
         t0 = time.perf_counter()
+        poses, labels, landmarks = self._initialise(prob, inputs, init, fixed, W, extra, timings)
+        # observations in the model: all of them (eq. 13 re-matches the filtered ones), or — filtered="drop" —
+        # those with a label after the initialisation (reported: those with a sensor id)
+        in_model = np.ones(N, bool) if rematch else labels >= 0
+        if rematch:
+            labels = _fill_nearest(prob, poses, labels, landmarks, W, in_model)
+        E = en.energy(prob, W, poses, landmarks, labels)
+        log = _SweepLog([E], [0.0], [time.perf_counter() - t0], [landmarks.copy()], p.trace_poses_every)
+        if log.every:
+            log.pose_iters, log.pose_snaps = [0], [poses.copy()]
+        timings["init_s"] = log.times[0]
+
+        # ---- step 2: ICM sweeps ----------------------------------------------------------------------------
+        status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
+        for n in range(1, p.max_sweeps + 1):
+            t0 = time.perf_counter()
+            if base_z is not None:  # the sweep's surface offsets / range bias, then its starting energy
+                prob, bias = surf.refresh(prob, base_z, rho, bias, p.range_bias == "estimate", W, poses,
+                                          landmarks, labels)
+                E = en.energy(prob, W, poses, landmarks, labels)
+            E_start = E
+            prev_landmarks = landmarks
+            # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i}), every observation in the model
+            if not reported and landmarks.shape[0]:
+                pts = prob.landmark_points(poses)
+                labels = labels.copy()
+                labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
+            if p.accelerate == "joint" and n % p.accelerate_every == 0:
+                poses, landmarks = self._joint_step(prob, W, poses, landmarks, labels, n, log)
+            # x_1..x_T (eq. 14)
+            poses = self._pose_sweep(prob, W, poses, labels, landmarks)
+            # m (eq. 15)
+            pts = prob.landmark_points(poses)
+            E_pose = en.chain_energy(prob, W, poses) + en.gps_energy(prob, W, poses)
+            labels, landmarks = self._map_sweep(prob, inputs, W, poses, pts, labels, landmarks, in_model,
+                                                E_pose, E_start, log)
+            # the energy over the observations in the model at the start of this sweep (the stopping rule's
+            # comparison), then the model of the next sweep
+            lab_same = _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
+            E_same = E_pose + en.observation_energy(pts, lab_same, landmarks, W.Q)
+            if rematch:
+                labels = lab_same
+            else:
+                in_model = labels >= 0
+            E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q)
+            log.record(n, E, mp.map_change(prev_landmarks, landmarks), time.perf_counter() - t0, landmarks, poses)
+            if progress is not None:
+                progress(n, p.max_sweeps)
+            decision = stop_decision(E_start, E_same, p.energy_rtol)
+            if decision == "increase":
+                log.increases += 1
+            elif decision == "converged":
+                status = Status.CONVERGED
+                break
+        return self._finish(prob, W, status, poses, landmarks, labels, bias, log, extra, timings, t_start)
+
+    # -- the steps of solve ----------------------------------------------------------------------------------
+    def _solve_team(self, inputs, init, progress):
+        """Multi-robot datasets: :func:`slamcli.solvers.icm.team.solve_team` (no surface / range bias there)."""
+        from slamcli.solvers.icm.team import solve_team
+
+        if self.params.surface or self.params.range_bias != "none":
+            from slamcli.errors import ConfigError
+
+            raise ConfigError("icm: surface / range_bias are not implemented for multi-robot datasets")
+
+        return solve_team(self, inputs, init=init, progress=progress)
+
+    def _problem(self, inputs):
+        """``(W, prob, ρ, the unshifted z, bias)``: the weights, the energy's :class:`~.energy.Problem` (with the
+        initial surface offsets when ``surface`` / ``range_bias`` asks for them) and :meth:`_surface_setup`'s
+        values. Invalid weights or data: one-line :class:`~slamcli.errors.ConfigError`."""
+        from slamcli.errors import ConfigError
+
+        p: IcmParams = self.params
+        try:
+            W = p.weights_for(inputs)
+            prob = en.Problem.from_inputs(inputs, p.range_offset, use_gps=p.use_gps and W.K > 0)
+            if prob.gps_step.size:
+                W.gps_obs_weight()  # the GPS pseudo-observation needs an isotropic Q
+        except ValueError as exc:
+            raise ConfigError(f"icm: {exc}") from None
+        rho, base_z, bias = self._surface_setup(inputs, prob)  # surface=true / range_bias=estimate
+        if base_z is not None:
+            prob = surf.with_range_offsets(prob, base_z, surf.initial_offsets(rho, prob.n_obs))
+        return W, prob, rho, base_z, bias
+
+    def _initialise(self, prob, inputs, init, fixed, W, extra, timings):
+        """Step 1: ``(poses, labels, landmarks)`` from ``--init``'s result, the gated or the on-line
+        initialisation, then (not for a given result) the map update of §4 or eq. (17) for reported labels.
+        Records ``extra["init"]`` and the per-step timings."""
+        from slamcli.errors import ConfigError
+
+        p: IcmParams = self.params
+        reported = fixed is not None
         if init is not None:
             poses, labels, landmarks = self._from_result(prob, init, fixed, W)
             extra["init"] = f"result:{init.solver}"
@@ -355,111 +465,74 @@ class IcmSlam(BaseSolver):
                 labels, landmarks, _ = mp.map_update(pts, labels, p.fusion_radius, p.min_observations)
             else:
                 landmarks = self._means_keep(prob, poses, labels, landmarks)
-        # observations in the model: all of them (eq. 13 re-matches the filtered ones), or — filtered="drop" —
-        # those with a label after the initialisation (reported: those with a sensor id)
-        in_model = np.ones(N, bool) if rematch else labels >= 0
-        if rematch:
-            labels = _fill_nearest(prob, poses, labels, landmarks, W, in_model)
-        E = en.energy(prob, W, poses, landmarks, labels)
-        objective, changes, times, lms = [E], [0.0], [time.perf_counter() - t0], [landmarks.copy()]
-        every = p.trace_poses_every
-        pose_iters, pose_snaps = ([0], [poses.copy()]) if every else ([], [])
-        timings["init_s"] = times[0]
+        return poses, labels, landmarks
 
-        # ---- step 2: ICM sweeps ----------------------------------------------------------------------------
-        status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
-        parts_log: list[str] = []
-        rejected = increases = 0
-        joint_accepted = merges = 0
-        joint_errors: list[str] = []
-        joint_log: list[str] = []
-        for n in range(1, p.max_sweeps + 1):
-            t0 = time.perf_counter()
-            if base_z is not None:  # the sweep's surface offsets / range bias, then its starting energy
-                prob, bias = surf.refresh(prob, base_z, rho, bias, p.range_bias == "estimate", W, poses,
-                                          landmarks, labels)
-                E = en.energy(prob, W, poses, landmarks, labels)
-            E_start = E
-            prev_landmarks = landmarks
-            # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i}), every observation in the model
-            if not reported and landmarks.shape[0]:
-                pts = prob.landmark_points(poses)
-                labels = labels.copy()
-                labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
-            if p.accelerate == "joint" and n % p.accelerate_every == 0:
-                poses, landmarks, jo = joint_refine(prob, W, poses, landmarks, labels, max_iters=p.joint_iters,
-                                                    step_tol=p.joint_step_tol)
-                joint_accepted += jo.steps
-                joint_log.append(f"{jo.steps}:{jo.reason}")
-                if jo.reason.startswith("error"):
-                    joint_errors.append(f"sweep {n}: {jo.reason[7:]}")
-            # x_1..x_T (eq. 14)
-            stats = en.step_stats(prob, labels, landmarks, W)
-            poses = poses.copy()
-            if p.schedule == "parallel":
-                en.sweep_poses_parallel(prob, W, poses, stats, p.pose_iters)
-            else:
-                en.sweep_poses_sequential(prob, W, poses, stats, p.pose_iters)
-            # m (eq. 15): eq. (17) always; label fusion within ϑ and the ς filter (guarded when monotone)
-            pts = prob.landmark_points(poses)
-            E_pose = en.chain_energy(prob, W, poses) + en.gps_energy(prob, W, poses)
-            if reported:
-                landmarks = self._means_keep(prob, poses, labels, landmarks)
-                parts = "eq17"
-            else:
-                labels, landmarks = mp.eq17(pts, labels)
-                parts = "eq17"
-                cand_labels, cand_lm, info = mp.map_update(pts, labels, p.fusion_radius, p.min_observations)
-                if info["fused"] or info["removed"]:
-                    what = "+".join(k for k, f in (("fusion", info["fused"]), ("filter", info["removed"])) if f)
-                    E_cand = E_pose + en.observation_energy(
-                        pts, _fill_nearest(prob, poses, cand_labels, cand_lm, W, in_model, pts), cand_lm, W.Q)
-                    if p.monotone and E_cand > E_start:
-                        rejected += 1
-                        parts = f"eq17 ({what} rejected)"
-                    else:
-                        labels, landmarks = cand_labels, cand_lm
-                        parts = f"eq17+{what}"
-                if p.merge:
-                    labels, landmarks, k = self._merge(prob, inputs, poses, pts, labels, landmarks, p.merge_prob)
-                    merges += k
-                    parts += f"+merge({k})" if k else ""
-            # the energy over the observations in the model at the start of this sweep (the stopping rule's
-            # comparison), then the model of the next sweep
-            lab_same = _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
-            E_same = E_pose + en.observation_energy(pts, lab_same, landmarks, W.Q)
-            if rematch:
-                labels = lab_same
-            else:
-                in_model = labels >= 0
-            E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q)
-            parts_log.append(parts)
-            change = mp.map_change(prev_landmarks, landmarks)
-            objective.append(E)
-            changes.append(change)
-            times.append(time.perf_counter() - t0)
-            lms.append(landmarks.copy())
-            if every and n % every == 0:
-                pose_iters.append(n)
-                pose_snaps.append(poses.copy())
-            if progress is not None:
-                progress(n, p.max_sweeps)
-            decision = stop_decision(E_start, E_same, p.energy_rtol)
-            if decision == "increase":
-                increases += 1
-            elif decision == "converged":
-                status = Status.CONVERGED
-                break
+    def _joint_step(self, prob, W, poses, landmarks, labels, n, log):
+        """``accelerate="joint"``: sweep ``n``'s joint Gauss-Newton refinement of poses and map points; the
+        outcome goes to ``log``."""
+        p: IcmParams = self.params
+        poses, landmarks, jo = joint_refine(prob, W, poses, landmarks, labels, max_iters=p.joint_iters,
+                                            step_tol=p.joint_step_tol)
+        log.joint_accepted += jo.steps
+        log.joint_log.append(f"{jo.steps}:{jo.reason}")
+        if jo.reason.startswith("error"):
+            log.joint_errors.append(f"sweep {n}: {jo.reason[7:]}")
+        return poses, landmarks
 
-        timings["s_per_sweep"] = float(np.mean(times[1:])) if len(times) > 1 else 0.0
+    def _pose_sweep(self, prob, W, poses, labels, landmarks):
+        """x_1..x_T (eq. 14): one sweep of the pose conditional modes, on a copy of ``poses``."""
+        p: IcmParams = self.params
+        stats = en.step_stats(prob, labels, landmarks, W)
+        poses = poses.copy()
+        if p.schedule == "parallel":
+            en.sweep_poses_parallel(prob, W, poses, stats, p.pose_iters)
+        else:
+            en.sweep_poses_sequential(prob, W, poses, stats, p.pose_iters)
+        return poses
+
+    def _map_sweep(self, prob, inputs, W, poses, pts, labels, landmarks, in_model, E_pose, E_start, log):
+        """m (eq. 15): eq. (17) always; label fusion within ϑ and the ς filter (guarded when monotone), then the
+        optional χ² merge. ``pts``: h⁻¹ of every observation from the new poses; ``E_pose``: the motion + GPS
+        energy of the new poses; ``E_start``: the sweep's starting energy. Returns ``(labels, landmarks)``; the
+        parts applied and the counters go to ``log``."""
+        p: IcmParams = self.params
+        if p.correspondences == "reported":
+            log.parts_log.append("eq17")
+            return labels, self._means_keep(prob, poses, labels, landmarks)
+        labels, landmarks = mp.eq17(pts, labels)
+        parts = "eq17"
+        cand_labels, cand_lm, info = mp.map_update(pts, labels, p.fusion_radius, p.min_observations)
+        if info["fused"] or info["removed"]:
+            what = "+".join(k for k, f in (("fusion", info["fused"]), ("filter", info["removed"])) if f)
+            E_cand = E_pose + en.observation_energy(
+                pts, _fill_nearest(prob, poses, cand_labels, cand_lm, W, in_model, pts), cand_lm, W.Q)
+            if p.monotone and E_cand > E_start:
+                log.rejected += 1
+                parts = f"eq17 ({what} rejected)"
+            else:
+                labels, landmarks = cand_labels, cand_lm
+                parts = f"eq17+{what}"
+        if p.merge:
+            labels, landmarks, k = self._merge(prob, inputs, poses, pts, labels, landmarks, p.merge_prob)
+            log.merges += k
+            parts += f"+merge({k})" if k else ""
+        log.parts_log.append(parts)
+        return labels, landmarks
+
+    def _finish(self, prob, W, status, poses, landmarks, labels, bias, log, extra, timings, t_start):
+        """The result: ``extra``'s sweep counters and energy terms, the optional Laplace covariances, the
+        iteration trace (the last iteration's poses always recorded) and the message."""
+        p: IcmParams = self.params
+        objective, joint_errors, increases = log.objective, log.joint_errors, log.increases
+        timings["s_per_sweep"] = float(np.mean(log.times[1:])) if len(log.times) > 1 else 0.0
         extra.update(
             sweeps=len(objective) - 1,
-            map_steps_rejected=rejected,
-            map_step_parts=parts_log,
+            map_steps_rejected=log.rejected,
+            map_step_parts=log.parts_log,
             energy_increases=increases,
-            joint_steps_accepted=joint_accepted,
-            joint_refinements=joint_log,
-            labels_merged=merges,
+            joint_steps_accepted=log.joint_accepted,
+            joint_refinements=log.joint_log,
+            labels_merged=log.merges,
             energy_label_cost=label_cost_energy(landmarks.shape[0], p.label_cost),
             n_out_of_model=int((labels < 0).sum()),
             surface=bool(p.surface), range_bias_m=float(bias),
@@ -469,20 +542,20 @@ class IcmSlam(BaseSolver):
             extra["joint_step_errors"] = joint_errors[:10]
         pose_cov = lm_cov = None
         cov_note = ""
-        if p.covariance and landmarks.shape[0] + T > 0:
+        if p.covariance and landmarks.shape[0] + prob.T > 0:
             try:
                 pose_cov, lm_cov = en.laplace_covariances(prob, W, poses, landmarks, labels)
             except np.linalg.LinAlgError as exc:  # the one marginals policy: refuse, never regularise H
                 why = f"the information matrix is not numerically positive definite at the estimate ({exc})"
                 extra["covariance_error"] = why
                 cov_note = f"; no covariances: {why}"
-        K = len(objective)
-        if every and pose_iters[-1] != K - 1:  # the last iteration is always recorded
-            pose_iters.append(K - 1)
-            pose_snaps.append(poses.copy())
-        trace = IterationTrace.from_lists(objective, changes, times, lms,
-                                          poses_per_iter=pose_snaps if every else None,
-                                          pose_iterations=pose_iters if every else None)
+        every, K = log.every, len(objective)
+        if every and log.pose_iters[-1] != K - 1:  # the last iteration is always recorded
+            log.pose_iters.append(K - 1)
+            log.pose_snaps.append(poses.copy())
+        trace = IterationTrace.from_lists(objective, log.changes, log.times, log.lms,
+                                          poses_per_iter=log.pose_snaps if every else None,
+                                          pose_iterations=log.pose_iters if every else None)
         return self.make_result(
             status=status,
             poses_xyt=poses,
