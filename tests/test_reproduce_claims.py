@@ -71,3 +71,13 @@ def test_claims_status_never_says_ok_and_counts_verdicts():
     s = oc.claims_status([R, N, N], True, [])
     assert "ok" not in s.lower().replace("look", "") and "1 reproduced" in s and "2 not reproduced" in s
     assert "FAILED" in oc.claims_status([R], False, ["a run failed"])
+
+
+def test_report_title_names_only_the_papers_whose_sections_ran():
+    from slamcli.reproduce.report import report_title
+
+    assert report_title(["paper001", "paper001-map4"]) == (
+        "# slamcli reproduction of paper 001 (hybrid Bayesian/frequentist occupancy-grid SLAM)")
+    title = report_title(["fig5", "nees", "paper004", "real"])
+    assert title.index("paper 000") < title.index("paper 004") < title.index("real recordings")
+    assert "paper 001" not in title

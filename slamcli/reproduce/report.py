@@ -992,6 +992,30 @@ class Reproduction:
 # The report's sections, in order. An entry is (key, builder): a method name of Reproduction (paper 000), or
 # "module:function" with run_section(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool).
 # Other papers hook in with one line each, e.g. ("paper001", "slamcli.reproduce.paper001:run_section").
+#: what each paper or data source is, for the report's title (a section's source: :func:`section_source`)
+SOURCES = {
+    "000": "paper 000 (ICM-SLAM, Int. J. Automation and Computing 15(3), 2018)",
+    "001": "paper 001 (hybrid Bayesian/frequentist occupancy-grid SLAM)",
+    "004": "paper 004 (CuikSLAM, set-membership SLAM)",
+    "real": "public real recordings",
+}
+
+
+def section_source(key: str) -> str:
+    """The :data:`SOURCES` key of a section: paper001*/paper004 by name, real* the recordings, else paper 000."""
+    if key.startswith("paper001"):
+        return "001"
+    if key == "paper004":
+        return "004"
+    return "real" if key.startswith("real") else "000"
+
+
+def report_title(keys: list[str]) -> str:
+    """``# slamcli reproduction of …`` naming only the papers/sources whose sections ran, in report order."""
+    order = list(dict.fromkeys(section_source(k) for k in keys)) or ["000"]
+    return "# slamcli reproduction of " + "; ".join(SOURCES[o] for o in order)
+
+
 SECTIONS: list[tuple[str, str]] = [
     ("fig5", "fig5_section"),
     ("init", "init_study_section"),
@@ -1093,7 +1117,7 @@ def reproduce(
     import slamcli
 
     lines = [
-        "# slamcli reproduction of paper 000 (ICM-SLAM, Int. J. Automation and Computing 15(3), 2018)",
+        report_title([sec.key for sec in sections]),
         "",
         (
             f"Generated {utc_now()} by "
