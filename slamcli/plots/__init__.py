@@ -9,6 +9,8 @@ import os
 from pathlib import Path
 
 FORMATS = (".png", ".pdf", ".svg")
+#: fonts embedded as TrueType (Type 42), not matplotlib's default Type 3, which IEEE PDF eXpress rejects
+FONT_RC = {"pdf.fonttype": 42, "ps.fonttype": 42}
 
 
 def parse_size(text: str | None, default: tuple[float, float]) -> tuple[float, float]:
@@ -54,7 +56,7 @@ def check_format(path: str | os.PathLike) -> str:
 def save_figure(fig, path: str | os.PathLike, dpi: int = 200) -> Path:
     """Save ``fig`` to ``path`` (``.png``, ``.pdf`` or ``.svg``, by extension) atomically: temp file in the
     same directory, then ``os.replace``, so a crash never leaves a half-written image. ``dpi`` sets the
-    raster resolution (PNG; PDF/SVG are vector)."""
+    raster resolution (PNG; PDF/SVG are vector). PDF fonts are embedded as TrueType (:data:`FONT_RC`)."""
     import io
 
     from slamcli.errors import ConfigError
@@ -64,7 +66,10 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 200) -> Path:
     fmt = check_format(final)
     if not dpi > 0:
         raise ConfigError(f"--dpi: must be > 0, got {dpi}")
+    import matplotlib
+
     buf = io.BytesIO()  # rendered in memory: matplotlib's PDF writer crashed on a full disk (AttributeError)
-    fig.savefig(buf, format=fmt, dpi=dpi)
+    with matplotlib.rc_context(FONT_RC):
+        fig.savefig(buf, format=fmt, dpi=dpi)
     write_bytes_atomic(final, buf.getbuffer())
     return final

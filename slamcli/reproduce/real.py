@@ -224,6 +224,7 @@ def _map_figure(rows, dataset, path: Path, title: str) -> Path | None:
     import matplotlib.pyplot as plt
 
     from slamcli.models.observation import sensor_pose
+    from slamcli.plots import save_figure
 
     ran = [r for r in rows if r.get("result") is not None and r.get("align") is not None]
     if not ran:
@@ -254,11 +255,8 @@ def _map_figure(rows, dataset, path: Path, title: str) -> Path | None:
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    from slamcli.io import atomic_path
-
     for suffix in (".png", ".pdf"):
-        with atomic_path(path.with_suffix(suffix)) as tmp:
-            fig.savefig(tmp, dpi=130, format=suffix[1:])
+        save_figure(fig, path.with_suffix(suffix), dpi=130)
     plt.close(fig)
     return path.with_suffix(".png")
 
