@@ -29,15 +29,20 @@ def _chain_border(n=6, m=2, seed=0):
     return sp.csc_matrix(A), n, m
 
 
-@pytest.mark.parametrize("path", ["selinv", "chain", "superlu"])
-def test_blocks_equal_the_dense_inverse(monkeypatch, path):
-    H, n, m = _chain_border()
+def _use_path(monkeypatch, path, n, m):
+    """Force ``path`` (the selected inverse when CHOLMOD is there, else a fallback) and return the pose
+    ``(n, 3)`` and landmark ``(m, 2)`` index blocks of :func:`_chain_border`'s H."""
     if path == "selinv" and not selinv.available():
         pytest.skip("CHOLMOD not installed")
     if path != "selinv":
         monkeypatch.setattr(selinv, "available", lambda: False)
-    poses = np.arange(3 * n).reshape(n, 3)
-    lms = 3 * n + np.arange(2 * m).reshape(m, 2)
+    return np.arange(3 * n).reshape(n, 3), 3 * n + np.arange(2 * m).reshape(m, 2)
+
+
+@pytest.mark.parametrize("path", ["selinv", "chain", "superlu"])
+def test_blocks_equal_the_dense_inverse(monkeypatch, path):
+    H, n, m = _chain_border()
+    poses, lms = _use_path(monkeypatch, path, n, m)
     pc, lc = mg.block_marginals(H, (poses, lms), names=("pose", "landmark"), chain=n if path == "chain" else 0)
     C = np.linalg.inv(H.toarray())
     for i in range(n):
@@ -55,12 +60,7 @@ def test_singular_information_is_refused_with_the_variable_named(monkeypatch, pa
     H[s, :] = 0.0
     H[:, s] = 0.0
     H = H.tocsc()
-    if path == "selinv" and not selinv.available():
-        pytest.skip("CHOLMOD not installed")
-    if path != "selinv":
-        monkeypatch.setattr(selinv, "available", lambda: False)
-    poses = np.arange(3 * n).reshape(n, 3)
-    lms = 3 * n + np.arange(2 * m).reshape(m, 2)
+    poses, lms = _use_path(monkeypatch, path, n, m)
 
     def locate(c):
         return f"pose {c // 3}" if c < 3 * n else f"landmark {(c - 3 * n) // 2}"
