@@ -116,13 +116,35 @@ def test_plot_compare(tmp_path):
     assert out.read_bytes()[:4] == b"\x89PNG"
     from slamcli.metrics.aggregate import compare_groups
     from slamcli.plots import new_figure
-    from slamcli.plots.curves import plot_compare
+    from slamcli.plots.figures import draw_compare
 
-    labels, values, *_ = compare_groups(tmp_path / "exp", "ate_rmse", "solver")
-    assert labels == ["ekf", "odometry"] and sorted(values[1]) == [10.0, 12.0, 14.0]
+    g = compare_groups(tmp_path / "exp", "ate_rmse", "solver")
+    assert g.labels == ("ekf", "odometry") and sorted(g.values[1]) == [10.0, 12.0, 14.0]
     _, ax = new_figure()
-    plot_compare(ax, labels, values, "ATE (m)")
+    draw_compare(ax, g)
     np.testing.assert_allclose(np.sort(ax.lines[-1].get_ydata()), [10.0, 12.0, 14.0])  # every run drawn
+    # names and units from the registry, not raw column names
+    assert ax.get_ylabel() == "ATE RMSE (m)" and ax.get_xlabel() == "solver"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["ekf\n(n=6)", "odometry\n(n=3)"]
+
+
+def test_plot_compare_by_two_columns_as_aggregate(tmp_path):
+    """`--by solver,provisional_min_hits` groups like aggregate does (it failed before: one column only)."""
+    _write_sweep(tmp_path / "exp")
+    out = tmp_path / "c.pdf"
+    r = runner.invoke(app, ["plot", "compare", str(tmp_path / "exp"), "--by", "solver,provisional_min_hits",
+                            "-o", str(out), "--label", "A", "--label", "B", "--label", "C"])
+    assert r.exit_code == 0, r.output
+    assert "9 runs in 3 groups" in r.output
+    from slamcli.metrics.aggregate import compare_groups
+
+    g = compare_groups(tmp_path / "exp", "ate_rmse", "solver,provisional_min_hits")
+    assert g.labels == ("ekf, provisional_min_hits=2", "ekf, provisional_min_hits=5", "odometry")
+    a = aggregate_dir(tmp_path / "exp", by=["solver", "provisional_min_hits"], metrics=["ate_rmse"])["summary"]
+    np.testing.assert_allclose([v.mean() for v in g.values], a["mean"].to_numpy())  # same groups, same order
+    r = runner.invoke(app, ["plot", "compare", str(tmp_path / "exp"), "--by", "solver,provisional_min_hits",
+                            "-o", str(tmp_path / "d.png"), "--label", "A"])
+    assert r.exit_code == 1 and "1 label(s) for 3 group(s)" in r.output and not (tmp_path / "d.png").exists()
 
 
 def test_real_sweep_keeps_int_parameter(tmp_path):

@@ -111,7 +111,12 @@ def test_plot_map_legend_without_ground_truth():
     path = np.column_stack([np.linspace(0, 3, 10), np.zeros(10)])
     plot_map(ax, None, np.array([[1.0, 1.0]]), None, path + 0.1, path, legend_note="No ground truth in dataset")
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert labels == ["Odometry", "Estimated trajectory", "Estimated locations", "No ground truth in dataset"]
+    assert labels == ["Odometry", "Estimated trajectory", "Estimated locations", "Start", "End",
+                      "No ground truth in dataset"]
+    # start and end markers at the estimate's first and last pose
+    lines = {ln.get_label(): ln for ln in ax.lines}
+    np.testing.assert_array_equal(lines["Start"].get_xydata(), path[:1])
+    np.testing.assert_array_equal(lines["End"].get_xydata(), path[-1:])
 
 
 @pytest.fixture()
@@ -145,7 +150,8 @@ def test_plot_map_without_ground_truth_draws_estimate_and_odometry(truthless, tm
     _map(ax, res_path, None, True, False, 0, None)
     lines = {ln.get_label(): ln for ln in ax.lines}
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert labels == ["Odometry", "Estimated trajectory", "Estimated locations", "No ground truth in dataset"]
+    assert labels == ["Odometry", "Estimated trajectory", "Estimated locations", "Start", "End",
+                      "No ground truth in dataset"]
     np.testing.assert_array_equal(lines["Estimated trajectory"].get_xydata(), res.poses_xyt[:, :2])
     np.testing.assert_array_equal(lines["Odometry"].get_xydata(), ds.inputs.odometry_xyt[:, :2])
     np.testing.assert_array_equal(lines["Estimated locations"].get_xydata(), res.landmarks_xy)

@@ -9,12 +9,17 @@ from __future__ import annotations
 from slamcli.api.facade import _dataset, _is_path, _result
 
 
-def _ax(ax, size=(6.4, 4.4)):
+def _ax(ax, size=(3.5, 2.6)):
+    """``ax``, or a new pyplot axis in the slamcli style (one column wide, the style's colour cycle)."""
     if ax is not None:
         return ax
     import matplotlib.pyplot as plt
 
-    return plt.subplots(figsize=size, layout="constrained")[1]
+    from slamcli.plots.style import style_axes
+
+    ax = plt.subplots(figsize=size, layout="constrained")[1]
+    style_axes(ax)
+    return ax
 
 
 def _pair(r, ds):
@@ -28,13 +33,15 @@ def _pair(r, ds):
     return result, _dataset(ds)
 
 
-def map(r, ds=None, *, ax=None, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None):
-    """Paper-style map: true and estimated landmarks and paths (+ covariance ellipses)."""
+def map(r, ds=None, *, ax=None, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None,
+        label: str | None = None):
+    """Paper-style map: true and estimated landmarks and paths (+ covariance ellipses, start/end markers);
+    ``label`` names the estimate in the legend."""
     from slamcli.plots.figures import draw_map
 
     result, dataset = _pair(r, ds)
-    return draw_map(_ax(ax, (7.0, 6.0)), result, dataset, ellipses=ellipses,
-                    pose_ellipse_every=pose_ellipse_every, title=title)
+    return draw_map(_ax(ax, (3.5, 3.6)), result, dataset, ellipses=ellipses,
+                    pose_ellipse_every=pose_ellipse_every, title=title, label=label)
 
 
 def errors(r, ds=None, *, ax=None, n_sigma: float = 3.0, title: str | None = None):
@@ -48,13 +55,14 @@ def errors(r, ds=None, *, ax=None, n_sigma: float = 3.0, title: str | None = Non
     if ax is None:
         import matplotlib.pyplot as plt
 
-        ax = plt.subplots(3, 1, sharex=True, figsize=(6.4, 5.5), layout="constrained")[1]
+        ax = plt.subplots(3, 1, sharex=True, figsize=(3.5, 4.2), layout="constrained")[1]
     draw_pose_errors(ax, result, dataset, n_sigma, title)
     return ax
 
 
 def mapchange(results, *, ax=None, labels=None, log: bool = True, title: str | None = None):
-    """Map change per iteration of one or several results (log axis)."""
+    """Map change per iteration of one or several results (log axis); ``labels``: one legend name per
+    result (default: solver names, numbered where they repeat)."""
     from slamcli.plots.figures import draw_mapchange
 
     results = results if isinstance(results, (list, tuple)) else [results]
@@ -74,10 +82,10 @@ def nees(results, datasets, *, ax=None, confidence: float = 0.95, log: bool = Tr
     return draw_nees(_ax(ax), avg, log=log, title=title)
 
 
-def compare(exp_dir, metric: str = "ate_rmse_m", by: str = "solver", *, ax=None, title: str | None = None):
-    """Box + strip plot of a metric per solver / parameter value over a sweep's completed runs."""
+def compare(exp_dir, metric: str = "ate_rmse_m", by="solver", *, ax=None, labels=None, title: str | None = None):
+    """Box + strip plot of a metric per configuration over a sweep's completed runs; ``by``: a column, a
+    comma list (``"solver,gate_prob"``) or a list; axis names and units from the metric registry."""
     from slamcli.metrics.aggregate import compare_groups
-    from slamcli.plots.curves import plot_compare
+    from slamcli.plots.figures import draw_compare
 
-    labels, values, metric_col, by_col, _ = compare_groups(exp_dir, metric, by)
-    return plot_compare(_ax(ax), labels, values, metric_col, by_col, title=title)
+    return draw_compare(_ax(ax), compare_groups(exp_dir, metric, by), labels=labels, title=title)

@@ -11,8 +11,11 @@ import typer
 from slamcli.cli.app import app, check_output, fail, handle_errors
 
 KINDS = ("map", "errors", "nees", "mapchange", "compare", "boxes")
-_SIZES = {"map": (7.0, 6.0), "errors": (6.4, 4.4), "nees": (6.4, 4.4), "mapchange": (6.4, 4.4),
-          "compare": (6.4, 4.4), "boxes": (7.0, 6.0)}
+#: default sizes (inches): one paper column wide (slamcli.plots.style.COLUMN_IN)
+_SIZES = {"map": (3.5, 3.6), "errors": (3.5, 2.6), "nees": (3.5, 2.6), "mapchange": (3.5, 2.6),
+          "compare": (3.5, 2.6), "boxes": (3.5, 3.6)}
+#: the three stacked pose-error panels of `plot errors` need this height unless --size is given
+_POSE_ERRORS_HEIGHT = 4.2
 
 
 @app.command("plot")
@@ -30,11 +33,18 @@ def plot_command(
     sigma: Annotated[float, typer.Option(
         help="errors: half-width of the pose error band in σ (results with covariances).")] = 3.0,
     metric: Annotated[str, typer.Option(help="compare: metric column, e.g. ate_rmse.")] = "ate_rmse_m",
-    by: Annotated[str, typer.Option(help="compare: group by this column (solver = label).")] = "solver",
+    by: Annotated[str, typer.Option(
+        help="compare: group by these columns, a comma list as in aggregate (solver = label), "
+             "e.g. solver,gate_prob.")] = "solver",
+    label: Annotated[list[str] | None, typer.Option(
+        "--label", help="Legend name (repeat): one per result for mapchange, of the estimate for map, "
+                        "of the curve for nees, one per group for compare. Default: solver names.")] = None,
     linear: Annotated[bool, typer.Option(
         "--linear", help="nees/mapchange: linear y axis instead of logarithmic.")] = False,
     dpi: Annotated[int, typer.Option(help="Raster resolution (PNG).")] = 200,
-    size: Annotated[str | None, typer.Option(help="Figure size WIDTHxHEIGHT in inches, e.g. 3.5x2.6.")] = None,
+    size: Annotated[str | None, typer.Option(
+        help="Figure size WIDTHxHEIGHT in inches, e.g. 3.5x2.6, or column (3.5x2.6) / page (7.16x3.2). "
+             "Default: one column wide.")] = None,
     no_hash_check: Annotated[bool, typer.Option("--no-hash-check", help="Skip the dataset hash check.")] = False,
     title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
@@ -61,23 +71,26 @@ def plot_command(
         w, h = parse_size(size, _SIZES[kind])
         _check_raster(w, h, dpi)
         _check_title(title)
+        labels = _check_labels(kind, label, len(results))
         check = not no_hash_check
         data_paths = list(data) if data else [None] * len(results)
         echo = (lambda msg: None) if quiet else typer.echo
         if kind == "errors":
-            fig = _errors(results[0], data_paths[0], check, title, (w, h), sigma, echo)
+            fig = _errors(results[0], data_paths[0], check, title, (w, h), sigma, echo, sized=size is not None)
         else:
             fig, ax = new_figure(w, h)
             if kind == "map":
-                _map(ax, results[0], data_paths[0], check, ellipses, pose_ellipse_every, title, echo)
+                _map(ax, results[0], data_paths[0], check, ellipses, pose_ellipse_every, title, echo,
+                     label=labels[0] if labels else None)
             elif kind == "mapchange":
-                _mapchange(ax, results, title, log=not linear)
+                _mapchange(ax, results, title, log=not linear, labels=labels)
             elif kind == "compare":
-                _compare(ax, results[0], metric, by, title, echo)
+                _compare(ax, results[0], metric, by, title, echo, labels=labels)
             elif kind == "boxes":
                 _boxes(ax, results[0], data_paths[0], check, hypothesis, title)
             else:
-                _nees(ax, results, data_paths, check, title, echo, log=not linear)
+                _nees(ax, results, data_paths, check, title, echo, log=not linear,
+                      label=labels[0] if labels else None)
         save_figure(fig, output, dpi=dpi)
         echo(f"wrote {output}")
 
@@ -99,7 +112,22 @@ def _check_raster(width_in: float, height_in: float, dpi: int) -> None:
     check_allocation("--dpi", dpi, float(px_w) * px_h * RGBA_BYTES, f"a {px_w}x{px_h} pixel canvas")
 
 
-def _check_title(title: str | None) -> None:
+def _check_labels(kind: str, labels: list[str] | None, n_results: int) -> list[str] | None:
+    """``--label`` values, checked against what the kind draws (one line on a mismatch)."""
+    if not labels:
+        return None
+    for lab in labels:
+        _check_title(lab, "--label")
+    if kind in ("errors", "boxes"):
+        fail(f"--label: plot {kind} has no legend name to set")
+    if kind == "mapchange" and len(labels) != n_results:
+        fail(f"--label: got {len(labels)} label(s) for {n_results} result(s); give one per result")
+    if kind in ("map", "nees") and len(labels) != 1:
+        fail(f"--label: plot {kind} draws one estimate; give one --label, got {len(labels)}")
+    return labels
+
+
+def _check_title(title: str | None, option: str = "--title") -> None:
     """Refuse a ``--title`` whose ``$...$`` part matplotlib's mathtext cannot parse (one line, not at save)."""
     if not title:
         return
@@ -115,10 +143,10 @@ def _check_title(title: str | None) -> None:
 
         m = re.search(r"(found .*?)\s*\(at char (\d+)\)", str(exc))
         why = f"{m.group(1)} at character {m.group(2)}" if m else "parse error"
-        fail(f"--title {title!r}: not valid mathtext ({why}); escape a literal dollar sign as \\$")
+        fail(f"{option} {title!r}: not valid mathtext ({why}); escape a literal dollar sign as \\$")
 
 
-def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.echo):
+def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.echo, label=None):
     from slamcli.api.evaluate import load_result_and_dataset
     from slamcli.plots.figures import draw_map
 
@@ -128,14 +156,13 @@ def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.e
         from slamcli.plots.grids import draw_grid
 
         name = "frequentist" if "frequentist" in res.grids else next(iter(res.grids))
-        draw_grid(ax, res.grids[name], label=f"occupancy ({name})")
-    draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every,
-             title=title or f"{res.solver}: {Path(result_path).name}")
+        draw_grid(ax, res.grids[name], label=f"occupancy ({name})", colorbar=True)
+    draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every, title=title, label=label)
     if ds.truth is None or ds.truth.position_reference_only:
         echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
 
 
-def _errors(result_path, data_path, check, title, size, n_sigma, echo):
+def _errors(result_path, data_path, check, title, size, n_sigma, echo, sized=False):
     """Landmark error per iteration for a result with an iteration trace (paper Figs 5e/f); otherwise the
     per-step pose error with ±nσ bands from the result's pose covariances (or without bands)."""
     from slamcli.api.evaluate import load_result_and_dataset
@@ -148,7 +175,7 @@ def _errors(result_path, data_path, check, title, size, n_sigma, echo):
         fig, ax = new_figure(*size)
         draw_landmark_errors(ax, res, ds, title)
         return fig
-    fig, axes = new_figure(size[0], max(size[1], 5.5), nrows=3, sharex=True)
+    fig, axes = new_figure(size[0], size[1] if sized else _POSE_ERRORS_HEIGHT, nrows=3, sharex=True)
     try:
         inside = draw_pose_errors(axes, res, ds, n_sigma, title)
     except ValueError as exc:
@@ -160,13 +187,12 @@ def _errors(result_path, data_path, check, title, size, n_sigma, echo):
     return fig
 
 
-def _mapchange(ax, result_paths, title, log=True):
+def _mapchange(ax, result_paths, title, log=True, labels=None):
     from slamcli.errors import SlamcliError
     from slamcli.io import read_result
     from slamcli.plots.figures import draw_mapchange
 
     results = [read_result(rp) for rp in result_paths]
-    labels = [f"{r.solver}: {Path(rp).name}" for r, rp in zip(results, result_paths)] if len(results) > 1 else None
     try:
         draw_mapchange(ax, results, labels, log=log, title=title)
     except ValueError as exc:
@@ -174,7 +200,7 @@ def _mapchange(ax, result_paths, title, log=True):
         raise SlamcliError(f"{bad}: {exc}") from None
 
 
-def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
+def _nees(ax, result_paths, data_paths, check, title, echo, log=True, label=None):
     import numpy as np
 
     from slamcli.api.evaluate import monte_carlo_nees_files
@@ -184,22 +210,25 @@ def _nees(ax, result_paths, data_paths, check, title, echo, log=True):
     a, why = monte_carlo_nees_files(result_paths, data_paths, check_hash=check)
     if a is None:
         raise SlamcliError(f"plot nees: {why}")
-    draw_nees(ax, a, log=log, title=title)
+    draw_nees(ax, a, log=log, title=title, label=label)
     n_finite = int(np.isfinite(a.anees).sum())
     echo(f"average pose NEES {a.mean:.3f} (time mean, E = {a.dof}) over N = {a.n_runs} runs;\n"
          f"{100 * a.fraction_inside:.1f}% of {n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}]")
 
 
-def _compare(ax, exp_dir, metric, by, title, echo):
+def _compare(ax, exp_dir, metric, by, title, echo, labels=None):
     from slamcli.errors import SlamcliError
     from slamcli.metrics.aggregate import compare_groups
-    from slamcli.plots.curves import plot_compare
+    from slamcli.plots.figures import draw_compare
 
-    labels, values, metric_col, by_col, n_excluded = compare_groups(exp_dir, metric, by)
-    if not labels or all(len(v) == 0 for v in values):
-        raise SlamcliError(f"{exp_dir}: no completed run has a value of {metric_col!r}")
-    plot_compare(ax, labels, values, metric_col, by_col, title=title or f"{Path(exp_dir).name}: {metric_col}")
-    echo(f"{sum(len(v) for v in values)} runs in {len(labels)} groups; {n_excluded} failed run(s) excluded")
+    g = compare_groups(exp_dir, metric, by)
+    if not g.labels or all(len(v) == 0 for v in g.values):
+        raise SlamcliError(f"{exp_dir}: no completed run has a value of {g.metric!r}")
+    if labels and len(labels) != len(g.labels):
+        raise SlamcliError(f"--label: got {len(labels)} label(s) for {len(g.labels)} group(s) "
+                           f"({'; '.join(g.labels)}); give one per group")
+    draw_compare(ax, g, labels=labels, title=title)
+    echo(f"{sum(len(v) for v in g.values)} runs in {len(g.labels)} groups; {g.n_excluded} failed run(s) excluded")
 
 
 def _boxes(ax, result_path, data_path, check, hypothesis, title):
@@ -219,4 +248,4 @@ def _boxes(ax, result_path, data_path, check, hypothesis, title):
     plot_boxes(ax, hb.pose_lo[hypothesis], hb.pose_hi[hypothesis], hb.landmark_lo[hypothesis, :L],
                hb.landmark_hi[hypothesis, :L], truth.poses_xyt if truth else None,
                truth.landmarks_xy if truth else None,
-               title=title or f"{res.solver}: hypothesis {hypothesis} of {len(hb)} ({L} landmarks)")
+               title=title or f"{res.solver}: hypothesis {hypothesis + 1} of {len(hb)}")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import difflib
 import re
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -251,16 +252,55 @@ def aggregate_dir(exp_dir: str | Path, by: Sequence[str] | None = None, metrics:
             "note": note, "paths": paths}
 
 
-def compare_groups(exp_dir: str | Path, metric: str, by: str = "solver"):
-    """Values of ``metric`` per level of ``by`` over the completed runs: ``(labels, [array, ...], metric_col,
-    by_col, n_excluded)`` in sorted order of the levels (for :func:`slamcli.plots.curves.plot_compare`)."""
-    df = read_table(exp_dir)
-    ok, n_excluded = completed(df)
-    by_col = resolve_column(by, df.columns, "--by column")
+@dataclass(frozen=True)
+class CompareGroups:
+    """Values of one metric per configuration, for :func:`slamcli.plots.figures.draw_compare`.
+
+    labels : (G,) display names of the configurations ("ekf, gate_prob=0.9").
+    values : (G,) arrays of the metric over each configuration's completed runs (NaN left out).
+    metric : the metric column.     by : the grouping columns.     n_excluded : failed/unfinished runs left out.
+    """
+
+    labels: tuple[str, ...]
+    values: tuple[Any, ...]
+    metric: str
+    by: tuple[str, ...]
+    n_excluded: int = 0
+
+
+def config_label(keys: Sequence[Any], by_cols: Sequence[str]) -> str:
+    """Display name of one configuration: the solver label bare, every other key as ``name=value``
+    (:func:`slamcli.metrics.registry.column_label`); missing values left out."""
+    from slamcli.metrics.registry import column_label
+
+    parts = [cell_text(k) if c == "label" else f"{column_label(c)}={cell_text(k)}"
+             for k, c in zip(keys, by_cols) if cell_text(k) != "—"]
+    return ", ".join(parts) or "—"
+
+
+def groups_of(df, metric: str, by: str | Sequence[str] = "solver", order: Sequence[str] | None = None,
+              n_excluded: int = 0) -> CompareGroups:
+    """:class:`CompareGroups` of ``metric`` in the completed-runs table ``df``, grouped by ``by`` (one column
+    name, a comma list ``"solver,gate_prob"`` or a sequence; names resolved by :func:`resolve_column`), in
+    sorted order of the keys, or in the order of the labels ``order`` when given (others left out)."""
+    names = [b.strip() for b in by.split(",")] if isinstance(by, str) else list(by)
+    by_cols = [resolve_column(b, df.columns, "--by column") for b in names if b]
+    if not by_cols:
+        raise ConfigError("--by: give at least one column")
     metric_col = resolve_column(metric, df.columns, "metric")
     labels, values = [], []
-    for key, g in ok.groupby(by_col, dropna=False, sort=True):
-        key = key[0] if isinstance(key, tuple) else key
-        labels.append(cell_text(key))
+    for keys, g in df.groupby(by_cols, dropna=False, sort=True):
+        keys = keys if isinstance(keys, tuple) else (keys,)
+        labels.append(config_label(keys, by_cols))
         values.append(g[metric_col].astype(float).dropna().to_numpy())
-    return labels, values, metric_col, by_col, n_excluded
+    if order is not None:
+        pick = [labels.index(o) for o in order if o in labels]
+        labels, values = [labels[k] for k in pick], [values[k] for k in pick]
+    return CompareGroups(tuple(labels), tuple(values), metric_col, tuple(by_cols), n_excluded)
+
+
+def compare_groups(exp_dir: str | Path, metric: str, by: str | Sequence[str] = "solver") -> CompareGroups:
+    """:func:`groups_of` over the completed runs of the sweep in ``exp_dir`` (failed runs counted)."""
+    df = read_table(exp_dir)
+    ok, n_excluded = completed(df)
+    return groups_of(ok, metric, by, n_excluded=n_excluded)

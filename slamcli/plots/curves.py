@@ -5,21 +5,35 @@ from __future__ import annotations
 
 import numpy as np
 
+from slamcli.plots import style
+
 
 def legend_below(ax, ncol: int = 3):
-    """Legend under the axis so it never hides data (constrained layout makes room)."""
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=ncol, fontsize="small", frameon=False)
+    """Legend under the axis, below its tick labels and x label, so it never hides data or the label
+    (constrained layout makes room); at most ``ncol`` columns, fewer when the labels would not fit the
+    figure's width (:func:`style.legend_columns`)."""
+    _, labels = ax.get_legend_handles_labels()
+    n = style.legend_columns(labels, ax.figure.get_figwidth(), max_cols=ncol)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=_below(ax), ncol=n, fontsize=style.SMALL_PT, frameon=False, borderaxespad=0.0, handlelength=1.8,
+              columnspacing=1.0)
+
+
+def _below(ax):
+    """Axes coordinates shifted down past the x tick labels and x label (:func:`style.below_axis_in`)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    return ax.transAxes + ScaledTranslation(0.0, -style.below_axis_in(ax), ax.figure.dpi_scale_trans)
 
 
 def plot_error_curves(ax, iterations, err_min_m, err_mean_m, err_max_m, title: str | None = None):
     """Minimum / mean / maximum nearest-true-landmark error per iteration (paper convention)."""
-    ax.plot(iterations, err_max_m, "-", color="tab:red", lw=1.2, label="Maximum error")
-    ax.plot(iterations, err_mean_m, "-", color="black", lw=1.5, label="Mean error")
-    ax.plot(iterations, err_min_m, "-", color="tab:blue", lw=1.2, label="Minimum error")
+    ax.plot(iterations, err_max_m, "-", color=style.EST_LANDMARK, lw=style.LINE_PT, label="Maximum error")
+    ax.plot(iterations, err_mean_m, "-", color=style.TRUTH, lw=1.3, label="Mean error")
+    ax.plot(iterations, err_min_m, "-", color=style.ESTIMATE, lw=style.LINE_PT, label="Minimum error")
     ax.set_xlabel("Iteration (0 = initialisation)")
-    ax.set_ylabel("Landmark error to nearest true landmark (m)")
+    ax.set_ylabel("Landmark error (m)")
     ax.set_ylim(bottom=0)
-    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.grid(True, **style.GRID)
     if title:
         ax.set_title(title)
     legend_below(ax, ncol=3)
@@ -38,7 +52,7 @@ def plot_map_change(ax, iterations, map_change_m, title: str | None = None, labe
     keep = it > 0  # iteration 0 has no predecessor
     if log:
         keep &= mc > 0
-    ax.plot(it[keep], mc[keep] * 1000.0, "o-", ms=3, lw=1.2, label=label or "Map change")
+    ax.plot(it[keep], mc[keep] * 1000.0, "o-", ms=2.5, lw=style.LINE_PT, label=label or "Map change")
     ax.set_xlabel("Iteration")
     ax.set_ylabel("Map change per iteration (mm)")
     if log:
@@ -47,10 +61,10 @@ def plot_map_change(ax, iterations, map_change_m, title: str | None = None, labe
         # y from 0 to the largest value of every series drawn so far (several calls may overlay results)
         tops = [np.nanmax(np.asarray(ln.get_ydata(), float), initial=0.0) for ln in ax.lines]
         ax.set_ylim(0, 1.05 * max(max(tops, default=0.0), 1e-9))
-    ax.grid(True, which="both" if log else "major", lw=0.3, alpha=0.5)
+    ax.grid(True, which="both" if log else "major", **style.GRID)
     if title:
         ax.set_title(title)
-    legend_below(ax, ncol=1 if log and len(ax.lines) > 2 else 2)
+    legend_below(ax, ncol=2)
     return ax
 
 
@@ -62,15 +76,15 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
     ``log`` (default): logarithmic y axis whose limits always include the band, so an inconsistent filter
     (NEES in the hundreds) and the band are both visible.
     """
-    ax.axhspan(lower, upper, color="tab:green", alpha=0.2, lw=0,
+    ax.axhspan(lower, upper, color=style.BAND, alpha=0.2, lw=0,
                label=f"95% χ² band [{lower:.2f}, {upper:.2f}] (N={n_runs})")
-    ax.axhline(dof, color="tab:green", lw=0.8, ls="--", label=f"E[NEES] = d = {dof}")
+    ax.axhline(dof, color=style.BAND, lw=0.8, ls="--", label=f"E[NEES] = d = {dof}")
     lab = label or "Average NEES"
     if fraction_inside is not None and np.isfinite(fraction_inside):
         lab += f" ({100 * fraction_inside:.0f}% of steps inside)"
-    ax.plot(steps, anees, "-", color="tab:blue", lw=1.0, label=lab)
+    ax.plot(steps, anees, "-", color=style.ESTIMATE, lw=style.LINE_PT, label=lab)
     ax.set_xlabel("Step")
-    ax.set_ylabel(f"Average NEES over {n_runs} runs (d = {dof})")
+    ax.set_ylabel(f"Average NEES (N = {n_runs}, d = {dof})")
     a = np.asarray(anees, float)
     finite = a[np.isfinite(a) & (a > 0)] if log else a[np.isfinite(a)]
     if log:
@@ -81,7 +95,7 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
     else:
         top = max(upper * 1.3, float(np.percentile(finite, 99)) * 1.1 if finite.size else upper * 1.3)
         ax.set_ylim(0, top)
-    ax.grid(True, which="both" if log else "major", lw=0.3, alpha=0.5)
+    ax.grid(True, which="both" if log else "major", **style.GRID)
     if title:
         ax.set_title(title)
     legend_below(ax, ncol=2)
@@ -92,7 +106,7 @@ def plot_pose_errors(axes, steps, err_xyt, sigma_xyt=None, n_sigma: float = 3.0,
                      title: str | None = None):
     """Per-step signed pose error (estimate − truth; heading wrapped) in three stacked axes with the
     ``±n_sigma·σ`` band of the estimator's own marginal covariance (the ``evo_ape --plot`` view plus the
-    filter's claimed uncertainty).
+    filter's claimed uncertainty). Headings in radians, the one angle unit of tables and figures.
 
     Parameters
     ----------
@@ -100,47 +114,66 @@ def plot_pose_errors(axes, steps, err_xyt, sigma_xyt=None, n_sigma: float = 3.0,
     steps : (T+1,)     err_xyt : (T+1, 3)    sigma_xyt : (T+1, 3) | None   √diag of the pose covariance.
     fraction_inside : (3,) | None   share of steps whose error lies inside the band, per component (legend).
     """
-    names = (("x error (m)", 1.0), ("y error (m)", 1.0), ("heading error (deg)", 180.0 / np.pi))
+    from slamcli.metrics.registry import ANGLE_UNIT
+
+    names = ("Δx (m)", "Δy (m)", f"Δθ ({ANGLE_UNIT})")  # short: three panels fit one column
     steps = np.asarray(steps)
     err = np.asarray(err_xyt, float)
+    band_label = f"±{n_sigma:g}σ"
+    if fraction_inside is not None:
+        band_label += " (inside: " + ", ".join(f"{c} {100 * f:.0f}%" for c, f in zip("xyθ", fraction_inside)) + ")"
     for k, ax in enumerate(axes):
-        label, scale = names[k]
         if sigma_xyt is not None:
-            band = n_sigma * np.asarray(sigma_xyt, float)[:, k] * scale
-            inside = "" if fraction_inside is None else f", {100 * fraction_inside[k]:.0f}% of steps inside"
-            ax.fill_between(steps, -band, band, color="tab:orange", alpha=0.25, lw=0,
-                            label=f"±{n_sigma:g}σ{inside}")
-        ax.plot(steps, err[:, k] * scale, "-", color="tab:blue", lw=0.9, label="estimate − truth")
-        ax.axhline(0.0, color="black", lw=0.5)
-        ax.set_ylabel(label)
-        ax.grid(True, lw=0.3, alpha=0.5)
-        ax.legend(loc="upper right", fontsize="x-small", frameon=False, ncol=2)
+            band = n_sigma * np.asarray(sigma_xyt, float)[:, k]
+            ax.fill_between(steps, -band, band, color=style.ACCENT, alpha=0.3, lw=0,
+                            label=band_label if k == 0 else None)
+        ax.plot(steps, err[:, k], "-", color=style.ESTIMATE, lw=0.8, label="estimate − truth" if k == 0 else None)
+        ax.axhline(0.0, color=style.TRUTH, lw=0.5)
+        ax.set_ylabel(names[k])
+        ax.grid(True, **style.GRID)
+        ax.label_outer()
     axes[-1].set_xlabel("Step")
+    handles, labels = axes[0].get_legend_handles_labels()
+    axes[-1].legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0),
+                    bbox_transform=_below(axes[-1]), ncol=style.legend_columns(labels, axes[-1].figure.get_figwidth(), 2),
+                    fontsize=style.SMALL_PT, frameon=False, borderaxespad=0.0)
     if title:
         axes[0].set_title(title)
     return axes
 
 
-def plot_compare(ax, labels, values, ylabel: str, xlabel: str = "", title: str | None = None):
+def plot_compare(ax, labels, values, ylabel: str, xlabel: str = "", title: str | None = None,
+                 nonnegative: bool = False):
     """Box plot per group with every run drawn on top (strip plot; points spread evenly across the box
-    width, no random jitter), e.g. ATE per solver over the replicates of a sweep.
+    width, no random jitter), e.g. ATE per solver over the replicates of a sweep. Boxes: median and
+    quartiles, whiskers to the furthest run within 1.5 IQR. Group labels that would collide are slanted.
 
     Parameters
     ----------
     labels : list of str (G,)          values : list of (n_g,) arrays.
+    ylabel, xlabel : axis labels (names and units from :mod:`slamcli.metrics.registry`).
+    nonnegative : the metric cannot be negative: the y axis starts at 0.
     """
     pos = np.arange(1, len(labels) + 1)
     ax.boxplot([np.asarray(v, float) for v in values], positions=pos, widths=0.5, showfliers=False,
-               medianprops={"color": "black"})
+               medianprops={"color": style.TRUTH, "lw": style.LINE_PT},
+               boxprops={"lw": style.THIN_PT}, whiskerprops={"lw": style.THIN_PT}, capprops={"lw": style.THIN_PT})
     for p, v in zip(pos, values):
         v = np.asarray(v, float)
         dx = np.linspace(-0.15, 0.15, len(v)) if len(v) > 1 else np.zeros(len(v))
-        ax.plot(p + dx, v, "o", ms=3.5, alpha=0.7, color="tab:blue", ls="none")
-    ax.set_xticks(pos, [f"{lab}\n(n={len(v)})" for lab, v in zip(labels, values)])
+        ax.plot(p + dx, v, "o", ms=2.5, alpha=0.75, color=style.ESTIMATE, ls="none")
+    stacked = [lab.replace(", ", "\n") for lab in labels]  # "ekf, gate_prob=0.9" on two lines
+    if not style.labels_collide(stacked, ax.figure.get_figwidth()):
+        ax.set_xticks(pos, [f"{lab}\n(n={len(v)})" for lab, v in zip(stacked, values)])
+    else:  # too many or too long: slanted, one line each
+        ax.set_xticks(pos, [f"{lab} (n={len(v)})" for lab, v in zip(labels, values)], rotation=30, ha="right",
+                      rotation_mode="anchor")
     ax.set_ylabel(ylabel)
     if xlabel:
         ax.set_xlabel(xlabel)
-    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    if nonnegative:
+        ax.set_ylim(bottom=0)
+    ax.grid(True, axis="y", **style.GRID)
     if title:
         ax.set_title(title)
     return ax

@@ -9,8 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 
-def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None):
-    """Paper-style map of ``result`` over ``dataset`` (truth drawn when the dataset has it)."""
+def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None,
+             label: str | None = None):
+    """Paper-style map of ``result`` over ``dataset`` (truth drawn when the dataset has it); ``label`` names
+    the estimate in the legend; the title defaults to the solver's name."""
     from slamcli.plots.maps import plot_map
 
     truth = dataset.truth
@@ -21,7 +23,7 @@ def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every:
                     result.poses_xyt[:, :2], landmark_cov=result.landmark_cov if ellipses else None,
                     pose_cov=result.pose_cov if ellipses else None, ellipse_every=pose_ellipse_every,
                     title=title if title is not None else result.solver,
-                    legend_note=None if truth else "No ground truth in dataset")
+                    legend_note=None if truth else "No ground truth in dataset", label=label)
 
 
 def draw_landmark_errors(ax, result, dataset, title: str | None = None):
@@ -75,22 +77,53 @@ def map_change_series(result) -> np.ndarray:
     return np.asarray([0.0] + [map_change(tr.landmarks_at(k - 1), tr.landmarks_at(k)) for k in range(1, len(tr))])
 
 
+def curve_labels(names, labels=None) -> list[str]:
+    """Legend names of overlaid curves: ``labels`` when given (one per curve), else ``names`` (solver names),
+    numbered "icm (1)", "icm (2)" where a name repeats."""
+    if labels:
+        if len(labels) != len(names):
+            raise ValueError(f"{len(labels)} label(s) for {len(names)} curve(s); give one --label per result")
+        return list(labels)
+    names = list(names)
+    out, seen = [], {}
+    for n in names:
+        seen[n] = seen.get(n, 0) + 1
+        out.append(f"{n} ({seen[n]})" if names.count(n) > 1 else n)
+    return out
+
+
 def draw_mapchange(ax, results, labels=None, *, log: bool = True, title: str | None = None):
-    """Overlay the map change per iteration of several results (log axis by default)."""
+    """Overlay the map change per iteration of several results (log axis by default); legend names from
+    :func:`curve_labels` (one result: no legend name unless given)."""
     from slamcli.plots.curves import plot_map_change
 
+    names = curve_labels([r.solver for r in results], labels)
     for k, res in enumerate(results):
         mc = map_change_series(res)
-        label = labels[k] if labels else (res.solver if len(results) > 1 else None)
+        label = names[k] if (labels or len(results) > 1) else None
         plot_map_change(ax, np.arange(len(mc)), mc, label=label, log=log)
     ax.set_title(title or "Map change between iterations")
     return ax
 
 
-def draw_nees(ax, average, *, log: bool = True, title: str | None = None):
+def draw_nees(ax, average, *, log: bool = True, title: str | None = None, label: str | None = None):
     """Monte-Carlo average pose NEES (:class:`~slamcli.metrics.consistency` result) with its χ² band."""
     from slamcli.plots.curves import plot_nees
 
     a = average
     return plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
-                     title=title or f"Pose NEES over {a.n_runs} runs", log=log)
+                     label=label, title=title or f"Pose NEES over {a.n_runs} runs", log=log)
+
+
+def draw_compare(ax, groups, *, labels=None, title: str | None = None):
+    """Box + strip plot of a :class:`~slamcli.metrics.aggregate.CompareGroups`: the metric's name and unit
+    on the y axis and the grouping columns' names on the x axis (:mod:`slamcli.metrics.registry`);
+    ``labels`` renames the groups (one per group). ``slamcli plot compare`` and the reproduce report's
+    compare figure both draw through this function."""
+    from slamcli.metrics.registry import column_label, metric_info
+    from slamcli.plots.curves import plot_compare
+
+    names = curve_labels(groups.labels, labels)
+    info = metric_info(groups.metric)
+    xlabel = ", ".join(column_label(c) for c in groups.by)
+    return plot_compare(ax, names, groups.values, info.label, xlabel, title=title, nonnegative=info.nonnegative)

@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from slamcli.plots import style
 
-def draw_grid(ax, grid, snapshot: int | None = None, unobserved_alpha: float = 1.0, label: str | None = None):
+
+def draw_grid(ax, grid, snapshot: int | None = None, unobserved_alpha: float = 1.0, label: str | None = None,
+              colorbar: bool = False):
     """Grey-level occupancy image (white = free, black = occupied, unobserved cells at their prior) of
-    ``grid`` (:class:`~slamcli.types.OccupancyGrid`), or of its ``snapshot``-th snapshot, under other artists."""
+    ``grid`` (:class:`~slamcli.types.OccupancyGrid`), or of its ``snapshot``-th snapshot, under other artists;
+    with ``colorbar`` a bar "occupancy probability" (0-1) beside the axis."""
     prob = grid.prob if snapshot is None else grid.snapshots[snapshot]
     H, W = prob.shape
     x0, y0 = float(grid.origin_xy[0]), float(grid.origin_xy[1])
@@ -16,14 +20,18 @@ def draw_grid(ax, grid, snapshot: int | None = None, unobserved_alpha: float = 1
     im = ax.imshow(prob, origin="lower", extent=ext, cmap="gray_r", vmin=0.0, vmax=1.0, interpolation="nearest",
                    zorder=0, alpha=unobserved_alpha)
     if label:
-        ax.plot([], [], "s", color="0.3", ms=6, ls="none", label=label)
+        ax.plot([], [], "s", color="0.3", ms=5, ls="none", label=label)
+    if colorbar:
+        cb = ax.figure.colorbar(im, ax=ax, shrink=0.9, pad=0.02, aspect=25)
+        cb.set_label("occupancy probability")
+        cb.outline.set_linewidth(style.THIN_PT)
     return im
 
 
 def draw_walls(ax, walls_xyxy, **kw):
     """Wall segments ``(W, 4)`` as thin lines (the true map, subfigure (a))."""
     w = np.asarray(walls_xyxy, float).reshape(-1, 4)
-    kw = {"color": "tab:green", "lw": 0.8, **kw}
+    kw = {"color": style.BAND, "lw": 0.8, **kw}
     for i, s in enumerate(w):
         ax.plot([s[0], s[2]], [s[1], s[3]], label="Walls (true)" if i == 0 else None, **kw)
 
@@ -34,21 +42,23 @@ def plot_map_error_vs_laps(ax, curves: dict, ylabel: str = "total map error Σ|P
         ax.plot(x, y, "o-", ms=3, label=label)
     ax.set_xlabel("laps")
     ax.set_ylabel(ylabel)
-    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.grid(True, **style.GRID)
     if title:
         ax.set_title(title)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=style.SMALL_PT)
 
 
 def plot_pose_error_3sigma(axes, df, dt: float = 1.0):
     """Subfigures (f)-(h): error in x, y, θ and ±3σ of the filter, one axis each; ``df`` from
     :func:`slamcli.metrics.occupancy.pose_errors_3sigma`."""
+    from slamcli.metrics.registry import ANGLE_UNIT
+
     t = df["step"].to_numpy() * dt
-    for ax, c, unit in zip(axes, ("x", "y", "theta"), ("m", "m", "rad")):
-        ax.plot(t, df[f"err_{c}"], lw=0.8, color="tab:blue", label=f"error {c}")
-        ax.plot(t, df[f"bound3_{c}"], lw=0.8, color="tab:red", ls="--", label="±3σ")
-        ax.plot(t, -df[f"bound3_{c}"], lw=0.8, color="tab:red", ls="--")
+    for ax, c, unit in zip(axes, ("x", "y", "theta"), ("m", "m", ANGLE_UNIT)):
+        ax.plot(t, df[f"err_{c}"], lw=0.8, color=style.ESTIMATE, label=f"error {c}")
+        ax.plot(t, df[f"bound3_{c}"], lw=0.8, color=style.EST_LANDMARK, ls="--", label="±3σ")
+        ax.plot(t, -df[f"bound3_{c}"], lw=0.8, color=style.EST_LANDMARK, ls="--")
         ax.set_ylabel(f"{c} ({unit})")
-        ax.grid(True, lw=0.3, alpha=0.5)
+        ax.grid(True, **style.GRID)
     axes[-1].set_xlabel("time (s)")
-    axes[0].legend(fontsize=7, loc="upper right")
+    axes[0].legend(fontsize=style.SMALL_PT, loc="upper right")

@@ -810,16 +810,16 @@ class Reproduction:
                            "missed", "spurious", "ATE RMSE (m)", "wall time (s)"], rows))
         done = t[t["status"] == "completed"] if len(t) else t
         labels = [s.label for s in outcome.cfg.solvers if len(done) and (done["label"] == s.label).any()]
-        if labels:
-            fig, axes = self._figure(2, width=5.5)
-            for ax, col, ylabel in ((axes[0], "ate_rmse_m", "ATE RMSE, unaligned (m)"),
-                                    (axes[1], "lm_ospa_m", "landmark OSPA, c = 1 m (m)")):
-                data = [done[done["label"] == lb][col].astype(float).dropna().to_numpy() for lb in labels]
-                ax.boxplot(data, tick_labels=labels, showmeans=True)
-                ax.set_ylabel(ylabel)
-                ax.set_ylim(bottom=0)
-                ax.grid(True, axis="y", lw=0.3, alpha=0.5)
-                ax.set_title(f"{len(reps)} replicates, same datasets for every solver")
+        if labels:  # the figure of `slamcli plot compare` (one implementation), one panel per metric
+            from slamcli.metrics.aggregate import groups_of
+            from slamcli.plots import new_figure
+            from slamcli.plots.figures import draw_compare
+            from slamcli.plots.style import PAGE_IN
+
+            fig, axes = new_figure(PAGE_IN, 3.2, ncols=2)
+            for ax, col in zip(axes, ("ate_rmse_m", "lm_ospa_m")):
+                draw_compare(ax, groups_of(done, col, "solver", order=labels),
+                             title=f"{len(reps)} replicates, same datasets for every solver")
             self._save(sec, fig, "compare")
         from slamcli.reproduce import outcomes as oc
 
