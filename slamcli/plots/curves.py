@@ -54,7 +54,7 @@ def plot_map_change(ax, iterations, map_change_m, title: str | None = None, labe
         keep &= mc > 0
     ax.plot(it[keep], mc[keep] * 1000.0, "o-", ms=2.5, lw=style.LINE_PT, label=label or "Map change")
     ax.set_xlabel("Iteration")
-    ax.set_ylabel("Map change per iteration (mm)")
+    ax.set_ylabel("Map change (mm)")
     if log:
         ax.set_yscale("log")
     else:
@@ -84,7 +84,7 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
         lab += f" ({100 * fraction_inside:.0f}% of steps inside)"
     ax.plot(steps, anees, "-", color=style.ESTIMATE, lw=style.LINE_PT, label=lab)
     ax.set_xlabel("Step")
-    ax.set_ylabel(f"Average NEES (N = {n_runs}, d = {dof})")
+    ax.set_ylabel("Average NEES")  # N and d are in the legend (band and E[NEES] = d)
     a = np.asarray(anees, float)
     finite = a[np.isfinite(a) & (a > 0)] if log else a[np.isfinite(a)]
     if log:
