@@ -74,9 +74,13 @@ def test_aggregate_dir_writes_three_tables(tmp_path):
     assert odo["mean"] == pytest.approx(12.0) and odo["std"] == pytest.approx(2.0)
     assert pd.isna(odo["solver.ekf.provisional_min_hits"])
     md = (tmp_path / "exp" / "aggregate.md").read_text()
-    assert "| ekf | 2 | 4 | 2.5 ± 2.1 |" in md and "1 failed or unfinished run(s) excluded" in md
+    # one precision per column: the smallest half-width (ekf 5: 12.71 · 0.1414 / √2 = 1.27) to 2 digits
+    assert "| solver | provisional_min_hits | n | ATE RMSE (m) |" in md
+    assert "| ekf | 2 | 4 | 2.5 ± 2.1 |" in md and "| ekf | 5 | 2 | 0.6 ± 1.3*† |" in md
+    assert "1 failed or unfinished run(s) excluded" in md
     tex = (tmp_path / "exp" / "aggregate.tex").read_text()
-    assert r"\toprule" in tex and r"2.5 $\pm$ 2.1" in tex and r"ate\_rmse\_m" in tex
+    assert r"\toprule" in tex and r"\num{2.5 \pm 2.1}" in tex and r"ATE RMSE [\si{\metre}]" in tex
+    assert "ate\\_rmse" not in tex and r"\num{0.6 \pm 1.3}$^{*\dagger}$" in tex
     back = pd.read_csv(tmp_path / "exp" / "aggregate.csv")
     assert len(back) == 3 and set(back["metric"]) == {"ate_rmse_m"}
 
@@ -88,6 +92,7 @@ def test_by_solver_and_cli(tmp_path):
     assert r.exit_code == 0, r.output
     assert "1 failed or unfinished run(s) excluded" in r.output
     assert max(len(line) for line in r.output.splitlines()) <= 80
+    assert "ATE RMSE (m)" in r.output and "ate_rmse_m" not in r.output
     s = pd.read_csv(tmp_path / "out" / "aggregate.csv")
     ekf = s[s.label == "ekf"].iloc[0]
     vals = [1.0, 2.0, 3.0, 4.0, 0.5, 0.7]

@@ -25,40 +25,89 @@ def aggregate_command(
     out_dir: Annotated[Path | None, typer.Option(
         "-o", "--out-dir", help="Where aggregate.{csv,md,tex} go; default: the sweep folder.")] = None,
     confidence: Annotated[float, typer.Option(help="Confidence level of the t interval.")] = 0.95,
+    baseline: Annotated[str | None, typer.Option(
+        help="Paired differences against this configuration only (as printed, e.g. 'ekf, gate_prob=0.9'); "
+             "default: every pair.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing; just write the files.")] = False,
 ) -> None:
-    """Summarise completed runs per configuration: CSV (tidy), Markdown and LaTeX tables."""
+    """Summarise completed runs per configuration, and paired differences between configurations on the same
+    datasets: CSV (tidy), Markdown and LaTeX (siunitx) tables."""
     with handle_errors():
         from slamcli.errors import ConfigError
 
         if not 0 < confidence < 1:
             raise ConfigError(f"--confidence: must be in (0, 1), got {confidence}")
-        from slamcli.metrics.aggregate import aggregate_dir, cell_text
+        from slamcli.metrics.aggregate import aggregate_dir
 
         check_output(out_dir if out_dir is not None else exp_dir, folder=True,
                      inputs=[exp_dir / "results.csv"])
         try:
-            a = aggregate_dir(exp_dir, _split(by), _split(metric), out_dir, confidence)
+            a = aggregate_dir(exp_dir, _split(by), _split(metric), out_dir, confidence, baseline)
         except KeyError as exc:  # a results.csv that lacks a column every sweep writes
             raise ConfigError(f"{exp_dir / 'results.csv'}: not a slamcli results table (no column {exc})") from None
-        if quiet:
-            return
-        from rich.table import Table
+        if not quiet:
+            _print(a, exp_dir.name, confidence)
 
-        # long form (configuration, metric, n, mean, std, CI) so that the table fits an 80-column terminal
-        summary = a["summary"]
-        by_cols = a["header"][: a["header"].index("n")]
-        con = stdout_console()
-        table = Table(title=f"{exp_dir.name}: {100 * confidence:g} % t confidence intervals", title_justify="left")
-        table.add_column("configuration", overflow="fold", max_width=26)
-        table.add_column("metric", overflow="fold", max_width=18)
-        for col in ("n", "mean", "std", "CI low", "CI high"):
-            table.add_column(col, justify="right")
-        g = "{:.4g}".format
-        for _, r in summary.iterrows():
-            config = " ".join(cell_text(r[c]) if c == "label" else f"{c.rsplit('.', 1)[-1]}={cell_text(r[c])}"
-                              for c in by_cols if cell_text(r[c]) != "—")
-            table.add_row(config, r["metric"], str(r["n"]), *(g(r[k]) for k in ("mean", "std", "ci_low", "ci_high")))
-        con.print(table)
-        con.print(a["note"].split(". Cells")[0] + ".", markup=False, highlight=False)
-        con.print(f"wrote {', '.join(str(p) for p in a['paths'].values())}", markup=False, highlight=False)
+
+def _table(title: str, columns: list[tuple[str, str]]):
+    """A rich table whose headers never wrap (each column at least as wide as its header); long cells fold."""
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left")
+    for name, justify in columns:
+        fold = justify == "fold"
+        table.add_column(name, justify="left" if fold else justify, min_width=len(name), no_wrap=not fold,
+                         overflow="fold" if fold else "ellipsis")
+    return table
+
+
+def _print(a: dict, name: str, confidence: float) -> None:
+    """Long-form summary (configuration, metric, n, mean, std, CI) and the paired differences of the first
+    metric: both fit a 100-column terminal without wrapping a header."""
+    from slamcli.metrics.aggregate import (
+        FLAG_CLIPPED,
+        FLAG_FEW,
+        config_label,
+        decimals,
+        p_text,
+    )
+    from slamcli.metrics.registry import metric_label
+
+    summary, con = a["summary"], stdout_console()
+    by_cols = [c for c in summary.columns if c not in ("metric", "n", "mean", "std", "ci_low", "ci_high",
+                                                       "ci_clipped", "few")]
+    ci = f"{100 * confidence:g} % CI"
+    table = _table(f"{name}: mean, std and {ci} (t)", [("configuration", "fold"), ("metric", "fold"),
+                                                          ("n", "right"), ("mean", "right"), ("std", "right"),
+                                                          (ci, "right")])
+    for m, g in summary.groupby("metric", sort=False):
+        d = decimals((g["ci_high"] - g["mean"]).tolist(), g["mean"].tolist())
+        for _, r in g.iterrows():
+            flags = (FLAG_CLIPPED if r["ci_clipped"] else "") + (FLAG_FEW if r["few"] else "")
+            cell = "—" if r["ci_low"] != r["ci_low"] else f"[{r['ci_low']:.{d}f}, {r['ci_high']:.{d}f}]"
+            table.add_row(config_label([r[c] for c in by_cols], by_cols), metric_label(m), str(r["n"]),
+                          _num(r["mean"], d), _num(r["std"], d), cell + flags)
+    con.print(table)
+    pairs = a["paired"]
+    if len(pairs):
+        first = pairs["metric"].iloc[0]
+        sub = pairs[pairs["metric"] == first]
+        d = decimals((sub["ci_high"] - sub["mean_diff"]).tolist(), sub["mean_diff"].tolist())
+        pt = _table(f"paired differences A − B, {metric_label(first)} (all metrics: paired.csv)",
+                    [("A", "fold"), ("B", "fold"), ("n", "right"), ("mean diff", "right"), (ci, "right"),
+                     ("p (t)", "right"), ("p (Wilcoxon)", "right")])
+        for _, r in sub.iterrows():
+            cell = "—" if r["ci_low"] != r["ci_low"] else f"[{r['ci_low']:.{d}f}, {r['ci_high']:.{d}f}]"
+            pt.add_row(r["a"], r["b"], str(r["n"]), _num(r["mean_diff"], d), cell + (FLAG_FEW if r["few"] else ""),
+                       p_text(r["p_t"]), p_text(r["p_wilcoxon"]))
+        con.print(pt)
+    for line in (a["note"].split(". Cells")[0] + ".", a["note"].split(". ", 1)[1].split(". ", 1)[1]):
+        con.print(line, markup=False, highlight=False)
+    if a["unpaired"]:
+        con.print(f"not paired (several runs per dataset): {', '.join(a['unpaired'])}", markup=False,
+                  highlight=False)
+    con.print(f"wrote {', '.join(str(p) for p in a['paths'].values())}", markup=False, highlight=False)
+
+
+def _num(v: float, d: int) -> str:
+    return "—" if v != v else f"{v:.{d}f}"

@@ -7,6 +7,18 @@ For the ``n`` values ``x_1..x_n`` of one metric in one configuration (NaN values
     std   s = sqrt( Σ (x_i − x̄)² / (n − 1) )                (sample standard deviation, ddof = 1)
     CI    x̄ ± t_{0.975, n−1} · s / √n                        (Student t, two-sided 95 %; NaN for n < 2)
 
+For a metric that cannot be negative (:attr:`~slamcli.metrics.registry.MetricInfo.nonnegative`) a lower end
+below 0 is clipped to 0 and flagged (``ci_clipped``); every n < 3 is flagged (``few``): with 2 runs the t
+interval is ± 12.7 standard errors.
+
+**Paired differences** (:func:`paired`): every solver of a replicate sees the same dataset, so two
+configurations A and B are compared on the datasets both solved (matched on ``dataset_id``, else on
+``replicate`` and the scenario axes). With ``d_i = a_i − b_i`` over those n datasets::
+
+    mean difference  d̄,   std s_d (ddof = 1),   CI  d̄ ± t_{0.975, n−1} · s_d / √n
+    paired t test    t = d̄ / (s_d / √n), two-sided p from Student t with n − 1 dof  (scipy.stats.ttest_rel)
+    Wilcoxon signed-rank on the d_i ≠ 0: W = min(R⁺, R⁻), two-sided p, exact for small n (scipy.stats.wilcoxon)
+
 Column types are kept (:func:`typed_frame`, :func:`read_table`): an integer sweep parameter that some
 solvers do not have is a nullable ``Int64`` column (``10`` and ``<NA>``), never ``10.0``.
 """
@@ -109,8 +121,14 @@ def completed(df):
     return df[ok], int((~ok).sum())
 
 
-def summarise(values, confidence: float = 0.95) -> dict[str, float]:
-    """``n, mean, std, ci_low, ci_high`` of the finite values (module docstring formulas)."""
+#: fewer runs than this are flagged: the t interval is then too wide (n = 2: ± 12.7 standard errors) or absent
+FEW_RUNS = 3
+SUMMARY_COLUMNS = ("n", "mean", "std", "ci_low", "ci_high", "ci_clipped", "few")
+
+
+def summarise(values, confidence: float = 0.95, nonnegative: bool = False) -> dict[str, Any]:
+    """``n, mean, std, ci_low, ci_high, ci_clipped, few`` of the finite values (module docstring formulas);
+    ``nonnegative``: a lower end below 0 becomes 0 and ``ci_clipped`` is True. ``few``: n < :data:`FEW_RUNS`."""
     import numpy as np
     from scipy import stats
 
@@ -118,19 +136,38 @@ def summarise(values, confidence: float = 0.95) -> dict[str, float]:
     x = x[np.isfinite(x)]
     n = int(x.size)
     nan = float("nan")
-    if n == 0:
-        return {"n": 0, "mean": nan, "std": nan, "ci_low": nan, "ci_high": nan}
-    mean = float(x.mean())
+    out = {"n": n, "mean": float(x.mean()) if n else nan, "std": nan, "ci_low": nan, "ci_high": nan,
+           "ci_clipped": False, "few": n < FEW_RUNS}
     if n < 2:
-        return {"n": 1, "mean": mean, "std": nan, "ci_low": nan, "ci_high": nan}
+        return out
     std = float(x.std(ddof=1))
     half = float(stats.t.ppf(0.5 + confidence / 2, n - 1)) * std / np.sqrt(n)
-    return {"n": n, "mean": mean, "std": std, "ci_low": mean - half, "ci_high": mean + half}
+    out.update(std=std, ci_low=out["mean"] - half, ci_high=out["mean"] + half)
+    if nonnegative and out["ci_low"] < 0:
+        out.update(ci_low=0.0, ci_clipped=True)
+    return out
+
+
+def _columns(df, by, metrics) -> tuple[list[str], list[str]]:
+    """Grouping and metric columns (resolved; default ``label`` + sweep axes and :data:`DEFAULT_METRICS`)."""
+    import pandas as pd
+
+    by_cols = [resolve_column(b, df.columns, "--by column") for b in by] if by else \
+        ["label"] + sweep_axes(df)
+    if metrics:
+        metric_cols = [resolve_column(m, df.columns, "metric") for m in metrics]
+    else:
+        metric_cols = [m for m in DEFAULT_METRICS if m in df.columns]
+    for m in metric_cols:
+        if not pd.api.types.is_numeric_dtype(df[m]) or pd.api.types.is_bool_dtype(df[m]):
+            raise ConfigError(f"metric {m!r} is not numeric")
+    return by_cols, metric_cols
 
 
 def aggregate(df, by: Sequence[str] | None = None, metrics: Sequence[str] | None = None,
               confidence: float = 0.95):
-    """Tidy summary: one row per (configuration, metric) with ``n, mean, std, ci_low, ci_high``.
+    """Tidy summary: one row per (configuration, metric) with ``n, mean, std, ci_low, ci_high, ci_clipped,
+    few`` (:func:`summarise`).
 
     Parameters
     ----------
@@ -144,22 +181,16 @@ def aggregate(df, by: Sequence[str] | None = None, metrics: Sequence[str] | None
     """
     import pandas as pd
 
-    by_cols = [resolve_column(b, df.columns, "--by column") for b in by] if by else \
-        ["label"] + sweep_axes(df)
-    if metrics:
-        metric_cols = [resolve_column(m, df.columns, "metric") for m in metrics]
-    else:
-        metric_cols = [m for m in DEFAULT_METRICS if m in df.columns]
-    for m in metric_cols:
-        if not pd.api.types.is_numeric_dtype(df[m]) or pd.api.types.is_bool_dtype(df[m]):
-            raise ConfigError(f"metric {m!r} is not numeric")
+    from slamcli.metrics.registry import metric_info
+
+    by_cols, metric_cols = _columns(df, by, metrics)
     rows = []
     for keys, g in df.groupby(by_cols, dropna=False, sort=True):
         keys = keys if isinstance(keys, tuple) else (keys,)
         for m in metric_cols:
             rows.append({**dict(zip(by_cols, keys)), "metric": m,
-                         **summarise(g[m].astype(float).to_numpy(), confidence)})
-    out = pd.DataFrame(rows, columns=[*by_cols, "metric", "n", "mean", "std", "ci_low", "ci_high"])
+                         **summarise(g[m].astype(float).to_numpy(), confidence, metric_info(m).nonnegative)})
+    out = pd.DataFrame(rows, columns=[*by_cols, "metric", *SUMMARY_COLUMNS])
     for c in by_cols:  # groupby hands back plain objects; restore each key column's dtype
         out[c] = out[c].astype(df[c].dtype)
     out["n"] = out["n"].astype("Int64")
@@ -172,24 +203,186 @@ def cell_text(v) -> str:
     return "—" if v is None or v is pd.NA or (isinstance(v, float) and v != v) else str(v)
 
 
-def _fmt(mean: float, lo: float, hi: float) -> str:
+# ------------------------------------------------------------------------------------------ paired differences
+def dataset_key(df, by_cols: Sequence[str]) -> list[str]:
+    """Columns that identify the dataset a run solved: ``dataset_id`` (written by every sweep), else
+    ``replicate`` and the scenario axes that are not grouping columns."""
+    if "dataset_id" in df.columns:
+        return ["dataset_id"]
+    if "replicate" not in df.columns:
+        raise ConfigError("paired differences need a dataset_id or replicate column")
+    return ["replicate", *(c for c in df.columns if c.startswith("scenario.") and c not in by_cols)]
+
+
+#: paired differences whose standard deviation is below this fraction of their largest magnitude are equal
+#: up to round-off (0.1 + 0.9 vs 0.1 + 0.99 ...): the t statistic is then undefined, not 10^15
+EQUAL_DIFFS_RTOL = 1e-12
+PAIRED_COLUMNS = ("n", "mean_diff", "std_diff", "ci_low", "ci_high", "t", "p_t", "w", "p_wilcoxon", "few")
+
+
+def paired_stats(a, b, confidence: float = 0.95) -> dict[str, Any]:
+    """Paired comparison of ``a`` and ``b`` (same length; element i of both solved the same dataset) over
+    the pairs where both are finite (module docstring formulas). NaN where undefined: t and its p when all
+    differences are equal (s_d = 0 up to :data:`EQUAL_DIFFS_RTOL`), W and its p when every difference is 0,
+    CI for n < 2."""
+    import warnings
+
+    import numpy as np
+    from scipy import stats
+
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+    d = a - b
+    n = int(d.size)
+    nan = float("nan")
+    out = dict.fromkeys(PAIRED_COLUMNS, nan)
+    out.update(n=n, few=n < FEW_RUNS, mean_diff=float(d.mean()) if n else nan)
+    if n < 2:
+        return out
+    sd = float(d.std(ddof=1))
+    half = float(stats.t.ppf(0.5 + confidence / 2, n - 1)) * sd / np.sqrt(n)
+    out.update(std_diff=sd, ci_low=out["mean_diff"] - half, ci_high=out["mean_diff"] + half)
+    if sd > EQUAL_DIFFS_RTOL * float(np.abs(d).max()):
+        res = stats.ttest_rel(a, b)
+        out.update(t=float(res.statistic), p_t=float(res.pvalue))
+    if np.any(d != 0):
+        with warnings.catch_warnings():  # "sample size too small for normal approximation" at tiny n
+            warnings.simplefilter("ignore")
+            res = stats.wilcoxon(a, b)
+        out.update(w=float(res.statistic), p_wilcoxon=float(res.pvalue))
+    return out
+
+
+def paired(df, by_cols: Sequence[str], metric_cols: Sequence[str], confidence: float = 0.95,
+           baseline: str | None = None):
+    """Paired differences between configurations on the datasets both solved (:func:`paired_stats` per
+    metric): every pair of configurations in table order, or each against ``baseline`` (a configuration
+    label as :func:`config_label` writes it). A configuration with several runs of one dataset (a swept axis
+    not among ``by_cols``) has no pairing and is listed in the second return value.
+
+    Returns ``(DataFrame with columns a, b, metric, *PAIRED_COLUMNS; labels left out)``; differences are a − b.
+    """
+    import pandas as pd
+
+    key = dataset_key(df, by_cols)
+    configs, unpaired = [], []
+    for keys, g in df.groupby(list(by_cols), dropna=False, sort=True):
+        label = config_label(keys if isinstance(keys, tuple) else (keys,), by_cols)
+        if g.duplicated(key).any():
+            unpaired.append(label)
+        else:
+            configs.append((label, g.set_index(key)))
+    names = [c[0] for c in configs]
+    if baseline is not None and baseline not in names:
+        raise ConfigError(f"--baseline {baseline!r} is not a configuration; choose one of {', '.join(names)}")
+    if baseline is None:
+        pairs = [(configs[i], configs[j]) for i in range(len(configs)) for j in range(i + 1, len(configs))]
+    else:
+        base = configs[names.index(baseline)]
+        pairs = [(c, base) for c in configs if c[0] != baseline]
+    rows = []
+    for (la, ga), (lb, gb) in pairs:
+        common = ga.index.intersection(gb.index)
+        if not len(common):
+            continue
+        for m in metric_cols:
+            rows.append({"a": la, "b": lb, "metric": m, **paired_stats(
+                ga.loc[common, m].astype(float).to_numpy(), gb.loc[common, m].astype(float).to_numpy(),
+                confidence)})
+    return pd.DataFrame(rows, columns=["a", "b", "metric", *PAIRED_COLUMNS]), unpaired
+
+
+# ---------------------------------------------------------------------------------------------------- tables
+#: flags on a table cell: lower interval end clipped at 0; fewer than FEW_RUNS runs
+FLAG_CLIPPED, FLAG_FEW = "*", "†"
+
+
+def decimals(half_widths, means) -> int:
+    """One precision per table column: the smallest CI half-width to two significant digits (means to the
+    same decimals); without intervals, three significant digits of the smallest non-zero |mean|; 0-6."""
+    import math
+
+    hw = [abs(float(h)) for h in half_widths if h is not None and math.isfinite(float(h)) and float(h) > 0]
+    if hw:
+        d = 1 - math.floor(math.log10(min(hw)))
+    else:
+        ms = [abs(float(m)) for m in means if m is not None and math.isfinite(float(m)) and float(m) != 0]
+        d = 2 - math.floor(math.log10(min(ms))) if ms else 0
+    return max(0, min(6, d))
+
+
+def _half(mean: float, hi: float) -> float:
+    return hi - mean  # the upper end is never clipped, so it gives the t half-width
+
+
+def format_cell(mean: float, hi: float, d: int, clipped: bool = False, few: bool = False,
+                tex: bool = False) -> str:
+    r"""``mean ± half-width`` at ``d`` decimals with its flags; ``tex``: siunitx ``\num{m \pm h}``."""
     if mean != mean:
-        return "—"
-    if lo != lo:
-        return f"{mean:.4g}"
-    return f"{mean:.4g} ± {(hi - lo) / 2:.2g}"
+        return "--" if tex else "—"
+    half = _half(mean, hi)
+    num = f"{mean:.{d}f}" + (f" \\pm {half:.{d}f}" if tex and half == half else
+                             f" ± {half:.{d}f}" if half == half else "")
+    flags = (FLAG_CLIPPED if clipped else "") + (FLAG_FEW if few else "")
+    if tex:
+        sup = "".join({"*": "*", "†": r"\dagger"}[f] for f in flags)
+        return f"\\num{{{num}}}" + (f"$^{{{sup}}}$" if sup else "")
+    return num + flags
 
 
-def wide(summary, by_cols: Sequence[str], metric_cols: Sequence[str]) -> tuple[list[str], list[list[str]]]:
-    """Header and rows of a display table: configuration, n, then ``mean ± CI half-width`` per metric."""
-    header = [*by_cols, "n", *metric_cols]
+def _flag(row, key: str) -> bool:
+    v = row.get(key, False)
+    return bool(v) if v is not None and v == v else False
+
+
+def wide(summary, by_cols: Sequence[str], metric_cols: Sequence[str], tex: bool = False):
+    """Header and rows of a display table: configuration, n, then ``mean ± CI half-width`` per metric, one
+    precision per metric column (:func:`decimals`), names and units from the metric registry."""
+    from slamcli.metrics.registry import column_label, metric_info, tex_escape
+
+    label = (lambda c: tex_escape(column_label(c))) if tex else column_label
+    header = [*(label(c) for c in by_cols), "n",
+              *(metric_info(m).tex_label if tex else metric_info(m).label for m in metric_cols)]
     rows = []
     if summary.empty:
         return header, rows
+    prec = {m: decimals([_half(r["mean"], r["ci_high"]) for _, r in g.iterrows()], g["mean"])
+            for m, g in summary.groupby("metric", sort=False)}
     for keys, g in summary.groupby(list(by_cols), dropna=False, sort=False):
         keys = keys if isinstance(keys, tuple) else (keys,)
-        cells = {r["metric"]: _fmt(r["mean"], r["ci_low"], r["ci_high"]) for _, r in g.iterrows()}
-        rows.append([*map(cell_text, keys), str(int(g["n"].max())), *(cells.get(m, "—") for m in metric_cols)])
+        cells = {r["metric"]: format_cell(r["mean"], r["ci_high"], prec[r["metric"]], _flag(r, "ci_clipped"),
+                                          _flag(r, "few"), tex) for _, r in g.iterrows()}
+        text = [cell_text(k) for k in keys]
+        rows.append([*(tex_escape(t) if tex else t for t in text), str(int(g["n"].max())),
+                     *(cells.get(m, "--" if tex else "—") for m in metric_cols)])
+    return header, rows
+
+
+def p_text(p: float) -> str:
+    """A p-value for a table: three decimals, ``<0.001`` below that, ``—`` when undefined."""
+    if p != p:
+        return "—"
+    return "<0.001" if p < 0.001 else f"{p:.3f}"
+
+
+def paired_rows(pairs, tex: bool = False) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the paired-differences table (one precision per metric, flags as in :func:`wide`)."""
+    from slamcli.metrics.registry import metric_info, tex_escape
+
+    esc = tex_escape if tex else (lambda s: s)
+    header = ["A", "B", "metric", "n", "mean diff A − B ± CI", "t", "p (t)", "W", "p (Wilcoxon)"]
+    rows = []
+    prec = {m: decimals([_half(r["mean_diff"], r["ci_high"]) for _, r in g.iterrows()], g["mean_diff"])
+            for m, g in pairs.groupby("metric", sort=False)} if len(pairs) else {}
+    for _, r in pairs.iterrows():
+        info = metric_info(r["metric"])
+        rows.append([esc(r["a"]), esc(r["b"]), info.tex_label if tex else info.label, str(int(r["n"])),
+                     format_cell(r["mean_diff"], r["ci_high"], prec[r["metric"]], few=_flag(r, "few"), tex=tex),
+                     "—" if r["t"] != r["t"] else f"{r['t']:.2f}", esc(p_text(r["p_t"])),
+                     "—" if r["w"] != r["w"] else f"{r['w']:g}", esc(p_text(r["p_wilcoxon"]))])
+    if tex:
+        header = [esc(h) for h in header]
     return header, rows
 
 
@@ -201,55 +394,77 @@ def to_markdown(header, rows, note: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def _tex(s: str) -> str:
-    for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"), ("#", r"\#"),
-                 ("±", r"$\pm$"), ("—", "--")):
-        s = s.replace(a, b)
-    return s
-
-
 def to_latex(header, rows, caption: str = "") -> str:
-    """A ``booktabs`` tabular (``\\usepackage{booktabs}``)."""
-    spec = "l" * len(header)
+    """A ``booktabs`` tabular of cells already in LaTeX (``\\usepackage{booktabs,siunitx}``; numbers as
+    ``\\num{m \\pm h}``, units as ``\\si{...}``)."""
+    from slamcli.metrics.registry import tex_escape
+
     out = [r"\begin{table}", r"\centering"]
     if caption:
-        out.append(r"\caption{" + _tex(caption) + "}")
-    out += [r"\begin{tabular}{" + spec + "}", r"\toprule", " & ".join(_tex(h) for h in header) + r" \\",
+        out.append(r"\caption{" + tex_escape(caption) + "}")
+    out += [r"\begin{tabular}{" + "l" * len(header) + "}", r"\toprule", " & ".join(header) + r" \\",
             r"\midrule"]
-    out += [" & ".join(_tex(c) for c in r) + r" \\" for r in rows]
+    out += [" & ".join(r) + r" \\" for r in rows]
     out += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
     return "\n".join(out) + "\n"
 
 
+def _notes(confidence: float) -> str:
+    return (f"Cells: mean ± half-width of the {100 * confidence:g} % t confidence interval. "
+            f"{FLAG_CLIPPED} lower end below 0 for a non-negative metric, clipped to 0. "
+            f"{FLAG_FEW} fewer than {FEW_RUNS} runs.")
+
+
 def aggregate_dir(exp_dir: str | Path, by: Sequence[str] | None = None, metrics: Sequence[str] | None = None,
-                  out_dir: str | Path | None = None, confidence: float = 0.95) -> dict[str, Any]:
-    """Aggregate ``exp_dir/results.csv`` and write ``aggregate.csv`` (tidy), ``aggregate.md`` and
-    ``aggregate.tex`` into ``out_dir`` (default ``exp_dir``), each atomically.
+                  out_dir: str | Path | None = None, confidence: float = 0.95,
+                  baseline: str | None = None) -> dict[str, Any]:
+    """Aggregate ``exp_dir/results.csv`` and write ``aggregate.csv`` (tidy), ``paired.csv`` (paired
+    differences, :func:`paired`), ``aggregate.md`` and ``aggregate.tex`` (both tables) into ``out_dir``
+    (default ``exp_dir``), each atomically.
 
-    Returns ``{"summary", "header", "rows", "n_runs", "n_excluded", "paths"}``.
+    Returns ``{"summary", "paired", "unpaired", "header", "rows", "n_runs", "n_excluded", "note", "paths"}``.
     """
-    from slamcli.io import atomic_path
-
     exp_dir = Path(exp_dir)
     df = read_table(exp_dir)
     ok, n_excluded = completed(df)
     summary, by_cols, metric_cols = aggregate(ok, by, metrics, confidence)
+    pairs, unpaired = paired(ok, by_cols, metric_cols, confidence, baseline)
     header, rows = wide(summary, by_cols, metric_cols)
     note = (f"{len(ok)} completed runs of {len(df)}; {n_excluded} failed or unfinished run(s) excluded. "
-            f"Cells: mean ± half-width of the {100 * confidence:g} % t confidence interval.")
-    out = Path(out_dir) if out_dir is not None else exp_dir
+            + _notes(confidence))
+    pnote = ("Paired differences A − B over the datasets both solved (same dataset_id); t: paired t test, "
+             "W: Wilcoxon signed-rank, two-sided p."
+             + (f" Not paired (several runs per dataset; group by every swept axis): {', '.join(unpaired)}."
+                if unpaired else ""))
+    paths = _write_tables(Path(out_dir) if out_dir is not None else exp_dir, exp_dir.name, summary, pairs,
+                          (header, rows), wide(summary, by_cols, metric_cols, tex=True), note, pnote)
+    return {"summary": summary, "paired": pairs, "unpaired": unpaired, "header": header, "rows": rows,
+            "n_runs": len(df), "n_excluded": n_excluded, "note": note, "paired_note": pnote, "paths": paths}
+
+
+def _write_tables(out: Path, name: str, summary, pairs, md_table, tex_table, note: str, pnote: str):
+    from slamcli.io import atomic_path
+
     paths = {}
     with atomic_path(out / "aggregate.csv") as tmp:
         summary.to_csv(tmp, index=False)
     paths["csv"] = out / "aggregate.csv"
+    with atomic_path(out / "paired.csv") as tmp:
+        pairs.to_csv(tmp, index=False)
+    paths["paired"] = out / "paired.csv"
+    md = to_markdown(*md_table, note)
+    if len(pairs):
+        md += "\n" + to_markdown(*paired_rows(pairs), pnote)
     with atomic_path(out / "aggregate.md") as tmp:
-        tmp.write_text(to_markdown(header, rows, note), encoding="utf-8")
+        tmp.write_text(md, encoding="utf-8")
     paths["md"] = out / "aggregate.md"
+    tex = to_latex(*tex_table, f"{name}: {note}")
+    if len(pairs):
+        tex += "\n" + to_latex(*paired_rows(pairs, tex=True), f"{name}: {pnote}")
     with atomic_path(out / "aggregate.tex") as tmp:
-        tmp.write_text(to_latex(header, rows, f"{exp_dir.name}: {note}"), encoding="utf-8")
+        tmp.write_text(tex, encoding="utf-8")
     paths["tex"] = out / "aggregate.tex"
-    return {"summary": summary, "header": header, "rows": rows, "n_runs": len(df), "n_excluded": n_excluded,
-            "note": note, "paths": paths}
+    return paths
 
 
 @dataclass(frozen=True)

@@ -163,8 +163,9 @@ def column_label(col: str) -> str:
 
 
 def tex_escape(s: str) -> str:
-    """Text for a LaTeX table cell (``_ % & # \\`` escaped; ``±`` and ``—`` as LaTeX; θ as ``$\\theta$``)."""
+    """Text for a LaTeX table cell (``_ % & # \\`` escaped; ``± — − † < >``, θ and Δ as LaTeX)."""
     for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"), ("#", r"\#"),
-                 ("±", r"$\pm$"), ("—", "--"), ("θ", r"$\theta$"), ("Δ", r"$\Delta$")):
+                 ("±", r"$\pm$"), ("—", "--"), ("θ", r"$\theta$"), ("Δ", r"$\Delta$"), ("−", "$-$"),
+                 ("†", r"\textdagger{}"), ("<", "$<$"), (">", "$>$")):
         s = s.replace(a, b)
     return s
