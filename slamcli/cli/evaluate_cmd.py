@@ -9,48 +9,61 @@ import typer
 
 from slamcli.cli.app import app, check_output, handle_errors, stdout_console
 
-# (label, key in metrics.json, unit) in display order; missing keys are skipped.
+# (row name, key(s) in metrics.json) in display order; a row of one key is named by the metric registry
+# (None), a row of several keys gets a group name. Units always come from the registry
+# (slamcli.metrics.registry; angles in radians). Missing keys are skipped.
 _ROWS = [
-    ("ATE RMSE (unaligned)", "ate_rmse_m", "m"),
-    ("ATE RMSE (SE(2)-aligned)", "aligned_ate_rmse_m", "m"),
-    ("heading RMSE (unaligned)", "heading_rmse_rad", "rad"),
-    ("odometry ATE RMSE", "odometry_ate_rmse_m", "m"),
-    ("RPE translation RMSE", "rpe_trans_rmse_m", "m"),
-    ("RPE rotation RMSE", "rpe_rot_rmse_rad", "rad"),
-    ("landmarks true / estimated", ("n_landmarks_true", "n_landmarks_est"), ""),
-    ("paper NN error min / mean / max", ("paper_err_min_m", "paper_err_mean_m", "paper_err_max_m"), "m"),
-    ("paper NN error near path (mean)", "paper_err_mean_near_path_m", "m"),
-    ("matched / missed / spurious", ("lm_n_matched", "lm_n_missed", "lm_n_spurious"), ""),
-    ("matched landmark RMSE", "lm_rmse_matched_m", "m"),
-    ("matched landmark RMSE (aligned)", "lm_aligned_rmse_matched_m", "m"),
-    ("OSPA", "lm_ospa_m", "m"),
-    ("GOSPA (α=2)", "lm_gospa_m", "m"),
-    ("pose NEES (time mean, E = 3)", "pose_nees_mean", ""),
-    ("landmark NEES (mean, E = 2)", "landmark_nees_mean", ""),
-    ("iterations in trace", "n_iterations", ""),
+    ("ATE RMSE (unaligned)", "ate_rmse_m"),
+    ("ATE RMSE (SE(2)-aligned)", "aligned_ate_rmse_m"),
+    ("heading RMSE (unaligned)", "heading_rmse_rad"),
+    (None, "odometry_ate_rmse_m"),
+    (None, "rpe_trans_rmse_m"),
+    (None, "rpe_rot_rmse_rad"),
+    ("landmarks true / estimated", ("n_landmarks_true", "n_landmarks_est")),
+    ("landmark error min / mean / max", ("paper_err_min_m", "paper_err_mean_m", "paper_err_max_m")),
+    (None, "paper_err_mean_near_path_m"),
+    ("landmarks matched / missed / spurious", ("lm_n_matched", "lm_n_missed", "lm_n_spurious")),
+    (None, "lm_rmse_matched_m"),
+    (None, "lm_aligned_rmse_matched_m"),
+    (None, "lm_ospa_m"),
+    ("landmark GOSPA (α=2)", "lm_gospa_m"),
+    ("pose NEES (time mean, E = 3)", "pose_nees_mean"),
+    ("landmark NEES (mean, E = 2)", "landmark_nees_mean"),
+    ("iterations in trace", "n_iterations"),
     # occupancy grids (paper 001): over the cells the frequentist map observed
-    ("grid cells observed", "grid_frequentist_n_observed", ""),
-    ("map error per cell: frequentist / log-odds", ("grid_frequentist_mean_abs_error", "grid_logodds_mean_abs_error"), ""),
-    ("total map error: frequentist / log-odds", ("grid_frequentist_total_abs_error", "grid_logodds_total_abs_error"), ""),
-    ("cell accuracy at 0.5: frequentist / log-odds", ("grid_frequentist_accuracy", "grid_logodds_accuracy"), ""),
+    (None, "grid_frequentist_n_observed"),
+    ("map error per cell: frequentist / log-odds", ("grid_frequentist_mean_abs_error", "grid_logodds_mean_abs_error")),
+    ("total map error: frequentist / log-odds", ("grid_frequentist_total_abs_error", "grid_logodds_total_abs_error")),
+    ("cell accuracy at 0.5: frequentist / log-odds", ("grid_frequentist_accuracy", "grid_logodds_accuracy")),
     # no ground truth / GPS reference (issue 14)
-    ("GPS ATE RMSE (SE(2)-aligned)", "gps_ate_aligned_rmse_m", "m"),
-    ("GPS ATE RMSE (unaligned)", "gps_ate_rmse_m", "m"),
-    ("odometry GPS ATE (aligned)", "odometry_gps_ate_aligned_rmse_m", "m"),
-    ("GPS fixes matched / gaps / longest gap", ("gps_n_matched", "gps_gap_count", "gps_longest_gap_s"), "-/-/s"),
-    ("surveyed landmarks matched / RMSE", ("survey_lm_matched", "survey_lm_rmse_m"), "- / m"),
-    ("final cost (own model)", "final_cost", ""),
-    ("mean NIS / 95 % band", ("nis_mean", "nis_band_lo", "nis_band_hi"), ""),
-    ("estimated landmarks (map size)", "n_landmarks_est", ""),
-    ("against: ATE (unaligned / aligned)", ("against_ate_rmse_m", "against_ate_aligned_rmse_m"), "m"),
-    ("against: landmarks matched / RMSE", ("against_lm_matched", "against_lm_rmse_m"), "- / m"),
-    ("set: soundness (true hypothesis)", "set_soundness", "frac"),
-    ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct"), ""),
-    ("set: true correspondence survived", "set_true_correspondence_survived", ""),
+    ("GPS ATE RMSE (SE(2)-aligned)", "gps_ate_aligned_rmse_m"),
+    ("GPS ATE RMSE (unaligned)", "gps_ate_rmse_m"),
+    (None, "odometry_gps_ate_aligned_rmse_m"),
+    ("GPS fixes matched / gaps / longest gap", ("gps_n_matched", "gps_gap_count", "gps_longest_gap_s")),
+    ("surveyed landmarks matched / RMSE", ("survey_lm_matched", "survey_lm_rmse_m")),
+    (None, "final_cost"),
+    ("mean NIS / 95 % band", ("nis_mean", "nis_band_lo", "nis_band_hi")),
+    ("estimated landmarks (map size)", "n_landmarks_est"),
+    ("against: ATE (unaligned / aligned)", ("against_ate_rmse_m", "against_ate_aligned_rmse_m")),
+    ("against: landmarks matched / RMSE", ("against_lm_matched", "against_lm_rmse_m")),
+    ("set: soundness (true hypothesis)", "set_soundness"),
+    ("set: hypotheses / distinct", ("set_n_hypotheses", "set_n_hypotheses_distinct")),
+    (None, "set_true_correspondence_survived"),
     ("set: mean box width pose x / y / θ", ("set_true_pose_width_x_mean", "set_true_pose_width_y_mean",
-                                            "set_true_pose_width_t_mean"), "m, m, rad"),
-    ("set: mean landmark box width", "set_true_landmark_width_mean", "m"),
+                                            "set_true_pose_width_t_mean")),
+    ("set: mean landmark box width", "set_true_landmark_width_mean"),
 ]
+
+
+def _row_name_unit(name: str | None, keys: tuple[str, ...]) -> tuple[str, str]:
+    """A row's name (the registry's for a single metric) and unit: the registry's units of its keys, one unit
+    when they agree, else each (``-`` for a count)."""
+    from slamcli.metrics.registry import metric_info
+
+    infos = [metric_info(k) for k in keys]
+    units = [i.unit for i in infos]
+    unit = units[0] if len(set(units)) == 1 else " / ".join(u or "-" for u in units)
+    return name or infos[0].name, unit
 
 
 def _fmt(v) -> str:
@@ -96,16 +109,20 @@ def evaluate_command(
         table.add_column("metric")
         table.add_column("value", justify="right")
         table.add_column("unit")
-        for label, key, unit in _ROWS:
+        for name, key in _ROWS:
             keys = key if isinstance(key, tuple) else (key,)
             if not all(k in m for k in keys):
                 continue
-            table.add_row(label, " / ".join(_fmt(m[k]) for k in keys), unit)
+            row_name, unit = _row_name_unit(name, keys)
+            table.add_row(row_name, " / ".join(_fmt(m[k]) for k in keys), unit)
         con = stdout_console()
         con.print(table)
         if m.get("robots"):  # multi-robot result: one row per robot
             rt = Table(title="per robot (multi-robot dataset)")
-            for col in ("robot", "ATE RMSE [m]", "aligned ATE [m]", "odometry ATE [m]"):
+            from slamcli.metrics.registry import metric_label
+
+            for col in ("robot", *(metric_label(k) for k in ("ate_rmse_m", "aligned_ate_rmse_m",
+                                                              "odometry_ate_rmse_m"))):
                 rt.add_column(col, justify="right")
             for n in m["robots"]:
                 rt.add_row(str(n), *(_fmt(m.get(f"robot{n}_{k}")) for k in ("ate_rmse_m", "aligned_ate_rmse_m",
