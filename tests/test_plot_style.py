@@ -23,6 +23,7 @@ import pytest
 
 matplotlib.use("Agg")
 
+from test_plots import make_runs
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -83,19 +84,7 @@ def test_inside_check_catches_a_clipped_label():
 
 @pytest.fixture()
 def runs(tmp_path):
-    from test_cli_evaluate import make_dataset, make_result
-
-    from slamcli.io import write_dataset, write_result
-
-    paths = []
-    for k in range(3):
-        ds = make_dataset(seed=k)
-        d = tmp_path / f"d{k}.h5"
-        write_dataset(d, ds)
-        r = tmp_path / f"r{k}.h5"
-        write_result(r, make_result(ds, d, rng_seed=k, covariances=True))
-        paths.append(r)
-    return paths
+    return make_runs(tmp_path)
 
 
 @pytest.fixture()

@@ -66,10 +66,10 @@ def test_save_figure_formats_and_atomicity(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "sub"]
 
 
-@pytest.fixture()
-def runs(tmp_path):
+def make_runs(tmp_path, n=3):
+    """``n`` toy result files (with covariances and an iteration trace) of ``n`` toy datasets."""
     paths = []
-    for k in range(3):
+    for k in range(n):
         ds = make_dataset(seed=k)
         d = tmp_path / f"d{k}.h5"
         write_dataset(d, ds)
@@ -77,6 +77,11 @@ def runs(tmp_path):
         write_result(r, make_result(ds, d, rng_seed=k))
         paths.append(r)
     return paths
+
+
+@pytest.fixture()
+def runs(tmp_path):
+    return make_runs(tmp_path)
 
 
 @pytest.mark.parametrize("kind,ext", [("map", "png"), ("errors", "pdf"), ("mapchange", "png"), ("nees", "png")])
