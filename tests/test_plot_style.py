@@ -113,16 +113,18 @@ def _cli_cases(runs, sweep):
             "compare": ["compare", str(sweep), "--by", "solver,provisional_min_hits"]}
 
 
-def test_every_cli_figure_keeps_its_labels_inside_one_column(runs, tmp_path, captured):
+@pytest.mark.parametrize("size,inches", [("3.5x2.6", COLUMN), ("page", (7.16, 3.2))])
+def test_every_cli_figure_keeps_its_labels_inside(runs, tmp_path, captured, size, inches):
+    """One column (3.5 in) and both columns (7.16 in, ``--size page``)."""
     from test_aggregate import _write_sweep
 
     _write_sweep(tmp_path / "exp")
     for name, args in _cli_cases(runs, tmp_path / "exp").items():
         captured.clear()
-        r = runner.invoke(app, ["plot", *args, "--size", "3.5x2.6", "-q", "-o", str(tmp_path / "f.png")])
+        r = runner.invoke(app, ["plot", *args, "--size", size, "-q", "-o", str(tmp_path / "f.png")])
         assert r.exit_code == 0, (name, r.output)
         (fig,) = captured
-        assert tuple(fig.get_size_inches()) == COLUMN
+        assert tuple(fig.get_size_inches()) == inches
         assert texts_outside(fig) == [], name
 
 
