@@ -69,8 +69,9 @@ def mapchange(results, *, ax=None, labels=None, log: bool = True, title: str | N
     return draw_mapchange(_ax(ax), [_result(r) for r in results], labels, log=log, title=title)
 
 
-def nees(results, datasets, *, ax=None, confidence: float = 0.95, log: bool = True, title: str | None = None):
-    """Monte-Carlo average pose NEES of N runs with the two-sided χ² band."""
+def nees(results, datasets, *, ax=None, confidence: float = 0.95, log: bool = True, title: str | None = None,
+         label: str | None = None):
+    """Monte-Carlo average pose NEES of N runs with the two-sided χ² band; ``label`` names the curve."""
     from slamcli.errors import SlamcliError
     from slamcli.metrics.summary import monte_carlo_pose_nees
     from slamcli.plots.figures import draw_nees
@@ -79,7 +80,7 @@ def nees(results, datasets, *, ax=None, confidence: float = 0.95, log: bool = Tr
     avg, why = monte_carlo_pose_nees(pairs, confidence)
     if avg is None:
         raise SlamcliError(f"nees: {why}")
-    return draw_nees(_ax(ax), avg, log=log, title=title)
+    return draw_nees(_ax(ax), avg, log=log, title=title, label=label)
 
 
 def compare(exp_dir, metric: str = "ate_rmse_m", by="solver", *, ax=None, labels=None, title: str | None = None):
