@@ -141,8 +141,12 @@ def test_pose_errors_boxes_and_occupancy_keep_labels_inside():
 
 def test_occupancy_map_has_a_colorbar_and_pose_errors_are_in_radians():
     fig = _fig_grid()
-    cbar_axes = [ax for ax in fig.axes if ax.get_ylabel() == "occupancy probability"]
+    cbar_axes = [c for ax in fig.axes for c in ax.child_axes if c.get_ylabel() == "occupancy probability"]
     assert len(cbar_axes) == 1 and cbar_axes[0].get_ylim() == (0.0, 1.0)
+    from slamcli.plots.style import FONT_PT, apply_style
+
+    apply_style(fig)  # the style reaches the colorbar (an inset axis, not in fig.axes)
+    assert cbar_axes[0].yaxis.label.get_fontsize() == FONT_PT
     fig = _fig_pose_errors()
     assert fig.axes[2].get_ylabel() == "Δθ (rad)"
     # the θ error is drawn unconverted (radians, as in the tables)

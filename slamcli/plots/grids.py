@@ -22,7 +22,8 @@ def draw_grid(ax, grid, snapshot: int | None = None, unobserved_alpha: float = 1
     if label:
         ax.plot([], [], "s", color="0.3", ms=5, ls="none", label=label)
     if colorbar:
-        cb = ax.figure.colorbar(im, ax=ax, shrink=0.9, pad=0.02, aspect=25)
+        # an inset of the map axis, so it stays beside the map however wide the legend under it is
+        cb = ax.figure.colorbar(im, cax=ax.inset_axes((1.03, 0.0, 0.04, 1.0)))
         cb.set_label("occupancy probability")
         cb.outline.set_linewidth(style.THIN_PT)
     return im

@@ -72,8 +72,9 @@ def _texts_of_axes(ax):
 
 def apply_style(fig) -> None:
     """Set the style's font family and sizes on every text of ``fig`` (titles and labels :data:`FONT_PT`;
-    ticks, offsets, legends, annotations :data:`SMALL_PT`), whatever rc settings it was drawn under."""
-    for ax in fig.axes:
+    ticks, offsets, legends, annotations :data:`SMALL_PT`), whatever rc settings it was drawn under; inset
+    axes (a colorbar beside a map) included."""
+    for ax in _all_axes(fig.axes):
         for t in _texts_of_axes(ax):
             if t is not None:
                 t.set_fontsize(FONT_PT)
@@ -92,6 +93,12 @@ def apply_style(fig) -> None:
         _style_legend(leg)
     if getattr(fig, "_suptitle", None) is not None:
         fig._suptitle.set_fontsize(FONT_PT)
+
+
+def _all_axes(axes):
+    for ax in axes:
+        yield ax
+        yield from _all_axes(getattr(ax, "child_axes", ()))
 
 
 def _style_legend(leg) -> None:
