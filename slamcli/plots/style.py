@@ -79,6 +79,9 @@ def apply_style(fig) -> None:
             if t is not None:
                 t.set_fontsize(FONT_PT)
                 t.set_fontfamily("sans-serif")
+        for t in (ax.title, getattr(ax, "_left_title", None), getattr(ax, "_right_title", None)):
+            if t is not None:
+                t.set_wrap(True)  # a long --title breaks into lines instead of leaving a one-column figure
         ax.tick_params(labelsize=SMALL_PT)
         for t in (*ax.get_xticklabels(), *ax.get_yticklabels()):
             t.set_fontfamily("sans-serif")
@@ -110,10 +113,11 @@ def _style_legend(leg) -> None:
 
 def legend_columns(labels, width_in: float, max_cols: int = 3) -> int:
     """Columns of a legend of ``labels`` that fits ``width_in`` inches at :data:`SMALL_PT`: each column is
-    a handle (2 em), a gap and the longest label (0.6 em per character, DejaVu Sans' mean advance)."""
+    a handle with its pad and the column gap (3.6 em, as :func:`~slamcli.plots.curves.legend_below` sets them)
+    and the longest label (0.62 em per character, DejaVu Sans' mean advance, rounded up)."""
     em_in = SMALL_PT / 72.0
     longest = max((len(s) for s in labels), default=0)
-    col_in = em_in * (2.8 + 0.6 * longest)
+    col_in = em_in * (3.6 + 0.62 * longest)
     fit = int((0.95 * width_in) // col_in) if col_in > 0 else max_cols
     return max(1, min(max_cols, fit, len(labels) or 1))
 
