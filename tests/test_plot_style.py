@@ -163,6 +163,14 @@ def test_map_title_has_no_file_name_and_label_names_the_estimate(runs, tmp_path,
     assert r.exit_code == 1 and "1 label(s) for 3 result(s)" in r.output
 
 
+def test_a_long_title_wraps_inside_one_column(runs, tmp_path, captured):
+    title = "ICM on paper-sim1, information weights, gated initialisation, seeds 0-9, 30 sweeps"
+    r = runner.invoke(app, ["plot", "errors", str(runs[0]), "--title", title, "--size", "column", "-q",
+                            "-o", str(tmp_path / "e.png")])
+    assert r.exit_code == 0, r.output
+    assert captured[0].axes[0].get_title() == title and texts_outside(captured[0]) == []
+
+
 def test_mapchange_default_labels_are_solver_names_numbered(runs, tmp_path, captured):
     r = runner.invoke(app, ["plot", "mapchange", *map(str, runs[:2]), "-q", "-o", str(tmp_path / "c.png")])
     assert r.exit_code == 0, r.output
