@@ -91,7 +91,11 @@ def plot_command(
             else:
                 _nees(ax, results, data_paths, check, title, echo, log=not linear,
                       label=labels[0] if labels else None)
-        save_figure(fig, output, dpi=dpi)
+        try:
+            save_figure(fig, output, dpi=dpi)
+        except MemoryError:  # the estimate passed, but this process may not have that much (RLIMIT_AS, ...)
+            fail(f"--dpi {dpi}: a {round(w * dpi)}x{round(h * dpi)} pixel canvas does not fit in the memory this "
+                 "process may use; use a smaller --dpi or --size")
         echo(f"wrote {output}")
 
 
