@@ -347,3 +347,15 @@ def test_image_comparison_detects_a_style_change(tmp_path):
     finally:
         style.ESTIMATE = old
     assert compare_images(str(same), str(actual), tol=IMAGE_TOL) is not None
+
+
+def test_reproduce_compare_figure_is_the_plot_compare_implementation():
+    """The report's compare figure draws through draw_compare, like `slamcli plot compare` (no own boxplot)."""
+    import inspect
+
+    from slamcli.cli import plot_cmd
+    from slamcli.reproduce.report import Reproduction
+
+    report_src = inspect.getsource(Reproduction.compare_section)
+    assert "draw_compare(" in report_src and "boxplot" not in report_src
+    assert "draw_compare(" in inspect.getsource(plot_cmd._compare)
