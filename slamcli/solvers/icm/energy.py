@@ -394,6 +394,13 @@ def step_stats(prob: Problem, labels, landmarks_xy, W: Weights | None = None) ->
 # ------------------------------------------------------------------------------------------------------------
 # 3-D conditional of one pose (eq. 14; eq. 11 with has_next = 0) — floats or arrays
 # ------------------------------------------------------------------------------------------------------------
+def _has_next(hn) -> bool:
+    """False only for a Python float ``hn == 0`` (the last pose, the on-line init): its t+1 terms are
+    ``0·(finite)`` and leave every sum as it is (up to the sign of a zero), so :func:`cond_cost` / :func:`cond_step` skip them.
+    Arrays (the coding-scheme sweep) always take the full path."""
+    return type(hn) is not float or hn != 0.0
+
+
 def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     """Value of the terms of H that involve pose x_t = (x, y, th).
 
@@ -418,18 +425,19 @@ def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     b2 = _wrap(th - pth - d2)
     cost = cost + s0 * b0 * b0 + s1 * b1 * b1 + s2 * b2 * b2
     c, s = cos(th), sin(th)
-    # motion t+1: g(x_t, u_t) − x_{t+1}
-    f0 = x + dt * v1 * c - dt * l1 * s - nx
-    f1 = y + dt * v1 * s + dt * l1 * c - ny
-    f2 = _wrap(th + dt * w1 - nth)
-    # odometry t+1: τ(θ_t)(x_{t+1} − x_t) − d̃_{t+1}
-    ex, ey = nx - x, ny - y
-    h0 = c * ex + s * ey - e0
-    h1 = -s * ex + c * ey - e1
-    h2 = _wrap(nth - th - e2)
-    cost = cost + hn * (
-        r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2
-    )
+    if _has_next(hn):  # a last pose (float hn = 0) skips the t+1 terms: adding 0·(…) changes no value
+        # motion t+1: g(x_t, u_t) − x_{t+1}
+        f0 = x + dt * v1 * c - dt * l1 * s - nx
+        f1 = y + dt * v1 * s + dt * l1 * c - ny
+        f2 = _wrap(th + dt * w1 - nth)
+        # odometry t+1: τ(θ_t)(x_{t+1} − x_t) − d̃_{t+1}
+        ex, ey = nx - x, ny - y
+        h0 = c * ex + s * ey - e0
+        h1 = -s * ex + c * ey - e1
+        h2 = _wrap(nth - th - e2)
+        cost = cost + hn * (
+            r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2
+        )
     # observations at t: Σ‖p + R(θ)v_i − m_i‖²_Q from the sufficient statistics
     RVx = c * V1x - s * V1y
     RVy = s * V1x + c * V1y
@@ -478,36 +486,37 @@ def cond_step(x, y, th, ctx, st, Wf, dt, cos, sin):
     g1 = g1 + sp * s0 * b0 + cp * s1 * b1
     g2 = g2 + s2 * b2
     c, s = cos(th), sin(th)
-    # motion t+1: J = [[1, 0, −dt (v s + l c)], [0, 1, dt (v c − l s)], [0, 0, 1]]
-    f0 = x + dt * v1 * c - dt * l1 * s - nx
-    f1 = y + dt * v1 * s + dt * l1 * c - ny
-    f2 = _wrap(th + dt * w1 - nth)
-    j02 = -dt * v1 * s - dt * l1 * c
-    j12 = dt * v1 * c - dt * l1 * s
-    H00 = H00 + hn * r0
-    H11 = H11 + hn * r1
-    H02 = H02 + hn * r0 * j02
-    H12 = H12 + hn * r1 * j12
-    H22 = H22 + hn * (r0 * j02 * j02 + r1 * j12 * j12 + r2)
-    g0 = g0 + hn * r0 * f0
-    g1 = g1 + hn * r1 * f1
-    g2 = g2 + hn * (r0 * j02 * f0 + r1 * j12 * f1 + r2 * f2)
-    # odometry t+1: J = [[−c, −s, k02], [s, −c, k12], [0, 0, −1]]
-    ex, ey = nx - x, ny - y
-    h0 = c * ex + s * ey - e0
-    h1 = -s * ex + c * ey - e1
-    h2 = _wrap(nth - th - e2)
-    k02 = -s * ex + c * ey
-    k12 = -c * ex - s * ey
-    H00 = H00 + hn * (s0 * c * c + s1 * s * s)
-    H01 = H01 + hn * (s0 - s1) * c * s
-    H11 = H11 + hn * (s0 * s * s + s1 * c * c)
-    H02 = H02 + hn * (-c * s0 * k02 + s * s1 * k12)
-    H12 = H12 + hn * (-s * s0 * k02 - c * s1 * k12)
-    H22 = H22 + hn * (s0 * k02 * k02 + s1 * k12 * k12 + s2)
-    g0 = g0 + hn * (-c * s0 * h0 + s * s1 * h1)
-    g1 = g1 + hn * (-s * s0 * h0 - c * s1 * h1)
-    g2 = g2 + hn * (k02 * s0 * h0 + k12 * s1 * h1 - s2 * h2)
+    if _has_next(hn):  # a last pose (float hn = 0) skips the t+1 terms (see cond_cost)
+        # motion t+1: J = [[1, 0, −dt (v s + l c)], [0, 1, dt (v c − l s)], [0, 0, 1]]
+        f0 = x + dt * v1 * c - dt * l1 * s - nx
+        f1 = y + dt * v1 * s + dt * l1 * c - ny
+        f2 = _wrap(th + dt * w1 - nth)
+        j02 = -dt * v1 * s - dt * l1 * c
+        j12 = dt * v1 * c - dt * l1 * s
+        H00 = H00 + hn * r0
+        H11 = H11 + hn * r1
+        H02 = H02 + hn * r0 * j02
+        H12 = H12 + hn * r1 * j12
+        H22 = H22 + hn * (r0 * j02 * j02 + r1 * j12 * j12 + r2)
+        g0 = g0 + hn * r0 * f0
+        g1 = g1 + hn * r1 * f1
+        g2 = g2 + hn * (r0 * j02 * f0 + r1 * j12 * f1 + r2 * f2)
+        # odometry t+1: J = [[−c, −s, k02], [s, −c, k12], [0, 0, −1]]
+        ex, ey = nx - x, ny - y
+        h0 = c * ex + s * ey - e0
+        h1 = -s * ex + c * ey - e1
+        h2 = _wrap(nth - th - e2)
+        k02 = -s * ex + c * ey
+        k12 = -c * ex - s * ey
+        H00 = H00 + hn * (s0 * c * c + s1 * s * s)
+        H01 = H01 + hn * (s0 - s1) * c * s
+        H11 = H11 + hn * (s0 * s * s + s1 * c * c)
+        H02 = H02 + hn * (-c * s0 * k02 + s * s1 * k12)
+        H12 = H12 + hn * (-s * s0 * k02 - c * s1 * k12)
+        H22 = H22 + hn * (s0 * k02 * k02 + s1 * k12 * k12 + s2)
+        g0 = g0 + hn * (-c * s0 * h0 + s * s1 * h1)
+        g1 = g1 + hn * (-s * s0 * h0 - c * s1 * h1)
+        g2 = g2 + hn * (k02 * s0 * h0 + k12 * s1 * h1 - s2 * h2)
     # observations: J_i = [[1, 0, −(Rv)_y], [0, 1, (Rv)_x]]
     RVx = c * V1x - s * V1y
     RVy = s * V1x + c * V1y
