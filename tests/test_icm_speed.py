@@ -113,7 +113,11 @@ def _reference_init(prob, W, radius, kinematic, iters):
         x = xh
         if t > 0 and not kinematic:
             ok = match >= 0
-            st = common._stats_one(prob.v_body[a:b][ok], msum[match[ok]] / mcnt[match[ok], None])
+            v, m = prob.v_body[a:b][ok], msum[match[ok]] / mcnt[match[ok], None]
+            st = (len(v), v[:, 0].sum(), v[:, 1].sum(), m[:, 0].sum(), m[:, 1].sum()) if len(v) else (0.0,) * 5
+            st += tuple(v[:, i] @ w[:, j] for v, w, i, j in [(v, v, 0, 0), (v, v, 0, 1), (v, v, 1, 1), (v, m, 0, 0),
+                        (v, m, 0, 1), (v, m, 1, 0), (v, m, 1, 1), (m, m, 0, 0), (m, m, 1, 1)])
+            st = tuple(float(q) for q in st)
             px, py, pth = poses[t - 1]
             d = prob.odo_inc[t - 1]
             ctx = (px, py, pth, xh[0], xh[1], pth + prob.dt * prob.controls[t - 1, 1], *d) + (0.0,) * 10
@@ -174,3 +178,28 @@ def test_last_pose_conditional_skips_nothing_that_counts():
             scalar = np.atleast_1d(fn(x, y, th, ctx, st, Wf, 0.1, math.cos, math.sin))
             vector = np.ravel(fn(np.array([x]), np.array([y]), np.array([th]), arr, st, Wf, 0.1, np.cos, np.sin))
             np.testing.assert_allclose(scalar, vector, rtol=1e-13, atol=1e-13)
+
+
+def test_compiled_kernels_equal_python_kernels(monkeypatch):
+    """numba's copies of the pose kernels (optional extra ``fast``) give the Python kernels' floats, bit for bit:
+    the sequential sweep (Algorithm 2's visit order) and the on-line init."""
+    pytest.importorskip("numba")
+    monkeypatch.delenv(en.NO_JIT_ENV, raising=False)
+    assert en.compiled_kernels() is not None
+    prob = en.Problem.from_inputs(_street(T=300, clutter=0.05))
+    W = en.Weights.from_params((2.0, 2.0, 1.0), (0.5, 0.5, 0.2), 1.0)
+    runs = {}
+    for jit_from in (10**9, 0):  # Python kernels, then the compiled ones
+        monkeypatch.setattr(en, "JIT_MIN_POSES", jit_from)
+        poses, labels, landmarks, _ = common.online_init(prob, W, radius=1.0)
+        stats = en.step_stats(prob, labels, landmarks)
+        swept = en.sweep_poses_sequential(prob, W, poses.copy(), stats, iters=3)
+        runs[jit_from] = (poses, labels, swept)
+    for a, b in zip(runs[10**9], runs[0]):
+        np.testing.assert_array_equal(a, b)
+    assert np.abs(runs[0][2] - runs[0][0]).max() > 1e-6  # the sweep moved the poses
+
+
+def test_no_jit_switch_keeps_python_kernels(monkeypatch):
+    monkeypatch.setenv(en.NO_JIT_ENV, "1")
+    assert en.compiled_kernels() is None

@@ -62,11 +62,13 @@ def online_init(
     of comparing each sighting with every mean.
     """
     T, N = prob.T, prob.n_obs
+    jit = en.compiled_kernels() if T + 1 >= en.JIT_MIN_POSES and not kinematic else None
+    minimise = en.cond_minimise_scalar if jit is None else jit.cond_minimise_scalar  # the same floats
     poses = np.empty((T + 1, 3))
     poses[0] = prob.x0
     kin = prob.kinematic_poses() if kinematic else None
     labels = np.full(N, -1, np.int64)
-    grid = MeanGrid(N, radius)
+    grid = MeanGrid(N, radius if fixed_labels is None else math.inf)  # known labels: no lookups, no grid
     Wf = W.flat
     off = prob.offsets.tolist()
     step_s = np.empty(T + 1)
@@ -87,19 +89,19 @@ def online_init(
             xh = tuple(kin[t].tolist())
         else:
             xh = _predict(prob.dt, poses[t - 1].tolist(), U[t - 1], LAT[t - 1])
-        match = np.full(b - a, -1, np.int64)
-        if b > a:
-            if fixed_labels is not None:
-                match = _known_matches(fixed_labels[a:b], grid.cnt)
-            else:
-                match = grid.nearest(_points(xh, rng[a:b], brg[a:b]))  # eqs. (9)-(10)
+        if b == a:
+            match = np.zeros(0, np.int64)
+        elif fixed_labels is not None:
+            match = _known_matches(fixed_labels[a:b], grid.cnt)
+        else:
+            match = grid.nearest(_points(xh, rng[a:b], brg[a:b]))  # eqs. (9)-(10)
         x = xh
         if t > 0 and not kinematic:
             ok = match >= 0
             st = _stats_one(prob.v_body[a:b][ok], grid.means(match[ok]))
             if has_gps[t]:
                 st = tuple(float(u + g) for u, g in zip(st, gps_st[:, t]))
-            x = _minimise_pose(prob, poses[t - 1], xh, U[t - 1], D[t - 1], st, Wf, iters)  # (11)
+            x = _minimise_pose(minimise, prob.dt, poses[t - 1], xh, U[t - 1], D[t - 1], st, Wf, iters)  # (11)
         poses[t] = x
         if b > a:
             _absorb_step(grid, _points(x, rng[a:b], brg[a:b]), match,
@@ -210,7 +212,7 @@ class MeanGrid:
         if self.inv_h is None or labels.size == 0:
             return
         new = self._keys(self.means(labels))
-        moved = np.flatnonzero(new != self.key[labels])
+        moved = (new != self.key[labels]).nonzero()[0]
         for j, k in zip(labels[moved].tolist(), new[moved].tolist()):  # a repeated label moves twice, to one cell
             old = int(self.key[j])
             if old in self.cells:
@@ -219,13 +221,14 @@ class MeanGrid:
             self.key[j] = k
 
 
-def _minimise_pose(prob, prev, xh, u, d, st, Wf, iters) -> np.ndarray:
-    """The minimisation (11) of step t's pose from ``xh``: ``prev`` the previous pose, ``u`` its control, ``d``
-    its odometry increment, ``st`` the 14 statistics of the matched observations (plus the GPS fix's)."""
-    px, py, pth = prev
-    g = (xh[0], xh[1], pth + prob.dt * u[1])
-    ctx = (px, py, pth, g[0], g[1], g[2], d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    return en.cond_minimise_scalar(xh[0], xh[1], xh[2], ctx, st, Wf, prob.dt, iters, 1e-10)  # (11)
+def _minimise_pose(minimise, dt, prev, xh, u, d, st, Wf, iters):
+    """The minimisation (11) of step t's pose from ``xh`` by ``minimise`` (:func:`~slamcli.solvers.icm.energy.
+    cond_minimise_scalar` or its compiled copy): ``prev`` the previous pose, ``u`` its control, ``d`` its
+    odometry increment, ``st`` the 14 statistics of the matched observations (plus the GPS fix's)."""
+    px, py, pth = float(prev[0]), float(prev[1]), float(prev[2])
+    ctx = (px, py, pth, xh[0], xh[1], pth + dt * u[1], d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+           0.0, 0.0)
+    return minimise(xh[0], xh[1], xh[2], ctx, st, Wf, dt, iters, 1e-10)  # (11)
 
 
 def _absorb_step(grid: MeanGrid, pts, match, known) -> None:
@@ -234,7 +237,7 @@ def _absorb_step(grid: MeanGrid, pts, match, known) -> None:
     nearest mean within ϑ or a new label, written into ``match`` in place."""
     ok = match >= 0
     grid.add(match[ok], pts[ok])
-    for i in np.flatnonzero(~ok).tolist():  # first sight: a new label (or one just created at this step)
+    for i in (~ok).nonzero()[0].tolist():  # first sight: a new label (or one just created at this step)
         if known is not None:
             lab = int(known[i])
             if lab < 0:
@@ -249,6 +252,9 @@ def _absorb_step(grid: MeanGrid, pts, match, known) -> None:
         grid.add(np.array([lab]), pts[i : i + 1])
 
 
+_sum = np.add.reduce  # ndarray.sum without its Python wrapper: the same pairwise sum
+
+
 def _stats_one(v, m):
     """The 14 sufficient statistics (see :func:`slamcli.solvers.icm.energy.step_stats`) of one step's matched observations."""
     if v.shape[0] == 0:
@@ -256,10 +262,10 @@ def _stats_one(v, m):
     vx, vy, mx, my = v[:, 0], v[:, 1], m[:, 0], m[:, 1]
     return (
         float(v.shape[0]),
-        float(vx.sum()),
-        float(vy.sum()),
-        float(mx.sum()),
-        float(my.sum()),
+        float(_sum(vx)),
+        float(_sum(vy)),
+        float(_sum(mx)),
+        float(_sum(my)),
         float(vx @ vx),
         float(vx @ vy),
         float(vy @ vy),
