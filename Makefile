@@ -11,7 +11,7 @@ BIN := $(VENV)/bin
 COMMA := ,
 INCLUDE_DIRS ?= /usr/include /usr/local/include /opt/homebrew/include $(CONDA_PREFIX)/include
 SUITESPARSE_H ?= $(firstword $(wildcard $(addsuffix /suitesparse/cholmod.h,$(INCLUDE_DIRS))))
-EXTRAS := test,gtsam,dask,parquet,dev,interval$(if $(strip $(SUITESPARSE_H)),$(COMMA)cholmod)
+EXTRAS := test,gtsam,dask,parquet,dev,interval,fast$(if $(strip $(SUITESPARSE_H)),$(COMMA)cholmod)
 PIP ?= $(BIN)/pip
 
 install:  ## create the venv and install slamcli with every extra the tests use (cholmod only if its headers exist)

@@ -28,7 +28,11 @@ Three independent evaluations of the same function live here:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import os
+import types
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +51,7 @@ TWO_PI = 2.0 * math.pi
 
 
 _wrap = wrap_angle_fast  # floats and arrays alike, no numpy scalar overhead in the per-pose loops
+_cos, _sin = math.cos, math.sin  # the scalar kernels' trigonometry (a name numba compiles as well)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -394,6 +399,13 @@ def step_stats(prob: Problem, labels, landmarks_xy, W: Weights | None = None) ->
 # ------------------------------------------------------------------------------------------------------------
 # 3-D conditional of one pose (eq. 14; eq. 11 with has_next = 0) — floats or arrays
 # ------------------------------------------------------------------------------------------------------------
+def _has_next(hn) -> bool:
+    """False only for a Python float ``hn == 0`` (the last pose, the on-line init): its t+1 terms are
+    ``0·(finite)`` and leave every sum as it is (up to the sign of a zero), so :func:`cond_cost` / :func:`cond_step` skip them.
+    Arrays (the coding-scheme sweep) always take the full path."""
+    return not isinstance(hn, float) or hn != 0.0
+
+
 def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     """Value of the terms of H that involve pose x_t = (x, y, th).
 
@@ -418,18 +430,19 @@ def cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin):
     b2 = _wrap(th - pth - d2)
     cost = cost + s0 * b0 * b0 + s1 * b1 * b1 + s2 * b2 * b2
     c, s = cos(th), sin(th)
-    # motion t+1: g(x_t, u_t) − x_{t+1}
-    f0 = x + dt * v1 * c - dt * l1 * s - nx
-    f1 = y + dt * v1 * s + dt * l1 * c - ny
-    f2 = _wrap(th + dt * w1 - nth)
-    # odometry t+1: τ(θ_t)(x_{t+1} − x_t) − d̃_{t+1}
-    ex, ey = nx - x, ny - y
-    h0 = c * ex + s * ey - e0
-    h1 = -s * ex + c * ey - e1
-    h2 = _wrap(nth - th - e2)
-    cost = cost + hn * (
-        r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2
-    )
+    if _has_next(hn):  # a last pose (float hn = 0) skips the t+1 terms: adding 0·(…) changes no value
+        # motion t+1: g(x_t, u_t) − x_{t+1}
+        f0 = x + dt * v1 * c - dt * l1 * s - nx
+        f1 = y + dt * v1 * s + dt * l1 * c - ny
+        f2 = _wrap(th + dt * w1 - nth)
+        # odometry t+1: τ(θ_t)(x_{t+1} − x_t) − d̃_{t+1}
+        ex, ey = nx - x, ny - y
+        h0 = c * ex + s * ey - e0
+        h1 = -s * ex + c * ey - e1
+        h2 = _wrap(nth - th - e2)
+        cost = cost + hn * (
+            r0 * f0 * f0 + r1 * f1 * f1 + r2 * f2 * f2 + s0 * h0 * h0 + s1 * h1 * h1 + s2 * h2 * h2
+        )
     # observations at t: Σ‖p + R(θ)v_i − m_i‖²_Q from the sufficient statistics
     RVx = c * V1x - s * V1y
     RVy = s * V1x + c * V1y
@@ -478,36 +491,37 @@ def cond_step(x, y, th, ctx, st, Wf, dt, cos, sin):
     g1 = g1 + sp * s0 * b0 + cp * s1 * b1
     g2 = g2 + s2 * b2
     c, s = cos(th), sin(th)
-    # motion t+1: J = [[1, 0, −dt (v s + l c)], [0, 1, dt (v c − l s)], [0, 0, 1]]
-    f0 = x + dt * v1 * c - dt * l1 * s - nx
-    f1 = y + dt * v1 * s + dt * l1 * c - ny
-    f2 = _wrap(th + dt * w1 - nth)
-    j02 = -dt * v1 * s - dt * l1 * c
-    j12 = dt * v1 * c - dt * l1 * s
-    H00 = H00 + hn * r0
-    H11 = H11 + hn * r1
-    H02 = H02 + hn * r0 * j02
-    H12 = H12 + hn * r1 * j12
-    H22 = H22 + hn * (r0 * j02 * j02 + r1 * j12 * j12 + r2)
-    g0 = g0 + hn * r0 * f0
-    g1 = g1 + hn * r1 * f1
-    g2 = g2 + hn * (r0 * j02 * f0 + r1 * j12 * f1 + r2 * f2)
-    # odometry t+1: J = [[−c, −s, k02], [s, −c, k12], [0, 0, −1]]
-    ex, ey = nx - x, ny - y
-    h0 = c * ex + s * ey - e0
-    h1 = -s * ex + c * ey - e1
-    h2 = _wrap(nth - th - e2)
-    k02 = -s * ex + c * ey
-    k12 = -c * ex - s * ey
-    H00 = H00 + hn * (s0 * c * c + s1 * s * s)
-    H01 = H01 + hn * (s0 - s1) * c * s
-    H11 = H11 + hn * (s0 * s * s + s1 * c * c)
-    H02 = H02 + hn * (-c * s0 * k02 + s * s1 * k12)
-    H12 = H12 + hn * (-s * s0 * k02 - c * s1 * k12)
-    H22 = H22 + hn * (s0 * k02 * k02 + s1 * k12 * k12 + s2)
-    g0 = g0 + hn * (-c * s0 * h0 + s * s1 * h1)
-    g1 = g1 + hn * (-s * s0 * h0 - c * s1 * h1)
-    g2 = g2 + hn * (k02 * s0 * h0 + k12 * s1 * h1 - s2 * h2)
+    if _has_next(hn):  # a last pose (float hn = 0) skips the t+1 terms (see cond_cost)
+        # motion t+1: J = [[1, 0, −dt (v s + l c)], [0, 1, dt (v c − l s)], [0, 0, 1]]
+        f0 = x + dt * v1 * c - dt * l1 * s - nx
+        f1 = y + dt * v1 * s + dt * l1 * c - ny
+        f2 = _wrap(th + dt * w1 - nth)
+        j02 = -dt * v1 * s - dt * l1 * c
+        j12 = dt * v1 * c - dt * l1 * s
+        H00 = H00 + hn * r0
+        H11 = H11 + hn * r1
+        H02 = H02 + hn * r0 * j02
+        H12 = H12 + hn * r1 * j12
+        H22 = H22 + hn * (r0 * j02 * j02 + r1 * j12 * j12 + r2)
+        g0 = g0 + hn * r0 * f0
+        g1 = g1 + hn * r1 * f1
+        g2 = g2 + hn * (r0 * j02 * f0 + r1 * j12 * f1 + r2 * f2)
+        # odometry t+1: J = [[−c, −s, k02], [s, −c, k12], [0, 0, −1]]
+        ex, ey = nx - x, ny - y
+        h0 = c * ex + s * ey - e0
+        h1 = -s * ex + c * ey - e1
+        h2 = _wrap(nth - th - e2)
+        k02 = -s * ex + c * ey
+        k12 = -c * ex - s * ey
+        H00 = H00 + hn * (s0 * c * c + s1 * s * s)
+        H01 = H01 + hn * (s0 - s1) * c * s
+        H11 = H11 + hn * (s0 * s * s + s1 * c * c)
+        H02 = H02 + hn * (-c * s0 * k02 + s * s1 * k12)
+        H12 = H12 + hn * (-s * s0 * k02 - c * s1 * k12)
+        H22 = H22 + hn * (s0 * k02 * k02 + s1 * k12 * k12 + s2)
+        g0 = g0 + hn * (-c * s0 * h0 + s * s1 * h1)
+        g1 = g1 + hn * (-s * s0 * h0 - c * s1 * h1)
+        g2 = g2 + hn * (k02 * s0 * h0 + k12 * s1 * h1 - s2 * h2)
     # observations: J_i = [[1, 0, −(Rv)_y], [0, 1, (Rv)_x]]
     RVx = c * V1x - s * V1y
     RVy = s * V1x + c * V1y
@@ -549,7 +563,7 @@ def cond_minimise_scalar(x, y, th, ctx, st, Wf, dt, iters: int, tol: float):
 
     Every accepted step lowers the conditional cost, hence the energy. Returns the new ``(x, y, th)``.
     """
-    cos, sin = math.cos, math.sin
+    cos, sin = _cos, _sin
     f = cond_cost(x, y, th, ctx, st, Wf, dt, cos, sin)
     for _ in range(iters):
         dx, dy, dth = cond_step(x, y, th, ctx, st, Wf, dt, cos, sin)
@@ -665,33 +679,47 @@ def _motion(x, u, dt, lat):
 def sweep_poses_sequential(prob: Problem, W: Weights, poses, stats, iters: int = 3, tol: float = 1e-10):
     """Paper-exact visit x_1, x_2, …, x_T (eq. 14), each pose moved to its conditional mode in place.
 
-    ``poses (T+1, 3)`` is modified in place; ``stats (14, T+1)`` from :func:`step_stats`.
+    ``poses (T+1, 3)`` is modified in place; ``stats (14, T+1)`` from :func:`step_stats`. With numba installed
+    (optional extra ``fast``) and at least :data:`JIT_MIN_POSES` poses the same loop runs compiled
+    (:func:`compiled_kernels`); the poses are the same floats either way.
     """
-    T, dt = prob.T, prob.dt
     Wf = W.flat
+    jit = compiled_kernels() if prob.T + 1 >= JIT_MIN_POSES else None
+    if jit is not None:
+        P = np.ascontiguousarray(poses, float)
+        arr = functools.partial(np.ascontiguousarray, dtype=float)  # one compiled signature
+        jit.sequential_loop(P, arr(prob.controls), arr(prob.lat), arr(prob.odo_inc), arr(stats.T), Wf,
+                            float(prob.dt), int(iters), float(tol), int(prob.T))
+        poses[:] = P
+        return poses
     P = poses.tolist()
-    U = prob.controls.tolist()
-    LAT = prob.lat.tolist()
-    D = prob.odo_inc.tolist()
-    ST = stats.T.tolist()
-    cos, sin = math.cos, math.sin
+    sequential_loop(P, prob.controls.tolist(), prob.lat.tolist(), prob.odo_inc.tolist(), stats.T.tolist(), Wf,
+                    prob.dt, iters, tol, prob.T)
+    poses[:] = P
+    return poses
+
+
+def sequential_loop(P, U, LAT, D, ST, Wf, dt, iters, tol, T):
+    """The loop of :func:`sweep_poses_sequential` over rows ``P[t] = [x, y, θ]`` (in place), controls ``U``,
+    lateral speeds ``LAT``, odometry increments ``D`` and statistics ``ST[t]`` (14): nested lists in Python,
+    arrays in its compiled copy (one source for both)."""
     for t in range(1, T + 1):
-        px, py, pth = P[t - 1]
-        v0, w0 = U[t - 1]
-        l0, cp, sp = LAT[t - 1], cos(pth), sin(pth)
+        px, py, pth = P[t - 1][0], P[t - 1][1], P[t - 1][2]
+        v0, w0 = U[t - 1][0], U[t - 1][1]
+        l0, cp, sp = LAT[t - 1], _cos(pth), _sin(pth)
         gx, gy, gth = px + dt * v0 * cp - dt * l0 * sp, py + dt * v0 * sp + dt * l0 * cp, pth + dt * w0
         d = D[t - 1]
         if t < T:
-            nx, ny, nth = P[t + 1]
-            v1, w1 = U[t]
+            nx, ny, nth = P[t + 1][0], P[t + 1][1], P[t + 1][2]
+            v1, w1 = U[t][0], U[t][1]
             e = D[t]
             ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 1.0, nx, ny, nth, v1, w1, e[0], e[1], e[2], LAT[t])
         else:
             ctx = (px, py, pth, gx, gy, gth, d[0], d[1], d[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        x, y, th = P[t]
-        P[t] = list(cond_minimise_scalar(x, y, th, ctx, ST[t], Wf, dt, iters, tol))
-    poses[:] = P
-    return poses
+        s = ST[t]
+        st = (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11], s[12], s[13])
+        x, y, th = cond_minimise_scalar(P[t][0], P[t][1], P[t][2], ctx, st, Wf, dt, iters, tol)
+        P[t][0], P[t][1], P[t][2] = x, y, th
 
 
 def sweep_poses_parallel(prob: Problem, W: Weights, poses, stats, iters: int = 3):
@@ -919,3 +947,54 @@ def laplace_covariances(prob: Problem, W: Weights, poses, landmarks, labels, *, 
     pose_cov = np.zeros((T + 1, 3, 3))
     pose_cov[1:] = pc
     return pose_cov, lm_cov
+
+
+# ------------------------------------------------------------------------------------------------------------
+# compiled copies of the scalar kernels (optional extra ``fast``: numba)
+# ------------------------------------------------------------------------------------------------------------
+#: poses from which :func:`sweep_poses_sequential` and the on-line init run the compiled kernels: loading them
+#: (numba's import and its on-disk cache) costs ≈0.4 s CPU, about 7 Python sweeps of 1000 poses; the results
+#: are the same floats either way
+JIT_MIN_POSES = 1000
+#: set to 1 to keep the pure-Python kernels even when numba is installed
+NO_JIT_ENV = "SLAMCLI_NO_JIT"
+
+
+@functools.cache
+def _build_kernels():
+    try:
+        import numba
+    except ImportError:
+        return None
+    jit = functools.partial(numba.njit, cache=True)
+    env = dict(globals(), _wrap=jit(wrap_angle_fast), _has_next=jit(_has_next))
+
+    def same_source(fn):  # the function's own code object, compiled against the jitted helpers
+        f = types.FunctionType(fn.__code__, env, fn.__name__, fn.__defaults__)
+        f.__qualname__ = fn.__qualname__
+        return jit(f)
+
+    env["cond_cost"] = same_source(cond_cost)
+    env["cond_step"] = same_source(cond_step)
+    env["cond_minimise_scalar"] = same_source(cond_minimise_scalar)
+    k = types.SimpleNamespace(cond_minimise_scalar=env["cond_minimise_scalar"],
+                              sequential_loop=same_source(sequential_loop))
+    try:  # compile (or load from numba's cache) the one signature of each entry point now
+        P = np.zeros((3, 3))
+        k.sequential_loop(P, np.zeros((2, 2)), np.zeros(2), np.zeros((2, 3)), np.zeros((3, 14)), (1.0,) * 8, 0.1, 1,
+                          0.0, 2)
+        k.cond_minimise_scalar(0.0, 0.0, 0.0, (0.0,) * 19, (0.0,) * 14, (1.0,) * 8, 0.1, 1, 0.0)
+    except Exception as exc:  # noqa: BLE001 - e.g. a stale numba cache; the Python kernels give the same floats
+        warnings.warn(f"numba kernels unavailable, ICM runs its Python kernels ({type(exc).__name__}: {exc})",
+                      RuntimeWarning, stacklevel=2)
+        return None
+    return k
+
+
+def compiled_kernels():
+    """numba-compiled :func:`cond_minimise_scalar` and :func:`sequential_loop` (same source, same IEEE
+    arithmetic, no fast-math: tested equal to the Python kernels bit for bit), or None when numba is not
+    installed or ``SLAMCLI_NO_JIT=1``. Compiled once per process; numba caches the machine code on disk."""
+    if os.environ.get(NO_JIT_ENV, "") not in ("", "0"):
+        return None
+    return _build_kernels()
