@@ -49,7 +49,7 @@ def _extras(lines: list[str]) -> set[str]:
 def test_install_without_headers_skips_cholmod_and_no_package_manager(tmp_path):
     lines = _install_recipe(tmp_path, tmp_path / "no-include")
     assert not any(re.search(r"\b(apt-get|apt|dpkg|sudo|brew)\b", x) for x in lines), lines
-    assert _extras(lines) == {"test", "gtsam", "dask", "parquet", "dev", "interval"}
+    assert _extras(lines) == {"test", "gtsam", "dask", "parquet", "dev", "interval", "fast"}
     assert any("linear solver: " in x for x in lines)
 
 
@@ -57,7 +57,7 @@ def test_install_with_suitesparse_header_adds_cholmod(tmp_path):
     inc = tmp_path / "include"
     (inc / "suitesparse").mkdir(parents=True)
     (inc / "suitesparse" / "cholmod.h").write_text("/* stand-in */\n")
-    assert _extras(_install_recipe(tmp_path, inc)) == {"test", "gtsam", "dask", "parquet", "dev", "interval", "cholmod"}
+    assert _extras(_install_recipe(tmp_path, inc)) == {"test", "gtsam", "dask", "parquet", "dev", "interval", "fast", "cholmod"}
 
 
 def test_license_matches_pyproject():
