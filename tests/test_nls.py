@@ -386,3 +386,30 @@ def test_marginals_refuse_an_indefinite_information_matrix():
     bad[1] = np.nan
     with pytest.raises(np.linalg.LinAlgError, match="landmark 1: non-finite"):
         nls.check_covariance_blocks(bad, "landmark")
+
+
+def test_assembled_normal_equations_equal_the_dense_jacobian_products():
+    """H and g (full and lower-triangle assembly) against JᵀJ and Jᵀr of the stacked sparse Jacobian, on a
+    problem mixing a landmark graph with a factor that touches one column twice (counts twice in H)."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    rng = np.random.default_rng(3)
+    cols = np.array([[3, 3, 7], [5, 9, 5]], np.int64)
+    A = rng.normal(size=(2, 2, 3))
+
+    def ev(x):
+        return np.einsum("fkn,fn->fk", A, x[cols]), A
+
+    twice = nls.FactorBlock("twice", cols, ev, np.eye(2))
+    prob = nls.NlsProblem(gp.problem.n_vars, [*gp.problem.blocks, twice], gp.problem.angle_cols)
+    x = gp.x0 + 0.01 * rng.normal(size=gp.x0.size)
+    params = nls.NlsParams(pose_chart="world")
+    asm = nls.Assembler(prob)
+    _, data, g = asm.linearize(x, params)
+    J = nls.jacobian_matrix(prob, x).toarray()
+    r = nls.residual_vector(prob, x)
+    np.testing.assert_allclose(asm.matrix(data).toarray(), J.T @ J, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g, J.T @ r, rtol=1e-12, atol=1e-9)
+    lo = asm.linearize_lower(x, params)[1]
+    np.testing.assert_array_equal(asm.full(lo), data)
+    np.testing.assert_array_equal(asm.lower(data), lo)
+    np.testing.assert_allclose(asm.lower_matrix(lo).toarray(), np.tril(J.T @ J), rtol=1e-12, atol=1e-9)

@@ -17,45 +17,96 @@ from slamcli.solvers.nls.problem import NlsParams, NlsProblem, pose_offsets
 # assembly
 # ----------------------------------------------------------------------------------------------------------
 class Assembler:
-    """Sparse structure of ``H`` computed once; every call scatters new values with ``np.bincount``."""
+    """Sparse structure of ``H`` computed once; every call scatters new values with ``np.bincount``.
+
+    Only the lower triangle is assembled (``i ≥ j``, CSC: what CHOLMOD reads): each factor of a block with
+    ``n`` columns contributes its ``n(n+1)/2`` local pairs ``a ≤ b`` at ``(max(c_a, c_b), min(c_a, c_b))``.
+    The scatter position of every pair is computed once, by one sort of the int64 keys ``col·D + row``
+    (:func:`_unique_inverse`; int32 positions when they fit). :meth:`full` mirrors lower data into the full
+    symmetric pattern (``indices`` / ``indptr`` / ``nnz`` / ``diag_pos``) by a precomputed gather, for
+    :meth:`matrix`, SuperLU and the chain solver; :meth:`linearize` returns full data as it always did,
+    :meth:`linearize_lower` the lower data the optimiser works with.
+    """
 
     def __init__(self, problem: NlsProblem) -> None:
         D = problem.n_vars
-        self.problem = problem
-        rows, cols = [], []
-        for b in problem.blocks:
-            c = np.asarray(b.cols, np.int64)
-            n = c.shape[1]
-            rows.append(np.broadcast_to(c[:, :, None], (c.shape[0], n, n)).ravel())
-            cols.append(np.broadcast_to(c[:, None, :], (c.shape[0], n, n)).ravel())
-        diag = np.arange(D, dtype=np.int64)  # every variable has a diagonal slot (damping, empty rows)
-        rows.append(diag)
-        cols.append(diag)
-        r = np.concatenate(rows)
-        c = np.concatenate(cols)
-        key = c * D + r  # column-major order → CSC
-        ukey, inv = np.unique(key, return_inverse=True)
-        self.scatter = inv.astype(np.int64)
-        self.nnz = ukey.size
-        self.indices = (ukey % D).astype(np.int32)
-        ucol = ukey // D
-        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(ucol, minlength=D))]).astype(np.int32)
-        self.diag_pos = self.scatter[-D:]
-        self.D = D
-        self.cols_flat = [np.asarray(b.cols, np.int64).ravel() for b in problem.blocks]
-        self.pose_offsets = [
-            pose_offsets(np.asarray(b.cols, np.int64), problem.se2_poses) for b in problem.blocks
-        ]
+        self.problem, self.D = problem, D
+        self.cols = [np.asarray(b.cols, np.int64) for b in problem.blocks]
+        self.pairs = [np.triu_indices(c.shape[1]) for c in self.cols]  # local (a, b), a ≤ b
+        # an off-diagonal local pair on one column (a factor touching a column twice) counts twice in H
+        self.twice = [_repeated_pairs(c, ia, ib) for c, (ia, ib) in zip(self.cols, self.pairs)]
+        sizes = [ia.size * c.shape[0] for c, (ia, _) in zip(self.cols, self.pairs)] + [D]
+        bounds = np.cumsum([0] + sizes)
+        ukey, inv = _unique_inverse(self._keys(bounds))
+        self.lo_scatter = [inv[s:e] for s, e in zip(bounds[:-2], bounds[1:-1])]
+        self.lo_diag_pos = inv[bounds[-2]:].astype(np.int64)
+        self.lo_nnz = int(ukey.size)
+        self.lo_indices = (ukey % D).astype(np.int32)
+        self.lo_indptr = _indptr(ukey // D, D)
+        del ukey, inv
+        self._full_pattern()
+        self.pose_offsets = [pose_offsets(c, problem.se2_poses) for c in self.cols]
+        self.colsT = [np.ascontiguousarray(c.T).ravel() for c in self.cols]
         fixed = np.asarray(problem.fixed_cols, np.int64)
         self.fixed = fixed
         if fixed.size:
             is_fixed = np.zeros(D, bool)
             is_fixed[fixed] = True
-            self.fixed_mask = is_fixed[self.indices] | np.repeat(is_fixed, np.diff(self.indptr))
-            self.fixed_diag = self.diag_pos[fixed]
+            self.lo_fixed_mask = is_fixed[self.lo_indices] | np.repeat(is_fixed, np.diff(self.lo_indptr))
+            self.lo_fixed_diag = self.lo_diag_pos[fixed]
+
+    def _keys(self, bounds: np.ndarray) -> np.ndarray:
+        """Lower-triangle CSC keys ``col·D + row`` of every local pair (per block pair-major ``(P, F)``),
+        then the diagonal ``i·D + i``."""
+        D = self.D
+        key = np.empty(int(bounds[-1]), np.int64)
+        for c, (ia, ib), s in zip(self.cols, self.pairs, bounds[:-1]):
+            F = c.shape[0]
+            for p, (a, b) in enumerate(zip(ia, ib)):
+                out = key[s + p * F : s + (p + 1) * F]
+                np.minimum(c[:, a], c[:, b], out=out)
+                out *= D
+                out += np.maximum(c[:, a], c[:, b])
+        key[bounds[-2]:] = np.arange(D, dtype=np.int64) * (D + 1)
+        return key
+
+    def _full_pattern(self) -> None:
+        """The full symmetric CSC pattern and ``full_src``: full data = lower data[full_src]."""
+        D = self.D
+        tag = sp.csc_matrix((np.arange(1, self.lo_nnz + 1, dtype=float), self.lo_indices, self.lo_indptr),
+                            shape=(D, D))
+        full = (tag + tag.T).tocsc()  # disjoint off the diagonal; the diagonal tags are doubled
+        full.sort_indices()
+        src = full.data
+        del tag
+        self.indices = full.indices.astype(np.int32)
+        self.indptr = full.indptr.astype(np.int32)
+        self.nnz = int(self.indices.size)
+        # column j of the full pattern: the upper entries (lower row j, off the diagonal), then (j, j)
+        self.diag_pos = self.indptr[:-1].astype(np.int64) + np.bincount(self.lo_indices, minlength=D) - 1
+        src[self.diag_pos] *= 0.5
+        self.full_src = (src - 1.0).astype(self.lo_scatter[0].dtype if self.lo_scatter else np.int64)
+
+    def full(self, lo_data: np.ndarray) -> np.ndarray:
+        """Data of the full symmetric pattern from lower-triangle data."""
+        return lo_data[self.full_src]
+
+    def lower(self, data: np.ndarray) -> np.ndarray:
+        """Lower-triangle data from data of the full pattern (the inverse of :meth:`full`)."""
+        if not hasattr(self, "_lo_in_full"):
+            col = np.repeat(np.arange(self.D, dtype=np.int32), np.diff(self.indptr))
+            at = np.flatnonzero(self.indices >= col)
+            self._lo_in_full = np.empty(self.lo_nnz, np.int64)
+            self._lo_in_full[self.full_src[at]] = at
+        return data[self._lo_in_full]
 
     def matrix(self, data: np.ndarray) -> sp.csc_matrix:
+        """The full symmetric ``H`` from full data (:meth:`linearize`, :meth:`full`)."""
         return sp.csc_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.D, self.D))
+
+    def lower_matrix(self, lo_data: np.ndarray) -> sp.csc_matrix:
+        """The lower triangle of ``H`` (CSC) from lower data (:meth:`linearize_lower`)."""
+        return sp.csc_matrix((lo_data, self.lo_indices, self.lo_indptr), shape=(self.D, self.D))
 
     def cost(self, x: np.ndarray, params: NlsParams) -> float:
         total = 0.0
@@ -65,34 +116,81 @@ class Assembler:
         return total
 
     def linearize(self, x: np.ndarray, params: NlsParams):
-        """Cost, ``H`` data (nnz,) and gradient ``g (D,)`` at ``x``."""
-        vals = []
+        """Cost, ``H`` data (nnz,) of the full pattern and gradient ``g (D,)`` at ``x``."""
+        cost, lo, g = self.linearize_lower(x, params)
+        return cost, self.full(lo), g
+
+    def linearize_lower(self, x: np.ndarray, params: NlsParams):
+        """Cost, lower-triangle ``H`` data (lo_nnz,) and gradient ``g (D,)`` at ``x``."""
+        data = np.zeros(self.lo_nnz)
         g = np.zeros(self.D)
         total = 0.0
         body = params.pose_chart == "body" and self.problem.se2_poses > 0
-        for b, cflat, offs in zip(self.problem.blocks, self.cols_flat, self.pose_offsets):
+        for i, b in enumerate(self.problem.blocks):
             r, J = b.evaluate(x)
-            if body and offs:  # ∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1) for each pose of each factor
+            if body and self.pose_offsets[i]:  # ∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1) for each pose of each factor
                 J = np.array(J, float, copy=True)
-                for o in offs:
+                for o in self.pose_offsets[i]:
                     R = se2.rot2(x[b.cols[:, o] + 2])  # (F, 2, 2)
                     J[:, :, o : o + 2] = np.matmul(J[:, :, o : o + 2], R)
             rw = whiten(b.sqrt_info, r)  # (F, k)
-            Jw = np.matmul(b.sqrt_info, J)  # (F, k, n)
+            JwT = np.ascontiguousarray(np.matmul(b.sqrt_info, J).transpose(1, 2, 0))  # (k, n, F)
             rho, w = kernel_cost(rw, b.robust, params)
             total += float(np.sum(rho))
-            Jt = np.swapaxes(Jw, 1, 2)
-            if w is not None:
-                Jt = Jt * w[:, None, None]
-            vals.append(np.matmul(Jt, Jw).ravel())
-            g += np.bincount(cflat, weights=np.einsum("fnk,fk->fn", Jt, rw).ravel(), minlength=self.D)
-        vals.append(np.zeros(self.D))
-        data = np.bincount(self.scatter, weights=np.concatenate(vals), minlength=self.nnz)
+            JtT = JwT if w is None else JwT * w
+            ia, ib = self.pairs[i]
+            vals = np.empty((ia.size, rw.shape[0]))
+            for p, (a, c) in enumerate(zip(ia, ib)):  # H_ab = Σ_k w J̃_ka J̃_kb, vectorised over factors
+                np.multiply(JtT[0, a], JwT[0, c], out=vals[p])
+                for k in range(1, JwT.shape[0]):
+                    vals[p] += JtT[k, a] * JwT[k, c]
+            if self.twice[i] is not None:
+                vals[self.twice[i]] *= 2.0
+            data += np.bincount(self.lo_scatter[i], weights=vals.ravel(), minlength=self.lo_nnz)
+            gl = JtT[0] * rw[:, 0]
+            for k in range(1, JwT.shape[0]):
+                gl += JtT[k] * rw[:, k]
+            g += np.bincount(self.colsT[i], weights=gl.ravel(), minlength=self.D)
         if self.fixed.size:
-            data[self.fixed_mask] = 0.0
-            data[self.fixed_diag] = 1.0
+            data[self.lo_fixed_mask] = 0.0
+            data[self.lo_fixed_diag] = 1.0
             g[self.fixed] = 0.0
         return total, data, g
+
+
+def _repeated_pairs(c: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray | None:
+    """Mask ``(P, F)`` of the off-diagonal local pairs ``a < b`` with ``c_a = c_b`` (None when there are none)."""
+    off = [(p, a, b) for p, (a, b) in enumerate(zip(ia, ib)) if a != b]
+    if not any(np.any(c[:, a] == c[:, b]) for _, a, b in off):
+        return None
+    mask = np.zeros((ia.size, c.shape[0]), bool)
+    for p, a, b in off:
+        mask[p] = c[:, a] == c[:, b]
+    return mask
+
+
+def _unique_inverse(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(key, return_inverse=True)`` with less memory: one argsort, the sorted keys reusing the
+    input's place, int32 inverse indices when the unique count fits."""
+    perm = np.argsort(key)
+    key = key[perm]
+    new = np.empty(key.size, bool)
+    if key.size:
+        new[0] = True
+        np.not_equal(key[1:], key[:-1], out=new[1:])
+    ukey = key[new]
+    del key
+    idx = np.int32 if ukey.size < np.iinfo(np.int32).max else np.int64
+    pos = np.cumsum(new, dtype=idx)
+    pos -= 1
+    del new
+    inv = np.empty(perm.size, idx)
+    inv[perm] = pos
+    return ukey, inv
+
+
+def _indptr(sorted_cols: np.ndarray, D: int) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(np.bincount(sorted_cols, minlength=D))]).astype(np.int32)
 
 
 class ChainSolver:
@@ -201,7 +299,8 @@ def cholmod_available() -> bool:
 class _CholmodFactor:
     """Sparse Cholesky ``P H Pᵀ = L Lᵀ`` by CHOLMOD: the fill-reducing ordering ``P`` and the symbolic
     factorisation are computed once from the fixed pattern of ``H``; :meth:`factorize` refills the
-    numeric values in place (``cholesky_inplace``). A pivot ≤ 0 (``H`` not numerically positive definite)
+    numeric values in place (``cholesky_inplace``). It reads the lower triangle only
+    (:meth:`factorize_lower`, no copy of the full pattern). A pivot ≤ 0 (``H`` not numerically positive definite)
     makes :meth:`factorize` return False."""
 
     name = "cholmod"
@@ -210,11 +309,17 @@ class _CholmodFactor:
         from sksparse.cholmod import CholmodNotPositiveDefiniteError, analyze
 
         self._not_pd = CholmodNotPositiveDefiniteError
-        self.H = asm.matrix(np.ones(asm.nnz))
+        self.asm = asm
+        self.H = asm.lower_matrix(np.ones(asm.lo_nnz))
         self.F = analyze(self.H, mode="supernodal")
 
     def factorize(self, data: np.ndarray) -> bool:
-        self.H.data = data
+        """Factorise ``H`` given by data of the full pattern (:meth:`Assembler.linearize`)."""
+        return self.factorize_lower(self.asm.lower(data))
+
+    def factorize_lower(self, lo_data: np.ndarray) -> bool:
+        """Factorise ``H`` given by its lower-triangle data (:meth:`Assembler.linearize_lower`)."""
+        self.H.data = lo_data
         try:
             self.F.cholesky_inplace(self.H)
         except self._not_pd:
