@@ -413,3 +413,15 @@ def test_assembled_normal_equations_equal_the_dense_jacobian_products():
     np.testing.assert_array_equal(asm.full(lo), data)
     np.testing.assert_array_equal(asm.lower(data), lo)
     np.testing.assert_allclose(asm.lower_matrix(lo).toarray(), np.tril(J.T @ J), rtol=1e-12, atol=1e-9)
+
+
+def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
+    """The Jacobian-free residuals LM's trial steps use are the ones ``evaluate`` returns, bit for bit
+    (odometry, loop closures, bearing-range with a landmark on top of a pose)."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    x = gp.x0.copy()
+    x[3 * gp.n_poses : 3 * gp.n_poses + 2] = x[3:5]  # landmark 0 on pose 1: GTSAM's zero-bearing branch
+    with_residual = [b for b in gp.problem.blocks if b.residual is not None]
+    assert {b.name for b in with_residual} >= {"odometry", "bearing_range"}
+    for b in with_residual:
+        np.testing.assert_array_equal(b.residuals(x), b.evaluate(x)[0])

@@ -12,7 +12,9 @@ from slamcli.models import motion
 from slamcli.solvers import nls
 from slamcli.solvers.graph.factors import (
     bearing_range_error,
+    bearing_range_residual,
     between_error,
+    between_residual,
     group_returns,
     landmark_offset_error,
     prior_error,
@@ -149,8 +151,13 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
             e, Ji, Jj = between_error(p[chain], p[chain + 1], meas)
             return e, np.concatenate([Ji, Jj], axis=2)
 
+        def res(x):
+            p = poses_of(x)
+            return between_residual(p[chain], p[chain + 1], meas)
+
         cols = np.concatenate([pc[chain], pc[chain + 1]], axis=1)
-        return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info)
+        return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info,
+                               residual=res)
 
     if n_poses > 1 and params.use_odometry:
         d = motion.odometry_increments(inputs.odometry_xyt)
@@ -169,6 +176,10 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
             e, Ji, Jj = between_error(p[bij[:, 0]], p[bij[:, 1]], bmeas)
             return e, np.concatenate([Ji, Jj], axis=2)
 
+        def res_between(x):
+            p = poses_of(x)
+            return between_residual(p[bij[:, 0]], p[bij[:, 1]], bmeas)
+
         blocks.append(
             nls.FactorBlock(
                 "loop_closure",
@@ -176,6 +187,7 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
                 ev_between,
                 sqrt_info_batch(bc.between_info),
                 robust=True,
+                residual=res_between,
             )
         )
     if n_poses > 1 and params.use_controls:
@@ -239,12 +251,19 @@ def _observation_blocks(inputs: SlamInputs, assoc: np.ndarray, params: GraphPara
             Jb[:, 0, 0] = -1.0
             return e, np.concatenate([Jx, Jm, Jb], axis=2)
 
+        def res_obs(x):
+            e = bearing_range_residual(poses_of(x)[steps], lms_of(x)[labels], z)
+            if bias_col is not None:
+                e[:, 0] -= x[bias_col]
+            return e
+
         cols = np.concatenate([pc[steps], lc[labels]], axis=1)
         if bias_col is not None:
             cols = np.concatenate([cols, np.full((cols.shape[0], 1), bias_col, np.int64)], axis=1)
         blocks.append(
             nls.FactorBlock(
-                "bearing_range", cols, ev_obs, sqrt_info_from_cov(inputs.noise.obs_cov), robust=True
+                "bearing_range", cols, ev_obs, sqrt_info_from_cov(inputs.noise.obs_cov), robust=True,
+                residual=res_obs,
             )
         )
     return blocks, int(rows.size)

@@ -8,7 +8,6 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from slamcli.models import se2
 from slamcli.solvers.nls.kernels import kernel_cost, whiten
 from slamcli.solvers.nls.problem import NlsParams, NlsProblem, pose_offsets
 
@@ -111,7 +110,7 @@ class Assembler:
     def cost(self, x: np.ndarray, params: NlsParams) -> float:
         total = 0.0
         for b in self.problem.blocks:
-            r, _ = b.evaluate(x)
+            r = b.residuals(x)
             total += float(np.sum(kernel_cost(whiten(b.sqrt_info, r), b.robust, params)[0]))
         return total
 
@@ -128,13 +127,8 @@ class Assembler:
         body = params.pose_chart == "body" and self.problem.se2_poses > 0
         for i, b in enumerate(self.problem.blocks):
             r, J = b.evaluate(x)
-            if body and self.pose_offsets[i]:  # ∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1) for each pose of each factor
-                J = np.array(J, float, copy=True)
-                for o in self.pose_offsets[i]:
-                    R = se2.rot2(x[b.cols[:, o] + 2])  # (F, 2, 2)
-                    J[:, :, o : o + 2] = np.matmul(J[:, :, o : o + 2], R)
+            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body else [])  # (k, n, F)
             rw = whiten(b.sqrt_info, r)  # (F, k)
-            JwT = np.ascontiguousarray(np.matmul(b.sqrt_info, J).transpose(1, 2, 0))  # (k, n, F)
             rho, w = kernel_cost(rw, b.robust, params)
             total += float(np.sum(rho))
             JtT = JwT if w is None else JwT * w
@@ -156,6 +150,23 @@ class Assembler:
             data[self.lo_fixed_diag] = 1.0
             g[self.fixed] = 0.0
         return total, data, g
+
+
+def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int]) -> np.ndarray:
+    """``L J`` of a block laid out ``(k, n, F)`` (factors last, contiguous), each pose's columns at the
+    ``offsets`` rotated into the body chart first: ``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``."""
+    F, k, n = J.shape
+    JT = np.ascontiguousarray(np.transpose(J, (1, 2, 0)))
+    for o in offsets:
+        th = x[b.cols[:, o] + 2]
+        c, s = np.cos(th), np.sin(th)
+        j0, j1 = JT[:, o].copy(), JT[:, o + 1]
+        JT[:, o] = j0 * c + j1 * s  # [J_x, J_y] R(θ), R = [[c, −s], [s, c]]
+        JT[:, o + 1] = j0 * -s + j1 * c
+    L = np.asarray(b.sqrt_info, float)
+    if L.ndim == 2:
+        return (L @ JT.reshape(k, n * F)).reshape(k, n, F)
+    return np.ascontiguousarray(np.matmul(L, np.transpose(JT, (2, 0, 1))).transpose(1, 2, 0))
 
 
 def _repeated_pairs(c: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray | None:

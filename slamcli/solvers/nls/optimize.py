@@ -28,7 +28,7 @@ def evaluate_cost(problem: NlsProblem, x: np.ndarray, params: NlsParams | None =
 
 def residual_vector(problem: NlsProblem, x: np.ndarray) -> np.ndarray:
     """Stacked whitened residuals ``(Σ F k,)`` at ``x`` (``cost = ½‖·‖²`` without robust kernel)."""
-    return np.concatenate([whiten(b.sqrt_info, b.evaluate(x)[0]).ravel() for b in problem.blocks])
+    return np.concatenate([whiten(b.sqrt_info, b.residuals(x)).ravel() for b in problem.blocks])
 
 
 def jacobian_matrix(problem: NlsProblem, x: np.ndarray) -> sp.csr_matrix:
