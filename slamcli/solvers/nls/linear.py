@@ -38,6 +38,9 @@ class Assembler:
         bounds = np.cumsum([0] + sizes)
         ukey, inv = _unique_inverse(self._keys(bounds))
         self.lo_scatter = [inv[s:e] for s, e in zip(bounds[:-2], bounds[1:-1])]
+        self._scatter_all = inv[: bounds[-2]]  # the blocks' pairs, in the order of the work buffer below
+        self._bounds = bounds[:-1]
+        self._work: dict = {}  # buffers reused by every linearisation (no fresh pages per iteration)
         self.lo_diag_pos = inv[bounds[-2]:].astype(np.int64)
         self.lo_nnz = int(ukey.size)
         self.lo_indices = (ukey % D).astype(np.int32)
@@ -119,32 +122,45 @@ class Assembler:
         cost, lo, g = self.linearize_lower(x, params)
         return cost, self.full(lo), g
 
+    def _buffer(self, key, shape) -> np.ndarray:
+        buf = self._work.get(key)
+        if buf is None or buf.shape != shape:
+            buf = self._work[key] = np.empty(shape)
+        return buf
+
     def linearize_lower(self, x: np.ndarray, params: NlsParams):
-        """Cost, lower-triangle ``H`` data (lo_nnz,) and gradient ``g (D,)`` at ``x``."""
-        data = np.zeros(self.lo_nnz)
+        """Cost, lower-triangle ``H`` data (lo_nnz,) and gradient ``g (D,)`` at ``x``.
+
+        The per-factor products are written into buffers kept across calls (arrays of this size are fresh
+        pages from the OS every time otherwise, and the page faults cost more than the arithmetic)."""
+        vals_all = self._buffer("vals", (int(self._bounds[-1]),))
         g = np.zeros(self.D)
         total = 0.0
         body = params.pose_chart == "body" and self.problem.se2_poses > 0
         for i, b in enumerate(self.problem.blocks):
             r, J = b.evaluate(x)
-            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body else [])  # (k, n, F)
+            F, k, n = J.shape
+            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body else [],
+                                     self._buffer(("jt", i), (k, n, F)), self._buffer(("jw", i), (k, n, F)))
             rw = whiten(b.sqrt_info, r)  # (F, k)
             rho, w = kernel_cost(rw, b.robust, params)
             total += float(np.sum(rho))
             JtT = JwT if w is None else JwT * w
             ia, ib = self.pairs[i]
-            vals = np.empty((ia.size, rw.shape[0]))
+            vals = vals_all[self._bounds[i] : self._bounds[i + 1]].reshape(ia.size, F)
             for p, (a, c) in enumerate(zip(ia, ib)):  # H_ab = Σ_k w J̃_ka J̃_kb, vectorised over factors
                 np.multiply(JtT[0, a], JwT[0, c], out=vals[p])
-                for k in range(1, JwT.shape[0]):
-                    vals[p] += JtT[k, a] * JwT[k, c]
+                for kk in range(1, k):
+                    vals[p] += JtT[kk, a] * JwT[kk, c]
             if self.twice[i] is not None:
                 vals[self.twice[i]] *= 2.0
-            data += np.bincount(self.lo_scatter[i], weights=vals.ravel(), minlength=self.lo_nnz)
-            gl = JtT[0] * rw[:, 0]
-            for k in range(1, JwT.shape[0]):
-                gl += JtT[k] * rw[:, k]
+            gl = self._buffer(("g", i), (n, F))
+            for a in range(n):
+                np.multiply(JtT[0, a], rw[:, 0], out=gl[a])
+                for kk in range(1, k):
+                    gl[a] += JtT[kk, a] * rw[:, kk]
             g += np.bincount(self.colsT[i], weights=gl.ravel(), minlength=self.D)
+        data = np.bincount(self._scatter_all, weights=vals_all, minlength=self.lo_nnz)
         if self.fixed.size:
             data[self.lo_fixed_mask] = 0.0
             data[self.lo_fixed_diag] = 1.0
@@ -152,11 +168,13 @@ class Assembler:
         return total, data, g
 
 
-def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int]) -> np.ndarray:
+def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], JT: np.ndarray,
+                       out: np.ndarray) -> np.ndarray:
     """``L J`` of a block laid out ``(k, n, F)`` (factors last, contiguous), each pose's columns at the
-    ``offsets`` rotated into the body chart first: ``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``."""
+    ``offsets`` rotated into the body chart first: ``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``. ``JT`` and ``out`` are
+    ``(k, n, F)`` work buffers; the result is ``out`` (or a new array for per-factor ``L``)."""
     F, k, n = J.shape
-    JT = np.ascontiguousarray(np.transpose(J, (1, 2, 0)))
+    np.copyto(JT, np.transpose(J, (1, 2, 0)))
     for o in offsets:
         th = x[b.cols[:, o] + 2]
         c, s = np.cos(th), np.sin(th)
@@ -165,7 +183,8 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int]) -> n
         JT[:, o + 1] = j0 * -s + j1 * c
     L = np.asarray(b.sqrt_info, float)
     if L.ndim == 2:
-        return (L @ JT.reshape(k, n * F)).reshape(k, n, F)
+        np.matmul(L, JT.reshape(k, n * F), out=out.reshape(k, n * F))
+        return out
     return np.ascontiguousarray(np.matmul(L, np.transpose(JT, (2, 0, 1))).transpose(1, 2, 0))
 
 
