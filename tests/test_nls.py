@@ -425,3 +425,20 @@ def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
     assert {b.name for b in with_residual} >= {"odometry", "bearing_range"}
     for b in with_residual:
         np.testing.assert_array_equal(b.residuals(x), b.evaluate(x)[0])
+
+
+@pytest.mark.skipif(not nls.cholmod_available(), reason="scikit-sparse (extra cholmod) not installed")
+def test_cholmod_factor_refuses_an_indefinite_matrix_and_solves_a_definite_one():
+    """The LDLᵀ factorisation runs through negative pivots, so the solver must test D: a matrix with one
+    negative eigenvalue is refused (as LLᵀ's pivot failure was), the definite one solves as the dense solve."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    asm = nls.Assembler(gp.problem)
+    _, data, g = asm.linearize(gp.x0, nls.NlsParams())
+    lin = nls.make_linear_solver(asm, nls.NlsParams(linear_solver="cholmod"))
+    H = asm.matrix(data).toarray()
+    assert lin.factorize(data)
+    np.testing.assert_allclose(lin.solve(g), np.linalg.solve(H, g), rtol=1e-9, atol=1e-12)
+    shifted = data.copy()
+    shifted[asm.diag_pos] -= 1.01 * np.linalg.eigvalsh(H)[0] + 1e-3 * np.abs(np.diag(H)).max()  # λ_min < 0
+    assert np.linalg.eigvalsh(asm.matrix(shifted).toarray())[0] < 0
+    assert not lin.factorize(shifted)
