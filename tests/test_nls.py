@@ -442,3 +442,13 @@ def test_cholmod_factor_refuses_an_indefinite_matrix_and_solves_a_definite_one()
     shifted[asm.diag_pos] -= 1.01 * np.linalg.eigvalsh(H)[0] + 1e-3 * np.abs(np.diag(H)).max()  # λ_min < 0
     assert np.linalg.eigvalsh(asm.matrix(shifted).toarray())[0] < 0
     assert not lin.factorize(shifted)
+
+
+def test_world_information_from_the_body_chart_equals_the_world_linearisation():
+    """``H_world = M H_body Mᵀ`` (M = blkdiag(R(θ), 1) per pose) against a linearisation in world coordinates."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    x = gp.x0 + 0.05 * np.random.default_rng(5).normal(size=gp.x0.size)
+    asm = nls.Assembler(gp.problem)
+    body = asm.linearize(x, nls.NlsParams(pose_chart="body"))[1]
+    world = asm.linearize(x, nls.NlsParams(pose_chart="world"))[1]
+    np.testing.assert_allclose(asm.body_to_world(body, x), world, rtol=1e-10, atol=1e-8)

@@ -101,6 +101,34 @@ class Assembler:
             self._lo_in_full[self.full_src[at]] = at
         return data[self._lo_in_full]
 
+    def body_to_world(self, data: np.ndarray, x: np.ndarray) -> np.ndarray | None:
+        """Full data of ``H`` in world coordinates from full data in GTSAM's body chart at ``x``:
+        ``J_body = J_world M`` with ``M = blkdiag(R(θ_p), 1, …, I)``, so ``H_world = M H_body Mᵀ`` — a 2×2
+        rotation of the ``[x, y]`` rows and then columns of every pose, in place on a copy (no
+        relinearisation). None when a pose column is held fixed (its identity row must not be rotated) or
+        the pattern does not hold whole pose blocks."""
+        n = self.problem.se2_poses
+        P = 3 * n
+        if n <= 0 or np.any(np.asarray(self.fixed) < P):
+            return None
+        out = np.array(data, float, copy=True)
+        th = np.asarray(x, float)[2:P:3]
+        c, s = np.cos(th), np.sin(th)
+        rows = self.indices
+        q0 = np.flatnonzero((rows < P) & (rows % 3 == 0))  # entries in an x row; the y row is the next one
+        if q0.size and (q0[-1] + 1 >= rows.size or np.any(rows[q0 + 1] != rows[q0] + 1)):
+            return None
+        p = rows[q0] // 3
+        _rotate_pairs(out, q0, q0 + 1, c[p], s[p])
+        start, mid, end = (self.indptr[k:P:3].astype(np.int64) for k in (0, 1, 2))
+        ln = mid - start
+        if np.any(end - mid != ln):
+            return None
+        a0 = np.repeat(start - np.cumsum(ln) + ln, ln) + np.arange(int(ln.sum()))  # column 3p's entries
+        p = np.repeat(np.arange(n), ln)
+        _rotate_pairs(out, a0, a0 + ln[p], c[p], s[p])  # ... and column 3p+1's, row for row
+        return out
+
     def matrix(self, data: np.ndarray) -> sp.csc_matrix:
         """The full symmetric ``H`` from full data (:meth:`linearize`, :meth:`full`)."""
         return sp.csc_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.D, self.D))
@@ -189,6 +217,13 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out:
         out[:, o] = j0 * c + j1 * s  # [J_x, J_y] R(θ), R = [[c, −s], [s, c]]
         out[:, o + 1] = j0 * -s + j1 * c
     return out
+
+
+def _rotate_pairs(d: np.ndarray, i0: np.ndarray, i1: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
+    """``[d_i0, d_i1] ← [c d_i0 − s d_i1, s d_i0 + c d_i1]`` in place."""
+    h0, h1 = d[i0], d[i1]
+    d[i0] = c * h0 - s * h1
+    d[i1] = s * h0 + c * h1
 
 
 def _repeated_pairs(c: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray | None:

@@ -138,8 +138,10 @@ def solve(
             status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
             break
     notes = _notes(stats, lin.name)
+    full = asm.full(data)
     if params.pose_chart == "body" and problem.se2_poses > 0:  # H for the marginals: world coordinates
-        data = asm.linearize_lower(x, dataclasses.replace(params, pose_chart="world"))[1]
+        world = asm.body_to_world(full, x)
+        full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
     return NlsResult(
         x=x,
         cost=cost,
@@ -148,7 +150,7 @@ def solve(
         iterations=it,
         cost_trace=np.asarray(costs),
         time_trace=np.asarray(times),
-        information=asm.matrix(asm.full(data)),
+        information=asm.matrix(full),
         linear_solves=int(stats["solves"]),
         notes=tuple(notes),
         linear_solver=lin.name,
