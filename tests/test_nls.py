@@ -422,7 +422,7 @@ def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
     x = gp.x0.copy()
     x[3 * gp.n_poses : 3 * gp.n_poses + 2] = x[3:5]  # landmark 0 on pose 1: GTSAM's zero-bearing branch
     with_residual = [b for b in gp.problem.blocks if b.residual is not None]
-    assert {b.name for b in with_residual} >= {"odometry", "bearing_range"}
+    assert {b.name for b in with_residual} >= {"prior", "odometry", "bearing_range"}
     for b in with_residual:
         np.testing.assert_array_equal(b.residuals(x), b.evaluate(x)[0])
 

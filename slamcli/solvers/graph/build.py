@@ -18,6 +18,7 @@ from slamcli.solvers.graph.factors import (
     group_returns,
     landmark_offset_error,
     prior_error,
+    prior_residual,
     robot_range_bearing_error,
     sqrt_info_batch,
     sqrt_info_from_cov,
@@ -137,8 +138,12 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
         e, J = prior_error(poses_of(x)[first], prior)
         return e, J
 
+    def res_prior(x):
+        return prior_residual(poses_of(x)[first], prior)
+
     blocks.append(
-        nls.FactorBlock("prior", pc[first], ev_prior, sqrt_info_from_cov(np.diag(np.square(params.prior_std))))
+        nls.FactorBlock("prior", pc[first], ev_prior, sqrt_info_from_cov(np.diag(np.square(params.prior_std))),
+                        residual=res_prior)
     )
 
     def between_block(name, meas, cov, sqrt_info=None):

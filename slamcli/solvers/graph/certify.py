@@ -33,6 +33,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from slamcli.models.angles import wrap_angle
+from slamcli.solvers import nls
 
 #: η of the certificate relative to the largest diagonal entry of S (the scale of the problem's weights)
 ETA_REL = 1e-9
@@ -91,13 +92,12 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def sesync_cost(poses_xyt, ij, xyt, kappa, tau) -> float:
     """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``."""
-    r, _ = _residuals(np.asarray(poses_xyt, float), ij, xyt, kappa, tau, jacobian=False)
+    r = _residuals(np.asarray(poses_xyt, float), ij, xyt, kappa, tau)
     return float(r @ r)
 
 
-def _residuals(poses, ij, xyt, kappa, tau, jacobian: bool = True):
-    """Stacked residuals ``r (4E,)`` with ``F = ‖r‖²`` and (optionally) their sparse Jacobian w.r.t.
-    ``[x, y, θ]`` of every pose.
+def _residuals(poses, ij, xyt, kappa, tau) -> np.ndarray:
+    """Stacked residuals ``r (4E,)`` with ``F = ‖r‖²`` (their Jacobians: :func:`_sesync_problem`).
 
     rotation:    ``√(2κ) (u_j − R(Δθ) u_i)``, ``u = [cos θ, sin θ]``   (``‖R_j − R_i R̃‖²_F = 2 ‖·‖²``)
     translation: ``√τ (t_j − t_i − R(θ_i) t̃)``
@@ -111,56 +111,34 @@ def _residuals(poses, ij, xyt, kappa, tau, jacobian: bool = True):
     tx, ty = xyt[:, 0], xyt[:, 1]
     rt = np.column_stack([c * tx - s * ty, s * tx + c * ty])
     r_tr = st[:, None] * (poses[j, :2] - poses[i, :2] - rt)
-    r = np.concatenate([r_rot, r_tr], axis=1).ravel()  # per edge [rot_x, rot_y, tr_x, tr_y]
-    if not jacobian:
-        return r, None
-    E = len(i)
-    row0 = 4 * np.arange(E)
-    rows, cols, vals = [], [], []
-
-    def put(rr, cc, vv):
-        rows.append(rr)
-        cols.append(cc)
-        vals.append(vv)
-
-    put(row0, 3 * j + 2, -sk * np.sin(th_j))
-    put(row0 + 1, 3 * j + 2, sk * np.cos(th_j))
-    put(row0, 3 * i + 2, sk * np.sin(a))
-    put(row0 + 1, 3 * i + 2, -sk * np.cos(a))
-    for k in (0, 1):
-        put(row0 + 2 + k, 3 * j + k, st)
-        put(row0 + 2 + k, 3 * i + k, -st)
-    put(row0 + 2, 3 * i + 2, st * (s * tx + c * ty))  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
-    put(row0 + 3, 3 * i + 2, -st * (c * tx - s * ty))
-    J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(4 * E, 3 * poses.shape[0]))
-    return r, J
+    return np.concatenate([r_rot, r_tr], axis=1).ravel()  # per edge [rot_x, rot_y, tr_x, tr_y]
 
 
 def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     """A stationary point of ``F`` near ``poses_xyt (n, 3)``: Gauss-Newton with step halving, pose 0 held
-    (F is invariant under a global SE(2) motion, so the held pose is stationary too)."""
+    (F is invariant under a global SE(2) motion, so the held pose is stationary too).
+
+    ``F = ‖r‖²`` (:func:`_residuals`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
+    edge over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``), so every iteration reuses the engine's assembly pattern and
+    the linear solver's ordering and symbolic analysis, computed once."""
     x = np.array(poses_xyt, float, copy=True)
-    r, J = _residuals(x, ij, xyt, kappa, tau)
-    cost = float(r @ r)
-    free = np.arange(3, 3 * x.shape[0])
-    solve = _spd_solver()
+    n = x.shape[0]
+    problem = _sesync_problem(n, ij, xyt, kappa, tau)
+    params = nls.NlsParams(pose_chart="world")
+    asm = nls.Assembler(problem)
+    lin = nls.make_linear_solver(asm, params)
+    flat = x.reshape(-1)
+    cost, lo, g = asm.linearize_lower(flat, params)
     for _ in range(REFINE_MAX_ITERS):
-        Jf = J[:, free].tocsc()
-        H = (Jf.T @ Jf).tocsc()
-        g = Jf.T @ r
-        try:
-            h = solve(H, -g)
-        except (RuntimeError, np.linalg.LinAlgError):
+        if not nls.factorize_lower(lin, asm, lo):
             break
-        if not np.all(np.isfinite(h)):
+        h = lin.solve(-g)
+        if h is None:
             break
         alpha, improved = 1.0, False
         while alpha > 1e-4:
-            xn = x.copy()
-            xn.reshape(-1)[free] += alpha * h
-            rn, Jn = _residuals(xn, ij, xyt, kappa, tau)
-            cn = float(rn @ rn)
+            xn = flat + alpha * h
+            cn = asm.cost(xn, params)
             if cn <= cost:
                 improved = True
                 break
@@ -168,34 +146,44 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
         if not improved:
             break
         done = cost - cn <= REFINE_REL_TOL * cost
-        x, r, J, cost = xn, rn, Jn, cn
+        flat = xn
         if done:
             break
+        cost, lo, g = asm.linearize_lower(flat, params)
+    x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x
 
 
-def _spd_solver():
-    """``solve(H, b)`` for the Gauss-Newton systems of :func:`refine_sesync`: CHOLMOD with its symbolic
-    analysis done once (the pattern of H is the same every iteration), else SuperLU in symmetric mode."""
-    try:
-        from sksparse.cholmod import CholmodError, analyze
-    except ImportError:
-        def superlu(H, b):
-            return spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                             options={"SymmetricMode": True}).solve(b)
-        return superlu
-    state: dict = {}
+def _sesync_problem(n: int, ij, xyt, kappa, tau) -> nls.NlsProblem:
+    """``½F`` as a least-squares problem over ``[x, y, θ]`` of ``n`` poses, pose 0 fixed (residuals and
+    Jacobians of :func:`_residuals`, per edge)."""
+    i, j = ij[:, 0], ij[:, 1]
+    cols = np.concatenate([3 * i[:, None] + np.arange(3), 3 * j[:, None] + np.arange(3)], axis=1)
+    sk, st = np.sqrt(2.0 * kappa), np.sqrt(tau)
+    tx, ty = xyt[:, 0], xyt[:, 1]
 
-    def cholmod(H, b):
-        try:
-            if "f" not in state:
-                state["f"] = analyze(H)
-            state["f"].cholesky_inplace(H)
-        except CholmodError as exc:
-            raise np.linalg.LinAlgError(str(exc)) from None
-        return state["f"](b)
-    return cholmod
+    def residual(v):
+        return _residuals(v.reshape(-1, 3), ij, xyt, kappa, tau).reshape(-1, 4)
+
+    def evaluate(v):
+        p = v.reshape(-1, 3)
+        th_i, th_j = p[i, 2], p[j, 2]
+        a = th_i + xyt[:, 2]
+        c, s = np.cos(th_i), np.sin(th_i)
+        J = np.zeros((len(i), 4, 6))
+        J[:, 0, 5], J[:, 1, 5] = -sk * np.sin(th_j), sk * np.cos(th_j)
+        J[:, 0, 2], J[:, 1, 2] = sk * np.sin(a), -sk * np.cos(a)
+        for k in (0, 1):
+            J[:, 2 + k, 3 + k] = st
+            J[:, 2 + k, k] = -st
+        J[:, 2, 2] = st * (s * tx + c * ty)  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
+        J[:, 3, 2] = -st * (c * tx - s * ty)
+        return residual(v), J
+
+    block = nls.FactorBlock("sesync", cols, evaluate, np.eye(4), residual=residual)
+    return nls.NlsProblem(3 * n, [block], fixed_cols=np.arange(3, dtype=np.int64),
+                          retract=lambda v, h: v + h)
 
 
 def data_matrix(n: int, ij, xyt, kappa, tau) -> sp.csc_matrix:

@@ -86,6 +86,11 @@ def prior_error(x, prior):
     return se2.log(q), log_jacobian(q) @ _compose_left_jacobian(p_inv)
 
 
+def prior_residual(x, prior):
+    """The error ``e (F, 3)`` of :func:`prior_error` without its Jacobian (the same arithmetic)."""
+    return se2.log(se2.compose(se2.inverse(prior), x))
+
+
 def bearing_range_error(x, m, z):
     """Range-bearing error ``e = [r̂ − r, wrap(b̂ − b)]`` (GTSAM's ``BearingRangeFactor2D`` up to row order).
 

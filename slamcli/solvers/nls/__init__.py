@@ -68,6 +68,7 @@ from slamcli.solvers.nls.linear import (  # noqa: F401
     ChainSolver,
     SuperLUFactor,
     cholmod_available,
+    factorize_lower,
     factorize_symmetric,
     make_linear_solver,
 )

@@ -476,6 +476,13 @@ class _ChainFactor:
         return self.cs.solve(self.data, rhs)
 
 
+def factorize_lower(lin, asm: Assembler, lo_data: np.ndarray) -> bool:
+    """Factorise ``H`` given by lower-triangle data with any solver of :func:`make_linear_solver` (CHOLMOD
+    reads the lower data directly, the others get the full pattern)."""
+    lower = getattr(lin, "factorize_lower", None)
+    return bool(lower(lo_data)) if lower is not None else bool(lin.factorize(asm.full(lo_data)))
+
+
 FACTOR_NAMES = {
     "cholmod": "CHOLMOD's sparse Cholesky",
     "chain": "banded Cholesky of the pose chain",

@@ -13,7 +13,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from slamcli.solvers.nls.kernels import whiten
-from slamcli.solvers.nls.linear import FACTOR_NAMES, Assembler, SuperLUFactor, make_linear_solver
+from slamcli.solvers.nls.linear import (
+    FACTOR_NAMES,
+    Assembler,
+    SuperLUFactor,
+    factorize_lower,
+    make_linear_solver,
+)
 from slamcli.solvers.nls.problem import NlsParams, NlsProblem, NlsResult, retract
 from slamcli.types import Status
 
@@ -71,8 +77,7 @@ def solve(
     def lin_solve(data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
         """``H(data) h = rhs`` for lower-triangle data; None if no factorisation gives a finite solution."""
         stats["solves"] += 1
-        lower = getattr(lin, "factorize_lower", None)
-        h = lin.solve(rhs) if (lower(data) if lower else lin.factorize(asm.full(data))) else None
+        h = lin.solve(rhs) if factorize_lower(lin, asm, data) else None
         if h is None and lin.name != "superlu":
             stats["fallbacks"] += 1
             if not backup:
