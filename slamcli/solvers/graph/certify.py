@@ -115,8 +115,10 @@ def _residuals(poses, ij, xyt, kappa, tau) -> np.ndarray:
 
 
 def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
-    """A stationary point of ``F`` near ``poses_xyt (n, 3)``: Gauss-Newton with step halving, pose 0 held
-    (F is invariant under a global SE(2) motion, so the held pose is stationary too).
+    """A stationary point of ``F`` near ``poses_xyt (n, 3)``: Newton steps (exact Hessian,
+    :func:`_theta_curvature`; quadratic convergence where F's residuals are large and Gauss-Newton's is only
+    linear) when they lower F, else Gauss-Newton with step halving; pose 0 held (F is invariant under a
+    global SE(2) motion, so the held pose is stationary too).
 
     ``F = ‖r‖²`` (:func:`_residuals`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
     edge over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``), so every iteration reuses the engine's assembly pattern and
@@ -128,22 +130,15 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     asm = nls.Assembler(problem)
     lin = nls.make_linear_solver(asm, params)
     flat = x.reshape(-1)
+    theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
     cost, lo, g = asm.linearize_lower(flat, params)
     for _ in range(REFINE_MAX_ITERS):
-        if not nls.factorize_lower(lin, asm, lo):
-            break
-        h = lin.solve(-g)
-        if h is None:
-            break
-        alpha, improved = 1.0, False
-        while alpha > 1e-4:
-            xn = flat + alpha * h
-            cn = asm.cost(xn, params)
-            if cn <= cost:
-                improved = True
-                break
-            alpha *= 0.5
-        if not improved:
+        newton = lo.copy()
+        newton[theta_diag] += _theta_curvature(flat.reshape(n, 3), ij, xyt, kappa, tau)[1:]
+        xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False)  # Newton: quadratic
+        if xn is None:  # H not positive definite there, or no decrease: Gauss-Newton with step halving
+            xn, cn = _try_step(asm, lin, params, flat, lo, g, cost, halving=True)
+        if xn is None:
             break
         done = cost - cn <= REFINE_REL_TOL * cost
         flat = xn
@@ -153,6 +148,44 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x
+
+
+def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool):
+    """``(x, cost)`` after the step ``−H⁻¹g`` for the matrix of lower data ``lo`` (halved until the cost does
+    not rise, when ``halving``), or ``(None, None)``."""
+    if not nls.factorize_lower(lin, asm, lo):
+        return None, None
+    h = lin.solve(-g)
+    if h is None:
+        return None, None
+    alpha = 1.0
+    while alpha > 1e-4:
+        xn = flat + alpha * h
+        cn = asm.cost(xn, params)
+        if cn <= cost:
+            return xn, cn
+        if not halving:
+            break
+        alpha *= 0.5
+    return None, None
+
+
+def _theta_curvature(poses, ij, xyt, kappa, tau) -> np.ndarray:
+    """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
+    depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
+    ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
+    r = _residuals(poses, ij, xyt, kappa, tau).reshape(-1, 4)
+    i, j = ij[:, 0], ij[:, 1]
+    sk, st = np.sqrt(2.0 * kappa), np.sqrt(tau)
+    th_i, th_j = poses[i, 2], poses[j, 2]
+    a = th_i + xyt[:, 2]
+    c, s = np.cos(th_i), np.sin(th_i)
+    tx, ty = xyt[:, 0], xyt[:, 1]
+    on_j = -sk * (r[:, 0] * np.cos(th_j) + r[:, 1] * np.sin(th_j))
+    on_i = sk * (r[:, 0] * np.cos(a) + r[:, 1] * np.sin(a)) + st * (r[:, 2] * (c * tx - s * ty)
+                                                                     + r[:, 3] * (s * tx + c * ty))
+    n = poses.shape[0]
+    return np.bincount(j, weights=on_j, minlength=n) + np.bincount(i, weights=on_i, minlength=n)
 
 
 def _sesync_problem(n: int, ij, xyt, kappa, tau) -> nls.NlsProblem:
