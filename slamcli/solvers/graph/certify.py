@@ -21,7 +21,8 @@ E_{R_i} t̃_e``; ``E`` the column selectors). At a stationary point the Lagrange
 with ``F(X) − tr(Λ)`` the duality gap (0 at a stationary point, ``S Xᵀ = 0``). ``S`` always has the
 gauge null space (the two rows of X and the common translation), so ``λ_min(S) = 0`` at best; the test is
 a sparse Cholesky of ``S + η I`` with ``η = ETA_REL · max diag(S)`` (:data:`ETA_REL`), i.e.
-``λ_min(S) ≥ −η``. ``λ_min`` is reported from a Lanczos run (``scipy.sparse.linalg.eigsh``).
+``λ_min(S) ≥ −η``. ``λ_min`` is reported by inverse iteration with that factorisation when certified, else
+from a Lanczos run (``scipy.sparse.linalg.eigsh``).
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from slamcli.models.angles import wrap_angle
 from slamcli.solvers import nls
@@ -43,6 +43,10 @@ REFINE_MAX_ITERS = 60
 #: dense eigenvalues below this size of S; Lanczos restarts of the uncertified λ_min
 DENSE_EIG_MAX = 600
 LANCZOS_MAX_ITERS = 2000
+#: inverse iteration for the certified λ_min: step budget and the change of the Rayleigh quotient (relative to
+#: max |S_ij|) at which it stops
+INVERSE_ITERATIONS = 50
+INVERSE_ITERATION_TOL = 1e-14
 
 
 @dataclass(frozen=True)
@@ -52,7 +56,8 @@ class Certificate:
     Attributes
     ----------
     certified : bool            ``S + ηI`` is positive definite: the refined estimate minimises F globally.
-    lambda_min : float          smallest eigenvalue of ``S`` (Lanczos; NaN when it did not converge).
+    lambda_min : float          smallest eigenvalue of ``S`` (inverse iteration or Lanczos, :func:`_lambda_min`;
+                                 NaN when it did not converge).
     eta : float                 the tolerance η of the test.
     sesync_cost : float         ``F`` at the refined estimate.
     dual_bound : float          ``tr(Λ)``, a lower bound on the global minimum of F when certified.
@@ -274,40 +279,49 @@ def certify_pose_graph(poses_xyt, ij, xyt, info) -> Certificate:
     S = (M - sp.csc_matrix((Lam.ravel(), (rr, cc)), shape=M.shape)).tocsc()
     S = 0.5 * (S + S.T)
     eta = ETA_REL * float(np.max(np.abs(S.diagonal()))) if n else 0.0
-    certified = _is_positive_definite((S + eta * sp.identity(3 * n, format="csc")).tocsc())
-    lam_min = _lambda_min(S, eta, certified)
+    certified, solve = _is_positive_definite((S + eta * sp.identity(3 * n, format="csc")).tocsc())
+    lam_min = _lambda_min(S, eta, certified, solve)
     gap = max(F - dual, 0.0) if certified else float("nan")
     return Certificate(bool(certified), lam_min, eta, F, dual, gap, x)
 
 
-def _is_positive_definite(A: sp.csc_matrix) -> bool:
-    """Whether the sparse symmetric ``A`` has a Cholesky factorisation (CHOLMOD, else an LDLᵀ-type SuperLU
-    elimination with every pivot > 0)."""
+def _is_positive_definite(A: sp.csc_matrix):
+    """``(ok, solve)``: whether the sparse symmetric ``A`` has a Cholesky factorisation (CHOLMOD, else an
+    LDLᵀ-type SuperLU elimination with every pivot > 0), and ``solve(b) = A⁻¹b`` by that factorisation."""
     try:
         from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
     except ImportError:
+        import scipy.sparse.linalg as spla
+
         try:
             lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
         except RuntimeError:
-            return False
-        return bool(np.array_equal(lu.perm_r, lu.perm_c) and np.all(lu.U.diagonal() > 0))
+            return False, None
+        return bool(np.array_equal(lu.perm_r, lu.perm_c) and np.all(lu.U.diagonal() > 0)), lu.solve
     try:  # supernodal mode is always an LLᵀ factorisation, which stops at the first pivot ≤ 0
-        cholesky(A, mode="supernodal")
+        factor = cholesky(A, mode="supernodal")
     except CholmodNotPositiveDefiniteError:
-        return False
-    return True
+        return False, None
+    return True, factor
 
 
-def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool) -> float:
-    """Smallest eigenvalue of ``S``; NaN when the Lanczos run does not converge.
+def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> float:
+    """Smallest eigenvalue of ``S``; NaN when the iteration does not converge.
 
-    Certified (every eigenvalue ≥ −η): shift-invert Lanczos at ``σ = −2η``, whose nearest eigenvalue is the
-    smallest (one factorisation of the positive definite ``S + 2ηI``, a few iterations). Otherwise the
-    smallest-algebraic Lanczos run, with a bounded budget (the value then only says how negative)."""
+    Certified (every eigenvalue ≥ −η): inverse iteration with the factorisation of ``S + ηI`` that the test
+    made (``solve``), whose dominant eigenvalue ``1/(λ_min + η)`` is the smallest one's, then the Rayleigh
+    quotient; without it (or when that does not converge), shift-invert Lanczos at ``σ = −2η``. Otherwise the smallest-algebraic Lanczos
+    run, with a bounded budget (the value then only says how negative)."""
     n = S.shape[0]
     if n <= DENSE_EIG_MAX:
         return float(np.linalg.eigvalsh(S.toarray())[0])
     v0 = np.ones(n) / np.sqrt(n)
+    if certified and solve is not None:
+        lam = _inverse_iteration(S, solve, v0)
+        if np.isfinite(lam):
+            return lam
+    import scipy.sparse.linalg as spla  # the inverse iteration is slow when λ₁ is not isolated
+
     try:
         if certified:
             vals = spla.eigsh(S, k=1, sigma=-2.0 * eta, which="LM", v0=v0, return_eigenvectors=False)
@@ -317,3 +331,22 @@ def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool) -> float:
     except (spla.ArpackNoConvergence, RuntimeError):
         return float("nan")
     return float(vals[0])
+
+
+def _inverse_iteration(S: sp.csc_matrix, solve, v: np.ndarray) -> float:
+    """Rayleigh quotient of ``S`` at the limit of ``v ← (S + ηI)⁻¹ v / ‖·‖``: converges at the rate
+    ``(λ₁ + η) / (λ₂ + η)`` (``λ₁`` the smallest eigenvalue, ``λ₂`` the next distinct one; at a certified
+    optimum ``λ₁ ≈ 0`` on the gauge null space and ``λ₂ ≫ η``, so a few steps). NaN without convergence."""
+    lam = np.inf
+    scale = max(float(abs(S).max()), np.finfo(float).tiny)
+    for _ in range(INVERSE_ITERATIONS):
+        w = np.asarray(solve(v), float).ravel()
+        norm = float(np.linalg.norm(w))
+        if not np.isfinite(norm) or norm == 0.0:
+            return float("nan")
+        v = w / norm
+        new = float(v @ (S @ v))
+        if abs(new - lam) <= INVERSE_ITERATION_TOL * scale:
+            return new
+        lam = new
+    return float("nan")
