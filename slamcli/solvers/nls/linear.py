@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from slamcli.solvers.nls.kernels import kernel_cost, whiten
 from slamcli.solvers.nls.problem import NlsParams, NlsProblem, pose_offsets
@@ -331,12 +330,14 @@ class ChainSolver:
         return h if np.all(np.isfinite(h)) else None
 
 
-def factorize_symmetric(H: sp.csc_matrix):
+def factorize_symmetric(H: sp.csc_matrix, ordering: str = "MMD_AT_PLUS_A"):
     """Sparse LU of a symmetric positive (semi-)definite matrix, Cholesky-like: symmetric minimum-degree
-    ordering and no pivoting off the diagonal."""
+    ordering (or ``ordering="NATURAL"`` for a matrix permuted already) and no pivoting off the diagonal."""
+    import scipy.sparse.linalg as spla  # imported when used: SuperLU is only the fallback with CHOLMOD
+
     return spla.splu(
         H,
-        permc_spec="MMD_AT_PLUS_A",
+        permc_spec=ordering,
         diag_pivot_thresh=0.0,
         options={"SymmetricMode": True},
     )
@@ -439,9 +440,7 @@ class SuperLUFactor:
             else:
                 D = self.asm.D
                 Hp = sp.csc_matrix((data[self.src], self.p_indices, self.p_indptr), shape=(D, D))
-                self.lu = spla.splu(
-                    Hp, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-                )
+                self.lu = factorize_symmetric(Hp, ordering="NATURAL")
                 self.permuted = True
         except RuntimeError:  # exactly singular
             return False
