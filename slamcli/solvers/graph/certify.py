@@ -40,6 +40,8 @@ ETA_REL = 1e-9
 #: Gauss-Newton refinement on F: stop at a relative cost decrease below this, or after REFINE_MAX_ITERS
 REFINE_REL_TOL = 1e-13
 REFINE_MAX_ITERS = 60
+#: a Newton step of the refinement is taken when F rises by at most this (relative): F's rounding
+NEWTON_SLACK = 1e-14
 #: dense eigenvalues below this size of S; Lanczos restarts of the uncertified λ_min
 DENSE_EIG_MAX = 600
 LANCZOS_MAX_ITERS = 2000
@@ -140,7 +142,9 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     for _ in range(REFINE_MAX_ITERS):
         newton = lo.copy()
         newton[theta_diag] += _theta_curvature(flat.reshape(n, 3), ij, xyt, kappa, tau)[1:]
-        xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False)  # Newton: quadratic
+        # Newton (quadratic convergence); near the optimum its decrease is below F's rounding, so a Newton
+        # step may raise F by that much (NEWTON_SLACK): it still shrinks the gradient, which the dual gap needs
+        xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
         if xn is None:  # H not positive definite there, or no decrease: Gauss-Newton with step halving
             xn, cn = _try_step(asm, lin, params, flat, lo, g, cost, halving=True)
         if xn is None:
@@ -155,9 +159,9 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     return x
 
 
-def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool):
+def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool, slack: float = 0.0):
     """``(x, cost)`` after the step ``−H⁻¹g`` for the matrix of lower data ``lo`` (halved until the cost does
-    not rise, when ``halving``), or ``(None, None)``."""
+    not rise by more than ``slack·cost``, when ``halving``), or ``(None, None)``."""
     if not nls.factorize_lower(lin, asm, lo):
         return None, None
     h = lin.solve(-g)
@@ -167,7 +171,7 @@ def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool):
     while alpha > 1e-4:
         xn = flat + alpha * h
         cn = asm.cost(xn, params)
-        if cn <= cost:
+        if cn <= cost + slack * abs(cost):
             return xn, cn
         if not halving:
             break
