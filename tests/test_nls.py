@@ -388,9 +388,13 @@ def test_marginals_refuse_an_indefinite_information_matrix():
         nls.check_covariance_blocks(bad, "landmark")
 
 
-def test_assembled_normal_equations_equal_the_dense_jacobian_products():
+@pytest.mark.parametrize("small_block", [4096, 0])  # batched einsum path / per-pair buffer path
+def test_assembled_normal_equations_equal_the_dense_jacobian_products(monkeypatch, small_block):
     """H and g (full and lower-triangle assembly) against JᵀJ and Jᵀr of the stacked sparse Jacobian, on a
     problem mixing a landmark graph with a factor that touches one column twice (counts twice in H)."""
+    from slamcli.solvers.nls import linear
+
+    monkeypatch.setattr(linear, "SMALL_BLOCK", small_block)
     _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
     rng = np.random.default_rng(3)
     cols = np.array([[3, 3, 7], [5, 9, 5]], np.int64)
@@ -399,7 +403,8 @@ def test_assembled_normal_equations_equal_the_dense_jacobian_products():
     def ev(x):
         return np.einsum("fkn,fn->fk", A, x[cols]), A
 
-    twice = nls.FactorBlock("twice", cols, ev, np.eye(2))
+    L = np.triu(rng.normal(size=(2, 2, 2))) + 2.0 * np.eye(2)  # per-factor square-root information
+    twice = nls.FactorBlock("twice", cols, ev, L)
     prob = nls.NlsProblem(gp.problem.n_vars, [*gp.problem.blocks, twice], gp.problem.angle_cols)
     x = gp.x0 + 0.01 * rng.normal(size=gp.x0.size)
     params = nls.NlsParams(pose_chart="world")
@@ -444,8 +449,12 @@ def test_cholmod_factor_refuses_an_indefinite_matrix_and_solves_a_definite_one()
     assert not lin.factorize(shifted)
 
 
-def test_world_information_from_the_body_chart_equals_the_world_linearisation():
+@pytest.mark.parametrize("small_block", [4096, 0])
+def test_world_information_from_the_body_chart_equals_the_world_linearisation(monkeypatch, small_block):
     """``H_world = M H_body Mᵀ`` (M = blkdiag(R(θ), 1) per pose) against a linearisation in world coordinates."""
+    from slamcli.solvers.nls import linear
+
+    monkeypatch.setattr(linear, "SMALL_BLOCK", small_block)
     _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
     x = gp.x0 + 0.05 * np.random.default_rng(5).normal(size=gp.x0.size)
     asm = nls.Assembler(gp.problem)

@@ -10,10 +10,14 @@ import scipy.sparse as sp
 from slamcli.solvers.nls.kernels import kernel_cost, whiten
 from slamcli.solvers.nls.problem import NlsParams, NlsProblem, pose_offsets
 
-
 # ----------------------------------------------------------------------------------------------------------
 # assembly
 # ----------------------------------------------------------------------------------------------------------
+#: blocks of at most this many factors are assembled with batched einsum calls (Python overhead per call
+#: dominates small blocks), larger ones with per-pair vector operations on buffers (memory traffic dominates)
+SMALL_BLOCK = 4096
+
+
 class Assembler:
     """Sparse structure of ``H`` computed once; every call scatters new values with ``np.bincount``.
 
@@ -173,17 +177,22 @@ class Assembler:
             JtT = JwT if w is None else JwT * w
             ia, ib = self.pairs[i]
             vals = vals_all[self._bounds[i] : self._bounds[i + 1]].reshape(ia.size, F)
-            for p, (a, c) in enumerate(zip(ia, ib)):  # H_ab = Σ_k w J̃_ka J̃_kb, vectorised over factors
-                np.multiply(JtT[0, a], JwT[0, c], out=vals[p])
-                for kk in range(1, k):
-                    vals[p] += JtT[kk, a] * JwT[kk, c]
+            if F <= SMALL_BLOCK:  # few factors: a handful of batched calls beat per-pair vector operations
+                vals[:] = np.einsum("kaf,kbf->abf", JtT, JwT)[ia, ib]
+                g += np.bincount(self.cols[i].T.ravel(), weights=np.einsum("kaf,fk->af", JtT, rw).ravel(),
+                                 minlength=self.D)
+            else:
+                for p, (a, c) in enumerate(zip(ia, ib)):  # H_ab = Σ_k w J̃_ka J̃_kb, vectorised over factors
+                    np.multiply(JtT[0, a], JwT[0, c], out=vals[p])
+                    for kk in range(1, k):
+                        vals[p] += JtT[kk, a] * JwT[kk, c]
+                for a in range(n):  # g_a = Σ_k w J̃_ka r̃_k
+                    ga = JtT[0, a] * rw[:, 0]
+                    for kk in range(1, k):
+                        ga += JtT[kk, a] * rw[:, kk]
+                    g += np.bincount(self.cols[i][:, a], weights=ga, minlength=self.D)
             if self.twice[i] is not None:
                 vals[self.twice[i]] *= 2.0
-            for a in range(n):  # g_a = Σ_k w J̃_ka r̃_k
-                ga = JtT[0, a] * rw[:, 0]
-                for kk in range(1, k):
-                    ga += JtT[kk, a] * rw[:, kk]
-                g += np.bincount(self.cols[i][:, a], weights=ga, minlength=self.D)
         data = np.bincount(self._scatter_all, weights=vals_all, minlength=self.lo_nnz)
         if self.fixed.size:
             data[self.lo_fixed_mask] = 0.0
@@ -198,7 +207,9 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out:
     (``L`` acts on rows, ``R`` on columns: ``(L J) R = L (J R)``)."""
     F, k, n = J.shape
     L = np.asarray(b.sqrt_info, float)
-    for i in range(k):
+    if F <= SMALL_BLOCK:
+        out[:] = np.einsum("ij,fja->iaf" if L.ndim == 2 else "fij,fja->iaf", L, J)
+    for i in range(k if F > SMALL_BLOCK else 0):
         for a in range(n):
             row = out[i, a]
             if L.ndim == 2:
