@@ -1,8 +1,8 @@
 """Issue 25's scoreboard: every slamcli / GTSAM ratio of the graph optimiser in one table (CSV + Markdown).
 
 One invocation, every side in its own fresh child process with single-threaded BLAS
-(``OMP_NUM_THREADS=OPENBLAS_NUM_THREADS=MKL_NUM_THREADS=1``), the two sides alternating (ours first on odd
-repeats, GTSAM first on even ones); CPU time (``resource.getrusage``: user + system), never wall time, since the
+(``OMP_NUM_THREADS=OPENBLAS_NUM_THREADS=MKL_NUM_THREADS=1``), the two sides alternating (ours first in the
+1st, 3rd, … repeat, GTSAM first in the others); CPU time (``resource.getrusage``: user + system), never wall time, since the
 machine may be shared. Rows (``case``):
 
 * ``lm`` — Levenberg-Marquardt on the grid-city world of :mod:`benchmarks.bench_scale` (known association,
