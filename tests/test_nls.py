@@ -461,3 +461,20 @@ def test_world_information_from_the_body_chart_equals_the_world_linearisation(mo
     body = asm.linearize(x, nls.NlsParams(pose_chart="body"))[1]
     world = asm.linearize(x, nls.NlsParams(pose_chart="world"))[1]
     np.testing.assert_allclose(asm.body_to_world(body, x), world, rtol=1e-10, atol=1e-8)
+
+
+def test_fused_bearing_range_jacobian_equals_the_separate_one():
+    """``bearing_range_jacobian`` (one array) against ``bearing_range_error`` (two), bit for bit, with a
+    landmark on a pose (GTSAM's zero-bearing branch)."""
+    from slamcli.solvers.graph.factors import bearing_range_error, bearing_range_jacobian
+
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=(50, 3))
+    m = rng.normal(size=(50, 2))
+    m[7] = x[7, :2]
+    z = rng.normal(size=(50, 2))
+    with np.errstate(divide="ignore", invalid="ignore"):  # range Jacobian 0/0 at the coincident pair
+        e, Jx, Jm = bearing_range_error(x, m, z)
+        e2, J = bearing_range_jacobian(x, m, z)
+    np.testing.assert_array_equal(e2, e)
+    np.testing.assert_array_equal(J, np.concatenate([Jx, Jm], axis=2))

@@ -12,6 +12,7 @@ from slamcli.models import motion
 from slamcli.solvers import nls
 from slamcli.solvers.graph.factors import (
     bearing_range_error,
+    bearing_range_jacobian,
     bearing_range_residual,
     between_error,
     between_residual,
@@ -248,13 +249,13 @@ def _observation_blocks(inputs: SlamInputs, assoc: np.ndarray, params: GraphPara
             steps, labels, z = group_returns(steps, labels, z, L)
 
         def ev_obs(x):
-            e, Jx, Jm = bearing_range_error(poses_of(x)[steps], lms_of(x)[labels], z)
+            e, J = bearing_range_jacobian(poses_of(x)[steps], lms_of(x)[labels], z)
             if bias_col is None:
-                return e, np.concatenate([Jx, Jm], axis=2)
+                return e, J
             e[:, 0] -= x[bias_col]  # r̂ = ‖m − p‖ − b
             Jb = np.zeros((e.shape[0], 2, 1))
             Jb[:, 0, 0] = -1.0
-            return e, np.concatenate([Jx, Jm, Jb], axis=2)
+            return e, np.concatenate([J, Jb], axis=2)
 
         def res_obs(x):
             e = bearing_range_residual(poses_of(x)[steps], lms_of(x)[labels], z)

@@ -114,6 +114,29 @@ def bearing_range_error(x, m, z):
     return e, J_x, J_m
 
 
+def bearing_range_jacobian(x, m, z):
+    """:func:`bearing_range_error` with its Jacobians in one array: ``e (F, 2)``, ``J (F, 2, 5) = [J_x | J_m]``
+    (the same values; the intermediates are computed once and no concatenation copies ``J``)."""
+    x = np.asarray(x, float)
+    m = np.asarray(m, float)
+    e, near = _bearing_range_residual(x, m, z)
+    dx = m[:, 0] - x[:, 0]
+    dy = m[:, 1] - x[:, 1]
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    J = np.empty((x.shape[0], 2, 5))
+    J[:, 0, 3] = dx / r
+    J[:, 0, 4] = dy / r
+    J[:, 1, 3] = -dy / q
+    J[:, 1, 4] = dx / q
+    np.negative(J[:, :, 3:], out=J[:, :, :2])
+    J[:, 0, 2] = 0.0
+    J[:, 1, 2] = -1.0
+    if np.any(near):  # as bearing_range_error: no bearing Jacobian within 1e-5 m
+        J[near, 1] = 0.0
+    return e, J
+
+
 def bearing_range_residual(x, m, z):
     """The error ``e (F, 2)`` of :func:`bearing_range_error` without its Jacobians (the same arithmetic)."""
     return _bearing_range_residual(x, m, z)[0]
