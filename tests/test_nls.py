@@ -386,3 +386,95 @@ def test_marginals_refuse_an_indefinite_information_matrix():
     bad[1] = np.nan
     with pytest.raises(np.linalg.LinAlgError, match="landmark 1: non-finite"):
         nls.check_covariance_blocks(bad, "landmark")
+
+
+@pytest.mark.parametrize("small_block", [4096, 0])  # batched einsum path / per-pair buffer path
+def test_assembled_normal_equations_equal_the_dense_jacobian_products(monkeypatch, small_block):
+    """H and g (full and lower-triangle assembly) against JᵀJ and Jᵀr of the stacked sparse Jacobian, on a
+    problem mixing a landmark graph with a factor that touches one column twice (counts twice in H)."""
+    from slamcli.solvers.nls import linear
+
+    monkeypatch.setattr(linear, "SMALL_BLOCK", small_block)
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    rng = np.random.default_rng(3)
+    cols = np.array([[3, 3, 7], [5, 9, 5]], np.int64)
+    A = rng.normal(size=(2, 2, 3))
+
+    def ev(x):
+        return np.einsum("fkn,fn->fk", A, x[cols]), A
+
+    L = np.triu(rng.normal(size=(2, 2, 2))) + 2.0 * np.eye(2)  # per-factor square-root information
+    twice = nls.FactorBlock("twice", cols, ev, L)
+    prob = nls.NlsProblem(gp.problem.n_vars, [*gp.problem.blocks, twice], gp.problem.angle_cols)
+    x = gp.x0 + 0.01 * rng.normal(size=gp.x0.size)
+    params = nls.NlsParams(pose_chart="world")
+    asm = nls.Assembler(prob)
+    _, data, g = asm.linearize(x, params)
+    J = nls.jacobian_matrix(prob, x).toarray()
+    r = nls.residual_vector(prob, x)
+    np.testing.assert_allclose(asm.matrix(data).toarray(), J.T @ J, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g, J.T @ r, rtol=1e-12, atol=1e-9)
+    lo = asm.linearize_lower(x, params)[1]
+    np.testing.assert_array_equal(asm.full(lo), data)
+    np.testing.assert_array_equal(asm.lower(data), lo)
+    np.testing.assert_allclose(asm.lower_matrix(lo).toarray(), np.tril(J.T @ J), rtol=1e-12, atol=1e-9)
+
+
+def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
+    """The Jacobian-free residuals LM's trial steps use are the ones ``evaluate`` returns, bit for bit
+    (odometry, loop closures, bearing-range with a landmark on top of a pose)."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    x = gp.x0.copy()
+    x[3 * gp.n_poses : 3 * gp.n_poses + 2] = x[3:5]  # landmark 0 on pose 1: GTSAM's zero-bearing branch
+    with_residual = [b for b in gp.problem.blocks if b.residual is not None]
+    assert {b.name for b in with_residual} >= {"prior", "odometry", "bearing_range"}
+    for b in with_residual:
+        np.testing.assert_array_equal(b.residuals(x), b.evaluate(x)[0])
+
+
+@pytest.mark.skipif(not nls.cholmod_available(), reason="scikit-sparse (extra cholmod) not installed")
+def test_cholmod_factor_refuses_an_indefinite_matrix_and_solves_a_definite_one():
+    """The LDLᵀ factorisation runs through negative pivots, so the solver must test D: a matrix with one
+    negative eigenvalue is refused (as LLᵀ's pivot failure was), the definite one solves as the dense solve."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    asm = nls.Assembler(gp.problem)
+    _, data, g = asm.linearize(gp.x0, nls.NlsParams())
+    lin = nls.make_linear_solver(asm, nls.NlsParams(linear_solver="cholmod"))
+    H = asm.matrix(data).toarray()
+    assert lin.factorize(data)
+    np.testing.assert_allclose(lin.solve(g), np.linalg.solve(H, g), rtol=1e-9, atol=1e-12)
+    shifted = data.copy()
+    shifted[asm.diag_pos] -= 1.01 * np.linalg.eigvalsh(H)[0] + 1e-3 * np.abs(np.diag(H)).max()  # λ_min < 0
+    assert np.linalg.eigvalsh(asm.matrix(shifted).toarray())[0] < 0
+    assert not lin.factorize(shifted)
+
+
+@pytest.mark.parametrize("small_block", [4096, 0])
+def test_world_information_from_the_body_chart_equals_the_world_linearisation(monkeypatch, small_block):
+    """``H_world = M H_body Mᵀ`` (M = blkdiag(R(θ), 1) per pose) against a linearisation in world coordinates."""
+    from slamcli.solvers.nls import linear
+
+    monkeypatch.setattr(linear, "SMALL_BLOCK", small_block)
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    x = gp.x0 + 0.05 * np.random.default_rng(5).normal(size=gp.x0.size)
+    asm = nls.Assembler(gp.problem)
+    body = asm.linearize(x, nls.NlsParams(pose_chart="body"))[1]
+    world = asm.linearize(x, nls.NlsParams(pose_chart="world"))[1]
+    np.testing.assert_allclose(asm.body_to_world(body, x), world, rtol=1e-10, atol=1e-8)
+
+
+def test_fused_bearing_range_jacobian_equals_the_separate_one():
+    """``bearing_range_jacobian`` (one array) against ``bearing_range_error`` (two), bit for bit, with a
+    landmark on a pose (GTSAM's zero-bearing branch)."""
+    from slamcli.solvers.graph.factors import bearing_range_error, bearing_range_jacobian
+
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=(50, 3))
+    m = rng.normal(size=(50, 2))
+    m[7] = x[7, :2]
+    z = rng.normal(size=(50, 2))
+    with np.errstate(divide="ignore", invalid="ignore"):  # range Jacobian 0/0 at the coincident pair
+        e, Jx, Jm = bearing_range_error(x, m, z)
+        e2, J = bearing_range_jacobian(x, m, z)
+    np.testing.assert_array_equal(e2, e)
+    np.testing.assert_array_equal(J, np.concatenate([Jx, Jm], axis=2))

@@ -12,10 +12,14 @@ from slamcli.models import motion
 from slamcli.solvers import nls
 from slamcli.solvers.graph.factors import (
     bearing_range_error,
+    bearing_range_jacobian,
+    bearing_range_residual,
     between_error,
+    between_residual,
     group_returns,
     landmark_offset_error,
     prior_error,
+    prior_residual,
     robot_range_bearing_error,
     sqrt_info_batch,
     sqrt_info_from_cov,
@@ -135,8 +139,12 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
         e, J = prior_error(poses_of(x)[first], prior)
         return e, J
 
+    def res_prior(x):
+        return prior_residual(poses_of(x)[first], prior)
+
     blocks.append(
-        nls.FactorBlock("prior", pc[first], ev_prior, sqrt_info_from_cov(np.diag(np.square(params.prior_std))))
+        nls.FactorBlock("prior", pc[first], ev_prior, sqrt_info_from_cov(np.diag(np.square(params.prior_std))),
+                        residual=res_prior)
     )
 
     def between_block(name, meas, cov, sqrt_info=None):
@@ -149,8 +157,13 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
             e, Ji, Jj = between_error(p[chain], p[chain + 1], meas)
             return e, np.concatenate([Ji, Jj], axis=2)
 
+        def res(x):
+            p = poses_of(x)
+            return between_residual(p[chain], p[chain + 1], meas)
+
         cols = np.concatenate([pc[chain], pc[chain + 1]], axis=1)
-        return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info)
+        return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info,
+                               residual=res)
 
     if n_poses > 1 and params.use_odometry:
         d = motion.odometry_increments(inputs.odometry_xyt)
@@ -169,6 +182,10 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
             e, Ji, Jj = between_error(p[bij[:, 0]], p[bij[:, 1]], bmeas)
             return e, np.concatenate([Ji, Jj], axis=2)
 
+        def res_between(x):
+            p = poses_of(x)
+            return between_residual(p[bij[:, 0]], p[bij[:, 1]], bmeas)
+
         blocks.append(
             nls.FactorBlock(
                 "loop_closure",
@@ -176,6 +193,7 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
                 ev_between,
                 sqrt_info_batch(bc.between_info),
                 robust=True,
+                residual=res_between,
             )
         )
     if n_poses > 1 and params.use_controls:
@@ -231,20 +249,27 @@ def _observation_blocks(inputs: SlamInputs, assoc: np.ndarray, params: GraphPara
             steps, labels, z = group_returns(steps, labels, z, L)
 
         def ev_obs(x):
-            e, Jx, Jm = bearing_range_error(poses_of(x)[steps], lms_of(x)[labels], z)
+            e, J = bearing_range_jacobian(poses_of(x)[steps], lms_of(x)[labels], z)
             if bias_col is None:
-                return e, np.concatenate([Jx, Jm], axis=2)
+                return e, J
             e[:, 0] -= x[bias_col]  # r̂ = ‖m − p‖ − b
             Jb = np.zeros((e.shape[0], 2, 1))
             Jb[:, 0, 0] = -1.0
-            return e, np.concatenate([Jx, Jm, Jb], axis=2)
+            return e, np.concatenate([J, Jb], axis=2)
+
+        def res_obs(x):
+            e = bearing_range_residual(poses_of(x)[steps], lms_of(x)[labels], z)
+            if bias_col is not None:
+                e[:, 0] -= x[bias_col]
+            return e
 
         cols = np.concatenate([pc[steps], lc[labels]], axis=1)
         if bias_col is not None:
             cols = np.concatenate([cols, np.full((cols.shape[0], 1), bias_col, np.int64)], axis=1)
         blocks.append(
             nls.FactorBlock(
-                "bearing_range", cols, ev_obs, sqrt_info_from_cov(inputs.noise.obs_cov), robust=True
+                "bearing_range", cols, ev_obs, sqrt_info_from_cov(inputs.noise.obs_cov), robust=True,
+                residual=res_obs,
             )
         )
     return blocks, int(rows.size)

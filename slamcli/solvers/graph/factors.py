@@ -61,13 +61,22 @@ def between_error(x_i, x_j, measured):
     -------
     e : ndarray (F, 3);  J_i, J_j : ndarray (F, 3, 3)  (w.r.t. world coordinates of x_i, x_j)
     """
-    d_inv = se2.inverse(measured)
-    b = se2.between(x_i, x_j)
-    p = se2.compose(d_inv, b)
+    d_inv, p = _between_offset(x_i, x_j, measured)
     e = se2.log(p)
     A = log_jacobian(p) @ _compose_left_jacobian(d_inv)
     Ba, Bb = se2.between_jacobians(x_i, x_j)
     return e, A @ Ba, A @ Bb
+
+
+def _between_offset(x_i, x_j, measured):
+    """``(d⁻¹, d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` of :func:`between_error`."""
+    d_inv = se2.inverse(measured)
+    return d_inv, se2.compose(d_inv, se2.between(x_i, x_j))
+
+
+def between_residual(x_i, x_j, measured):
+    """The error ``e (F, 3)`` of :func:`between_error` without its Jacobians (the same arithmetic)."""
+    return se2.log(_between_offset(x_i, x_j, measured)[1])
 
 
 def prior_error(x, prior):
@@ -75,6 +84,11 @@ def prior_error(x, prior):
     p_inv = se2.inverse(prior)
     q = se2.compose(p_inv, x)
     return se2.log(q), log_jacobian(q) @ _compose_left_jacobian(p_inv)
+
+
+def prior_residual(x, prior):
+    """The error ``e (F, 3)`` of :func:`prior_error` without its Jacobian (the same arithmetic)."""
+    return se2.log(se2.compose(se2.inverse(prior), x))
 
 
 def bearing_range_error(x, m, z):
@@ -92,15 +106,49 @@ def bearing_range_error(x, m, z):
     -------
     e : ndarray (F, 2);  J_x : ndarray (F, 2, 3);  J_m : ndarray (F, 2, 2)
     """
-    zh = observation.range_bearing(x, m)
-    e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
+    e, near = _bearing_range_residual(x, m, z)
     J_x, J_m = observation.range_bearing_jacobians(x, m)
-    near = zh[:, 0] <= 1e-5
     if np.any(near):  # GTSAM's Rot2::relativeBearing: within 1e-5 m the bearing is 0, its Jacobian zero
-        e[near, 1] = wrap_angle(-z[near, 1])
         J_x[near, 1] = 0.0
         J_m[near, 1] = 0.0
     return e, J_x, J_m
+
+
+def bearing_range_jacobian(x, m, z):
+    """:func:`bearing_range_error` with its Jacobians in one array: ``e (F, 2)``, ``J (F, 2, 5) = [J_x | J_m]``
+    (the same values; the intermediates are computed once and no concatenation copies ``J``)."""
+    x = np.asarray(x, float)
+    m = np.asarray(m, float)
+    e, near = _bearing_range_residual(x, m, z)
+    dx = m[:, 0] - x[:, 0]
+    dy = m[:, 1] - x[:, 1]
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    J = np.empty((x.shape[0], 2, 5))
+    J[:, 0, 3] = dx / r
+    J[:, 0, 4] = dy / r
+    J[:, 1, 3] = -dy / q
+    J[:, 1, 4] = dx / q
+    np.negative(J[:, :, 3:], out=J[:, :, :2])
+    J[:, 0, 2] = 0.0
+    J[:, 1, 2] = -1.0
+    if np.any(near):  # as bearing_range_error: no bearing Jacobian within 1e-5 m
+        J[near, 1] = 0.0
+    return e, J
+
+
+def bearing_range_residual(x, m, z):
+    """The error ``e (F, 2)`` of :func:`bearing_range_error` without its Jacobians (the same arithmetic)."""
+    return _bearing_range_residual(x, m, z)[0]
+
+
+def _bearing_range_residual(x, m, z):
+    zh = observation.range_bearing(x, m)
+    e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
+    near = zh[:, 0] <= 1e-5
+    if np.any(near):
+        e[near, 1] = wrap_angle(-z[near, 1])
+    return e, near
 
 
 def landmark_offset_error(x, m, z_xy):

@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
-from scipy.sparse import csgraph
 
 from slamcli.errors import SolverError
 from slamcli.models import motion, se2
@@ -203,6 +201,8 @@ def spanning_tree_poses(
     first: dict[tuple[int, int], int] = {}
     for e in range(E):
         first.setdefault((int(ij[e, 0]), int(ij[e, 1])), e)
+    from scipy.sparse import csgraph  # imported when used (spanning-tree start only)
+
     order, pred = csgraph.breadth_first_order(
         sp.csr_matrix((np.ones(E), (ij[:, 0], ij[:, 1])), shape=(n_poses, n_poses)),
         0,
@@ -230,10 +230,7 @@ def _solve_normal(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
     """Least squares ``min ‖A x − b‖`` through the normal equations ``AᵀA x = Aᵀb`` (symmetric positive
     definite: SuperLU in symmetric mode, minimum-degree ordering, no off-diagonal pivoting = sparse Cholesky)."""
     At = A.T.tocsr()
-    lu = spla.splu(
-        (At @ A).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-    )
-    return lu.solve(At @ b)
+    return nls.factorize_symmetric((At @ A).tocsc()).solve(At @ b)
 
 
 def chordal_poses(
@@ -253,6 +250,8 @@ def chordal_poses(
     ij = np.asarray(ij, np.int64).reshape(-1, 2)
     xyt = np.asarray(xyt, float).reshape(-1, 3)
     info = np.asarray(info, float).reshape(-1, 3, 3)
+    from scipy.sparse import csgraph  # imported when used (chordal start only)
+
     n_comp, labels = csgraph.connected_components(
         sp.coo_matrix((np.ones(len(ij)), (ij[:, 0], ij[:, 1])), shape=(n_poses, n_poses)), directed=False
     )

@@ -14,11 +14,13 @@ Normal equations (Gauss-Newton approximation of the Hessian; IRLS weights ``w_f`
     H = Σ_f w_f J̃_fᵀ J̃_f ,   g = Σ_f w_f J̃_fᵀ r̃_f ,   J̃ = L J,  r̃ = L r
     (H + λ D) h = −g                                      (GN: λ = 0; LM: D = diag(H) or I)
 
-``H`` is assembled as a ``scipy.sparse.csc_matrix`` whose structure (the COO → CSC scatter map) is computed
-once per problem; every iteration is one vectorised evaluation per block and a ``np.bincount`` scatter — no
-Python loop over factors. Linear systems (:func:`make_linear_solver`): CHOLMOD's supernodal Cholesky
-(``scikit-sparse``, extra ``cholmod``) with its fill-reducing ordering and symbolic analysis done once per
-problem and the numeric factorisation refilled in place; or SciPy's SuperLU in symmetric mode with the
+``H``'s lower triangle is assembled in CSC order, its structure (the scatter position of every pair of a
+factor's columns) computed once per problem; every iteration is one vectorised evaluation per block, the pair
+products into buffers kept across iterations and one ``np.bincount`` scatter — no Python loop over factors
+(:class:`Assembler`; the full symmetric matrix by a precomputed gather). LM's trial steps evaluate residuals
+only (``FactorBlock.residual``). Linear systems (:func:`make_linear_solver`): CHOLMOD's simplicial
+``LDLᵀ`` with a positive-pivot test (``scikit-sparse``, extra ``cholmod``) with its fill-reducing ordering
+and symbolic analysis done once per problem and the numeric factorisation refilled in place; or SciPy's SuperLU in symmetric mode with the
 minimum-degree ordering of the first factorisation reused; or the chain solver (:class:`_ChainSolver`,
 banded Cholesky + dense border Schur complement). ``H`` is positive semi-definite in exact arithmetic, but
 not always numerically: a landmark that sits (almost) on a pose has a bearing Jacobian ``∝ 1/r`` and puts
@@ -68,6 +70,7 @@ from slamcli.solvers.nls.linear import (  # noqa: F401
     ChainSolver,
     SuperLUFactor,
     cholmod_available,
+    factorize_lower,
     factorize_symmetric,
     make_linear_solver,
 )

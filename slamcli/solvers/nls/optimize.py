@@ -13,7 +13,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from slamcli.solvers.nls.kernels import whiten
-from slamcli.solvers.nls.linear import FACTOR_NAMES, Assembler, SuperLUFactor, make_linear_solver
+from slamcli.solvers.nls.linear import (
+    FACTOR_NAMES,
+    Assembler,
+    SuperLUFactor,
+    factorize_lower,
+    make_linear_solver,
+)
 from slamcli.solvers.nls.problem import NlsParams, NlsProblem, NlsResult, retract
 from slamcli.types import Status
 
@@ -28,7 +34,7 @@ def evaluate_cost(problem: NlsProblem, x: np.ndarray, params: NlsParams | None =
 
 def residual_vector(problem: NlsProblem, x: np.ndarray) -> np.ndarray:
     """Stacked whitened residuals ``(Σ F k,)`` at ``x`` (``cost = ½‖·‖²`` without robust kernel)."""
-    return np.concatenate([whiten(b.sqrt_info, b.evaluate(x)[0]).ravel() for b in problem.blocks])
+    return np.concatenate([whiten(b.sqrt_info, b.residuals(x)).ravel() for b in problem.blocks])
 
 
 def jacobian_matrix(problem: NlsProblem, x: np.ndarray) -> sp.csr_matrix:
@@ -69,17 +75,17 @@ def solve(
     backup: list = []  # SuperLU, created on the first breakdown of the primary factorisation
 
     def lin_solve(data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
-        """``H(data) h = rhs``; None if no factorisation gives a finite solution."""
+        """``H(data) h = rhs`` for lower-triangle data; None if no factorisation gives a finite solution."""
         stats["solves"] += 1
-        h = lin.solve(rhs) if lin.factorize(data) else None
+        h = lin.solve(rhs) if factorize_lower(lin, asm, data) else None
         if h is None and lin.name != "superlu":
             stats["fallbacks"] += 1
             if not backup:
                 backup.append(SuperLUFactor(asm))
-            h = backup[0].solve(rhs) if backup[0].factorize(data) else None
+            h = backup[0].solve(rhs) if backup[0].factorize(asm.full(data)) else None
         return h
 
-    cost, data, g = asm.linearize(x, params)
+    cost, data, g = asm.linearize_lower(x, params)  # H's lower triangle: the optimiser's working data
     if not np.isfinite(cost):
         return NlsResult(
             x,
@@ -89,7 +95,7 @@ def solve(
             0,
             np.array([cost]),
             np.zeros(1),
-            asm.matrix(data),
+            asm.matrix(asm.full(data)),
         )
     costs, times = [cost], [0.0]
     if callback is not None:
@@ -107,7 +113,7 @@ def solve(
         if cost <= params.abs_cost_tol:
             status, message = Status.CONVERGED, "cost below abs_cost_tol"
             break
-        diag = data[asm.diag_pos]
+        diag = data[asm.lo_diag_pos]
         Dvec = np.clip(diag, 1e-6, 1e32) if params.damping == "marquardt" else np.ones(asm.D)
         stop = None  # (status, message) that ends the optimisation inside this iteration
         if params.method == "lm":
@@ -126,7 +132,7 @@ def solve(
         it += 1
         decrease = cost - new_cost
         x = x_new
-        cost, data, g = asm.linearize(x, params)
+        cost, data, g = asm.linearize_lower(x, params)
         now = time.perf_counter()
         costs.append(cost)
         times.append(now - t_last)
@@ -137,8 +143,10 @@ def solve(
             status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
             break
     notes = _notes(stats, lin.name)
+    full = asm.full(data)
     if params.pose_chart == "body" and problem.se2_poses > 0:  # H for the marginals: world coordinates
-        data = asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
+        world = asm.body_to_world(full, x)
+        full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
     return NlsResult(
         x=x,
         cost=cost,
@@ -147,7 +155,7 @@ def solve(
         iterations=it,
         cost_trace=np.asarray(costs),
         time_trace=np.asarray(times),
-        information=asm.matrix(data),
+        information=asm.matrix(full),
         linear_solves=int(stats["solves"]),
         notes=tuple(notes),
         linear_solver=lin.name,
@@ -166,18 +174,18 @@ class _Damping:
 def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _Damping, stats, small):
     """One LM iteration: raise λ until a trial step is accepted (GTSAM's inner loop). Returns ``(stop,
     x_new, new_cost)`` with ``stop`` None or the ``(status, message)`` that ends the optimisation."""
-    diag = data[asm.diag_pos]
+    diag = data[asm.lo_diag_pos]
     stop = x_new = new_cost = None
     while True:
         damped = data.copy()
-        damped[asm.diag_pos] += st.lam * Dvec
+        damped[asm.lo_diag_pos] += st.lam * Dvec
         h = lin_solve(damped, -g)
         if h is None and params.damping == "levenberg":
             # λI cannot regularise an H that is numerically indefinite because of entries many orders
             # above the rest (a landmark on top of a pose): this trial uses Marquardt's D = diag(H)
             Dvec = np.clip(diag, 1e-6, 1e32)
             damped = data.copy()
-            damped[asm.diag_pos] += st.lam * Dvec
+            damped[asm.lo_diag_pos] += st.lam * Dvec
             h = lin_solve(damped, -g)
             stats["marquardt_trials"] += 1
         ok = False
@@ -232,7 +240,7 @@ def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _
 def _gn_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, stats, small):
     """One Gauss-Newton step with its safeguards (damped when H is not numerically positive definite,
     halved when the cost rises). Returns ``(stop, x_new, new_cost)`` as :func:`_lm_iteration`."""
-    diag = data[asm.diag_pos]
+    diag = data[asm.lo_diag_pos]
     stop = x_new = new_cost = None
     h = lin_solve(data, -g)
     if h is not None and small(h):
@@ -246,7 +254,7 @@ def _gn_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, stats
         h = None
         while lam_gn <= 1e16 * scale:
             damped = data.copy()
-            damped[asm.diag_pos] += lam_gn * Dvec
+            damped[asm.lo_diag_pos] += lam_gn * Dvec
             h = lin_solve(damped, -g)
             if h is not None and float(g @ h) < 0.0:
                 break
@@ -304,7 +312,7 @@ def _dogleg_iteration(problem, asm, params, lin_solve, x, cost, data, g, delta, 
 
     Returns ``(stop, x_new, new_cost, delta)`` with ``stop`` None when a step was accepted.
     """
-    H = asm.matrix(data)
+    H = asm.matrix(asm.full(data))
     h_gn = lin_solve(data, -g)
     if h_gn is not None and not float(g @ h_gn) < 0.0:
         h_gn = None  # H not positive definite along h_gn: no Gauss-Newton point

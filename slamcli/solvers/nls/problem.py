@@ -36,6 +36,9 @@ class FactorBlock:
     robust : bool
         Whether the problem's robust kernel (if any) applies to this block (observations: yes; priors and
         odometry: usually no).
+    residual : callable ``x (D,) -> r (F, k)`` or None
+        The residuals of ``evaluate`` without the Jacobians (the same values), for cost-only evaluations
+        (LM's trial steps); None = ``evaluate(x)[0]``.
     """
 
     name: str
@@ -43,6 +46,11 @@ class FactorBlock:
     evaluate: EvaluateFn
     sqrt_info: np.ndarray
     robust: bool = False
+    residual: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Unwhitened residuals ``r (F, k)`` at ``x``."""
+        return self.evaluate(x)[0] if self.residual is None else self.residual(x)
 
     @property
     def n_factors(self) -> int:

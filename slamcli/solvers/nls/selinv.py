@@ -148,6 +148,8 @@ class SelectedInverse:
                      zip(self.off[:-1].tolist(), nrows.tolist(), width.tolist())]
         self._snrows = [ix[ip[j] : ip[j + 1]] for j in first.tolist()]
         self._first = first.tolist()
+        from scipy.linalg.lapack import dtrtri  # the inverse of a triangular block, without LU's overhead
+
         for K in range(ns - 1, -1, -1):
             j0, s = self._first[K], int(width[K])
             m = len(self._snrows[K])
@@ -156,7 +158,7 @@ class SelectedInverse:
             for i in range(s):  # column j0+i holds rows i.. of the panel, stored contiguously
                 panel[i:, i] = lx[p0 : p0 + m - i]
                 p0 += m - i
-            Linv = np.linalg.inv(panel[:s]) if s > 1 else np.ones((1, 1))  # unit lower triangular
+            Linv = dtrtri(panel[:s], lower=1, unitdiag=1)[0] if s > 1 else np.ones((1, 1))  # unit lower triangular
             out = self._blk[K]
             SJJ = Linv.T @ (Linv / d[j0 : j0 + s, None])  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
             if m > s:
@@ -229,7 +231,7 @@ class SelectedInverse:
             pos = np.searchsorted(rows, tail)
             if pos[-1] >= len(rows) or (rows[pos] != tail).any():
                 raise ValueError("the pattern of L is not closed under elimination (not a symbolic factor)")
-            X = self._blk[K][pos][:, R[a0:a1] - self._first[K]]
+            X = self._blk[K][pos[:, None], R[a0:a1] - self._first[K]]
             S[a0:, a0:a1] = X
             S[a0:a1, a0:] = X.T  # the diagonal block is symmetric: writing it twice is harmless
         return S
