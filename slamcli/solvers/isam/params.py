@@ -29,6 +29,10 @@ class IsamParams:
         point exceeds this in any component (m or rad; default 0.1, GTSAM ``ISAM2Params.relinearizeThreshold``).
     iterations : int
         Gauss-Newton steps of the window per update (default 1, as one ``ISAM2.update``).
+    reactivate : bool
+        A re-observed marginalised landmark re-enters the window at once, with its frozen marginal as a prior
+        (default True; approximate until the next batch step rebuilds the prior from the factors); False =
+        its sightings wait in the store for the next batch step.
     batch_every_s : float
         A re-observed marginalised landmark (a loop closure) makes the next update a batch step once at least
         this many seconds of data passed since the previous one (default 20; 0 = at every loop closure):
@@ -55,6 +59,7 @@ class IsamParams:
     lag_s: float = 3.0
     relin_threshold: float = 0.1
     iterations: int = 1
+    reactivate: bool = True
     batch_every_s: float = 20.0
     batch_iterations: int = 10
     end_batch: bool = True

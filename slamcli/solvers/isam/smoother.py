@@ -47,6 +47,7 @@ class IncrementalSmoother:
         self.step_cpu: list[float] = []
         self.n_batches = 0
         self.n_deferred = 0
+        self.n_reactivated = 0
         self.pending = False
         self.t_batch = float(inputs.timestamps[0])
 
@@ -111,6 +112,11 @@ class IncrementalSmoother:
             self.assoc[rows] = labels[seg]
         ids = self.fs.add_sightings(k, labels, z)
         act = w.lm_active.a[labels]
+        if self.p.reactivate and not act.all():
+            w.reactivate(labels[~act])
+            self.pending = True
+            self.n_reactivated += int((~act).sum())
+            act = w.lm_active.a[labels]
         if act.any():
             w.add_window_sightings(ids[act])
         if not act.all():

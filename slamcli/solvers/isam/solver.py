@@ -68,7 +68,7 @@ class IsamSlam(BaseSolver):
         poses, lms, assoc = sm.poses(), sm.landmarks(), sm.assoc
         extra = {"association": mode, "robust": kernel, "keyframes": int(sm.kf_steps.size),
                  "n_landmarks": int(lms.shape[0]), "batch_steps": int(sm.n_batches),
-                 "deferred_sightings": int(sm.n_deferred)}
+                 "deferred_sightings": int(sm.n_deferred), "reactivated_landmarks": int(sm.n_reactivated)}
         timings = {"smoother_cpu_s": cpu, "max_update_cpu_s": float(max(sm.step_cpu, default=0.0)),
                    "update_cpu_slope_s": per_step_slope(sm.step_cpu)}
         status, message = Status.CONVERGED, f"incremental smoother: {sm.kf_steps.size} updates"

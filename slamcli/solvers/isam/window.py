@@ -223,6 +223,22 @@ class Window:
         self.lm_active.a[drop] = False
         self.act_lm = self.act_lm[~np.isin(self.act_lm, drop)]
 
+    def reactivate(self, lm: np.ndarray) -> None:
+        """Bring marginalised landmarks ``lm`` back into the window, at their frozen estimates, with their
+        frozen marginals ``N(μ_j, P_j)`` appended to the prior (an approximation: the sightings behind ``P_j``
+        also informed the poses through the prior; the next batch step rebuilds the prior from the factors)."""
+        lm = np.asarray(lm, np.int64)
+        self.lm_active.a[lm] = True
+        self.act_lm = np.concatenate([self.act_lm, lm])
+        self.lm_lin.a[lm] = self.lm_x.a[lm]
+        n0, k = self.p_g.size, 2 * lm.size
+        H = np.zeros((n0 + k, n0 + k))
+        H[:n0, :n0] = self.p_H
+        for i, j in enumerate(lm):
+            H[n0 + 2 * i : n0 + 2 * i + 2, n0 + 2 * i : n0 + 2 * i + 2] = np.linalg.inv(self.lm_cov.a[j])
+        self.p_H, self.p_g = H, np.concatenate([self.p_g, np.zeros(k)])
+        self.p_lm = np.concatenate([self.p_lm, lm])
+
     def set_prior(self, kf: np.ndarray, lm: np.ndarray, H: np.ndarray, g: np.ndarray) -> None:
         self.p_kf, self.p_lm, self.p_H, self.p_g = kf, lm, H, g
 
