@@ -48,6 +48,8 @@ class IncrementalSmoother:
         self.n_batches = 0
         self.n_deferred = 0
         self.n_reactivated = 0
+        self.batch_cpu = 0.0  # CPU s spent in batch steps
+        self.batch_updates: list[int] = []  # updates that ended with a batch step
         self.pending = False
         self.t_batch = float(inputs.timestamps[0])
 
@@ -79,6 +81,7 @@ class IncrementalSmoother:
             w.marginalize_oldest()
         now = float(ts[t])
         if self.pending and now - self.t_batch >= self.p.batch_every_s:
+            self.batch_updates.append(i)
             self.batch_step()
             self.t_batch = now
 
@@ -153,6 +156,7 @@ class IncrementalSmoother:
     def batch_step(self) -> None:
         """LM over the whole keyframe graph from the current estimate, then the window is rebuilt: its
         factors relinearised at the new estimate and its prior the Schur complement of every other factor."""
+        c0 = time.process_time()
         w, fs = self.win, self.fs
         K, L = w.K, w.lm_x.n
         prob = keyframe_problem(fs, K, L, np.arange(K - 1), np.arange(fs.br_z.n), True)
@@ -166,6 +170,7 @@ class IncrementalSmoother:
         self._rebuild(x, nparams)
         self.pending = False
         self.n_batches += 1
+        self.batch_cpu += time.process_time() - c0
 
     def _rebuild(self, x: np.ndarray, nparams: nls.NlsParams) -> None:
         w, fs = self.win, self.fs
