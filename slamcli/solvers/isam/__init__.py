@@ -30,8 +30,8 @@ fixed-lag window bounds each update's linear algebra by the window, and the batc
 grows with the map) are amortised over ≥ ``batch_every_s`` s of data. Defaults, full run, CPU s / aligned GPS
 ATE m (the benchmark's helpers with one parameter changed): defaults 54.7 / 2.60; ``batch_every_s=10`` 113.6 /
 2.68; ``=40`` 45.9 / 2.62; ``lag_s=6`` 66.9 / 2.58; ``batch_iterations=3`` 57.0 / 2.60 (a batch step's cost is
-its set-up and factorisations, not its LM iterations); ``reactivate=false`` 10.2 m, ``robust=cauchy`` 7.2 m
-(both before re-activation was the default). A supernodal partial
+its set-up and factorisations, not its LM iterations); ``reactivate=false`` 56.7 / 10.2, ``reactivate=false
+robust=cauchy`` 104.5 / 7.2. A supernodal partial
 update of the whole factor was not built: CHOLMOD is optional here (SuperLU otherwise), and the window keeps
 the factorised part dense and small. The earlier on-line option, ``graph -p init=incremental`` (a full
 re-solve per 3 s window), takes 228 s CPU for the same 300 s (issue 25).
