@@ -1,0 +1,42 @@
+"""Incremental smoothing for on-line SLAM (``--method isam``).
+
+One update per keyframe (a pose with sightings; the odometry between keyframes is composed into one
+between factor, :mod:`slamcli.solvers.isam.factors`):
+
+1. the new pose, initialised by the composed odometry, and its between factor;
+2. data association of the keyframe's detections against the *current* estimate
+   (:mod:`slamcli.solvers.isam.associate`: ``graph``'s detections and χ² gate, with the smoother's joint
+   covariance of pose and landmark) — or the sensor's ids;
+3. bearing-range factors (``graph``'s GTSAM-exact errors) into the window;
+4. one Gauss-Newton step of the window (:mod:`slamcli.solvers.isam.window`): cached whitened linearisations,
+   a variable is relinearised only when its step exceeds ``relin_threshold`` (and then only the factors that
+   touch it), the dense window system is re-factorised — the marginalised part never is;
+5. keyframes older than ``lag_s`` and the landmarks no window pose sees are marginalised into the window's
+   prior (Schur complement); a marginalised landmark seen again re-enters with its frozen marginal;
+6. at such a loop closure, once ``batch_every_s`` seconds passed since the last one, a batch step: LM over the
+   whole keyframe graph from the current estimate, then the window prior is rebuilt exactly from every other
+   factor (sparse Schur complement). The run ends with a batch step; ``final_batch`` adds ``graph``'s batch
+   LM over the full graph (every pose), whose optimum the result then is.
+
+Choice of the scheme, by measurement (``benchmarks/bench_isam.py``, CPU seconds, single-threaded, same
+factors and association replayed through GTSAM 4.3's ``ISAM2`` with its defaults): iSAM2's Bayes tree is the
+alternative we measured (GTSAM's C++ implementation: a Python Bayes tree would only be slower). Its
+per-update time grows along the run — the root clique holds the recent poses and every landmark linked to
+them, and each re-observed landmark re-eliminates the path to the root. On Victoria Park (full run, 7231
+updates) iSAM2's per-update CPU rises by 6.5 ms per 1000 updates and it needs 181.5 s; ours rises by 0.07 ms
+per 1000 updates outside batch steps (1.8 ms with them) and needs 54.7 s, 40.5 s of it in 78 batch steps
+(first 300 s: 3.56 vs 5.90 s), for the same estimate (GPS ATE 2.60 m full, 1.39 m 300 s, on both). The
+fixed-lag window bounds each update's linear algebra by the window, and the batch steps (the only part that
+grows with the map) are amortised over ≥ ``batch_every_s`` s of data. Defaults, full run, CPU s / aligned GPS
+ATE m (the benchmark's helpers with one parameter changed): defaults 54.7 / 2.60; ``batch_every_s=10`` 113.6 /
+2.68; ``=40`` 45.9 / 2.62; ``lag_s=6`` 66.9 / 2.58; ``batch_iterations=3`` 57.0 / 2.60 (a batch step's cost is
+its set-up and factorisations, not its LM iterations); ``reactivate=false`` 56.7 / 10.2, ``reactivate=false
+robust=cauchy`` 104.5 / 7.2. A supernodal partial
+update of the whole factor was not built: CHOLMOD is optional here (SuperLU otherwise), and the window keeps
+the factorised part dense and small. The earlier on-line option, ``graph -p init=incremental`` (a full
+re-solve per 3 s window), takes 228 s CPU for the same 300 s (issue 25).
+"""
+
+from slamcli.solvers.isam.params import IsamParams  # noqa: F401
+from slamcli.solvers.isam.smoother import IncrementalSmoother  # noqa: F401
+from slamcli.solvers.isam.solver import IsamSlam, per_step_slope  # noqa: F401
