@@ -70,3 +70,18 @@ def test_provisional_window_counts_sensor_frames_not_steps():
     short = EkfSlam(EkfParams(association="ml", provisional=True, provisional_min_hits=3,
                               provisional_window=1)).solve(ds.inputs, rng=np.random.default_rng(0))
     assert short.landmarks_xy.shape[0] <= n_true // 4, short.landmarks_xy.shape[0]
+
+
+@pytest.mark.parametrize("method", ["ekf", "fastslam", "odometry"])
+def test_one_pass_solvers_end_completed_with_every_step(method):
+    """A filter or one-pass solver that processed every step reports ``completed`` (not an iteration status),
+    with one pose per step of the dataset."""
+    from slamcli.api.solve import make_solver, solver_rng
+    from slamcli.types import Status
+
+    ds = simulate_scenario("loop", seed=0)
+    res = make_solver(method).solve(ds.inputs, rng=solver_rng(0))
+    assert res.status is Status.COMPLETED, (res.status, res.message)
+    assert res.poses_xyt.shape == (ds.inputs.n_poses, 3) and np.all(np.isfinite(res.poses_xyt))
+    if method == "ekf":
+        assert res.message.startswith(f"filtered {ds.inputs.n_poses} steps")
