@@ -24,6 +24,7 @@ stay) and rewrites the summary. Uses 1 core at a time (the machine is shared); r
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import resource
 import time
@@ -38,8 +39,11 @@ QUICK_CPU_LIMIT_S = 60
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def _child(conn, data_path: str, method: str, cpu_limit: int) -> None:
-    """Read the dataset, solve with defaults, evaluate; send a dict (or the error line) through ``conn``."""
+def _child(conn, data_path: str, method: str, cpu_limit: int, params: dict | None = None,
+           oracle_ids: bool = False) -> None:
+    """Read the dataset, solve with defaults (or ``params``), evaluate; send a dict (or the error line) through
+    ``conn``. ``oracle_ids``: the TRUE association copied into ``reported_id`` first (an explanation run only,
+    as ``slamcli solve --oracle-association``)."""
     resource.setrlimit(resource.RLIMIT_CPU, (cpu_limit, cpu_limit + 5))
     try:
         from slamcli.api.solve import make_solver, solver_rng
@@ -48,8 +52,12 @@ def _child(conn, data_path: str, method: str, cpu_limit: int) -> None:
         from slamcli.metrics.trajectory import ate
 
         ds = read_dataset(data_path)
+        inputs = ds.inputs
+        if oracle_ids:
+            obs = dataclasses.replace(inputs.observations, reported_id=np.asarray(ds.truth.obs_landmark, np.int64))
+            inputs = dataclasses.replace(inputs, observations=obs)
         c0 = time.process_time()
-        res = make_solver(method).solve(ds.inputs, rng=solver_rng(0))
+        res = make_solver(method, params).solve(inputs, rng=solver_rng(0))
         cpu = time.process_time() - c0
         ok = bool(np.all(np.isfinite(res.poses_xyt)))
         nan = float("nan")
@@ -72,11 +80,11 @@ def _child(conn, data_path: str, method: str, cpu_limit: int) -> None:
         conn.close()
 
 
-def run_one(data_path: str, method: str, cpu_limit: int) -> dict:
+def run_one(data_path: str, method: str, cpu_limit: int, params: dict | None = None, oracle_ids: bool = False) -> dict:
     """One default solve in a child process; a CPU-limit kill or crash becomes ``{"error": ...}``."""
     ctx = mp.get_context("fork")  # the child inherits the parent's imports (a spawn costs ≈ 5 s CPU each)
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(child, data_path, method, cpu_limit))
+    proc = ctx.Process(target=_child, args=(child, data_path, method, cpu_limit, params, oracle_ids))
     proc.start()
     child.close()
     try:
@@ -146,6 +154,37 @@ def run(quick: bool = False, seeds=None, solvers=None, csv_path: str | None = No
     if not csv_path:
         write_markdown(rows, str(RESULTS / "defaults.md"))
     return table if csv_path else rows
+
+
+#: solvers with the surface-aware range option (``-p surface=true``: ranges lengthened by π/4 · declared radius)
+SURFACE_SOLVERS = ("ekf", "graph", "icm")
+
+
+def explain(csv_path: str, cpu_limit: int = CPU_LIMIT_S) -> list[dict]:
+    """Measure why each losing row of the table loses: re-solve its (scenario, seed) with the true association
+    as reported ids (``ate_oracle_ids_m``: is it the association?) and, for the solvers that have it, with
+    ``surface=true`` (``ate_surface_m``: is it the laser's range bias on the post surface?). The alignment's
+    share is already in the table (``ate_unaligned_m``). Merged into the CSV; the summary is rewritten."""
+    import tempfile
+
+    from slamcli.io import write_dataset
+    from slamcli.sim import simulate_scenario
+
+    table = read_csv(csv_path)
+    lost = [r for r in table if r["solver"] not in ("odometry", "cuik") and r.get("beats_dr") is not True
+            and np.isfinite(_num(r.get("ate_aligned_m")))]
+    with tempfile.TemporaryDirectory(prefix="bench-defaults-explain-") as tmp:
+        for r in lost:
+            path = f"{tmp}/{r['scenario']}-{r['seed']}.h5"
+            write_dataset(path, simulate_scenario(r["scenario"], seed=int(r["seed"])))
+            o = run_one(path, r["solver"], cpu_limit, oracle_ids=True)
+            r["ate_oracle_ids_m"] = o.get("ate_aligned_m", float("nan"))
+            if r["solver"] in SURFACE_SOLVERS:
+                o = run_one(path, r["solver"], cpu_limit, params={"surface": True})
+                r["ate_surface_m"] = o.get("ate_aligned_m", float("nan"))
+            _write_csv(csv_path, table)
+            write_markdown(table, csv_path.removesuffix(".csv") + ".md")
+    return table
 
 
 def _key(r: dict) -> tuple[str, int, str]:
@@ -227,8 +266,14 @@ def write_markdown(rows: list[dict], path: str) -> None:
     lines += ["", f"Rows where a default does not beat dead reckoning ({len(lost)}):", ""]
     for r in lost:
         why = r.get("note") or r.get("message") or ""
+        measured = [f"unaligned {_num(r.get('ate_unaligned_m')):.3f} m"]
+        for key, label in (("ate_oracle_ids_m", "with the true association"),
+                           ("ate_surface_m", "with surface=true")):
+            if np.isfinite(_num(r.get(key))):
+                measured.append(f"{label} {_num(r[key]):.3f} m")
         lines.append(f"- {r['scenario']} seed {r['seed']} {r['solver']}: {_num(r.get('ate_aligned_m')):.3f} m vs "
-                     f"{_num(r.get('ate_dr_aligned_m')):.3f} m ({r.get('status') or 'error'}; {str(why)[:100]})")
+                     f"{_num(r.get('ate_dr_aligned_m')):.3f} m; " + "; ".join(measured) +
+                     f" ({r.get('status') or 'error'}: {str(why)[:90]})")
     have = {_key(r) for r in rows}
     missing = [f"{sc} seed {sd}: " + ", ".join(ms) for sd in SEEDS for sc in SCENARIOS
                if (ms := [m for m in registry.names() if (sc, sd, m) not in have])]
@@ -274,6 +319,10 @@ if __name__ == "__main__":  # pragma: no cover
     ap.add_argument("--seeds", default=None, help="comma-separated seeds (default 0-4)")
     ap.add_argument("--solvers", default=None, help="comma-separated solver names (default: all registered)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--explain", action="store_true", help="measure why the losing rows of the CSV lose")
     args = ap.parse_args()
+    if args.explain:
+        explain(str(RESULTS / "defaults.csv"))
+        raise SystemExit(0)
     run(quick=args.quick, seeds=[int(x) for x in args.seeds.split(",")] if args.seeds else None,
         solvers=args.solvers.split(",") if args.solvers else None, csv_path=str(RESULTS / "defaults.csv"))
