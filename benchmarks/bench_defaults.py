@@ -160,12 +160,13 @@ def run(quick: bool = False, seeds=None, solvers=None, csv_path: str | None = No
 SURFACE_SOLVERS = ("ekf", "graph", "icm")
 
 
-def explain(csv_path: str, cpu_limit: int = CPU_LIMIT_S, seeds=None, solvers=None, oracle: bool = True) -> list[dict]:
+def explain(csv_path: str, cpu_limit: int = CPU_LIMIT_S, seeds=None, solvers=None, oracle: bool = True,
+            surface: bool = True) -> list[dict]:
     """Measure why each losing row of the table loses: re-solve its (scenario, seed) with the true association
     as reported ids (``ate_oracle_ids_m``: is it the association?) and, for the solvers that have it, with
     ``surface=true`` (``ate_surface_m``: is it the laser's range bias on the post surface?). The alignment's
-    share is already in the table (``ate_unaligned_m``). ``seeds`` / ``solvers`` / ``oracle=False``: a part of
-    it. Merged into the CSV; the summary is rewritten."""
+    share is already in the table (``ate_unaligned_m``). ``seeds`` / ``solvers`` / ``oracle=False`` /
+    ``surface=False``: a part of it. Merged into the CSV; the summary is rewritten."""
     import tempfile
 
     from slamcli.io import write_dataset
@@ -182,7 +183,7 @@ def explain(csv_path: str, cpu_limit: int = CPU_LIMIT_S, seeds=None, solvers=Non
             if oracle:
                 o = run_one(path, r["solver"], cpu_limit, oracle_ids=True)
                 r["ate_oracle_ids_m"] = o.get("ate_aligned_m", float("nan"))
-            if r["solver"] in SURFACE_SOLVERS:
+            if surface and r["solver"] in SURFACE_SOLVERS:
                 o = run_one(path, r["solver"], cpu_limit, params={"surface": True})
                 r["ate_surface_m"] = o.get("ate_aligned_m", float("nan"))
             _write_csv(csv_path, table)
@@ -266,7 +267,10 @@ def write_markdown(rows: list[dict], path: str) -> None:
             lines.append(f"| {sc} | {solver} | {seeds} | {a:.3f} | {d:.3f} | {wins} | {sp:.1f} / "
                          f"{rs[0].get('landmarks_true', '')} | {cpu:.1f} | {status} |")
     lost = [r for r in rows if r["solver"] != "odometry" and r.get("beats_dr") is not True]
-    lines += ["", f"Rows where a default does not beat dead reckoning ({len(lost)}):", ""]
+    lines += ["", f"Rows where a default does not beat dead reckoning ({len(lost)}), each with its unaligned ATE and,",
+              "measured by `python -m benchmarks.bench_defaults --explain`, the aligned ATE of the same solve with the",
+              "true association given as ids (is it the association?) and with `-p surface=true` where the solver has",
+              "it (is it the laser's range bias on the surface of the posts?):", ""]
     for r in lost:
         why = r.get("note") or r.get("message") or ""
         measured = [f"unaligned {_num(r.get('ate_unaligned_m')):.3f} m"]
@@ -324,10 +328,12 @@ if __name__ == "__main__":  # pragma: no cover
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--explain", action="store_true", help="measure why the losing rows of the CSV lose")
     ap.add_argument("--no-oracle", action="store_true", help="--explain without the true-association runs")
+    ap.add_argument("--no-surface", action="store_true", help="--explain without the surface=true runs")
     args = ap.parse_args()
     if args.explain:
         explain(str(RESULTS / "defaults.csv"), seeds=[int(x) for x in args.seeds.split(",")] if args.seeds else None,
-                solvers=args.solvers.split(",") if args.solvers else None, oracle=not args.no_oracle)
+                solvers=args.solvers.split(",") if args.solvers else None, oracle=not args.no_oracle,
+                surface=not args.no_surface)
         raise SystemExit(0)
     run(quick=args.quick, seeds=[int(x) for x in args.seeds.split(",")] if args.seeds else None,
         solvers=args.solvers.split(",") if args.solvers else None, csv_path=str(RESULTS / "defaults.csv"))
