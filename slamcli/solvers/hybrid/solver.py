@@ -298,7 +298,7 @@ class HybridSlam(BaseSolver):
         # the EKF defaults before issue 24 item 7 (provisional list, grouped returns, new-landmark threshold),
         # spelled out so that hybrid's results do not move with the ekf solver's defaults
         ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
-                                motion_std_scale=p.motion_std_scale, use_gps=False, provisional=False,
+                                motion_std_scale=p.motion_std_scale, use_gps=False, provisional=False, size_gate=False,
                                 group_returns=False, new_landmark_prob=0.9999))
         return ekf.solve(f_inputs, rng=rng, progress=progress)
 
