@@ -88,6 +88,12 @@ class Contractor:
     """Base class: ``vars`` are box indices; :meth:`step` narrows once, :meth:`contract` to a local fixpoint."""
 
     vars: tuple[int, ...] = ()
+    #: observation rows of the readings the operator uses, in its own order (empty = not recorded). The LP
+    #: relaxation (:mod:`~slamcli.solvers.cuik.linear`) gives each row one range and one bearing variable shared
+    #: by every operator that uses it; a band's last entry is the row whose true range is the band's edge
+    readings: tuple[int, ...] = ()
+    #: a band's tolerance on that range (ties within it are allowed; the solver's ``recovery_slack``)
+    band_slack: float = 0.0
     #: local fixpoint iterations at most (the steps converge geometrically; this bounds the worst case)
     max_inner: int = 50
 
@@ -181,9 +187,10 @@ class SharedLandmarkLeg(Contractor):
         self.vars = tuple(leg)
         self.Rt = (Interval(z_t[0]) + Interval(-h_r, h_r)) & _NONNEG
         self.Bt = Interval(z_t[1]) + Interval(-h_b, h_b)
-        rs = (Interval(z_s[0]) + Interval(-h_r, h_r)) & _NONNEG
-        qx, qy, phi = unbounded(), unbounded(), Interval(z_s[1]) + Interval(-h_b, h_b)
-        _POLAR.contract(qx, qy, rs, phi)  # q_s, a constant box
+        rs = self.Rs = (Interval(z_s[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Bs = Interval(z_s[1]) + Interval(-h_b, h_b)
+        qx, qy, phi = unbounded(), unbounded(), Interval(self.Bs)
+        _POLAR.contract(qx, qy, Interval(rs), phi)  # q_s, a constant box
         self.qsx, self.qsy = qx, qy
 
     def step(self, box: list, narrow_theta: bool) -> None:
@@ -329,9 +336,10 @@ class OutsideBandLocal(Contractor):
                  band_hi: float, from_next: bool) -> None:
         self.leg, self.from_next = leg, from_next
         self.vars = tuple(leg)
-        rm = (Interval(z[0]) + Interval(-h_r, h_r)) & _NONNEG
-        qx, qy, phi = unbounded(), unbounded(), Interval(z[1]) + Interval(-h_b, h_b)
-        _POLAR.contract(qx, qy, rm, phi)  # the sighting of m in its pose's frame, a constant box
+        self.Rm = (Interval(z[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Bm = Interval(z[1]) + Interval(-h_b, h_b)
+        qx, qy, phi = unbounded(), unbounded(), Interval(self.Bm)
+        _POLAR.contract(qx, qy, Interval(self.Rm), phi)  # the sighting of m in its pose's frame, a constant box
         self.qx, self.qy = qx, qy
         self.pieces = _band_pieces(band_lo, band_hi)
 

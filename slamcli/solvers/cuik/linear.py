@@ -78,6 +78,7 @@ class Relaxation:
     def __init__(self, box: list, edges, narrow_theta: bool) -> None:
         self.bounds = [Interval(x) for x in box]
         self.rows: list[tuple[dict[int, float], float, float]] = []
+        self._reads: dict[int, tuple[int, int]] = {}
         for e in edges:
             if isinstance(e, OdometryTurnMove):
                 self._odometry(e, narrow_theta)
@@ -92,6 +93,19 @@ class Relaxation:
             # other operators (the separation priors) are left out: dropping a constraint is sound
 
     # -- building blocks ------------------------------------------------------------------------------------
+    def reading(self, i: int, R, B) -> tuple[int, int]:
+        """The range and bearing variables of observation row ``i`` (made on first use, with intervals R, B)."""
+        if i not in self._reads:
+            self._reads[i] = (self.aux(R), self.aux(B))
+        return self._reads[i]
+
+    def sighting(self, i: int, R, B, qx, qy) -> tuple[int, int]:
+        """Variables for the sighting ``r_i·e(b_i)`` of row ``i`` in its pose's frame, tied to its reading."""
+        i_r, i_b = self.reading(i, R, B)
+        jx, jy = self.aux(qx), self.aux(qy)
+        self.polar({jx: 1.0}, {jy: 1.0}, i_r, i_b)
+        return jx, jy
+
     def aux(self, iv) -> int:
         self.bounds.append(Interval(iv))
         return len(self.bounds) - 1
@@ -159,30 +173,43 @@ class Relaxation:
         th = self.bounds[t]
         if not _finite(th):
             return
-        i_r = self.aux(e.R)
         i_f = self.aux(th + e.B)
-        self.row({i_f: 1.0, t: -1.0}, e.B)
+        if e.readings:
+            i_r, i_b = self.reading(e.readings[0], e.R, e.B)
+            self.row({i_f: 1.0, t: -1.0, i_b: -1.0}, Interval(0.0))
+        else:
+            i_r = self.aux(e.R)
+            self.row({i_f: 1.0, t: -1.0}, e.B)
         self.polar({lx: 1.0, x: -1.0}, {ly: 1.0, y: -1.0}, i_r, i_f)
 
     def _local_cycle(self, e: SharedLandmarkLeg) -> None:
         i_d, i_a = e.leg
-        i_r = self.aux(e.Rt)
         i_f = self.aux(e.Bt - self.bounds[i_a])
-        self.row({i_f: 1.0, i_a: 1.0}, e.Bt)
-        qx, qy = self.aux(e.qsx), self.aux(e.qsy)
+        if e.readings:
+            i_r, i_b = self.reading(e.readings[0], e.Rt, e.Bt)
+            self.row({i_f: 1.0, i_a: 1.0, i_b: -1.0}, Interval(0.0))
+            qx, qy = self.sighting(e.readings[1], e.Rs, e.Bs, e.qsx, e.qsy)
+        else:
+            i_r = self.aux(e.Rt)
+            self.row({i_f: 1.0, i_a: 1.0}, e.Bt)
+            qx, qy = self.aux(e.qsx), self.aux(e.qsy)
         self.polar({i_d: 1.0, qx: 1.0}, {qy: 1.0}, i_r, i_f)
 
     def _band(self, e: OutsideBand) -> None:
         """The chord cut of ``‖l − p‖² ≥ r²`` (see the module docstring); nothing when it does not apply."""
         (x, y, _t), (lx, ly) = e.pose, e.landmark
-        self._chord({lx: 1.0, x: -1.0}, {ly: 1.0, y: -1.0}, e.pieces)
+        self._chord({lx: 1.0, x: -1.0}, {ly: 1.0, y: -1.0}, e.pieces, self._band_range(e, e.readings[-1:]))
 
     def _band_local(self, e: OutsideBandLocal) -> None:
         """The chord cut of :class:`OutsideBandLocal`, through aux variables for the sighting and ``d·e(α)``."""
         i_d, i_a = e.leg
-        qx, qy = self.aux(e.qx), self.aux(e.qy)
+        if e.readings:
+            qx, qy = self.sighting(e.readings[0], e.Rm, e.Bm, e.qx, e.qy)
+        else:
+            qx, qy = self.aux(e.qx), self.aux(e.qy)
+        rho = self._band_range(e, e.readings[1:])
         if e.from_next:  # δ = (d + q_x, q_y)
-            self._chord({i_d: 1.0, qx: 1.0}, {qy: 1.0}, e.pieces)
+            self._chord({i_d: 1.0, qx: 1.0}, {qy: 1.0}, e.pieces, rho)
             return
         b = self.bounds
         if not (_finite(b[i_d]) and _finite(b[i_a])):
@@ -190,11 +217,19 @@ class Relaxation:
         px = self.aux(b[i_d] * codac.cos(b[i_a]))
         py = self.aux(b[i_d] * codac.sin(b[i_a]))
         self.polar({px: 1.0}, {py: 1.0}, i_d, i_a)  # P = d·e(α)
-        self._chord({qx: 1.0, px: -1.0}, {qy: 1.0, py: -1.0}, e.pieces)
+        self._chord({qx: 1.0, px: -1.0}, {qy: 1.0, py: -1.0}, e.pieces, rho)
 
-    def _chord(self, u: dict[int, float], v: dict[int, float], pieces: list) -> None:
+    def _band_range(self, e, rows: tuple[int, ...]):
+        """``(range variable, slack)`` of the reading whose true range is the band's edge, when it has one."""
+        if not rows or rows[0] not in self._reads:
+            return None
+        return self._reads[rows[0]][0], e.band_slack
+
+    def _chord(self, u: dict[int, float], v: dict[int, float], pieces: list, rho=None) -> None:
         """``δ = (Σu, Σv)`` with ``‖δ‖² ∈ ∪ pieces``: the chord cut of the outer piece when δ's box (from the
-        variables' bounds) cannot reach the inner one."""
+        variables' bounds) cannot reach the inner one; with ``rho = (i_ρ, slack)`` also the cut of
+        ``‖δ‖ ≥ ρ − slack`` with the reading's own range ρ: ``‖δ‖ − g·δ`` is convex, so with ``g`` the unit
+        vector to the box centre and ``a`` its largest value at a corner, ``ρ − g·δ ≤ a + slack``."""
         b = self.bounds
         dx = sum((Interval(a) * b[k] for k, a in u.items()), Interval(0.0))
         dy = sum((Interval(a) * b[k] for k, a in v.items()), Interval(0.0))
@@ -202,6 +237,8 @@ class Relaxation:
             return
         if len(pieces) > 1 and (codac.sqr(dx) + codac.sqr(dy)).lb() <= pieces[0].ub():
             return  # the inner piece may hold δ: no cut
+        if rho is not None:
+            self._radius_cut(u, v, dx, dy, *rho)
         cut = chord_cut(dx, dy, pieces[-1].lb())
         if cut is not None:
             (nx, ny), k = cut
@@ -210,6 +247,25 @@ class Relaxation:
                 for j, a in lin.items():
                     coef[j] = coef.get(j, 0.0) + n * a  # a = ±1: exact
             self.row(coef, Interval(k, codac.oo))
+
+
+    def _radius_cut(self, u: dict[int, float], v: dict[int, float], dx, dy, i_rho: int, slack: float) -> None:
+        cx, cy = dx.mid(), dy.mid()
+        norm = math.hypot(cx, cy)
+        if not norm > 0:
+            return
+        gx, gy = cx / norm, cy / norm
+        a = -math.inf
+        for px in (dx.lb(), dx.ub()):
+            for py in (dy.lb(), dy.ub()):
+                P, Q = Interval(px), Interval(py)
+                f = codac.sqrt(codac.sqr(P) + codac.sqr(Q)) - (Interval(gx) * P + Interval(gy) * Q)
+                a = max(a, f.ub())
+        coef: dict[int, float] = {i_rho: 1.0}
+        for lin, g in ((u, gx), (v, gy)):
+            for j, c in lin.items():
+                coef[j] = coef.get(j, 0.0) - g * c  # c = ±1: exact
+        self.row(coef, Interval(-codac.oo, (Interval(a) + Interval(slack)).ub()))
 
 
 def chord_cut(dx, dy, r2: float):

@@ -387,14 +387,15 @@ class _Run:
 
         obs, p, lv = self.obs, self.p, self.lm_vars(j)
         r, b = float(obs.range_m[i]), float(obs.bearing_rad[i])
-        start = [g.add_edge(RangeBearing(self.pose_vars(t), lv, r, b, self.h_r, self.h_b))]
+        sl = p.recovery_slack
+        start = [g.add_edge(_tagged(RangeBearing(self.pose_vars(t), lv, r, b, self.h_r, self.h_b), i))]
         if self.neg:
             # closest-landmark sensor: every other landmark is outside [r_min, r) of pose t ...
-            start += [g.add_edge(OutsideBand(self.pose_vars(t), self.lm_vars(m), self.r_min, self.r_lo[i]))
-                      for m in range(g.n_landmarks) if m != j]
+            start += [g.add_edge(_tagged(OutsideBand(self.pose_vars(t), self.lm_vars(m), self.r_min, self.r_lo[i]),
+                                         i, slack=sl)) for m in range(g.n_landmarks) if m != j]
             if is_new:  # ... and a new landmark was never closer than what earlier poses saw
-                start += [g.add_edge(OutsideBand(self.pose_vars(int(obs.step[k])), lv, self.r_min, self.r_lo[k]))
-                          for k in range(i)]
+                start += [g.add_edge(_tagged(OutsideBand(self.pose_vars(int(obs.step[k])), lv, self.r_min,
+                                                         self.r_lo[k]), k, slack=sl)) for k in range(i)]
                 start += [g.add_edge(OutsideBand(self.pose_vars(s), lv, self.r_min, self.r_max)) for s in self.silent]
         prev = range(int(obs.offsets[t - 1]), int(obs.offsets[t])) if t > 0 else range(0)
         z = {k: (float(obs.range_m[k]), float(obs.bearing_rad[k])) for k in prev}
@@ -405,12 +406,14 @@ class _Run:
             start += [g.add_edge(Separated(self.lm_vars(m), lv, self.sep)) for m in range(g.n_landmarks) if m != j]
         if self.neg and p.narrow_theta and p.local_negative:  # a different label seen from pose t−1: the
             # closest-landmark information between the two poses, in a local frame (leg and readings only)
-            start += [g.add_edge(OutsideBandLocal(self.leg_vars(t - 1), z[k], self.h_r, self.h_b, self.r_min,
-                                                  self.r_lo[i], from_next=False)) for k in prev if g.assoc[k] != j]
-            start += [g.add_edge(OutsideBandLocal(self.leg_vars(t - 1), (r, b), self.h_r, self.h_b, self.r_min,
-                                                  self.r_lo[k], from_next=True)) for k in prev if g.assoc[k] != j]
+            start += [g.add_edge(_tagged(OutsideBandLocal(self.leg_vars(t - 1), z[k], self.h_r, self.h_b, self.r_min,
+                                                          self.r_lo[i], from_next=False), k, i, slack=sl))
+                      for k in prev if g.assoc[k] != j]
+            start += [g.add_edge(_tagged(OutsideBandLocal(self.leg_vars(t - 1), (r, b), self.h_r, self.h_b, self.r_min,
+                                                          self.r_lo[k], from_next=True), i, k, slack=sl))
+                      for k in prev if g.assoc[k] != j]
         if p.narrow_theta:  # the same landmark seen from pose t−1: a local cycle
-            start += [g.add_edge(SharedLandmarkLeg(self.leg_vars(t - 1), z[k], (r, b), self.h_r, self.h_b))
+            start += [g.add_edge(_tagged(SharedLandmarkLeg(self.leg_vars(t - 1), z[k], (r, b), self.h_r, self.h_b), k, i))
                       for k in prev if g.assoc[k] == j]
         return start
 
@@ -453,6 +456,13 @@ class _Run:
             "negative_information": self.neg,
             "min_separation": self.sep,
         }
+
+
+def _tagged(edge, *readings: int, slack: float = 0.0):
+    """``edge`` with the observation rows of its readings recorded (``Contractor.readings``, for the LP)."""
+    edge.readings = readings
+    edge.band_slack = slack
+    return edge
 
 
 def _lp_rounds(h, p: CuikParams, counter) -> bool:
