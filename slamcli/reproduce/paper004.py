@@ -1,7 +1,7 @@
 """Reproduction section for paper 004 (Kubica & Szynkiewicz, "CuikSLAM with Unknown Correspondence –
 Preliminary Results"): Tables 1-6 side by side with ``cuik`` on ``cuik-room``, hypothesis counts, our tighter
-boxes with θ narrowing (+ 3B shaving, bisection and the branch-and-bound hull pass), their tightness against an
-independent inner bound of the feasible hull (:class:`FeasibleSet`, SLSQP from several starts), Porta's setting
+boxes with θ narrowing (+ 3B shaving, bisection, the LP contractor and the LP-bounded branch-and-bound hull pass),
+their tightness against an independent inner bound of the feasible hull (:class:`FeasibleSet`, SLSQP from several starts), Porta's setting
 (``cuik-room-porta``) and the paper's leg length (``cuik-room-paper-legs``), Monte-Carlo soundness, the
 wrong-bound check and the ``graph`` cross-check.
 

@@ -57,14 +57,19 @@ _fesetround(NORMAL_ROUNDING)
 
 
 @contextlib.contextmanager
-def interval_rounding():
-    """Run codac interval code in the rounding mode it needs, then restore the caller's mode."""
+def rounding_mode(mode: int):
+    """Run the block in the C library's rounding ``mode``, then restore the caller's mode."""
     prev = int(_fegetround())
-    _fesetround(INTERVAL_ROUNDING)
+    _fesetround(mode)
     try:
         yield
     finally:
         _fesetround(prev)
+
+
+def interval_rounding():
+    """Run codac interval code in the rounding mode it needs, then restore the caller's mode."""
+    return rounding_mode(INTERVAL_ROUNDING)
 
 
 Interval = codac.Interval

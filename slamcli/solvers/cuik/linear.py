@@ -28,7 +28,6 @@ rounding mode (its result is only a guess that the interval bound makes safe).
 
 from __future__ import annotations
 
-import contextlib
 import math
 
 import numpy as np
@@ -41,26 +40,14 @@ from slamcli.solvers.cuik.contractors import (
     OutsideBandLocal,
     RangeBearing,
     SharedLandmarkLeg,
-    _fegetround,
-    _fesetround,
     codac,
+    rounding_mode,
 )
 
 #: width (rad) of φ above which a polar relation gets two more expansion points (φ's ends), besides the centre
 EXTRA_POINTS_WIDTH = 0.05
 #: bound used for the phase-one slack variable (m): larger than any violation the relaxation can show
 SLACK_BOUND = 1e6
-
-
-@contextlib.contextmanager
-def _nearest():
-    """Round to nearest while HiGHS runs (it is not written for round-upward); restore the caller's mode."""
-    prev = int(_fegetround())
-    _fesetround(NORMAL_ROUNDING)
-    try:
-        yield
-    finally:
-        _fesetround(prev)
 
 
 def _finite(iv) -> bool:
@@ -356,7 +343,7 @@ class LinearProgram:
     def _solve(self, c: np.ndarray, A: np.ndarray, bounds):
         from scipy.optimize import linprog
 
-        with _nearest():
+        with rounding_mode(NORMAL_ROUNDING):  # HiGHS is not written for round-upward
             res = linprog(c, A_ub=A, b_ub=self.b, bounds=bounds, method="highs")
         return res
 
