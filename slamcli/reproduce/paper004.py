@@ -490,7 +490,7 @@ def _unknown_tightness(md: list[str], checks: dict, quick: bool, log: Callable[[
     md += ["Unknown correspondence (noisy seeds, types only): box / inner hull of the true hypothesis per landmark "
            "coordinate (l1 x, l1 y, …, l4 y), with the scenario default operators and with the LP contractor + "
            f"LP-bounded hull pass (`lp_rounds=2, hull_lp, hull_leaves={UNKNOWN_HULL_LP_LEAVES}`; CPU "
-           f"{np.mean(cpu[1::2]):.1f} s per solve against {np.mean(cpu[0::2]):.1f} s). Hypotheses and rank: the "
+           f"{np.mean(cpu[1::2]):.1f} s per solve against {np.mean(cpu[0::2]):.2f} s). Hypotheses and rank: the "
            "second run.", "",
            _md(["seed", "hypotheses", "true one's rank", "default: box / inner", "worst", "+ LP + hull: box / inner",
                 "worst"], rows), "",
