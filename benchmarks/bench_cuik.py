@@ -7,8 +7,10 @@ Rows (seed 1 unless said otherwise):
   prior (``bounded.declared_separation=0``), and the paper operator set without it; the full set with the
   final 3B shaving (4 slices) + bisection (64 leaves) pass; and the unique correspondence (true association,
   one graph) as the reference for the cost of branching; the unique correspondence with the branch-and-bound
-  hull pass (``hull_leaves``, 10 quick / 100 full) and in Porta's setting (``cuik-room-porta``) — ``ratio`` = seconds of the row / seconds of the
-  unique-correspondence full-set run in the same process.
+  hull pass (``hull_leaves``, 10 quick / 100 full), the same with the LP contractor (``lp_rounds=2``) and the
+  LP-bounded hull pass (``hull_lp``), the unknown correspondence with ``lp_rounds=2``, and in Porta's setting
+  (``cuik-room-porta``) — ``ratio`` = seconds of the row / seconds of the unique-correspondence full-set run in
+  the same process.
 * ``cuik-corridors`` (14 typed landmarks, 45 legs, declared 4 m separation) with the hypothesis cap 16 and the
   two cap rankings ``parsimony_volume`` (default: fewest landmarks, then largest box volume) and
   ``parsimony_area`` (fewest landmarks, then smallest landmark box area); full mode also runs seeds 0-4 with
@@ -78,6 +80,10 @@ def run(quick: bool = False) -> list[dict]:
     rows.append(_row("cuik-room/unique", _known(room), room,
                      {"association": "reported", "shave_slices": 4, "bisect_leaves": 64,
                       "hull_leaves": 10 if quick else 100}, 1))
+    rows.append(_row("cuik-room/unique", _known(room), room,
+                     {"association": "reported", "shave_slices": 4, "bisect_leaves": 64, "lp_rounds": 2,
+                      "hull_leaves": 10 if quick else 100, "hull_lp": True}, 1))
+    rows.append(_row("cuik-room/unknown", room.inputs, room, {"lp_rounds": 2}, 1))
     porta = simulate_scenario("cuik-room-porta", 1)
     rows.append(_row("cuik-room-porta/unique", porta.inputs, porta, {"association": "reported"}, repeats))
     corr = simulate_scenario("cuik-corridors", 1)

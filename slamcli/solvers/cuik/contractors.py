@@ -57,14 +57,19 @@ _fesetround(NORMAL_ROUNDING)
 
 
 @contextlib.contextmanager
-def interval_rounding():
-    """Run codac interval code in the rounding mode it needs, then restore the caller's mode."""
+def rounding_mode(mode: int):
+    """Run the block in the C library's rounding ``mode``, then restore the caller's mode."""
     prev = int(_fegetround())
-    _fesetround(INTERVAL_ROUNDING)
+    _fesetround(mode)
     try:
         yield
     finally:
         _fesetround(prev)
+
+
+def interval_rounding():
+    """Run codac interval code in the rounding mode it needs, then restore the caller's mode."""
+    return rounding_mode(INTERVAL_ROUNDING)
 
 
 Interval = codac.Interval
@@ -88,6 +93,12 @@ class Contractor:
     """Base class: ``vars`` are box indices; :meth:`step` narrows once, :meth:`contract` to a local fixpoint."""
 
     vars: tuple[int, ...] = ()
+    #: observation rows of the readings the operator uses, in its own order (empty = not recorded). The LP
+    #: relaxation (:mod:`~slamcli.solvers.cuik.linear`) gives each row one range and one bearing variable shared
+    #: by every operator that uses it; a band's last entry is the row whose true range is the band's edge
+    readings: tuple[int, ...] = ()
+    #: a band's tolerance on that range (ties within it are allowed; the solver's ``recovery_slack``)
+    band_slack: float = 0.0
     #: local fixpoint iterations at most (the steps converge geometrically; this bounds the worst case)
     max_inner: int = 50
 
@@ -181,9 +192,10 @@ class SharedLandmarkLeg(Contractor):
         self.vars = tuple(leg)
         self.Rt = (Interval(z_t[0]) + Interval(-h_r, h_r)) & _NONNEG
         self.Bt = Interval(z_t[1]) + Interval(-h_b, h_b)
-        rs = (Interval(z_s[0]) + Interval(-h_r, h_r)) & _NONNEG
-        qx, qy, phi = unbounded(), unbounded(), Interval(z_s[1]) + Interval(-h_b, h_b)
-        _POLAR.contract(qx, qy, rs, phi)  # q_s, a constant box
+        rs = self.Rs = (Interval(z_s[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Bs = Interval(z_s[1]) + Interval(-h_b, h_b)
+        qx, qy, phi = unbounded(), unbounded(), Interval(self.Bs)
+        _POLAR.contract(qx, qy, Interval(rs), phi)  # q_s, a constant box
         self.qsx, self.qsy = qx, qy
 
     def step(self, box: list, narrow_theta: bool) -> None:
@@ -238,10 +250,7 @@ class OutsideBand(Contractor):
     def __init__(self, pose: tuple[int, int, int], landmark: tuple[int, int], band_lo: float, band_hi: float) -> None:
         self.pose, self.landmark = pose, landmark
         self.vars = (pose[0], pose[1], *landmark)
-        # outward rounding: the allowed pieces are enlarged, never shrunk
-        lo2 = (Interval(band_lo) * Interval(band_lo)).ub() if band_lo > 0 else None
-        self.pieces = ([Interval(0.0, lo2)] if lo2 is not None else []) + [
-            Interval((Interval(band_hi) * Interval(band_hi)).lb(), codac.oo)]
+        self.pieces = _band_pieces(band_lo, band_hi)  # outward rounding: enlarged, never shrunk
         # quick exit: boxes certainly farther apart than this (with a relative margin that dwarfs the
         # rounding of the float test) satisfy the constraint everywhere — nothing to refute or narrow
         self._far2 = band_hi * band_hi * (1.0 + 1e-9) + 1e-12
@@ -268,21 +277,11 @@ class OutsideBand(Contractor):
             return
         (x, y, _t), (lx, ly) = self.pose, self.landmark
         bx, by, blx, bly = box[x], box[y], box[lx], box[ly]
-        dx, dy = blx - bx, bly - by
-        sx, sy = codac.sqr(dx), codac.sqr(dy)
-        s = sx + sy
         hull = None
-        for piece in self.pieces:
-            sk = s & piece
-            if sk.is_empty():
-                continue
-            sxk, syk, dxk, dyk = Interval(sx), Interval(sy), Interval(dx), Interval(dy)
-            codac.AddOp.bwd(sk, sxk, syk)
-            codac.SqrOp.bwd(sxk, dxk)
-            codac.SqrOp.bwd(syk, dyk)
+        for dx, dy in _outside_pieces(blx - bx, bly - by, self.pieces):
             v = [Interval(box[i]) for i in (x, y, lx, ly)]
-            codac.SubOp.bwd(dxk, v[2], v[0])
-            codac.SubOp.bwd(dyk, v[3], v[1])
+            codac.SubOp.bwd(dx, v[2], v[0])
+            codac.SubOp.bwd(dy, v[3], v[1])
             if any(iv.is_empty() for iv in v):
                 continue
             hull = v if hull is None else [a | b for a, b in zip(hull, v)]
@@ -292,6 +291,83 @@ class OutsideBand(Contractor):
             return
         for i, iv in zip((x, y, lx, ly), hull):
             box[i] = box[i] & iv
+
+
+def _band_pieces(band_lo: float, band_hi: float) -> list:
+    """The allowed values of ``‖δ‖²`` outside the band ``[band_lo, band_hi)``, enlarged outwards (sound)."""
+    lo2 = (Interval(band_lo) * Interval(band_lo)).ub() if band_lo > 0 else None
+    return ([Interval(0.0, lo2)] if lo2 is not None else []) + [
+        Interval((Interval(band_hi) * Interval(band_hi)).lb(), codac.oo)]
+
+
+def _outside_pieces(dx: codac.Interval, dy: codac.Interval, pieces: list) -> list:
+    """``δ = (dx, dy)`` narrowed to ``‖δ‖² ∈ piece``, for each piece that leaves it non-empty."""
+    sx, sy = codac.sqr(dx), codac.sqr(dy)
+    s = sx + sy
+    out = []
+    for piece in pieces:
+        sk = s & piece
+        if sk.is_empty():
+            continue
+        sxk, syk, dxk, dyk = Interval(sx), Interval(sy), Interval(dx), Interval(dy)
+        codac.AddOp.bwd(sk, sxk, syk)
+        codac.SqrOp.bwd(sxk, dxk)
+        codac.SqrOp.bwd(syk, dyk)
+        if not (dxk.is_empty() or dyk.is_empty()):
+            out.append((dxk, dyk))
+    return out
+
+
+def _outside(dx: codac.Interval, dy: codac.Interval, pieces: list):
+    """The hull of :func:`_outside_pieces`; None when no piece survives."""
+    hull = None
+    for dxk, dyk in _outside_pieces(dx, dy, pieces):
+        hull = (dxk, dyk) if hull is None else (hull[0] | dxk, hull[1] | dyk)
+    return hull
+
+
+class OutsideBandLocal(Contractor):
+    """:class:`OutsideBand` for a landmark seen from the pose next to the reporting one, written in a local
+    frame (like :class:`SharedLandmarkLeg`), so only the leg ``(d, α)`` between the two poses and a reading
+    enter — the world-frame boxes of the pose and the landmark (metres wide after a long chain) do not.
+
+    ``from_next=False``: pose t reported a landmark at range ``r``; landmark m was seen from pose t−1 at
+    ``z = (r_m, b_m)``. In the frame of pose t−1, ``l_m − p_t = r_m·e(b_m) − d·e(α)``.
+    ``from_next=True``: pose t−1 reported a landmark at range ``r``; landmark m was seen from pose t at ``z``.
+    In the frame of pose t, ``l_m − p_{t−1} = (d + r_m cos b_m, r_m sin b_m)``.
+    Either way ``‖l_m − p‖ ∉ [band_lo, band_hi)``. Variables: the leg ``(i_d, i_α)``."""
+
+    def __init__(self, leg: tuple[int, int], z: tuple[float, float], h_r: float, h_b: float, band_lo: float,
+                 band_hi: float, from_next: bool) -> None:
+        self.leg, self.from_next = leg, from_next
+        self.vars = tuple(leg)
+        self.Rm = (Interval(z[0]) + Interval(-h_r, h_r)) & _NONNEG
+        self.Bm = Interval(z[1]) + Interval(-h_b, h_b)
+        qx, qy, phi = unbounded(), unbounded(), Interval(self.Bm)
+        _POLAR.contract(qx, qy, Interval(self.Rm), phi)  # the sighting of m in its pose's frame, a constant box
+        self.qx, self.qy = qx, qy
+        self.pieces = _band_pieces(band_lo, band_hi)
+
+    max_inner = 3
+
+    def step(self, box: list, narrow_theta: bool) -> None:
+        i_d, i_a = self.leg
+        if self.from_next:
+            out = _outside(box[i_d] + self.qx, Interval(self.qy), self.pieces)
+            box[i_d] = Interval.empty() if out is None else box[i_d] & (out[0] - self.qx)
+            return
+        px, py, rho, phi = unbounded(), unbounded(), Interval(box[i_d]), Interval(box[i_a])
+        _POLAR.contract(px, py, rho, phi)  # P = d·e(α)
+        out = _outside(self.qx - px, self.qy - py, self.pieces)
+        if out is None or not narrow_theta:
+            if out is None:
+                box[i_d] = Interval.empty()
+                box[i_a] = Interval.empty()
+            return
+        px, py = px & (self.qx - out[0]), py & (self.qy - out[1])
+        _POLAR.contract(px, py, rho, phi)
+        box[i_d] = box[i_d] & rho
+        box[i_a] = box[i_a] & phi
 
 
 class Separated(Contractor):

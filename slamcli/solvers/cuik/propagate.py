@@ -14,9 +14,13 @@ from __future__ import annotations
 
 import heapq
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from slamcli.solvers.cuik.contractors import Contractor, Interval
+
+#: ``leaf_bound(leaf, target, side)``: a sound bound of one end of ``leaf[target]``, None = no solution
+LeafBound = Callable[[list, int, int], "float | None"]
 
 
 @dataclass
@@ -150,7 +154,8 @@ def _candidates(leaf: list, split_vars: list[int], scales: list[float], min_widt
 
 def tighten_bound(box: list, edges: list[Contractor], adj: dict[int, list[int]], target: int, side: int,
                   split_vars: list[int], scales: list[float], *, narrow_theta: bool, tol: float, max_leaves: int,
-                  min_width: float, n_candidates: int = 6, counter: Counter | None = None) -> float | None:
+                  min_width: float, n_candidates: int = 6, counter: Counter | None = None,
+                  leaf_bound: LeafBound | None = None) -> float | None:
     """Interval branch and bound on one end of ``box[target]``: the smallest lower end (``side`` 0) or the
     largest upper end (``side`` 1) over a cover of the box by propagated leaves.
 
@@ -161,6 +166,9 @@ def tighten_bound(box: list, edges: list[Contractor], adj: dict[int, list[int]],
     is a sound new bound. Stops after ``max_leaves`` expansions or when the extreme leaf is narrower than
     ``min_width`` in every scaled split variable. Returns the new end, or None when every leaf is refuted (no
     solution in the box). ``box`` is not modified.
+
+    ``leaf_bound(leaf, target, side)``, when given, is a further sound bound of the leaf's end (e.g. the LP
+    relaxation of :mod:`~slamcli.solvers.cuik.linear`), applied to every propagated child; None refutes it.
     """
     sign = 1.0 if side == 0 else -1.0
 
@@ -178,7 +186,7 @@ def tighten_bound(box: list, edges: list[Contractor], adj: dict[int, list[int]],
                 child = [Interval(x) for x in leaf]
                 child[v] = half
                 if propagate(child, edges, adj, adj.get(v, []), narrow_theta=narrow_theta, tol=tol,
-                             counter=counter):
+                             counter=counter) and _bounded(child, target, side, leaf_bound):
                     kids.append(child)
             score = min((end(c) for c in kids), default=float("inf"))
             if best is None or score > best[0]:
@@ -194,9 +202,24 @@ def tighten_bound(box: list, edges: list[Contractor], adj: dict[int, list[int]],
     return sign * heap[0][0]
 
 
+def _bounded(leaf: list, target: int, side: int, leaf_bound: LeafBound | None) -> bool:
+    """Narrow the leaf's ``side`` end of ``target`` by ``leaf_bound``; False when the leaf is refuted."""
+    if leaf_bound is None:
+        return True
+    e = leaf_bound(leaf, target, side)
+    if e is None:
+        return False
+    iv = leaf[target]
+    if (e > iv.ub()) if side == 0 else (e < iv.lb()):
+        return False
+    leaf[target] = iv & (Interval(e, iv.ub()) if side == 0 else Interval(iv.lb(), e))
+    return True
+
+
 def hull_pass(box: list, edges: list[Contractor], adj: dict[int, list[int]], targets: list[int],
               split_vars: list[int], scales: list[float], *, narrow_theta: bool, tol: float, max_leaves: int,
-              min_width: float, rounds: int = 1, counter: Counter | None = None) -> bool:
+              min_width: float, rounds: int = 1, counter: Counter | None = None, n_candidates: int = 6,
+              leaf_bound: LeafBound | None = None) -> bool:
     """Tighten both ends of every ``targets`` variable by :func:`tighten_bound`, propagating the narrowed box
     after each end (so later targets start from the tighter box); ``rounds`` passes. Sound; returns False when
     the box is refuted."""
@@ -206,7 +229,8 @@ def hull_pass(box: list, edges: list[Contractor], adj: dict[int, list[int]], tar
                 if not box[v].diam() > 10 * tol:
                     continue
                 new = tighten_bound(box, edges, adj, v, side, split_vars, scales, narrow_theta=narrow_theta,
-                                    tol=tol, max_leaves=max_leaves, min_width=min_width, counter=counter)
+                                    tol=tol, max_leaves=max_leaves, min_width=min_width, counter=counter,
+                                    n_candidates=n_candidates, leaf_bound=leaf_bound)
                 if new is None:
                     return False
                 lo, hi = (new, box[v].ub()) if side == 0 else (box[v].lb(), new)

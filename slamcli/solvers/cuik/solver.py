@@ -76,6 +76,11 @@ class CuikParams:
                                (observation or silent pose, other landmark) — no landmark of any type is in
                                the visible band closer than the reported one (paper 004 §6: the robot
                                "does notice the closest landmark"). Sound; False = the paper's graphs only.
+    local_negative : bool      with the negative information and the full set: for landmarks seen from
+                               consecutive poses under different labels, the same constraint written in the
+                               first pose's frame (:class:`OutsideBandLocal`: only the leg and the readings
+                               enter, not the metres-wide world boxes). Sound; it is what pins the room's
+                               tie poses.
     separation : bool          when the data declare ``NoiseBounds.min_separation > 0`` (a map prior, not a
                                sensor fact): every pair of landmark labels is at least that far apart.
     hull_leaves : int          0 = off; else a final branch-and-bound pass (runs after 3B and bisection) that
@@ -88,6 +93,15 @@ class CuikParams:
     hull_split : "legs" | "poses" | "all"
                                what the hull pass bisects: the odometry legs (d, α) — the independent
                                errors — or pose positions and headings, or both with landmarks.
+    lp_rounds : int            0 = off; else rounds of the LP contractor (:mod:`~slamcli.solvers.cuik.linear`:
+                               an affine relaxation of the whole graph over the box, every bounded variable
+                               minimised and maximised with HiGHS, each bound made rigorous by interval
+                               arithmetic on the dual) in the final pass, after 3B and bisection, each
+                               followed by propagation (sound; catches the coupling through the loop that
+                               per-edge operators lose).
+    hull_lp : bool             the hull pass bounds every leaf's end by the same LP relaxation and splits the
+                               widest scaled variable (no strong branching) — converges to the hull with far
+                               fewer leaves.
     rank : str                 order used by the cap and for the output (a heuristic, not a guarantee):
                                ``parsimony_volume`` = fewest landmarks, then the LARGEST box log-volume (under
                                uniform errors an association's likelihood is proportional to the volume of
@@ -112,10 +126,13 @@ class CuikParams:
     bisect_leaves: int = 0
     recovery_slack: float = 1e-9
     negative_information: bool = True
+    local_negative: bool = True
     separation: bool = True
     hull_leaves: int = 0
     hull_targets: Literal["landmarks", "all"] = "landmarks"
     hull_split: Literal["legs", "poses", "all"] = "poses"
+    lp_rounds: int = 0
+    hull_lp: bool = False
     rank: Literal["parsimony_area", "parsimony_width", "parsimony_volume"] = "parsimony_volume"
 
     def __post_init__(self) -> None:
@@ -125,6 +142,8 @@ class CuikParams:
             raise ValueError("max_hypotheses must be >= 1")
         if self.hull_leaves < 0:
             raise ValueError("hull_leaves must be >= 0")
+        if self.lp_rounds < 0:
+            raise ValueError("lp_rounds must be >= 0")
         if self.shave_slices < 0 or self.shave_rounds < 1:
             raise ValueError("shave_slices must be >= 0 and shave_rounds >= 1")
         if self.recovery_slack < 0:
@@ -359,6 +378,7 @@ class _Run:
         """Add the edges of observation ``i`` (pose t) read as landmark label ``j`` to ``g``; their indices."""
         from slamcli.solvers.cuik.contractors import (
             OutsideBand,
+            OutsideBandLocal,
             RangeBearing,
             Separated,
             SeparatedLocal,
@@ -367,14 +387,15 @@ class _Run:
 
         obs, p, lv = self.obs, self.p, self.lm_vars(j)
         r, b = float(obs.range_m[i]), float(obs.bearing_rad[i])
-        start = [g.add_edge(RangeBearing(self.pose_vars(t), lv, r, b, self.h_r, self.h_b))]
+        sl = p.recovery_slack
+        start = [g.add_edge(_tagged(RangeBearing(self.pose_vars(t), lv, r, b, self.h_r, self.h_b), i))]
         if self.neg:
             # closest-landmark sensor: every other landmark is outside [r_min, r) of pose t ...
-            start += [g.add_edge(OutsideBand(self.pose_vars(t), self.lm_vars(m), self.r_min, self.r_lo[i]))
-                      for m in range(g.n_landmarks) if m != j]
+            start += [g.add_edge(_tagged(OutsideBand(self.pose_vars(t), self.lm_vars(m), self.r_min, self.r_lo[i]),
+                                         i, slack=sl)) for m in range(g.n_landmarks) if m != j]
             if is_new:  # ... and a new landmark was never closer than what earlier poses saw
-                start += [g.add_edge(OutsideBand(self.pose_vars(int(obs.step[k])), lv, self.r_min, self.r_lo[k]))
-                          for k in range(i)]
+                start += [g.add_edge(_tagged(OutsideBand(self.pose_vars(int(obs.step[k])), lv, self.r_min,
+                                                         self.r_lo[k]), k, slack=sl)) for k in range(i)]
                 start += [g.add_edge(OutsideBand(self.pose_vars(s), lv, self.r_min, self.r_max)) for s in self.silent]
         prev = range(int(obs.offsets[t - 1]), int(obs.offsets[t])) if t > 0 else range(0)
         z = {k: (float(obs.range_m[k]), float(obs.bearing_rad[k])) for k in prev}
@@ -383,8 +404,16 @@ class _Run:
                       for k in prev if g.assoc[k] != j]
         if is_new and self.sep > 0:
             start += [g.add_edge(Separated(self.lm_vars(m), lv, self.sep)) for m in range(g.n_landmarks) if m != j]
+        if self.neg and p.narrow_theta and p.local_negative:  # a different label seen from pose t−1: the
+            # closest-landmark information between the two poses, in a local frame (leg and readings only)
+            start += [g.add_edge(_tagged(OutsideBandLocal(self.leg_vars(t - 1), z[k], self.h_r, self.h_b, self.r_min,
+                                                          self.r_lo[i], from_next=False), k, i, slack=sl))
+                      for k in prev if g.assoc[k] != j]
+            start += [g.add_edge(_tagged(OutsideBandLocal(self.leg_vars(t - 1), (r, b), self.h_r, self.h_b, self.r_min,
+                                                          self.r_lo[k], from_next=True), i, k, slack=sl))
+                      for k in prev if g.assoc[k] != j]
         if p.narrow_theta:  # the same landmark seen from pose t−1: a local cycle
-            start += [g.add_edge(SharedLandmarkLeg(self.leg_vars(t - 1), z[k], (r, b), self.h_r, self.h_b))
+            start += [g.add_edge(_tagged(SharedLandmarkLeg(self.leg_vars(t - 1), z[k], (r, b), self.h_r, self.h_b), k, i))
                       for k in prev if g.assoc[k] == j]
         return start
 
@@ -395,7 +424,7 @@ class _Run:
         from slamcli.solvers.cuik.propagate import bisect_hull, shave
 
         p, c = self.p, self.counter
-        if not (p.shave_slices > 0 or p.bisect_leaves > 0 or p.hull_leaves > 0):
+        if not (p.shave_slices > 0 or p.bisect_leaves > 0 or p.hull_leaves > 0 or p.lp_rounds > 0):
             return True
         kept = []
         for h in self.hyps:
@@ -405,6 +434,8 @@ class _Run:
             if ok and p.bisect_leaves > 0:
                 ok = bisect_hull(h.box, h.edges, h.adj, [3 * t + 2 for t in range(self.n_poses)],
                                  narrow_theta=p.narrow_theta, tol=p.tol, max_leaves=p.bisect_leaves, counter=c)
+            if ok and p.lp_rounds > 0:
+                ok = _lp_rounds(h, p, c)
             if ok and p.hull_leaves > 0:
                 ok = _hull(h, p, self.n_poses, self.base, c)
             if ok:
@@ -427,6 +458,28 @@ class _Run:
         }
 
 
+def _tagged(edge, *readings: int, slack: float = 0.0):
+    """``edge`` with the observation rows of its readings recorded (``Contractor.readings``, for the LP)."""
+    edge.readings = readings
+    edge.band_slack = slack
+    return edge
+
+
+def _lp_rounds(h, p: CuikParams, counter) -> bool:
+    """``lp_rounds`` × (the LP contractor on every bounded variable, then propagation); False when refuted."""
+    from slamcli.solvers.cuik.linear import lp_contract
+    from slamcli.solvers.cuik.propagate import propagate
+
+    every = list(range(len(h.edges)))
+    for _ in range(p.lp_rounds):
+        variables = [v for v, x in enumerate(h.box) if 10 * p.tol < x.diam() < float("inf")]
+        if not lp_contract(h.box, h.edges, variables, narrow_theta=p.narrow_theta):
+            return False
+        if not propagate(h.box, h.edges, h.adj, every, narrow_theta=p.narrow_theta, tol=p.tol, counter=counter):
+            return False
+    return True
+
+
 def _hull(h, p: CuikParams, n_poses: int, base: int, counter) -> bool:
     """The final branch-and-bound pass (``hull_leaves``) on one hypothesis; False when it is refuted."""
     from slamcli.solvers.cuik.propagate import hull_pass
@@ -439,8 +492,16 @@ def _hull(h, p: CuikParams, n_poses: int, base: int, counter) -> bool:
     # widths compared in metres: an angle times HULL_LEVER (a heading or turn error moves a point that far)
     scales = [HULL_LEVER if (v < 3 * n_poses and v % 3 == 2) or (3 * n_poses <= v < base and (v - 3 * n_poses) % 2)
               else 1.0 for v in split]
+    leaf_bound = None
+    if p.hull_lp:
+        from slamcli.solvers.cuik.linear import lp_end
+
+        def leaf_bound(leaf: list, target: int, side: int) -> float | None:
+            return lp_end(leaf, h.edges, target, side, narrow_theta=p.narrow_theta)
+
     return hull_pass(h.box, h.edges, h.adj, targets, split, scales, narrow_theta=p.narrow_theta, tol=p.tol,
-                     max_leaves=p.hull_leaves, min_width=HULL_MIN_WIDTH, counter=counter)
+                     max_leaves=p.hull_leaves, min_width=HULL_MIN_WIDTH, counter=counter,
+                     n_candidates=1 if p.hull_lp else 6, leaf_bound=leaf_bound)
 
 
 #: lever arm (m) that turns an angle width into a length for the hull pass's choice of split variable
