@@ -26,9 +26,11 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import scipy.sparse as sp
 
 from slamcli.errors import ConfigError
 from slamcli.models.observation import inverse_range_bearing
+from slamcli.models.potentials import observation_residual_jacobians
 from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import map_step as mp
@@ -85,6 +87,112 @@ def team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels) -> 
             "total": float(chain + obs + rd)}
 
 
+def _pose_columns(fp: np.ndarray) -> np.ndarray:
+    """Column of the first coordinate of every stacked pose ``(P,)`` in the team's joint vector
+    ``[robot 1: x_1..x_T, robot 2: x_1..x_T, …, m]``; ``-1`` for each robot's fixed x_0."""
+    cols = np.full(int(fp[-1]), -1, np.int64)
+    off = 0
+    for r in range(len(fp) - 1):
+        a, b = int(fp[r]), int(fp[r + 1])
+        cols[a + 1:b] = off + 3 * np.arange(b - a - 1)
+        off += 3 * (b - a - 1)
+    return cols
+
+
+def team_joint_residuals(inputs, W, probs, poses, landmarks, labels):
+    """Whitened residuals ``r`` (``‖r‖²`` = the team energy) and their sparse Jacobian over
+    ``[every robot's x_1..x_T (3 Σ T_r), m (2L)]``: each robot's chain and landmark terms
+    (:func:`slamcli.solvers.icm.energy.joint_residuals`, its columns moved to the robot's block) and the
+    inter-robot readings ``h⁻¹(x^i_t, z) − p(x^j_t)``."""
+    team, obs = inputs.robots, inputs.observations
+    fp = team.first_pose
+    pcol = _pose_columns(fp)
+    n_pose = 3 * int(sum(pr.T for pr in probs))
+    L = landmarks.shape[0]
+    rs, Js = [], []
+    for r, pr in enumerate(probs):
+        a, b = int(fp[r]), int(fp[r + 1])
+        lab = labels[int(obs.offsets[a]):int(obs.offsets[b])]
+        rr, Jr = en.joint_residuals(pr, W, poses[a:b], landmarks, lab)
+        Jr = Jr.tocoo()
+        own = Jr.col < 3 * pr.T
+        col = np.where(own, Jr.col + (pcol[a + 1] if b - a > 1 else 0), Jr.col - 3 * pr.T + n_pose)
+        rs.append(rr)
+        Js.append(sp.csr_matrix((Jr.data, (Jr.row, col)), shape=(Jr.shape[0], n_pose + 2 * L)))
+    K = len(team.range_m)
+    if K:
+        oi, oj = np.asarray(team.observer_pose), np.asarray(team.observed_pose)
+        e = inverse_range_bearing(poses[oi], team.z).reshape(-1, 2) - poses[oj, :2]
+        Jx, _ = observation_residual_jacobians(poses[oi], team.z)
+        sw = np.sqrt(np.asarray(W.Q, float))
+        rows = np.arange(2 * K).reshape(K, 2)
+        ri, ci, vi = [], [], []
+        for pose, Jb, d in ((oi, Jx, 3), (oj, np.broadcast_to(-np.eye(2), (K, 2, 2)), 2)):
+            ok = pcol[pose] >= 0
+            c = pcol[pose][ok, None] + np.arange(d)[None, :]
+            ri.append(np.repeat(rows[ok][:, :, None], d, 2).ravel())
+            ci.append(np.repeat(c[:, None, :], 2, 1).ravel())
+            vi.append((Jb[ok] * sw[None, :, None]).ravel())
+        rs.append((e * sw).ravel())
+        Js.append(sp.csr_matrix((np.concatenate(vi), (np.concatenate(ri), np.concatenate(ci))),
+                                shape=(2 * K, n_pose + 2 * L)))
+    return np.concatenate(rs), sp.vstack(Js).tocsr()
+
+
+def team_joint_refine(inputs, W, probs, team_prob, poses, landmarks, labels, *, max_iters: int, step_tol: float,
+                      max_halvings: int = 12):
+    """Joint Gauss-Newton steps over every robot's poses and the shared map with fixed matchings (the team's
+    ``accelerate=joint``; the same stopping rules as :func:`slamcli.solvers.icm.joint.joint_refine`), each step
+    accepted only if it lowers the team energy. Returns ``(poses, landmarks, steps, reason)``."""
+    from slamcli.solvers.icm.joint import RTOL
+
+    fp = inputs.robots.first_pose
+    pcol = _pose_columns(fp)
+    moving = pcol >= 0
+    L = landmarks.shape[0]
+
+    def total(p, m):
+        return team_energy_terms(inputs, W, probs, team_prob, p, m, labels)["total"]
+
+    f, steps, reason = total(poses, landmarks), 0, "max_iters"
+    for _ in range(max_iters):
+        r, J = team_joint_residuals(inputs, W, probs, poses, landmarks, labels)
+        try:
+            delta = en.solve_normal_sparse(J, r)
+        except (np.linalg.LinAlgError, RuntimeError, ValueError, MemoryError) as exc:
+            reason = f"error: {type(exc).__name__}"
+            break
+        if not np.all(np.isfinite(delta)):
+            reason = "error: non-finite step"
+            break
+        dp = delta[:-2 * L or None].reshape(-1, 3) if L else delta.reshape(-1, 3)
+        dm = delta[len(delta) - 2 * L:].reshape(L, 2)
+        alpha, accepted = 1.0, False
+        for _ in range(max_halvings):
+            p_new, m_new = poses.copy(), landmarks + alpha * dm
+            p_new[moving] += alpha * dp[(pcol[moving] // 3)]
+            p_new[:, 2] = (p_new[:, 2] + np.pi) % (2 * np.pi) - np.pi
+            f_new = total(p_new, m_new)
+            if f_new < f:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            reason = "rejected"
+            break
+        steps += 1
+        last = alpha * float(np.abs(delta).max(initial=0.0))
+        done_energy = f - f_new <= RTOL * max(abs(f), 1e-300)
+        poses, landmarks, f = p_new, m_new, f_new
+        if last < step_tol:
+            reason = "step"
+            break
+        if done_energy:
+            reason = "energy"
+            break
+    return poses, landmarks, steps, reason
+
+
 def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progress=None) -> SolverResult:
     """ICM on a multi-robot dataset (module docstring); ``solver`` is the :class:`IcmSlam` instance."""
     t_start = time.perf_counter()
@@ -93,7 +201,7 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
         (p.correspondences != "reported", "correspondences=reported"),
         (init is not None, "no --init"),
         (p.schedule != "sequential", "schedule=sequential"),
-        (p.accelerate != "none", "accelerate=none"),
+        (p.accelerate == "joint" and p.schedule != "sequential", "accelerate=joint with schedule=sequential"),
         (p.covariance, "covariance=false"),
         (len(inputs.gps_step) > 0, "no GPS fixes"),
     ]
@@ -134,10 +242,14 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
 
     # ---- step 2: sweeps: robot 1's poses, robot 2's, …, then the map ---------------------------------------
     status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
-    increases = 0
+    increases, joint_log = 0, []
     for n in range(1, p.max_sweeps + 1):
         t0 = time.perf_counter()
         E_start, prev = E, landmarks
+        if p.accelerate == "joint" and n % p.accelerate_every == 0:  # joint Gauss-Newton over the whole team
+            poses, landmarks, k, why = team_joint_refine(inputs, W, probs, team_prob, poses, landmarks, labels,
+                                                         max_iters=p.joint_iters, step_tol=p.joint_step_tol)
+            joint_log.append(f"{k}:{why}")
         stats_all = en.step_stats(team_prob, labels, landmarks)  # (14, P): landmark terms, stacked poses
         poses = poses.copy()
         for r in range(R):
@@ -176,6 +288,9 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
         "multi_robot": {"robots": [int(x) for x in team.robot_number], "readings": int(len(team.range_m))},
         "sweeps": K - 1,
         "energy_increases": increases,
+        "accelerate": p.accelerate,
+        "joint_refinements": joint_log,
+        "outlier_gate": "not implemented for teams" if p.outlier_sigma > 0 else "off",
         **{f"energy_{k}": v for k, v in terms.items()},
     }
     trace = IterationTrace.from_lists(objective, changes, times, lms,
