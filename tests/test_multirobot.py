@@ -490,3 +490,26 @@ def test_team_joint_steps_converge_to_the_least_squares_optimum():
         rm = team_joint_residuals(ds.inputs, W, probs, pm, xm[n_pose:].reshape(-1, 2), labels)[0]
         Jfd[:, k] = (rp - rm) / (2 * h)
     assert np.abs(J.toarray() - Jfd).max() < 1e-6 * max(1.0, np.abs(Jfd).max())
+
+
+def test_team_icm_verdict_follows_the_numbers():
+    from slamcli.reproduce.real_multi import team_icm_verdict
+
+    rows = [{"icm_joint": 0.12, "graph_joint": 0.11}, {"icm_joint": 0.10, "graph_joint": 0.11}]
+    assert "**met**" in team_icm_verdict(rows, "converged")  # 0.110 ≤ 1.1 · 0.110
+    assert "**not met** (it stopped at its sweep cap)" in team_icm_verdict(rows, "max_iterations")
+    rows[0]["icm_joint"] = 0.15  # mean 0.125 > 0.121
+    assert "**not met** (ATE too high)" in team_icm_verdict(rows, "converged")
+
+
+def test_team_null_matching_drops_a_misread_robot_reading():
+    """A reading moved 3 m along its beam (60 σ_r) takes the null value; the clean readings never do."""
+    ds = two_robot_world()
+    team = ds.inputs.robots
+    rng_m = np.array(team.range_m, float)
+    rng_m[2] += 3.0
+    bad = dataclasses.replace(ds.inputs, robots=dataclasses.replace(team, range_m=rng_m))
+    p = IcmParams(correspondences="reported", weights="information", outlier_sigma=7.0, accelerate="joint",
+                  accelerate_every=1, joint_iters=20, max_sweeps=30, trace_poses_every=0)
+    assert solve_dataset(bad, "icm", p).extra["readings_nulled"] == 1
+    assert solve_dataset(ds.inputs, "icm", p).extra["readings_nulled"] == 0
