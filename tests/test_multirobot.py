@@ -305,6 +305,16 @@ def _icm_reference(ds: Dataset, W):
     return fun, unpack, free
 
 
+def _reference_vector(res, ds, free):
+    """``(order, v)``: the reference's landmark row of each of ICM's labels, and ICM's result as the reference's
+    variable vector ``[free poses, landmarks by reported id]``."""
+    lm = np.empty((4, 2))
+    order = np.full(4, -1)
+    order[res.assoc] = ds.inputs.observations.reported_id
+    lm[order] = res.landmarks_xy
+    return order, np.concatenate([res.poses_xyt[free].ravel(), lm.ravel()])
+
+
 def test_joint_icm_reaches_the_minimum_of_its_energy():
     ds = two_robot_world()
     p = IcmParams(correspondences="reported", R=(1.0,), S=(4.0,), Q=(1.0,), max_sweeps=3000, energy_rtol=1e-13,
@@ -315,11 +325,7 @@ def test_joint_icm_reaches_the_minimum_of_its_energy():
     W = p.design_weights()
     fun, unpack, free = _icm_reference(ds, W)
     # the reported energy is the energy of the model equations at the result
-    lm = np.empty((4, 2))
-    order = np.full(4, -1)
-    order[res.assoc] = ds.inputs.observations.reported_id
-    lm[order] = res.landmarks_xy
-    v_icm = np.concatenate([res.poses_xyt[free].ravel(), lm.ravel()])
+    order, v_icm = _reference_vector(res, ds, free)
     assert res.extra["energy_total"] == pytest.approx(float(np.sum(fun(v_icm) ** 2)), rel=1e-10)
     ref = least_squares(fun, v_icm, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     E_min = float(np.sum(ref.fun**2))
@@ -453,11 +459,7 @@ def test_team_joint_steps_converge_to_the_least_squares_optimum():
     assert res.status.value == "converged" and res.extra["sweeps"] < 20
     W = p.design_weights()
     fun, unpack, free = _icm_reference(ds, W)
-    lm = np.empty((4, 2))
-    order = np.full(4, -1)
-    order[res.assoc] = ds.inputs.observations.reported_id
-    lm[order] = res.landmarks_xy
-    v_icm = np.concatenate([res.poses_xyt[free].ravel(), lm.ravel()])
+    order, v_icm = _reference_vector(res, ds, free)
     ref = least_squares(fun, v_icm, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     assert res.extra["energy_total"] <= float(np.sum(ref.fun**2)) * (1 + 1e-9)
     assert np.max(np.abs(res.poses_xyt - unpack(ref.x)[0])) < 1e-5

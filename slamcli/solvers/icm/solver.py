@@ -80,7 +80,9 @@ For long real runs (issue 22; separate options, default off, bundled as ``preset
 * ``joint_iters`` — with ``accelerate="joint"``, Gauss-Newton steps until the step or the decrease is negligible
   (:mod:`slamcli.solvers.icm.joint`);
 * ``merge`` — χ² label merge after each map step, never across labels seen in one scan; ``label_cost`` adds
-  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`).
+  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`);
+* ``outlier_sigma`` — with reported ids, a null matching at a constant cost for sightings more than k σ from their
+  id's map point (a truncated quadratic; :mod:`slamcli.solvers.icm.gate`).
 
 The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
 writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).

@@ -154,7 +154,7 @@ def team_joint_refine(inputs, W, probs, team_prob, poses, landmarks, labels, *, 
     """Joint Gauss-Newton steps over every robot's poses and the shared map with fixed matchings (the team's
     ``accelerate=joint``; the same stopping rules as :func:`slamcli.solvers.icm.joint.joint_refine`), each step
     accepted only if it lowers the team energy. Returns ``(poses, landmarks, steps, reason)``."""
-    from slamcli.solvers.icm.joint import RTOL
+    from slamcli.solvers.icm.joint import stop_reason
 
     fp = inputs.robots.first_pose
     pcol = _pose_columns(fp)
@@ -191,14 +191,10 @@ def team_joint_refine(inputs, W, probs, team_prob, poses, landmarks, labels, *, 
             reason = "rejected"
             break
         steps += 1
-        last = alpha * float(np.abs(delta).max(initial=0.0))
-        done_energy = f - f_new <= RTOL * max(abs(f), 1e-300)
+        why = stop_reason(f, f_new, alpha * float(np.abs(delta).max(initial=0.0)), step_tol)
         poses, landmarks, f = p_new, m_new, f_new
-        if last < step_tol:
-            reason = "step"
-            break
-        if done_energy:
-            reason = "energy"
+        if why:
+            reason = why
             break
     return poses, landmarks, steps, reason
 
