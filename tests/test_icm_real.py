@@ -253,7 +253,9 @@ def test_preset_real_rule_for_data_with_ids():
     inp, _ = _loop_with_ids_and_outliers(0, 0)
     p = IcmParams(preset="real")
     q = p.for_data(inp)
-    assert (q.correspondences, q.weights, q.outlier_sigma, q.max_sweeps) == ("reported", "information", 7.0, 30)
+    assert (q.correspondences, q.weights, q.outlier_sigma, q.max_sweeps, q.init) == (
+        "reported", "information", 7.0, 30, "online")
+    assert q.for_data(inp) is q  # the rule is applied once
     assert q.merge and q.accelerate == "joint"  # the rest of the preset is kept
     # without ids nothing changes; an explicit value wins; the paper default ignores the rule
     no_ids = dataclasses.replace(inp, observations=dataclasses.replace(

@@ -157,8 +157,9 @@ class IcmParams:
     merge_prob : float           χ² probability of the merge test (2 dof; 0.999 → 13.8).
     preset : "paper" | "real"    named setting (:mod:`slamcli.solvers.icm.presets`): "paper" = these defaults;
                                  "real" = accelerate=joint, accelerate_every=1, joint_iters=20, max_sweeps=5,
-                                 merge=true, weights=design; with sensor-reported ids also
-                                 correspondences=reported, weights=information, outlier_sigma=7, max_sweeps=30
+                                 merge=true, weights=design, init=gated, gate_prob=0.9999,
+                                 birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
+                                 init=online, weights=information, outlier_sigma=7, max_sweeps=30
                                  (each key still at its paper default takes the preset's value; other explicit
                                  values win).
     outlier_sigma : float        k > 0: an observation with a reported id whose residual exceeds k σ of the noise
@@ -271,7 +272,12 @@ class IcmParams:
         has_ids = bool(len(rid)) and bool(np.any(np.asarray(rid) >= 0))
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
         changes = apply_data_rule(self, defaults, has_ids)
-        return dataclasses.replace(self, **changes) if changes else self
+        if not changes:
+            return self
+        out = dataclasses.replace(self)  # a copy; the rule's values are set after __post_init__, which would
+        for key, value in changes.items():  # otherwise hand a key back to the preset (init=online is the default)
+            object.__setattr__(out, key, value)
+        return out
 
     def design_weights(self) -> en.Weights:
         """R, S, Q, K as given (``weights="design"``)."""
