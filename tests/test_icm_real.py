@@ -185,3 +185,82 @@ def test_gated_init_reported_ids_and_refusals():
     bad = dataclasses.replace(inp, noise=dataclasses.replace(inp.noise, motion_std=np.array([0.0, 0.1])))
     with pytest.raises(ValueError, match="noise.motion_std"):
         gated_init(prob, bad, gate_prob=0.99, birth_prob=0.9999)
+
+
+# ---- null matching behind a k σ gate (solvers/icm/gate.py) and preset=real's rule for data with ids ----------
+def test_null_cost_closed_form():
+    from types import SimpleNamespace
+
+    from slamcli.solvers.icm.gate import null_costs
+
+    prob = SimpleNamespace(z=np.array([[2.0, 0.1], [10.0, -0.3]]))
+    W = en.Weights.from_params((1.0,), (0.0,), (3.0, 5.0))
+    tau = null_costs(prob, W, 0.1, 0.02, 7.0)
+    # τ = k² · (σ_r² + r² σ_b²) / 2 · mean(Q): r = 2 → 49 · (0.01 + 0.0016) / 2 · 4; r = 10 → 49 · 0.05 / 2 · 4
+    assert tau == pytest.approx([49 * 0.0116 / 2 * 4, 49 * 0.05 / 2 * 4], rel=1e-14)
+
+
+def test_gate_labels_hand_built():
+    from slamcli.solvers.icm.gate import gate_labels, null_energy
+
+    lm = np.array([[0.0, 0.0], [5.0, 0.0]])
+    pts = np.array([[0.3, 0.4], [5.0, 1.1], [9.0, 9.0], [0.0, 0.9]])
+    cand = np.array([0, 1, -1, 0])
+    tau = np.full(4, 2.0)
+    # Q = diag(2, 2): costs 2·0.25 = 0.5 (keep), 2·1.21 = 2.42 (null), no candidate, 2·0.81 = 1.62 (keep)
+    lab = gate_labels(pts, cand, lm, (2.0, 2.0), tau)
+    assert lab.tolist() == [0, -1, -1, 0]
+    assert null_energy(lab, cand, tau) == 2.0  # only the nulled observation with a candidate pays τ
+
+
+def _loop_with_ids_and_outliers(seed: int, n_out: int):
+    """``loop`` with the true landmarks as sensor-reported ids and ``n_out`` sightings moved 3 m along their beam
+    (a misread: far beyond any noise), and the indices of the moved sightings."""
+    ds = simulate_scenario("loop", seed=seed)
+    inp = ds.inputs
+    obs = inp.observations
+    bad = np.random.default_rng(seed).choice(len(obs.range_m), n_out, replace=False)
+    rng_m = obs.range_m.copy()
+    rng_m[bad] += 3.0
+    obs = dataclasses.replace(obs, range_m=rng_m, reported_id=np.asarray(ds.truth.obs_landmark, np.int64).copy())
+    return dataclasses.replace(inp, observations=obs), np.sort(bad)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_outlier_gate_nulls_the_misreads_and_reaches_the_clean_optimum(seed):
+    """With a 7 σ gate ICM nulls exactly the planted misreads, and ends at the joint optimum of the energy
+    without them (the reference: joint Gauss-Newton to convergence on the clean labels, from ICM's end)."""
+    from slamcli.solvers.icm import IcmSlam
+    from slamcli.solvers.icm.common import reported_labels
+
+    inp, bad = _loop_with_ids_and_outliers(seed, 6)
+    p = IcmParams(correspondences="reported", weights="information", outlier_sigma=7.0, accelerate="joint",
+                  accelerate_every=1, joint_iters=20, max_sweeps=60, energy_rtol=1e-12)
+    res = IcmSlam(p).solve(inp, rng=np.random.default_rng(0))
+    lab = np.asarray(res.assoc)
+    assert np.flatnonzero(lab < 0).tolist() == bad.tolist()
+    clean = reported_labels(inp.observations.reported_id)
+    clean[bad] = -1
+    prob = en.Problem.from_inputs(inp)
+    W = en.information_weights(inp)
+    p_ref, m_ref, _, _ = en.map_energy_fixed_assoc(prob, W, np.asarray(res.poses_xyt), np.asarray(res.landmarks_xy),
+                                                   clean)
+    assert np.abs(np.asarray(res.poses_xyt)[:, :2] - p_ref[:, :2]).max() < 1e-3
+    assert np.abs(np.asarray(res.landmarks_xy) - m_ref).max() < 1e-3
+
+
+def test_preset_real_rule_for_data_with_ids():
+    inp, _ = _loop_with_ids_and_outliers(0, 0)
+    p = IcmParams(preset="real")
+    q = p.for_data(inp)
+    assert (q.correspondences, q.weights, q.outlier_sigma, q.max_sweeps, q.init) == (
+        "reported", "information", 7.0, 30, "online")
+    assert q.for_data(inp) is q  # the rule is applied once
+    assert q.merge and q.accelerate == "joint"  # the rest of the preset is kept
+    # without ids nothing changes; an explicit value wins; the paper default ignores the rule
+    no_ids = dataclasses.replace(inp, observations=dataclasses.replace(
+        inp.observations, reported_id=np.full(len(inp.observations.range_m), -1, np.int64)))
+    assert p.for_data(no_ids) is p
+    assert IcmParams(preset="real", max_sweeps=9).for_data(inp).max_sweeps == 9
+    assert IcmParams(preset="real", outlier_sigma=3.0).for_data(inp).outlier_sigma == 3.0
+    assert IcmParams().for_data(inp) == IcmParams()

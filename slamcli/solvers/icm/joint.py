@@ -62,12 +62,17 @@ def joint_refine(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, m
         dp[:, 2] = (dp[:, 2] + np.pi) % (2 * np.pi) - np.pi
         last = float(max(np.abs(dp).max(initial=0.0), np.abs(m_new - landmarks).max(initial=0.0)))
         steps += 1
-        done_energy = f - f_new <= RTOL * max(abs(f), 1e-300)
+        why = stop_reason(f, f_new, last, step_tol)
         poses, landmarks, f = p_new, m_new, f_new
-        if last < step_tol:
-            reason = "step"
-            break
-        if done_energy:
-            reason = "energy"
+        if why:
+            reason = why
             break
     return poses, landmarks, JointOutcome(steps, reason, last, f)
+
+
+def stop_reason(f: float, f_new: float, last_step: float, step_tol: float) -> str | None:
+    """Why a refinement stops after an accepted step from energy ``f`` to ``f_new`` whose largest component was
+    ``last_step``: ``"step"`` (below ``step_tol``), ``"energy"`` (relative decrease ≤ :data:`RTOL`) or None."""
+    if last_step < step_tol:
+        return "step"
+    return "energy" if f - f_new <= RTOL * max(abs(f), 1e-300) else None

@@ -80,7 +80,9 @@ For long real runs (issue 22; separate options, default off, bundled as ``preset
 * ``joint_iters`` — with ``accelerate="joint"``, Gauss-Newton steps until the step or the decrease is negligible
   (:mod:`slamcli.solvers.icm.joint`);
 * ``merge`` — χ² label merge after each map step, never across labels seen in one scan; ``label_cost`` adds
-  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`).
+  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`);
+* ``outlier_sigma`` — with reported ids, a null matching at a constant cost for sightings more than k σ from their
+  id's map point (a truncated quadratic; :mod:`slamcli.solvers.icm.gate`).
 
 The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
 writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).
@@ -97,13 +99,14 @@ import numpy as np
 
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.icm import energy as en
+from slamcli.solvers.icm import gate
 from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm import surface as surf
 from slamcli.solvers.icm.common import online_init, reported_labels, stop_decision
 from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
-from slamcli.solvers.icm.presets import apply_preset
+from slamcli.solvers.icm.presets import apply_data_rule, apply_preset
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -154,8 +157,15 @@ class IcmParams:
     merge_prob : float           χ² probability of the merge test (2 dof; 0.999 → 13.8).
     preset : "paper" | "real"    named setting (:mod:`slamcli.solvers.icm.presets`): "paper" = these defaults;
                                  "real" = accelerate=joint, accelerate_every=1, joint_iters=20, max_sweeps=5,
-                                 merge=true, weights=design (each key still at its paper default takes the
-                                 preset's value; other explicit values win).
+                                 merge=true, weights=design, init=gated, gate_prob=0.9999,
+                                 birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
+                                 init=online, weights=information, outlier_sigma=7, max_sweeps=30
+                                 (each key still at its paper default takes the preset's value; other explicit
+                                 values win).
+    outlier_sigma : float        k > 0: an observation with a reported id whose residual exceeds k σ of the noise
+                                 model takes the null matching at a constant cost (truncated quadratic,
+                                 :mod:`slamcli.solvers.icm.gate`); 0 = the paper's quadratic (default). Only with
+                                 correspondences=reported.
     label_cost : float           λ: cost per landmark added to the reported energy (``extra["energy_label_cost"]``,
                                  0 = the paper's Φ_m); with weights=information, merging by the χ² test is
                                  merging when it lowers H + λ·L for λ = χ²₂(merge_prob).
@@ -219,6 +229,7 @@ class IcmParams:
     merge: bool = False
     merge_prob: float = 0.999
     label_cost: float = 0.0
+    outlier_sigma: float = 0.0
     preset: Literal["paper", "real"] = "paper"
 
     def __post_init__(self) -> None:
@@ -239,6 +250,9 @@ class IcmParams:
             raise ValueError(f"energy_rtol must be >= 0, got {self.energy_rtol}")
         if not (self.range_offset >= 0 and math.isfinite(self.range_offset)):
             raise ValueError(f"range_offset must be a finite number >= 0, got {self.range_offset}")
+        if not (self.outlier_sigma >= 0 and math.isfinite(self.outlier_sigma)):
+            raise ValueError(f"outlier_sigma must be a finite number >= 0 (0 = no null matching), "
+                             f"got {self.outlier_sigma}")
         if not (0.0 < self.merge_prob < 1.0):
             raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
         for name in ("joint_step_tol", "label_cost"):
@@ -250,6 +264,20 @@ class IcmParams:
                              f"birth_prob={self.birth_prob}")
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
+
+    def for_data(self, inputs: SlamInputs) -> IcmParams:
+        """These parameters with the preset's rule for the dataset applied (``preset=real`` on data with
+        sensor-reported ids: :data:`slamcli.solvers.icm.presets.WITH_IDS`); ``self`` when nothing changes."""
+        rid = inputs.observations.reported_id
+        has_ids = bool(len(rid)) and bool(np.any(np.asarray(rid) >= 0))
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        changes = apply_data_rule(self, defaults, has_ids)
+        if not changes:
+            return self
+        out = dataclasses.replace(self)  # a copy; the rule's values are set after __post_init__, which would
+        for key, value in changes.items():  # otherwise hand a key back to the preset (init=online is the default)
+            object.__setattr__(out, key, value)
+        return out
 
     def design_weights(self) -> en.Weights:
         """R, S, Q, K as given (``weights="design"``)."""
@@ -322,6 +350,9 @@ class IcmSlam(BaseSolver):
         rng: np.random.Generator,
         progress: ProgressFn | None = None,
     ) -> SolverResult:
+        resolved = self.params.for_data(inputs)
+        if resolved is not self.params:  # the preset's rule for this dataset (presets.WITH_IDS)
+            return type(self)(resolved).solve(inputs, init=init, rng=rng, progress=progress)
         if inputs.robots is not None:
             return self._solve_team(inputs, init, progress)
         t_start = time.perf_counter()
@@ -338,6 +369,13 @@ class IcmSlam(BaseSolver):
                        "weights_used": {"R": list(W.R), "S": list(W.S), "Q": list(W.Q), "K": W.K},
                        "gps_fixes_used": int(prob.gps_step.size), "filtered": p.filtered}
         rematch = p.filtered == "rematch" and not reported
+        # null matching behind a gate (outlier_sigma > 0, reported ids only): τ_i per observation, or None
+        tau = (gate.null_costs(prob, W, inputs.noise.range_std, inputs.noise.bearing_std, p.outlier_sigma)
+               if reported and p.outlier_sigma > 0 else None)
+        extra["outlier_gate"] = p.outlier_sigma if tau is not None else "off"
+
+        def null_E(lab) -> float:
+            return 0.0 if tau is None else gate.null_energy(lab, fixed, tau)
         timings: dict = {}  # wall-clock numbers: SolverResult.timings, never extra (determinism)
 
         # ---- step 1: initialisation ----------------------------------------------------------------------
@@ -361,7 +399,7 @@ class IcmSlam(BaseSolver):
             if base_z is not None:  # the sweep's surface offsets / range bias, then its starting energy
                 prob, bias = surf.refresh(prob, base_z, rho, bias, p.range_bias == "estimate", W, poses,
                                           landmarks, labels)
-                E = en.energy(prob, W, poses, landmarks, labels)
+                E = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
             E_start = E
             prev_landmarks = landmarks
             # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i}), every observation in the model
@@ -369,6 +407,8 @@ class IcmSlam(BaseSolver):
                 pts = prob.landmark_points(poses)
                 labels = labels.copy()
                 labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
+            elif tau is not None and landmarks.shape[0]:  # c-step with the null value (solvers/icm/gate.py)
+                labels = gate.gate_labels(prob.landmark_points(poses), fixed, landmarks, W.Q, tau)
             if p.accelerate == "joint" and n % p.accelerate_every == 0:
                 poses, landmarks = self._joint_step(prob, W, poses, landmarks, labels, n, log)
             # x_1..x_T (eq. 14)
@@ -380,13 +420,13 @@ class IcmSlam(BaseSolver):
                                                 E_pose, E_start, log)
             # the energy over the observations in the model at the start of this sweep (the stopping rule's
             # comparison), then the model of the next sweep
-            lab_same = _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
-            E_same = E_pose + en.observation_energy(pts, lab_same, landmarks, W.Q)
+            lab_same = labels if reported else _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
+            E_same = E_pose + en.observation_energy(pts, lab_same, landmarks, W.Q) + null_E(lab_same)
             if rematch:
                 labels = lab_same
-            else:
+            elif not reported:  # reported ids: the model keeps every observation with an id (null or not)
                 in_model = labels >= 0
-            E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q)
+            E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q) + null_E(labels)
             log.record(n, E, mp.map_change(prev_landmarks, landmarks), time.perf_counter() - t0, landmarks, poses)
             if progress is not None:
                 progress(n, p.max_sweeps)
@@ -396,6 +436,8 @@ class IcmSlam(BaseSolver):
             elif decision == "converged":
                 status = Status.CONVERGED
                 break
+        if tau is not None:
+            extra.update(outliers_nulled=int(((fixed >= 0) & (labels < 0)).sum()), energy_null=null_E(labels))
         return self._finish(prob, W, status, poses, landmarks, labels, bias, log, extra, timings, t_start)
 
     # -- the steps of solve ----------------------------------------------------------------------------------

@@ -26,11 +26,14 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import scipy.sparse as sp
 
 from slamcli.errors import ConfigError
 from slamcli.models.observation import inverse_range_bearing
+from slamcli.models.potentials import observation_residual_jacobians
 from slamcli.solvers.frontend import compact_labels
 from slamcli.solvers.icm import energy as en
+from slamcli.solvers.icm import gate
 from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm.common import online_init, reported_labels, stop_decision
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status, solo_inputs
@@ -49,7 +52,7 @@ def _add_stats(out: np.ndarray, step: np.ndarray, v: np.ndarray, m: np.ndarray) 
         out[k] += np.bincount(step, weights=w, minlength=K)[:K]
 
 
-def reading_stats(inputs: SlamInputs, poses_xyt: np.ndarray, robot: int) -> np.ndarray:
+def reading_stats(inputs: SlamInputs, poses_xyt: np.ndarray, robot: int, active=None) -> np.ndarray:
     """Sufficient statistics ``(14, T_r+1)`` of the inter-robot reading terms that involve robot ``robot``'s
     poses, the other robots' poses held at ``poses_xyt`` (stacked)."""
     team = inputs.robots
@@ -57,49 +60,179 @@ def reading_stats(inputs: SlamInputs, poses_xyt: np.ndarray, robot: int) -> np.n
     a, b = int(fp[robot]), int(fp[robot + 1])
     out = np.zeros((14, b - a))
     oi, oj, z = np.asarray(team.observer_pose), np.asarray(team.observed_pose), team.z
-    mine = (oi >= a) & (oi < b)
+    act = np.ones(len(oi), bool) if active is None else active
+    mine = (oi >= a) & (oi < b) & act
     v = np.stack([z[mine, 0] * np.cos(z[mine, 1]), z[mine, 0] * np.sin(z[mine, 1])], -1)
     _add_stats(out, oi[mine] - a, v, poses_xyt[oj[mine], :2])
-    seen = (oj >= a) & (oj < b)
+    seen = (oj >= a) & (oj < b) & act
     y = inverse_range_bearing(poses_xyt[oi[seen]], z[seen]).reshape(-1, 2)
     _add_stats(out, oj[seen] - a, np.zeros_like(y), y)
     return out
 
 
-def reading_energy(inputs: SlamInputs, W: en.Weights, poses_xyt: np.ndarray) -> float:
-    """``Σ_k ‖h⁻¹(x_i, z_k) − p(x_j)‖²_Q`` over the inter-robot readings."""
+def reading_points(inputs: SlamInputs, poses_xyt: np.ndarray) -> np.ndarray:
+    """``h⁻¹(x_i, z_k) (K, 2)`` of every inter-robot reading."""
+    team = inputs.robots
+    return inverse_range_bearing(poses_xyt[team.observer_pose], team.z).reshape(-1, 2)
+
+
+def reading_energy(inputs: SlamInputs, W: en.Weights, poses_xyt: np.ndarray, active=None) -> float:
+    """``Σ_k ‖h⁻¹(x_i, z_k) − p(x_j)‖²_Q`` over the inter-robot readings (those in ``active``, default all)."""
     team = inputs.robots
     if team is None or not len(team.range_m):
         return 0.0
-    pts = inverse_range_bearing(poses_xyt[team.observer_pose], team.z).reshape(-1, 2)
-    return en.observation_energy(pts, np.arange(len(pts)), poses_xyt[team.observed_pose, :2], W.Q)
+    pts = reading_points(inputs, poses_xyt)
+    lab = np.arange(len(pts)) if active is None else np.where(active, np.arange(len(pts)), -1)
+    return en.observation_energy(pts, lab, poses_xyt[team.observed_pose, :2], W.Q)
 
 
-def team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels) -> dict[str, float]:
+def team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels, active=None) -> dict[str, float]:
     """``chain`` (motion + odometry of every robot), ``observation`` (shared map), ``robot_readings``, ``total``."""
     fp = inputs.robots.first_pose
     chain = sum(en.chain_energy(pr, W, poses[fp[r]:fp[r + 1]]) for r, pr in enumerate(probs))
     obs = en.observation_energy(team_prob.landmark_points(poses), labels, landmarks, W.Q)
-    rd = reading_energy(inputs, W, poses)
+    rd = reading_energy(inputs, W, poses, active)
     return {"chain": float(chain), "observation": float(obs), "robot_readings": float(rd),
             "total": float(chain + obs + rd)}
 
 
-def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progress=None) -> SolverResult:
-    """ICM on a multi-robot dataset (module docstring); ``solver`` is the :class:`IcmSlam` instance."""
-    t_start = time.perf_counter()
-    p = solver.params
+def _pose_columns(fp: np.ndarray) -> np.ndarray:
+    """Column of the first coordinate of every stacked pose ``(P,)`` in the team's joint vector
+    ``[robot 1: x_1..x_T, robot 2: x_1..x_T, …, m]``; ``-1`` for each robot's fixed x_0."""
+    cols = np.full(int(fp[-1]), -1, np.int64)
+    off = 0
+    for r in range(len(fp) - 1):
+        a, b = int(fp[r]), int(fp[r + 1])
+        cols[a + 1:b] = off + 3 * np.arange(b - a - 1)
+        off += 3 * (b - a - 1)
+    return cols
+
+
+def team_joint_residuals(inputs, W, probs, poses, landmarks, labels, active=None):
+    """Whitened residuals ``r`` (``‖r‖²`` = the team energy) and their sparse Jacobian over
+    ``[every robot's x_1..x_T (3 Σ T_r), m (2L)]``: each robot's chain and landmark terms
+    (:func:`slamcli.solvers.icm.energy.joint_residuals`, its columns moved to the robot's block) and the
+    inter-robot readings ``h⁻¹(x^i_t, z) − p(x^j_t)``."""
+    team, obs = inputs.robots, inputs.observations
+    fp = team.first_pose
+    pcol = _pose_columns(fp)
+    n_pose = 3 * int(sum(pr.T for pr in probs))
+    L = landmarks.shape[0]
+    rs, Js = [], []
+    for r, pr in enumerate(probs):
+        a, b = int(fp[r]), int(fp[r + 1])
+        lab = labels[int(obs.offsets[a]):int(obs.offsets[b])]
+        rr, Jr = en.joint_residuals(pr, W, poses[a:b], landmarks, lab)
+        Jr = Jr.tocoo()
+        own = Jr.col < 3 * pr.T
+        col = np.where(own, Jr.col + (pcol[a + 1] if b - a > 1 else 0), Jr.col - 3 * pr.T + n_pose)
+        rs.append(rr)
+        Js.append(sp.csr_matrix((Jr.data, (Jr.row, col)), shape=(Jr.shape[0], n_pose + 2 * L)))
+    act = np.ones(len(team.range_m), bool) if active is None else active
+    K = int(act.sum())
+    if K:
+        oi, oj, z = np.asarray(team.observer_pose)[act], np.asarray(team.observed_pose)[act], team.z[act]
+        e = inverse_range_bearing(poses[oi], z).reshape(-1, 2) - poses[oj, :2]
+        Jx, _ = observation_residual_jacobians(poses[oi], z)
+        sw = np.sqrt(np.asarray(W.Q, float))
+        rows = np.arange(2 * K).reshape(K, 2)
+        ri, ci, vi = [], [], []
+        for pose, Jb, d in ((oi, Jx, 3), (oj, np.broadcast_to(-np.eye(2), (K, 2, 2)), 2)):
+            ok = pcol[pose] >= 0
+            c = pcol[pose][ok, None] + np.arange(d)[None, :]
+            ri.append(np.repeat(rows[ok][:, :, None], d, 2).ravel())
+            ci.append(np.repeat(c[:, None, :], 2, 1).ravel())
+            vi.append((Jb[ok] * sw[None, :, None]).ravel())
+        rs.append((e * sw).ravel())
+        Js.append(sp.csr_matrix((np.concatenate(vi), (np.concatenate(ri), np.concatenate(ci))),
+                                shape=(2 * K, n_pose + 2 * L)))
+    return np.concatenate(rs), sp.vstack(Js).tocsr()
+
+
+def team_joint_refine(inputs, W, probs, team_prob, poses, landmarks, labels, *, max_iters: int, step_tol: float,
+                      max_halvings: int = 12, active=None):
+    """Joint Gauss-Newton steps over every robot's poses and the shared map with fixed matchings (the team's
+    ``accelerate=joint``; the same stopping rules as :func:`slamcli.solvers.icm.joint.joint_refine`), each step
+    accepted only if it lowers the team energy. Returns ``(poses, landmarks, steps, reason)``."""
+    from slamcli.solvers.icm.joint import stop_reason
+
+    fp = inputs.robots.first_pose
+    pcol = _pose_columns(fp)
+    moving = pcol >= 0
+    L = landmarks.shape[0]
+
+    def total(p, m):
+        return team_energy_terms(inputs, W, probs, team_prob, p, m, labels, active)["total"]
+
+    f, steps, reason = total(poses, landmarks), 0, "max_iters"
+    for _ in range(max_iters):
+        r, J = team_joint_residuals(inputs, W, probs, poses, landmarks, labels, active)
+        try:
+            delta = en.solve_normal_sparse(J, r)
+        except (np.linalg.LinAlgError, RuntimeError, ValueError, MemoryError) as exc:
+            reason = f"error: {type(exc).__name__}"
+            break
+        if not np.all(np.isfinite(delta)):
+            reason = "error: non-finite step"
+            break
+        dp = delta[:-2 * L or None].reshape(-1, 3) if L else delta.reshape(-1, 3)
+        dm = delta[len(delta) - 2 * L:].reshape(L, 2)
+        alpha, accepted = 1.0, False
+        for _ in range(max_halvings):
+            p_new, m_new = poses.copy(), landmarks + alpha * dm
+            p_new[moving] += alpha * dp[(pcol[moving] // 3)]
+            p_new[:, 2] = (p_new[:, 2] + np.pi) % (2 * np.pi) - np.pi
+            f_new = total(p_new, m_new)
+            if f_new < f:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            reason = "rejected"
+            break
+        steps += 1
+        why = stop_reason(f, f_new, alpha * float(np.abs(delta).max(initial=0.0)), step_tol)
+        poses, landmarks, f = p_new, m_new, f_new
+        if why:
+            reason = why
+            break
+    return poses, landmarks, steps, reason
+
+
+def _refuse_unsupported(p, inputs: SlamInputs, init) -> None:
+    """One-line :class:`ConfigError` naming every setting a team solve needs and does not have."""
     unsupported = [
         (p.correspondences != "reported", "correspondences=reported"),
         (init is not None, "no --init"),
         (p.schedule != "sequential", "schedule=sequential"),
-        (p.accelerate != "none", "accelerate=none"),
         (p.covariance, "covariance=false"),
         (len(inputs.gps_step) > 0, "no GPS fixes"),
     ]
     needs = [what for bad, what in unsupported if bad]
     if needs:
         raise ConfigError(f"icm: multi-robot data needs {', '.join(needs)}")
+
+
+def _gated_c_step(inputs, team_prob, W, poses, fixed, landmarks, tau, tau_rd):
+    """The c-step with the null value (:mod:`slamcli.solvers.icm.gate`): the landmark labels and the mask of the
+    inter-robot readings kept (``‖h⁻¹(x_i, z) − p(x_j)‖²_Q ≤ τ``)."""
+    labels = gate.gate_labels(team_prob.landmark_points(poses), fixed, landmarks, W.Q, tau)
+    d = reading_points(inputs, poses) - poses[np.asarray(inputs.robots.observed_pose), :2]
+    return labels, W.Q[0] * d[:, 0] ** 2 + W.Q[1] * d[:, 1] ** 2 <= tau_rd
+
+
+def _reading_problem(inputs):
+    """A stand-in with the readings' ``z`` (what :func:`slamcli.solvers.icm.gate.null_costs` reads)."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(z=np.asarray(inputs.robots.z, float).reshape(-1, 2))
+
+
+def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progress=None) -> SolverResult:
+    """ICM on a multi-robot dataset (module docstring); ``solver`` is the :class:`IcmSlam` instance."""
+    t_start = time.perf_counter()
+    p = solver.params
+    _refuse_unsupported(p, inputs, init)
     try:
         W = p.weights_for(inputs)
     except ValueError as exc:
@@ -115,6 +248,19 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
         raise ConfigError("icm: correspondences=reported needs sensor-reported ids, the dataset has none")
     L = int(labels.max()) + 1 if labels.size and labels.max() >= 0 else 0
     obs = inputs.observations
+    fixed = labels  # the ids; with outlier_sigma > 0 each sweep's c-step may null some (solvers/icm/gate.py)
+    tau = (gate.null_costs(team_prob, W, inputs.noise.range_std, inputs.noise.bearing_std, p.outlier_sigma)
+           if p.outlier_sigma > 0 else None)
+
+    # the inter-robot readings get the same null value (τ from their own ranges); None = all active
+    tau_rd = (gate.null_costs(_reading_problem(inputs), W, inputs.noise.range_std, inputs.noise.bearing_std,
+                              p.outlier_sigma) if tau is not None else None)
+    active = None
+
+    def null_E(lab) -> float:
+        if tau is None:
+            return 0.0
+        return gate.null_energy(lab, fixed, tau) + (0.0 if active is None else float(tau_rd[~active].sum()))
 
     # ---- step 1: each robot's on-line initialisation (its own data only), then the shared map ---------------
     t0 = time.perf_counter()
@@ -134,21 +280,27 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
 
     # ---- step 2: sweeps: robot 1's poses, robot 2's, …, then the map ---------------------------------------
     status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
-    increases = 0
+    increases, joint_log = 0, []
     for n in range(1, p.max_sweeps + 1):
         t0 = time.perf_counter()
         E_start, prev = E, landmarks
+        if tau is not None and landmarks.shape[0]:  # c-step with the null value
+            labels, active = _gated_c_step(inputs, team_prob, W, poses, fixed, landmarks, tau, tau_rd)
+        if p.accelerate == "joint" and n % p.accelerate_every == 0:  # joint Gauss-Newton over the whole team
+            poses, landmarks, k, why = team_joint_refine(inputs, W, probs, team_prob, poses, landmarks, labels,
+                                                         max_iters=p.joint_iters, step_tol=p.joint_step_tol, active=active)
+            joint_log.append(f"{k}:{why}")
         stats_all = en.step_stats(team_prob, labels, landmarks)  # (14, P): landmark terms, stacked poses
         poses = poses.copy()
         for r in range(R):
             a, b = int(fp[r]), int(fp[r + 1])
-            st = stats_all[:, a:b] + reading_stats(inputs, poses, r)  # the other robots at their current poses
+            st = stats_all[:, a:b] + reading_stats(inputs, poses, r, active)  # the other robots at their current poses
             pr = poses[a:b].copy()
             en.sweep_poses_sequential(probs[r], W, pr, st, p.pose_iters)
             poses[a:b] = pr
         means, cnt = mp.label_means(team_prob.landmark_points(poses), labels, L)
         landmarks = np.where(cnt[:, None] > 0, means, landmarks)  # eq. (17)
-        E = team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels)["total"]
+        E = team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels, active)["total"] + null_E(labels)
         objective.append(E)
         changes.append(mp.map_change(prev, landmarks))
         times.append(time.perf_counter() - t0)
@@ -168,7 +320,7 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
     if every and pose_iters[-1] != K - 1:
         pose_iters.append(K - 1)
         pose_snaps.append(poses.copy())
-    terms = team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels)
+    terms = team_energy_terms(inputs, W, probs, team_prob, poses, landmarks, labels, active)
     extra = {
         "weights": p.weights,
         "weights_used": {"R": list(W.R), "S": list(W.S), "Q": list(W.Q), "K": W.K},
@@ -176,6 +328,12 @@ def solve_team(solver, inputs: SlamInputs, *, init: SolverResult | None, progres
         "multi_robot": {"robots": [int(x) for x in team.robot_number], "readings": int(len(team.range_m))},
         "sweeps": K - 1,
         "energy_increases": increases,
+        "accelerate": p.accelerate,
+        "joint_refinements": joint_log,
+        "outlier_gate": p.outlier_sigma if tau is not None else "off",
+        "outliers_nulled": int(((fixed >= 0) & (labels < 0)).sum()),
+        "energy_null": null_E(labels),
+        "readings_nulled": 0 if active is None else int((~active).sum()),
         **{f"energy_{k}": v for k, v in terms.items()},
     }
     trace = IterationTrace.from_lists(objective, changes, times, lms,
