@@ -300,6 +300,17 @@ def _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts=None) -> np.n
     return out
 
 
+def _not_converged_note(objective, rtol: float) -> str:
+    """Why a run that hit ``max_sweeps`` is not ``converged``: the last sweep's relative energy decrease
+    against the stopping rule's ``energy_rtol``, and the two ways on (ICM's Gauss-Seidel sweeps move a long
+    chain slowly; joint Gauss-Newton steps reach the same optimum in a few sweeps)."""
+    if len(objective) < 2:
+        return ""
+    drop = (objective[-2] - objective[-1]) / max(abs(objective[-2]), 1e-300)
+    return (f"; not converged: the last sweep lowered the energy by {drop:.2g} (relative; energy_rtol "
+            f"{rtol:g}) — raise -p max_sweeps or add -p accelerate=joint")
+
+
 @dataclasses.dataclass
 class _SweepLog:
     """What :meth:`IcmSlam.solve` records per iteration (the :class:`~slamcli.types.IterationTrace` lists, the
@@ -606,6 +617,7 @@ class IcmSlam(BaseSolver):
             t_start=t_start,
             message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}"
             + (f"; energy rose in {increases} sweep(s)" if increases else "")
+            + (_not_converged_note(objective, p.energy_rtol) if status == Status.MAX_ITERATIONS else "")
             + (f"; joint step failed: {joint_errors[0]}" if joint_errors else "")
             + cov_note,
             pose_cov=pose_cov,
