@@ -125,3 +125,18 @@ def test_nees_band_matches_chi2_quantiles_and_setting_lists_eq19():
     assert lo == pytest.approx(chi2.ppf(0.025, 60) / 20) and hi == pytest.approx(chi2.ppf(0.975, 60) / 20)
     assert 2.0 < lo < 3 < hi < 4.2  # the mean of 20 χ²(3) draws: 3 ± 1.96·√(6/20) ≈ [1.93, 4.07], skewed right
     assert any("eq. 19" in d for d in DEVIATIONS) and any("10×" in d for d in DEVIATIONS)
+
+
+def test_first_wrong_association_step():
+    from types import SimpleNamespace as NS
+
+    from slamcli.reproduce.paper001 import first_wrong_step
+
+    def m(assoc, truth, steps):
+        return {"res": NS(assoc=np.array(assoc)), "ds": NS(truth=NS(obs_landmark=np.array(truth)),
+                                                          inputs=NS(observations=NS(step=np.array(steps))))}
+
+    # rows: feature 4 → landmark 0, feature 7 → landmark 1, discarded row, then feature 7 into landmark 0 at step 3
+    assert first_wrong_step(m([0, 1, -1, 0], [4, 7, 4, 7], [0, 1, 2, 3])) == 3
+    assert first_wrong_step(m([0, 1, 0], [4, 7, 4], [0, 1, 2])) is None
+    assert first_wrong_step(m([0, 0], [4, -1], [0, 5])) == 5  # a false return fused into a landmark

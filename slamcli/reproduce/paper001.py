@@ -498,8 +498,22 @@ def _association_rows(studied: list[tuple[Run, dict]]) -> list[dict]:
                      "error": float(m["frequentist_final"]["mean_abs_error"]),
                      "error_known": float(k["frequentist_final"]["mean_abs_error"]),
                      "pos_err": m["pos_err_mean"], "pos_err_known": k["pos_err_mean"],
-                     "n_landmarks": int(len(m["res"].landmarks_xy))})
+                     "n_landmarks": int(len(m["res"].landmarks_xy)), "first_wrong_step": first_wrong_step(m)})
     return rows
+
+
+def first_wrong_step(m: dict) -> int | None:
+    """The first step at which a row is fused into a landmark that earlier rows of another true feature built
+    (or a false return is fused into one), from the result's row association and the truth's (a metric)."""
+    assoc = np.asarray(m["res"].assoc, np.int64)
+    truth = np.asarray(m["ds"].truth.obs_landmark, np.int64)
+    steps = np.asarray(m["ds"].inputs.observations.step, np.int64)
+    owner: dict[int, int] = {}
+    for i in np.flatnonzero(assoc >= 0):
+        j = int(assoc[i])
+        if owner.setdefault(j, int(truth[i])) != truth[i] or truth[i] < 0:
+            return int(steps[i])
+    return None
 
 
 def _complexity_pairs() -> tuple[list[tuple[float, float]] | None, list[dict] | None]:
@@ -581,9 +595,10 @@ def _study_lines(studied: list, results: list, mc: list[dict], assoc: list[dict]
     """Tables of the association runs, the ablation and 10× runs, the NEES Monte-Carlo and the stored
     complexity table."""
     lines = ["", "### Claim studies", "", "| run | steps | final per-cell err (freq.) | EKF mean pos err (m) | "
-             "EKF landmarks | solve CPU (s) |", "|---|---|---|---|---|---|"]
+             "EKF landmarks | first wrong association (step) | solve CPU (s) |", "|---|---|---|---|---|---|---|"]
     lines += [f"| {r.label} | {m['n_steps']} | {_fmt(m['frequentist_final']['mean_abs_error'])} | "
-              f"{_fmt(m['pos_err_mean'])} | {len(m['res'].landmarks_xy)} | {m['cpu_time_s']:.0f} |" for r, m in studied]
+              f"{_fmt(m['pos_err_mean'])} | {len(m['res'].landmarks_xy)} | {_wrong(m) if r.study == 'association' else ''} | "
+              f"{m['cpu_time_s']:.0f} |" for r, m in studied]
     base = {(r.map_no, r.sensor): m for r, m in results if not r.study and "posts" not in r.label}
     for r, m in studied:
         if r.study in ("ablation", "stabilising") and (r.map_no, r.sensor) in base:
@@ -604,6 +619,14 @@ def _study_lines(studied: list, results: list, mc: list[dict], assoc: list[dict]
                   "|---|---|---|"]
         lines += [f"| {r['world']} | {r['grid_cells']:.0f} | {_fmt(r['cpu_ms_per_map_step'])} |" for r in cx_rows]
     return lines + [""]
+
+
+def _wrong(m: dict) -> str:
+    t = first_wrong_step(m)
+    if t is None:
+        return "none"
+    err = m["pose"]["err_theta"].to_numpy()
+    return f"{t} (heading error there {abs(float(err[t])):.2f} rad)"
 
 
 def _run_studies(out: Path, quick: bool, results: list, report) -> tuple[list[str], dict, bool]:
