@@ -139,4 +139,5 @@ def test_first_wrong_association_step():
     # rows: feature 4 → landmark 0, feature 7 → landmark 1, discarded row, then feature 7 into landmark 0 at step 3
     assert first_wrong_step(m([0, 1, -1, 0], [4, 7, 4, 7], [0, 1, 2, 3])) == 3
     assert first_wrong_step(m([0, 1, 0], [4, 7, 4], [0, 1, 2])) is None
-    assert first_wrong_step(m([0, 0], [4, -1], [0, 5])) == 5  # a false return fused into a landmark
+    assert first_wrong_step(m([0, 0], [4, -1], [0, 5])) == 5  # a false return fused into a feature's landmark
+    assert first_wrong_step(m([0, 1], [4, -1], [0, 5])) is None  # a false return's own (spurious) landmark

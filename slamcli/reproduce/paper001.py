@@ -10,6 +10,12 @@ Two sections, so that the long Map 4 run comes last in ``make reproduce`` and ca
 ``run_section_map4`` (key ``paper001-map4``) — Map 4 with the laser, 2 laps, as the paper. Quick mode: a small
 Map 1 (40 m square, 8 m corridor, 1 m cells, 60 beams) with both sensors, and the first 120 steps of Map 4 —
 smoke checks, named as such. Each section states every run's wall and CPU time.
+
+The ``paper001`` section then runs the claim studies (:func:`study_runs`, :func:`consistency_study`,
+:func:`plateau_study`; helpers in :mod:`slamcli.reproduce.paper001_studies`) and feeds their numbers to
+:func:`claim_verdicts`: association faults (1 lap per map), the 20-seed NEES Monte-Carlo (quick: 5 seeds on the
+small map, not judged), the plain-likelihood ablation, the paper's 10× stabilising noise, the noisy plateau and
+the stored complexity table.
 """
 
 from __future__ import annotations
@@ -463,16 +469,20 @@ def consistency_study(out: Path, quick: bool) -> list[dict]:
     """:func:`nees_summary` per :func:`_mc_configs` entry over 20 seeds (quick: 5), cached in
     ``out/nees_mc.csv`` (a configuration already there with the same seed count is not run again)."""
     import csv
+    import io
 
     n_seeds = 5 if quick else NEES_MIN_SEEDS
     path = out / "nees_mc.csv"
     cached = {}
     if path.is_file():
-        with open(path, newline="") as fh:
-            for r in csv.DictReader(fh):
-                cached[(r["label"], int(r["n_seeds"]))] = {k: (r[k] if k == "label" else
-                                                               int(r[k]) if k == "n_seeds" else float(r[k]))
-                                                           for k in r}
+        try:
+            with open(path, newline="") as fh:
+                for r in csv.DictReader(fh):
+                    cached[(r["label"], int(r["n_seeds"]))] = {k: (r[k] if k == "label" else
+                                                                   int(r[k]) if k == "n_seeds" else float(r[k]))
+                                                               for k in r}
+        except (ValueError, KeyError, TypeError):  # an unreadable cache is simply recomputed
+            cached = {}
     rows = []
     for label, scen, ov, par in _mc_configs(quick):
         row = cached.get((label, n_seeds))
@@ -481,9 +491,11 @@ def consistency_study(out: Path, quick: bool) -> list[dict]:
         rows.append(row)
     from slamcli.io.atomic import write_bytes_atomic
 
-    keys = list(rows[0])
-    text = ",".join(keys) + "\n" + "".join(",".join(str(r[k]) for k in keys) + "\n" for r in rows)
-    write_bytes_atomic(path, text.encode())
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    write_bytes_atomic(path, buf.getvalue().encode())
     return rows
 
 
@@ -503,15 +515,15 @@ def _association_rows(studied: list[tuple[Run, dict]]) -> list[dict]:
 
 
 def first_wrong_step(m: dict) -> int | None:
-    """The first step at which a row is fused into a landmark that earlier rows of another true feature built
-    (or a false return is fused into one), from the result's row association and the truth's (a metric)."""
+    """The first step at which a row is fused into a landmark that rows of another source built (another true
+    feature, or a false return: id −1), from the result's row association and the truth's (a metric)."""
     assoc = np.asarray(m["res"].assoc, np.int64)
     truth = np.asarray(m["ds"].truth.obs_landmark, np.int64)
     steps = np.asarray(m["ds"].inputs.observations.step, np.int64)
     owner: dict[int, int] = {}
     for i in np.flatnonzero(assoc >= 0):
         j = int(assoc[i])
-        if owner.setdefault(j, int(truth[i])) != truth[i] or truth[i] < 0:
+        if owner.setdefault(j, int(truth[i])) != truth[i]:
             return int(steps[i])
     return None
 

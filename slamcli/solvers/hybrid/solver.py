@@ -82,7 +82,7 @@ class HybridParams:
                                 points spread so wide that the scan likelihood often prefers an off-mean sample
                                 (measured on hybrid-map1 with 1 m cells, 90 beams and free_margin 1.5 m: final
                                 per-cell error 0.196 with 10, 0.029 with 3) — hence the default 3 (the
-                                reproduce section lists it among the deviations; it does not run 10).
+                                reproduce section lists it among the deviations and runs 10 beside it).
     motion_std_scale : float    EKF factor on the process noise.
     feature_sensor, scan_sensor : int   sensor indices of the feature rows and the scan rows.
     association : "auto" | "known" | "ml"   EKF data association of the feature rows: the reported ids (paper
