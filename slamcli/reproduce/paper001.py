@@ -587,14 +587,19 @@ def _plateau_lines(pl: dict) -> list[str]:
              "|---|" + "---|" * pl["laps"]]
     lines += [f"| {k} | " + " | ".join(_fmt(float(x), 3) for x in v) + " |" for k, v in e.items()]
     run = e["EKF belief, 7 weighted sigma points (the run)"]
-    true = e["true poses"]
+    mean, true = e["EKF mean only"], e["true poses"]
     nob = e["true poses, scan bearing σ = 0"]
-    flat = plateaued
-    cause = ("the sensor: with the true poses the error stays flat too" if flat(true) else
-             "the belief: with the true poses the error keeps falling") if len(true) >= 2 else "not judged (one lap)"
-    lines += ["", f"- Plateau ({'flat' if flat(run) else 'falling'} in the run: {_fmt(run[0])} → {_fmt(run[-1])}): "
-              f"cause measured as **{cause}** ({_fmt(true[0])} → {_fmt(true[-1])}); without the scan's bearing noise "
-              f"{_fmt(nob[0])} → {_fmt(nob[-1])}.",
+    if len(true) < 2:
+        return lines + ["", "- One lap only: the plateau cannot be judged.", ""]
+    lines += ["", f"- The run: {_fmt(run[0])} → {_fmt(run[-1])} ("
+              + ("a plateau" if plateaued(run) else "still falling") + f"); with the true poses: {_fmt(true[0])} → "
+              f"{_fmt(true[-1])} (" + ("flat after lap 1: the floor of E2 with this sensor" if plateaued(true)
+                                      else "still falling") + ").",
+              f"- Of the run's final error {_fmt(run[-1])}: {_fmt(true[-1])} remains with the true poses (the sensor), "
+              f"{_fmt(mean[-1] - true[-1])} comes with the EKF mean's pose error, and {_fmt(run[-1] - mean[-1])} with "
+              "spreading each scan over the 7 weighted sigma points instead of the mean.",
+              f"- Without the scan's bearing noise the floor is {_fmt(nob[-1])} (true poses): the bearing noise "
+              f"accounts for {_fmt(true[-1] - nob[-1])} of it.",
               f"- The noisy sensor's range σ at {pl['max_range']:g} m with its bearing error folded in: "
               f"√(σ_r² + (r σ_θ)²) = √({pl['range_std']:g}² + ({pl['max_range']:g}·{pl['bearing_std']:.4g})²) = "
               f"{pl['sigma_eff']:.3f} m against {pl['resolution']:g} m cells "
