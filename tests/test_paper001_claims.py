@@ -141,3 +141,12 @@ def test_first_wrong_association_step():
     assert first_wrong_step(m([0, 1, 0], [4, 7, 4], [0, 1, 2])) is None
     assert first_wrong_step(m([0, 0], [4, -1], [0, 5])) == 5  # a false return fused into a feature's landmark
     assert first_wrong_step(m([0, 1], [4, -1], [0, 5])) is None  # a false return's own (spurious) landmark
+
+
+@pytest.mark.parametrize("scale, outcome", [(1.0, "does NOT hold here"), (3.0, "holds here.")])
+def test_unstabilised_filter_sentence_follows_the_monte_carlo(scale, outcome):
+    from slamcli.reproduce.paper001 import _study_lines
+
+    mc = [nees_summary(_nees(scale, 20, seed=k), f"Map {k} laser, 1×") for k in (1, 2)]
+    text = "\n".join(_study_lines([], [], mc, [], None))
+    assert outcome in text and f"optimistic in {2 if scale > 1 else 0} of 2" in text

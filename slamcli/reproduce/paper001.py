@@ -631,6 +631,13 @@ def _study_lines(studied: list, results: list, mc: list[dict], assoc: list[dict]
               "class |", "|---|---|---|---|---|---|---|"]
     lines += [f"| {c['label']} | {c['n_seeds']} | {_fmt(c['anees_mean'])} | {100 * c['inside']:.0f} % | "
               f"{100 * c['above']:.0f} % | {100 * c['below']:.0f} % | {nees_class(c)} |" for c in mc]
+    bare = [c for c in mc if c["label"].endswith(" 1×") and nees_class(c) != "not judged"]
+    if bare:
+        over = [c["label"] for c in bare if nees_class(c) == "optimistic"]
+        lines.append(f"- Without stabilising noise (1×) the filter is optimistic in {len(over)} of {len(bare)} "
+                     "configurations: the paper's \"otherwise the filter rapidly becomes overconfident\" "
+                     + ("holds here." if len(over) == len(bare) else "holds in part here." if over
+                        else "does NOT hold here (with reported ids)."))
     if cx_rows:
         lines += ["", f"Stored complexity results (`{COMPLEXITY_CSV.as_posix()}`, `python -m benchmarks hybrid`: CPU "
                   "time per mapping step, single-threaded):", "", "| world | grid cells | CPU ms / step |",
