@@ -617,6 +617,7 @@ def _study_lines(studied: list, results: list, mc: list[dict], assoc: list[dict]
     lines += [f"| {r.label} | {m['n_steps']} | {_fmt(m['frequentist_final']['mean_abs_error'])} | "
               f"{_fmt(m['pos_err_mean'])} | {len(m['res'].landmarks_xy)} | {_wrong(m) if r.study == 'association' else ''} | "
               f"{m['cpu_time_s']:.0f} |" for r, m in studied]
+    lines.append("")
     base = {(r.map_no, r.sensor): m for r, m in results if not r.study and "posts" not in r.label}
     for r, m in studied:
         if r.study in ("ablation", "stabilising") and (r.map_no, r.sensor) in base:
@@ -631,6 +632,7 @@ def _study_lines(studied: list, results: list, mc: list[dict], assoc: list[dict]
               "class |", "|---|---|---|---|---|---|---|"]
     lines += [f"| {c['label']} | {c['n_seeds']} | {_fmt(c['anees_mean'])} | {100 * c['inside']:.0f} % | "
               f"{100 * c['above']:.0f} % | {100 * c['below']:.0f} % | {nees_class(c)} |" for c in mc]
+    lines.append("")
     bare = [c for c in mc if c["label"].endswith(" 1×") and nees_class(c) != "not judged"]
     if bare:
         over = [c["label"] for c in bare if nees_class(c) == "optimistic"]
