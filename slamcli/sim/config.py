@@ -417,6 +417,10 @@ class WallsConfig:
     laps : int                  laps of the route; > 0 sets the run length (``n_steps`` is then ignored:
                                 the run ends when the robot is back at the start for the ``laps``-th time).
     max_cells : int             refuse grids with more cells (memory guard).
+    wrong_id_prob : float       probability that a feature row reports the id of another feature (drawn
+                                uniformly among the others) instead of its own — a data-association fault;
+                                the truth keeps the row's real feature. Clutter (``clutter.rate``) adds false
+                                feature rows with id −1.
     """
 
     layout: Literal["none", "ladder"] = "none"
@@ -431,8 +435,10 @@ class WallsConfig:
     grid_margin: float = 2.0
     laps: int = 3
     max_cells: int = 50_000_000
+    wrong_id_prob: float = 0.0
 
     def __post_init__(self) -> None:
+        _check(0.0 <= self.wrong_id_prob <= 1.0, "walls.wrong_id_prob must be in [0, 1]")
         _check(self.width > 0 and self.height > 0 and self.corridor > 0, "walls: width, height, corridor must be > 0")
         _check(self.block_rows >= 1 and self.block_cols >= 1, "walls: block_rows and block_cols must be >= 1")
         _check(self.width - (self.block_cols + 1) * self.corridor > 0

@@ -4,6 +4,9 @@ Observation table of the dataset:
 
 * sensor 0 — range-bearing observations of the features (corners / mid-points / posts) in range, field of
   view and line of sight, with their identity reported (``reported_id``), noise σ_r, σ_θ of the sensor;
+  plus ``clutter.rate`` false returns per step (id −1, no line-of-sight test) and, with probability
+  ``walls.wrong_id_prob`` per true row, the id of another feature reported instead of its own (both drawn
+  from the *clutter* stream, the wrong ids after the false returns; the truth keeps the real feature);
 * sensor 1 — the scan: ``sensor.n_beams`` beams at the nominal bearings, ranges from :mod:`sim.raycast`
   against the walls (beam direction perturbed by σ_θ, range noise σ_r); a beam without a wall within
   ``max_range`` reads exactly ``max_range`` (the row is kept: it says "free up to max range").
@@ -21,7 +24,7 @@ import numpy as np
 
 from slamcli.sim import raycast, robot, sensors, walls
 from slamcli.sim.assemble import simulated_inputs, simulated_metadata
-from slamcli.sim.config import ClutterConfig, ScenarioConfig
+from slamcli.sim.config import ScenarioConfig
 from slamcli.sim.streams import stream
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, OccupancyGrid
 
@@ -44,6 +47,19 @@ def build_world(cfg: ScenarioConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray
             feats = np.vstack([feats, extra[gap > 1e-6]])
     route = walls.ladder_route(w.width, w.height, w.block_rows, w.block_cols, w.corridor)
     return segs, feats, route
+
+
+def wrong_ids(landmark: np.ndarray, n_features: int, prob: float, rng: np.random.Generator) -> np.ndarray:
+    """The reported ids: each true row (``landmark ≥ 0``) reports, with probability ``prob``, another feature
+    drawn uniformly from the ``n_features − 1`` others; clutter rows keep −1. Draws nothing when ``prob = 0``."""
+    out = np.asarray(landmark, np.int64).copy()
+    if prob <= 0 or n_features < 2:
+        return out
+    rows = np.flatnonzero(out >= 0)
+    flip = rows[rng.random(len(rows)) < prob]
+    shift = rng.integers(1, n_features, len(flip))  # 1 … F−1: never the row's own feature
+    out[flip] = (out[flip] + shift) % n_features
+    return out
 
 
 def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
@@ -73,15 +89,17 @@ def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
     steps = np.arange(T + 1, dtype=np.int64)
 
     # sensor 0: features (point sensor query, then line of sight against the walls)
-    rng_s = stream("sensor", seed)
-    ret = sensors.point_scans(poses, feats, steps, cfg.sensor, ClutterConfig(rate=0.0), rng_s, stream("clutter", seed))
+    rng_s, rng_c = stream("sensor", seed), stream("clutter", seed)
+    ret = sensors.point_scans(poses, feats, steps, cfg.sensor, cfg.clutter, rng_s, rng_c)
+    true_row = ret.landmark >= 0
     if len(ret.step):
         p = poses[ret.step]
-        d = feats[ret.landmark] - p[:, :2]
+        d = feats[np.maximum(ret.landmark, 0)] - p[:, :2]
         dist = np.hypot(d[:, 0], d[:, 1])
         t_hit, _ = raycast.cast(p[:, :2], np.arctan2(d[:, 1], d[:, 0]), float(cfg.sensor.max_range) + 1.0, segs)
-        seen = t_hit >= dist - _LOS_TOL
+        seen = (t_hit >= dist - _LOS_TOL) | ~true_row  # clutter is no feature: no line-of-sight test
         ret = sensors.Returns(ret.step[seen], ret.range_m[seen], ret.bearing_rad[seen], ret.landmark[seen])
+    reported = wrong_ids(ret.landmark, len(feats), cfg.walls.wrong_id_prob, rng_c)
     if progress is not None:
         progress(T // 10, T)
 
@@ -103,7 +121,8 @@ def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
     rng_all = np.concatenate([ret.range_m, scan_r.reshape(-1)])
     brg_all = np.concatenate([ret.bearing_rad, np.tile(alphas, T + 1)])
     sensor_all = np.concatenate([np.full(n_f, FEATURE_SENSOR), np.full((T + 1) * B, SCAN_SENSOR)])
-    rid_all = np.concatenate([ret.landmark, np.full((T + 1) * B, -1)])
+    rid_all = np.concatenate([reported, np.full((T + 1) * B, -1)])
+    truth_all = np.concatenate([ret.landmark, np.full((T + 1) * B, -1)])
     order = np.argsort(step_all, kind="stable")
     obs = Observations.from_rows(step_all[order], np.column_stack([rng_all[order], brg_all[order]]), T + 1,
                                  reported_id=rid_all[order], sensor=sensor_all[order])
@@ -117,7 +136,7 @@ def simulate_walls(cfg: ScenarioConfig, seed: int, progress=None) -> Dataset:
     truth = GroundTruth(
         poses_xyt=poses,
         landmarks_xy=feats,
-        obs_landmark=rid_all[order].astype(np.int64),
+        obs_landmark=truth_all[order].astype(np.int64),
         occupancy=OccupancyGrid(origin_xy=np.asarray(spec.origin_xy, float), resolution=spec.resolution,
                                 prob=occ.astype(np.float32)),
         walls_xyxy=segs,

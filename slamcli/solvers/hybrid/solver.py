@@ -82,7 +82,7 @@ class HybridParams:
                                 points spread so wide that the scan likelihood often prefers an off-mean sample
                                 (measured on hybrid-map1 with 1 m cells, 90 beams and free_margin 1.5 m: final
                                 per-cell error 0.196 with 10, 0.029 with 3) — hence the default 3 (the
-                                reproduce section lists it among the deviations; it does not run 10).
+                                reproduce section lists it among the deviations and runs 10 beside it).
     motion_std_scale : float    EKF factor on the process noise.
     feature_sensor, scan_sensor : int   sensor indices of the feature rows and the scan rows.
     association : "auto" | "known" | "ml"   EKF data association of the feature rows: the reported ids (paper
@@ -211,15 +211,18 @@ class MapperOutput:
     ess_sum: float  # Σ_t effective sample size of the weights p(z|s)b(s)
     band: int
     samples_kept: int  # Σ_t samples with weight ≥ ``weight_floor`` (the others are dropped before E2)
+    clock: np.ndarray | None = None  # the per-cell clock n of γ = a·n^(−α) (``weighted_clock``), else None
 
 
 def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeometry, spec: GridSpec,
-              p: HybridParams, rng: np.random.Generator, progress=None, on_step=None) -> MapperOutput:
+              p: HybridParams, rng: np.random.Generator, progress=None, on_step=None,
+              snap_at: np.ndarray | None = None) -> MapperOutput:
     """The frequentist part over all steps: E2 (and the log-odds baseline) from the pose beliefs
     ``N(mu[t], cov[t])`` — ``mu (T+1, 3)``, ``cov (T+1, 3, 3)`` — and the scans ``ranges (T+1, B)``.
 
     ``progress(done, n)`` after every T/200 steps; ``on_step(t, samples (S, 3), w (S,))`` (diagnostics) with
-    the pose samples and their normalised weights ``∝ p(z|s) b(s)``.
+    the pose samples and their normalised weights ``∝ p(z|s) b(s)``; ``snap_at``: snapshot steps instead of
+    ``n_snapshots`` evenly spaced ones (e.g. the lap ends).
     """
     n_poses = len(mu)
     T = n_poses - 1
@@ -232,7 +235,8 @@ def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeom
     clock = np.zeros(spec.n_cells) if p.weighted_clock else None
     L = np.full(spec.n_cells, math.log(p.prior / (1 - p.prior)))
     cnt_b = np.zeros(spec.n_cells, np.int32)
-    snap_steps = np.unique(np.round(np.linspace(0, T, p.n_snapshots + 1)[1:]).astype(np.int64))
+    snap_steps = (np.unique(np.round(np.linspace(0, T, p.n_snapshots + 1)[1:]).astype(np.int64)) if snap_at is None
+                  else np.unique(np.clip(np.asarray(snap_at, np.int64), 0, T)))
     snaps, snaps_b = [], []
     min_trav = p.min_traversal * p.resolution
     n_upd, ess_sum, kept = 0, 0.0, 0
@@ -276,7 +280,7 @@ def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeom
                 snaps_b.append(_prob(L).reshape(spec.shape).astype(np.float32))
         if progress is not None and (t % report == 0 or t == T):
             progress(t + 1, n_poses)
-    return MapperOutput(P, cnt, L, cnt_b, snap_steps, snaps, snaps_b, n_upd, ess_sum, band, kept)
+    return MapperOutput(P, cnt, L, cnt_b, snap_steps, snaps, snaps_b, n_upd, ess_sum, band, kept, clock)
 
 
 class HybridSlam(BaseSolver):
