@@ -147,7 +147,7 @@ def test_incremental_init_on_the_victoria_park_excerpt(tmp_path):
     """End to end on the first 60 s of Victoria Park (tests/data/victoria_park_excerpt): windows of 3 s,
     GPS ATE (aligned) below dead reckoning's 1.37 m and at the batch front end's level (0.85 m measured; on
     the first 300 s, where the batch association is built from 26 m of drift, it is 21.3 m against
-    1.38 m with init=incremental — too long for the suite, see /work/notes/issue-10.md)."""
+    1.38 m with init=incremental — too long for the suite, measured for issue 10)."""
     import json
 
     from typer.testing import CliRunner

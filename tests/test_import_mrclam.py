@@ -3,7 +3,7 @@ of the real excerpt against its motion-capture truth, schema round trip, one-lin
 ``slamcli import`` → ``solve`` → ``evaluate`` end to end.
 
 Data: ``tests/data/mrclam_excerpt`` (45 s of robot 1 of MRCLAM Dataset 7, see its PROVENANCE.txt) and tiny
-hand-written recordings in ``tmp_path``. Nothing here reads /work/shared.
+hand-written recordings in ``tmp_path``. Nothing here reads the shared datasets folder.
 """
 
 from __future__ import annotations

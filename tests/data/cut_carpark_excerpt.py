@@ -1,4 +1,4 @@
-"""Cut tests/data/carpark_excerpt/ from /work/shared/datasets/acfr_carpark (first 150 laser scans, ~32 s).
+"""Cut tests/data/carpark_excerpt/ from $SLAMCLI_DATASETS/acfr_carpark (first 150 laser scans, ~32 s).
 
 Run once: ``.venv/bin/python tests/data/cut_carpark_excerpt.py``. Rows are copied unmodified; only the time
 window is cut (every sensor array up to the time of scan 60), the merged event list is left out (the importer
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import scipy.io as sio
 
-SRC = Path(sys.argv[1] if len(sys.argv) > 1 else "/work/shared/datasets/acfr_carpark")
+SRC = Path(sys.argv[1] if len(sys.argv) > 1 else "$SLAMCLI_DATASETS/acfr_carpark")
 DST = Path(__file__).parent / "carpark_excerpt"
 N_SCANS = 150
 
