@@ -5,13 +5,14 @@ window is cut (every sensor array up to the time of scan 60), the merged event l
 does not read it) and beac_juan3.mat is copied whole.
 """
 
+import os
 import shutil
 import sys
 from pathlib import Path
 
 import scipy.io as sio
 
-SRC = Path(sys.argv[1] if len(sys.argv) > 1 else "$SLAMCLI_DATASETS/acfr_carpark")
+SRC = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(os.environ["SLAMCLI_DATASETS"]) / "acfr_carpark"
 DST = Path(__file__).parent / "carpark_excerpt"
 N_SCANS = 150
 
