@@ -515,3 +515,56 @@ def test_team_null_matching_drops_a_misread_robot_reading():
                   accelerate_every=1, joint_iters=20, max_sweeps=30, trace_poses_every=0)
     assert solve_dataset(bad, "icm", p).extra["readings_nulled"] == 1
     assert solve_dataset(ds.inputs, "icm", p).extra["readings_nulled"] == 0
+
+
+def test_team_cauchy_kernel_weights_match_scipy_cauchy_loss():
+    # IRLS with kernel_cost's weights (the weighted mean, repeated) reaches scipy's Cauchy-loss location estimate
+    from slamcli.solvers.icm.team import kernel_cost
+
+    y, k = np.array([0.0, 0.1, -0.2, 0.15, 5.0, -4.0]), 0.3
+    x = float(np.median(y))
+    for _ in range(500):
+        w = kernel_cost((x - y) ** 2, k)[1]
+        x = float(np.sum(w * y) / np.sum(w))
+    ref = least_squares(lambda v: v - y, [np.median(y)], loss="cauchy", f_scale=k, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    assert x == pytest.approx(ref.x[0], abs=1e-7)  # scipy stops within ~1e-8 of the minimiser
+    # the cost is twice scipy's ½ Σ f² ρ(r²/f²) (ICM's energy is ‖r‖², not ½‖r‖²)
+    c = kernel_cost((ref.x[0] - y) ** 2, k)[0]
+    assert np.sum(c) == pytest.approx(2 * ref.cost, rel=1e-12)
+
+
+def test_team_robust_range_weighted_odometry_only_icm_reaches_its_minimum():
+    """robust=cauchy, team_range_weights, team_odometry_only: ICM ends at the minimum of that energy, written here
+    from the potentials and minimised by scipy (BFGS)."""
+    from scipy.optimize import minimize
+
+    from slamcli.solvers.icm import energy as en
+
+    ds = two_robot_world()
+    k = 1.0
+    p = IcmParams(correspondences="reported", R=(1.0,), S=(4.0,), Q=(400.0,), max_sweeps=3000, energy_rtol=1e-14,
+                  trace_poses_every=0, robust="cauchy", cauchy_k=k, team_range_weights=True,
+                  team_odometry_only=True, accelerate="joint", joint_iters=20)
+    res = solve_dataset(ds.inputs, "icm", p)
+    E = np.asarray(res.trace.objective)
+    assert np.all(np.diff(E) <= 1e-12 * E[0])  # still monotone
+    assert res.extra["motion_potential"] is False and res.extra["team_range_weights"] is True
+    W = en.Weights.from_params((0.0,), (4.0,), (400.0,))
+    fun, unpack, free = _icm_reference(ds, W)
+    inp, team = ds.inputs, ds.inputs.robots
+    nz = inp.noise
+    var = lambda r: nz.range_std**2 + (r * nz.bearing_std) ** 2
+    r_med = np.median(inp.observations.z[:, 0])
+    f = np.concatenate([var(r_med) / var(inp.observations.z[:, 0]), var(r_med) / var(team.range_m)])
+    n_chain = 6 * len(team.chain_pairs)
+
+    def energy(v):
+        r = fun(v)
+        s2 = f * np.sum(r[n_chain:].reshape(-1, 2) ** 2, axis=1)
+        return float(np.sum(r[:n_chain] ** 2) + np.sum(k * k * np.log1p(s2 / (k * k))))
+
+    order, v_icm = _reference_vector(res, ds, free)
+    assert res.extra["energy_total"] == pytest.approx(energy(v_icm), rel=1e-10)
+    ref = minimize(energy, v_icm + 1e-3, method="BFGS", options={"gtol": 1e-10, "maxiter": 20000})
+    assert res.extra["energy_total"] <= ref.fun * (1 + 1e-6)
+    assert np.max(np.abs(res.poses_xyt - unpack(ref.x)[0])) < 1e-3

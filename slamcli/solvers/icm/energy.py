@@ -358,14 +358,15 @@ def observation_energy(points_xy, labels, landmarks_xy, Q) -> float:
 # ------------------------------------------------------------------------------------------------------------
 # per-step sufficient statistics of the observation potential
 # ------------------------------------------------------------------------------------------------------------
-def step_stats(prob: Problem, labels, landmarks_xy, W: Weights | None = None) -> np.ndarray:
+def step_stats(prob: Problem, labels, landmarks_xy, W: Weights | None = None, obs_w=None) -> np.ndarray:
     """Sufficient statistics ``(14, T+1)`` of the observation part of the pose conditional.
 
     With ``e_i = p + R(θ) v_i − m_{c_i}`` (v_i = observation in the robot frame), the sum
     ``Σ_i e_iᵀ Q e_i`` over the observations at pose t depends on the data only through the rows
     ``n, Σv_x, Σv_y, Σm_x, Σm_y, Σv_x², Σv_xv_y, Σv_y², Σv_xm_x, Σv_xm_y, Σv_ym_x, Σv_ym_y, Σm_x², Σm_y²``.
     Observations with ``labels < 0`` are left out. With ``W`` the GPS fixes are added as weighted
-    pseudo-observations (:func:`gps_step_stats`).
+    pseudo-observations (:func:`gps_step_stats`). With ``obs_w (N,)`` each observation's rows are scaled by its
+    weight (the sum becomes ``Σ_i w_i e_iᵀ Q e_i``: the IRLS weights of a robust kernel).
     """
     labels = np.asarray(labels)
     ok = labels >= 0
@@ -391,7 +392,10 @@ def step_stats(prob: Problem, labels, landmarks_xy, W: Weights | None = None) ->
         my * my,
     ]
     out = gps_step_stats(prob, W) if W is not None else np.zeros((14, K))
+    ow = None if obs_w is None else np.asarray(obs_w, float)[ok]
     for k, w in enumerate(cols):
+        if ow is not None:
+            w = ow if w is None else w * ow
         out[k] += np.bincount(st, weights=w, minlength=K)[:K]
     return out
 
@@ -739,9 +743,10 @@ def sweep_poses_parallel(prob: Problem, W: Weights, poses, stats, iters: int = 3
 # ------------------------------------------------------------------------------------------------------------
 # joint problem over all poses and the map (fixed matchings): whitened residuals and sparse Jacobian
 # ------------------------------------------------------------------------------------------------------------
-def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jacobian: bool = True):
+def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jacobian: bool = True, obs_w=None):
     """Whitened residual vector ``r`` (so that ``‖r‖² = H``) and its sparse Jacobian w.r.t.
-    ``[x_1 … x_T (3T), m (2L)]`` (x_0 is fixed).
+    ``[x_1 … x_T (3T), m (2L)]`` (x_0 is fixed). With ``obs_w (N,)`` the rows of observation i are scaled by
+    ``√w_i`` (an IRLS step of a robust kernel).
 
     Returns ``(r (M,), J (M, 3T+2L) csr or None)``.
     """
@@ -755,12 +760,13 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
         # r (K, k) residuals; sw (k,) sqrt-weights; blocks: list of (J (K, k, d), col_index (K, d))
         nonlocal row0
         K, k = r.shape
+        sw = np.broadcast_to(sw, (K, k))  # (k,) per block or (K, k) per row
         res.append((r * sw).ravel())
         if jacobian:
             ridx = row0 + np.arange(K * k).reshape(K, k)
             for Jb, cidx in blocks:
                 valid = cidx[:, 0] >= 0
-                Jw = Jb[valid] * sw[None, :, None]
+                Jw = Jb[valid] * sw[valid][:, :, None]
                 d = Jb.shape[2]
                 rows.append(np.repeat(ridx[valid][:, :, None], d, axis=2).ravel())
                 cols.append(np.repeat(cidx[valid][:, None, :], k, axis=1).ravel())
@@ -788,7 +794,8 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
         r = potentials.observation_residual(poses[st], prob.z[ok], landmarks[lab])
         Jx, Jm = potentials.observation_residual_jacobians(poses[st], prob.z[ok])
         mcols = 3 * T + 2 * lab[:, None] + np.arange(2)[None, :]
-        add_block(r, np.sqrt(W.Q), [(Jx, pose_cols(st)), (Jm, mcols)])
+        sq = np.sqrt(W.Q) if obs_w is None else np.sqrt(W.Q)[None, :] * np.sqrt(np.asarray(obs_w, float)[ok])[:, None]
+        add_block(r, sq, [(Jx, pose_cols(st)), (Jm, mcols)])
     if W.K and prob.gps_step.size:
         g = prob.gps_step
         r = poses[g, :2] - prob.gps_xy

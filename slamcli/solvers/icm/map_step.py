@@ -59,16 +59,21 @@ def nearest_labels(points_xy, landmarks_xy, Q, prev_labels=None) -> np.ndarray:
     return out
 
 
-def label_means(points_xy, labels, n_labels: int):
-    """Closed-form map, eq. (17): each label's point is the mean of its observations' h⁻¹(x_t, z_{t,i}).
+def label_means(points_xy, labels, n_labels: int, weights=None):
+    """Closed-form map, eq. (17): each label's point is the mean of its observations' h⁻¹(x_t, z_{t,i}) (the
+    ``weights``-weighted mean when given: the conditional mode under per-observation weights).
 
-    Returns ``(means (n_labels, 2), counts (n_labels,))``; labels without observations get NaN.
+    Returns ``(means (n_labels, 2), counts (n_labels,))`` (counts = summed weights); labels without
+    observations get NaN.
     """
     ok = labels >= 0
     lab = labels[ok]
-    cnt = np.bincount(lab, minlength=n_labels)[:n_labels].astype(float)
-    sx = np.bincount(lab, weights=points_xy[ok, 0], minlength=n_labels)[:n_labels]
-    sy = np.bincount(lab, weights=points_xy[ok, 1], minlength=n_labels)[:n_labels]
+    w = None if weights is None else np.asarray(weights, float)[ok]
+    cnt = np.bincount(lab, weights=w, minlength=n_labels)[:n_labels].astype(float)
+    wx = points_xy[ok, 0] if w is None else w * points_xy[ok, 0]
+    wy = points_xy[ok, 1] if w is None else w * points_xy[ok, 1]
+    sx = np.bincount(lab, weights=wx, minlength=n_labels)[:n_labels]
+    sy = np.bincount(lab, weights=wy, minlength=n_labels)[:n_labels]
     with np.errstate(invalid="ignore", divide="ignore"):
         means = np.stack([sx / cnt, sy / cnt], -1)
     return means, cnt

@@ -159,13 +159,28 @@ class IcmParams:
                                  "real" = accelerate=joint, accelerate_every=1, joint_iters=20, max_sweeps=5,
                                  merge=true, weights=design, init=gated, gate_prob=0.9999,
                                  birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
-                                 init=online, weights=information, outlier_sigma=7, max_sweeps=30
+                                 init=online, weights=information, outlier_sigma=7, max_sweeps=30,
+                                 team_range_weights=true, team_odometry_only=true
                                  (each key still at its paper default takes the preset's value; other explicit
                                  values win).
     outlier_sigma : float        k > 0: an observation with a reported id whose residual exceeds k σ of the noise
                                  model takes the null matching at a constant cost (truncated quadratic,
                                  :mod:`slamcli.solvers.icm.gate`); 0 = the paper's quadratic (default). Only with
                                  correspondences=reported.
+    robust : "none" | "cauchy"   multi-robot solves only (a one-robot solve ignores it): the observation and
+                                 reading terms under ``graph``'s Cauchy kernel of scale ``cauchy_k`` (whitened
+                                 units; ICM keeps the kernel's weights fixed through a sweep and takes them at
+                                 the new estimate before the next — the half-quadratic form, still monotone;
+                                 the joint steps are IRLS steps). Default "none" (the paper's quadratic).
+                                 MRCLAM Dataset 7 team, preset=real: mean ATE 0.152 m against 0.136 m without.
+    cauchy_k : float             the Cauchy scale (``graph``'s default 2.3849).
+    team_range_weights : bool    multi-robot solves only: each sighting's (and robot reading's) isotropic weight
+                                 from its own range, ``q(r) = 2 / (σ_r² + r² σ_b²)``, instead of one q at the
+                                 median range (weights=information; with design weights the same factors
+                                 ``q(r) / q(r̃)`` of Q); the null cost ``outlier_sigma`` keeps meaning k σ.
+    team_odometry_only : bool    multi-robot solves only: drop the motion potential R when the odometry
+                                 potential is on (on MRCLAM the odometry is the integral of the controls, so
+                                 both count the same motion twice; ``graph`` uses the odometry alone).
     label_cost : float           λ: cost per landmark added to the reported energy (``extra["energy_label_cost"]``,
                                  0 = the paper's Φ_m); with weights=information, merging by the χ² test is
                                  merging when it lowers H + λ·L for λ = χ²₂(merge_prob).
@@ -230,6 +245,10 @@ class IcmParams:
     merge_prob: float = 0.999
     label_cost: float = 0.0
     outlier_sigma: float = 0.0
+    robust: Literal["none", "cauchy"] = "none"
+    cauchy_k: float = 2.3849
+    team_range_weights: bool = False
+    team_odometry_only: bool = False
     preset: Literal["paper", "real"] = "paper"
 
     def __post_init__(self) -> None:
@@ -253,6 +272,8 @@ class IcmParams:
         if not (self.outlier_sigma >= 0 and math.isfinite(self.outlier_sigma)):
             raise ValueError(f"outlier_sigma must be a finite number >= 0 (0 = no null matching), "
                              f"got {self.outlier_sigma}")
+        if not (self.cauchy_k > 0 and math.isfinite(self.cauchy_k)):
+            raise ValueError(f"cauchy_k must be a finite number > 0, got {self.cauchy_k}")
         if not (0.0 < self.merge_prob < 1.0):
             raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
         for name in ("joint_step_tol", "label_cost"):
