@@ -1,5 +1,5 @@
 """Sweep throughput: runs per minute for 1 vs 2 workers, on short runs (a 100-run EKF sweep of ``loop``,
-quick: 12) and on runs of ≥ 1 s (24 runs of EKF with defaults on 300 steps of ``paper-sim1``, quick: 8; issue
+quick: 12) and on runs of ≥ 1 s (24 runs of EKF with defaults on 1000 steps of ``paper-sim1``, quick: 8; issue
 25 item 6: ``-j 2`` ≥ 1.8× ``-j 1``).
 
 Every run is the real pipeline (simulate → solve → evaluate → per-run files), one replicate per run, so each
