@@ -24,7 +24,10 @@ Conversion
 * **Measurements**: a scan goes to the nearest pose, ``k = round((t − t_0)/dt)`` (timing error ≤ dt/2 =
   12.5 ms, the largest that occurred in ``metadata["max_timing_error_s"]``). Bearing ``b = b_laser − π/2``.
   ``reported_id = −1`` (unknown correspondence); the trunk diameter is kept per row in
-  ``observations.diameter_m`` (ranges are to the trunk surface, so a solver may add ``diameter/2``).
+  ``observations.diameter_m``. Whether the detector's ranges are to the trunk surface or its centre is not
+  stated with the data; measured, they behave as centre ranges: the EKF with ``-p surface=true`` (the
+  declared-size offset added) ends the first 300 s at GPS ATE 1.449 m against 1.428 m without, and its mean
+  NIS rises from 0.59 to 0.70, so no solver adds an offset by default.
 * **Reference**: GPS fixes as a position-only truth (``GroundTruth.ref_time_s/ref_xy``) of the laser point (``ref_offset_xy``); no true poses,
   landmarks or association exist.
 
