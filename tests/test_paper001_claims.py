@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from slamcli.metrics.consistency import chi2_band
 from slamcli.reproduce.paper001 import CLAIMS, DEVIATIONS, claim_verdicts, plateaued
 from slamcli.reproduce.paper001_studies import (
     loglog_slope,
-    nees_band,
     nees_class,
     nees_summary,
     read_complexity,
@@ -65,7 +65,7 @@ def test_nees_summary_counts_steps_against_the_band_by_brute_force():
     nees = _nees(0.8, 20, 200, seed=7)
     nees[:, 0] = np.nan  # the known start
     s = nees_summary(nees, "x")
-    lo, hi = nees_band(20)
+    lo, hi = chi2_band(20, 3)
     inside = above = 0
     for t in range(1, 200):
         m = sum(nees[k, t] for k in range(20)) / 20
@@ -121,7 +121,7 @@ def test_complexity_and_association_verdicts_follow_their_numbers():
 
 
 def test_nees_band_matches_chi2_quantiles_and_setting_lists_eq19():
-    lo, hi = nees_band(20)
+    lo, hi = chi2_band(20, 3)
     assert lo == pytest.approx(chi2.ppf(0.025, 60) / 20) and hi == pytest.approx(chi2.ppf(0.975, 60) / 20)
     assert 2.0 < lo < 3 < hi < 4.2  # the mean of 20 χ²(3) draws: 3 ± 1.96·√(6/20) ≈ [1.93, 4.07], skewed right
     assert any("eq. 19" in d for d in DEVIATIONS) and any("10×" in d for d in DEVIATIONS)

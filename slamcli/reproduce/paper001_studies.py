@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from slamcli.metrics.consistency import chi2_band
+
 #: a two-sided 95 % band of the mean NEES over N independent seeds (χ²(3N)/N quantiles, d = 3)
 NEES_BAND_PROB = 0.95
 #: seeds a configuration needs before its NEES is judged against the band
@@ -31,22 +33,15 @@ NEES_ABOVE_MAX = 0.05
 COMPLEXITY_CSV = Path("benchmarks") / "results" / "hybrid.csv"
 
 
-def nees_band(n_seeds: int, dof: int = 3, prob: float = NEES_BAND_PROB) -> tuple[float, float]:
-    """``[lo, hi]`` of the mean NEES over ``n_seeds`` calibrated runs (χ²(dof·N)/N quantiles)."""
-    from scipy.stats import chi2
-
-    n = max(int(n_seeds), 1)
-    return float(chi2.ppf((1 - prob) / 2, dof * n) / n), float(chi2.ppf((1 + prob) / 2, dof * n) / n)
-
-
 def nees_summary(nees: np.ndarray, label: str = "") -> dict:
     """Per-step ANEES of ``nees (N seeds, T steps)`` (NaN steps, e.g. the known start, left out) against
-    :func:`nees_band`: ``{label, n_seeds, anees_mean, inside, above, below, lo, hi}`` (fractions of steps)."""
+    :func:`slamcli.metrics.consistency.chi2_band` (3 dof, :data:`NEES_BAND_PROB`):
+    ``{label, n_seeds, anees_mean, inside, above, below, lo, hi}`` (fractions of steps)."""
     nees = np.atleast_2d(np.asarray(nees, float))
     cols = np.all(np.isfinite(nees), axis=0)
     anees = nees[:, cols].mean(axis=0)
     n = nees.shape[0]
-    lo, hi = nees_band(n)
+    lo, hi = chi2_band(n, 3, NEES_BAND_PROB)
     return {"label": label, "n_seeds": n, "anees_mean": float(anees.mean()) if anees.size else math.nan,
             "inside": float(np.mean((anees >= lo) & (anees <= hi))) if anees.size else math.nan,
             "above": float(np.mean(anees > hi)) if anees.size else math.nan,
@@ -137,4 +132,4 @@ def gamma_at_laps(clock: np.ndarray, n_laps: int, a: float, alpha: float) -> lis
 
 
 __all__ = ["COMPLEXITY_CSV", "NEES_BAND_PROB", "NEES_MIN_SEEDS", "gamma_at_laps", "loglog_slope",
-           "map_with_given_poses", "nees_band", "nees_class", "nees_monte_carlo", "nees_summary", "read_complexity"]
+           "map_with_given_poses", "nees_class", "nees_monte_carlo", "nees_summary", "read_complexity"]
