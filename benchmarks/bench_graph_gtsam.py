@@ -21,7 +21,9 @@ machine may be shared. Rows (``case``):
 
 Run: ``python -m benchmarks graph_gtsam [--quick]`` → ``benchmarks/results/graph_gtsam.csv`` and
 ``graph_gtsam.md``. ``SLAMCLI_BENCH_LM_SIZES=10001,50001`` restricts the LM sizes, ``SLAMCLI_BENCH_PARTS=lm``
-(comma list of lm, posegraph, startup, sweep) the parts.
+(comma list of lm, posegraph, startup, sweep) the parts; the rows of the parts not run are kept from the
+previous ``graph_gtsam.csv``, so ``SLAMCLI_BENCH_PARTS=startup python -m benchmarks graph_gtsam`` refreshes
+only the start-up row.
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ SIZES = (10_001, 50_001, 100_001)
 QUICK_SIZES = (2_001,)
 REPEATS = {10_001: 3, 50_001: 2, 100_001: 1, 2_001: 2}
 PARTS = ("lm", "posegraph", "startup", "sweep")
+#: the ``case`` column of each part's rows
+CASES = {"lm": "lm", "posegraph": "posegraph", "startup": "startup", "sweep": "sweep_worker_start"}
 
 
 def _cpu_s() -> float:
@@ -169,20 +173,42 @@ def write_markdown(rows: list[dict], path: Path) -> None:
     tmp.replace(path)
 
 
+def _cell(text: str):
+    """A CSV cell read back as the value it was written from (int, float, bool or str)."""
+    if text in ("True", "False"):
+        return text == "True"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def previous_rows(path: Path) -> list[dict]:
+    """The rows of an earlier run's CSV (empty cells left out); ``[]`` when there is none."""
+    import csv
+
+    if not path.exists():
+        return []
+    with path.open(newline="") as fh:
+        return [{k: _cell(v) for k, v in r.items() if v != ""} for r in csv.DictReader(fh)]
+
+
 def run(quick: bool = False) -> list[dict]:
     parts = tuple(p for p in os.environ.get("SLAMCLI_BENCH_PARTS", ",".join(PARTS)).split(",") if p)
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown:
+        raise SystemExit(f"SLAMCLI_BENCH_PARTS: unknown part(s) {', '.join(unknown)}; known: {', '.join(PARTS)}")
     env_sizes = os.environ.get("SLAMCLI_BENCH_LM_SIZES")
     sizes = tuple(int(s) for s in env_sizes.split(",")) if env_sizes else (QUICK_SIZES if quick else SIZES)
+    kept = previous_rows(HERE / "results" / "graph_gtsam.csv")
+    measure = {"lm": lambda: lm_rows(sizes), "posegraph": lambda: posegraph_rows(quick),
+               "startup": lambda: startup_rows(quick), "sweep": sweep_rows}
     rows: list[dict] = []
     t0 = time.perf_counter()
-    if "lm" in parts:
-        rows += lm_rows(sizes)
-    if "posegraph" in parts:
-        rows += posegraph_rows(quick)
-    if "startup" in parts:
-        rows += startup_rows(quick)
-    if "sweep" in parts:
-        rows += sweep_rows()
+    for part in PARTS:  # the table's order, whichever parts run
+        rows += measure[part]() if part in parts else [r for r in kept if r.get("case") == CASES[part]]
     (HERE / "results").mkdir(exist_ok=True)
     write_markdown(rows, HERE / "results" / "graph_gtsam.md")
     print(f"graph_gtsam: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
