@@ -173,26 +173,11 @@ def write_markdown(rows: list[dict], path: Path) -> None:
     tmp.replace(path)
 
 
-def _cell(text: str):
-    """A CSV cell read back as the value it was written from (int, float, bool or str)."""
-    if text in ("True", "False"):
-        return text == "True"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def previous_rows(path: Path) -> list[dict]:
-    """The rows of an earlier run's CSV (empty cells left out); ``[]`` when there is none."""
-    import csv
+    """The rows of an earlier run's CSV (numbers parsed back, empty cells left out); ``[]`` when there is none."""
+    from benchmarks.bench_defaults import read_csv
 
-    if not path.exists():
-        return []
-    with path.open(newline="") as fh:
-        return [{k: _cell(v) for k, v in r.items() if v != ""} for r in csv.DictReader(fh)]
+    return [{k: v for k, v in r.items() if v != ""} for r in read_csv(str(path))]
 
 
 def run(quick: bool = False) -> list[dict]:

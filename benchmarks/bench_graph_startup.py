@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 N_POSES = 1000
-REPEATS = 5
+REPEATS = 7
 GTSAM_SCRIPT = """
 import sys, gtsam
 graph, values = gtsam.readG2o(sys.argv[1], False)
