@@ -159,7 +159,8 @@ def sweep_rows() -> list[dict]:
              "slamcli": round(s["worker_start_cpu_s"], 3), "wall_s": round(s["worker_start_wall_s"], 3)}]
 
 
-def write_markdown(rows: list[dict], path: Path) -> None:
+def write_markdown(rows: list[dict], path: Path, kept_lines: dict[tuple, str] | None = None) -> None:
+    """The table; a row whose ``(case, what)`` is in ``kept_lines`` is written as that earlier line."""
     lines = ["| case | what | slamcli CPU s | GTSAM CPU s | ratio | goal | met | details |",
              "|---|---|---|---|---|---|---|---|"]
     skip = {"case", "what", "slamcli", "gtsam", "ratio", "goal", "met"}
@@ -167,7 +168,8 @@ def write_markdown(rows: list[dict], path: Path) -> None:
         det = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()
                         if k not in skip and v not in ("", None))
         cells = [r.get(k, "") for k in ("case", "what", "slamcli", "gtsam", "ratio", "goal", "met")]
-        lines.append("| " + " | ".join(str(c) for c in cells) + f" | {det} |")
+        line = "| " + " | ".join(str(c) for c in cells) + f" | {det} |"
+        lines.append((kept_lines or {}).get((r.get("case"), r.get("what")), line))
     tmp = path.with_suffix(".md.tmp")
     tmp.write_text("\n".join(lines) + "\n")
     tmp.replace(path)
@@ -178,6 +180,14 @@ def previous_rows(path: Path) -> list[dict]:
     from benchmarks.bench_defaults import read_csv
 
     return [{k: v for k, v in r.items() if v != ""} for r in read_csv(str(path))]
+
+
+def previous_md_lines(path: Path) -> dict[tuple, str]:
+    """The table lines of an earlier run's Markdown by ``(case, what)`` (a kept row keeps its line as it was)."""
+    if not path.exists():
+        return {}
+    cells = (line.strip("| ").split(" | ") for line in path.read_text().splitlines()[2:])
+    return {(c[0], c[1]): "| " + " | ".join(c) + " |" for c in cells if len(c) > 2}
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -195,7 +205,10 @@ def run(quick: bool = False) -> list[dict]:
     for part in PARTS:  # the table's order, whichever parts run
         rows += measure[part]() if part in parts else [r for r in kept if r.get("case") == CASES[part]]
     (HERE / "results").mkdir(exist_ok=True)
-    write_markdown(rows, HERE / "results" / "graph_gtsam.md")
+    md_lines = previous_md_lines(HERE / "results" / "graph_gtsam.md")
+    kept_lines = {k: md_lines[k] for k in ((r["case"], r["what"]) for r in kept if r.get("case") in
+                                           {CASES[p] for p in PARTS if p not in parts}) if k in md_lines}
+    write_markdown(rows, HERE / "results" / "graph_gtsam.md", kept_lines)
     print(f"graph_gtsam: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     return rows
 
