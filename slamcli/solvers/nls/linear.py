@@ -354,14 +354,30 @@ def factorize_symmetric(H: sp.csc_matrix, ordering: str = "MMD_AT_PLUS_A"):
     )
 
 
-def _solve(H: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray | None:
+def solve_spd(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+    """``H⁻¹ rhs`` for a sparse symmetric positive definite ``H``: CHOLMOD's simplicial ``LDLᵀ`` (AMD ordering)
+    when the ``cholmod`` extra is installed, else :func:`factorize_symmetric` (SuperLU, minimum degree; on
+    City10000's chordal systems ≈ 8× slower than CHOLMOD).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError   ``H`` is not numerically positive definite / singular.
+    """
+    H = sp.csc_matrix(H)
+    if cholmod_available():
+        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
+
+        try:
+            F = cholesky(H, mode="simplicial")
+        except CholmodNotPositiveDefiniteError as exc:
+            raise np.linalg.LinAlgError(f"matrix is not positive definite ({exc})") from None
+        if not np.all(F.D() > 0.0):
+            raise np.linalg.LinAlgError("matrix is not positive definite (a pivot ≤ 0)")
+        return F(rhs)
     try:
-        h = factorize_symmetric(H).solve(rhs)
-    except RuntimeError:  # exactly singular
-        return None
-    if not np.all(np.isfinite(h)):
-        return None
-    return h
+        return factorize_symmetric(H).solve(rhs)
+    except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+        raise np.linalg.LinAlgError(f"matrix is singular ({exc})") from None
 
 
 # ----------------------------------------------------------------------------------------------------------
