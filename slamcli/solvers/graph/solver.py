@@ -79,13 +79,16 @@ def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
     merged).
     """
     out: dict[str, dict] = {}
+    thresholds: dict[int, tuple[float, float]] = {}
     for b in problem.blocks:
-        r, _ = b.evaluate(x)
+        r = b.residuals(x)  # no Jacobians
         L = np.asarray(b.sqrt_info, float)
         rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
         s2 = np.einsum("fk,fk->f", rw, rw)
         k = int(r.shape[1])
-        t95, t99 = chi2_quantile(0.95, k), chi2_quantile(0.99, k)
+        if k not in thresholds:
+            thresholds[k] = (chi2_quantile(0.95, k), chi2_quantile(0.99, k))
+        t95, t99 = thresholds[k]
         d = out.setdefault(b.name, {"factors": 0, "dof": k, "over_95": 0, "over_99": 0})
         d["factors"] += int(s2.size)
         d["over_95"] += int(np.sum(s2 > t95))
