@@ -42,9 +42,10 @@ import scipy.sparse as sp
 #: most gather positions (int64) of the recurrence computed at once (memory ≈ 8 bytes × 3 × this)
 GATHER_CHUNK = 1 << 22
 #: supernodes with at most this many rows below them get precomputed (vectorised) gather positions; larger
-#: row sets are gathered run by run (:meth:`SelectedInverse._gather`), where the r² index arithmetic would
-#: cost more than the Python overhead it saves (City10000: 0.25 s vs 0.18 s with every supernode vectorised)
-GATHER_MAX_ROWS = 48
+#: row sets are gathered run by run (:meth:`SelectedInverse._gather`), where the r² index arithmetic costs
+#: more than the Python overhead it saves (City10000: 0.25 s with every supernode vectorised, 0.15 s run by
+#: run, 0.14 s with 16-32 here; intel 0.021 / 0.018 s run by run / 24)
+GATHER_MAX_ROWS = 24
 
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
@@ -194,14 +195,30 @@ class SelectedInverse:
         idx = self.off[Kp] + (g - self._key_start[Kp]) * self.sn_width[Kp] + (lo - self.sn_first[Kp])
         return idx, starts
 
+    def _diagonal_terms(self, panels: np.ndarray, d: np.ndarray):
+        """``L_JJ⁻¹`` and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` of every supernode (``s × s`` row-major, at ``soff[K]`` of two
+        flat arrays), batched over the supernodes of one width: they depend on the factor only, not on Σ̃."""
+        w = self.sn_width
+        soff = np.r_[0, np.cumsum(w * w)].astype(np.int64)
+        linv, sjj = np.empty(int(soff[-1])), np.empty(int(soff[-1]))
+        for s in np.unique(w).tolist():
+            Ks = np.flatnonzero(w == s)
+            at = (soff[Ks][:, None] + np.arange(s * s)).ravel()
+            blocks = panels[(self.off[Ks][:, None] + np.arange(s * s)).ravel()].reshape(-1, s, s)  # L_JJ, unit lower
+            inv = np.linalg.inv(blocks) if s > 1 else np.ones((Ks.size, 1, 1))
+            dj = d[self.sn_first[Ks][:, None] + np.arange(s)]
+            linv[at] = inv.ravel()
+            sjj[at] = (np.swapaxes(inv, 1, 2) @ (inv / dj[:, :, None])).ravel()
+        return soff, linv, sjj
+
     def _recurrence(self, panels: np.ndarray, d: np.ndarray) -> None:
         """The supernodal Takahashi recurrence (module docstring), last supernode first. The gather positions
-        of ``Σ̃_{R,R}`` are computed in vectorised chunks of at most :data:`GATHER_CHUNK` entries, so the loop
-        body is a few dense products per supernode."""
-        from scipy.linalg.lapack import dtrtri  # the inverse of a triangular block, without LU's overhead
-
+        of ``Σ̃_{R,R}`` are computed in vectorised chunks of at most :data:`GATHER_CHUNK` entries and the
+        diagonal-block terms beforehand (:meth:`_diagonal_terms`), so the loop body is a few dense products
+        per supernode."""
         ns = len(self.sn_first)
-        width, nrows, off, first = (a.tolist() for a in (self.sn_width, self.sn_nrows, self.off, self.sn_first))
+        soff, linv, sjj = self._diagonal_terms(panels, d)
+        width, nrows, off, so_l = (a.tolist() for a in (self.sn_width, self.sn_nrows, self.off, soff))
         r = self.sn_nrows - self.sn_width
         csize = np.r_[0, np.cumsum(np.where(r <= GATHER_MAX_ROWS, r * r, 0))]
         vals = self.vals
@@ -210,20 +227,18 @@ class SelectedInverse:
             if K < K_lo:  # next chunk of gather positions: supernodes K_lo..K
                 K_lo = max(0, min(int(np.searchsorted(csize, csize[K + 1] - GATHER_CHUNK)), K))
                 gidx, gstart = self._gather_index(K_lo, K + 1)
-            j0, s, m, o = first[K], width[K], nrows[K], off[K]
-            panel = panels[o : o + m * s].reshape(m, s)
-            Linv = dtrtri(panel[:s], lower=1, unitdiag=1)[0] if s > 1 else np.ones((1, 1))  # unit lower triangular
-            SJJ = Linv.T @ (Linv / d[j0 : j0 + s, None])  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
+            s, m, o, so = width[K], nrows[K], off[K], so_l[K]
+            SJJ = sjj[so : so + s * s].reshape(s, s)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
             out = vals[o : o + m * s].reshape(m, s)
             if m > s:
-                Y = panel[s:] @ Linv  # L_RJ L_JJ⁻¹   (r × s)
+                Y = panels[o + s * s : o + m * s].reshape(m - s, s) @ linv[so : so + s * s].reshape(s, s)  # L_RJ L_JJ⁻¹
                 q = K - K_lo
                 if m - s <= GATHER_MAX_ROWS:  # Σ̃_{R,R}, computed before
                     S = vals[gidx[gstart[q] : gstart[q + 1]]].reshape(m - s, m - s)
                 else:
                     S = self._gather(self._sn_rows(K)[s:])
                 SRJ = -(S @ Y)
-                SJJ -= Y.T @ SRJ
+                SJJ = SJJ - Y.T @ SRJ
                 out[s:] = SRJ
             out[:s] = 0.5 * (SJJ + SJJ.T)
 
