@@ -403,6 +403,8 @@ class GraphSlam(BaseSolver):
         if p.outlier_counts:
             extra["chi2_outliers"] = chi2_outlier_counts(gp.problem, res.x)
         message = res.message
+        if p.init == "auto" and start != "odometry" and p.init_from == "odometry":
+            message += f"; started from the {start} relaxation (init=auto: a pose graph with loop closures)"
         if run.rnd:  # the status is that of the last round; the trace holds every round (each with its start)
             message += (
                 f" (in optimisation round {run.rnd + 1}, after landmark merges; {run.done_iters} iterations in all)"
