@@ -91,7 +91,9 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
 
     H = sp.csc_matrix(H)
     try:
-        F = cholesky(H, mode="supernodal")
+        # AMD alone: CHOLMOD's default also tries METIS when AMD's fill is high, which on these matrices
+        # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L)
+        F = cholesky(H, mode="supernodal", ordering_method="amd")
     except CholmodNotPositiveDefiniteError as exc:
         col = getattr(exc, "column", None)
         perm = getattr(getattr(exc, "factor", None), "P", lambda: None)()
