@@ -241,8 +241,9 @@ def resolve_init(params: GraphParams, inputs) -> str:
 
     Why (``benchmarks/bench_graph_gtsam.py``, issue 25): from the odometry chain LM stalls on MIT at cost
     385.12 (GTSAM's LM too) and only the certificate's chordal restart reaches the certified 20.60, i.e. two
-    solves; from the chordal start one solve reaches it, and on intel, CSAIL, manhattan, City10000 and KITTI 00
-    the chordal start reaches the same certified optimum in fewer LM iterations (5/5/4/5/5 vs 6/5/6/8/5)."""
+    solves; from the chordal start one solve reaches it (10 LM iterations), and on intel, CSAIL, manhattan,
+    City10000 and KITTI 00 the chordal start reaches the same certified optimum in as many or fewer LM
+    iterations (5 / 5 / 4 / 5 / 5 vs 6 / 5 / 6 / 8 / 5 from the odometry chain)."""
     if params.init != "auto":
         return params.init
     c = inputs.constraints
