@@ -145,6 +145,7 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
     cost, lo, g = asm.linearize_lower(flat, params)
     near = False  # the last step lowered F by < FROZEN_REL: the previous factorisation is good enough
+    stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
             xn, cn = _frozen_step(asm, lin, params, flat, g, cost, NEWTON_SLACK)
@@ -155,8 +156,11 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
                 flat = xn
                 if done:
                     break
-                cost, lo, g = asm.linearize_lower(flat, params)
+                cost, g, stale = cn, _gradient(problem, flat), True
                 continue
+        if stale:
+            cost, lo, g = asm.linearize_lower(flat, params)
+            stale = False
         newton = lo.copy()
         newton[theta_diag] += _theta_curvature(flat.reshape(n, 3), ij, xyt, kappa, tau)[1:]
         # Newton (quadratic convergence); near the optimum its decrease is below F's rounding, so a Newton
@@ -175,6 +179,16 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x
+
+
+def _gradient(problem: nls.NlsProblem, flat: np.ndarray) -> np.ndarray:
+    """``∇(½F) = Σ_e J_eᵀ r_e`` at ``flat`` (the gradient :meth:`nls.Assembler.linearize_lower` returns for the
+    one identity-weighted block of :func:`_sesync_problem`, without assembling ``H``), pose 0 held."""
+    b = problem.blocks[0]
+    r, J = b.evaluate(flat)
+    g = np.bincount(np.asarray(b.cols).ravel(), weights=np.einsum("fka,fk->fa", J, r).ravel(), minlength=problem.n_vars)
+    g[np.asarray(problem.fixed_cols)] = 0.0
+    return g
 
 
 def _frozen_step(asm, lin, params, flat, g, cost, slack: float):
