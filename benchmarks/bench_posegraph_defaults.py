@@ -23,7 +23,7 @@ import numpy as np
 from benchmarks.bench_posegraph import DATASET_NAMES, NAMES, QUICK, gtsam_pose_graph
 
 #: timed repeats per side, alternating (ours first in even repeats, GTSAM first in odd ones); medians reported
-REPEATS = 3
+REPEATS = 5
 
 
 def _gtsam_lm(g, v0):
