@@ -135,6 +135,12 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     ``F = ‖r‖²`` (:func:`_residuals`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
     edge over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``), so every iteration reuses the engine's assembly pattern and
     the linear solver's ordering and symbolic analysis, computed once."""
+    return _refine(poses_xyt, ij, xyt, kappa, tau)[0]
+
+
+def _refine(poses_xyt, ij, xyt, kappa, tau):
+    """:func:`refine_sesync`'s point, with its assembler and linear solver (whose sparsity pattern and
+    symbolic analysis the certificate matrix reuses, :func:`_certificate_matrix`)."""
     x = np.array(poses_xyt, float, copy=True)
     n = x.shape[0]
     problem = _sesync_problem(n, ij, xyt, kappa, tau)
@@ -178,7 +184,7 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
         cost, lo, g = asm.linearize_lower(flat, params)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
-    return x
+    return x, asm, lin
 
 
 def _gradient(problem: nls.NlsProblem, flat: np.ndarray) -> np.ndarray:
@@ -307,29 +313,67 @@ def certify_pose_graph(poses_xyt, ij, xyt, info) -> Certificate:
     xyt = np.asarray(xyt, float).reshape(-1, 3)
     kappa, tau = isotropic_weights(info)
     n = int(np.asarray(poses_xyt).shape[0])
-    x = refine_sesync(poses_xyt, ij, xyt, kappa, tau)
+    x, asm, lin = _refine(poses_xyt, ij, xyt, kappa, tau)
     F = sesync_cost(x, ij, xyt, kappa, tau)
-    M = data_matrix(n, ij, xyt, kappa, tau)
-    X = np.zeros((2, 3 * n))
-    X[:, :n] = x[:, :2].T
-    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
-    X[0, n::2], X[1, n::2] = c, s  # R_i = [[c, −s], [s, c]]: columns n+2i (first), n+2i+1 (second)
-    X[0, n + 1 :: 2], X[1, n + 1 :: 2] = -s, c
-    G = (M @ X.T)[n:].reshape(n, 2, 2)  # (M Xᵀ)_{R_i}, 2×2 each
-    R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], 1)  # (n, 2, 2)
-    Lam = G @ R
-    Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
-    dual = float(np.trace(Lam, axis1=1, axis2=2).sum())
-    rr = n + 2 * np.arange(n)[:, None, None] + np.arange(2)[None, :, None]
-    cc = n + 2 * np.arange(n)[:, None, None] + np.arange(2)[None, None, :]
-    rr, cc = np.broadcast_to(rr, (n, 2, 2)).ravel(), np.broadcast_to(cc, (n, 2, 2)).ravel()
-    S = (M - sp.csc_matrix((Lam.ravel(), (rr, cc)), shape=M.shape)).tocsc()
-    S = 0.5 * (S + S.T)
-    eta = ETA_REL * float(np.max(np.abs(S.diagonal()))) if n else 0.0
-    certified, solve = _is_positive_definite((S + eta * sp.identity(3 * n, format="csc")).tocsc())
+    S_lo, dual = _certificate_matrix(asm, x, ij, xyt, kappa, tau)
+    S = asm.matrix(asm.full(S_lo))  # in the pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
+    eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
+    shifted = S_lo.copy()
+    shifted[asm.lo_diag_pos] += eta
+    if lin.name == "cholmod":  # the refinement's symbolic analysis: a numeric LDLᵀ with a positive-pivot test
+        certified = nls.factorize_lower(lin, asm, shifted)
+        solve = _finite_solve(lin) if certified else None
+    else:
+        certified, solve = _is_positive_definite(asm.matrix(asm.full(shifted)))
     lam_min = _lambda_min(S, eta, certified, solve)
     gap = max(F - dual, 0.0) if certified else float("nan")
     return Certificate(bool(certified), lam_min, eta, F, dual, gap, x)
+
+
+def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.ndarray, float]:
+    """``(S, tr Λ)``: the lower data of ``S = M − blkdiag(0, Λ_i)`` (module docstring) on the refinement's
+    pattern ``asm`` — its columns ``3i, 3i+1, 3i+2`` are ``t_i, R_i e₁, R_i e₂`` (a permutation of
+    :func:`data_matrix`'s), so ``M`` scatters like the refinement's ``H`` (edge ``e`` adds
+    ``v vᵀ`` over ``[t_i, R_i, t_j, R_j]`` for its three columns ``v`` of ``A_e``, ``a_e``) — and the
+    multipliers ``Λ``."""
+    n = x.shape[0]
+    c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
+    sk, st = np.sqrt(kappa), np.sqrt(tau)
+    zero = np.zeros_like(c)
+    V = np.stack([
+        np.stack([zero, -sk * c, -sk * s, zero, sk, zero], -1),  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
+        np.stack([zero, sk * s, -sk * c, zero, zero, sk], -1),  # A_e e₂
+        np.stack([-st, -st * xyt[:, 0], -st * xyt[:, 1], st, zero, zero], -1),  # a_e
+    ], 1)  # (E, 3, 6)
+    ia, ib = asm.pairs[0]
+    vals = np.einsum("eka,ekb->abe", V, V)[ia, ib]
+    if asm.twice[0] is not None:
+        vals[asm.twice[0]] *= 2.0
+    M_lo = np.bincount(asm.lo_scatter[0], weights=vals.ravel(), minlength=asm.lo_nnz)
+    ct, st_ = np.cos(x[:, 2]), np.sin(x[:, 2])
+    Xt = np.empty((n, 3, 2))  # rows of Xᵀ: t_i, then the columns of R_i = [[c, −s], [s, c]]
+    Xt[:, 0], Xt[:, 1], Xt[:, 2] = x[:, :2], np.column_stack([ct, st_]), np.column_stack([-st_, ct])
+    G = (asm.matrix(asm.full(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
+    Lam = G @ np.swapaxes(Xt[:, 1:], 1, 2)  # G_i R_i (R_i's columns are rows 1, 2 of Xt_i)
+    Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
+    d1, d2 = asm.lo_diag_pos[3 * np.arange(n) + 1], asm.lo_diag_pos[3 * np.arange(n) + 2]
+    # (R_i e₂, R_i e₁): next after the diagonal in column 3i+1 — in the pattern for every pose with an edge
+    # (a dense 3×3 block); a pose without edges has G_i = 0, so Λ_i = 0 and nothing to subtract
+    below = d1 + 1
+    has = asm.lo_indices[below] == 3 * np.arange(n) + 2
+    S_lo = M_lo
+    S_lo[d1] -= Lam[:, 0, 0]
+    S_lo[below[has]] -= Lam[has, 1, 0]
+    S_lo[d2] -= Lam[:, 1, 1]
+    return S_lo, float(np.trace(Lam, axis1=1, axis2=2).sum())
+
+
+def _finite_solve(lin):
+    """``b ↦ A⁻¹b`` by the linear solver ``lin``'s factorisation (NaNs when it is not finite)."""
+    def solve(b):
+        h = lin.solve(b)
+        return np.full_like(b, np.nan) if h is None else h
+    return solve
 
 
 def _is_positive_definite(A: sp.csc_matrix):
