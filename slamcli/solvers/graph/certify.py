@@ -104,35 +104,81 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def sesync_cost(poses_xyt, ij, xyt, kappa, tau) -> float:
     """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``."""
-    r = _residuals(np.asarray(poses_xyt, float), ij, xyt, kappa, tau)
+    r = _Edges(ij, xyt, kappa, tau).residuals(np.asarray(poses_xyt, float)).ravel()
     return float(r @ r)
 
 
-def _residuals(poses, ij, xyt, kappa, tau) -> np.ndarray:
-    """Stacked residuals ``r (4E,)`` with ``F = ‖r‖²`` (their Jacobians: :func:`_sesync_problem`).
+class _Edges:
+    """The edges' constant terms, and ``F``'s residuals, Jacobians and θ curvature from them.
+
+    Residuals per edge ``[rot_x, rot_y, tr_x, tr_y]``:
 
     rotation:    ``√(2κ) (u_j − R(Δθ) u_i)``, ``u = [cos θ, sin θ]``   (``‖R_j − R_i R̃‖²_F = 2 ‖·‖²``)
     translation: ``√τ (t_j − t_i − R(θ_i) t̃)``
-    """
-    i, j = ij[:, 0], ij[:, 1]
-    th_i, th_j = poses[i, 2], poses[j, 2]
-    sk, st = np.sqrt(2.0 * kappa), np.sqrt(tau)
-    a = th_i + xyt[:, 2]
-    r_rot = sk[:, None] * np.column_stack([np.cos(th_j) - np.cos(a), np.sin(th_j) - np.sin(a)])
-    c, s = np.cos(th_i), np.sin(th_i)
-    tx, ty = xyt[:, 0], xyt[:, 1]
-    rt = np.column_stack([c * tx - s * ty, s * tx + c * ty])
-    r_tr = st[:, None] * (poses[j, :2] - poses[i, :2] - rt)
-    return np.concatenate([r_rot, r_tr], axis=1).ravel()  # per edge [rot_x, rot_y, tr_x, tr_y]
+
+    The sines and cosines are the poses' (``n`` of each), those of ``θ_i + Δθ`` by the addition theorem with
+    the measurements' ``cos Δθ``, ``sin Δθ`` computed once: two transcendental calls per evaluation instead
+    of six per edge."""
+
+    def __init__(self, ij, xyt, kappa, tau) -> None:
+        self.i, self.j = ij[:, 0], ij[:, 1]
+        self.sk, self.st = np.sqrt(2.0 * kappa), np.sqrt(tau)
+        self.cd, self.sd = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
+        self.tx, self.ty = xyt[:, 0].copy(), xyt[:, 1].copy()
+
+    def trig(self, poses) -> tuple:
+        """``(cos θ_j, sin θ_j, cos(θ_i + Δθ), sin(θ_i + Δθ), cos θ_i, sin θ_i)`` per edge."""
+        cp, sp_ = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        c, s = cp[self.i], sp_[self.i]
+        return cp[self.j], sp_[self.j], c * self.cd - s * self.sd, s * self.cd + c * self.sd, c, s
+
+    def residuals(self, poses, trig=None) -> np.ndarray:
+        """``r (E, 4)`` at ``poses (n, 3)``."""
+        cj, sj, ca, sa, c, s = self.trig(poses) if trig is None else trig
+        pi, pj = poses[self.i], poses[self.j]
+        r = np.empty((self.i.size, 4))
+        r[:, 0] = self.sk * (cj - ca)
+        r[:, 1] = self.sk * (sj - sa)
+        r[:, 2] = self.st * (pj[:, 0] - pi[:, 0] - (c * self.tx - s * self.ty))
+        r[:, 3] = self.st * (pj[:, 1] - pi[:, 1] - (s * self.tx + c * self.ty))
+        return r
+
+    def evaluate(self, poses) -> tuple[np.ndarray, np.ndarray]:
+        """``(r (E, 4), J (E, 4, 6))``, ``J`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``."""
+        trig = self.trig(poses)
+        cj, sj, ca, sa, c, s = trig
+        sk, st = self.sk, self.st
+        J = np.zeros((self.i.size, 4, 6))
+        J[:, 0, 5], J[:, 1, 5] = -sk * sj, sk * cj
+        J[:, 0, 2], J[:, 1, 2] = sk * sa, -sk * ca
+        for k in (0, 1):
+            J[:, 2 + k, 3 + k] = st
+            J[:, 2 + k, k] = -st
+        J[:, 2, 2] = st * (s * self.tx + c * self.ty)  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
+        J[:, 3, 2] = -st * (c * self.tx - s * self.ty)
+        return self.residuals(poses, trig), J
+
+    def theta_curvature(self, poses) -> np.ndarray:
+        """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
+        depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
+        ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
+        trig = self.trig(poses)
+        cj, sj, ca, sa, c, s = trig
+        r = self.residuals(poses, trig)
+        on_j = -self.sk * (r[:, 0] * cj + r[:, 1] * sj)
+        on_i = self.sk * (r[:, 0] * ca + r[:, 1] * sa) + self.st * (r[:, 2] * (c * self.tx - s * self.ty)
+                                                                     + r[:, 3] * (s * self.tx + c * self.ty))
+        n = poses.shape[0]
+        return np.bincount(self.j, weights=on_j, minlength=n) + np.bincount(self.i, weights=on_i, minlength=n)
 
 
 def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     """A stationary point of ``F`` near ``poses_xyt (n, 3)``: Newton steps (exact Hessian,
-    :func:`_theta_curvature`; quadratic convergence where F's residuals are large and Gauss-Newton's is only
+    :meth:`_Edges.theta_curvature`; quadratic convergence where F's residuals are large and Gauss-Newton's is only
     linear) when they lower F, else Gauss-Newton with step halving; pose 0 held (F is invariant under a
     global SE(2) motion, so the held pose is stationary too).
 
-    ``F = ‖r‖²`` (:func:`_residuals`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
+    ``F = ‖r‖²`` (:class:`_Edges`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
     edge over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``), so every iteration reuses the engine's assembly pattern and
     the linear solver's ordering and symbolic analysis, computed once."""
     return _refine(poses_xyt, ij, xyt, kappa, tau)[0]
@@ -143,7 +189,8 @@ def _refine(poses_xyt, ij, xyt, kappa, tau):
     symbolic analysis the certificate matrix reuses, :func:`_certificate_matrix`)."""
     x = np.array(poses_xyt, float, copy=True)
     n = x.shape[0]
-    problem = _sesync_problem(n, ij, xyt, kappa, tau)
+    edges = _Edges(ij, xyt, kappa, tau)
+    problem = _sesync_problem(n, edges)
     params = nls.NlsParams(pose_chart="world")
     asm = nls.Assembler(problem)
     lin = nls.make_linear_solver(asm, params)
@@ -168,7 +215,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau):
             cost, lo, g = asm.linearize_lower(flat, params)
             stale = False
         newton = lo.copy()
-        newton[theta_diag] += _theta_curvature(flat.reshape(n, 3), ij, xyt, kappa, tau)[1:]
+        newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3))[1:]
         # Newton (quadratic convergence); near the optimum its decrease is below F's rounding, so a Newton
         # step may raise F by that much (NEWTON_SLACK): it still shrinks the gradient, which the dual gap needs
         xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
@@ -228,51 +275,13 @@ def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool, slack: float =
     return None, None
 
 
-def _theta_curvature(poses, ij, xyt, kappa, tau) -> np.ndarray:
-    """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
-    depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
-    ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
-    r = _residuals(poses, ij, xyt, kappa, tau).reshape(-1, 4)
-    i, j = ij[:, 0], ij[:, 1]
-    sk, st = np.sqrt(2.0 * kappa), np.sqrt(tau)
-    th_i, th_j = poses[i, 2], poses[j, 2]
-    a = th_i + xyt[:, 2]
-    c, s = np.cos(th_i), np.sin(th_i)
-    tx, ty = xyt[:, 0], xyt[:, 1]
-    on_j = -sk * (r[:, 0] * np.cos(th_j) + r[:, 1] * np.sin(th_j))
-    on_i = sk * (r[:, 0] * np.cos(a) + r[:, 1] * np.sin(a)) + st * (r[:, 2] * (c * tx - s * ty)
-                                                                     + r[:, 3] * (s * tx + c * ty))
-    n = poses.shape[0]
-    return np.bincount(j, weights=on_j, minlength=n) + np.bincount(i, weights=on_i, minlength=n)
-
-
-def _sesync_problem(n: int, ij, xyt, kappa, tau) -> nls.NlsProblem:
+def _sesync_problem(n: int, edges: _Edges) -> nls.NlsProblem:
     """``½F`` as a least-squares problem over ``[x, y, θ]`` of ``n`` poses, pose 0 fixed (residuals and
-    Jacobians of :func:`_residuals`, per edge)."""
-    i, j = ij[:, 0], ij[:, 1]
+    Jacobians of :class:`_Edges`, per edge)."""
+    i, j = edges.i, edges.j
     cols = np.concatenate([3 * i[:, None] + np.arange(3), 3 * j[:, None] + np.arange(3)], axis=1)
-    sk, st = np.sqrt(2.0 * kappa), np.sqrt(tau)
-    tx, ty = xyt[:, 0], xyt[:, 1]
-
-    def residual(v):
-        return _residuals(v.reshape(-1, 3), ij, xyt, kappa, tau).reshape(-1, 4)
-
-    def evaluate(v):
-        p = v.reshape(-1, 3)
-        th_i, th_j = p[i, 2], p[j, 2]
-        a = th_i + xyt[:, 2]
-        c, s = np.cos(th_i), np.sin(th_i)
-        J = np.zeros((len(i), 4, 6))
-        J[:, 0, 5], J[:, 1, 5] = -sk * np.sin(th_j), sk * np.cos(th_j)
-        J[:, 0, 2], J[:, 1, 2] = sk * np.sin(a), -sk * np.cos(a)
-        for k in (0, 1):
-            J[:, 2 + k, 3 + k] = st
-            J[:, 2 + k, k] = -st
-        J[:, 2, 2] = st * (s * tx + c * ty)  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
-        J[:, 3, 2] = -st * (c * tx - s * ty)
-        return residual(v), J
-
-    block = nls.FactorBlock("sesync", cols, evaluate, np.eye(4), residual=residual)
+    block = nls.FactorBlock("sesync", cols, lambda v: edges.evaluate(v.reshape(-1, 3)), np.eye(4),
+                            residual=lambda v: edges.residuals(v.reshape(-1, 3)))
     return nls.NlsProblem(3 * n, [block], fixed_cols=np.arange(3, dtype=np.int64),
                           retract=lambda v, h: v + h)
 
