@@ -313,14 +313,14 @@ class GraphSlam(BaseSolver):
             if not p.certify:
                 return run, None, None
             ij, xyt, info = pose_graph_edges(inputs, p.edge_info)
-            cert = certify_pose_graph(run.gp.unpack(run.res.x)[0], ij, xyt, info)
+            cert = certify_pose_graph(run.gp.unpack(run.res.x)[0], ij, xyt, info, run.res.workspace)
             if cert.certified or not auto or start == "chordal":
                 return run, cert, None
             restart = {"from": "chordal", "first_cost": float(run.res.cost),
                        "first_lambda_min": float(cert.lambda_min), "first_init": start}
             run2 = self._optimise(inputs, assoc, initial_poses(inputs, "chordal"), np.zeros((0, 2)), mode, kernel,
                                   progress)
-            cert2 = certify_pose_graph(run2.gp.unpack(run2.res.x)[0], ij, xyt, info)
+            cert2 = certify_pose_graph(run2.gp.unpack(run2.res.x)[0], ij, xyt, info, run2.res.workspace)
             if run2.res.cost <= run.res.cost:
                 return run2, cert2, restart
             return run, cert, {**restart, "kept": "first"}
