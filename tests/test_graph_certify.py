@@ -147,3 +147,43 @@ def test_refinement_reaches_a_stationary_point_where_the_duality_gap_closes():
     cert = certify.certify_pose_graph(start, ij, xyt, info)
     assert cert.certified
     assert abs(cert.sesync_cost - cert.dual_bound) <= 1e-11 * cert.sesync_cost
+
+
+def test_certificate_matrix_on_the_refinement_pattern_is_the_permuted_definition():
+    """S assembled on the refinement's sparsity pattern (pose-interleaved columns [t_i, R_i e₁, R_i e₂]) equals
+    M − blkdiag(0, Λ) built densely from the definition (data matrix by its rank-one terms, Λ_i = Sym(G_i R_i))
+    after the permutation; tr(Λ) is the dual bound."""
+    poses, ij, xyt, info = _hexagon(0.2, seed=3)
+    kappa, tau = certify.isotropic_weights(info)
+    x = poses + np.random.default_rng(4).normal(scale=0.1, size=poses.shape)
+    n = 6
+    M = np.zeros((3 * n, 3 * n))  # columns [t_1 … t_n | R_1 e₁, R_1 e₂, …], one rank-one term at a time
+    for (i, j), m, k, t in zip(ij, xyt, kappa, tau):
+        c, s = np.cos(m[2]), np.sin(m[2])
+        for col in ([c, s], [-s, c]):  # A_e e_m = e_{R_j e_m} − E_{R_i} (R̃ e_m)
+            v = np.zeros(3 * n)
+            v[n + 2 * j + (0 if col == [c, s] else 1)] += 1.0
+            v[n + 2 * i : n + 2 * i + 2] -= col
+            M += k * np.outer(v, v)
+        v = np.zeros(3 * n)
+        v[j] += 1.0
+        v[i] -= 1.0
+        v[n + 2 * i : n + 2 * i + 2] -= m[:2]
+        M += t * np.outer(v, v)
+    X = np.zeros((2, 3 * n))
+    X[:, :n] = x[:, :2].T
+    S = M.copy()
+    dual = 0.0
+    for i, a in enumerate(x[:, 2]):
+        X[:, n + 2 * i : n + 2 * i + 2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    G = M @ X.T
+    for i in range(n):
+        L = G[n + 2 * i : n + 2 * i + 2] @ X[:, n + 2 * i : n + 2 * i + 2]
+        S[n + 2 * i : n + 2 * i + 2, n + 2 * i : n + 2 * i + 2] -= 0.5 * (L + L.T)
+        dual += np.trace(L)
+    _, asm, _ = certify._refine(poses, ij, xyt, kappa, tau)
+    S_lo, tr_lam = certify._certificate_matrix(asm, x, ij, xyt, kappa, tau)
+    perm = np.ravel(np.column_stack([np.arange(n), n + 2 * np.arange(n), n + 2 * np.arange(n) + 1]))
+    got = asm.matrix(asm.full(S_lo)).toarray()
+    np.testing.assert_allclose(got, S[np.ix_(perm, perm)], rtol=0, atol=1e-12 * np.abs(S).max())
+    assert tr_lam == pytest.approx(dual, rel=1e-12)

@@ -420,6 +420,34 @@ def test_assembled_normal_equations_equal_the_dense_jacobian_products(monkeypatc
     np.testing.assert_allclose(asm.lower_matrix(lo).toarray(), np.tril(J.T @ J), rtol=1e-12, atol=1e-9)
 
 
+def test_assembler_on_another_assemblers_pattern_gives_the_same_normal_equations():
+    """``Assembler(problem, like=other)``: a problem whose H fits in ``other``'s pattern (here the problem
+    without its prior block) reuses that pattern and assembles JᵀJ, Jᵀr of its own stacked Jacobian (explicit
+    zeros where only ``other`` has entries); a problem with an entry outside the pattern gets its own."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    big = nls.Assembler(gp.problem)
+    sub = nls.NlsProblem(gp.problem.n_vars, [b for b in gp.problem.blocks if b.name != "prior"],
+                         gp.problem.angle_cols, fixed_cols=np.arange(3))
+    x = gp.x0 + 0.01 * np.random.default_rng(4).normal(size=gp.x0.size)
+    params = nls.NlsParams(pose_chart="world")
+    asm = nls.Assembler(sub, like=big)
+    assert asm.lo_indices is big.lo_indices
+    own = nls.Assembler(sub)
+    for a in (asm, own):
+        _, lo, g = a.linearize_lower(x, params)
+        J = nls.jacobian_matrix(sub, x).toarray()
+        J[:, :3] = 0.0  # held columns: identity rows in H, zero gradient
+        ref = J.T @ J
+        ref[:3, :3] = np.eye(3)
+        np.testing.assert_allclose(a.matrix(a.full(lo)).toarray(), ref, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(g, J.T @ nls.residual_vector(sub, x), rtol=1e-12, atol=1e-9)
+    pattern = own.matrix(np.ones(own.nnz)).toarray() != 0
+    a, b = np.argwhere(~pattern)[0]  # two columns no factor couples
+    far = nls.FactorBlock("far", np.array([[a, b]]), lambda v: (v[None, [a, b]], np.ones((1, 2, 2))), np.eye(2))
+    wider = nls.Assembler(nls.NlsProblem(sub.n_vars, [*sub.blocks, far], sub.angle_cols), like=own)
+    assert wider.lo_indices is not own.lo_indices and wider.lo_nnz > own.lo_nnz
+
+
 def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
     """The Jacobian-free residuals LM's trial steps use are the ones ``evaluate`` returns, bit for bit
     (odometry, loop closures, bearing-range with a landmark on top of a pose)."""

@@ -77,7 +77,7 @@ def test_mit_excerpt_lm_from_odometry_stalls_chordal_does_not():
     """LM from the odometry chain ends in a local minimum on MIT; chordal initialisation reaches GTSAM's
     optimum from the same start (and GTSAM from the odometry start stalls too: the minimum is real)."""
     inp = import_graph(MIT).inputs
-    odo = solve_dataset(inp, "graph", {"covariance": False, "restart": "off"})
+    odo = solve_dataset(inp, "graph", {"init": "odometry", "covariance": False, "restart": "off"})
     cho = solve_dataset(inp, "graph", {"init": "chordal", "covariance": False})
     assert cho.extra["init"] == "chordal" and "init" not in odo.extra
     g, _, gt_cho = _gtsam_solve(inp, graph.initial_poses(inp, "chordal"))
@@ -86,11 +86,15 @@ def test_mit_excerpt_lm_from_odometry_stalls_chordal_does_not():
     assert odo.extra["final_cost"] > 10 * cho.extra["final_cost"]
     assert gt_odo > 10 * gt_cho  # GTSAM's LM from the odometry chain stalls in the same way
     assert abs(odo.extra["final_cost"] - gt_odo) <= 1e-4 * gt_odo
-    # the stall is not certified; with the defaults the solver notices and re-solves from the chordal start
+    # the stall is not certified; from the odometry start the solver notices and re-solves from the chordal one
     assert odo.extra["certificate"]["certified"] is False and odo.extra["certificate"]["lambda_min"] < 0
+    rst = solve_dataset(inp, "graph", {"init": "odometry", "covariance": False})
+    assert rst.extra["restart"]["from"] == "chordal" and rst.extra["certificate"]["certified"] is True
+    assert abs(rst.extra["final_cost"] - gt_cho) <= 1e-6 * gt_cho and "certified global optimum" in rst.message
+    # the defaults (init=auto) start a pose graph with loop closures from the chordal relaxation: no restart
     dflt = solve_dataset(inp, "graph", {"covariance": False})
-    assert dflt.extra["restart"]["from"] == "chordal" and dflt.extra["certificate"]["certified"] is True
-    assert abs(dflt.extra["final_cost"] - gt_cho) <= 1e-6 * gt_cho and "certified global optimum" in dflt.message
+    assert dflt.extra["init"] == "chordal" and "restart" not in dflt.extra and "chordal relaxation" in dflt.message
+    assert dflt.extra["certificate"]["certified"] is True and abs(dflt.extra["final_cost"] - gt_cho) <= 1e-6 * gt_cho
 
 
 def _loop_world(n=60, seed=3):

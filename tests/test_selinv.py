@@ -50,9 +50,10 @@ def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
     # every stored entry of Σ̃ is an entry of (P H Pᵀ)⁻¹
     Pinv = Hinv[np.ix_(S.perm, S.perm)]
     checked = 0
-    for K, j0 in enumerate(S._first):
-        rows = S._snrows[K]
-        blk = S._blk[K]
+    for K, j0 in enumerate(S.sn_first.tolist()):
+        rows = S._sn_rows(K)
+        m, w = rows.size, int(S.sn_width[K])
+        blk = S.vals[S.off[K] : S.off[K] + m * w].reshape(m, w)
         np.testing.assert_allclose(blk, Pinv[np.ix_(rows, np.arange(j0, j0 + blk.shape[1]))], rtol=0,
                                    atol=1e-10 * scale)
         checked += blk.size
@@ -65,6 +66,20 @@ def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
     F = selinv.factor_ldl(H)
     LD = (F.L @ sp.diags(F.d) @ F.L.T).toarray()
     assert np.abs(LD - H.toarray()[np.ix_(F.perm, F.perm)]).max() <= 1e-12 * np.abs(H).max()
+
+
+@pytest.mark.parametrize("max_rows, chunk", [(0, 1 << 22), (10**9, 1 << 22), (10**9, 7), (8, 50)])
+def test_both_gathers_and_any_chunking_give_the_dense_inverse(monkeypatch, max_rows, chunk):
+    """Σ̃_{R,R} gathered run by run (max_rows 0), from precomputed positions (every supernode), mixed, and with
+    the positions computed in small chunks: every stored entry equals the dense inverse's."""
+    monkeypatch.setattr(selinv, "GATHER_MAX_ROWS", max_rows)
+    monkeypatch.setattr(selinv, "GATHER_CHUNK", chunk)
+    H = _block_spd(150, 3, 5)
+    S = selinv.SelectedInverse.from_matrix(H)
+    assert np.max(S.sn_nrows - S.sn_width) > 8  # the mixed case has both kinds of supernode
+    Hinv = np.linalg.inv(H.toarray())
+    C = sp.coo_matrix(H)
+    assert np.abs(S.entries(C.row, C.col) - Hinv[C.row, C.col]).max() <= 1e-10 * np.abs(Hinv).max()
 
 
 def test_recurrence_on_a_hand_made_factor_without_cholmod_ordering():

@@ -53,6 +53,16 @@ def _compose_left_jacobian(a: np.ndarray) -> np.ndarray:
 def between_error(x_i, x_j, measured):
     """GTSAM ``BetweenFactorPose2`` error ``e = Log(d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` and its Jacobians.
 
+    The products of :func:`log_jacobian`, :func:`_compose_left_jacobian` and
+    :func:`slamcli.models.se2.between_jacobians` written out entry by entry (one pass over the factors, no
+    3×3 matrix products; the hot loop of every graph linearisation). With ``b = x_i⁻¹ ⊕ x_j``,
+    ``p = d⁻¹ ⊕ b = (R(−δθ)(b_t − d_t), b_θ − δθ)``, ``A = ∂Log/∂p · blkdiag(R(−δθ), 1)`` and
+    ``R_iᵀ = R(θ_i)ᵀ``::
+
+        J_j = [[A₂ R_iᵀ, a], [0, 1]]      J_i = [[−A₂ R_iᵀ, A₂ [b_y, −b_x]ᵀ − a], [0, −1]]
+
+    (``A₂`` the upper-left 2×2 block of ``A``, ``a`` its upper-right column).
+
     Parameters
     ----------
     x_i, x_j, measured : ndarray (F, 3)
@@ -61,22 +71,62 @@ def between_error(x_i, x_j, measured):
     -------
     e : ndarray (F, 3);  J_i, J_j : ndarray (F, 3, 3)  (w.r.t. world coordinates of x_i, x_j)
     """
-    d_inv, p = _between_offset(x_i, x_j, measured)
-    e = se2.log(p)
-    A = log_jacobian(p) @ _compose_left_jacobian(d_inv)
-    Ba, Bb = se2.between_jacobians(x_i, x_j)
-    return e, A @ Ba, A @ Bb
+    x_i = np.asarray(x_i, float)
+    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured)
+    e = _log_of(px, py, w)
+    # ∂Log/∂p (log_jacobian), the same series near 0
+    small4 = np.abs(w) < 1e-4
+    ws = np.where(small4, 1.0, w)
+    half = 0.5 * ws
+    sh = np.sin(half)
+    cot = np.cos(half) / sh
+    alpha = np.where(small4, 1.0 - w**2 / 12.0, half * cot)
+    dalpha = np.where(small4, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
+    hw = 0.5 * w
+    # A = ∂Log/∂p · blkdiag(R(−δθ), 1):  R(−δθ) = [[cd, sd], [−sd, cd]]
+    a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
+    a10, a11 = -hw * cd - alpha * sd, alpha * cd - hw * sd
+    a02, a12 = dalpha * px + 0.5 * py, dalpha * py - 0.5 * px
+    shape = x_i.shape[:-1] + (3, 3)
+    Jj, Ji = np.zeros(shape), np.zeros(shape)
+    Jj[..., 0, 0], Jj[..., 0, 1] = a00 * ci - a01 * si, a00 * si + a01 * ci  # A₂ R_iᵀ
+    Jj[..., 1, 0], Jj[..., 1, 1] = a10 * ci - a11 * si, a10 * si + a11 * ci
+    Jj[..., 0, 2], Jj[..., 1, 2], Jj[..., 2, 2] = a02, a12, 1.0
+    Ji[..., :2, :2] = -Jj[..., :2, :2]
+    Ji[..., 0, 2] = a00 * by - a01 * bx - a02
+    Ji[..., 1, 2] = a10 * by - a11 * bx - a12
+    Ji[..., 2, 2] = -1.0
+    return e, Ji, Jj
 
 
-def _between_offset(x_i, x_j, measured):
-    """``(d⁻¹, d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` of :func:`between_error`."""
-    d_inv = se2.inverse(measured)
-    return d_inv, se2.compose(d_inv, se2.between(x_i, x_j))
+def _between_parts(x_i, x_j, measured):
+    """The intermediate terms of :func:`between_error`: ``cos θ_i, sin θ_i``, ``b_t`` of ``b = x_i⁻¹ ⊕ x_j``,
+    ``cos δθ, sin δθ`` of the measurement and ``p = d⁻¹ ⊕ b`` as ``(p_x, p_y, p_θ)`` (``p_θ`` wrapped)."""
+    x_i, x_j, d = (np.asarray(v, float) for v in (x_i, x_j, measured))
+    ci, si = np.cos(x_i[..., 2]), np.sin(x_i[..., 2])
+    dxw, dyw = x_j[..., 0] - x_i[..., 0], x_j[..., 1] - x_i[..., 1]
+    bx, by = ci * dxw + si * dyw, ci * dyw - si * dxw
+    cd, sd = np.cos(d[..., 2]), np.sin(d[..., 2])
+    ux, uy = bx - d[..., 0], by - d[..., 1]
+    px, py = cd * ux + sd * uy, cd * uy - sd * ux  # R(−δθ)(b_t − d_t)
+    w = wrap_angle(x_j[..., 2] - x_i[..., 2] - d[..., 2])
+    return ci, si, bx, by, cd, sd, px, py, w
+
+
+def _log_of(px, py, w):
+    """:func:`slamcli.models.se2.log` of ``(p_x, p_y, w)`` with ``w`` already wrapped → ``(..., 3)``."""
+    small = np.abs(w) < 1e-6
+    ws = np.where(small, 1.0, w)
+    A = np.where(small, 1.0 - w**2 / 6.0, np.sin(ws) / ws)
+    B = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - np.cos(ws)) / ws)
+    det = A * A + B * B
+    return np.stack([(A * px + B * py) / det, (A * py - B * px) / det, w], -1)
 
 
 def between_residual(x_i, x_j, measured):
     """The error ``e (F, 3)`` of :func:`between_error` without its Jacobians (the same arithmetic)."""
-    return se2.log(_between_offset(x_i, x_j, measured)[1])
+    *_, px, py, w = _between_parts(x_i, x_j, measured)
+    return _log_of(px, py, w)
 
 
 def prior_error(x, prior):

@@ -228,9 +228,9 @@ def spanning_tree_poses(
 
 def _solve_normal(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
     """Least squares ``min ‖A x − b‖`` through the normal equations ``AᵀA x = Aᵀb`` (symmetric positive
-    definite: SuperLU in symmetric mode, minimum-degree ordering, no off-diagonal pivoting = sparse Cholesky)."""
+    definite: a sparse Cholesky, :func:`slamcli.solvers.nls.solve_spd`)."""
     At = A.T.tocsr()
-    return nls.factorize_symmetric((At @ A).tocsc()).solve(At @ b)
+    return nls.solve_spd(At @ A, At @ b)
 
 
 def chordal_poses(

@@ -24,7 +24,13 @@ from slamcli.solvers.graph.init import (
 )
 from slamcli.solvers.graph.merge import merge_candidates
 from slamcli.solvers.graph.paper import build_paper_problem, default_paper_weights
-from slamcli.solvers.graph.params import STALL_REL_DECREASE, STALL_WINDOW, GraphParams, resolve_robust
+from slamcli.solvers.graph.params import (
+    STALL_REL_DECREASE,
+    STALL_WINDOW,
+    GraphParams,
+    resolve_init,
+    resolve_robust,
+)
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
 
@@ -73,13 +79,16 @@ def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
     merged).
     """
     out: dict[str, dict] = {}
+    thresholds: dict[int, tuple[float, float]] = {}
     for b in problem.blocks:
-        r, _ = b.evaluate(x)
+        r = b.residuals(x)  # no Jacobians
         L = np.asarray(b.sqrt_info, float)
         rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
         s2 = np.einsum("fk,fk->f", rw, rw)
         k = int(r.shape[1])
-        t95, t99 = chi2_quantile(0.95, k), chi2_quantile(0.99, k)
+        if k not in thresholds:
+            thresholds[k] = (chi2_quantile(0.95, k), chi2_quantile(0.99, k))
+        t95, t99 = thresholds[k]
         d = out.setdefault(b.name, {"factors": 0, "dof": k, "over_95": 0, "over_99": 0})
         d["factors"] += int(s2.size)
         d["over_95"] += int(np.sum(s2 > t95))
@@ -168,7 +177,8 @@ class GraphSlam(BaseSolver):
 
             inputs = mean_offset_inputs(inputs, "graph")
         self._check_inputs(inputs, init)
-        poses0 = self._initial_poses(inputs, init)
+        start = resolve_init(p, inputs)
+        poses0 = self._initial_poses(inputs, init, start)
         assoc, old_of_new, mode = self._associate(inputs, init, poses0)
         robust_init = None
         if p.init == "robust" and p.init_from == "odometry" and old_of_new.size:
@@ -178,8 +188,8 @@ class GraphSlam(BaseSolver):
             lm0 = np.asarray(init.landmarks_xy, float).reshape(-1, 2)[old_of_new]
         kernel = resolve_robust(p.robust, mode, inputs.reported_id_source)
         run = self._optimise(inputs, assoc, poses0, lm0, mode, kernel, progress)
-        run, cert, restart = self._certify_or_restart(inputs, run, assoc, poses0, mode, kernel, progress)
-        extra, message = self._summary(run, mode, kernel, robust_init)
+        run, cert, restart = self._certify_or_restart(inputs, run, assoc, poses0, mode, kernel, progress, start)
+        extra, message = self._summary(run, mode, kernel, robust_init, start)
         message = self._report_restart(extra, message, cert, restart)
         pose_cov, landmark_cov, message = self._covariances(inputs, run, extra, message)
         if run.notes:
@@ -208,7 +218,7 @@ class GraphSlam(BaseSolver):
         if inputs.motion_model != "ddmr" and (p.use_controls or p.model == "paper"):
             raise SolverError(f"graph: use_controls / model=paper read the controls as DDMR [v, omega]; with "
                               f"motion_model={inputs.motion_model!r} use the odometry factors (model=gtsam)")
-        if inputs.robots is not None and (p.model == "paper" or p.init != "odometry" or p.use_controls):
+        if inputs.robots is not None and (p.model == "paper" or p.init not in ("auto", "odometry") or p.use_controls):
             raise SolverError("graph: multi-robot data supports model=gtsam with init=odometry and "
                               "use_controls=false only")
         if p.init_from == "init" and init is None:
@@ -221,8 +231,9 @@ class GraphSlam(BaseSolver):
                     "use association=nn, or another init with reported ids / --init labels"
                 )
 
-    def _initial_poses(self, inputs: SlamInputs, init: SolverResult | None) -> np.ndarray:
-        """Start poses ``(T+1, 3)``: the ``--init`` result's, or ``params.init``'s (robust: odometry first)."""
+    def _initial_poses(self, inputs: SlamInputs, init: SolverResult | None, start: str) -> np.ndarray:
+        """Start poses ``(T+1, 3)``: the ``--init`` result's, or those of ``start`` (``params.init`` resolved,
+        :func:`resolve_init`; robust: odometry first)."""
         p = self.params
         if p.init_from == "init":
             poses0 = np.asarray(init.poses_xyt, float)
@@ -231,8 +242,8 @@ class GraphSlam(BaseSolver):
                     f"graph: init result has poses {poses0.shape}, dataset needs ({inputs.n_poses}, 3)"
                 )
             return poses0
-        poses0 = initial_poses(inputs, "odometry" if p.init in ("robust", "incremental") else p.init)
-        if p.init == "incremental":
+        poses0 = initial_poses(inputs, "odometry" if start in ("robust", "incremental") else start)
+        if start == "incremental":
             poses0 = incremental_initial_poses(inputs, poses0, p)
         return poses0
 
@@ -291,7 +302,7 @@ class GraphSlam(BaseSolver):
         return (p.model == "gtsam" and run.gp.n_landmarks == 0 and kernel == "none" and inputs.robots is None
                 and not p.use_controls and not has_gps and not p.estimate_range_bias and inputs.n_poses >= 2)
 
-    def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress):
+    def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress, start: str):
         """Certify a pose graph's optimum, re-solving from the chordal relaxation when the first start is not
         certified; re-solve a stalled landmark graph from ``init=robust`` (GraphParams.restart).
 
@@ -302,23 +313,23 @@ class GraphSlam(BaseSolver):
             if not p.certify:
                 return run, None, None
             ij, xyt, info = pose_graph_edges(inputs, p.edge_info)
-            cert = certify_pose_graph(run.gp.unpack(run.res.x)[0], ij, xyt, info)
-            if cert.certified or not auto or p.init == "chordal":
+            cert = certify_pose_graph(run.gp.unpack(run.res.x)[0], ij, xyt, info, run.res.workspace)
+            if cert.certified or not auto or start == "chordal":
                 return run, cert, None
             restart = {"from": "chordal", "first_cost": float(run.res.cost),
-                       "first_lambda_min": float(cert.lambda_min), "first_init": p.init}
+                       "first_lambda_min": float(cert.lambda_min), "first_init": start}
             run2 = self._optimise(inputs, assoc, initial_poses(inputs, "chordal"), np.zeros((0, 2)), mode, kernel,
                                   progress)
-            cert2 = certify_pose_graph(run2.gp.unpack(run2.res.x)[0], ij, xyt, info)
+            cert2 = certify_pose_graph(run2.gp.unpack(run2.res.x)[0], ij, xyt, info, run2.res.workspace)
             if run2.res.cost <= run.res.cost:
                 return run2, cert2, restart
             return run, cert, {**restart, "kept": "first"}
-        if not (auto and p.model == "gtsam" and p.init == "odometry" and run.gp.n_landmarks and _stalled(run)):
+        if not (auto and p.model == "gtsam" and start == "odometry" and run.gp.n_landmarks and _stalled(run)):
             return run, None, None
         poses_r, robust_res = robust_initial_poses(inputs, assoc, poses0, p)
         lm_r = frontend.landmarks_from_observations(poses_r, inputs.observations, assoc, int(assoc.max(initial=-1)) + 1)
         run2 = self._optimise(inputs, assoc, poses_r, lm_r, mode, kernel, progress)
-        restart = {"from": "robust", "first_cost": float(run.res.cost), "first_init": p.init,
+        restart = {"from": "robust", "first_cost": float(run.res.cost), "first_init": start,
                    "robust_cost": float(robust_res.cost)}
         if run2.res.cost <= run.res.cost:
             return run2, None, restart
@@ -366,7 +377,7 @@ class GraphSlam(BaseSolver):
         run.merged_total += int(pairs.shape[0])
         return poses_r.copy(), new_lms[old_of_new]
 
-    def _summary(self, run: _Run, mode: str, kernel: str, robust_init) -> tuple[dict, str]:
+    def _summary(self, run: _Run, mode: str, kernel: str, robust_init, start: str) -> tuple[dict, str]:
         """The result's ``extra`` dict and message (before covariances)."""
         p, gp, res = self.params, run.gp, run.res
         extra: dict = {
@@ -381,8 +392,8 @@ class GraphSlam(BaseSolver):
             extra["merged_landmarks"] = run.merged_total
         if gp.range_bias_col is not None:
             extra["range_bias"] = float(res.x[gp.range_bias_col])
-        if p.init != "odometry" and p.init_from == "odometry":
-            extra["init"] = p.init
+        if start != "odometry" and p.init_from == "odometry":
+            extra["init"] = start
         if robust_init is not None:
             extra["robust_init"] = {
                 "status": robust_init.status.value,
@@ -392,6 +403,8 @@ class GraphSlam(BaseSolver):
         if p.outlier_counts:
             extra["chi2_outliers"] = chi2_outlier_counts(gp.problem, res.x)
         message = res.message
+        if p.init == "auto" and start != "odometry" and p.init_from == "odometry":
+            message += f"; started from the {start} relaxation (init=auto: a pose graph with loop closures)"
         if run.rnd:  # the status is that of the last round; the trace holds every round (each with its start)
             message += (
                 f" (in optimisation round {run.rnd + 1}, after landmark merges; {run.done_iters} iterations in all)"

@@ -73,6 +73,7 @@ from slamcli.solvers.nls.linear import (  # noqa: F401
     factorize_lower,
     factorize_symmetric,
     make_linear_solver,
+    solve_spd,
 )
 from slamcli.solvers.nls.marginals import (  # noqa: F401
     NotPositiveDefiniteError,

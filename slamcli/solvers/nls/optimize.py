@@ -159,6 +159,7 @@ def solve(
         linear_solves=int(stats["solves"]),
         notes=tuple(notes),
         linear_solver=lin.name,
+        workspace=(asm, lin),
     )
 
 

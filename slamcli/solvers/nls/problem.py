@@ -219,6 +219,9 @@ class NlsResult:
     notes : tuple[str, ...]      numerical fallbacks that were taken (SuperLU instead of CHOLMOD or the
                                  banded Cholesky, damped Gauss-Newton steps); empty when none were needed.
     linear_solver : str          the linear solver used (``cholmod``, ``superlu`` or ``chain``).
+    workspace : tuple or None    ``(Assembler, linear solver)`` of the run: their sparsity pattern and
+                                 symbolic analysis serve a follow-up problem on the same factor graph
+                                 (``Assembler(problem, like=...)``, e.g. the pose-graph certificate).
     """
 
     x: np.ndarray
@@ -232,6 +235,7 @@ class NlsResult:
     linear_solves: int = 0
     notes: tuple[str, ...] = ()
     linear_solver: str = ""
+    workspace: tuple | None = field(default=None, repr=False, compare=False)
 
 
 def pose_offsets(cols: np.ndarray, n_poses: int) -> list[int]:
