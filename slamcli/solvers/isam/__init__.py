@@ -23,13 +23,14 @@ factors and association replayed through GTSAM 4.3's ``ISAM2`` with its defaults
 alternative we measured (GTSAM's C++ implementation: a Python Bayes tree would only be slower). Its
 per-update time grows along the run — the root clique holds the recent poses and every landmark linked to
 them, and each re-observed landmark re-eliminates the path to the root. On Victoria Park (full run, 7231
-updates) iSAM2's per-update CPU rises by 6.5 ms per 1000 updates and it needs 181.5 s; ours rises by 0.07 ms
-per 1000 updates outside batch steps (1.8 ms with them) and needs 54.7 s, 40.5 s of it in 78 batch steps
-(first 300 s: 3.56 vs 5.90 s), for the same estimate (GPS ATE 2.60 m full, 1.39 m 300 s, on both). The
-fixed-lag window bounds each update's linear algebra by the window, and the batch steps (the only part that
-grows with the map) are amortised over ≥ ``batch_every_s`` s of data. Defaults, full run, CPU s / aligned GPS
-ATE m over every fix, the reference's glitch included (the benchmark's helpers with one parameter changed): defaults 54.7 / 2.60; ``batch_every_s=10`` 113.6 /
-2.68; ``=40`` 45.9 / 2.62; ``lag_s=6`` 66.9 / 2.58; ``batch_iterations=3`` 57.0 / 2.60 (a batch step's cost is
+updates) iSAM2's per-update CPU rises by 8.2 ms per 1000 updates and it needs 205.5 s; ours changes by
+−0.10 ms per 1000 updates outside batch steps (+1.2 ms with them) and needs 54.8 s, 33.8 s of it in 78 batch
+steps (first 300 s: 4.14 vs 6.78 s), for the same estimate (``slamcli evaluate``'s GPS ATE 1.59 m full — 2.60 m
+with the reference's glitch —, 1.39 m 300 s, on both). The fixed-lag window bounds each update's linear
+algebra by the window, and the batch steps (the only part that grows with the map) are amortised over
+≥ ``batch_every_s`` s of data. Defaults, full run, CPU s / aligned GPS ATE m over every fix, the reference's
+glitch included (an earlier run of the benchmark's helpers with one parameter changed): defaults 54.7 / 2.60;
+``batch_every_s=10`` 113.6 / 2.68; ``=40`` 45.9 / 2.62; ``lag_s=6`` 66.9 / 2.58; ``batch_iterations=3`` 57.0 / 2.60 (a batch step's cost is
 its set-up and factorisations, not its LM iterations); ``reactivate=false`` 56.7 / 10.2, ``reactivate=false
 robust=cauchy`` 104.5 / 7.2. A supernodal partial
 update of the whole factor was not built: CHOLMOD is optional here (SuperLU otherwise), and the window keeps
