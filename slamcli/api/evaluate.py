@@ -297,7 +297,7 @@ def evaluate_without_truth(result, dataset):
                          f"{g['gps_gap_total_s']:.1f} s in all, longest {g['gps_longest_gap_s']:.1f} s; the "
                          "unaligned ATE assumes the run's start frame is the GPS frame (it is not known to be), "
                          f"the aligned one removes that frame; positions of the body point {off.tolist()} m; "
-                         f"{g['gps_n_rejected']} fixes rejected as glitches (farther than "
+                         f"{g['gps_n_rejected']} fix(es) rejected as glitches (farther than "
                          f"{g['gps_glitch_max_speed_mps']:g} m/s · Δt + {g['gps_glitch_tol_m']:g} m from both "
                          "neighbouring fixes, which agree with each other; reference only) at "
                          f"{[round(x, 3) for x in g['gps_rejected_time_s']]} s, kept in gps_ate_*_raw_rmse_m")
