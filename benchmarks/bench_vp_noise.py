@@ -13,8 +13,15 @@ heading), odometry lateral, odometry heading, range, bearing — the importer's 
 every ``|r_g − 1| < TOL`` (the simple iterated estimator; Förstner 1979). ``σ_*`` columns are the σ the
 round *assumed*, ``r_*`` what it measured; the last round's ``σ·√r`` is the calibrated noise.
 
-The ``gps_ate_m`` column (``slamcli evaluate``'s aligned GPS ATE, glitch gate on) describes each round's
-optimum; it takes no part in the estimate.
+Then, per window: (a) a synthetic check of the estimator on this very problem — measurements drawn with the
+calibrated σ around isam's estimate (same steps, association and geometry, seeded), VCE from the defaults
+again: the table gives recovered / true σ; (b) ``isam`` on the import with the calibrated noise (odometry
+and laser σ; the control σ, unused by ``graph`` and ``isam``, stay), at its default gate and at
+``gate_prob`` :data:`WIDE_GATE`; (c) VCE again on the wide gate's association (does the calibration hold on
+the association its own noise gives?).
+
+The ``gps_ate_m`` / ``isam_gps_ate_m`` columns (``slamcli evaluate``'s aligned GPS ATE, glitch gate on)
+describe each optimum; they take no part in the estimate.
 
 Run: ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m benchmarks vp_noise [--quick]``; writes
 ``benchmarks/results/vp_noise.csv`` and ``benchmarks/results/vp_noise.md``.
@@ -39,6 +46,8 @@ TOL = 0.002
 MAX_ROUNDS = 20
 #: the wide χ² gate probability tried with the calibrated noise (χ²₂ threshold 41.4 against 13.8 at isam's 0.999)
 WIDE_GATE = 1 - 1e-9
+#: seed of the synthetic check's draws
+SEED = 2026
 
 
 def _victoria(duration, noise=None):
@@ -91,7 +100,7 @@ def _noise_of(noise, sig):
 
 def vce(name: str, stage: str, dataset, inp, assoc, poses, lms) -> list[dict]:
     """The iterated VCE rounds (module docstring) from the import's noise on one association; one row per
-    round."""
+    round (``dataset`` None: no GPS ATE column)."""
     from benchmarks.bench_isam import _ate, _to_body
     from slamcli.metrics.variance import variance_components
     from slamcli.solvers import nls
@@ -112,7 +121,7 @@ def vce(name: str, stage: str, dataset, inp, assoc, poses, lms) -> list[dict]:
         poses, lms = gp.unpack(res.x)
         row = {"window": name, "stage": stage, "round": rnd, "n_vars": gp.problem.n_vars, "n_rows": int(e.size),
                "landmarks": gp.n_landmarks, "lm_message": res.message, "cpu_s": time.process_time() - c0,
-               "gps_ate_m": _ate(dataset, _to_body(poses, dataset.inputs))[0]}
+               "gps_ate_m": float("nan") if dataset is None else _ate(dataset, _to_body(poses, dataset.inputs))[0]}
         for i, g in enumerate(GROUPS):
             row.update({f"sigma_{g}": sig[i], f"n_{g}": int(vc.n_obs[i]), f"redundancy_{g}": vc.redundancy[i],
                         f"r_{g}": vc.ratio[i], f"r_approx_{g}": ap.ratio[i]})
@@ -124,6 +133,33 @@ def vce(name: str, stage: str, dataset, inp, assoc, poses, lms) -> list[dict]:
             break
         sig = sig * np.sqrt(vc.ratio)
     return rows
+
+
+def synthetic(inp, assoc, poses, lms, sigma, seed: int):
+    """The same problem (steps, association, geometry) with measurements drawn around ``poses (T+1, 3)`` and
+    ``lms (L, 2)`` with known σ = ``sigma`` (odometry x, lateral, heading per step, range, bearing): per-step
+    odometry ``d_t = (x_t⁻¹ ⊕ x_{t+1}) ⊕ Exp(−ε_t)``, ε_t ~ N(0, diag σ²) (so ``graph``'s between error at
+    the generating poses is ε_t), integrated from ``x_0``; associated sightings ``h(x, m) + N(0, σ²)``."""
+    from slamcli.models import se2
+    from slamcli.models.angles import wrap_angle
+    from slamcli.models.observation import range_bearing
+
+    rng = np.random.default_rng(seed)
+    sigma = np.asarray(sigma, float)
+    eps = rng.normal(size=(poses.shape[0] - 1, 3)) * sigma[:3]
+    d = se2.compose(se2.between(poses[:-1], poses[1:]), se2.exp(-eps))
+    th = poses[0, 2] + np.concatenate([[0.0], np.cumsum(d[:, 2])])
+    c, s = np.cos(th[:-1]), np.sin(th[:-1])
+    step_xy = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], -1)
+    odo = np.column_stack([poses[0, :2] + np.vstack([[0.0, 0.0], np.cumsum(step_xy, 0)]), wrap_angle(th)])
+    obs = inp.observations
+    z = np.array(obs.z, float)
+    rows = np.flatnonzero(assoc >= 0)
+    zt = range_bearing(poses[np.asarray(obs.step)[rows]], lms[assoc[rows]])
+    z[rows, 0] = zt[:, 0] + sigma[3] * rng.normal(size=rows.size)
+    z[rows, 1] = wrap_angle(zt[:, 1] + sigma[4] * rng.normal(size=rows.size))
+    return dataclasses.replace(inp, x0=np.array(poses[0], float), odometry_xyt=odo,
+                               observations=dataclasses.replace(obs, range_m=z[:, 0], bearing_rad=z[:, 1]))
 
 
 def calibrated(rows: list[dict], window: str, stage: str) -> dict:
@@ -172,6 +208,15 @@ def write_markdown(rows: list[dict], isam_rows: list[dict]) -> Path:
         lines.append(f"| {w} | {st} | {c['rounds']} | " + " | ".join(
             f"{c[f'sigma_{g}']:.4g} (×{c[f'factor_{g}']:.2f}; {c[f'redundancy_share_{g}']:.3f}; "
             f"{100 * c[f'rel_sd_{g}']:.1f} %)" for g in GROUPS) + " |")
+    lines += ["", "Synthetic check (measurements drawn with the first association's calibrated σ, VCE from the "
+              "defaults): recovered σ / true σ, and that ratio's distance from 1 in standard deviations "
+              "1/√(2ρ):", "", "| window | " + " | ".join(GROUPS) + " |", "|" + "---|" * (1 + len(GROUPS))]
+    for w in dict.fromkeys(r["window"] for r in rows if r["stage"] == "synthetic, σ known"):
+        c = calibrated(rows, w, "synthetic, σ known")
+        last = [r for r in rows if r["window"] == w and r["stage"] == "synthetic, σ known"][-1]
+        q = [c[f"sigma_{g}"] / last[f"true_sigma_{g}"] for g in GROUPS]
+        lines.append(f"| {w} | " + " | ".join(f"{v:.4f} ({(v - 1) / c[f'rel_sd_{g}']:+.1f} sd)"
+                                              for v, g in zip(q, GROUPS)) + " |")
     lines += ["", "`isam` on the default import and on the VCE-calibrated one (calibrated on the default "
               "association of the same window):", "",
               "| window | noise | gate_prob | landmarks | GPS ATE m | raw ATE m | CPU s |", "|" + "---|" * 7]
@@ -194,7 +239,14 @@ def run(quick: bool = False) -> list[dict]:
         inp, assoc, poses, lms, summary = isam_run(ds)
         isam_rows.append({"window": name, "noise": "defaults", **summary})
         rows += vce(name, "isam, defaults", ds, inp, assoc, poses, lms)
-        ds_cal = _victoria(duration, calibrated_noise(calibrated(rows, name, "isam, defaults")))
+        cal = calibrated(rows, name, "isam, defaults")
+        # the estimator's check: measurements drawn with the calibrated σ around isam's estimate, same
+        # association and geometry, VCE from the defaults again — does it recover the σ it was given?
+        truth = [cal[f"sigma_{g}"] for g in GROUPS]
+        syn = vce(name, "synthetic, σ known", None, synthetic(inp, assoc, poses, lms, truth, SEED), assoc,
+                  poses, lms)
+        rows += [{**r, **{f"true_sigma_{g}": t for g, t in zip(GROUPS, truth)}} for r in syn]
+        ds_cal = _victoria(duration, calibrated_noise(cal))
         for gate in (None, WIDE_GATE):
             inp, assoc, poses, lms, summary = isam_run(ds_cal, gate)
             isam_rows.append({"window": name, "noise": "VCE", **summary})
