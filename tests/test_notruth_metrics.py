@@ -10,6 +10,7 @@ from scipy.stats import chi2
 from slamcli.metrics.reference import (
     ate_vs_position_reference,
     gaps,
+    glitches,
     mean_nis_band,
     own_model_metrics,
     trajectory_against,
@@ -94,3 +95,61 @@ def test_mean_nis_band_and_own_model_metrics():
                         extra={"final_cost": 12.5})
     m2 = own_model_metrics(res2)
     assert m2["final_cost"] == 12.5 and m2["nis_note"].startswith("not available")
+
+
+def _balanced_track(speed, n=40, dt=0.2, a=1.0):
+    """A straight run at ``speed`` m/s (estimate) and GPS fixes every ``dt`` s displaced ±a m along the normal
+    in the pattern + − − + (repeated): Σ sᵢ = Σ sᵢ τᵢ = 0, so the least-squares SE(2) alignment is the identity
+    and the aligned ATE is exactly ``a`` (closed form)."""
+    u = np.array([0.6, 0.8])
+    nrm = np.array([-0.8, 0.6])
+    t = np.linspace(0.0, n * dt, 4 * n + 1)
+    poses = np.column_stack([speed * t[:, None] * u, np.zeros(t.size)])
+    rt = dt * np.arange(n)
+    s = np.tile([1.0, -1.0, -1.0, 1.0], n // 4)
+    ref = speed * rt[:, None] * u + a * s[:, None] * nrm
+    return t, poses, rt, ref, u, nrm
+
+
+def test_gps_glitch_gate_rejects_a_planted_glitch_and_keeps_the_closed_form_ate():
+    t, poses, rt, ref, u, nrm = _balanced_track(speed=8.0)
+    m0 = ate_vs_position_reference(t, poses, rt, ref)
+    assert m0["gps_n_rejected"] == 0 and m0["gps_ate_aligned_rmse_m"] == pytest.approx(1.0, rel=1e-12)
+    # plant a glitch between fixes 20 and 21: 140 m off the line at its own time
+    tg, D = 0.5 * (rt[20] + rt[21]), 140.0
+    rt2 = np.insert(rt, 21, tg)
+    ref2 = np.insert(ref, 21, 8.0 * tg * u + D * nrm, axis=0)
+    m = ate_vs_position_reference(t, poses, rt2, ref2)
+    assert m["gps_n_rejected"] == 1 and m["gps_rejected_time_s"] == [pytest.approx(tg)]
+    assert m["gps_n_matched"] == len(rt)
+    assert m["gps_ate_aligned_rmse_m"] == pytest.approx(1.0, rel=1e-12)
+    assert m["gps_ate_rmse_m"] == pytest.approx(1.0, rel=1e-12)
+    # nothing hidden: the ungated ATE over every fix (unaligned: closed form with the glitch's error D)
+    n = len(rt)
+    assert m["gps_ate_raw_rmse_m"] == pytest.approx(np.sqrt((n * 1.0 + D**2) / (n + 1)), rel=1e-12)
+    assert 1.0 < m["gps_ate_aligned_raw_rmse_m"] <= m["gps_ate_raw_rmse_m"]
+    assert m["gps_glitch_max_speed_mps"] == 20.0 and m["gps_glitch_tol_m"] == 5.0
+
+
+def test_gps_glitch_gate_keeps_fixes_at_a_legitimate_high_speed():
+    # 60 m/s, three times the gate's speed: every fix is far from its neighbours, but they agree → none gated
+    t, poses, rt, ref, _, _ = _balanced_track(speed=60.0)
+    m = ate_vs_position_reference(t, poses, rt, ref)
+    assert m["gps_n_rejected"] == 0 and m["gps_n_matched"] == len(rt)
+    assert m["gps_ate_aligned_rmse_m"] == pytest.approx(1.0, rel=1e-12)
+    assert m["gps_ate_aligned_raw_rmse_m"] == m["gps_ate_aligned_rmse_m"]
+
+
+def test_gps_glitch_gate_threshold_by_hand():
+    # fixes 1 s apart on the x axis; the middle one jumps 30 m sideways (bound 20·1 + 5 = 25 m)
+    t = np.array([0.0, 1.0, 2.0])
+    xy = np.array([[0.0, 0.0], [1.0, 30.0], [2.0, 0.0]])
+    assert glitches(t, xy).tolist() == [False, True, False]
+    assert glitches(t, xy, max_speed_mps=26.0).tolist() == [False, False, False]  # 26 + 5 > √(1 + 900)
+    assert glitches(t, xy, tol_m=11.0).tolist() == [False, False, False]
+    # the neighbours disagree (the last one jumped too): not an isolated glitch, not gated
+    assert not glitches(t, [[0.0, 0.0], [1.0, 30.0], [2.0, 60.0]]).any()
+    # end fixes are never gated
+    assert not glitches(t[:2], xy[:2]).any()
+    with pytest.raises(ValueError, match="max_speed_mps"):
+        glitches(t, xy, max_speed_mps=0.0)

@@ -296,7 +296,11 @@ def evaluate_without_truth(result, dataset):
                          f"{g['gps_gap_count']} gaps > {g['gps_gap_threshold_s']:g} s without GPS, "
                          f"{g['gps_gap_total_s']:.1f} s in all, longest {g['gps_longest_gap_s']:.1f} s; the "
                          "unaligned ATE assumes the run's start frame is the GPS frame (it is not known to be), "
-                         f"the aligned one removes that frame; positions of the body point {off.tolist()} m")
+                         f"the aligned one removes that frame; positions of the body point {off.tolist()} m; "
+                         f"{g['gps_n_rejected']} fix(es) rejected as glitches (farther than "
+                         f"{g['gps_glitch_max_speed_mps']:g} m/s · Δt + {g['gps_glitch_tol_m']:g} m from both "
+                         "neighbouring fixes, which agree with each other; reference only) at "
+                         f"{[round(x, 3) for x in g['gps_rejected_time_s']]} s, kept in gps_ate_*_raw_rmse_m")
         per_step["gps_aligned_err_m"] = np.interp(inp.timestamps, t_m, errs) if len(t_m) else np.nan
     s["not_available"] = missing
     n_it = len(result.trace) if result.trace is not None else 0

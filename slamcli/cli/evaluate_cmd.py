@@ -38,6 +38,8 @@ _ROWS = [
     # no ground truth / GPS reference (issue 14)
     ("GPS ATE RMSE (SE(2)-aligned)", "gps_ate_aligned_rmse_m"),
     ("GPS ATE RMSE (unaligned)", "gps_ate_rmse_m"),
+    ("GPS ATE RMSE, glitches kept (al. / unal.)", ("gps_ate_aligned_raw_rmse_m", "gps_ate_raw_rmse_m")),
+    (None, "gps_n_rejected"),
     (None, "odometry_gps_ate_aligned_rmse_m"),
     ("GPS fixes matched / gaps / longest gap", ("gps_n_matched", "gps_gap_count", "gps_longest_gap_s")),
     ("surveyed landmarks matched / RMSE", ("survey_lm_matched", "survey_lm_rmse_m")),

@@ -4,6 +4,7 @@
 * :mod:`~slamcli.metrics.trajectory`  ATE (unaligned / SE(2)-aligned), RPE, Umeyama alignment
 * :mod:`~slamcli.metrics.consistency` NEES, Monte-Carlo average NEES and χ² band
 * :mod:`~slamcli.metrics.summary`     everything ``slamcli evaluate`` reports for one result
+* :mod:`~slamcli.metrics.variance`    variance-component estimation: is a noise model calibrated, group by group
 """
 
 from slamcli.metrics.consistency import average_nees, chi2_band, landmark_nees, nees, pose_nees

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 ANGLE_UNIT = "rad"
 
 #: plain-text unit → siunitx unit macro (``\si{...}``)
-_SI = {"m": r"\metre", "rad": r"\radian", "s": r"\second", "mm": r"\milli\metre"}
+_SI = {"m": r"\metre", "rad": r"\radian", "s": r"\second", "mm": r"\milli\metre", "m/s": r"\metre\per\second"}
 #: suffix of a column name → unit
 _SUFFIX_UNITS = (("_mm", "mm"), ("_m", "m"), ("_rad", "rad"), ("_s", "s"))
 
@@ -112,6 +112,11 @@ _METRICS = [
     # GPS / surveyed references (no ground truth)
     _m("gps_ate_aligned_rmse_m", "GPS ATE RMSE, aligned", "m"),
     _m("gps_ate_rmse_m", "GPS ATE RMSE", "m"),
+    _m("gps_ate_aligned_raw_rmse_m", "GPS ATE RMSE, aligned, glitches kept", "m"),
+    _m("gps_ate_raw_rmse_m", "GPS ATE RMSE, glitches kept", "m"),
+    _m("gps_n_rejected", "GPS glitches rejected"),
+    _m("gps_glitch_max_speed_mps", "GPS glitch gate speed", "m/s"),
+    _m("gps_glitch_tol_m", "GPS glitch gate tolerance", "m"),
     _m("odometry_gps_ate_aligned_rmse_m", "odometry GPS ATE, aligned", "m"),
     _m("gps_n_matched", "GPS fixes matched"),
     _m("gps_gap_count", "GPS gaps"),
