@@ -52,12 +52,13 @@ def _surface_points(centre, rho, lateral):
 
 
 def _solve(inputs, **kw):
-    p = FastSlamParams(n_particles=20, association="ml", group_returns=False, **kw)
+    p = FastSlamParams(**{"n_particles": 20, "association": "ml", "group_returns": False, **kw})
     return FastSlam(p).solve(inputs, rng=np.random.default_rng(3))
 
 
+@pytest.mark.parametrize("hide", [True, False])
 @pytest.mark.parametrize("version", [1, 2])
-def test_two_returns_of_one_post_make_one_landmark_with_the_gate(version):
+def test_two_returns_of_one_post_make_one_landmark_with_the_gate(version, hide):
     d = 0.5
     pts = _surface_points((2.25, 0.0), d / 2, [-0.18, 0.18])  # one post, its left and right edges
     sep = np.linalg.norm(pts[0] - pts[1])
@@ -68,7 +69,7 @@ def test_two_returns_of_one_post_make_one_landmark_with_the_gate(version):
     assert sep**2 / (2 * sigma_max**2) > CHI2_2DOF_9999
     inputs = _inputs(pts, d)
     off = _solve(inputs, version=version, size_gate=False)
-    on = _solve(inputs, version=version, size_gate=True)
+    on = _solve(inputs, version=version, size_gate=True, size_gate_hide=hide)
     assert off.landmarks_xy.shape == (2, 2)
     assert on.landmarks_xy.shape == (1, 2)
     assert on.extra["n_size_gated"] == 20  # every particle dropped the second one
@@ -110,13 +111,13 @@ def test_gated_slot_is_reused_and_later_landmarks_keep_their_rows():
         offsets=Observations.offsets_from_steps(np.array([0, 0, 1]), 2), diameter_m=np.full(3, d),
     )
     inputs = SlamInputs(**{**a.__dict__, "observations": obs})
-    res = _solve(inputs, version=2, size_gate=True)
+    res = _solve(inputs, version=2, size_gate=True, size_gate_hide=False)
     # the gated row stays unassociated (not relabelled to the landmark that reuses its slot)
     np.testing.assert_array_equal(res.assoc, [0, -1, 1])
     assert res.landmarks_xy.shape == (2, 2)
     from slamcli.solvers.fastslam import _Run, _setup
 
-    p = FastSlamParams(n_particles=20, association="ml", group_returns=False, size_gate=True)
+    p = FastSlamParams(n_particles=20, association="ml", group_returns=False, size_gate=True, size_gate_hide=False)
     run = _Run(_setup(inputs, p), inputs, np.random.default_rng(3))
     run.step(0)
     np.testing.assert_array_equal(run.ps.n_slots, 1)  # slot 1 given back after step 0
@@ -143,3 +144,23 @@ def test_inside_declared_size_matches_brute_force():
 def test_size_gate_param_is_validated():
     with pytest.raises(ValueError, match="size_gate"):
         FastSlamParams(size_gate="yes")
+    with pytest.raises(ValueError, match="size_gate_hide"):
+        FastSlamParams(size_gate_hide=1)
+
+
+def test_hidden_landmarks_leave_the_filter_unchanged():
+    """size_gate_hide: the particles run exactly as without the gate (same path, same draws); the reported map
+    is the ungated one without the landmarks born within 2ρ of another (each within 2ρ of one reported)."""
+    from slamcli.sim import simulate_scenario
+
+    ds = simulate_scenario("paper-sim1", seed=0, overrides={"n_steps": 400})
+    off = FastSlam(FastSlamParams(size_gate=False)).solve(ds.inputs, rng=np.random.default_rng(0))
+    on = FastSlam(FastSlamParams(size_gate=True)).solve(ds.inputs, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(on.poses_xyt, off.poses_xyt)
+    assert 0 < on.landmarks_xy.shape[0] < off.landmarks_xy.shape[0]
+    kept = [np.flatnonzero(np.all(off.landmarks_xy == m, axis=1)) for m in on.landmarks_xy]
+    assert all(k.size == 1 for k in kept)  # the reported map is a subset of the ungated one
+    hidden = np.setdiff1d(np.arange(off.landmarks_xy.shape[0]), np.concatenate(kept))
+    two_rho = float(np.max(ds.inputs.observations.diameter_m))
+    d = np.linalg.norm(off.landmarks_xy[hidden, None] - on.landmarks_xy[None], axis=-1)
+    assert np.all(d.min(axis=1) < two_rho)  # every hidden one shadows a reported landmark

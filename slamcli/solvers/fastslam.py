@@ -144,6 +144,11 @@ class FastSlamParams:
         A post cut by the edge of the field of view returns only some of its beams, whose mean bearing misses
         the centre: paper-sim1 seed 0 without the gate made 36 extra landmarks so (of 99; 63 true), all first
         seen at 1.35-2.65 m and |bearing| 79-90°, ending 0.17-0.26 m from their post's first landmark.
+    size_gate_hide : bool
+        With ``size_gate``: keep the gated landmark inside the particle, flagged, and leave it (and its rows)
+        out of the reported map, instead of dropping it. The flagged landmark goes on absorbing the later
+        returns of that cut view, so the filter runs exactly as without the gate; dropped, those biased
+        returns are fused into the post's landmark or skipped, and the path suffers.
     """
 
     n_particles: int = 50
@@ -161,6 +166,7 @@ class FastSlamParams:
     group_returns: bool = True
     group_dist: float = 0.5
     size_gate: bool = False
+    size_gate_hide: bool = True
 
     def __post_init__(self) -> None:
         if self.n_particles < 1:
@@ -185,8 +191,9 @@ class FastSlamParams:
             raise ValueError(f"fov_rad must be > 0, got {self.fov_rad}")
         if not self.group_dist > 0.0:
             raise ValueError(f"group_dist must be > 0, got {self.group_dist}")
-        if not isinstance(self.size_gate, (bool, np.bool_)):
-            raise ValueError(f"size_gate must be true or false, got {self.size_gate!r}")
+        for name in ("size_gate", "size_gate_hide"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if not 0.0 < self.removal_range_frac <= 1.0:
             raise ValueError(f"removal_range_frac must be in (0, 1], got {self.removal_range_frac}")
 
@@ -207,6 +214,7 @@ class ParticleSet:
     exists : ndarray (P, C)     slot holds a live landmark.
     n_slots : ndarray (P,)      slots used so far (ML association allocates new landmarks at ``n_slots``).
     log_w : ndarray (P,)        unnormalised log importance weights.
+    hidden : ndarray (P, C)     live landmark left out of the reported map (``size_gate_hide``).
     """
 
     x: np.ndarray
@@ -216,6 +224,7 @@ class ParticleSet:
     exists: np.ndarray
     n_slots: np.ndarray
     log_w: np.ndarray
+    hidden: np.ndarray
 
     @classmethod
     def create(cls, x0: np.ndarray, n_particles: int, capacity: int) -> ParticleSet:
@@ -228,6 +237,7 @@ class ParticleSet:
             exists=np.zeros((P, C), bool),
             n_slots=np.zeros(P, np.int64),
             log_w=np.zeros(P),
+            hidden=np.zeros((P, C), bool),
         )
 
     @property
@@ -252,6 +262,7 @@ class ParticleSet:
             exists=self.exists[idx],
             n_slots=self.n_slots[idx],
             log_w=np.zeros(idx.shape[0]),
+            hidden=self.hidden[idx],
         )
 
     def ensure_capacity(self, needed: int) -> None:
@@ -266,6 +277,7 @@ class ParticleSet:
         self.sig = np.concatenate([self.sig, np.zeros((P, pad, 2, 2))], axis=1)
         self.count = np.concatenate([self.count, np.zeros((P, pad), np.int32)], axis=1)
         self.exists = np.concatenate([self.exists, np.zeros((P, pad), bool)], axis=1)
+        self.hidden = np.concatenate([self.hidden, np.zeros((P, pad), bool)], axis=1)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -776,7 +788,7 @@ class _Run:
         else:
             assoc_slots = self.assoc_hist[np.arange(N), lineage[obs_step]]
         poses = self.pose_hist[np.arange(T1), lineage] if self.pose_hist is not None else self.mean_xyt
-        live = ps.exists[best]
+        live = ps.exists[best] & ~ps.hidden[best]
         if known:
             lm_xy, lm_cov = moment_matched_landmarks(ps.mu[:, live], ps.sig[:, live], w)
         else:
@@ -851,8 +863,11 @@ class _Run:
             ps.ensure_capacity(int(ps.n_slots.max()) + 1)
             j = np.where(new, ps.n_slots, j)
             ps.n_slots = ps.n_slots + new
-            if gated.any():  # born as usual (weight p0), removed at the end of the step (:meth:`_drop_gated`)
+            if gated.any() and self.p.size_gate_hide:  # born as usual, never reported
+                ps.hidden[gated, j[gated]] = True
+            elif gated.any():  # born as usual (weight p0), removed at the end of the step (:meth:`_drop_gated`)
                 self._gated.append((np.flatnonzero(gated), j[gated]))
+            self.n_size_gated += int(np.count_nonzero(gated))
         return j, new
 
     def _inside_size(self, ps: ParticleSet, n: int, x, z) -> np.ndarray:
@@ -871,7 +886,6 @@ class _Run:
         for k, s in self._gated:
             ps.exists[k, s] = False
             n0[k] = np.minimum(n0[k], s)  # lowest gated slot per particle (slots of one step only grow)
-        self.n_size_gated += sum(k.size for k, _ in self._gated)
         self._gated = []
         ar = np.arange(ps.n_particles)
         out = [s if s is None or np.ndim(s) == 0 else np.where(ps.exists[ar, s], s, -1) for s in step_slots]
