@@ -16,6 +16,9 @@ observation row, ``-1`` = not used) plus initial landmark positions ``landmarks_
 * :func:`associations_from_result` — copy the labels of another solver's result (``--init``).
 
 :func:`landmarks_from_observations` averages inverse observations per label (vectorised, ``np.bincount``).
+The filters' per-step front end is here too: :func:`group_detections` (a laser's returns of one landmark in one
+step merged into one measurement) and :func:`inside_declared_size` (the declared-size test of their
+``size_gate``), used by EKF and FastSLAM.
 """
 
 from __future__ import annotations
