@@ -139,7 +139,8 @@ class FastSlamParams:
         ``ml`` with a landmark size declared per row (``observations.diameter_m``, radius ρ; no effect when the
         dataset declares none), per particle: a detection that would start a new landmark in a particle whose
         map has a landmark within 2ρ of its point ``h⁻¹(x^[k], z)`` (two posts of radius ρ cannot be closer)
-        starts none in that particle (EKF's ``size_gate``, :func:`slamcli.solvers.frontend.inside_declared_size`).
+        is a cut view of that post: its landmark is hidden from the reported map (``size_gate_hide``, default) or
+        dropped at the end of the step (EKF's ``size_gate``; :func:`slamcli.solvers.frontend.inside_declared_size`).
         The particle is weighted as for a new landmark (``p0``): the gate changes the map, not the weights.
         A post cut by the edge of the field of view returns only some of its beams, whose mean bearing misses
         the centre: paper-sim1 seed 0 without the gate made 36 extra landmarks so (of 99; 63 true), all first
