@@ -58,6 +58,7 @@ from slamcli.models.observation import (
 )
 from slamcli.models.se2 import compose, rot2
 from slamcli.solvers.base import BaseSolver
+from slamcli.solvers.frontend import group_detections, inside_declared_size
 from slamcli.solvers.surface import declared_radius, require_radius
 from slamcli.types import SlamInputs, SolverResult, Status
 
@@ -512,50 +513,6 @@ def _landmark_blocks(st: _GrowingState):
     return landmarks, landmark_cov
 
 
-def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, association: str,
-                     group_dist: float, range_offset: float = 0.0):
-    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order (also FastSLAM's).
-
-    Rows ``lo:hi`` of ``z_all (N, 2)``, ``sensor (N,)``, ``rid (N,)``; ``x_r (3,)`` an estimate of the pose.
-    Without ``group`` (``group_returns``) every row is its own detection. With it, the rows of one landmark are merged
-    into one measurement at their mean range and circular-mean bearing (a laser hits one post on several
-    adjacent beams; fusing each hit as an independent measurement of the centre overweights that pose-landmark
-    pair): ``known`` groups by (sensor, reported id); ``ml`` by single-linkage clusters of the inverse
-    observations ``h⁻¹(x_r, z)`` closer than ``group_dist`` (same sensor).
-    ``range_offset`` is added to every range first.
-    """
-    z = z_all[lo:hi]
-    if range_offset:
-        z = z + np.array([range_offset, 0.0])
-    rows = np.arange(lo, hi, dtype=np.int64)
-    if not group or hi - lo < 2:
-        return [(z[k], rows[k : k + 1]) for k in range(hi - lo)]
-    s = np.asarray(sensor[lo:hi], np.int64)
-    if association == "known":
-        r = np.asarray(rid[lo:hi], np.int64)
-        # rows without an id stay single (they are discarded anyway)
-        key = np.where(r >= 0, s * (int(r.max()) + 2) + r, -1 - np.arange(hi - lo))
-    else:
-        from scipy.sparse import csr_matrix
-        from scipy.sparse.csgraph import connected_components
-
-        # single-linkage clusters of the landmark-space points m̂ = h⁻¹(x_r, z) of one sensor: O(k²), k ≲ 10²
-        pts = inverse_range_bearing(np.asarray(x_r, float)[None, :], z)
-        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < group_dist
-        near &= s[:, None] == s[None, :]
-        _, key = connected_components(csr_matrix(near), directed=False)
-    out = []
-    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
-    for k in np.argsort(first, kind="stable"):
-        g = np.flatnonzero(inv == k)
-        if g.size == 1:
-            out.append((z[g[0]], rows[g]))
-        else:
-            b = math.atan2(float(np.sin(z[g, 1]).sum()), float(np.cos(z[g, 1]).sum()))
-            out.append((np.array([float(z[g, 0].mean()), b]), rows[g]))
-    return out
-
-
 def _chi2_2dof_ppf(q: float) -> float:
     """χ²(2) quantile in closed form: ``F(x) = 1 − exp(−x/2)``, so ``F⁻¹(q) = −2 ln(1 − q)`` (0.99 → 9.21);
     no ``scipy.stats`` import in the filter (≈ 0.4-1 s, issue 25)."""
@@ -568,12 +525,10 @@ def _add_landmark(st: _GrowingState, z, R) -> int:
 
 
 def _inside_declared_size(st: _GrowingState, z, min_sep: float) -> bool:
-    """Whether the point ``h⁻¹(x_r, z)`` lies closer than ``min_sep`` (m) to a state landmark's mean."""
+    """Whether the point ``h⁻¹(x_r, z)`` lies closer than ``min_sep`` (m) to a state landmark's mean
+    (:func:`slamcli.solvers.frontend.inside_declared_size`)."""
     L = (st.n - 3) // 2
-    if L == 0 or not min_sep > 0:
-        return False
-    d = st.x[3:].reshape(L, 2) - inverse_range_bearing(st.x[:3], z)
-    return bool(np.min(np.einsum("ij,ij->i", d, d)) < min_sep * min_sep)
+    return bool(inside_declared_size(st.x[3:].reshape(L, 2), inverse_range_bearing(st.x[:3], z), min_sep))
 
 
 def _ml_best(st: _GrowingState, z, R, exclude) -> tuple[int, float]:

@@ -16,6 +16,9 @@ observation row, ``-1`` = not used) plus initial landmark positions ``landmarks_
 * :func:`associations_from_result` — copy the labels of another solver's result (``--init``).
 
 :func:`landmarks_from_observations` averages inverse observations per label (vectorised, ``np.bincount``).
+The filters' per-step front end is here too: :func:`group_detections` (a laser's returns of one landmark in one
+step merged into one measurement) and :func:`inside_declared_size` (the declared-size test of their
+``size_gate``), used by EKF and FastSLAM.
 """
 
 from __future__ import annotations
@@ -376,3 +379,74 @@ def resolve_association(mode: str, reported_id: np.ndarray, *, force_ml: bool = 
     if force_ml:
         return "ml"
     return "known" if bool(np.any(np.asarray(reported_id) >= 0)) else "ml"
+
+
+def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, association: str,
+                     group_dist: float, range_offset: float = 0.0):
+    """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order (EKF's and FastSLAM's).
+
+    Rows ``lo:hi`` of ``z_all (N, 2)``, ``sensor (N,)``, ``rid (N,)``; ``x_r (3,)`` an estimate of the pose.
+    Without ``group`` (``group_returns``) every row is its own detection. With it, the rows of one landmark are merged
+    into one measurement at their mean range and circular-mean bearing (a laser hits one post on several
+    adjacent beams; fusing each hit as an independent measurement of the centre overweights that pose-landmark
+    pair): ``known`` groups by (sensor, reported id); ``ml`` by single-linkage clusters of the inverse
+    observations ``h⁻¹(x_r, z)`` closer than ``group_dist`` (same sensor).
+    ``range_offset`` is added to every range first.
+    """
+    z = z_all[lo:hi]
+    if range_offset:
+        z = z + np.array([range_offset, 0.0])
+    rows = np.arange(lo, hi, dtype=np.int64)
+    if not group or hi - lo < 2:
+        return [(z[k], rows[k : k + 1]) for k in range(hi - lo)]
+    s = np.asarray(sensor[lo:hi], np.int64)
+    if association == "known":
+        r = np.asarray(rid[lo:hi], np.int64)
+        # rows without an id stay single (they are discarded anyway)
+        key = np.where(r >= 0, s * (int(r.max()) + 2) + r, -1 - np.arange(hi - lo))
+    else:
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        # single-linkage clusters of the landmark-space points m̂ = h⁻¹(x_r, z) of one sensor: O(k²), k ≲ 10²
+        pts = observation.inverse_range_bearing(np.asarray(x_r, float)[None, :], z)
+        near = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1) < group_dist
+        near &= s[:, None] == s[None, :]
+        _, key = connected_components(csr_matrix(near), directed=False)
+    out = []
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    for k in np.argsort(first, kind="stable"):
+        g = np.flatnonzero(inv == k)
+        if g.size == 1:
+            out.append((z[g[0]], rows[g]))
+        else:
+            b = math.atan2(float(np.sin(z[g, 1]).sum()), float(np.cos(z[g, 1]).sum()))
+            out.append((np.array([float(z[g, 0].mean()), b]), rows[g]))
+    return out
+
+
+def inside_declared_size(landmarks_xy: np.ndarray, points_xy: np.ndarray, min_sep: float,
+                         live: np.ndarray | None = None) -> np.ndarray:
+    """Whether each point lies closer than ``min_sep`` (m) to one of its landmarks — the declared-size test
+    (EKF's and FastSLAM's ``size_gate``): two posts of radius ρ cannot be closer than 2ρ, so a detection that
+    matches no landmark but whose point is within 2ρ of one is a cut view of that post, not a new one.
+
+    Parameters
+    ----------
+    landmarks_xy : ndarray (..., L, 2)   landmark means (one map, or one per particle).
+    points_xy : ndarray (..., 2)         inverse observations ``h⁻¹(x, z)`` (one per map).
+    min_sep : float                      m; ``≤ 0`` = no test (all False).
+    live : ndarray (..., L) bool or None  landmarks that count (None = all).
+
+    Returns
+    -------
+    ndarray (...) bool
+    """
+    lead = np.broadcast_shapes(np.shape(landmarks_xy)[:-2], np.shape(points_xy)[:-1])
+    if not min_sep > 0 or np.shape(landmarks_xy)[-2] == 0:
+        return np.zeros(lead, bool)
+    d = np.asarray(landmarks_xy, float) - np.asarray(points_xy, float)[..., None, :]
+    close = np.einsum("...i,...i->...", d, d) < min_sep * min_sep
+    if live is not None:
+        close &= live
+    return close.any(-1)
