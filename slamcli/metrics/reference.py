@@ -168,17 +168,15 @@ def trajectory_against(poses_a, poses_b, landmarks_a, landmarks_b, *, cutoff_m: 
     pa, pb = np.asarray(poses_a, float), np.asarray(poses_b, float)
     if pa.shape != pb.shape:
         raise ValueError(f"the two results have {pa.shape[0]} and {pb.shape[0]} poses; compare results of one dataset")
-    e = np.linalg.norm(pa[:, :2] - pb[:, :2], axis=1)
-    R, t = umeyama_se2(pa[:, :2], pb[:, :2])
-    ea = np.linalg.norm(pa[:, :2] @ R.T + t - pb[:, :2], axis=1)
+    e, ea, _ = _aligned_errors(pa[:, :2], pb[:, :2])
     dth = np.asarray(angle_diff(pa[:, 2], pb[:, 2]), float)
     la = np.asarray(landmarks_a, float).reshape(-1, 2)
     lb = np.asarray(landmarks_b, float).reshape(-1, 2)
     n_match, lm_rmse = _matched_rmse(la, lb, cutoff_m)
     return {
-        "against_ate_rmse_m": float(np.sqrt(np.mean(e**2))),
-        "against_ate_aligned_rmse_m": float(np.sqrt(np.mean(ea**2))),
-        "against_heading_rmse_rad": float(np.sqrt(np.mean(dth**2))),
+        "against_ate_rmse_m": _rms(e),
+        "against_ate_aligned_rmse_m": _rms(ea),
+        "against_heading_rmse_rad": _rms(dth),
         "against_lm_matched": n_match,
         "against_lm_rmse_m": lm_rmse,
         "against_lm_only_a": int(len(la) - n_match),
