@@ -104,12 +104,14 @@ def exp(xi):
 def log(p):
     """SE(2) logarithm: pose ``(..., 3)`` → tangent ``[v_x, v_y, omega] (..., 3)``, omega in [-pi, pi)."""
     p = np.asarray(p, float)
-    w = wrap_angle(p[..., 2])
+    return log_of(p[..., 0], p[..., 1], wrap_angle(p[..., 2]))
+
+
+def log_of(x, y, w):
+    """:func:`log` of the pose ``(x, y, w)`` given as its coordinates, ``w`` already wrapped → ``(..., 3)``."""
     A, B = _sinc_terms(w)
     det = A * A + B * B
-    vx = (A * p[..., 0] + B * p[..., 1]) / det
-    vy = (-B * p[..., 0] + A * p[..., 1]) / det
-    return np.stack([vx, vy, w], -1)
+    return np.stack([(A * x + B * y) / det, (-B * x + A * y) / det, w], -1)
 
 
 def interpolate_poses(t_rows: np.ndarray, xyt_rows: np.ndarray, t: np.ndarray) -> np.ndarray:

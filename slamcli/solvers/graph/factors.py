@@ -23,12 +23,7 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
     """
     p = np.asarray(p, float)
     w = wrap_angle(p[..., 2])
-    small = np.abs(w) < 1e-4
-    ws = np.where(small, 1.0, w)
-    half = 0.5 * ws
-    cot = np.cos(half) / np.sin(half)
-    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
-    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / np.sin(half) ** 2)
+    alpha, dalpha = _log_jacobian_terms(w)
     x, y = p[..., 0], p[..., 1]
     J = np.zeros(p.shape[:-1] + (3, 3))
     J[..., 0, 0] = alpha
@@ -39,6 +34,18 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
     J[..., 1, 2] = -0.5 * x + dalpha * y
     J[..., 2, 2] = 1.0
     return J
+
+
+def _log_jacobian_terms(w):
+    """``(α, α')`` of :func:`log_jacobian` at the wrapped angle ``w`` (series below 1e-4)."""
+    small = np.abs(w) < 1e-4
+    ws = np.where(small, 1.0, w)
+    half = 0.5 * ws
+    sh = np.sin(half)
+    cot = np.cos(half) / sh
+    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
+    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
+    return alpha, dalpha
 
 
 def _compose_left_jacobian(a: np.ndarray) -> np.ndarray:
@@ -73,15 +80,8 @@ def between_error(x_i, x_j, measured):
     """
     x_i = np.asarray(x_i, float)
     ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured)
-    e = _log_of(px, py, w)
-    # ∂Log/∂p (log_jacobian), the same series near 0
-    small4 = np.abs(w) < 1e-4
-    ws = np.where(small4, 1.0, w)
-    half = 0.5 * ws
-    sh = np.sin(half)
-    cot = np.cos(half) / sh
-    alpha = np.where(small4, 1.0 - w**2 / 12.0, half * cot)
-    dalpha = np.where(small4, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
+    e = se2.log_of(px, py, w)
+    alpha, dalpha = _log_jacobian_terms(w)  # ∂Log/∂p (log_jacobian)
     hw = 0.5 * w
     # A = ∂Log/∂p · blkdiag(R(−δθ), 1):  R(−δθ) = [[cd, sd], [−sd, cd]]
     a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
@@ -113,20 +113,10 @@ def _between_parts(x_i, x_j, measured):
     return ci, si, bx, by, cd, sd, px, py, w
 
 
-def _log_of(px, py, w):
-    """:func:`slamcli.models.se2.log` of ``(p_x, p_y, w)`` with ``w`` already wrapped → ``(..., 3)``."""
-    small = np.abs(w) < 1e-6
-    ws = np.where(small, 1.0, w)
-    A = np.where(small, 1.0 - w**2 / 6.0, np.sin(ws) / ws)
-    B = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - np.cos(ws)) / ws)
-    det = A * A + B * B
-    return np.stack([(A * px + B * py) / det, (A * py - B * px) / det, w], -1)
-
-
 def between_residual(x_i, x_j, measured):
     """The error ``e (F, 3)`` of :func:`between_error` without its Jacobians (the same arithmetic)."""
     *_, px, py, w = _between_parts(x_i, x_j, measured)
-    return _log_of(px, py, w)
+    return se2.log_of(px, py, w)
 
 
 def prior_error(x, prior):
