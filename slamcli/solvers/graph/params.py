@@ -233,6 +233,11 @@ def resolve_robust(robust: str, association: str, id_source: str = "unknown") ->
     return "cauchy" if association == "reported" and id_source == "sensor" else "none"
 
 
+def uses_gps(params: GraphParams, inputs) -> bool:
+    """Whether the graph gets GPS factors: ``use_gps`` and the dataset has fixes."""
+    return bool(params.use_gps and np.asarray(getattr(inputs, "gps_step", ())).size > 0)
+
+
 def resolve_init(params: GraphParams, inputs) -> str:
     """The start ``init = "auto"`` stands for (any other value is returned as it is): ``chordal`` when the
     graph is a pose graph with loop closures — between-factors, no landmark observations, one robot, no GPS
@@ -248,7 +253,6 @@ def resolve_init(params: GraphParams, inputs) -> str:
         return params.init
     c = inputs.constraints
     has_loops = c is not None and int(c.n_between) > 0
-    has_gps = params.use_gps and np.asarray(getattr(inputs, "gps_step", ())).size > 0
-    pose_graph = (params.model == "gtsam" and not params.use_controls and inputs.robots is None and not has_gps
-                  and len(inputs.observations) == 0)
+    pose_graph = (params.model == "gtsam" and not params.use_controls and inputs.robots is None
+                  and not uses_gps(params, inputs) and len(inputs.observations) == 0)
     return "chordal" if has_loops and pose_graph else "odometry"

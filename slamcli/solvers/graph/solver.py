@@ -30,6 +30,7 @@ from slamcli.solvers.graph.params import (
     GraphParams,
     resolve_init,
     resolve_robust,
+    uses_gps,
 )
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -298,9 +299,8 @@ class GraphSlam(BaseSolver):
         """Whether the solved graph is a plain pose graph (the SE-Sync certificate applies): ``gtsam`` model,
         no landmarks, no kernel, GPS, controls, range bias or second robot."""
         p = self.params
-        has_gps = p.use_gps and np.asarray(getattr(inputs, "gps_step", ())).size > 0
         return (p.model == "gtsam" and run.gp.n_landmarks == 0 and kernel == "none" and inputs.robots is None
-                and not p.use_controls and not has_gps and not p.estimate_range_bias and inputs.n_poses >= 2)
+                and not p.use_controls and not uses_gps(p, inputs) and not p.estimate_range_bias and inputs.n_poses >= 2)
 
     def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress, start: str):
         """Certify a pose graph's optimum, re-solving from the chordal relaxation when the first start is not
