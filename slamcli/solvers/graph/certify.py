@@ -400,26 +400,16 @@ def _finite_solve(lin):
 def _is_positive_definite(A: sp.csc_matrix):
     """``(ok, solve)``: whether the sparse symmetric ``A`` has a Cholesky factorisation (CHOLMOD, else an
     LDLᵀ-type SuperLU elimination with every pivot > 0), and ``solve(b) = A⁻¹b`` by that factorisation."""
-    try:
-        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
-    except ImportError:
-        import scipy.sparse.linalg as spla
-
+    if not nls.cholmod_available():
         try:
-            lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+            lu = nls.factorize_symmetric(A)
         except RuntimeError:
             return False, None
         return bool(np.array_equal(lu.perm_r, lu.perm_c) and np.all(lu.U.diagonal() > 0)), lu.solve
-    # the simplicial LDLᵀ (no pivoting: the arithmetic of LLᵀ without its square roots, so every pivot > 0 iff
-    # the Cholesky exists) — with the reference BLAS CHOLMOD is linked to, 2-3× faster than the supernodal LLᵀ
-    # on these matrices (City10000: 0.13 → 0.05 s); an exactly zero pivot raises instead
-    try:
-        factor = cholesky(A, mode="simplicial")
-    except CholmodNotPositiveDefiniteError:
-        return False, None
-    if not np.all(factor.D() > 0.0):
-        return False, None
-    return True, factor
+    # the simplicial LDLᵀ — with the reference BLAS CHOLMOD is linked to, 2-3× faster than the supernodal LLᵀ
+    # on these matrices (City10000: 0.13 → 0.05 s)
+    factor = nls.cholmod_spd_factor(A)
+    return factor is not None, factor
 
 
 def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> float:

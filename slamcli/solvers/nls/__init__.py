@@ -70,6 +70,7 @@ from slamcli.solvers.nls.linear import (  # noqa: F401
     ChainSolver,
     SuperLUFactor,
     cholmod_available,
+    cholmod_spd_factor,
     factorize_lower,
     factorize_symmetric,
     make_linear_solver,

@@ -382,6 +382,20 @@ def factorize_symmetric(H: sp.csc_matrix, ordering: str = "MMD_AT_PLUS_A"):
     )
 
 
+def cholmod_spd_factor(H: sp.csc_matrix):
+    """CHOLMOD's simplicial ``LDLᵀ`` of a sparse symmetric ``H`` (callable: ``F(b) = H⁻¹b``), or None when ``H``
+    is not positive definite. No pivoting: the arithmetic of ``LLᵀ`` without its square roots, so every pivot
+    ``D > 0`` iff the Cholesky factor exists; an exactly zero pivot makes CHOLMOD raise. Needs the ``cholmod``
+    extra (:func:`cholmod_available`)."""
+    from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
+
+    try:
+        F = cholesky(H, mode="simplicial")
+    except CholmodNotPositiveDefiniteError:
+        return None
+    return F if np.all(F.D() > 0.0) else None
+
+
 def solve_spd(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
     """``H⁻¹ rhs`` for a sparse symmetric positive definite ``H``: CHOLMOD's simplicial ``LDLᵀ`` (AMD ordering)
     when the ``cholmod`` extra is installed, else :func:`factorize_symmetric` (SuperLU, minimum degree; on
@@ -393,14 +407,9 @@ def solve_spd(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
     """
     H = sp.csc_matrix(H)
     if cholmod_available():
-        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
-
-        try:
-            F = cholesky(H, mode="simplicial")
-        except CholmodNotPositiveDefiniteError as exc:
-            raise np.linalg.LinAlgError(f"matrix is not positive definite ({exc})") from None
-        if not np.all(F.D() > 0.0):
-            raise np.linalg.LinAlgError("matrix is not positive definite (a pivot ≤ 0)")
+        F = cholmod_spd_factor(H)
+        if F is None:
+            raise np.linalg.LinAlgError("matrix is not positive definite (CHOLMOD: a pivot ≤ 0)")
         return F(rhs)
     try:
         return factorize_symmetric(H).solve(rhs)
