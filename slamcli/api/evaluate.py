@@ -299,8 +299,9 @@ def evaluate_without_truth(result, dataset):
                          f"the aligned one removes that frame; positions of the body point {off.tolist()} m; "
                          f"{g['gps_n_rejected']} fix(es) rejected as glitches (farther than "
                          f"{g['gps_glitch_max_speed_mps']:g} m/s · Δt + {g['gps_glitch_tol_m']:g} m from both "
-                         "neighbouring fixes, which agree with each other; reference only) at "
-                         f"{[round(x, 3) for x in g['gps_rejected_time_s']]} s, kept in gps_ate_*_raw_rmse_m")
+                         "neighbouring fixes, which agree with each other; reference only)"
+                         + (f" at {[round(x, 3) for x in g['gps_rejected_time_s']]} s, kept in gps_ate_*_raw_rmse_m"
+                            if g["gps_n_rejected"] else ""))
         per_step["gps_aligned_err_m"] = np.interp(inp.timestamps, t_m, errs) if len(t_m) else np.nan
     s["not_available"] = missing
     n_it = len(result.trace) if result.trace is not None else 0
