@@ -5,7 +5,7 @@ Per window (the first 300 s; without ``--quick`` also the full run): ``isam`` wi
 default-noise import gives the association (which detection is which landmark) and a starting estimate.
 Then, round by round, ``graph``'s factor graph of that association (laser frame, every pose: per-step odometry
 between factors, range-bearing factors, no kernel) is solved by LM from the previous optimum, and
-:func:`slamcli.metrics.variance.variance_components` gives each factor group's variance factor
+:func:`slamcli.solvers.nls.variance.variance_components` gives each factor group's variance factor
 ``r_g = Σ whitened residual² / redundancy`` (exact redundancy ``n_g − tr(J_g H⁻¹ J_gᵀ)`` through the selected
 inverse of ``H``; the common approximation ``n_g (1 − n/m)`` beside it). Groups: odometry x (along the
 heading), odometry lateral, odometry heading, range, bearing — the importer's ``odometry_std`` (x, lateral,
@@ -39,8 +39,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
+from slamcli.solvers.graph.variance import NOISE_GROUPS
+
 HERE = Path(__file__).resolve().parent
-GROUPS = ("odo_x", "odo_lat", "odo_theta", "range", "bearing")
+GROUPS = NOISE_GROUPS
 #: converged when every variance factor is within this of 1
 TOL = 0.002
 MAX_ROUNDS = 20
@@ -79,59 +81,36 @@ def isam_run(dataset, gate_prob: float | None = None):
     return inp, assoc, sm.poses(), sm.landmarks()[old_of_new], summary
 
 
-def row_groups(problem) -> np.ndarray:
-    """Group (index into :data:`GROUPS`, −1 = none) of every row of ``nls.residual_vector(problem)``."""
-    out = []
-    for b in problem.blocks:
-        F, k = b.n_factors, np.shape(b.sqrt_info)[-1]
-        if b.name == "odometry":
-            out.append(np.tile(np.arange(3), F))
-        elif b.name == "bearing_range":
-            out.append(np.tile(np.array([3, 4]), F))
-        else:
-            out.append(np.full(F * k, -1))
-    return np.concatenate(out).astype(np.int64)
-
-
-def _noise_of(noise, sig):
-    return dataclasses.replace(noise, odometry_std=np.array(sig[:3], float), range_std=float(sig[3]),
-                               bearing_std=float(sig[4]))
-
-
 def vce(name: str, stage: str, dataset, inp, assoc, poses, lms) -> list[dict]:
-    """The iterated VCE rounds (module docstring) from the import's noise on one association; one row per
-    round (``dataset`` None: no GPS ATE column)."""
+    """The iterated VCE rounds (module docstring; :func:`slamcli.solvers.graph.calibrate_noise`, the estimator
+    of ``isam -p noise=vce``) from the import's noise on one association; one row per round (``dataset``
+    None: no GPS ATE column)."""
     from benchmarks.bench_isam import _ate, _to_body
-    from slamcli.metrics.variance import variance_components
-    from slamcli.solvers import nls
-    from slamcli.solvers.graph import GraphParams, build_gtsam_problem
+    from slamcli.solvers.graph import calibrate_noise, noise_sigmas
 
-    gp_params = GraphParams(robust="none")
-    n0 = inp.noise
-    sig = np.array([*n0.odometry_std, n0.range_std, n0.bearing_std], float)
+    sig0 = noise_sigmas(inp.noise)
     rows = []
-    for rnd in range(MAX_ROUNDS):
-        c0 = time.process_time()
-        gp = build_gtsam_problem(dataclasses.replace(inp, noise=_noise_of(n0, sig)), assoc, poses, lms, gp_params)
-        res = nls.solve(gp.problem, gp.x0, gp_params.nls_params("none", 1.0))
-        grp = row_groups(gp.problem)
-        J, e = nls.jacobian_matrix(gp.problem, res.x), nls.residual_vector(gp.problem, res.x)
-        vc = variance_components(J, e, grp, len(GROUPS))
-        ap = variance_components(J, e, grp, len(GROUPS), method="approx")
-        poses, lms = gp.unpack(res.x)
-        row = {"window": name, "stage": stage, "round": rnd, "n_vars": gp.problem.n_vars, "n_rows": int(e.size),
-               "landmarks": gp.n_landmarks, "lm_message": res.message, "cpu_s": time.process_time() - c0,
-               "gps_ate_m": float("nan") if dataset is None else _ate(dataset, _to_body(poses, dataset.inputs))[0]}
+    clock = [time.process_time()]
+
+    def record(rnd, gp, res):
+        vc, sig = rnd.components, sig0 * rnd.scale
+        n = gp.problem.n_vars
+        poses_r, _ = gp.unpack(res.x)
+        row = {"window": name, "stage": stage, "round": len(rows), "n_vars": n,
+               "n_rows": int(sum(b.n_factors * np.shape(b.sqrt_info)[-1] for b in gp.problem.blocks)),
+               "landmarks": gp.n_landmarks, "lm_message": res.message, "cpu_s": time.process_time() - clock[0],
+               "gps_ate_m": float("nan") if dataset is None else _ate(dataset, _to_body(poses_r, dataset.inputs))[0]}
+        approx = vc.ssr / (vc.n_obs * (1.0 - n / row["n_rows"]))  # ρ_g ≈ n_g (1 − n/m), m over every row
         for i, g in enumerate(GROUPS):
             row.update({f"sigma_{g}": sig[i], f"n_{g}": int(vc.n_obs[i]), f"redundancy_{g}": vc.redundancy[i],
-                        f"r_{g}": vc.ratio[i], f"r_approx_{g}": ap.ratio[i]})
+                        f"r_{g}": vc.ratio[i], f"r_approx_{g}": approx[i]})
         rows.append(row)
-        print(f"{name} / {stage} round {rnd}: " + " ".join(f"{g} σ {sig[i]:.4g} r {vc.ratio[i]:.4f}"
-                                                 for i, g in enumerate(GROUPS)) + f"  ATE {row['gps_ate_m']:.3f}",
-              flush=True)
-        if np.all(np.abs(vc.ratio - 1) < TOL):
-            break
-        sig = sig * np.sqrt(vc.ratio)
+        print(f"{name} / {stage} round {row['round']}: " + " ".join(
+            f"{g} σ {sig[i]:.4g} r {vc.ratio[i]:.4f}" for i, g in enumerate(GROUPS))
+            + f"  ATE {row['gps_ate_m']:.3f}", flush=True)
+        clock[0] = time.process_time()
+
+    calibrate_noise(inp, assoc, poses, lms, tol=TOL, max_reweights=MAX_ROUNDS - 1, on_round=record)
     return rows
 
 
@@ -183,9 +162,9 @@ def calibrated_noise(cal: dict):
     """The importer's default :class:`NoiseSpec` with the calibrated odometry and laser σ (the control σ, which
     ``graph`` and ``isam`` do not use, stay the defaults)."""
     from slamcli.datasets.victoria_park import default_noise
+    from slamcli.solvers.graph import noise_with_sigmas
 
-    n = default_noise(range_std=cal["sigma_range"], bearing_std=cal["sigma_bearing"])
-    return dataclasses.replace(n, odometry_std=np.array([cal[f"sigma_{g}"] for g in GROUPS[:3]]))
+    return noise_with_sigmas(default_noise(), [cal[f"sigma_{g}"] for g in GROUPS])
 
 
 def write_markdown(rows: list[dict], isam_rows: list[dict]) -> Path:

@@ -78,3 +78,11 @@ from slamcli.solvers.graph.solver import (  # noqa: F401
     GraphSlam,
     chi2_outlier_counts,
 )
+from slamcli.solvers.graph.variance import (  # noqa: F401
+    NOISE_GROUPS,
+    NoiseCalibration,
+    calibrate_noise,
+    noise_row_groups,
+    noise_sigmas,
+    noise_with_sigmas,
+)

@@ -46,6 +46,17 @@ class IsamParams:
     final_batch : bool
         After the last update, run ``graph``'s batch LM on the full graph (every pose, same factors and
         association) from the smoother's estimate (default False). With it the result is ``graph``'s optimum.
+    noise : "dataset" | "vce"
+        Noise model of the result. ``dataset`` (default): the dataset's NoiseSpec σ throughout. ``vce``: after the
+        on-line pass (association and smoothing with the dataset's σ, unchanged), the σ of odometry x /
+        lateral / heading, range and bearing are re-estimated from the smoother's own residuals by iterated
+        variance-component estimation (:mod:`slamcli.solvers.graph.variance`: batch LM over every pose on the
+        smoother's association, σ_g ← σ_g·√r_g, re-solve) and the result is the batch optimum under those σ
+        (implies ``final_batch``; needs ``robust`` to resolve to ``none``). No GPS and no ground truth enter.
+    vce_tol : float
+        ``noise=vce``: stop when every variance factor is within this of 1 (default 0.05).
+    vce_max_rounds : int
+        ``noise=vce``: at most this many re-weighted batch solves (default 10; 1 = one round).
     robust : "auto" | "none" | "cauchy" | "huber"
         Kernel on the sightings (as ``graph``'s ``robust``; ``auto`` = ``graph``'s choice for the association:
         cauchy for ids reported by a real sensor, else none).
@@ -64,6 +75,9 @@ class IsamParams:
     batch_iterations: int = 10
     end_batch: bool = True
     final_batch: bool = False
+    noise: Literal["dataset", "vce"] = "dataset"
+    vce_tol: float = 0.05
+    vce_max_rounds: int = 10
     robust: Literal["auto", "none", "cauchy", "huber"] = "auto"
     cauchy_k: float = 2.3849
     huber_k: float = 1.345
@@ -81,5 +95,11 @@ class IsamParams:
             raise ValueError("iterations and batch_iterations must be ≥ 1")
         if self.batch_every_s < 0:
             raise ValueError("batch_every_s must be ≥ 0 s")
+        if self.noise not in ("dataset", "vce"):
+            raise ValueError(f"noise must be dataset or vce, got {self.noise!r}")
+        if not 0.0 < self.vce_tol < 1.0:
+            raise ValueError("vce_tol must be in (0, 1)")
+        if self.vce_max_rounds < 1:
+            raise ValueError("vce_max_rounds must be ≥ 1")
         if self.cauchy_k <= 0 or self.huber_k <= 0:
             raise ValueError("cauchy_k and huber_k must be > 0")

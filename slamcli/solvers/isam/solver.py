@@ -9,7 +9,14 @@ import numpy as np
 from slamcli.errors import SolverError
 from slamcli.solvers import frontend, nls
 from slamcli.solvers.base import BaseSolver, ProgressFn
-from slamcli.solvers.graph import GraphParams, build_gtsam_problem, resolve_robust
+from slamcli.solvers.graph import (
+    NOISE_GROUPS,
+    GraphParams,
+    build_gtsam_problem,
+    calibrate_noise,
+    noise_sigmas,
+    resolve_robust,
+)
 from slamcli.solvers.isam.params import IsamParams
 from slamcli.solvers.isam.smoother import IncrementalSmoother
 from slamcli.types import SlamInputs, SolverResult, Status
@@ -30,8 +37,12 @@ class IsamSlam(BaseSolver):
     previous one; with ``final_batch`` the batch optimum of the full graph), ``landmarks_xy (L, 2)`` in order of
     first sighting, ``assoc (N,)``; no covariances. ``extra``: ``association``, ``robust``, ``keyframes``,
     ``n_landmarks``, ``batch_steps``, ``deferred_sightings`` (sightings of marginalised landmarks, used from
-    the next batch step on), and with ``final_batch`` ``final_cost`` / ``final_iterations``.
-    ``timings``: ``smoother_cpu_s``, ``max_update_cpu_s``, ``update_cpu_slope_s`` and ``final_batch_cpu_s``.
+    the next batch step on), and with ``final_batch`` or ``noise=vce`` ``final_cost`` / ``final_iterations``;
+    with ``noise=vce`` also ``noise`` and ``vce_sigma`` / ``vce_factor`` / ``vce_ratio`` (per group of
+    :data:`~slamcli.solvers.graph.NOISE_GROUPS`: the σ of the returned optimum, σ / the dataset's σ, the
+    variance factor measured there), ``vce_rounds`` (re-weighted solves) and ``vce_converged``.
+    ``timings``: ``smoother_cpu_s``, ``max_update_cpu_s``, ``update_cpu_slope_s`` and ``final_batch_cpu_s``
+    (with ``noise=vce``: every VCE round's batch solve and estimate).
     """
 
     name = "isam"
@@ -72,15 +83,38 @@ class IsamSlam(BaseSolver):
         timings = {"smoother_cpu_s": cpu, "max_update_cpu_s": float(max(sm.step_cpu, default=0.0)),
                    "update_cpu_slope_s": per_step_slope(sm.step_cpu)}
         status, message = Status.CONVERGED, f"incremental smoother: {sm.kf_steps.size} updates"
-        if p.final_batch and lms.shape[0]:
+        if lms.shape[0] and (p.final_batch or p.noise == "vce"):
             c1 = time.process_time()
             assoc_c, old_of_new = frontend.compact_labels(assoc)
-            gp = build_gtsam_problem(inputs, assoc_c, poses, lms[old_of_new], gp_params)
-            res = nls.solve(gp.problem, gp.x0, gp_params.nls_params(kernel, k))
+            if p.noise == "vce":
+                res, gp, note = _vce_batch(inputs, assoc_c, poses, lms[old_of_new], gp_params, p, extra)
+            else:
+                gp = build_gtsam_problem(inputs, assoc_c, poses, lms[old_of_new], gp_params)
+                res, note = nls.solve(gp.problem, gp.x0, gp_params.nls_params(kernel, k)), "final batch LM"
             poses, lms = (a.copy() for a in gp.unpack(res.x))
             assoc = assoc_c
-            status, message = res.status, f"{message}; final batch LM: {res.message}"
+            status, message = res.status, f"{message}; {note}: {res.message}"
             extra.update(final_cost=float(res.cost), final_iterations=int(res.iterations))
             timings["final_batch_cpu_s"] = time.process_time() - c1
         return self.make_result(status=status, poses_xyt=poses, landmarks_xy=lms, assoc=assoc, t_start=t_start,
                                 message=message, extra=extra, timings=timings)
+
+
+def _vce_batch(inputs, assoc, poses, lms, gp_params, p: IsamParams, extra: dict):
+    """``noise=vce``: iterated VCE on the smoother's association (:func:`calibrate_noise`); returns the last
+    round's ``(LM result, graph problem, message prefix)`` and writes the estimate into ``extra``."""
+    if gp_params.robust != "none":
+        raise SolverError(f"isam: noise=vce estimates Gaussian noise and needs robust=none (this association's "
+                          f"kernel is {gp_params.robust})")
+    cal = calibrate_noise(inputs, assoc, poses, lms, gp_params, tol=p.vce_tol, max_reweights=p.vce_max_rounds)
+    sigma0 = noise_sigmas(inputs.noise)
+    n = len(cal.vce.rounds) - 1
+    extra.update(noise="vce", vce_rounds=n, vce_converged=cal.vce.converged,
+                 vce_sigma=dict(zip(NOISE_GROUPS, cal.sigma.tolist())),
+                 vce_factor=dict(zip(NOISE_GROUPS, (cal.sigma / sigma0).tolist())),
+                 vce_ratio=dict(zip(NOISE_GROUPS, cal.vce.ratio.tolist())))
+    state = "converged" if cal.vce.converged else f"not converged (tolerance {p.vce_tol:g})"
+    note = (f"noise σ re-estimated by VCE on the smoother's association ({n} re-weighted batch solves, {state}; "
+            "σ × the dataset's: " + ", ".join(f"{g} {f:.2f}" for g, f in zip(NOISE_GROUPS, cal.sigma / sigma0))
+            + "); batch LM under those σ")
+    return cal.result, cal.problem, note

@@ -1,4 +1,4 @@
-"""Variance-component estimation (slamcli.metrics.variance) against closed forms.
+"""Variance-component estimation (slamcli.solvers.nls.variance) against closed forms.
 
 * redundancy: ρ_g = Σ_{i∈g} (1 − h_ii) with the hat-matrix diagonal h_ii = ‖Q_i‖² of a thin QR of J
   (independent of the H⁻¹ trace the module computes); Σ_g ρ_g = m − n.
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from slamcli.metrics.variance import variance_components
 from slamcli.solvers.nls import selinv
+from slamcli.solvers.nls.variance import variance_components
 
 
 def _sparse_problem(rng, n, m, per_row):
