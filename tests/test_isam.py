@@ -125,3 +125,57 @@ def test_window_prior_is_the_exact_schur_complement_of_the_marginalised_factors(
     H, g = sm.win.assemble()
     assert np.abs(H - H_ref).max() <= 1e-9 * np.abs(H_ref).max()
     assert np.abs(g - g_ref).max() <= 1e-6 * max(np.abs(g_ref).max(), 1.0)
+
+
+# --------------------------------------------------------------------------------------- noise="vce" (issue 25)
+def _batch_with_sigmas(inputs, res, start):
+    """``graph``'s batch LM on ``inputs`` with the σ ``res`` reports (``vce_sigma``) on ``res``'s association,
+    started from another estimate ``start`` (same labels): Gaussian factors, NoiseSpec σ, no GPS."""
+    import dataclasses
+
+    from slamcli.solvers.graph import NOISE_GROUPS, noise_with_sigmas
+
+    sig = [res.extra["vce_sigma"][g] for g in NOISE_GROUPS]
+    inp = dataclasses.replace(inputs, noise=noise_with_sigmas(inputs.noise, sig))
+    gp = GraphParams(association="init", robust="none", use_gps=False, edge_info=False, covariance=False)
+    return GraphSlam(gp).solve(inp, init=start, rng=np.random.default_rng(0))
+
+
+def _check_vce(inputs):
+    rng = np.random.default_rng(0)
+    plain = IsamSlam(IsamParams(final_batch=True)).solve(inputs, rng=rng)
+    vce = IsamSlam(IsamParams(noise="vce")).solve(inputs, rng=rng)
+    assert np.array_equal(vce.assoc, plain.assoc)  # the association is the on-line pass's, unchanged
+    assert vce.extra["noise"] == "vce" and "re-estimated by VCE" in vce.message
+    assert vce.extra["vce_converged"] and 1 <= vce.extra["vce_rounds"] <= IsamParams().vce_max_rounds
+    assert all(abs(r - 1) <= IsamParams().vce_tol for r in vce.extra["vce_ratio"].values())
+    # the σ moved away from the dataset's (else this checks nothing) ...
+    assert max(abs(np.log(f)) for f in vce.extra["vce_factor"].values()) > np.log(1.1)
+    # ... and the result is the batch optimum under them: LM from the default-noise optimum lands on it
+    _same_optimum(vce, _batch_with_sigmas(inputs, vce, plain))
+    return vce
+
+
+def test_vce_noise_on_loop_keeps_the_association_and_is_the_batch_optimum_of_its_sigmas():
+    _check_vce(simulate_scenario("loop", seed=1).inputs)
+
+
+def test_vce_noise_on_the_victoria_park_excerpt():
+    from slamcli.datasets.victoria_park import import_victoria_park
+    from slamcli.solvers.sensor_frame import to_sensor_frame
+
+    ds = import_victoria_park(Path(__file__).parent / "data" / "victoria_park_excerpt")
+    vce = _check_vce(to_sensor_frame(ds.inputs))
+    assert vce.extra["association"] == "nn"
+
+
+def test_vce_noise_refuses_a_robust_kernel():
+    from slamcli.errors import SolverError
+
+    ds = simulate_scenario("loop", seed=1, overrides={"sensor.report_ids": True, "n_steps": 100})
+    with pytest.raises(SolverError, match="noise=vce .* needs robust=none"):
+        IsamSlam(IsamParams(noise="vce", robust="cauchy")).solve(ds.inputs, rng=np.random.default_rng(0))
+    with pytest.raises(ValueError):
+        IsamParams(noise="given")
+    with pytest.raises(ValueError):
+        IsamParams(vce_max_rounds=0)
