@@ -10,8 +10,10 @@ between factors, range-bearing factors, no kernel) is solved by LM from the prev
 inverse of ``H``; the common approximation ``n_g (1 − n/m)`` beside it). Groups: odometry x (along the
 heading), odometry lateral, odometry heading, range, bearing — the importer's ``odometry_std`` (x, lateral,
 θ) and ``range_std`` / ``bearing_std``. Every σ is scaled by ``√r_g`` and the next round re-solves, until
-every ``|r_g − 1| < TOL`` (the simple iterated estimator; Förstner 1979). ``σ_*`` columns are the σ the
-round *assumed*, ``r_*`` what it measured; the last round's ``σ·√r`` is the calibrated noise.
+every ``|r_g − 1| ≤ TOL`` (the simple iterated estimator; Förstner 1979) — the rounds are
+:func:`slamcli.solvers.graph.calibrate_noise`, the estimator of ``isam -p noise=vce``, here to a tighter TOL.
+``σ_*`` columns are the σ the round *assumed*, ``r_*`` what it measured; the last round's ``σ·√r`` is the
+calibrated noise.
 
 Then, per window: (a) a synthetic check of the estimator on this very problem — measurements drawn with the
 calibrated σ around isam's estimate (same steps, association and geometry, seeded), VCE from the defaults

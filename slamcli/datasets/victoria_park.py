@@ -49,7 +49,7 @@ that choice (procedure: :mod:`slamcli.api.calibrate`; first 120 s of the run, EK
    nowhere (``benchmarks/bench_vp_noise.py``, results ``benchmarks/results/vp_noise.{csv,md}``): ``graph``'s
    factors (per-step odometry between factors and range-bearing factors in the laser frame, no kernel), per
    group the variance factor ``r_g = Σ whitened residual² / redundancy``, redundancy ``n_g − tr(J_g H⁻¹ J_gᵀ)``
-   exact (:mod:`slamcli.metrics.variance`), σ_g scaled by √r_g and re-solved until every ``|r_g − 1| < 0.002``.
+   exact (:mod:`slamcli.solvers.nls.variance`), σ_g scaled by √r_g and re-solved until every ``|r_g − 1| < 0.002``.
    With the defaults the full run gives r = 0.30 (odometry x), 13.3 (lateral), 0.46 (heading), 0.126 (range),
    0.325 (bearing); the calibrated σ are odometry (0.0053 m, 0.0128 m, 0.00137 rad) per step, σ_r 0.159 m,
    σ_b 0.0051 rad — ×0.43 / ×2.55 / ×0.68 / ×0.32 / ×0.58 the defaults (first 300 s: ×0.38 / ×2.72 / ×0.83 /

@@ -5,6 +5,7 @@
 * :mod:`~slamcli.metrics.consistency` NEES, Monte-Carlo average NEES and χ² band
 * :mod:`~slamcli.metrics.summary`     everything ``slamcli evaluate`` reports for one result
 * :mod:`~slamcli.metrics.variance`    variance-component estimation: is a noise model calibrated, group by group
+                                      (re-exports :mod:`slamcli.solvers.nls.variance`, which ``isam -p noise=vce`` uses)
 """
 
 from slamcli.metrics.consistency import average_nees, chi2_band, landmark_nees, nees, pose_nees
