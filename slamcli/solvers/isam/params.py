@@ -56,7 +56,9 @@ class IsamParams:
     vce_tol : float
         ``noise=vce``: stop when every variance factor is within this of 1 (default 0.05).
     vce_max_rounds : int
-        ``noise=vce``: at most this many re-weighted batch solves (default 10; 1 = one round).
+        ``noise=vce``: at most this many re-weighted batch solves (default 10; 1 = one round). Iterating is the
+        default by the rule fixed before measuring (``benchmarks/bench_isam.py``): one round leaves a variance
+        factor 0.47 from 1 on Victoria Park; 4 re-weightings reach 5 % at 25.7× real time.
     robust : "auto" | "none" | "cauchy" | "huber"
         Kernel on the sightings (as ``graph``'s ``robust``; ``auto`` = ``graph``'s choice for the association:
         cauchy for ids reported by a real sensor, else none).
