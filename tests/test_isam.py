@@ -39,10 +39,16 @@ def test_final_batch_equals_graph_lm_on_loop_with_reported_ids(loop_ids):
     assert abs(inc.extra["final_cost"] - bat.extra["final_cost"]) <= TOL * bat.extra["final_cost"]
 
 
-def test_unknown_association_on_loop_finds_every_landmark_once_and_ends_at_graphs_optimum():
+@pytest.fixture(scope="module")
+def loop_nn():
+    """``loop`` with unknown association and isam's final-batch result on it."""
     ds = simulate_scenario("loop", seed=1)
+    return ds, IsamSlam(IsamParams(final_batch=True)).solve(ds.inputs, rng=np.random.default_rng(0))
+
+
+def test_unknown_association_on_loop_finds_every_landmark_once_and_ends_at_graphs_optimum(loop_nn):
+    ds, inc = loop_nn
     rng = np.random.default_rng(0)
-    inc = IsamSlam(IsamParams(final_batch=True)).solve(ds.inputs, rng=rng)
     assert inc.extra["association"] == "nn"
     # every label is one true landmark and every true landmark one label (truth read here, not by the solver)
     true_lm = np.asarray(ds.truth.landmarks_xy, float)
@@ -141,9 +147,10 @@ def _batch_with_sigmas(inputs, res, start):
     return GraphSlam(gp).solve(inp, init=start, rng=np.random.default_rng(0))
 
 
-def _check_vce(inputs):
+def _check_vce(inputs, plain=None):
+    """``noise=vce`` on ``inputs`` against ``plain``, isam's final-batch result with the dataset's σ."""
     rng = np.random.default_rng(0)
-    plain = IsamSlam(IsamParams(final_batch=True)).solve(inputs, rng=rng)
+    plain = plain or IsamSlam(IsamParams(final_batch=True)).solve(inputs, rng=rng)
     vce = IsamSlam(IsamParams(noise="vce")).solve(inputs, rng=rng)
     assert np.array_equal(vce.assoc, plain.assoc)  # the association is the on-line pass's, unchanged
     assert vce.extra["noise"] == "vce" and "re-estimated by VCE" in vce.message
@@ -156,15 +163,16 @@ def _check_vce(inputs):
     return vce
 
 
-def test_vce_noise_on_loop_keeps_the_association_and_is_the_batch_optimum_of_its_sigmas():
-    _check_vce(simulate_scenario("loop", seed=1).inputs)
+def test_vce_noise_on_loop_keeps_the_association_and_is_the_batch_optimum_of_its_sigmas(loop_nn):
+    ds, plain = loop_nn
+    _check_vce(ds.inputs, plain)
 
 
 def test_vce_noise_on_the_victoria_park_excerpt():
     from slamcli.datasets.victoria_park import import_victoria_park
     from slamcli.solvers.sensor_frame import to_sensor_frame
 
-    ds = import_victoria_park(Path(__file__).parent / "data" / "victoria_park_excerpt")
+    ds = import_victoria_park(Path(__file__).parent / "data" / "victoria_park_excerpt", duration=30.0)
     vce = _check_vce(to_sensor_frame(ds.inputs))
     assert vce.extra["association"] == "nn"
 
