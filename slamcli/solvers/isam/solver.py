@@ -71,6 +71,9 @@ class IsamSlam(BaseSolver):
         if mode == "reported" and not has_ids:
             raise SolverError("isam: association=reported but the observations carry no reported_id")
         kernel = resolve_robust(p.robust, mode, inputs.reported_id_source)
+        if p.noise == "vce" and kernel != "none":  # refused before the on-line pass, not after it
+            raise SolverError(f"isam: noise=vce estimates Gaussian noise and needs robust=none (this association's "
+                              f"kernel is {kernel})")
         gp_params = GraphParams(robust=kernel, cauchy_k=p.cauchy_k, huber_k=p.huber_k)
         k = gp_params.kernel_scale(kernel)
         c0 = time.process_time()
@@ -96,6 +99,8 @@ class IsamSlam(BaseSolver):
             status, message = res.status, f"{message}; {note}: {res.message}"
             extra.update(final_cost=float(res.cost), final_iterations=int(res.iterations))
             timings["final_batch_cpu_s"] = time.process_time() - c1
+        elif p.noise == "vce":
+            message += "; noise=vce not applied: no landmarks, the odometry alone has no redundancy"
         return self.make_result(status=status, poses_xyt=poses, landmarks_xy=lms, assoc=assoc, t_start=t_start,
                                 message=message, extra=extra, timings=timings)
 
@@ -103,10 +108,10 @@ class IsamSlam(BaseSolver):
 def _vce_batch(inputs, assoc, poses, lms, gp_params, p: IsamParams, extra: dict):
     """``noise=vce``: iterated VCE on the smoother's association (:func:`calibrate_noise`); returns the last
     round's ``(LM result, graph problem, message prefix)`` and writes the estimate into ``extra``."""
-    if gp_params.robust != "none":
-        raise SolverError(f"isam: noise=vce estimates Gaussian noise and needs robust=none (this association's "
-                          f"kernel is {gp_params.robust})")
-    cal = calibrate_noise(inputs, assoc, poses, lms, gp_params, tol=p.vce_tol, max_reweights=p.vce_max_rounds)
+    try:
+        cal = calibrate_noise(inputs, assoc, poses, lms, gp_params, tol=p.vce_tol, max_reweights=p.vce_max_rounds)
+    except ValueError as exc:  # e.g. no redundancy: fewer residual rows than unknowns
+        raise SolverError(f"isam: noise=vce: {exc}") from None
     sigma0 = noise_sigmas(inputs.noise)
     n = len(cal.vce.rounds) - 1
     extra.update(noise="vce", vce_rounds=n, vce_converged=cal.vce.converged,
