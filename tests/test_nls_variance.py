@@ -129,3 +129,10 @@ def test_bad_input():
         variance_components(np.eye(3), np.zeros(3), np.zeros(3, int))
     with pytest.raises(ValueError, match="exact or approx"):
         variance_components(np.ones((4, 1)), np.zeros(4), np.zeros(4, int), method="helmert")
+
+
+def test_one_implementation():
+    """The metrics layer names the solvers-layer estimator; it has no copy of its own."""
+    import slamcli.metrics.variance as metrics_variance
+
+    assert metrics_variance.variance_components is variance_components
