@@ -68,18 +68,21 @@ def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
     assert np.abs(LD - H.toarray()[np.ix_(F.perm, F.perm)]).max() <= 1e-12 * np.abs(H).max()
 
 
-@pytest.mark.parametrize("max_rows, chunk", [(0, 1 << 22), (10**9, 1 << 22), (10**9, 7), (8, 50)])
-def test_both_gathers_and_any_chunking_give_the_dense_inverse(monkeypatch, max_rows, chunk):
-    """Σ̃_{R,R} gathered run by run (max_rows 0), from precomputed positions (every supernode), mixed, and with
-    the positions computed in small chunks: every stored entry equals the dense inverse's."""
-    monkeypatch.setattr(selinv, "GATHER_MAX_ROWS", max_rows)
-    monkeypatch.setattr(selinv, "GATHER_CHUNK", chunk)
+@pytest.mark.parametrize("overhead, ratio", [(0.0, 1.01), (1e18, 1.25), (4e4, 2.0)])
+def test_any_bucketing_gives_the_dense_inverse(monkeypatch, overhead, ratio):
+    """Supernodes of one level batched one size class per bucket (no merging), all in one bucket padded to
+    the largest (merge always) and the default cost model: every stored entry equals the dense inverse's."""
+    monkeypatch.setattr(selinv, "BUCKET_OVERHEAD", overhead)
+    monkeypatch.setattr(selinv, "CLASS_RATIO", ratio)
     H = _block_spd(150, 3, 5)
     S = selinv.SelectedInverse.from_matrix(H)
-    assert np.max(S.sn_nrows - S.sn_width) > 8  # the mixed case has both kinds of supernode
     Hinv = np.linalg.inv(H.toarray())
     C = sp.coo_matrix(H)
     assert np.abs(S.entries(C.row, C.col) - Hinv[C.row, C.col]).max() <= 1e-10 * np.abs(Hinv).max()
+    idx = np.arange(450).reshape(150, 3)
+    (blk,) = selinv.inverse_blocks(H, [idx])
+    ref = Hinv.reshape(150, 3, 150, 3)[np.arange(150), :, np.arange(150), :]
+    assert np.abs(blk - ref).max() <= 1e-10 * np.abs(Hinv).max()
 
 
 def test_recurrence_on_a_hand_made_factor_without_cholmod_ordering():

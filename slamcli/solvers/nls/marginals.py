@@ -294,8 +294,7 @@ def block_marginals(
 
     if selinv.available():
         try:
-            sel = selinv.SelectedInverse.from_matrix(information, [s for s in sets if s.size])
-            return checked([sel.blocks(s) for s in sets])
+            return checked(selinv.inverse_blocks(information, sets))
         except np.linalg.LinAlgError as exc:
             raise np.linalg.LinAlgError(where(exc)) from None
     first_error = None

@@ -23,9 +23,13 @@ a dense lower triangle plus one shared row set ``R``), a block version of the sa
     Σ̃_{R,J} = − Σ̃_{R,R} Y
     Σ̃_{J,J} = L_{J,J}⁻ᵀ D_J⁻¹ L_{J,J}⁻¹ − Yᵀ Σ̃_{R,J}
 
-so the work is dense matrix products (BLAS) and the Python overhead is per supernode, not per column.
-``Σ̃_{R,R}`` is gathered from the blocks of the ancestor supernodes that own the columns in ``R``
-(one ``searchsorted`` per ancestor, SelInv's "relative indices").
+so the work is dense matrix products (BLAS). A supernode needs only its ancestors in the elimination tree of
+the supernodes, so all supernodes of one *level* (depth in that tree) are independent: the recurrence runs
+level by level from the root, batching the supernodes of a level into a few buckets padded to one shape
+(:class:`_Schedule`) — one batched product per bucket, so the Python overhead is per bucket, not per
+supernode (intel: 515 supernodes, 27 levels, ≈ 50 buckets). Each supernode leaves its dense *front*
+``Σ̃_{J∪R, J∪R}`` for its children, whose ``Σ̃_{R,R}`` is a gather from the parent's front (``R`` of a child
+lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels of fronts are alive at once.
 
 The factorisation is CHOLMOD's (``scikit-sparse``, the ``cholmod`` extra): its fill-reducing ordering
 (AMD / nested dissection) and its ``L D Lᵀ``. Without CHOLMOD, :func:`factor_ldl` raises ImportError and the
@@ -39,13 +43,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-#: most gather positions (int64) of the recurrence computed at once (memory ≈ 8 bytes × 3 × this)
-GATHER_CHUNK = 1 << 22
-#: supernodes with at most this many rows below them get precomputed (vectorised) gather positions; larger
-#: row sets are gathered run by run (:meth:`SelectedInverse._gather`), where the r² index arithmetic costs
-#: more than the Python overhead it saves (City10000: 0.25 s with every supernode vectorised, 0.15 s run by
-#: run, 0.14 s with 16-32 here; intel 0.021 / 0.018 s run by run / 24)
-GATHER_MAX_ROWS = 24
+#: width ratio of the size classes of :class:`_Schedule` (row counts and widths within a factor of this share
+#: a class before the cost model merges classes)
+CLASS_RATIO = 1.25
+#: overhead of one batched bucket of the recurrence (a dozen numpy calls), in units of one padded
+#: multiply-add of :func:`_bucket_cost` — the cost model that decides when padding beats another bucket
+BUCKET_OVERHEAD = 40_000.0
 
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
@@ -114,23 +117,18 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
     return LdlFactor(L, d, perm)
 
 
-class SelectedInverse:
-    """``Σ̃ = (P H Pᵀ)⁻¹`` on the pattern of ``L`` (supernodal Takahashi recurrence, see module doc).
+class _Supernodes:
+    """The supernodal pattern of ``L`` (unit lower triangular, sorted CSC, diagonal first in every column).
 
-    Build with :meth:`from_matrix` (CHOLMOD) or from any :class:`LdlFactor`; read blocks of ``H⁻¹`` in the
-    original order with :meth:`blocks` / :meth:`entries`. Memory: one float per stored entry of the
-    supernodal pattern (``≈ nnz(L)``) plus the index arrays.
-    """
+    Supernode ``K``: columns ``first[K] .. first[K] + width[K] − 1``, row set ``J ∪ R`` (``nrows[K]`` rows,
+    concatenated in ``rows`` from ``key_start[K]``); ``keys`` = sorted ``K·n + row`` of every block row (the
+    lookup of an entry's local row); ``off`` = start of ``K``'s row-major ``nrows × width`` block in the
+    storage of :class:`SelectedInverse`."""
 
-    def __init__(self, factor: LdlFactor) -> None:
-        L = factor.L
+    def __init__(self, L: sp.csc_matrix) -> None:
         n = L.shape[0]
-        ip, ix, lx = L.indptr, L.indices, L.data
+        ip, ix = L.indptr, L.indices
         self.n = n
-        self._ip, self._ix = ip, ix
-        self.perm = factor.perm
-        self.iperm = np.empty(n, np.int64)
-        self.iperm[factor.perm] = np.arange(n)
         cnt = np.diff(ip)  # entries per column including the diagonal
         if n and (np.any(cnt < 1) or np.any(ix[ip[:-1]] != np.arange(n))):
             raise ValueError("L must store its diagonal first in every column (sorted CSC)")
@@ -140,131 +138,67 @@ class SelectedInverse:
         cont = (nxt[:-1] == np.arange(1, n)) & (cnt[:-1] == cnt[1:] + 1)
         first = np.flatnonzero(np.r_[True, ~cont]) if n else np.zeros(0, np.int64)
         ns = len(first)
-        bounds = np.r_[first, n].astype(np.int64)
-        width = np.diff(bounds)  # |J|
-        nrows = cnt[first].astype(np.int64)  # |J| + |R|
-        self.sn_first, self.sn_width, self.sn_nrows = first, width, nrows
-        self.sn_of = np.repeat(np.arange(ns), width)  # supernode of each (permuted) column
-        # Σ̃ storage: supernode K is a dense row-major (nrows_K × width_K) block at vals[off[K]:]
-        self.off = np.r_[0, np.cumsum(nrows * width)].astype(np.int64)
-        self.vals = np.zeros(int(self.off[-1]))
-        # row sets J ∪ R of all supernodes, concatenated (supernode K's at _key_start[K]), and the sorted
-        # (supernode, row) keys of every block row: the lookup table of :meth:`entries` and of the gathers
+        self.first = first
+        self.width = np.diff(np.r_[first, n]).astype(np.int64)
+        self.nrows = cnt[first].astype(np.int64)
+        self.sn_of = np.repeat(np.arange(ns), self.width)  # supernode of each (permuted) column
+        self.off = np.r_[0, np.cumsum(self.nrows * self.width)].astype(np.int64)
         is_first = np.zeros(n, bool)
         is_first[first] = True
-        self._rows = ix[np.repeat(is_first, cnt)].astype(np.int64)
-        self._key_start = np.r_[0, np.cumsum(nrows)[:-1]].astype(np.int64)
-        self._keys = np.repeat(np.arange(ns, dtype=np.int64), nrows) * n + self._rows
-        self._recurrence(self._panels(lx, cnt), factor.d)
+        self.rows = ix[np.repeat(is_first, cnt)].astype(np.int64)
+        self.key_start = np.r_[0, np.cumsum(self.nrows)[:-1]].astype(np.int64)
+        self.keys = np.repeat(np.arange(ns, dtype=np.int64), self.nrows) * n + self.rows
+        self.cnt = cnt
 
-    def _panels(self, lx: np.ndarray, cnt: np.ndarray) -> np.ndarray:
-        """``L``'s entries laid out as :attr:`vals` (supernode K's columns as a row-major ``nrows × width``
-        panel at ``off[K]``, zero above the diagonal), by one vectorised scatter: column ``j0 + i`` of a
-        supernode holds its rows ``i..`` contiguously in ``lx`` (fundamental supernode)."""
-        n = self.n
-        col = np.repeat(np.arange(n), cnt)  # column of every stored entry
-        K = self.sn_of[col]
-        i = col - self.sn_first[K]  # local column
-        t = np.arange(lx.size) - np.repeat(self._ip[:-1].astype(np.int64), cnt)  # position within the column
-        panels = np.zeros(self.vals.size)
-        panels[self.off[K] + (i + t) * self.sn_width[K] + i] = lx
-        return panels
+    def local_rows(self, K: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there)."""
+        key = K * self.n + rows
+        g = np.searchsorted(self.keys, key)
+        found = g < len(self.keys)
+        found[found] = self.keys[g[found]] == key[found]
+        if not np.all(found):
+            raise ValueError("requested entries of H⁻¹ are not on the pattern of the factor")
+        return g - self.key_start[K]
 
-    def _gather_index(self, K0: int, K1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Flat positions in :attr:`vals` of ``Σ̃_{R,R}`` (dense ``r × r``, row-major) for the supernodes
-        ``K0 ≤ K < K1`` (``R`` = rows below the supernode), concatenated, and the start of each.
 
-        Entry ``(a, b)`` of ``Σ̃`` (``lo = min(a, b)``, ``hi = max``) is stored by the supernode owning column
-        ``lo``, at the local row of ``hi`` (found in the sorted keys: SelInv's "relative indices"); chordality
-        makes every such pair a stored entry."""
-        Ks = np.arange(K0, K1)
-        r = self.sn_nrows[Ks] - self.sn_width[Ks]
-        r = np.where(r <= GATHER_MAX_ROWS, r, 0)  # larger row sets: :meth:`_gather`
-        sizes = r * r
-        starts = np.r_[0, np.cumsum(sizes)]
-        T = int(starts[-1])
-        rep = np.repeat(np.arange(Ks.size), sizes)
-        u = np.arange(T, dtype=np.int64) - starts[:-1][rep]
-        rr = r[rep]
-        rs = (self._key_start[Ks] + self.sn_width[Ks])[rep]
-        a, b = self._rows[rs + u // rr], self._rows[rs + u % rr]
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        Kp = self.sn_of[lo]
-        key = Kp * self.n + hi
-        g = np.minimum(np.searchsorted(self._keys, key), max(self._keys.size - 1, 0))
-        if T and not np.array_equal(self._keys[g], key):
-            raise ValueError("the pattern of L is not closed under elimination (not a symbolic factor)")
-        idx = self.off[Kp] + (g - self._key_start[Kp]) * self.sn_width[Kp] + (lo - self.sn_first[Kp])
-        return idx, starts
+class SelectedInverse:
+    """``Σ̃ = (P H Pᵀ)⁻¹`` on the pattern of ``L`` (supernodal Takahashi recurrence, see module doc).
 
-    def _diagonal_terms(self, panels: np.ndarray, d: np.ndarray):
-        """``L_JJ⁻¹`` and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` of every supernode (``s × s`` row-major, at ``soff[K]`` of two
-        flat arrays), batched over the supernodes of one width: they depend on the factor only, not on Σ̃."""
-        w = self.sn_width
-        soff = np.r_[0, np.cumsum(w * w)].astype(np.int64)
-        linv, sjj = np.empty(int(soff[-1])), np.empty(int(soff[-1]))
-        for s in np.unique(w).tolist():
-            Ks = np.flatnonzero(w == s)
-            at = (soff[Ks][:, None] + np.arange(s * s)).ravel()
-            blocks = panels[(self.off[Ks][:, None] + np.arange(s * s)).ravel()].reshape(-1, s, s)  # L_JJ, unit lower
-            inv = np.linalg.inv(blocks) if s > 1 else np.ones((Ks.size, 1, 1))
-            dj = d[self.sn_first[Ks][:, None] + np.arange(s)]
-            linv[at] = inv.ravel()
-            sjj[at] = (np.swapaxes(inv, 1, 2) @ (inv / dj[:, :, None])).ravel()
-        return soff, linv, sjj
+    Build with :meth:`from_matrix` (CHOLMOD) or from any :class:`LdlFactor`; read blocks of ``H⁻¹`` in the
+    original order with :meth:`blocks` / :meth:`entries`. Memory: one float per stored entry of the
+    supernodal pattern (``≈ nnz(L)``) plus the index arrays. Only a few blocks wanted (marginals):
+    :func:`inverse_blocks`, which keeps no more than those.
+    """
 
-    def _recurrence(self, panels: np.ndarray, d: np.ndarray) -> None:
-        """The supernodal Takahashi recurrence (module docstring), last supernode first. The gather positions
-        of ``Σ̃_{R,R}`` are computed in vectorised chunks of at most :data:`GATHER_CHUNK` entries and the
-        diagonal-block terms beforehand (:meth:`_diagonal_terms`), so the loop body is a few dense products
-        per supernode."""
-        ns = len(self.sn_first)
-        soff, linv, sjj = self._diagonal_terms(panels, d)
-        width, nrows, off, so_l = (a.tolist() for a in (self.sn_width, self.sn_nrows, self.off, soff))
-        r = self.sn_nrows - self.sn_width
-        csize = np.r_[0, np.cumsum(np.where(r <= GATHER_MAX_ROWS, r * r, 0))]
-        vals = self.vals
-        K_lo = ns
-        for K in range(ns - 1, -1, -1):
-            if K < K_lo:  # next chunk of gather positions: supernodes K_lo..K
-                K_lo = max(0, min(int(np.searchsorted(csize, csize[K + 1] - GATHER_CHUNK)), K))
-                gidx, gstart = self._gather_index(K_lo, K + 1)
-            s, m, o, so = width[K], nrows[K], off[K], so_l[K]
-            SJJ = sjj[so : so + s * s].reshape(s, s)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
-            out = vals[o : o + m * s].reshape(m, s)
-            if m > s:
-                Y = panels[o + s * s : o + m * s].reshape(m - s, s) @ linv[so : so + s * s].reshape(s, s)  # L_RJ L_JJ⁻¹
-                q = K - K_lo
-                if m - s <= GATHER_MAX_ROWS:  # Σ̃_{R,R}, computed before
-                    S = vals[gidx[gstart[q] : gstart[q + 1]]].reshape(m - s, m - s)
-                else:
-                    S = self._gather(self._sn_rows(K)[s:])
-                SRJ = -(S @ Y)
-                SJJ = SJJ - Y.T @ SRJ
-                out[s:] = SRJ
-            out[:s] = 0.5 * (SJJ + SJJ.T)
+    def __init__(self, factor: LdlFactor) -> None:
+        sn = _Supernodes(factor.L)
+        self.n, self._sn = sn.n, sn
+        self.perm = factor.perm
+        self.iperm = np.empty(sn.n, np.int64)
+        self.iperm[factor.perm] = np.arange(sn.n)
+        self.sn_first, self.sn_width, self.sn_nrows, self.sn_of, self.off = (
+            sn.first, sn.width, sn.nrows, sn.sn_of, sn.off)
+        self.vals = np.zeros(int(sn.off[-1]))  # supernode K: dense row-major (nrows × width) at off[K]
+        if not sn.n:
+            return
+        plan = _Schedule(sn)
+        K = np.repeat(np.arange(len(sn.first)), sn.nrows * sn.width)
+        u = np.arange(self.vals.size) - sn.off[K]
+        t, c = u // sn.width[K], u % sn.width[K]  # local row and column of every stored entry
+        self.vals[:] = plan.run(factor, *plan.front_index(K, t, c))
 
     @classmethod
     def from_matrix(cls, H: sp.spmatrix, index_blocks=()) -> SelectedInverse:
         """Factor ``H`` with CHOLMOD (:func:`factor_ldl`) and run the recurrence.
 
         ``index_blocks``: arrays ``(B, k)`` of columns whose ``k × k`` blocks :meth:`blocks` will be asked
-        for; their pattern is added to ``H``'s as explicit zeros, so that every such block lies on the
-        pattern of the factor even for variables no factor couples (e.g. held-fixed ones)."""
-        H = sp.csc_matrix(H)
-        extra = [np.asarray(b, np.int64) for b in index_blocks if np.size(b)]
-        if extra:
-            C = sp.coo_matrix(H)
-            r = [C.row] + [np.repeat(b, b.shape[1], axis=1).ravel() for b in extra]
-            c = [C.col] + [np.tile(b, (1, b.shape[1])).ravel() for b in extra]
-            v = [C.data] + [np.zeros(b.size * b.shape[1]) for b in extra]
-            H = sp.csc_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=H.shape)
-        return cls(factor_ldl(H))
+        for; their pattern is added to ``H``'s as explicit zeros (:func:`with_block_pattern`)."""
+        return cls(factor_ldl(with_block_pattern(H, index_blocks)))
 
     def _sn_rows(self, K: int) -> np.ndarray:
         """Sorted row set ``J ∪ R`` of supernode ``K`` (permuted order)."""
-        k0 = int(self._key_start[K])
-        return self._rows[k0 : k0 + int(self.sn_nrows[K])]
+        k0 = int(self._sn.key_start[K])
+        return self._sn.rows[k0 : k0 + int(self.sn_nrows[K])]
 
     def entries(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """``(H⁻¹)[rows, cols]`` (original order, equal shapes) — each pair must lie on the pattern of the
@@ -274,13 +208,7 @@ class SelectedInverse:
         qa, qb = self.iperm[rows.ravel()], self.iperm[cols.ravel()]
         lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
         K = self.sn_of[lo]
-        key = K * self.n + hi
-        g = np.searchsorted(self._keys, key)
-        found = g < len(self._keys)
-        found[found] = self._keys[g[found]] == key[found]
-        if not np.all(found):
-            raise ValueError("requested entries of H⁻¹ are not on the pattern of the factor")
-        p = g - self._key_start[K]  # local row in supernode K's block
+        p = self._sn.local_rows(K, hi)
         return self.vals[self.off[K] + p * self.sn_width[K] + (lo - self.sn_first[K])].reshape(shape)
 
     def blocks(self, index_blocks: np.ndarray) -> np.ndarray:
@@ -291,24 +219,232 @@ class SelectedInverse:
         c = np.broadcast_to(idx[:, None, :], (B, k, k))
         return self.entries(r, c)
 
-    def _gather(self, R: np.ndarray) -> np.ndarray:
-        """Dense ``Σ̃_{R,R}`` for a sorted row set ``R`` that is a clique of the pattern (already computed).
 
-        ``R`` splits into runs owned by one supernode ``K`` each; a run's columns hold ``Σ̃`` for every row of
-        ``R`` from the run on (chordality: they are rows of ``K``), found by one ``searchsorted``."""
-        r = len(R)
-        S = np.empty((r, r))
-        sn = self.sn_of[R]
-        cuts = (np.flatnonzero(sn[1:] != sn[:-1]) + 1).tolist()
-        for a0, a1 in zip([0] + cuts, cuts + [r]):
-            K = int(sn[a0])
-            rows = self._sn_rows(K)
-            tail = R[a0:]
-            pos = np.searchsorted(rows, tail)
-            if pos[-1] >= len(rows) or (rows[pos] != tail).any():
-                raise ValueError("the pattern of L is not closed under elimination (not a symbolic factor)")
-            o, w = int(self.off[K]), int(self.sn_width[K])
-            X = self.vals[o : o + len(rows) * w].reshape(len(rows), w)[pos[:, None], R[a0:a1] - self.sn_first[K]]
-            S[a0:, a0:a1] = X
-            S[a0:a1, a0:] = X.T  # the diagonal block is symmetric: writing it twice is harmless
-        return S
+def with_block_pattern(H: sp.spmatrix, index_blocks=()) -> sp.csc_matrix:
+    """``H`` (CSC) with the ``k × k`` pattern of every row of every ``index_blocks (B, k)`` added as explicit
+    zeros, so that each such block lies on the pattern of the factor even for variables no factor couples
+    (e.g. held-fixed ones)."""
+    H = sp.csc_matrix(H)
+    extra = [np.asarray(b, np.int64) for b in index_blocks if np.size(b)]
+    if not extra:
+        return H
+    C = sp.coo_matrix(H)
+    r = [C.row] + [np.repeat(b, b.shape[1], axis=1).ravel() for b in extra]
+    c = [C.col] + [np.tile(b, (1, b.shape[1])).ravel() for b in extra]
+    v = [C.data] + [np.zeros(b.size * b.shape[1]) for b in extra]
+    return sp.csc_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=H.shape)
+
+
+def inverse_blocks(H: sp.spmatrix, index_blocks) -> list[np.ndarray]:
+    """``(H⁻¹)[idx, idx]`` ``(B, k, k)`` for every row of every ``index_blocks (B, k)`` — the marginals —
+    by the batched recurrence, keeping only the fronts of two levels and the requested entries (no
+    ``nnz(L)`` storage, no lookup table for other entries).
+
+    Raises ImportError (no CHOLMOD) and :class:`NotPositiveDefiniteError` as :func:`factor_ldl`."""
+    sets = [np.asarray(b, np.int64) for b in index_blocks]
+    factor = factor_ldl(with_block_pattern(H, sets))
+    sn = _Supernodes(factor.L)
+    iperm = np.empty(sn.n, np.int64)
+    iperm[factor.perm] = np.arange(sn.n)
+    # the lower triangle (with diagonal) of every block, in permuted order
+    tri = [np.tril_indices(b.shape[1]) for b in sets]
+    qa = np.concatenate([iperm[b[:, i].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
+    qb = np.concatenate([iperm[b[:, j].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
+    lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
+    vals = np.zeros(0)
+    if sn.n:
+        plan = _Schedule(sn)
+        K = sn.sn_of[lo]
+        vals = plan.run(factor, *plan.front_index(K, sn.local_rows(K, hi), lo - sn.first[K]))
+    out, at = [], 0
+    for b, (i, j) in zip(sets, tri):
+        B, k = b.shape
+        blk = np.empty((B, k, k))
+        v = vals[at : at + B * i.size].reshape(B, i.size)
+        blk[:, i, j] = v
+        blk[:, j, i] = v
+        out.append(blk)
+        at += B * i.size
+    return out
+
+
+def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For concatenated runs of ``sizes``: the run of every element, its position in the run, the run starts."""
+    sizes = np.asarray(sizes, np.int64)
+    starts = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+    rep = np.repeat(np.arange(sizes.size), sizes)
+    return rep, np.arange(starts[-1], dtype=np.int64) - starts[:-1][rep], starts
+
+
+def _bucket_cost(nb, rp, sp_):
+    """Padded work of ``nb`` supernodes with ``rp`` rows below and width ``sp_`` (multiply-adds and moves)."""
+    return nb * (rp * rp * (sp_ + 1) + rp * sp_ * sp_ + sp_**3 + (rp + sp_) ** 2)
+
+
+def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
+    """Supernodes in processing order (level by level, root level first) cut into buckets of one level.
+
+    Within a level, supernodes are sorted by size class (``CLASS_RATIO``) and consecutive classes merged while
+    padding all to the larger costs less than another bucket (:data:`BUCKET_OVERHEAD`). Returns ``order``
+    (supernodes), ``b_start`` (start of every bucket in ``order``, plus the end) and the buckets' level."""
+    lg = np.log(CLASS_RATIO)
+    rc, sc = np.floor(np.log1p(r) / lg).astype(np.int64), np.floor(np.log1p(w) / lg).astype(np.int64)
+    order = np.lexsort((w, r, sc, rc, depth))
+    key = np.stack([depth[order], rc[order], sc[order]])
+    gs = np.flatnonzero(np.r_[True, np.any(key[:, 1:] != key[:, :-1], axis=0)])
+    gn = np.diff(np.r_[gs, order.size]).tolist()
+    gr, gw = np.maximum.reduceat(r[order], gs).tolist(), np.maximum.reduceat(w[order], gs).tolist()
+    glev = depth[order][gs].tolist()
+    starts = []
+    cn = cr = cw = 0
+    for g in range(len(gs)):
+        n2, r2, w2 = cn + gn[g], max(cr, gr[g]), max(cw, gw[g])
+        if g and glev[g] == glev[g - 1] and (
+            _bucket_cost(n2, r2, w2) <= _bucket_cost(cn, cr, cw) + _bucket_cost(gn[g], gr[g], gw[g]) + BUCKET_OVERHEAD
+        ):
+            cn, cr, cw = n2, r2, w2
+        else:
+            starts.append(int(gs[g]))
+            cn, cr, cw = gn[g], gr[g], gw[g]
+    b_start = np.array(starts + [order.size], np.int64)
+    return order, b_start, depth[order][b_start[:-1]]
+
+
+class _Schedule:
+    """The plan of the batched recurrence, from the pattern alone (module docstring).
+
+    Elimination tree of the supernodes (parent = owner of the first row below ``J``), levels by depth,
+    buckets of one level (:func:`_buckets`) whose members are padded to the bucket's largest row count ``rp``
+    and width ``sp``. A supernode's front is ``(sp + rp)²`` row-major, ``J`` rows first, ``R`` rows from
+    ``sp``; a level's fronts lie one after another in its buffer from position 1 (position 0 holds the 0
+    every padded gather reads)."""
+
+    def __init__(self, sn: _Supernodes) -> None:
+        w, m = sn.width, sn.nrows
+        ns, r = w.size, m - w
+        below = sn.key_start + w  # position in rows of each supernode's first row below J
+        par = np.full(ns, -1, np.int64)
+        par[r > 0] = sn.sn_of[sn.rows[below[r > 0]]]
+        depth = [0] * ns
+        pl = par.tolist()
+        for K in range(ns - 1, -1, -1):  # a parent comes after its children
+            if pl[K] >= 0:
+                depth[K] = depth[pl[K]] + 1
+        self.depth = depth = np.asarray(depth, np.int64)
+        order, b_start, b_level = _buckets(depth, r, w)
+        self.n_levels = int(depth.max()) + 1
+        self.level_buckets = np.searchsorted(b_level, np.arange(self.n_levels + 1)).tolist()
+        bk = np.repeat(np.arange(b_start.size - 1), np.diff(b_start))  # bucket of order[i]
+        b_rows, b_width = np.maximum.reduceat(r[order], b_start[:-1]), np.maximum.reduceat(w[order], b_start[:-1])
+        b_count = np.diff(b_start)
+        self.b_count, self.b_rows, self.b_width = b_count.tolist(), b_rows.tolist(), b_width.tolist()
+        mp_b = b_rows + b_width
+        cum = np.r_[0, np.cumsum(b_count * mp_b * mp_b)]
+        lv_first = np.asarray(self.level_buckets, np.int64)
+        front_at = cum[:-1] - cum[lv_first[b_level]] + 1
+        self.level_size = (cum[lv_first[1:]] - cum[lv_first[:-1]]).tolist()
+        # per supernode: padded shape, front offset in its level's buffer, place in its bucket
+        self.rp, self.sp, self.slot = (np.empty(ns, np.int64) for _ in range(3))
+        self.rp[order], self.sp[order] = b_rows[bk], b_width[bk]
+        self.slot[order] = np.arange(ns) - b_start[bk]
+        self.bucket = np.empty(ns, np.int64)
+        self.bucket[order] = bk
+        self.mp = self.rp + self.sp
+        self.foff = front_at[self.bucket] + self.slot * self.mp**2
+        self.sn, self.par, self.order, self.b_start = sn, par, order, b_start
+        # padded L (nb, mp, sp) and D⁻¹ (nb, sp) of every bucket, one after another
+        self.l_at = np.r_[0, np.cumsum(b_count * mp_b * b_width)].tolist()
+        self.d_at = np.r_[0, np.cumsum(b_count * b_width)].tolist()
+        self.rel_at, self.rel = self._relative_positions(below)
+
+    def _relative_positions(self, below):
+        """Position in the parent's front of every row below every supernode, padded to ``rp`` with −1
+        (supernode ``order[i]``'s at ``rel_at[i]``): its row in the parent's ``J ∪ R``, ``J`` first, ``R``
+        after the parent's padded width."""
+        sn, par = self.sn, self.par
+        r = sn.nrows - sn.width
+        rep, u, _ = _ragged(r)
+        P = par[rep]
+        loc = sn.local_rows(P, sn.rows[below[rep] + u])
+        wP = sn.width[P]
+        pos = np.where(loc < wP, loc, loc - wP + self.sp[P])
+        start = np.empty(r.size, np.int64)
+        start[self.order] = np.r_[0, np.cumsum(self.rp[self.order])[:-1]]
+        rel = np.full(int(self.rp.sum()), -1, np.int64)
+        rel[start[rep] + u] = pos
+        return start[self.order][self.b_start[:-1]].tolist() + [rel.size], rel
+
+    def front_index(self, K, t, c):
+        """Where the recurrence leaves ``Σ̃`` at local row ``t``, column ``c < width`` of supernode ``K``:
+        positions in the level buffers, grouped by level (``(src, level starts, order)``)."""
+        fr = np.where(t < self.sn.width[K], t, t - self.sn.width[K] + self.sp[K])
+        pos = self.foff[K] + fr * self.mp[K] + c
+        o = np.argsort(self.depth[K], kind="stable")
+        at = np.searchsorted(self.depth[K][o], np.arange(self.n_levels + 1))
+        return pos[o], at.tolist(), o
+
+    def _padded_factor(self, factor: LdlFactor):
+        """``L`` as the buckets' padded ``(nb, mp, sp)`` panels (unit diagonal on the padding) and ``D⁻¹`` as
+        ``(nb, sp)`` (zero on the padding), each flat in bucket order."""
+        sn, L = self.sn, factor.L
+        col = np.repeat(np.arange(sn.n), sn.cnt)  # column of every stored entry
+        K = sn.sn_of[col]
+        i = col - sn.first[K]  # local column
+        t = i + (np.arange(L.data.size) - np.repeat(L.indptr[:-1].astype(np.int64), sn.cnt))  # local row
+        b, sp_ = self.bucket[K], self.sp[K]
+        base = np.asarray(self.l_at)[b] + self.slot[K] * self.mp[K] * sp_
+        fr = np.where(t < sn.width[K], t, t - sn.width[K] + sp_)
+        lpad = np.zeros(self.l_at[-1])
+        rep, a, _ = _ragged(self.sp)  # the padded diagonals: 1
+        lpad[np.asarray(self.l_at)[self.bucket[rep]] + self.slot[rep] * self.mp[rep] * self.sp[rep] + a * (self.sp[rep] + 1)] = 1.0
+        lpad[base + fr * sp_ + i] = L.data
+        dpad = np.zeros(self.d_at[-1])
+        Kc = sn.sn_of
+        dpad[np.asarray(self.d_at)[self.bucket[Kc]] + self.slot[Kc] * self.sp[Kc] + (np.arange(sn.n) - sn.first[Kc])] = 1.0 / factor.d
+        return lpad, dpad
+
+    def run(self, factor: LdlFactor, src: np.ndarray, src_at: list, o: np.ndarray) -> np.ndarray:
+        """The recurrence, root level first; returns ``Σ̃`` at the front positions ``src`` (of
+        :meth:`front_index`) in the caller's order."""
+        lpad, dpad = self._padded_factor(factor)
+        out = np.empty(src.size)
+        prev = np.zeros(1)
+        lb = self.level_buckets
+        for lv in range(self.n_levels):
+            buf = np.empty(self.level_size[lv] + 1)
+            buf[0] = 0.0
+            for b in range(lb[lv], lb[lv + 1]):
+                self._bucket(b, buf, prev, lpad, dpad)
+            out[src_at[lv] : src_at[lv + 1]] = buf[src[src_at[lv] : src_at[lv + 1]]]
+            prev = buf
+        res = np.empty_like(out)
+        res[o] = out
+        return res
+
+    def _bucket(self, b: int, buf: np.ndarray, prev: np.ndarray, lpad: np.ndarray, dpad: np.ndarray) -> None:
+        """The block recurrence (module docstring) for the ``nb`` supernodes of bucket ``b`` at once, fronts
+        written to ``buf``; ``prev`` holds the parents' fronts."""
+        nb, rp, s = self.b_count[b], self.b_rows[b], self.b_width[b]
+        mp = rp + s
+        Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
+        Linv = np.linalg.inv(Lb[:, :s])  # unit lower triangular, padded with I
+        di = dpad[self.d_at[b] : self.d_at[b + 1]].reshape(nb, s, 1)
+        SJJ = np.swapaxes(Linv, 1, 2) @ (Linv * di)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹ (zero on the padding)
+        f0 = int(self.foff[self.order[self.b_start[b]]])
+        F = buf[f0 : f0 + nb * mp * mp].reshape(nb, mp, mp)
+        if rp:
+            Ks = self.order[self.b_start[b] : self.b_start[b + 1]]
+            P = self.par[Ks]
+            rel = self.rel[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp)
+            gi = (self.foff[P] + 0)[:, None, None] + rel[:, :, None] * self.mp[P][:, None, None] + rel[:, None, :]
+            pad = rel < 0
+            gi[pad[:, :, None] | pad[:, None, :]] = 0
+            S = prev[gi]  # Σ̃_{R,R} from the parents' fronts
+            Y = Lb[:, s:] @ Linv  # L_RJ L_JJ⁻¹
+            SRJ = S @ Y
+            np.negative(SRJ, out=SRJ)
+            SJJ -= np.swapaxes(Y, 1, 2) @ SRJ
+            F[:, s:, :s] = SRJ
+            F[:, :s, s:] = np.swapaxes(SRJ, 1, 2)
+            F[:, s:, s:] = S
+        F[:, :s, :s] = 0.5 * (SJJ + np.swapaxes(SJJ, 1, 2))
