@@ -49,6 +49,11 @@ CLASS_RATIO = 1.25
 #: overhead of one batched bucket of the recurrence (a dozen numpy calls), in units of one padded
 #: multiply-add of :func:`_bucket_cost` — the cost model that decides when padding beats another bucket
 BUCKET_OVERHEAD = 40_000.0
+#: relaxed supernodes (:func:`_amalgamate`): at most this many columns, at most this fraction of explicit zeros
+AMALGAMATE_MAX_WIDTH = 48
+AMALGAMATE_MAX_ZEROS = 0.5
+#: blocks at least this wide are inverted by LAPACK's triangular inverse, one call each (:func:`_unit_lower_inverse`)
+TRTRI_MIN_WIDTH = 128
 
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
@@ -82,8 +87,12 @@ class LdlFactor:
     perm: np.ndarray
 
 
-def factor_ldl(H: sp.spmatrix) -> LdlFactor:
+def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
     """CHOLMOD's fill-reducing ``L D Lᵀ`` of a symmetric positive definite ``H``.
+
+    ``analysis``: a CHOLMOD factor (``sksparse.cholmod.Factor``, simplicial) of a matrix with ``H``'s
+    pattern, e.g. the LM's: its ordering and symbolic factorisation are reused, only the numeric
+    factorisation is paid (City10000: the analysis is ≈ 15 of 65 ms).
 
     Raises
     ------
@@ -95,35 +104,44 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
     H = sp.csc_matrix(H)
     try:
         # AMD alone: CHOLMOD's default also tries METIS when AMD's fill is high, which on these matrices
-        # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L)
-        F = cholesky(H, mode="supernodal", ordering_method="amd")
+        # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L). Simplicial: with
+        # the reference BLAS CHOLMOD is linked to here, its supernodal factorisation is ≈ 2× slower (intel
+        # 5.6 vs 2.5 ms, City10000 77 vs 50 ms); the relaxed supernodes are :class:`_Supernodes`' own.
+        if analysis is None:
+            F = cholesky(H, mode="simplicial", ordering_method="amd")
+        else:
+            F = analysis.cholesky(H)
     except CholmodNotPositiveDefiniteError as exc:
         col = getattr(exc, "column", None)
         perm = getattr(getattr(exc, "factor", None), "P", lambda: None)()
         where = int(perm[col]) if perm is not None and col is not None and col < len(perm) else int(col or 0)
         raise NotPositiveDefiniteError(f"sparse Cholesky of H: pivot ≤ 0 ({exc})", where) from None
     perm = np.asarray(F.P(), np.int64)
-    # F.L() (L Lᵀ) keeps the symbolic pattern, explicit zeros included; F.L_D() would drop them
-    L = sp.csc_matrix(F.L())
+    # F.LD(): L with D on its diagonal, the symbolic pattern kept (explicit zeros included; F.L_D() drops them)
+    L = sp.csc_matrix(F.LD())
     L.sort_indices()
-    diag = L.data[L.indptr[:-1]]
     if not np.all(L.indices[L.indptr[:-1]] == np.arange(L.shape[0])):
         raise ValueError("CHOLMOD's L does not store its diagonal first")
-    if not np.all(diag > 0.0):
-        k = int(np.argmin(diag))
-        raise NotPositiveDefiniteError(f"pivot ≤ 0 in the sparse Cholesky of H ({diag[k]:.3g})", perm[k])
-    L.data /= np.repeat(diag, np.diff(L.indptr))  # unit lower triangular: P H Pᵀ = L D Lᵀ, D = diag²
-    d = diag * diag
+    d = L.data[L.indptr[:-1]].copy()
+    if not np.all(d > 0.0):  # LDLᵀ runs through a negative pivot: the test is ours
+        k = int(np.argmin(d))
+        raise NotPositiveDefiniteError(f"pivot ≤ 0 in the sparse LDLᵀ of H ({d[k]:.3g})", perm[k])
+    L.data[L.indptr[:-1]] = 1.0  # unit lower triangular: P H Pᵀ = L D Lᵀ
     return LdlFactor(L, d, perm)
 
 
 class _Supernodes:
-    """The supernodal pattern of ``L`` (unit lower triangular, sorted CSC, diagonal first in every column).
+    """The supernodal pattern of ``L`` (unit lower triangular, sorted CSC, diagonal first in every column),
+    with relaxed supernodes.
 
-    Supernode ``K``: columns ``first[K] .. first[K] + width[K] − 1``, row set ``J ∪ R`` (``nrows[K]`` rows,
-    concatenated in ``rows`` from ``key_start[K]``); ``keys`` = sorted ``K·n + row`` of every block row (the
-    lookup of an entry's local row); ``off`` = start of ``K``'s row-major ``nrows × width`` block in the
-    storage of :class:`SelectedInverse`."""
+    Fundamental supernodes (runs of columns with nested patterns) are amalgamated along chains of the
+    elimination tree (:func:`_amalgamate`): a supernode absorbs its parent when the parent's columns follow
+    its own (postorder) and the zeros this adds to ``L``'s pattern stay few — fewer, wider supernodes and a
+    shallower tree for the level-batched recurrence. Supernode ``K``: columns ``first[K] ..
+    first[K] + width[K] − 1``, row set ``J ∪ R`` (``nrows[K]`` rows, concatenated in ``rows`` from
+    ``key_start[K]``); ``keys`` = sorted ``K·n + row`` of every block row (the lookup of an entry's local row);
+    ``off`` = start of ``K``'s row-major ``nrows × width`` block in the storage of :class:`SelectedInverse`;
+    ``entry_K, entry_col, entry_row``: supernode, local column and local row of every stored entry of ``L``."""
 
     def __init__(self, L: sp.csc_matrix) -> None:
         n = L.shape[0]
@@ -136,19 +154,44 @@ class _Supernodes:
         # pattern(j) = {j} ∪ pattern(j+1)  (chordality makes equal counts sufficient)
         nxt = np.where(cnt > 1, ix[np.minimum(ip[:-1] + 1, max(len(ix) - 1, 0))], -1)
         cont = (nxt[:-1] == np.arange(1, n)) & (cnt[:-1] == cnt[1:] + 1)
-        first = np.flatnonzero(np.r_[True, ~cont]) if n else np.zeros(0, np.int64)
-        ns = len(first)
-        self.first = first
-        self.width = np.diff(np.r_[first, n]).astype(np.int64)
-        self.nrows = cnt[first].astype(np.int64)
+        ffirst = np.flatnonzero(np.r_[True, ~cont]) if n else np.zeros(0, np.int64)
+        fwidth = np.diff(np.r_[ffirst, n]).astype(np.int64)
+        fnrows = cnt[ffirst].astype(np.int64)
+        fsn_of = np.repeat(np.arange(ffirst.size), fwidth)
+        is_first = np.zeros(n, bool)
+        is_first[ffirst] = True
+        frows = ix[np.repeat(is_first, cnt)].astype(np.int64)
+        fkey_start = np.r_[0, np.cumsum(fnrows)[:-1]].astype(np.int64)
+        fpar = np.full(ffirst.size, -1, np.int64)
+        below = fnrows > fwidth
+        fpar[below] = fsn_of[frows[fkey_start[below] + fwidth[below]]]
+        group = _amalgamate(fpar, fwidth, fnrows)  # merged supernode of every fundamental one
+        starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]]) if n else np.zeros(0, np.int64)
+        top = np.r_[starts[1:], ffirst.size] - 1  # last (topmost) member of every merged supernode
+        self.first = ffirst[starts]
+        self.width = np.diff(np.r_[self.first, n]).astype(np.int64)
+        r_top = fnrows[top] - fwidth[top]
+        self.nrows = self.width + r_top
+        ns = self.first.size
         self.sn_of = np.repeat(np.arange(ns), self.width)  # supernode of each (permuted) column
         self.off = np.r_[0, np.cumsum(self.nrows * self.width)].astype(np.int64)
-        is_first = np.zeros(n, bool)
-        is_first[first] = True
-        self.rows = ix[np.repeat(is_first, cnt)].astype(np.int64)
+        # merged row set: the supernode's own columns, then the rows below its topmost member
         self.key_start = np.r_[0, np.cumsum(self.nrows)[:-1]].astype(np.int64)
-        self.keys = np.repeat(np.arange(ns, dtype=np.int64), self.nrows) * n + self.rows
-        self.cnt = cnt
+        rep, u, _ = _ragged(self.nrows)
+        w_rep = self.width[rep]
+        tk = top[rep]
+        self.rows = np.where(u < w_rep, self.first[rep] + u, frows[fkey_start[tk] + fwidth[tk] + u - w_rep])
+        self.keys = rep * n + self.rows
+        # every fundamental row's place in its merged supernode's row set, then every stored entry's
+        rep, u, _ = _ragged(fnrows)
+        G = group[rep]
+        fmap = self.local_rows(G, frows[fkey_start[rep] + u])
+        col = np.repeat(np.arange(n), cnt)
+        k = fsn_of[col]
+        t = (col - ffirst[k]) + (np.arange(ix.size) - np.repeat(ip[:-1].astype(np.int64), cnt))
+        self.entry_K = group[k]
+        self.entry_col = col - self.first[self.entry_K]
+        self.entry_row = fmap[fkey_start[k] + t]
 
     def local_rows(self, K: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there)."""
@@ -235,27 +278,23 @@ def with_block_pattern(H: sp.spmatrix, index_blocks=()) -> sp.csc_matrix:
     return sp.csc_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=H.shape)
 
 
-def inverse_blocks(H: sp.spmatrix, index_blocks) -> list[np.ndarray]:
+def inverse_blocks(H: sp.spmatrix, index_blocks, analysis=None) -> list[np.ndarray]:
     """``(H⁻¹)[idx, idx]`` ``(B, k, k)`` for every row of every ``index_blocks (B, k)`` — the marginals —
     by the batched recurrence, keeping only the fronts of two levels and the requested entries (no
-    ``nnz(L)`` storage, no lookup table for other entries).
+    ``nnz(L)`` storage, no lookup table for other entries). ``analysis``: as :func:`factor_ldl`'s.
+
+    ``H`` is factored as it is; only when a block is off the pattern of its factor (a variable no factor
+    couples, e.g. a held-fixed one) is it factored again with the blocks' pattern added
+    (:func:`with_block_pattern`).
 
     Raises ImportError (no CHOLMOD) and :class:`NotPositiveDefiniteError` as :func:`factor_ldl`."""
     sets = [np.asarray(b, np.int64) for b in index_blocks]
-    factor = factor_ldl(with_block_pattern(H, sets))
-    sn = _Supernodes(factor.L)
-    iperm = np.empty(sn.n, np.int64)
-    iperm[factor.perm] = np.arange(sn.n)
-    # the lower triangle (with diagonal) of every block, in permuted order
-    tri = [np.tril_indices(b.shape[1]) for b in sets]
-    qa = np.concatenate([iperm[b[:, i].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
-    qb = np.concatenate([iperm[b[:, j].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
-    lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
-    vals = np.zeros(0)
-    if sn.n:
-        plan = _Schedule(sn)
-        K = sn.sn_of[lo]
-        vals = plan.run(factor, *plan.front_index(K, sn.local_rows(K, hi), lo - sn.first[K]))
+    tri = [np.tril_indices(b.shape[1]) for b in sets]  # the lower triangle (with diagonal) of every block
+    factor = factor_ldl(H, analysis)
+    try:
+        vals = _lower_entries(factor, sets, tri)
+    except ValueError:  # a block off the pattern of L
+        vals = _lower_entries(factor_ldl(with_block_pattern(H, sets)), sets, tri)
     out, at = [], 0
     for b, (i, j) in zip(sets, tri):
         B, k = b.shape
@@ -266,6 +305,55 @@ def inverse_blocks(H: sp.spmatrix, index_blocks) -> list[np.ndarray]:
         out.append(blk)
         at += B * i.size
     return out
+
+
+def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.ndarray:
+    """``H⁻¹`` at the ``tri`` (lower triangle) entries of every block of ``sets``, concatenated; ValueError
+    when one is off the pattern of the factor."""
+    sn = _Supernodes(factor.L)
+    iperm = np.empty(sn.n, np.int64)
+    iperm[factor.perm] = np.arange(sn.n)
+    qa = np.concatenate([iperm[b[:, i].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
+    qb = np.concatenate([iperm[b[:, j].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
+    lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
+    if not sn.n:
+        return np.zeros(0)
+    K = sn.sn_of[lo]
+    where = sn.local_rows(K, hi)
+    plan = _Schedule(sn)
+    return plan.run(factor, *plan.front_index(K, where, lo - sn.first[K]))
+
+
+def _unit_lower_inverse(blocks: np.ndarray) -> np.ndarray:
+    """Inverses of unit lower triangular ``(B, w, w)`` blocks: batched LU inverse for narrow ones (one call),
+    LAPACK's triangular inverse one by one above :data:`TRTRI_MIN_WIDTH` (an eighth of the flops, which
+    there outweigh the calls: City10000's 288-wide root block 6 vs 1.5 ms)."""
+    if blocks.shape[1] < TRTRI_MIN_WIDTH:
+        return np.linalg.inv(blocks)
+    from scipy.linalg.lapack import dtrtri
+
+    return np.stack([dtrtri(b, lower=1, unitdiag=1)[0] for b in blocks])
+
+
+def _amalgamate(par: np.ndarray, width: np.ndarray, nrows: np.ndarray) -> np.ndarray:
+    """Relaxed supernodes: the merged supernode of every fundamental one (non-decreasing labels).
+
+    Walking the postordered supernodes upwards, supernode ``k + 1`` joins ``k``'s group when it is ``k``'s
+    parent (its columns follow), the group stays at most :data:`AMALGAMATE_MAX_WIDTH` columns wide and the
+    explicit zeros of the merged lower trapezoid stay at most :data:`AMALGAMATE_MAX_ZEROS` of it."""
+    ns = par.size
+    group = [0] * ns
+    pl, wl, rl = par.tolist(), width.tolist(), (nrows - width).tolist()
+    nz = (width * nrows - width * (width - 1) // 2).tolist()  # stored entries of each supernode's columns
+    g, W, A = 0, 0, 0
+    for k in range(ns):
+        if k and not (pl[k - 1] == k and W + wl[k] <= AMALGAMATE_MAX_WIDTH and (
+                (W + wl[k]) * (W + wl[k] + 2 * rl[k] + 1) // 2 - (A + nz[k])
+                <= AMALGAMATE_MAX_ZEROS * (W + wl[k]) * (W + wl[k] + 2 * rl[k] + 1) / 2)):
+            g, W, A = g + 1, 0, 0
+        group[k] = g
+        W, A = W + wl[k], A + nz[k]
+    return np.asarray(group, np.int64)
 
 
 def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -342,6 +430,7 @@ class _Schedule:
         cum = np.r_[0, np.cumsum(b_count * mp_b * mp_b)]
         lv_first = np.asarray(self.level_buckets, np.int64)
         front_at = cum[:-1] - cum[lv_first[b_level]] + 1
+        self.front_at = front_at.tolist()
         self.level_size = (cum[lv_first[1:]] - cum[lv_first[:-1]]).tolist()
         # per supernode: padded shape, front offset in its level's buffer, place in its bucket
         self.rp, self.sp, self.slot = (np.empty(ns, np.int64) for _ in range(3))
@@ -354,11 +443,12 @@ class _Schedule:
         self.sn, self.par, self.order, self.b_start = sn, par, order, b_start
         # padded L (nb, mp, sp) and D⁻¹ (nb, sp) of every bucket, one after another
         self.l_at = np.r_[0, np.cumsum(b_count * mp_b * b_width)].tolist()
-        self.d_at = np.r_[0, np.cumsum(b_count * b_width)].tolist()
+        self.s_at = np.r_[0, np.cumsum(b_count * b_width * b_width)].tolist()
         self.rel_at, self.rel = self._relative_positions(below)
+        self.par_b = np.split(par[order], b_start[1:-1])  # the parents of every bucket's supernodes
 
     def _relative_positions(self, below):
-        """Position in the parent's front of every row below every supernode, padded to ``rp`` with −1
+        """Position in the parent's front of every row below every supernode, padded to ``rp`` with 0
         (supernode ``order[i]``'s at ``rel_at[i]``): its row in the parent's ``J ∪ R``, ``J`` first, ``R``
         after the parent's padded width."""
         sn, par = self.sn, self.par
@@ -370,7 +460,7 @@ class _Schedule:
         pos = np.where(loc < wP, loc, loc - wP + self.sp[P])
         start = np.empty(r.size, np.int64)
         start[self.order] = np.r_[0, np.cumsum(self.rp[self.order])[:-1]]
-        rel = np.full(int(self.rp.sum()), -1, np.int64)
+        rel = np.zeros(int(self.rp.sum()), np.int64)
         rel[start[rep] + u] = pos
         return start[self.order][self.b_start[:-1]].tolist() + [rel.size], rel
 
@@ -384,29 +474,46 @@ class _Schedule:
         return pos[o], at.tolist(), o
 
     def _padded_factor(self, factor: LdlFactor):
-        """``L`` as the buckets' padded ``(nb, mp, sp)`` panels (unit diagonal on the padding) and ``D⁻¹`` as
-        ``(nb, sp)`` (zero on the padding), each flat in bucket order."""
+        """``L`` as the buckets' padded ``(nb, mp, sp)`` panels, flat in bucket order (zero on the padding),
+        and the position of every supernode's panel in it."""
         sn, L = self.sn, factor.L
-        col = np.repeat(np.arange(sn.n), sn.cnt)  # column of every stored entry
-        K = sn.sn_of[col]
-        i = col - sn.first[K]  # local column
-        t = i + (np.arange(L.data.size) - np.repeat(L.indptr[:-1].astype(np.int64), sn.cnt))  # local row
-        b, sp_ = self.bucket[K], self.sp[K]
-        base = np.asarray(self.l_at)[b] + self.slot[K] * self.mp[K] * sp_
+        K, i, t = sn.entry_K, sn.entry_col, sn.entry_row
+        base = np.asarray(self.l_at)[self.bucket] + self.slot * self.mp * self.sp
+        sp_ = self.sp[K]
         fr = np.where(t < sn.width[K], t, t - sn.width[K] + sp_)
         lpad = np.zeros(self.l_at[-1])
-        rep, a, _ = _ragged(self.sp)  # the padded diagonals: 1
-        lpad[np.asarray(self.l_at)[self.bucket[rep]] + self.slot[rep] * self.mp[rep] * self.sp[rep] + a * (self.sp[rep] + 1)] = 1.0
-        lpad[base + fr * sp_ + i] = L.data
-        dpad = np.zeros(self.d_at[-1])
-        Kc = sn.sn_of
-        dpad[np.asarray(self.d_at)[self.bucket[Kc]] + self.slot[Kc] * self.sp[Kc] + (np.arange(sn.n) - sn.first[Kc])] = 1.0 / factor.d
-        return lpad, dpad
+        lpad[base[K] + fr * sp_ + i] = L.data
+        return lpad, base
+
+    def _diagonal_terms(self, lpad: np.ndarray, base: np.ndarray, d: np.ndarray):
+        """``L_JJ⁻¹`` (identity on the padding) and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` (zero on the padding) of every
+        supernode as the buckets' ``(nb, sp, sp)`` blocks, flat in bucket order. They depend on the factor
+        only, so they are batched over all supernodes of one width (unpadded: an inverse costs ``∝ s³``)
+        rather than per bucket."""
+        sn = self.sn
+        w, sp_ = sn.width, self.sp
+        at = np.asarray(self.s_at)[self.bucket] + self.slot * sp_ * sp_
+        linv, sjj = np.zeros(self.s_at[-1]), np.zeros(self.s_at[-1])
+        rep, a, _ = _ragged(sp_)
+        linv[at[rep] + a * (sp_[rep] + 1)] = 1.0
+        ow = np.argsort(w, kind="stable")
+        ws = w[ow]
+        cuts = np.flatnonzero(np.r_[True, ws[1:] != ws[:-1], True]).tolist()
+        for g0, g1 in zip(cuts[:-1], cuts[1:]):
+            wv, Ks = int(ws[g0]), ow[g0:g1]
+            a = np.arange(wv)
+            rc = (a[:, None] * sp_[Ks][:, None, None] + a)  # (B, wv, wv) row-major offsets in (sp, sp)
+            inv = _unit_lower_inverse(lpad[base[Ks][:, None, None] + rc])
+            dst = at[Ks][:, None, None] + rc
+            linv[dst] = inv
+            sjj[dst] = np.swapaxes(inv, 1, 2) @ (inv / d[sn.first[Ks][:, None] + a][:, :, None])
+        return linv, sjj
 
     def run(self, factor: LdlFactor, src: np.ndarray, src_at: list, o: np.ndarray) -> np.ndarray:
         """The recurrence, root level first; returns ``Σ̃`` at the front positions ``src`` (of
         :meth:`front_index`) in the caller's order."""
-        lpad, dpad = self._padded_factor(factor)
+        lpad, base = self._padded_factor(factor)
+        linv, sjj = self._diagonal_terms(lpad, base, factor.d)
         out = np.empty(src.size)
         prev = np.zeros(1)
         lb = self.level_buckets
@@ -414,37 +521,35 @@ class _Schedule:
             buf = np.empty(self.level_size[lv] + 1)
             buf[0] = 0.0
             for b in range(lb[lv], lb[lv + 1]):
-                self._bucket(b, buf, prev, lpad, dpad)
+                self._bucket(b, buf, prev, lpad, linv, sjj)
             out[src_at[lv] : src_at[lv + 1]] = buf[src[src_at[lv] : src_at[lv + 1]]]
             prev = buf
         res = np.empty_like(out)
         res[o] = out
         return res
 
-    def _bucket(self, b: int, buf: np.ndarray, prev: np.ndarray, lpad: np.ndarray, dpad: np.ndarray) -> None:
+    def _bucket(self, b: int, buf, prev, lpad, linv, sjj) -> None:
         """The block recurrence (module docstring) for the ``nb`` supernodes of bucket ``b`` at once, fronts
-        written to ``buf``; ``prev`` holds the parents' fronts."""
+        written to ``buf``; ``prev`` holds the parents' fronts.
+
+        Padded rows of ``Σ̃_{R,R}`` are gathered from the parent's first row (finite values, not zeros): they
+        only ever meet the zero padded rows of ``Y`` and land in padded rows of the front, which no child
+        reads."""
         nb, rp, s = self.b_count[b], self.b_rows[b], self.b_width[b]
         mp = rp + s
-        Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
-        Linv = np.linalg.inv(Lb[:, :s])  # unit lower triangular, padded with I
-        di = dpad[self.d_at[b] : self.d_at[b + 1]].reshape(nb, s, 1)
-        SJJ = np.swapaxes(Linv, 1, 2) @ (Linv * di)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹ (zero on the padding)
-        f0 = int(self.foff[self.order[self.b_start[b]]])
+        SJJ = sjj[self.s_at[b] : self.s_at[b + 1]].reshape(nb, s, s)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
+        f0 = self.front_at[b]
         F = buf[f0 : f0 + nb * mp * mp].reshape(nb, mp, mp)
         if rp:
-            Ks = self.order[self.b_start[b] : self.b_start[b + 1]]
-            P = self.par[Ks]
+            Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
+            Y = Lb[:, s:] @ linv[self.s_at[b] : self.s_at[b + 1]].reshape(nb, s, s)  # L_RJ L_JJ⁻¹
             rel = self.rel[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp)
-            gi = (self.foff[P] + 0)[:, None, None] + rel[:, :, None] * self.mp[P][:, None, None] + rel[:, None, :]
-            pad = rel < 0
-            gi[pad[:, :, None] | pad[:, None, :]] = 0
-            S = prev[gi]  # Σ̃_{R,R} from the parents' fronts
-            Y = Lb[:, s:] @ Linv  # L_RJ L_JJ⁻¹
-            SRJ = S @ Y
+            P = self.par_b[b]
+            S = prev[(self.foff[P])[:, None, None] + rel[:, :, None] * self.mp[P][:, None, None] + rel[:, None, :]]
+            SRJ = S @ Y  # −Σ̃_{R,J}
+            SJJ = SJJ + np.swapaxes(Y, 1, 2) @ SRJ
             np.negative(SRJ, out=SRJ)
-            SJJ -= np.swapaxes(Y, 1, 2) @ SRJ
             F[:, s:, :s] = SRJ
             F[:, :s, s:] = np.swapaxes(SRJ, 1, 2)
             F[:, s:, s:] = S
-        F[:, :s, :s] = 0.5 * (SJJ + np.swapaxes(SJJ, 1, 2))
+        F[:, :s, :s] = SJJ  # symmetric up to rounding; every block returned is built from its lower triangle
