@@ -50,7 +50,7 @@ CLASS_RATIO = 1.25
 #: multiply-add of :func:`_bucket_cost` — the cost model that decides when padding beats another bucket
 BUCKET_OVERHEAD = 40_000.0
 #: relaxed supernodes (:func:`_amalgamate`): at most this many columns, at most this fraction of explicit zeros
-AMALGAMATE_MAX_WIDTH = 48
+AMALGAMATE_MAX_WIDTH = 12
 AMALGAMATE_MAX_ZEROS = 0.5
 #: blocks at least this wide are inverted by LAPACK's triangular inverse, one call each (:func:`_unit_lower_inverse`)
 TRTRI_MIN_WIDTH = 128
@@ -325,35 +325,43 @@ def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.n
 
 
 def _unit_lower_inverse(blocks: np.ndarray) -> np.ndarray:
-    """Inverses of unit lower triangular ``(B, w, w)`` blocks: batched LU inverse for narrow ones (one call),
-    LAPACK's triangular inverse one by one above :data:`TRTRI_MIN_WIDTH` (an eighth of the flops, which
-    there outweigh the calls: City10000's 288-wide root block 6 vs 1.5 ms)."""
-    if blocks.shape[1] < TRTRI_MIN_WIDTH:
-        return np.linalg.inv(blocks)
-    from scipy.linalg.lapack import dtrtri
+    """Inverses of unit lower triangular ``(B, w, w)`` blocks: row by row forward substitution batched over
+    the blocks (``w − 1`` einsums; a third of the flops of a general inverse and none of its per-matrix
+    LAPACK overhead: 1000 blocks of 12 × 12, 1.6 vs 5.2 ms), LAPACK's triangular inverse one block at a time
+    from :data:`TRTRI_MIN_WIDTH` on (a 288-wide separator: 1.7 vs 3.9 ms)."""
+    B, w, _ = blocks.shape
+    if w >= TRTRI_MIN_WIDTH:
+        from scipy.linalg.lapack import dtrtri
 
-    return np.stack([dtrtri(b, lower=1, unitdiag=1)[0] for b in blocks])
+        return np.stack([dtrtri(b, lower=1, unitdiag=1)[0] for b in blocks])
+    X = np.zeros_like(blocks)
+    d = np.arange(w)
+    X[:, d, d] = 1.0
+    for i in range(1, w):
+        X[:, i, :i] = -np.einsum("bk,bkj->bj", blocks[:, i, :i], X[:, :i, :i])
+    return X
 
 
 def _amalgamate(par: np.ndarray, width: np.ndarray, nrows: np.ndarray) -> np.ndarray:
     """Relaxed supernodes: the merged supernode of every fundamental one (non-decreasing labels).
 
-    Walking the postordered supernodes upwards, supernode ``k + 1`` joins ``k``'s group when it is ``k``'s
-    parent (its columns follow), the group stays at most :data:`AMALGAMATE_MAX_WIDTH` columns wide and the
-    explicit zeros of the merged lower trapezoid stay at most :data:`AMALGAMATE_MAX_ZEROS` of it."""
+    Supernode ``k`` may merge with ``k + 1`` when that is its parent (its columns follow, postorder) and the
+    explicit zeros the pair's merged lower trapezoid gets stay at most :data:`AMALGAMATE_MAX_ZEROS` of it;
+    runs of such links (chains of the tree) are cut into pieces of about :data:`AMALGAMATE_MAX_WIDTH`
+    columns. Vectorised: no loop over supernodes."""
     ns = par.size
-    group = [0] * ns
-    pl, wl, rl = par.tolist(), width.tolist(), (nrows - width).tolist()
-    nz = (width * nrows - width * (width - 1) // 2).tolist()  # stored entries of each supernode's columns
-    g, W, A = 0, 0, 0
-    for k in range(ns):
-        if k and not (pl[k - 1] == k and W + wl[k] <= AMALGAMATE_MAX_WIDTH and (
-                (W + wl[k]) * (W + wl[k] + 2 * rl[k] + 1) // 2 - (A + nz[k])
-                <= AMALGAMATE_MAX_ZEROS * (W + wl[k]) * (W + wl[k] + 2 * rl[k] + 1) / 2)):
-            g, W, A = g + 1, 0, 0
-        group[k] = g
-        W, A = W + wl[k], A + nz[k]
-    return np.asarray(group, np.int64)
+    if ns < 2 or AMALGAMATE_MAX_WIDTH <= 0:
+        return np.arange(ns, dtype=np.int64)
+    w, r = width, nrows - width
+    extra = (w[1:] + r[1:]) - r[:-1]  # zero rows added to each column of k by merging it into k + 1
+    pair = w[:-1] + w[1:]
+    ok = (par[:-1] == np.arange(1, ns)) & (extra * w[:-1] <= AMALGAMATE_MAX_ZEROS * pair * (pair + 2 * r[1:] + 1) / 2)
+    new_chain = np.r_[True, ~ok]
+    chain = np.cumsum(new_chain) - 1
+    before = np.cumsum(w) - w  # columns before each supernode
+    piece = (before - before[new_chain][chain]) // AMALGAMATE_MAX_WIDTH
+    cut = np.r_[True, (chain[1:] != chain[:-1]) | (piece[1:] != piece[:-1])]
+    return np.cumsum(cut) - 1
 
 
 def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
