@@ -141,7 +141,8 @@ class _Supernodes:
     first[K] + width[K] − 1``, row set ``J ∪ R`` (``nrows[K]`` rows, concatenated in ``rows`` from
     ``key_start[K]``); ``keys`` = sorted ``K·n + row`` of every block row (the lookup of an entry's local row);
     ``off`` = start of ``K``'s row-major ``nrows × width`` block in the storage of :class:`SelectedInverse`;
-    ``entry_K, entry_col, entry_row``: supernode, local column and local row of every stored entry of ``L``."""
+    ``fmap`` = local row (in its supernode) of every row of every fundamental supernode, ``col_shift`` = where
+    a column's stored entries of ``L`` start in ``fmap`` minus where they start in ``L``."""
 
     def __init__(self, L: sp.csc_matrix) -> None:
         n = L.shape[0]
@@ -182,16 +183,13 @@ class _Supernodes:
         tk = top[rep]
         self.rows = np.where(u < w_rep, self.first[rep] + u, frows[fkey_start[tk] + fwidth[tk] + u - w_rep])
         self.keys = rep * n + self.rows
-        # every fundamental row's place in its merged supernode's row set, then every stored entry's
+        # every fundamental row's place in its merged supernode's row set (entries of L are found through it)
         rep, u, _ = _ragged(fnrows)
-        G = group[rep]
-        fmap = self.local_rows(G, frows[fkey_start[rep] + u])
-        col = np.repeat(np.arange(n), cnt)
-        k = fsn_of[col]
-        t = (col - ffirst[k]) + (np.arange(ix.size) - np.repeat(ip[:-1].astype(np.int64), cnt))
-        self.entry_K = group[k]
-        self.entry_col = col - self.first[self.entry_K]
-        self.entry_row = fmap[fkey_start[k] + t]
+        self.frow_sn = group[rep]
+        self.fmap = self.local_rows(self.frow_sn, frows[fkey_start[rep] + u])
+        # per column: where its stored entries start among the fundamental rows (minus its start in L)
+        self.col_shift = fkey_start[fsn_of] + (np.arange(n) - ffirst[fsn_of]) - ip[:-1]
+        self.cnt = cnt
 
     def local_rows(self, K: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there)."""
@@ -485,12 +483,14 @@ class _Schedule:
         """``L`` as the buckets' padded ``(nb, mp, sp)`` panels, flat in bucket order (zero on the padding),
         and the position of every supernode's panel in it."""
         sn, L = self.sn, factor.L
-        K, i, t = sn.entry_K, sn.entry_col, sn.entry_row
-        base = np.asarray(self.l_at)[self.bucket] + self.slot * self.mp * self.sp
-        sp_ = self.sp[K]
-        fr = np.where(t < sn.width[K], t, t - sn.width[K] + sp_)
+        K, w, sp_ = sn.sn_of, sn.width, self.sp
+        base = np.asarray(self.l_at)[self.bucket] + self.slot * self.mp * sp_
+        colbase = base[K] + (np.arange(sn.n) - sn.first[K])  # row 0 of every column's padded panel
+        G, t = sn.frow_sn, sn.fmap
+        rowoff = np.where(t < w[G], t, t - w[G] + sp_[G]) * sp_[G]  # padded row offset of every fundamental row
+        nnz = L.data.size
         lpad = np.zeros(self.l_at[-1])
-        lpad[base[K] + fr * sp_ + i] = L.data
+        lpad[np.repeat(colbase, sn.cnt) + rowoff[np.repeat(sn.col_shift, sn.cnt) + np.arange(nnz)]] = L.data
         return lpad, base
 
     def _diagonal_terms(self, lpad: np.ndarray, base: np.ndarray, d: np.ndarray):
