@@ -47,8 +47,8 @@ import scipy.sparse as sp
 #: a class before the cost model merges classes)
 CLASS_RATIO = 1.25
 #: overhead of one batched bucket of the recurrence (a dozen numpy calls), in units of one padded
-#: multiply-add of :func:`_bucket_cost` — the cost model that decides when padding beats another bucket
-BUCKET_OVERHEAD = 40_000.0
+#: multiply-add of :func:`_buckets`' cost model — which decides when padding beats another bucket
+BUCKET_OVERHEAD = 100_000.0
 #: relaxed supernodes (:func:`_amalgamate`): at most this many columns, at most this fraction of explicit zeros
 AMALGAMATE_MAX_WIDTH = 12
 AMALGAMATE_MAX_ZEROS = 0.5
@@ -370,16 +370,12 @@ def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return rep, np.arange(starts[-1], dtype=np.int64) - starts[:-1][rep], starts
 
 
-def _bucket_cost(nb, rp, sp_):
-    """Padded work of ``nb`` supernodes with ``rp`` rows below and width ``sp_`` (multiply-adds and moves)."""
-    return nb * (rp * rp * (sp_ + 1) + rp * sp_ * sp_ + sp_**3 + (rp + sp_) ** 2)
-
-
 def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
     """Supernodes in processing order (level by level, root level first) cut into buckets of one level.
 
     Within a level, supernodes are sorted by size class (``CLASS_RATIO``) and consecutive classes merged while
-    padding all to the larger costs less than another bucket (:data:`BUCKET_OVERHEAD`). Returns ``order``
+    padding all to the larger costs less than another bucket (:data:`BUCKET_OVERHEAD`, in units of one padded
+    multiply-add or move of the bucket's products and gathers). Returns ``order``
     (supernodes), ``b_start`` (start of every bucket in ``order``, plus the end) and the buckets' level."""
     lg = np.log(CLASS_RATIO)
     rc, sc = np.floor(np.log1p(r) / lg).astype(np.int64), np.floor(np.log1p(w) / lg).astype(np.int64)
@@ -391,15 +387,19 @@ def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
     glev = depth[order][gs].tolist()
     starts = []
     cn = cr = cw = 0
+    over = BUCKET_OVERHEAD
     for g in range(len(gs)):
-        n2, r2, w2 = cn + gn[g], max(cr, gr[g]), max(cw, gw[g])
-        if g and glev[g] == glev[g - 1] and (
-            _bucket_cost(n2, r2, w2) <= _bucket_cost(cn, cr, cw) + _bucket_cost(gn[g], gr[g], gw[g]) + BUCKET_OVERHEAD
-        ):
-            cn, cr, cw = n2, r2, w2
-        else:
-            starts.append(int(gs[g]))
-            cn, cr, cw = gn[g], gr[g], gw[g]
+        n1, r1, w1 = gn[g], gr[g], gw[g]
+        if g and glev[g] == glev[g - 1]:  # padded cost of the products and gathers, merged vs apart
+            r2, w2 = max(cr, r1), max(cw, w1)
+            merged = (cn + n1) * (r2 * r2 * (w2 + 1) + r2 * w2 * w2 + w2**3 + (r2 + w2) ** 2)
+            apart = (cn * (cr * cr * (cw + 1) + cr * cw * cw + cw**3 + (cr + cw) ** 2)
+                     + n1 * (r1 * r1 * (w1 + 1) + r1 * w1 * w1 + w1**3 + (r1 + w1) ** 2) + over)
+            if merged <= apart:
+                cn, cr, cw = cn + n1, r2, w2
+                continue
+        starts.append(int(gs[g]))
+        cn, cr, cw = n1, r1, w1
     b_start = np.array(starts + [order.size], np.int64)
     return order, b_start, depth[order][b_start[:-1]]
 
