@@ -155,29 +155,29 @@ class _Supernodes:
         # pattern(j) = {j} ∪ pattern(j+1)  (chordality makes equal counts sufficient)
         nxt = np.where(cnt > 1, ix[np.minimum(ip[:-1] + 1, max(len(ix) - 1, 0))], -1)
         cont = (nxt[:-1] == np.arange(1, n)) & (cnt[:-1] == cnt[1:] + 1)
-        ffirst = np.flatnonzero(np.r_[True, ~cont]) if n else np.zeros(0, np.int64)
-        fwidth = np.diff(np.r_[ffirst, n]).astype(np.int64)
+        ffirst = np.flatnonzero(np.concatenate(([True], ~cont))) if n else np.zeros(0, np.int64)
+        fwidth = np.diff(np.append(ffirst, n)).astype(np.int64)
         fnrows = cnt[ffirst].astype(np.int64)
         fsn_of = np.repeat(np.arange(ffirst.size), fwidth)
         is_first = np.zeros(n, bool)
         is_first[ffirst] = True
         frows = ix[np.repeat(is_first, cnt)].astype(np.int64)
-        fkey_start = np.r_[0, np.cumsum(fnrows)[:-1]].astype(np.int64)
+        fkey_start = _starts(fnrows)[:-1].astype(np.int64)
         fpar = np.full(ffirst.size, -1, np.int64)
         below = fnrows > fwidth
         fpar[below] = fsn_of[frows[fkey_start[below] + fwidth[below]]]
         group = _amalgamate(fpar, fwidth, fnrows)  # merged supernode of every fundamental one
-        starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]]) if n else np.zeros(0, np.int64)
-        top = np.r_[starts[1:], ffirst.size] - 1  # last (topmost) member of every merged supernode
+        starts = np.flatnonzero(np.concatenate(([True], group[1:] != group[:-1]))) if n else np.zeros(0, np.int64)
+        top = np.append(starts[1:], ffirst.size) - 1  # last (topmost) member of every merged supernode
         self.first = ffirst[starts]
-        self.width = np.diff(np.r_[self.first, n]).astype(np.int64)
+        self.width = np.diff(np.append(self.first, n)).astype(np.int64)
         r_top = fnrows[top] - fwidth[top]
         self.nrows = self.width + r_top
         ns = self.first.size
         self.sn_of = np.repeat(np.arange(ns), self.width)  # supernode of each (permuted) column
-        self.off = np.r_[0, np.cumsum(self.nrows * self.width)].astype(np.int64)
+        self.off = _starts(self.nrows * self.width).astype(np.int64)
         # merged row set: the supernode's own columns, then the rows below its topmost member
-        self.key_start = np.r_[0, np.cumsum(self.nrows)[:-1]].astype(np.int64)
+        self.key_start = _starts(self.nrows)[:-1].astype(np.int64)
         rep, u, _ = _ragged(self.nrows)
         w_rep = self.width[rep]
         tk = top[rep]
@@ -354,18 +354,25 @@ def _amalgamate(par: np.ndarray, width: np.ndarray, nrows: np.ndarray) -> np.nda
     extra = (w[1:] + r[1:]) - r[:-1]  # zero rows added to each column of k by merging it into k + 1
     pair = w[:-1] + w[1:]
     ok = (par[:-1] == np.arange(1, ns)) & (extra * w[:-1] <= AMALGAMATE_MAX_ZEROS * pair * (pair + 2 * r[1:] + 1) / 2)
-    new_chain = np.r_[True, ~ok]
+    new_chain = np.concatenate(([True], ~ok))
     chain = np.cumsum(new_chain) - 1
     before = np.cumsum(w) - w  # columns before each supernode
     piece = (before - before[new_chain][chain]) // AMALGAMATE_MAX_WIDTH
-    cut = np.r_[True, (chain[1:] != chain[:-1]) | (piece[1:] != piece[:-1])]
+    cut = np.concatenate(([True], (chain[1:] != chain[:-1]) | (piece[1:] != piece[:-1])))
     return np.cumsum(cut) - 1
+
+
+def _starts(sizes: np.ndarray) -> np.ndarray:
+    """``[0, cumsum(sizes)]`` as int64: where consecutive runs of ``sizes`` start, and the total."""
+    out = np.zeros(len(sizes) + 1, np.int64)
+    np.cumsum(sizes, out=out[1:])
+    return out
 
 
 def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For concatenated runs of ``sizes``: the run of every element, its position in the run, the run starts."""
     sizes = np.asarray(sizes, np.int64)
-    starts = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+    starts = _starts(sizes).astype(np.int64)
     rep = np.repeat(np.arange(sizes.size), sizes)
     return rep, np.arange(starts[-1], dtype=np.int64) - starts[:-1][rep], starts
 
@@ -381,8 +388,8 @@ def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
     rc, sc = np.floor(np.log1p(r) / lg).astype(np.int64), np.floor(np.log1p(w) / lg).astype(np.int64)
     order = np.lexsort((w, r, sc, rc, depth))
     key = np.stack([depth[order], rc[order], sc[order]])
-    gs = np.flatnonzero(np.r_[True, np.any(key[:, 1:] != key[:, :-1], axis=0)])
-    gn = np.diff(np.r_[gs, order.size]).tolist()
+    gs = np.flatnonzero(np.concatenate(([True], np.any(key[:, 1:] != key[:, :-1], axis=0))))
+    gn = np.diff(np.append(gs, order.size)).tolist()
     gr, gw = np.maximum.reduceat(r[order], gs).tolist(), np.maximum.reduceat(w[order], gs).tolist()
     glev = depth[order][gs].tolist()
     starts = []
@@ -433,7 +440,7 @@ class _Schedule:
         b_count = np.diff(b_start)
         self.b_count, self.b_rows, self.b_width = b_count.tolist(), b_rows.tolist(), b_width.tolist()
         mp_b = b_rows + b_width
-        cum = np.r_[0, np.cumsum(b_count * mp_b * mp_b)]
+        cum = _starts(b_count * mp_b * mp_b)
         lv_first = np.asarray(self.level_buckets, np.int64)
         front_at = cum[:-1] - cum[lv_first[b_level]] + 1
         self.front_at = front_at.tolist()
@@ -448,10 +455,13 @@ class _Schedule:
         self.foff = front_at[self.bucket] + self.slot * self.mp**2
         self.sn, self.par, self.order, self.b_start = sn, par, order, b_start
         # padded L (nb, mp, sp) and D⁻¹ (nb, sp) of every bucket, one after another
-        self.l_at = np.r_[0, np.cumsum(b_count * mp_b * b_width)].tolist()
-        self.s_at = np.r_[0, np.cumsum(b_count * b_width * b_width)].tolist()
+        self.l_at = _starts(b_count * mp_b * b_width).tolist()
+        self.s_at = _starts(b_count * b_width * b_width).tolist()
         self.rel_at, self.rel = self._relative_positions(below)
-        self.par_b = np.split(par[order], b_start[1:-1])  # the parents of every bucket's supernodes
+        # the parent's front (offset, padded size) of every supernode in processing order, (ns, 1, 1)
+        p_o = np.maximum(par[order], 0)
+        self.par_front, self.par_mp = self.foff[p_o][:, None, None], self.mp[p_o][:, None, None]
+        self.b_start_l = b_start.tolist()
 
     def _relative_positions(self, below):
         """Position in the parent's front of every row below every supernode, padded to ``rp`` with 0
@@ -465,7 +475,7 @@ class _Schedule:
         wP = sn.width[P]
         pos = np.where(loc < wP, loc, loc - wP + self.sp[P])
         start = np.empty(r.size, np.int64)
-        start[self.order] = np.r_[0, np.cumsum(self.rp[self.order])[:-1]]
+        start[self.order] = _starts(self.rp[self.order])[:-1]
         rel = np.zeros(int(self.rp.sum()), np.int64)
         rel[start[rep] + u] = pos
         return start[self.order][self.b_start[:-1]].tolist() + [rel.size], rel
@@ -506,7 +516,7 @@ class _Schedule:
         linv[at[rep] + a * (sp_[rep] + 1)] = 1.0
         ow = np.argsort(w, kind="stable")
         ws = w[ow]
-        cuts = np.flatnonzero(np.r_[True, ws[1:] != ws[:-1], True]).tolist()
+        cuts = np.flatnonzero(np.concatenate(([True], ws[1:] != ws[:-1], [True]))).tolist()
         for g0, g1 in zip(cuts[:-1], cuts[1:]):
             wv, Ks = int(ws[g0]), ow[g0:g1]
             a = np.arange(wv)
@@ -514,7 +524,7 @@ class _Schedule:
             inv = _unit_lower_inverse(lpad[base[Ks][:, None, None] + rc])
             dst = at[Ks][:, None, None] + rc
             linv[dst] = inv
-            sjj[dst] = np.swapaxes(inv, 1, 2) @ (inv / d[sn.first[Ks][:, None] + a][:, :, None])
+            sjj[dst] = inv.mT @ (inv / d[sn.first[Ks][:, None] + a][:, :, None])
         return linv, sjj
 
     def run(self, factor: LdlFactor, src: np.ndarray, src_at: list, o: np.ndarray) -> np.ndarray:
@@ -552,12 +562,12 @@ class _Schedule:
             Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
             Y = Lb[:, s:] @ linv[self.s_at[b] : self.s_at[b + 1]].reshape(nb, s, s)  # L_RJ L_JJ⁻¹
             rel = self.rel[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp)
-            P = self.par_b[b]
-            S = prev[(self.foff[P])[:, None, None] + rel[:, :, None] * self.mp[P][:, None, None] + rel[:, None, :]]
+            k0, k1 = self.b_start_l[b], self.b_start_l[b + 1]
+            S = prev[self.par_front[k0:k1] + rel[:, :, None] * self.par_mp[k0:k1] + rel[:, None, :]]
             SRJ = S @ Y  # −Σ̃_{R,J}
-            SJJ = SJJ + np.swapaxes(Y, 1, 2) @ SRJ
+            SJJ = SJJ + Y.mT @ SRJ
             np.negative(SRJ, out=SRJ)
             F[:, s:, :s] = SRJ
-            F[:, :s, s:] = np.swapaxes(SRJ, 1, 2)
+            F[:, :s, s:] = SRJ.mT
             F[:, s:, s:] = S
         F[:, :s, :s] = SJJ  # symmetric up to rounding; every block returned is built from its lower triangle
