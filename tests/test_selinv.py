@@ -106,9 +106,9 @@ def test_any_relaxed_supernodes_give_the_dense_inverse(monkeypatch, max_width, m
         assert len(S.sn_first) < len(selinv.SelectedInverse.from_matrix(H).sn_first)
 
 
-@pytest.mark.parametrize("width, trtri_from", [(1, 128), (3, 128), (12, 128), (12, 5)])
+@pytest.mark.parametrize("width, trtri_from", [(1, 128), (3, 128), (12, 128), (12, 5), (30, 128)])
 def test_unit_lower_inverse_equals_numpy_inverse(monkeypatch, width, trtri_from):
-    """Batched forward substitution and LAPACK's triangular inverse (``trtri_from`` ≤ width) against
+    """Batched forward substitution and LAPACK's triangular inverse (``trtri_from`` ≤ width, or 7 blocks of 30) against
     ``np.linalg.inv`` on random unit lower triangular blocks."""
     monkeypatch.setattr(selinv, "TRTRI_MIN_WIDTH", trtri_from)
     rng = np.random.default_rng(width)
