@@ -460,15 +460,14 @@ class _Schedule:
         self.l_at = _starts(b_count * mp_b * b_width).tolist()
         self.s_at = _starts(b_count * b_width * b_width).tolist()
         self.rel_at, self.rel = self._relative_positions(below)
-        # the parent's front (offset, padded size) of every supernode in processing order, (ns, 1, 1)
-        p_o = np.maximum(par[order], 0)
-        self.par_front, self.par_mp = self.foff[p_o][:, None, None], self.mp[p_o][:, None, None]
-        self.b_start_l = b_start.tolist()
 
     def _relative_positions(self, below):
         """Position in the parent's front of every row below every supernode, padded to ``rp`` with 0
         (supernode ``order[i]``'s at ``rel_at[i]``): its row in the parent's ``J ∪ R``, ``J`` first, ``R``
-        after the parent's padded width."""
+        after the parent's padded width; and the same row's start in the previous level's buffer
+        (``rel_row``: front offset + row · padded size; 0 on the padding), so that the gather of
+        ``Σ̃_{R,R}`` is ``rel_row[a] + rel[b]``. Padded positions read finite values of that buffer that only
+        meet zero rows of ``Y``."""
         sn, par = self.sn, self.par
         r = sn.nrows - sn.width
         rep, u, _ = _ragged(r)
@@ -480,6 +479,8 @@ class _Schedule:
         start[self.order] = _starts(self.rp[self.order])[:-1]
         rel = np.zeros(int(self.rp.sum()), np.int64)
         rel[start[rep] + u] = pos
+        self.rel_row = np.zeros(rel.size, np.int64)
+        self.rel_row[start[rep] + u] = self.foff[P] + pos * self.mp[P]
         return start[self.order][self.b_start[:-1]].tolist() + [rel.size], rel
 
     def front_index(self, K, t, c):
@@ -535,15 +536,14 @@ class _Schedule:
         lpad, base = self._padded_factor(factor)
         linv, sjj = self._diagonal_terms(lpad, base, factor.d)
         out = np.empty(src.size)
-        prev = np.zeros(1)
+        # two buffers, levels alternating (position 0 stays 0: the padded gathers' slot)
+        buf, prev = np.zeros(max(self.level_size) + 1), np.zeros(max(self.level_size) + 1)
         lb = self.level_buckets
         for lv in range(self.n_levels):
-            buf = np.empty(self.level_size[lv] + 1)
-            buf[0] = 0.0
             for b in range(lb[lv], lb[lv + 1]):
                 self._bucket(b, buf, prev, lpad, linv, sjj)
             out[src_at[lv] : src_at[lv + 1]] = buf[src[src_at[lv] : src_at[lv + 1]]]
-            prev = buf
+            buf, prev = prev, buf
         res = np.empty_like(out)
         res[o] = out
         return res
@@ -564,8 +564,7 @@ class _Schedule:
             Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
             Y = Lb[:, s:] @ linv[self.s_at[b] : self.s_at[b + 1]].reshape(nb, s, s)  # L_RJ L_JJ⁻¹
             rel = self.rel[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp)
-            k0, k1 = self.b_start_l[b], self.b_start_l[b + 1]
-            S = prev[self.par_front[k0:k1] + rel[:, :, None] * self.par_mp[k0:k1] + rel[:, None, :]]
+            S = prev[self.rel_row[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp, 1) + rel[:, None, :]]
             SRJ = S @ Y  # −Σ̃_{R,J}
             SJJ = SJJ + Y.mT @ SRJ
             np.negative(SRJ, out=SRJ)
