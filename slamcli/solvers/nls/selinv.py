@@ -101,7 +101,7 @@ def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
     """
     from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
 
-    H = sp.csc_matrix(H)
+    H = H if sp.isspmatrix_csc(H) else sp.csc_matrix(H)
     try:
         # AMD alone: CHOLMOD's default also tries METIS when AMD's fill is high, which on these matrices
         # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L). Simplicial: with
@@ -118,7 +118,8 @@ def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
         raise NotPositiveDefiniteError(f"sparse Cholesky of H: pivot ≤ 0 ({exc})", where) from None
     perm = np.asarray(F.P(), np.int64)
     # F.LD(): L with D on its diagonal, the symbolic pattern kept (explicit zeros included; F.L_D() drops them)
-    L = sp.csc_matrix(F.LD())
+    L = F.LD()
+    L = L if sp.isspmatrix_csc(L) else sp.csc_matrix(L)
     L.sort_indices()
     if not np.all(L.indices[L.indptr[:-1]] == np.arange(L.shape[0])):
         raise ValueError("CHOLMOD's L does not store its diagonal first")
@@ -287,7 +288,7 @@ def inverse_blocks(H: sp.spmatrix, index_blocks, analysis=None) -> list[np.ndarr
 
     Raises ImportError (no CHOLMOD) and :class:`NotPositiveDefiniteError` as :func:`factor_ldl`."""
     sets = [np.asarray(b, np.int64) for b in index_blocks]
-    tri = [np.tril_indices(b.shape[1]) for b in sets]  # the lower triangle (with diagonal) of every block
+    tri = [np.nonzero(np.tri(b.shape[1], dtype=bool)) for b in sets]  # each block's lower triangle with diagonal
     factor = factor_ldl(H, analysis)
     try:
         vals = _lower_entries(factor, sets, tri)
