@@ -499,12 +499,17 @@ class _Schedule:
         sn, L = self.sn, factor.L
         K, w, sp_ = sn.sn_of, sn.width, self.sp
         base = np.asarray(self.l_at)[self.bucket] + self.slot * self.mp * sp_
-        colbase = base[K] + (np.arange(sn.n) - sn.first[K])  # row 0 of every column's padded panel
+        # 32-bit positions where they fit: the scatter of L's nnz entries is bound by memory traffic
+        it = np.int32 if max(self.l_at[-1], sn.fmap.size, L.data.size) < 2**31 else np.int64
+        colbase = (base[K] + (np.arange(sn.n) - sn.first[K])).astype(it)  # row 0 of every column's panel
         G, t = sn.frow_sn, sn.fmap
-        rowoff = np.where(t < w[G], t, t - w[G] + sp_[G]) * sp_[G]  # padded row offset of every fundamental row
-        nnz = L.data.size
+        rowoff = (np.where(t < w[G], t, t - w[G] + sp_[G]) * sp_[G]).astype(it)  # padded row offsets
+        at = np.repeat(sn.col_shift.astype(it), sn.cnt)  # every entry's row among the fundamental rows
+        at += np.arange(L.data.size, dtype=it)
+        dst = np.repeat(colbase, sn.cnt)
+        dst += rowoff[at]
         lpad = np.zeros(self.l_at[-1])
-        lpad[np.repeat(colbase, sn.cnt) + rowoff[np.repeat(sn.col_shift, sn.cnt) + np.arange(nnz)]] = L.data
+        lpad[dst] = L.data
         return lpad, base
 
     def _diagonal_terms(self, lpad: np.ndarray, base: np.ndarray, d: np.ndarray):
