@@ -459,7 +459,18 @@ class _Schedule:
         self.sn, self.par, self.order, self.b_start = sn, par, order, b_start
         # padded L (nb, mp, sp) and D⁻¹ (nb, sp) of every bucket, one after another
         self.l_at = _starts(b_count * mp_b * b_width).tolist()
-        self.s_at = _starts(b_count * b_width * b_width).tolist()
+        # buckets grouped by padded width: group g's supernodes are those of its buckets, in bucket order;
+        # bucket b's are at b_group_at[b] of group b_group[b] (its L_JJ⁻¹ and D̂⁻¹ blocks are views there)
+        ob = np.argsort(b_width, kind="stable")
+        gw, g_of = np.unique(b_width[ob], return_inverse=True)
+        at = np.empty(b_count.size, np.int64)
+        at[ob] = _starts(b_count[ob])[:-1] - _starts(b_count[ob])[np.searchsorted(b_width[ob], gw)][g_of]
+        self.b_group = np.empty(b_count.size, np.int64)
+        self.b_group[ob] = g_of
+        self.b_group, self.b_group_at = self.b_group.tolist(), at.tolist()
+        self.group_width = gw.tolist()
+        self.group_sn = [np.concatenate([order[b_start[b] : b_start[b + 1]] for b in ob[g_of == g]])
+                         for g in range(gw.size)]
         self.rel_at, self.rel = self._relative_positions(below)
 
     def _relative_positions(self, below):
@@ -514,26 +525,20 @@ class _Schedule:
 
     def _diagonal_terms(self, lpad: np.ndarray, base: np.ndarray, d: np.ndarray):
         """``L_JJ⁻¹`` (identity on the padding) and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` (zero on the padding) of every
-        supernode as the buckets' ``(nb, sp, sp)`` blocks, flat in bucket order. They depend on the factor
-        only, so they are batched over all supernodes of one width (unpadded: an inverse costs ``∝ s³``)
-        rather than per bucket."""
+        supernode, one ``(N, sp, sp)`` array per padded width ``sp`` (:attr:`group_sn`), so that a bucket's
+        blocks are a view. They depend on the factor only: batched over all buckets of one width, not per
+        bucket."""
         sn = self.sn
-        w, sp_ = sn.width, self.sp
-        at = np.asarray(self.s_at)[self.bucket] + self.slot * sp_ * sp_
-        linv, sjj = np.zeros(self.s_at[-1]), np.zeros(self.s_at[-1])
-        rep, a, _ = _ragged(sp_)
-        linv[at[rep] + a * (sp_[rep] + 1)] = 1.0
-        ow = np.argsort(w, kind="stable")
-        ws = w[ow]
-        cuts = np.flatnonzero(np.concatenate(([True], ws[1:] != ws[:-1], [True]))).tolist()
-        for g0, g1 in zip(cuts[:-1], cuts[1:]):
-            wv, Ks = int(ws[g0]), ow[g0:g1]
-            a = np.arange(wv)
-            rc = (a[:, None] * sp_[Ks][:, None, None] + a)  # (B, wv, wv) row-major offsets in (sp, sp)
-            inv = _unit_lower_inverse(lpad[base[Ks][:, None, None] + rc])
-            dst = at[Ks][:, None, None] + rc
-            linv[dst] = inv
-            sjj[dst] = inv.mT @ (inv / d[sn.first[Ks][:, None] + a][:, :, None])
+        linv, sjj = [], []
+        for sp_, Ks in zip(self.group_width, self.group_sn):
+            a = np.arange(sp_)
+            blk = lpad[base[Ks][:, None, None] + a[:, None] * sp_ + a]  # L_JJ, zero on the padding
+            blk[:, a, a] = 1.0
+            inv = _unit_lower_inverse(blk)
+            col = sn.first[Ks][:, None] + a
+            dinv = np.where(a < sn.width[Ks][:, None], 1.0 / d[np.minimum(col, sn.n - 1)], 0.0)
+            linv.append(inv)
+            sjj.append(inv.mT @ (inv * dinv[:, :, None]))
         return linv, sjj
 
     def run(self, factor: LdlFactor, src: np.ndarray, src_at: list, o: np.ndarray) -> np.ndarray:
@@ -563,12 +568,13 @@ class _Schedule:
         reads."""
         nb, rp, s = self.b_count[b], self.b_rows[b], self.b_width[b]
         mp = rp + s
-        SJJ = sjj[self.s_at[b] : self.s_at[b + 1]].reshape(nb, s, s)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
+        g, k0 = self.b_group[b], self.b_group_at[b]
+        SJJ = sjj[g][k0 : k0 + nb]  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
         f0 = self.front_at[b]
         F = buf[f0 : f0 + nb * mp * mp].reshape(nb, mp, mp)
         if rp:
             Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
-            Y = Lb[:, s:] @ linv[self.s_at[b] : self.s_at[b + 1]].reshape(nb, s, s)  # L_RJ L_JJ⁻¹
+            Y = Lb[:, s:] @ linv[g][k0 : k0 + nb]  # L_RJ L_JJ⁻¹
             rel = self.rel[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp)
             S = prev[self.rel_row[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp, 1) + rel[:, None, :]]
             SRJ = S @ Y  # −Σ̃_{R,J}
