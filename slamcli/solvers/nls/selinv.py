@@ -50,7 +50,7 @@ import scipy.sparse as sp
 CLASS_RATIO = 1.25
 #: overhead of one batched bucket of the recurrence (a dozen numpy calls), in units of one padded
 #: multiply-add of :func:`_buckets`' cost model — which decides when padding beats another bucket
-BUCKET_OVERHEAD = 100_000.0
+BUCKET_OVERHEAD = 50_000.0
 #: relaxed supernodes (:func:`_amalgamate`): at most this many columns, at most this fraction of explicit zeros
 AMALGAMATE_MAX_WIDTH = 12
 AMALGAMATE_MAX_ZEROS = 0.5
