@@ -68,18 +68,94 @@ def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
     assert np.abs(LD - H.toarray()[np.ix_(F.perm, F.perm)]).max() <= 1e-12 * np.abs(H).max()
 
 
-@pytest.mark.parametrize("max_rows, chunk", [(0, 1 << 22), (10**9, 1 << 22), (10**9, 7), (8, 50)])
-def test_both_gathers_and_any_chunking_give_the_dense_inverse(monkeypatch, max_rows, chunk):
-    """Σ̃_{R,R} gathered run by run (max_rows 0), from precomputed positions (every supernode), mixed, and with
-    the positions computed in small chunks: every stored entry equals the dense inverse's."""
-    monkeypatch.setattr(selinv, "GATHER_MAX_ROWS", max_rows)
-    monkeypatch.setattr(selinv, "GATHER_CHUNK", chunk)
+@pytest.mark.parametrize("overhead, ratio", [(0.0, 1.01), (1e18, 1.25), (4e4, 2.0)])
+def test_any_bucketing_gives_the_dense_inverse(monkeypatch, overhead, ratio):
+    """Supernodes of one level batched one size class per bucket (no merging), all in one bucket padded to
+    the largest (merge always) and the default cost model: every stored entry equals the dense inverse's."""
+    monkeypatch.setattr(selinv, "BUCKET_OVERHEAD", overhead)
+    monkeypatch.setattr(selinv, "CLASS_RATIO", ratio)
     H = _block_spd(150, 3, 5)
     S = selinv.SelectedInverse.from_matrix(H)
-    assert np.max(S.sn_nrows - S.sn_width) > 8  # the mixed case has both kinds of supernode
     Hinv = np.linalg.inv(H.toarray())
     C = sp.coo_matrix(H)
     assert np.abs(S.entries(C.row, C.col) - Hinv[C.row, C.col]).max() <= 1e-10 * np.abs(Hinv).max()
+    idx = np.arange(450).reshape(150, 3)
+    (blk,) = selinv.inverse_blocks(H, [idx])
+    ref = Hinv.reshape(150, 3, 150, 3)[np.arange(150), :, np.arange(150), :]
+    assert np.abs(blk - ref).max() <= 1e-10 * np.abs(Hinv).max()
+
+
+@pytest.mark.parametrize("max_width, max_zeros", [(0, 0.5), (6, 0.0), (12, 0.5), (48, 1.0)])
+def test_any_relaxed_supernodes_give_the_dense_inverse(monkeypatch, max_width, max_zeros):
+    """Fundamental supernodes only (width 0), merges without any explicit zero, the default and merges
+    along whole chains (widths ≤ 48, any zeros): the selected inverse equals the dense inverse on the
+    pattern and in the marginal blocks, on a random sparse SPD matrix and a SLAM-like block matrix."""
+    monkeypatch.setattr(selinv, "AMALGAMATE_MAX_WIDTH", max_width)
+    monkeypatch.setattr(selinv, "AMALGAMATE_MAX_ZEROS", max_zeros)
+    for H, k in [(_random_spd(200, 0.01, 2), 1), (_block_spd(150, 3, 5), 3)]:
+        S = selinv.SelectedInverse.from_matrix(H)
+        Hinv = np.linalg.inv(H.toarray())
+        C = sp.coo_matrix(H)
+        assert np.abs(S.entries(C.row, C.col) - Hinv[C.row, C.col]).max() <= 1e-10 * np.abs(Hinv).max()
+        B = H.shape[0] // k
+        (blk,) = selinv.inverse_blocks(H, [np.arange(B * k).reshape(B, k)])
+        ref = Hinv.reshape(B, k, B, k)[np.arange(B), :, np.arange(B), :]
+        assert np.abs(blk - ref).max() <= 1e-10 * np.abs(Hinv).max()
+    if max_width == 48:  # the chains did merge: fewer supernodes than the fundamental ones
+        monkeypatch.setattr(selinv, "AMALGAMATE_MAX_WIDTH", 0)
+        assert len(S.sn_first) < len(selinv.SelectedInverse.from_matrix(H).sn_first)
+
+
+@pytest.mark.parametrize("width, trtri_from", [(1, 128), (3, 128), (12, 128), (12, 5), (30, 128)])
+def test_unit_lower_inverse_equals_numpy_inverse(monkeypatch, width, trtri_from):
+    """Batched forward substitution and LAPACK's triangular inverse (``trtri_from`` ≤ width, or 7 blocks of 30) against
+    ``np.linalg.inv`` on random unit lower triangular blocks."""
+    monkeypatch.setattr(selinv, "TRTRI_MIN_WIDTH", trtri_from)
+    rng = np.random.default_rng(width)
+    L = np.tril(rng.standard_normal((7, width, width)), -1) + np.eye(width)
+    ref = np.linalg.inv(L)
+    assert np.abs(selinv._unit_lower_inverse(L) - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+def test_inverse_blocks_adds_the_pattern_of_a_block_off_the_factor():
+    """A held-fixed variable's 2×2 block is off the pattern of ``H``'s factor: :func:`selinv.inverse_blocks`
+    factors again with the blocks' pattern added and returns the dense inverse's blocks."""
+    H = sp.csc_matrix(sp.block_diag([_block_spd(10, 2, 5), sp.diags([2.0, 4.0])]))
+    idx = np.array([[20, 21], [0, 1], [4, 5]])
+    (got,) = selinv.inverse_blocks(H, [idx])
+    Hinv = np.linalg.inv(H.toarray())
+    np.testing.assert_allclose(got, Hinv[idx[:, :, None], idx[:, None, :]], rtol=1e-12, atol=1e-15)
+
+
+def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
+    """``graph`` on the intel excerpt (300 poses, loop closures): its marginals — computed with the LM's
+    CHOLMOD analysis (the workspace is of H's pattern, so it is used) — equal the dense inverse's blocks,
+    and the same call without the workspace (a fresh analysis) gives the same blocks."""
+    from pathlib import Path
+
+    from slamcli.datasets.g2o import import_graph
+    from slamcli.solvers.graph import solver
+    from slamcli.solvers.nls import marginals
+
+    inp = import_graph(Path(__file__).parent / "data" / "intel_excerpt.g2o").inputs
+    seen = {}
+    inner = solver.laplace_marginals
+
+    def grab(gp, H, workspace=None):
+        seen.update(gp=gp, H=H, workspace=workspace)
+        return inner(gp, H, workspace)
+
+    monkeypatch.setattr(solver, "laplace_marginals", grab)
+    res = graph.GraphSlam(graph.GraphParams()).solve(inp, rng=np.random.default_rng(0))
+    gp, H, ws = seen["gp"], seen["H"], seen["workspace"]
+    assert marginals.cholmod_analysis(ws, H) is not None
+    ip = gp.pose_cols()
+    Hinv = np.linalg.inv(H.toarray())
+    ref = Hinv[ip[:, :, None], ip[:, None, :]]
+    assert res.pose_cov.shape == ref.shape
+    assert np.abs(res.pose_cov - ref).max() <= 1e-10 * np.abs(ref).max()
+    fresh, _ = graph.laplace_marginals(gp, H)
+    assert np.abs(fresh - ref).max() <= 1e-10 * np.abs(ref).max()
 
 
 def test_recurrence_on_a_hand_made_factor_without_cholmod_ordering():

@@ -305,13 +305,14 @@ def _team_and_gps_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout) 
     return blocks
 
 
-def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.ndarray]:
+def laplace_marginals(gp: GraphProblem, information, workspace=None) -> tuple[np.ndarray, np.ndarray]:
     """World-frame marginal covariances ``pose_cov (T+1, 3, 3)`` and ``landmark_cov (L, 2, 2)`` at the optimum.
 
     The blocks of ``H⁻¹`` for the pose and landmark columns of ``gp``, by the one marginals path
     :func:`slamcli.solvers.nls.marginals.block_marginals` (selected inverse with CHOLMOD; else the chain +
     border elimination when every pose-pose factor links consecutive poses or is unary; else the sparse
     column solve), whose policy on an ``H`` that is not numerically positive definite is to refuse.
+    ``workspace``: the LM's ``NlsResult.workspace`` (its CHOLMOD analysis is reused when it fits ``H``).
 
     Raises
     ------
@@ -321,7 +322,7 @@ def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.nda
     """
     pose_cov, lm_cov = nls.block_marginals(
         information, (gp.pose_cols(), gp.landmark_cols()), names=("pose", "landmark"),
-        chain=gp.n_poses, locate=lambda c: located(gp, c),
+        chain=gp.n_poses, locate=lambda c: located(gp, c), workspace=workspace,
     )
     return pose_cov, lm_cov
 

@@ -256,6 +256,7 @@ def block_marginals(
     chain: int = 0,
     locate: Callable[[int], str] | None = None,
     batch_size: int = 512,
+    workspace: tuple | None = None,
 ) -> list[np.ndarray]:
     """Marginal covariance blocks of ``Σ = H⁻¹`` for several sets of variables (module docstring).
 
@@ -270,6 +271,9 @@ def block_marginals(
         is exactly the chain's blocks (``arange(3·chain).reshape(chain, 3)``) or lies in the border.
     locate : ``column → "pose 17"``-style name of the variable owning a column of ``H`` (for messages).
     batch_size : columns of ``H⁻¹`` per batch of the column solve.
+    workspace : the ``NlsResult.workspace`` of the optimisation that produced ``H``: when its linear solver is
+        CHOLMOD's simplicial factorisation of ``H``'s pattern, the selected inverse reuses its ordering and
+        symbolic analysis (:func:`cholmod_analysis`).
 
     Returns
     -------
@@ -294,8 +298,7 @@ def block_marginals(
 
     if selinv.available():
         try:
-            sel = selinv.SelectedInverse.from_matrix(information, [s for s in sets if s.size])
-            return checked([sel.blocks(s) for s in sets])
+            return checked(selinv.inverse_blocks(information, sets, cholmod_analysis(workspace, information)))
         except np.linalg.LinAlgError as exc:
             raise np.linalg.LinAlgError(where(exc)) from None
     first_error = None
@@ -310,6 +313,20 @@ def block_marginals(
                         for s in sets])
     except np.linalg.LinAlgError as exc:
         raise np.linalg.LinAlgError(first_error or where(exc)) from None
+
+
+def cholmod_analysis(workspace: tuple | None, information: sp.spmatrix):
+    """The CHOLMOD factor (symbolic analysis) of an optimisation's workspace ``(Assembler, linear solver)``
+    when it is a simplicial ``LDLᵀ`` analysed on ``information``'s own pattern, else None."""
+    if workspace is None:
+        return None
+    asm, lin = workspace
+    if getattr(lin, "name", "") != "cholmod" or not getattr(lin, "ldl", False):
+        return None
+    H = information
+    if not (sp.isspmatrix_csc(H) and np.array_equal(H.indptr, asm.indptr) and np.array_equal(H.indices, asm.indices)):
+        return None
+    return lin.F
 
 
 def _chain_border_blocks(information: sp.spmatrix, sets: list[np.ndarray], chain: int) -> list[np.ndarray]:

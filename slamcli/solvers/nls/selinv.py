@@ -16,19 +16,25 @@ Because the pattern of ``L`` is chordal, ``R ∪ {j}`` is a clique of it, so ``�
 that were computed before (columns ``> j``). Nothing outside the pattern is ever formed: memory
 ``O(nnz(L))``, work ``O(Σ_j |R_j|²)`` — the cost of the factorisation itself.
 
-This module runs the recurrence on *supernodes* (maximal runs of columns ``J = j0..j1`` whose pattern is
-a dense lower triangle plus one shared row set ``R``), a block version of the same identity::
+This module runs the recurrence on *supernodes* (runs of columns ``J = j0..j1`` whose pattern is a dense
+lower triangle plus one shared row set ``R``; relaxed: neighbouring fundamental supernodes of a chain of the
+elimination tree are merged, with explicit zeros, :func:`_amalgamate`), a block version of the same identity::
 
     Y      = L_{R,J} L_{J,J}⁻¹                                            (|R| × |J|)
     Σ̃_{R,J} = − Σ̃_{R,R} Y
     Σ̃_{J,J} = L_{J,J}⁻ᵀ D_J⁻¹ L_{J,J}⁻¹ − Yᵀ Σ̃_{R,J}
 
-so the work is dense matrix products (BLAS) and the Python overhead is per supernode, not per column.
-``Σ̃_{R,R}`` is gathered from the blocks of the ancestor supernodes that own the columns in ``R``
-(one ``searchsorted`` per ancestor, SelInv's "relative indices").
+so the work is dense matrix products (BLAS). A supernode needs only its ancestors in the elimination tree of
+the supernodes, so all supernodes of one *level* (depth in that tree) are independent: the recurrence runs
+level by level from the root, batching the supernodes of a level into a few buckets padded to one shape
+(:class:`_Schedule`) — one batched product per bucket, so the Python overhead is per bucket, not per
+supernode (intel: 627 supernodes, 32 levels, 43 buckets; City10000: 3934, 30, 298). Each supernode leaves its dense *front*
+``Σ̃_{J∪R, J∪R}`` for its children, whose ``Σ̃_{R,R}`` is a gather from the parent's front (``R`` of a child
+lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels of fronts are alive at once.
 
 The factorisation is CHOLMOD's (``scikit-sparse``, the ``cholmod`` extra): its fill-reducing ordering
-(AMD / nested dissection) and its ``L D Lᵀ``. Without CHOLMOD, :func:`factor_ldl` raises ImportError and the
+(AMD / nested dissection) and its simplicial ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
+has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid. Without CHOLMOD, :func:`factor_ldl` raises ImportError and the
 callers use their SciPy path. Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
 """
 
@@ -39,13 +45,17 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-#: most gather positions (int64) of the recurrence computed at once (memory ≈ 8 bytes × 3 × this)
-GATHER_CHUNK = 1 << 22
-#: supernodes with at most this many rows below them get precomputed (vectorised) gather positions; larger
-#: row sets are gathered run by run (:meth:`SelectedInverse._gather`), where the r² index arithmetic costs
-#: more than the Python overhead it saves (City10000: 0.25 s with every supernode vectorised, 0.15 s run by
-#: run, 0.14 s with 16-32 here; intel 0.021 / 0.018 s run by run / 24)
-GATHER_MAX_ROWS = 24
+#: width ratio of the size classes of :class:`_Schedule` (row counts and widths within a factor of this share
+#: a class before the cost model merges classes)
+CLASS_RATIO = 1.25
+#: overhead of one batched bucket of the recurrence (a dozen numpy calls), in units of one padded
+#: multiply-add of :func:`_buckets`' cost model — which decides when padding beats another bucket
+BUCKET_OVERHEAD = 50_000.0
+#: relaxed supernodes (:func:`_amalgamate`): at most this many columns, at most this fraction of explicit zeros
+AMALGAMATE_MAX_WIDTH = 12
+AMALGAMATE_MAX_ZEROS = 0.5
+#: blocks at least this wide are inverted by LAPACK's triangular inverse, one call each (:func:`_unit_lower_inverse`)
+TRTRI_MIN_WIDTH = 128
 
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
@@ -79,8 +89,12 @@ class LdlFactor:
     perm: np.ndarray
 
 
-def factor_ldl(H: sp.spmatrix) -> LdlFactor:
+def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
     """CHOLMOD's fill-reducing ``L D Lᵀ`` of a symmetric positive definite ``H``.
+
+    ``analysis``: a CHOLMOD factor (``sksparse.cholmod.Factor``, simplicial) of a matrix with ``H``'s
+    pattern, e.g. the LM's: its ordering and symbolic factorisation are reused, only the numeric
+    factorisation is paid (City10000: the analysis is ≈ 15 of 65 ms).
 
     Raises
     ------
@@ -89,48 +103,54 @@ def factor_ldl(H: sp.spmatrix) -> LdlFactor:
     """
     from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
 
-    H = sp.csc_matrix(H)
+    H = H if sp.isspmatrix_csc(H) else sp.csc_matrix(H)
     try:
         # AMD alone: CHOLMOD's default also tries METIS when AMD's fill is high, which on these matrices
-        # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L)
-        F = cholesky(H, mode="supernodal", ordering_method="amd")
+        # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L). Simplicial: with
+        # the reference BLAS CHOLMOD is linked to here, its supernodal factorisation is ≈ 2× slower (intel
+        # 5.6 vs 2.5 ms, City10000 77 vs 50 ms); the relaxed supernodes are :class:`_Supernodes`' own.
+        if analysis is None:
+            F = cholesky(H, mode="simplicial", ordering_method="amd")
+        else:
+            F = analysis.cholesky(H)
     except CholmodNotPositiveDefiniteError as exc:
         col = getattr(exc, "column", None)
         perm = getattr(getattr(exc, "factor", None), "P", lambda: None)()
         where = int(perm[col]) if perm is not None and col is not None and col < len(perm) else int(col or 0)
         raise NotPositiveDefiniteError(f"sparse Cholesky of H: pivot ≤ 0 ({exc})", where) from None
     perm = np.asarray(F.P(), np.int64)
-    # F.L() (L Lᵀ) keeps the symbolic pattern, explicit zeros included; F.L_D() would drop them
-    L = sp.csc_matrix(F.L())
+    # F.LD(): L with D on its diagonal, the symbolic pattern kept (explicit zeros included; F.L_D() drops them)
+    L = F.LD()
+    L = L if sp.isspmatrix_csc(L) else sp.csc_matrix(L)
     L.sort_indices()
-    diag = L.data[L.indptr[:-1]]
     if not np.all(L.indices[L.indptr[:-1]] == np.arange(L.shape[0])):
         raise ValueError("CHOLMOD's L does not store its diagonal first")
-    if not np.all(diag > 0.0):
-        k = int(np.argmin(diag))
-        raise NotPositiveDefiniteError(f"pivot ≤ 0 in the sparse Cholesky of H ({diag[k]:.3g})", perm[k])
-    L.data /= np.repeat(diag, np.diff(L.indptr))  # unit lower triangular: P H Pᵀ = L D Lᵀ, D = diag²
-    d = diag * diag
+    d = L.data[L.indptr[:-1]].copy()
+    if not np.all(d > 0.0):  # LDLᵀ runs through a negative pivot: the test is ours
+        k = int(np.argmin(d))
+        raise NotPositiveDefiniteError(f"pivot ≤ 0 in the sparse LDLᵀ of H ({d[k]:.3g})", perm[k])
+    L.data[L.indptr[:-1]] = 1.0  # unit lower triangular: P H Pᵀ = L D Lᵀ
     return LdlFactor(L, d, perm)
 
 
-class SelectedInverse:
-    """``Σ̃ = (P H Pᵀ)⁻¹`` on the pattern of ``L`` (supernodal Takahashi recurrence, see module doc).
+class _Supernodes:
+    """The supernodal pattern of ``L`` (unit lower triangular, sorted CSC, diagonal first in every column),
+    with relaxed supernodes.
 
-    Build with :meth:`from_matrix` (CHOLMOD) or from any :class:`LdlFactor`; read blocks of ``H⁻¹`` in the
-    original order with :meth:`blocks` / :meth:`entries`. Memory: one float per stored entry of the
-    supernodal pattern (``≈ nnz(L)``) plus the index arrays.
-    """
+    Fundamental supernodes (runs of columns with nested patterns) are amalgamated along chains of the
+    elimination tree (:func:`_amalgamate`): a supernode absorbs its parent when the parent's columns follow
+    its own (postorder) and the zeros this adds to ``L``'s pattern stay few — fewer, wider supernodes and a
+    shallower tree for the level-batched recurrence. Supernode ``K``: columns ``first[K] ..
+    first[K] + width[K] − 1``, row set ``J ∪ R`` (``nrows[K]`` rows, concatenated in ``rows`` from
+    ``key_start[K]``); ``keys`` = sorted ``K·n + row`` of every block row (the lookup of an entry's local row);
+    ``off`` = start of ``K``'s row-major ``nrows × width`` block in the storage of :class:`SelectedInverse`;
+    ``fmap`` = local row (in its supernode) of every row of every fundamental supernode, ``col_shift`` = where
+    a column's stored entries of ``L`` start in ``fmap`` minus where they start in ``L``."""
 
-    def __init__(self, factor: LdlFactor) -> None:
-        L = factor.L
+    def __init__(self, L: sp.csc_matrix) -> None:
         n = L.shape[0]
-        ip, ix, lx = L.indptr, L.indices, L.data
+        ip, ix = L.indptr, L.indices
         self.n = n
-        self._ip, self._ix = ip, ix
-        self.perm = factor.perm
-        self.iperm = np.empty(n, np.int64)
-        self.iperm[factor.perm] = np.arange(n)
         cnt = np.diff(ip)  # entries per column including the diagonal
         if n and (np.any(cnt < 1) or np.any(ix[ip[:-1]] != np.arange(n))):
             raise ValueError("L must store its diagonal first in every column (sorted CSC)")
@@ -138,133 +158,91 @@ class SelectedInverse:
         # pattern(j) = {j} ∪ pattern(j+1)  (chordality makes equal counts sufficient)
         nxt = np.where(cnt > 1, ix[np.minimum(ip[:-1] + 1, max(len(ix) - 1, 0))], -1)
         cont = (nxt[:-1] == np.arange(1, n)) & (cnt[:-1] == cnt[1:] + 1)
-        first = np.flatnonzero(np.r_[True, ~cont]) if n else np.zeros(0, np.int64)
-        ns = len(first)
-        bounds = np.r_[first, n].astype(np.int64)
-        width = np.diff(bounds)  # |J|
-        nrows = cnt[first].astype(np.int64)  # |J| + |R|
-        self.sn_first, self.sn_width, self.sn_nrows = first, width, nrows
-        self.sn_of = np.repeat(np.arange(ns), width)  # supernode of each (permuted) column
-        # Σ̃ storage: supernode K is a dense row-major (nrows_K × width_K) block at vals[off[K]:]
-        self.off = np.r_[0, np.cumsum(nrows * width)].astype(np.int64)
-        self.vals = np.zeros(int(self.off[-1]))
-        # row sets J ∪ R of all supernodes, concatenated (supernode K's at _key_start[K]), and the sorted
-        # (supernode, row) keys of every block row: the lookup table of :meth:`entries` and of the gathers
+        ffirst = np.flatnonzero(np.concatenate(([True], ~cont))) if n else np.zeros(0, np.int64)
+        fwidth = np.diff(np.append(ffirst, n)).astype(np.int64)
+        fnrows = cnt[ffirst].astype(np.int64)
+        fsn_of = np.repeat(np.arange(ffirst.size), fwidth)
         is_first = np.zeros(n, bool)
-        is_first[first] = True
-        self._rows = ix[np.repeat(is_first, cnt)].astype(np.int64)
-        self._key_start = np.r_[0, np.cumsum(nrows)[:-1]].astype(np.int64)
-        self._keys = np.repeat(np.arange(ns, dtype=np.int64), nrows) * n + self._rows
-        self._recurrence(self._panels(lx, cnt), factor.d)
+        is_first[ffirst] = True
+        frows = ix[np.repeat(is_first, cnt)].astype(np.int64)
+        fkey_start = _starts(fnrows)[:-1].astype(np.int64)
+        fpar = np.full(ffirst.size, -1, np.int64)
+        below = fnrows > fwidth
+        fpar[below] = fsn_of[frows[fkey_start[below] + fwidth[below]]]
+        group = _amalgamate(fpar, fwidth, fnrows)  # merged supernode of every fundamental one
+        starts = np.flatnonzero(np.concatenate(([True], group[1:] != group[:-1]))) if n else np.zeros(0, np.int64)
+        top = np.append(starts[1:], ffirst.size) - 1  # last (topmost) member of every merged supernode
+        self.first = ffirst[starts]
+        self.width = np.diff(np.append(self.first, n)).astype(np.int64)
+        r_top = fnrows[top] - fwidth[top]
+        self.nrows = self.width + r_top
+        ns = self.first.size
+        self.sn_of = np.repeat(np.arange(ns), self.width)  # supernode of each (permuted) column
+        self.off = _starts(self.nrows * self.width).astype(np.int64)
+        # merged row set: the supernode's own columns, then the rows below its topmost member
+        self.key_start = _starts(self.nrows)[:-1].astype(np.int64)
+        rep, u, _ = _ragged(self.nrows)
+        w_rep = self.width[rep]
+        tk = top[rep]
+        self.rows = np.where(u < w_rep, self.first[rep] + u, frows[fkey_start[tk] + fwidth[tk] + u - w_rep])
+        self.keys = rep * n + self.rows
+        # every fundamental row's place in its merged supernode's row set (entries of L are found through it)
+        rep, u, _ = _ragged(fnrows)
+        self.frow_sn = group[rep]
+        self.fmap = self.local_rows(self.frow_sn, frows[fkey_start[rep] + u])
+        # per column: where its stored entries start among the fundamental rows (minus its start in L)
+        self.col_shift = fkey_start[fsn_of] + (np.arange(n) - ffirst[fsn_of]) - ip[:-1]
+        self.cnt = cnt
 
-    def _panels(self, lx: np.ndarray, cnt: np.ndarray) -> np.ndarray:
-        """``L``'s entries laid out as :attr:`vals` (supernode K's columns as a row-major ``nrows × width``
-        panel at ``off[K]``, zero above the diagonal), by one vectorised scatter: column ``j0 + i`` of a
-        supernode holds its rows ``i..`` contiguously in ``lx`` (fundamental supernode)."""
-        n = self.n
-        col = np.repeat(np.arange(n), cnt)  # column of every stored entry
-        K = self.sn_of[col]
-        i = col - self.sn_first[K]  # local column
-        t = np.arange(lx.size) - np.repeat(self._ip[:-1].astype(np.int64), cnt)  # position within the column
-        panels = np.zeros(self.vals.size)
-        panels[self.off[K] + (i + t) * self.sn_width[K] + i] = lx
-        return panels
+    def local_rows(self, K: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there)."""
+        key = K * self.n + rows
+        g = np.searchsorted(self.keys, key)
+        found = g < len(self.keys)
+        found[found] = self.keys[g[found]] == key[found]
+        if not np.all(found):
+            raise ValueError("requested entries of H⁻¹ are not on the pattern of the factor")
+        return g - self.key_start[K]
 
-    def _gather_index(self, K0: int, K1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Flat positions in :attr:`vals` of ``Σ̃_{R,R}`` (dense ``r × r``, row-major) for the supernodes
-        ``K0 ≤ K < K1`` (``R`` = rows below the supernode), concatenated, and the start of each.
 
-        Entry ``(a, b)`` of ``Σ̃`` (``lo = min(a, b)``, ``hi = max``) is stored by the supernode owning column
-        ``lo``, at the local row of ``hi`` (found in the sorted keys: SelInv's "relative indices"); chordality
-        makes every such pair a stored entry."""
-        Ks = np.arange(K0, K1)
-        r = self.sn_nrows[Ks] - self.sn_width[Ks]
-        r = np.where(r <= GATHER_MAX_ROWS, r, 0)  # larger row sets: :meth:`_gather`
-        sizes = r * r
-        starts = np.r_[0, np.cumsum(sizes)]
-        T = int(starts[-1])
-        rep = np.repeat(np.arange(Ks.size), sizes)
-        u = np.arange(T, dtype=np.int64) - starts[:-1][rep]
-        rr = r[rep]
-        rs = (self._key_start[Ks] + self.sn_width[Ks])[rep]
-        a, b = self._rows[rs + u // rr], self._rows[rs + u % rr]
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        Kp = self.sn_of[lo]
-        key = Kp * self.n + hi
-        g = np.minimum(np.searchsorted(self._keys, key), max(self._keys.size - 1, 0))
-        if T and not np.array_equal(self._keys[g], key):
-            raise ValueError("the pattern of L is not closed under elimination (not a symbolic factor)")
-        idx = self.off[Kp] + (g - self._key_start[Kp]) * self.sn_width[Kp] + (lo - self.sn_first[Kp])
-        return idx, starts
+class SelectedInverse:
+    """``Σ̃ = (P H Pᵀ)⁻¹`` on the pattern of ``L`` (supernodal Takahashi recurrence, see module doc).
 
-    def _diagonal_terms(self, panels: np.ndarray, d: np.ndarray):
-        """``L_JJ⁻¹`` and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` of every supernode (``s × s`` row-major, at ``soff[K]`` of two
-        flat arrays), batched over the supernodes of one width: they depend on the factor only, not on Σ̃."""
-        w = self.sn_width
-        soff = np.r_[0, np.cumsum(w * w)].astype(np.int64)
-        linv, sjj = np.empty(int(soff[-1])), np.empty(int(soff[-1]))
-        for s in np.unique(w).tolist():
-            Ks = np.flatnonzero(w == s)
-            at = (soff[Ks][:, None] + np.arange(s * s)).ravel()
-            blocks = panels[(self.off[Ks][:, None] + np.arange(s * s)).ravel()].reshape(-1, s, s)  # L_JJ, unit lower
-            inv = np.linalg.inv(blocks) if s > 1 else np.ones((Ks.size, 1, 1))
-            dj = d[self.sn_first[Ks][:, None] + np.arange(s)]
-            linv[at] = inv.ravel()
-            sjj[at] = (np.swapaxes(inv, 1, 2) @ (inv / dj[:, :, None])).ravel()
-        return soff, linv, sjj
+    Build with :meth:`from_matrix` (CHOLMOD) or from any :class:`LdlFactor`; read blocks of ``H⁻¹`` in the
+    original order with :meth:`blocks` / :meth:`entries`. Memory: one float per stored entry of the
+    supernodal pattern (``≈ nnz(L)``) plus the index arrays. Only a few blocks wanted (marginals):
+    :func:`inverse_blocks`, which keeps no more than those.
+    """
 
-    def _recurrence(self, panels: np.ndarray, d: np.ndarray) -> None:
-        """The supernodal Takahashi recurrence (module docstring), last supernode first. The gather positions
-        of ``Σ̃_{R,R}`` are computed in vectorised chunks of at most :data:`GATHER_CHUNK` entries and the
-        diagonal-block terms beforehand (:meth:`_diagonal_terms`), so the loop body is a few dense products
-        per supernode."""
-        ns = len(self.sn_first)
-        soff, linv, sjj = self._diagonal_terms(panels, d)
-        width, nrows, off, so_l = (a.tolist() for a in (self.sn_width, self.sn_nrows, self.off, soff))
-        r = self.sn_nrows - self.sn_width
-        csize = np.r_[0, np.cumsum(np.where(r <= GATHER_MAX_ROWS, r * r, 0))]
-        vals = self.vals
-        K_lo = ns
-        for K in range(ns - 1, -1, -1):
-            if K < K_lo:  # next chunk of gather positions: supernodes K_lo..K
-                K_lo = max(0, min(int(np.searchsorted(csize, csize[K + 1] - GATHER_CHUNK)), K))
-                gidx, gstart = self._gather_index(K_lo, K + 1)
-            s, m, o, so = width[K], nrows[K], off[K], so_l[K]
-            SJJ = sjj[so : so + s * s].reshape(s, s)  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
-            out = vals[o : o + m * s].reshape(m, s)
-            if m > s:
-                Y = panels[o + s * s : o + m * s].reshape(m - s, s) @ linv[so : so + s * s].reshape(s, s)  # L_RJ L_JJ⁻¹
-                q = K - K_lo
-                if m - s <= GATHER_MAX_ROWS:  # Σ̃_{R,R}, computed before
-                    S = vals[gidx[gstart[q] : gstart[q + 1]]].reshape(m - s, m - s)
-                else:
-                    S = self._gather(self._sn_rows(K)[s:])
-                SRJ = -(S @ Y)
-                SJJ = SJJ - Y.T @ SRJ
-                out[s:] = SRJ
-            out[:s] = 0.5 * (SJJ + SJJ.T)
+    def __init__(self, factor: LdlFactor) -> None:
+        sn = _Supernodes(factor.L)
+        self.n, self._sn = sn.n, sn
+        self.perm = factor.perm
+        self.iperm = np.empty(sn.n, np.int64)
+        self.iperm[factor.perm] = np.arange(sn.n)
+        self.sn_first, self.sn_width, self.sn_nrows, self.sn_of, self.off = (
+            sn.first, sn.width, sn.nrows, sn.sn_of, sn.off)
+        self.vals = np.zeros(int(sn.off[-1]))  # supernode K: dense row-major (nrows × width) at off[K]
+        if not sn.n:
+            return
+        plan = _Schedule(sn)
+        K = np.repeat(np.arange(len(sn.first)), sn.nrows * sn.width)
+        u = np.arange(self.vals.size) - sn.off[K]
+        t, c = u // sn.width[K], u % sn.width[K]  # local row and column of every stored entry
+        self.vals[:] = plan.run(factor, *plan.front_index(K, t, c))
 
     @classmethod
     def from_matrix(cls, H: sp.spmatrix, index_blocks=()) -> SelectedInverse:
         """Factor ``H`` with CHOLMOD (:func:`factor_ldl`) and run the recurrence.
 
         ``index_blocks``: arrays ``(B, k)`` of columns whose ``k × k`` blocks :meth:`blocks` will be asked
-        for; their pattern is added to ``H``'s as explicit zeros, so that every such block lies on the
-        pattern of the factor even for variables no factor couples (e.g. held-fixed ones)."""
-        H = sp.csc_matrix(H)
-        extra = [np.asarray(b, np.int64) for b in index_blocks if np.size(b)]
-        if extra:
-            C = sp.coo_matrix(H)
-            r = [C.row] + [np.repeat(b, b.shape[1], axis=1).ravel() for b in extra]
-            c = [C.col] + [np.tile(b, (1, b.shape[1])).ravel() for b in extra]
-            v = [C.data] + [np.zeros(b.size * b.shape[1]) for b in extra]
-            H = sp.csc_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=H.shape)
-        return cls(factor_ldl(H))
+        for; their pattern is added to ``H``'s as explicit zeros (:func:`with_block_pattern`)."""
+        return cls(factor_ldl(with_block_pattern(H, index_blocks)))
 
     def _sn_rows(self, K: int) -> np.ndarray:
         """Sorted row set ``J ∪ R`` of supernode ``K`` (permuted order)."""
-        k0 = int(self._key_start[K])
-        return self._rows[k0 : k0 + int(self.sn_nrows[K])]
+        k0 = int(self._sn.key_start[K])
+        return self._sn.rows[k0 : k0 + int(self.sn_nrows[K])]
 
     def entries(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """``(H⁻¹)[rows, cols]`` (original order, equal shapes) — each pair must lie on the pattern of the
@@ -274,13 +252,7 @@ class SelectedInverse:
         qa, qb = self.iperm[rows.ravel()], self.iperm[cols.ravel()]
         lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
         K = self.sn_of[lo]
-        key = K * self.n + hi
-        g = np.searchsorted(self._keys, key)
-        found = g < len(self._keys)
-        found[found] = self._keys[g[found]] == key[found]
-        if not np.all(found):
-            raise ValueError("requested entries of H⁻¹ are not on the pattern of the factor")
-        p = g - self._key_start[K]  # local row in supernode K's block
+        p = self._sn.local_rows(K, hi)
         return self.vals[self.off[K] + p * self.sn_width[K] + (lo - self.sn_first[K])].reshape(shape)
 
     def blocks(self, index_blocks: np.ndarray) -> np.ndarray:
@@ -291,24 +263,326 @@ class SelectedInverse:
         c = np.broadcast_to(idx[:, None, :], (B, k, k))
         return self.entries(r, c)
 
-    def _gather(self, R: np.ndarray) -> np.ndarray:
-        """Dense ``Σ̃_{R,R}`` for a sorted row set ``R`` that is a clique of the pattern (already computed).
 
-        ``R`` splits into runs owned by one supernode ``K`` each; a run's columns hold ``Σ̃`` for every row of
-        ``R`` from the run on (chordality: they are rows of ``K``), found by one ``searchsorted``."""
-        r = len(R)
-        S = np.empty((r, r))
-        sn = self.sn_of[R]
-        cuts = (np.flatnonzero(sn[1:] != sn[:-1]) + 1).tolist()
-        for a0, a1 in zip([0] + cuts, cuts + [r]):
-            K = int(sn[a0])
-            rows = self._sn_rows(K)
-            tail = R[a0:]
-            pos = np.searchsorted(rows, tail)
-            if pos[-1] >= len(rows) or (rows[pos] != tail).any():
-                raise ValueError("the pattern of L is not closed under elimination (not a symbolic factor)")
-            o, w = int(self.off[K]), int(self.sn_width[K])
-            X = self.vals[o : o + len(rows) * w].reshape(len(rows), w)[pos[:, None], R[a0:a1] - self.sn_first[K]]
-            S[a0:, a0:a1] = X
-            S[a0:a1, a0:] = X.T  # the diagonal block is symmetric: writing it twice is harmless
-        return S
+def with_block_pattern(H: sp.spmatrix, index_blocks=()) -> sp.csc_matrix:
+    """``H`` (CSC) with the ``k × k`` pattern of every row of every ``index_blocks (B, k)`` added as explicit
+    zeros, so that each such block lies on the pattern of the factor even for variables no factor couples
+    (e.g. held-fixed ones)."""
+    H = sp.csc_matrix(H)
+    extra = [np.asarray(b, np.int64) for b in index_blocks if np.size(b)]
+    if not extra:
+        return H
+    C = sp.coo_matrix(H)
+    r = [C.row] + [np.repeat(b, b.shape[1], axis=1).ravel() for b in extra]
+    c = [C.col] + [np.tile(b, (1, b.shape[1])).ravel() for b in extra]
+    v = [C.data] + [np.zeros(b.size * b.shape[1]) for b in extra]
+    return sp.csc_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=H.shape)
+
+
+def inverse_blocks(H: sp.spmatrix, index_blocks, analysis=None) -> list[np.ndarray]:
+    """``(H⁻¹)[idx, idx]`` ``(B, k, k)`` for every row of every ``index_blocks (B, k)`` — the marginals —
+    by the batched recurrence, keeping only the fronts of two levels and the requested entries (no
+    ``nnz(L)`` storage, no lookup table for other entries). ``analysis``: as :func:`factor_ldl`'s.
+
+    ``H`` is factored as it is; only when a block is off the pattern of its factor (a variable no factor
+    couples, e.g. a held-fixed one) is it factored again with the blocks' pattern added
+    (:func:`with_block_pattern`).
+
+    Raises ImportError (no CHOLMOD) and :class:`NotPositiveDefiniteError` as :func:`factor_ldl`."""
+    sets = [np.asarray(b, np.int64) for b in index_blocks]
+    tri = [np.nonzero(np.tri(b.shape[1], dtype=bool)) for b in sets]  # each block's lower triangle with diagonal
+    factor = factor_ldl(H, analysis)
+    try:
+        vals = _lower_entries(factor, sets, tri)
+    except ValueError:  # a block off the pattern of L
+        vals = _lower_entries(factor_ldl(with_block_pattern(H, sets)), sets, tri)
+    out, at = [], 0
+    for b, (i, j) in zip(sets, tri):
+        B, k = b.shape
+        blk = np.empty((B, k, k))
+        v = vals[at : at + B * i.size].reshape(B, i.size)
+        blk[:, i, j] = v
+        blk[:, j, i] = v
+        out.append(blk)
+        at += B * i.size
+    return out
+
+
+def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.ndarray:
+    """``H⁻¹`` at the ``tri`` (lower triangle) entries of every block of ``sets``, concatenated; ValueError
+    when one is off the pattern of the factor."""
+    sn = _Supernodes(factor.L)
+    iperm = np.empty(sn.n, np.int64)
+    iperm[factor.perm] = np.arange(sn.n)
+    qa = np.concatenate([iperm[b[:, i].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
+    qb = np.concatenate([iperm[b[:, j].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
+    lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
+    if not sn.n:
+        return np.zeros(0)
+    K = sn.sn_of[lo]
+    where = sn.local_rows(K, hi)
+    plan = _Schedule(sn)
+    return plan.run(factor, *plan.front_index(K, where, lo - sn.first[K]))
+
+
+def _unit_lower_inverse(blocks: np.ndarray) -> np.ndarray:
+    """Inverses of unit lower triangular ``(B, w, w)`` blocks: row by row forward substitution batched over
+    the blocks (``w − 1`` einsums; a third of the flops of a general inverse and none of its per-matrix
+    LAPACK overhead: 1000 blocks of 12 × 12, 1.6 vs 5.2 ms), LAPACK's triangular inverse one block at a time
+    from :data:`TRTRI_MIN_WIDTH` on (a 288-wide separator: 1.7 vs 3.9 ms) or when the blocks are fewer than
+    about 0.6 (w − 1) (one call of ≈ 10 µs per block against w − 1 einsums of ≈ 6 µs: City10000's
+    separators of 27-96 columns, 70 calls instead of ≈ 700)."""
+    B, w, _ = blocks.shape
+    if w >= TRTRI_MIN_WIDTH or 5 * B < 3 * (w - 1):  # few wide blocks: one LAPACK call each beats w − 1 einsums
+        from scipy.linalg.lapack import dtrtri
+
+        return np.stack([dtrtri(b, lower=1, unitdiag=1)[0] for b in blocks])
+    X = np.zeros_like(blocks)
+    d = np.arange(w)
+    X[:, d, d] = 1.0
+    for i in range(1, w):
+        X[:, i, :i] = -np.einsum("bk,bkj->bj", blocks[:, i, :i], X[:, :i, :i])
+    return X
+
+
+def _amalgamate(par: np.ndarray, width: np.ndarray, nrows: np.ndarray) -> np.ndarray:
+    """Relaxed supernodes: the merged supernode of every fundamental one (non-decreasing labels).
+
+    Supernode ``k`` may merge with ``k + 1`` when that is its parent (its columns follow, postorder) and the
+    explicit zeros the pair's merged lower trapezoid gets stay at most :data:`AMALGAMATE_MAX_ZEROS` of it;
+    runs of such links (chains of the tree) are cut into pieces of about :data:`AMALGAMATE_MAX_WIDTH`
+    columns. Vectorised: no loop over supernodes."""
+    ns = par.size
+    if ns < 2 or AMALGAMATE_MAX_WIDTH <= 0:
+        return np.arange(ns, dtype=np.int64)
+    w, r = width, nrows - width
+    extra = (w[1:] + r[1:]) - r[:-1]  # zero rows added to each column of k by merging it into k + 1
+    pair = w[:-1] + w[1:]
+    ok = (par[:-1] == np.arange(1, ns)) & (extra * w[:-1] <= AMALGAMATE_MAX_ZEROS * pair * (pair + 2 * r[1:] + 1) / 2)
+    new_chain = np.concatenate(([True], ~ok))
+    chain = np.cumsum(new_chain) - 1
+    before = np.cumsum(w) - w  # columns before each supernode
+    piece = (before - before[new_chain][chain]) // AMALGAMATE_MAX_WIDTH
+    cut = np.concatenate(([True], (chain[1:] != chain[:-1]) | (piece[1:] != piece[:-1])))
+    return np.cumsum(cut) - 1
+
+
+def _starts(sizes: np.ndarray) -> np.ndarray:
+    """``[0, cumsum(sizes)]`` as int64: where consecutive runs of ``sizes`` start, and the total."""
+    out = np.zeros(len(sizes) + 1, np.int64)
+    np.cumsum(sizes, out=out[1:])
+    return out
+
+
+def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For concatenated runs of ``sizes``: the run of every element, its position in the run, the run starts."""
+    sizes = np.asarray(sizes, np.int64)
+    starts = _starts(sizes).astype(np.int64)
+    rep = np.repeat(np.arange(sizes.size), sizes)
+    return rep, np.arange(starts[-1], dtype=np.int64) - starts[:-1][rep], starts
+
+
+def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
+    """Supernodes in processing order (level by level, root level first) cut into buckets of one level.
+
+    Within a level, supernodes are sorted by size class (``CLASS_RATIO``) and consecutive classes merged while
+    padding all to the larger costs less than another bucket (:data:`BUCKET_OVERHEAD`, in units of one padded
+    multiply-add or move of the bucket's products and gathers). Returns ``order``
+    (supernodes), ``b_start`` (start of every bucket in ``order``, plus the end) and the buckets' level."""
+    lg = np.log(CLASS_RATIO)
+    rc, sc = np.floor(np.log1p(r) / lg).astype(np.int64), np.floor(np.log1p(w) / lg).astype(np.int64)
+    order = np.lexsort((w, r, sc, rc, depth))
+    key = np.stack([depth[order], rc[order], sc[order]])
+    gs = np.flatnonzero(np.concatenate(([True], np.any(key[:, 1:] != key[:, :-1], axis=0))))
+    gn = np.diff(np.append(gs, order.size)).tolist()
+    gr, gw = np.maximum.reduceat(r[order], gs).tolist(), np.maximum.reduceat(w[order], gs).tolist()
+    glev = depth[order][gs].tolist()
+    starts = []
+    cn = cr = cw = 0
+    over = BUCKET_OVERHEAD
+    for g in range(len(gs)):
+        n1, r1, w1 = gn[g], gr[g], gw[g]
+        if g and glev[g] == glev[g - 1]:  # padded cost of the products and gathers, merged vs apart
+            r2, w2 = max(cr, r1), max(cw, w1)
+            merged = (cn + n1) * (r2 * r2 * (w2 + 1) + r2 * w2 * w2 + w2**3 + (r2 + w2) ** 2)
+            apart = (cn * (cr * cr * (cw + 1) + cr * cw * cw + cw**3 + (cr + cw) ** 2)
+                     + n1 * (r1 * r1 * (w1 + 1) + r1 * w1 * w1 + w1**3 + (r1 + w1) ** 2) + over)
+            if merged <= apart:
+                cn, cr, cw = cn + n1, r2, w2
+                continue
+        starts.append(int(gs[g]))
+        cn, cr, cw = n1, r1, w1
+    b_start = np.array(starts + [order.size], np.int64)
+    return order, b_start, depth[order][b_start[:-1]]
+
+
+class _Schedule:
+    """The plan of the batched recurrence, from the pattern alone (module docstring).
+
+    Elimination tree of the supernodes (parent = owner of the first row below ``J``), levels by depth,
+    buckets of one level (:func:`_buckets`) whose members are padded to the bucket's largest row count ``rp``
+    and width ``sp``. A supernode's front is ``(sp + rp)²`` row-major, ``J`` rows first, ``R`` rows from
+    ``sp``; a level's fronts lie one after another in its buffer from position 1 (position 0 holds the 0
+    every padded gather reads)."""
+
+    def __init__(self, sn: _Supernodes) -> None:
+        w, m = sn.width, sn.nrows
+        ns, r = w.size, m - w
+        below = sn.key_start + w  # position in rows of each supernode's first row below J
+        par = np.full(ns, -1, np.int64)
+        par[r > 0] = sn.sn_of[sn.rows[below[r > 0]]]
+        depth = [0] * ns
+        pl = par.tolist()
+        for K in range(ns - 1, -1, -1):  # a parent comes after its children
+            if pl[K] >= 0:
+                depth[K] = depth[pl[K]] + 1
+        self.depth = depth = np.asarray(depth, np.int64)
+        order, b_start, b_level = _buckets(depth, r, w)
+        self.n_levels = int(depth.max()) + 1
+        self.level_buckets = np.searchsorted(b_level, np.arange(self.n_levels + 1)).tolist()
+        bk = np.repeat(np.arange(b_start.size - 1), np.diff(b_start))  # bucket of order[i]
+        b_rows, b_width = np.maximum.reduceat(r[order], b_start[:-1]), np.maximum.reduceat(w[order], b_start[:-1])
+        b_count = np.diff(b_start)
+        self.b_count, self.b_rows, self.b_width = b_count.tolist(), b_rows.tolist(), b_width.tolist()
+        mp_b = b_rows + b_width
+        cum = _starts(b_count * mp_b * mp_b)
+        lv_first = np.asarray(self.level_buckets, np.int64)
+        front_at = cum[:-1] - cum[lv_first[b_level]] + 1
+        self.front_at = front_at.tolist()
+        self.level_size = (cum[lv_first[1:]] - cum[lv_first[:-1]]).tolist()
+        # per supernode: padded shape, front offset in its level's buffer, place in its bucket
+        self.rp, self.sp, self.slot = (np.empty(ns, np.int64) for _ in range(3))
+        self.rp[order], self.sp[order] = b_rows[bk], b_width[bk]
+        self.slot[order] = np.arange(ns) - b_start[bk]
+        self.bucket = np.empty(ns, np.int64)
+        self.bucket[order] = bk
+        self.mp = self.rp + self.sp
+        self.foff = front_at[self.bucket] + self.slot * self.mp**2
+        self.sn, self.par, self.order, self.b_start = sn, par, order, b_start
+        # padded L (nb, mp, sp) and D⁻¹ (nb, sp) of every bucket, one after another
+        self.l_at = _starts(b_count * mp_b * b_width).tolist()
+        # buckets grouped by padded width: group g's supernodes are those of its buckets, in bucket order;
+        # bucket b's are at b_group_at[b] of group b_group[b] (its L_JJ⁻¹ and D̂⁻¹ blocks are views there)
+        ob = np.argsort(b_width, kind="stable")
+        gw, g_of = np.unique(b_width[ob], return_inverse=True)
+        at = np.empty(b_count.size, np.int64)
+        at[ob] = _starts(b_count[ob])[:-1] - _starts(b_count[ob])[np.searchsorted(b_width[ob], gw)][g_of]
+        self.b_group = np.empty(b_count.size, np.int64)
+        self.b_group[ob] = g_of
+        self.b_group, self.b_group_at = self.b_group.tolist(), at.tolist()
+        self.group_width = gw.tolist()
+        self.group_sn = [np.concatenate([order[b_start[b] : b_start[b + 1]] for b in ob[g_of == g]])
+                         for g in range(gw.size)]
+        self.rel_at, self.rel = self._relative_positions(below)
+
+    def _relative_positions(self, below):
+        """Position in the parent's front of every row below every supernode, padded to ``rp`` with 0
+        (supernode ``order[i]``'s at ``rel_at[i]``): its row in the parent's ``J ∪ R``, ``J`` first, ``R``
+        after the parent's padded width; and the same row's start in the previous level's buffer
+        (``rel_row``: front offset + row · padded size; 0 on the padding), so that the gather of
+        ``Σ̃_{R,R}`` is ``rel_row[a] + rel[b]``. Padded positions read finite values of that buffer that only
+        meet zero rows of ``Y``."""
+        sn, par = self.sn, self.par
+        r = sn.nrows - sn.width
+        rep, u, _ = _ragged(r)
+        P = par[rep]
+        loc = sn.local_rows(P, sn.rows[below[rep] + u])
+        wP = sn.width[P]
+        pos = np.where(loc < wP, loc, loc - wP + self.sp[P])
+        start = np.empty(r.size, np.int64)
+        start[self.order] = _starts(self.rp[self.order])[:-1]
+        rel = np.zeros(int(self.rp.sum()), np.int64)
+        rel[start[rep] + u] = pos
+        self.rel_row = np.zeros(rel.size, np.int64)
+        self.rel_row[start[rep] + u] = self.foff[P] + pos * self.mp[P]
+        return start[self.order][self.b_start[:-1]].tolist() + [rel.size], rel
+
+    def front_index(self, K, t, c):
+        """Where the recurrence leaves ``Σ̃`` at local row ``t``, column ``c < width`` of supernode ``K``:
+        positions in the level buffers, grouped by level (``(src, level starts, order)``)."""
+        fr = np.where(t < self.sn.width[K], t, t - self.sn.width[K] + self.sp[K])
+        pos = self.foff[K] + fr * self.mp[K] + c
+        o = np.argsort(self.depth[K], kind="stable")
+        at = np.searchsorted(self.depth[K][o], np.arange(self.n_levels + 1))
+        return pos[o], at.tolist(), o
+
+    def _padded_factor(self, factor: LdlFactor):
+        """``L`` as the buckets' padded ``(nb, mp, sp)`` panels, flat in bucket order (zero on the padding),
+        and the position of every supernode's panel in it."""
+        sn, L = self.sn, factor.L
+        K, w, sp_ = sn.sn_of, sn.width, self.sp
+        base = np.asarray(self.l_at)[self.bucket] + self.slot * self.mp * sp_
+        # 32-bit positions where they fit: the scatter of L's nnz entries is bound by memory traffic
+        it = np.int32 if max(self.l_at[-1], sn.fmap.size, L.data.size) < 2**31 else np.int64
+        colbase = (base[K] + (np.arange(sn.n) - sn.first[K])).astype(it)  # row 0 of every column's panel
+        G, t = sn.frow_sn, sn.fmap
+        rowoff = (np.where(t < w[G], t, t - w[G] + sp_[G]) * sp_[G]).astype(it)  # padded row offsets
+        at = np.repeat(sn.col_shift.astype(it), sn.cnt)  # every entry's row among the fundamental rows
+        at += np.arange(L.data.size, dtype=it)
+        dst = np.repeat(colbase, sn.cnt)
+        dst += rowoff[at]
+        lpad = np.zeros(self.l_at[-1])
+        lpad[dst] = L.data
+        return lpad, base
+
+    def _diagonal_terms(self, lpad: np.ndarray, base: np.ndarray, d: np.ndarray):
+        """``L_JJ⁻¹`` (identity on the padding) and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` (zero on the padding) of every
+        supernode, one ``(N, sp, sp)`` array per padded width ``sp`` (:attr:`group_sn`), so that a bucket's
+        blocks are a view. They depend on the factor only: batched over all buckets of one width, not per
+        bucket."""
+        sn = self.sn
+        linv, sjj = [], []
+        for sp_, Ks in zip(self.group_width, self.group_sn):
+            a = np.arange(sp_)
+            blk = lpad[base[Ks][:, None, None] + a[:, None] * sp_ + a]  # L_JJ, zero on the padding
+            blk[:, a, a] = 1.0
+            inv = _unit_lower_inverse(blk)
+            col = sn.first[Ks][:, None] + a
+            dinv = np.where(a < sn.width[Ks][:, None], 1.0 / d[np.minimum(col, sn.n - 1)], 0.0)
+            linv.append(inv)
+            sjj.append(inv.mT @ (inv * dinv[:, :, None]))
+        return linv, sjj
+
+    def run(self, factor: LdlFactor, src: np.ndarray, src_at: list, o: np.ndarray) -> np.ndarray:
+        """The recurrence, root level first; returns ``Σ̃`` at the front positions ``src`` (of
+        :meth:`front_index`) in the caller's order."""
+        lpad, base = self._padded_factor(factor)
+        linv, sjj = self._diagonal_terms(lpad, base, factor.d)
+        out = np.empty(src.size)
+        # two buffers, levels alternating (position 0 stays 0: the padded gathers' slot)
+        buf, prev = np.zeros(max(self.level_size) + 1), np.zeros(max(self.level_size) + 1)
+        lb = self.level_buckets
+        for lv in range(self.n_levels):
+            for b in range(lb[lv], lb[lv + 1]):
+                self._bucket(b, buf, prev, lpad, linv, sjj)
+            out[src_at[lv] : src_at[lv + 1]] = buf[src[src_at[lv] : src_at[lv + 1]]]
+            buf, prev = prev, buf
+        res = np.empty_like(out)
+        res[o] = out
+        return res
+
+    def _bucket(self, b: int, buf, prev, lpad, linv, sjj) -> None:
+        """The block recurrence (module docstring) for the ``nb`` supernodes of bucket ``b`` at once, fronts
+        written to ``buf``; ``prev`` holds the parents' fronts.
+
+        Padded rows of ``Σ̃_{R,R}`` are gathered from the parent's first row (finite values, not zeros): they
+        only ever meet the zero padded rows of ``Y`` and land in padded rows of the front, which no child
+        reads."""
+        nb, rp, s = self.b_count[b], self.b_rows[b], self.b_width[b]
+        mp = rp + s
+        g, k0 = self.b_group[b], self.b_group_at[b]
+        SJJ = sjj[g][k0 : k0 + nb]  # L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹
+        f0 = self.front_at[b]
+        F = buf[f0 : f0 + nb * mp * mp].reshape(nb, mp, mp)
+        if rp:
+            Lb = lpad[self.l_at[b] : self.l_at[b + 1]].reshape(nb, mp, s)
+            Y = Lb[:, s:] @ linv[g][k0 : k0 + nb]  # L_RJ L_JJ⁻¹
+            rel = self.rel[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp)
+            S = prev[self.rel_row[self.rel_at[b] : self.rel_at[b + 1]].reshape(nb, rp, 1) + rel[:, None, :]]
+            SRJ = S @ Y  # −Σ̃_{R,J}
+            SJJ = SJJ + Y.mT @ SRJ
+            np.negative(SRJ, out=SRJ)
+            F[:, s:, :s] = SRJ
+            F[:, :s, s:] = SRJ.mT
+            F[:, s:, s:] = S
+        F[:, :s, :s] = SJJ  # symmetric up to rounding; every block returned is built from its lower triangle
