@@ -274,7 +274,7 @@ class GraphSlam(BaseSolver):
             if progress is not None:
                 progress(min(run.done_iters + k, run.budget), run.budget)
 
-        nparams = p.nls_params(kernel, p.kernel_scale(kernel))
+        nparams = p.nls_params(kernel, p.kernel_scale(kernel), pose_graph=self._is_pose_graph(inputs, len(lm0), kernel))
         x_init_poses, x_init_lms = poses0, lm0
         for rnd in range(rounds + 1):
             run.rnd = rnd
@@ -295,11 +295,11 @@ class GraphSlam(BaseSolver):
             x_init_poses, x_init_lms = merged
         return run
 
-    def _is_pose_graph(self, inputs: SlamInputs, run: _Run, kernel: str) -> bool:
+    def _is_pose_graph(self, inputs: SlamInputs, n_landmarks: int, kernel: str) -> bool:
         """Whether the solved graph is a plain pose graph (the SE-Sync certificate applies): ``gtsam`` model,
         no landmarks, no kernel, GPS, controls, range bias or second robot."""
         p = self.params
-        return (p.model == "gtsam" and run.gp.n_landmarks == 0 and kernel == "none" and inputs.robots is None
+        return (p.model == "gtsam" and n_landmarks == 0 and kernel == "none" and inputs.robots is None
                 and not p.use_controls and not uses_gps(p, inputs) and not p.estimate_range_bias and inputs.n_poses >= 2)
 
     def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress, start: str):
@@ -309,7 +309,7 @@ class GraphSlam(BaseSolver):
         Returns ``(run, certificate or None, restart dict or None)``; the run kept has the lower cost."""
         p = self.params
         auto = p.restart == "auto" and p.init_from == "odometry"
-        if self._is_pose_graph(inputs, run, kernel):
+        if self._is_pose_graph(inputs, run.gp.n_landmarks, kernel):
             if not p.certify:
                 return run, None, None
             ij, xyt, info = pose_graph_edges(inputs, p.edge_info)

@@ -196,6 +196,9 @@ def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _
                 break
             # predicted decrease of the undamped model: −gᵀh − ½hᵀHh = ½hᵀ(λDh − g)
             pred = 0.5 * float(h @ (st.lam * Dvec * h - g))
+            if 0.0 <= pred <= params.pred_cost_tol * cost and st.lam <= params.lambda_init:
+                stop = (Status.CONVERGED, "predicted cost decrease below pred_cost_tol")
+                break
             if pred >= 0.0:
                 x_new = retract(problem, params, x, h)
                 new_cost = asm.cost(x_new, params)

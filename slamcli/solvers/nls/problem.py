@@ -119,6 +119,13 @@ class NlsParams:
         GTSAM's ``LevenbergMarquardtOptimizer``; a dogleg iteration may shrink its region several times).
     rel_cost_tol : float
         Converged when an accepted step lowers the cost by less than ``rel_cost_tol · cost``.
+    pred_cost_tol : float
+        LM only (0 = off, the default): converged, before the trial step, when the step's predicted decrease
+        ``−gᵀh − ½hᵀHh`` (the Gauss-Newton decrement ``½gᵀH⁻¹g`` up to the damping) is below
+        ``pred_cost_tol · cost`` while λ is at most ``lambda_init``. Near the optimum that decrement is the
+        distance to the minimum in cost, so LM stops one or two iterations (a trial cost, a retraction and a
+        linearisation each) before ``rel_cost_tol`` would, at a point whose cost is within about
+        ``pred_cost_tol · cost`` of the optimum's.
     abs_cost_tol : float
         Converged when the cost is below this value.
     step_tol : float
@@ -167,6 +174,7 @@ class NlsParams:
     method: Literal["lm", "gn", "dogleg"] = "lm"
     max_iterations: int = 100
     rel_cost_tol: float = 1e-12
+    pred_cost_tol: float = 0.0
     abs_cost_tol: float = 1e-20
     step_tol: float = 1e-12
     lambda_init: float = 1e-5
@@ -196,6 +204,8 @@ class NlsParams:
             raise ValueError("need 0 ≤ lambda_min ≤ lambda_init ≤ lambda_max")
         if not self.delta_init > 0.0:
             raise ValueError("delta_init must be > 0")
+        if not self.pred_cost_tol >= 0.0:
+            raise ValueError("pred_cost_tol must be ≥ 0")
         if self.pose_chart not in ("body", "world"):
             raise ValueError(f"pose_chart must be body or world, got {self.pose_chart!r}")
 
