@@ -448,6 +448,36 @@ def test_assembler_on_another_assemblers_pattern_gives_the_same_normal_equations
     assert wider.lo_indices is not own.lo_indices and wider.lo_nnz > own.lo_nnz
 
 
+def test_assembler_on_stacked_blocks_of_another_pattern_gives_the_same_normal_equations():
+    """A block whose factors are those of consecutive blocks of ``like`` (the certificate's one block of all
+    edges over the LM problem's odometry and loop-closure blocks) takes ``like``'s scatter positions without a
+    search: same pattern object, H and g equal to JᵀJ and Jᵀr of the dense Jacobian, scatter positions equal
+    to the searched ones."""
+    from slamcli.solvers.nls import linear
+
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    odo = next(b for b in gp.problem.blocks if b.name == "odometry")
+    k = odo.n_factors // 2
+
+    def part(sl):
+        return nls.FactorBlock("half", odo.cols[sl], lambda v: tuple(a[sl] for a in odo.evaluate(v)), odo.sqrt_info)
+
+    split = nls.NlsProblem(gp.problem.n_vars, [b if b is not odo else p for b in gp.problem.blocks
+                                               for p in ((part(slice(0, k)), part(slice(k, None))) if b is odo else (b,))],
+                           gp.problem.angle_cols)
+    like = nls.Assembler(split)
+    asm = nls.Assembler(gp.problem, like=like)
+    assert asm.lo_indices is like.lo_indices
+    sizes = [a.size * c.shape[0] for c, (a, _) in zip(asm.cols, asm.pairs)] + [asm.D]
+    key = asm._keys(np.cumsum([0] + sizes))
+    np.testing.assert_array_equal(linear._positions_by_blocks(like, asm.cols), linear._positions_in(like, key))
+    x = gp.x0 + 0.01 * np.random.default_rng(5).normal(size=gp.x0.size)
+    _, lo, g = asm.linearize_lower(x, nls.NlsParams(pose_chart="world"))
+    J = nls.jacobian_matrix(gp.problem, x).toarray()
+    np.testing.assert_allclose(asm.matrix(asm.full(lo)).toarray(), J.T @ J, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g, J.T @ nls.residual_vector(gp.problem, x), rtol=1e-12, atol=1e-9)
+
+
 def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
     """The Jacobian-free residuals LM's trial steps use are the ones ``evaluate`` returns, bit for bit
     (odometry, loop closures, bearing-range with a landmark on top of a pose)."""

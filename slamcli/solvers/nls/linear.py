@@ -33,7 +33,8 @@ class Assembler:
     def __init__(self, problem: NlsProblem, like: Assembler | None = None) -> None:
         """``like``: an assembler whose pattern holds every entry of ``problem``'s ``H`` (e.g. another
         problem on the same variables and factor graph): its pattern is reused — the scatter positions are
-        looked up in its sorted keys instead of sorting anew — so a linear solver analysed for ``like``
+        ``like``'s own when each block stacks consecutive blocks of ``like`` (:func:`_positions_by_blocks`),
+        else looked up in its sorted keys instead of sorting anew — so a linear solver analysed for ``like``
         factorises this problem's ``H`` too. Without it, or when an entry is missing, the pattern is
         ``problem``'s own."""
         D = problem.n_vars
@@ -44,12 +45,14 @@ class Assembler:
         self.twice = [_repeated_pairs(c, ia, ib) for c, (ia, ib) in zip(self.cols, self.pairs)]
         sizes = [ia.size * c.shape[0] for c, (ia, _) in zip(self.cols, self.pairs)] + [D]
         bounds = np.cumsum([0] + sizes)
-        key = self._keys(bounds)
-        inv = _positions_in(like, key) if like is not None and like.D == D else None
+        inv = _positions_by_blocks(like, self.cols) if like is not None and like.D == D else None
+        if inv is None:
+            key = self._keys(bounds)
+            inv = _positions_in(like, key) if like is not None and like.D == D else None
         own = inv is None
         if own:
             ukey, inv = _unique_inverse(key)
-        del key
+            del key
         self.lo_scatter = [inv[s:e] for s, e in zip(bounds[:-2], bounds[1:-1])]
         self._scatter_all = inv[: bounds[-2]]  # the blocks' pairs, in the order of the work buffer below
         self._bounds = bounds[:-1]
@@ -67,6 +70,8 @@ class Assembler:
             self.indices, self.indptr, self.nnz = like.indices, like.indptr, like.nnz
             self.diag_pos, self.full_src = like.diag_pos, like.full_src
         self.pose_offsets = [pose_offsets(c, problem.se2_poses) for c in self.cols]
+        # blocks whitened by L = I (the certificate's SE-Sync residuals): no products with L
+        self.identity_info = [_is_identity(b.sqrt_info) for b in problem.blocks]
         fixed = np.asarray(problem.fixed_cols, np.int64)
         self.fixed = fixed
         if fixed.size:
@@ -158,9 +163,9 @@ class Assembler:
 
     def cost(self, x: np.ndarray, params: NlsParams) -> float:
         total = 0.0
-        for b in self.problem.blocks:
+        for b, identity in zip(self.problem.blocks, self.identity_info):
             r = b.residuals(x)
-            total += float(np.sum(kernel_cost(whiten(b.sqrt_info, r), b.robust, params)[0]))
+            total += float(np.sum(kernel_cost(r if identity else whiten(b.sqrt_info, r), b.robust, params)[0]))
         return total
 
     def linearize(self, x: np.ndarray, params: NlsParams):
@@ -186,8 +191,9 @@ class Assembler:
         for i, b in enumerate(self.problem.blocks):
             r, J = b.evaluate(x)
             F, k, n = J.shape
-            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body else [], self._buffer(("jw", i), (k, n, F)))
-            rw = whiten(b.sqrt_info, r)  # (F, k)
+            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body else [], self._buffer(("jw", i), (k, n, F)),
+                                     self.identity_info[i])
+            rw = r if self.identity_info[i] else whiten(b.sqrt_info, r)  # (F, k)
             rho, w = kernel_cost(rw, b.robust, params)
             total += float(np.sum(rho))
             JtT = JwT if w is None else JwT * w
@@ -217,14 +223,15 @@ class Assembler:
         return total, data, g
 
 
-def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out: np.ndarray) -> np.ndarray:
+def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out: np.ndarray,
+                       identity: bool = False) -> np.ndarray:
     """``L J`` of a block laid out ``(k, n, F)`` (factors last, contiguous) in the work buffer ``out``, each
     pose's columns at the ``offsets`` then rotated into the body chart: ``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``
-    (``L`` acts on rows, ``R`` on columns: ``(L J) R = L (J R)``)."""
+    (``L`` acts on rows, ``R`` on columns: ``(L J) R = L (J R)``); ``identity``: ``L = I`` (no product)."""
     F, k, n = J.shape
     L = np.asarray(b.sqrt_info, float)
-    if F <= SMALL_BLOCK:
-        out[:] = np.einsum("ij,fja->iaf" if L.ndim == 2 else "fij,fja->iaf", L, J)
+    if F <= SMALL_BLOCK:  # one batched product (2-3× faster than the equivalent einsum), then factors last
+        out[:] = (J if identity else np.matmul(L, J)).transpose(1, 2, 0)
     for i in range(k if F > SMALL_BLOCK else 0):
         for a in range(n):
             row = out[i, a]
@@ -243,6 +250,11 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out:
         out[:, o] = j0 * c + j1 * s  # [J_x, J_y] R(θ), R = [[c, −s], [s, c]]
         out[:, o + 1] = j0 * -s + j1 * c
     return out
+
+
+def _is_identity(L) -> bool:
+    L = np.asarray(L)
+    return L.ndim == 2 and L.shape[0] == L.shape[1] and bool(np.array_equal(L, np.eye(L.shape[0])))
 
 
 def _rotate_pairs(d: np.ndarray, i0: np.ndarray, i1: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
@@ -273,6 +285,28 @@ def _positions_in(like: Assembler, key: np.ndarray) -> np.ndarray | None:
     if not np.array_equal(like._lo_keys[pos], key):
         return None
     return pos.astype(np.int32 if like.lo_nnz < np.iinfo(np.int32).max else np.int64)
+
+
+def _positions_by_blocks(like: Assembler, cols: list[np.ndarray]) -> np.ndarray | None:
+    """The scatter positions (as :func:`_positions_in`, blocks' pairs then the diagonal) when every block of
+    ``cols`` stacks consecutive blocks of ``like`` with the same columns (the certificate's one block of all
+    edges = the LM problem's odometry and loop-closure blocks): ``like``'s positions, pair by pair, without a
+    search; None otherwise."""
+    out, k = [], 0
+    for c in cols:
+        F, n = c.shape
+        parts, row = [], 0
+        while row < F and k < len(like.cols):
+            lc = like.cols[k]
+            if lc.shape[1] == n and row + lc.shape[0] <= F and np.array_equal(lc, c[row:row + lc.shape[0]]):
+                parts.append(like.lo_scatter[k].reshape(-1, lc.shape[0]))
+                row += lc.shape[0]
+            k += 1
+        if row != F:
+            return None
+        out.append(np.concatenate(parts, axis=1).ravel() if parts else np.zeros(0, np.int32))
+    out.append(like.lo_diag_pos.astype(out[0].dtype if out else np.int32))
+    return np.concatenate(out)
 
 
 def _unique_inverse(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
