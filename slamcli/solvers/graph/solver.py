@@ -4,6 +4,7 @@ merges → marginals).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,9 +52,11 @@ def chi2_cdf(x: float, k: int) -> float:
     return min(max(P, 0.0), 1.0)
 
 
+@functools.lru_cache(maxsize=64)
 def chi2_quantile(p: float, k: int) -> float:
     """``x`` with ``chi2_cdf(x, k) = p`` (0 < p < 1) by bisection to ``CHI2_QUANTILE_RTOL`` (the CDF is
-    monotone; the bracket doubles until it holds ``p``)."""
+    monotone; the bracket doubles until it holds ``p``). Cached: every solve's outlier counts ask for the same
+    few ``(p, k)`` (≈ 50 CDF evaluations each)."""
     lo, hi = 0.0, max(1.0, float(k))
     while chi2_cdf(hi, k) < p:
         lo, hi = hi, 2.0 * hi
