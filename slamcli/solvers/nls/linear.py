@@ -64,11 +64,10 @@ class Assembler:
             self.lo_indices = (ukey % D).astype(np.int32)
             self.lo_indptr = _indptr(ukey // D, D)
             del ukey
-            self._full_pattern()
         else:
             self.lo_nnz, self.lo_indices, self.lo_indptr = like.lo_nnz, like.lo_indices, like.lo_indptr
-            self.indices, self.indptr, self.nnz = like.indices, like.indptr, like.nnz
-            self.diag_pos, self.full_src = like.diag_pos, like.full_src
+        self._full_of = None if own else like  # the full pattern: built on first use (CHOLMOD reads the lower)
+        self._full: tuple | None = None
         self.pose_offsets = [pose_offsets(c, problem.se2_poses) for c in self.cols]
         # blocks whitened by L = I (the certificate's SE-Sync residuals): no products with L
         self.identity_info = [_is_identity(b.sqrt_info) for b in problem.blocks]
@@ -95,7 +94,20 @@ class Assembler:
         key[bounds[-2]:] = np.arange(D, dtype=np.int64) * (D + 1)
         return key
 
-    def _full_pattern(self) -> None:
+    def _full_parts(self) -> tuple:
+        """``(indices, indptr, nnz, diag_pos, full_src)`` of the full pattern, built once on first use (a
+        solve with CHOLMOD never needs it) or shared with the ``like`` assembler whose pattern this one uses."""
+        if self._full is None:
+            self._full = self._full_of._full_parts() if self._full_of is not None else self._full_pattern()
+        return self._full
+
+    indices = property(lambda self: self._full_parts()[0], doc="row indices of the full symmetric pattern (CSC)")
+    indptr = property(lambda self: self._full_parts()[1], doc="column pointers of the full pattern")
+    nnz = property(lambda self: self._full_parts()[2], doc="entries of the full pattern")
+    diag_pos = property(lambda self: self._full_parts()[3], doc="position of each diagonal entry in the full data")
+    full_src = property(lambda self: self._full_parts()[4], doc="full data = lower data[full_src]")
+
+    def _full_pattern(self) -> tuple:
         """The full symmetric CSC pattern and ``full_src``: full data = lower data[full_src]."""
         D = self.D
         tag = sp.csc_matrix((np.arange(1, self.lo_nnz + 1, dtype=float), self.lo_indices, self.lo_indptr),
@@ -104,13 +116,13 @@ class Assembler:
         full.sort_indices()
         src = full.data
         del tag
-        self.indices = full.indices.astype(np.int32)
-        self.indptr = full.indptr.astype(np.int32)
-        self.nnz = int(self.indices.size)
+        indices = full.indices.astype(np.int32)
+        indptr = full.indptr.astype(np.int32)
         # column j of the full pattern: the upper entries (lower row j, off the diagonal), then (j, j)
-        self.diag_pos = self.indptr[:-1].astype(np.int64) + np.bincount(self.lo_indices, minlength=D) - 1
-        src[self.diag_pos] *= 0.5
-        self.full_src = (src - 1.0).astype(self.lo_scatter[0].dtype if self.lo_scatter else np.int64)
+        diag_pos = indptr[:-1].astype(np.int64) + np.bincount(self.lo_indices, minlength=D) - 1
+        src[diag_pos] *= 0.5
+        full_src = (src - 1.0).astype(self.lo_scatter[0].dtype if self.lo_scatter else np.int64)
+        return indices, indptr, int(indices.size), diag_pos, full_src
 
     def full(self, lo_data: np.ndarray) -> np.ndarray:
         """Data of the full symmetric pattern from lower-triangle data."""
