@@ -85,6 +85,13 @@ def _sinc_terms(w):
     """``A = sin(w)/w`` and ``B = (1 - cos(w))/w`` with series near zero."""
     w = np.asarray(w, float)
     small = np.abs(w) < 1e-6
+    if w.ndim:  # closed forms everywhere, the series patched in where small (same values as the selects below)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            A, B = np.sin(w) / w, (1.0 - np.cos(w)) / w
+        if small.any():
+            ws = w[small]
+            A[small], B[small] = 1.0 - ws**2 / 6.0, ws / 2.0 - ws**3 / 24.0
+        return A, B
     ws = np.where(small, 1.0, w)
     A = np.where(small, 1.0 - w**2 / 6.0, np.sin(ws) / ws)
     B = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - np.cos(ws)) / ws)

@@ -39,6 +39,16 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
 def _log_jacobian_terms(w):
     """``(α, α')`` of :func:`log_jacobian` at the wrapped angle ``w`` (series below 1e-4)."""
     small = np.abs(w) < 1e-4
+    if np.ndim(w):  # closed forms everywhere, the series patched in where small (same values as the selects below)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            half = 0.5 * w
+            sh = np.sin(half)
+            cot = np.cos(half) / sh
+            alpha, dalpha = half * cot, 0.5 * cot - 0.25 * w / sh**2
+        if small.any():
+            ws = w[small]
+            alpha[small], dalpha[small] = 1.0 - ws**2 / 12.0, -ws / 6.0 - ws**3 / 180.0
+        return alpha, dalpha
     ws = np.where(small, 1.0, w)
     half = 0.5 * ws
     sh = np.sin(half)
@@ -48,19 +58,10 @@ def _log_jacobian_terms(w):
     return alpha, dalpha
 
 
-def _compose_left_jacobian(a: np.ndarray) -> np.ndarray:
-    """``∂ compose(a, b) / ∂b = blkdiag(R(θ_a), 1)``, ``(..., 3, 3)``."""
-    a = np.asarray(a, float)
-    J = np.zeros(a.shape[:-1] + (3, 3))
-    J[..., :2, :2] = se2.rot2(a[..., 2])
-    J[..., 2, 2] = 1.0
-    return J
-
-
 def between_error(x_i, x_j, measured):
     """GTSAM ``BetweenFactorPose2`` error ``e = Log(d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` and its Jacobians.
 
-    The products of :func:`log_jacobian`, :func:`_compose_left_jacobian` and
+    The products of :func:`log_jacobian`, ``∂(a ⊕ b)/∂b = blkdiag(R(θ_a), 1)`` and
     :func:`slamcli.models.se2.between_jacobians` written out entry by entry (one pass over the factors, no
     3×3 matrix products; the hot loop of every graph linearisation). With ``b = x_i⁻¹ ⊕ x_j``,
     ``p = d⁻¹ ⊕ b = (R(−δθ)(b_t − d_t), b_θ − δθ)``, ``A = ∂Log/∂p · blkdiag(R(−δθ), 1)`` and
@@ -120,15 +121,18 @@ def between_residual(x_i, x_j, measured):
 
 
 def prior_error(x, prior):
-    """GTSAM ``PriorFactorPose2`` error ``e = Log(p⁻¹ ⊕ x)`` and Jacobian ``(F, 3, 3)``."""
-    p_inv = se2.inverse(prior)
-    q = se2.compose(p_inv, x)
-    return se2.log(q), log_jacobian(q) @ _compose_left_jacobian(p_inv)
+    """GTSAM ``PriorFactorPose2`` error ``e = Log(p⁻¹ ⊕ x)`` and Jacobian ``(F, 3, 3)``: the between error of
+    ``(p, x)`` with an identity measurement (:func:`between_error`'s one pass; a prior block of one factor is
+    all per-call overhead, and it is evaluated at every linearisation and trial cost)."""
+    x = np.asarray(x, float)
+    e, _, J = between_error(np.broadcast_to(np.asarray(prior, float), x.shape), x, np.zeros(x.shape))
+    return e, J
 
 
 def prior_residual(x, prior):
     """The error ``e (F, 3)`` of :func:`prior_error` without its Jacobian (the same arithmetic)."""
-    return se2.log(se2.compose(se2.inverse(prior), x))
+    x = np.asarray(x, float)
+    return between_residual(np.broadcast_to(np.asarray(prior, float), x.shape), x, np.zeros(x.shape))
 
 
 def bearing_range_error(x, m, z):
