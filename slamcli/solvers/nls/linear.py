@@ -278,12 +278,12 @@ def _rotate_pairs(d: np.ndarray, i0: np.ndarray, i1: np.ndarray, c: np.ndarray, 
 
 def _repeated_pairs(c: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray | None:
     """Mask ``(P, F)`` of the off-diagonal local pairs ``a < b`` with ``c_a = c_b`` (None when there are none)."""
-    off = [(p, a, b) for p, (a, b) in enumerate(zip(ia, ib)) if a != b]
-    if not any(np.any(c[:, a] == c[:, b]) for _, a, b in off):
+    off = np.flatnonzero(ia != ib)
+    same = c[:, ia[off]] == c[:, ib[off]]  # (F, off-diagonal pairs), one comparison for all of them
+    if not same.any():
         return None
     mask = np.zeros((ia.size, c.shape[0]), bool)
-    for p, a, b in off:
-        mask[p] = c[:, a] == c[:, b]
+    mask[off] = same.T
     return mask
 
 
