@@ -131,6 +131,30 @@ def test_every_block_jacobian_matches_finite_differences(model):
     assert names == expected
 
 
+def test_body_chart_jacobians_match_finite_differences_of_the_retraction():
+    """``evaluate_body`` (the between factors' and the prior's fused body-chart Jacobians) against central
+    differences of the residual under GTSAM's retraction ``x_p ⊕ Exp(ξ)`` of each pose, and the residuals equal
+    ``evaluate``'s."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    x = gp.x0 + np.random.default_rng(6).normal(0, 0.3, gp.x0.size)
+    fused = [b for b in gp.problem.blocks if b.evaluate_body is not None]
+    assert {b.name for b in fused} >= {"prior", "odometry"}
+    for b in fused:
+        r, J = b.evaluate_body(x)
+        np.testing.assert_allclose(r, b.evaluate(x)[0], rtol=0, atol=1e-15)
+        for f in range(b.n_factors):
+            for o in range(0, b.cols.shape[1], 3):  # one pose per column triplet
+                c = b.cols[f, o : o + 3]
+
+                def rf(xi, f=f, c=c, b=b):
+                    xx = x.copy()
+                    xx[c] = se2.compose(x[c], se2.exp(xi))
+                    return b.evaluate(xx)[0][f]
+
+                np.testing.assert_allclose(J[f][:, o : o + 3], _num_jac(rf, np.zeros(3)), atol=2e-6,
+                                           err_msg=f"{b.name} factor {f}")
+
+
 # ---------------------------------------------------------------------------------------------------------
 # optimiser
 # ---------------------------------------------------------------------------------------------------------

@@ -201,10 +201,11 @@ class Assembler:
         total = 0.0
         body = params.pose_chart == "body" and self.problem.se2_poses > 0
         for i, b in enumerate(self.problem.blocks):
-            r, J = b.evaluate(x)
+            fused = body and b.evaluate_body is not None  # Jacobians in the body chart already
+            r, J = b.evaluate_body(x) if fused else b.evaluate(x)
             F, k, n = J.shape
-            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body else [], self._buffer(("jw", i), (k, n, F)),
-                                     self.identity_info[i])
+            JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body and not fused else [],
+                                     self._buffer(("jw", i), (k, n, F)), self.identity_info[i])
             rw = r if self.identity_info[i] else whiten(b.sqrt_info, r)  # (F, k)
             rho, w = kernel_cost(rw, b.robust, params)
             total += float(np.sum(rho))

@@ -39,6 +39,10 @@ class FactorBlock:
     residual : callable ``x (D,) -> r (F, k)`` or None
         The residuals of ``evaluate`` without the Jacobians (the same values), for cost-only evaluations
         (LM's trial steps); None = ``evaluate(x)[0]``.
+    evaluate_body : callable ``x (D,) -> (r (F, k), J (F, k, n))`` or None
+        ``evaluate`` with the columns of every SE(2) pose already in the body chart
+        (``J · blkdiag(R(θ), 1)``, ``NlsParams.pose_chart = "body"``), for blocks that get them cheaper in
+        one pass than by the assembler's rotation of ``evaluate``'s; None = ``evaluate`` then that rotation.
     """
 
     name: str
@@ -47,6 +51,7 @@ class FactorBlock:
     sqrt_info: np.ndarray
     robust: bool = False
     residual: Callable[[np.ndarray], np.ndarray] | None = None
+    evaluate_body: EvaluateFn | None = None
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Unwhitened residuals ``r (F, k)`` at ``x``."""
