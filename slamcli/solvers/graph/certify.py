@@ -97,8 +97,8 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """SE-Sync's ``κ (E,)`` and ``τ (E,)`` from edge information matrices ``info (E, 3, 3)`` over ``[x, y, θ]``."""
     info = np.asarray(info, float).reshape(-1, 3, 3)
     kappa = info[:, 2, 2].copy()
-    tran_cov = np.linalg.inv(info[:, :2, :2])
-    tau = 2.0 / np.trace(tran_cov, axis1=1, axis2=2)
+    a, b, c, d = info[:, 0, 0], info[:, 0, 1], info[:, 1, 0], info[:, 1, 1]
+    tau = 2.0 * (a * d - b * c) / (a + d)  # tr(A⁻¹) = tr(A) / det(A) for a 2×2 A
     return kappa, tau
 
 
@@ -202,7 +202,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
-            xn, cn = _frozen_step(asm, lin, params, flat, g, cost, NEWTON_SLACK)
+            xn, cn, gn = _frozen_step(problem, lin, flat, g, cost, NEWTON_SLACK)
             if xn is not None:
                 # its convergence is linear: stop on a step below F's rounding that also moved x by ≤ FROZEN_STEP_TOL
                 step = float(np.max(np.abs(xn - flat), initial=0.0))
@@ -210,7 +210,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 flat = xn
                 if done:
                     break
-                cost, g, stale = cn, _gradient(problem, flat), True
+                cost, g, stale = cn, gn, True
                 continue
         if stale:
             cost, lo, g = asm.linearize_lower(flat, params)
@@ -245,25 +245,27 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _gradient(problem: nls.NlsProblem, flat: np.ndarray) -> np.ndarray:
-    """``∇(½F) = Σ_e J_eᵀ r_e`` at ``flat`` (the gradient :meth:`nls.Assembler.linearize_lower` returns for the
-    one identity-weighted block of :func:`_sesync_problem`, without assembling ``H``), pose 0 held."""
+def _cost_gradient(problem: nls.NlsProblem, flat: np.ndarray) -> tuple[float, np.ndarray]:
+    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` from one evaluation (the cost and gradient
+    :meth:`nls.Assembler.linearize_lower` returns for the one identity-weighted block of :func:`_sesync_problem`,
+    without assembling ``H``), pose 0 held."""
     b = problem.blocks[0]
     r, J = b.evaluate(flat)
+    cost = float(np.sum(0.5 * np.einsum("fk,fk->f", r, r)))  # as Assembler.cost sums it
     g = np.bincount(np.asarray(b.cols).ravel(), weights=np.einsum("fka,fk->fa", J, r).ravel(), minlength=problem.n_vars)
     g[np.asarray(problem.fixed_cols)] = 0.0
-    return g
+    return cost, g
 
 
-def _frozen_step(asm, lin, params, flat, g, cost, slack: float):
-    """``(x, cost)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's ``H``) when
-    it does not raise the cost by more than ``slack·cost``, else ``(None, None)``."""
+def _frozen_step(problem, lin, flat, g, cost, slack: float):
+    """``(x, cost, gradient)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's
+    ``H``) when it does not raise the cost by more than ``slack·cost``, else ``(None, None, None)``."""
     h = lin.solve(-g)
     if h is None:
-        return None, None
+        return None, None, None
     xn = flat + h
-    cn = asm.cost(xn, params)
-    return (xn, cn) if cn <= cost + slack * abs(cost) else (None, None)
+    cn, gn = _cost_gradient(problem, xn)
+    return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
 
 
 def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool, slack: float = 0.0):
