@@ -95,7 +95,7 @@ def solve(
             0,
             np.array([cost]),
             np.zeros(1),
-            asm.matrix(asm.full(data)),
+            lambda: asm.matrix(asm.full(data)),
         )
     costs, times = [cost], [0.0]
     if callback is not None:
@@ -143,10 +143,14 @@ def solve(
             status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
             break
     notes = _notes(stats, lin.name)
-    full = asm.full(data)
-    if params.pose_chart == "body" and problem.se2_poses > 0:  # H for the marginals: world coordinates
-        world = asm.body_to_world(full, x)
-        full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
+
+    def information() -> sp.csc_matrix:  # H for the marginals, in world coordinates (on first use)
+        full = asm.full(data)
+        if params.pose_chart == "body" and problem.se2_poses > 0:
+            world = asm.body_to_world(full, x)
+            full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
+        return asm.matrix(full)
+
     return NlsResult(
         x=x,
         cost=cost,
@@ -155,7 +159,7 @@ def solve(
         iterations=it,
         cost_trace=np.asarray(costs),
         time_trace=np.asarray(times),
-        information=asm.matrix(full),
+        information_fn=information,
         linear_solves=int(stats["solves"]),
         notes=tuple(notes),
         linear_solver=lin.name,

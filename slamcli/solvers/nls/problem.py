@@ -4,6 +4,7 @@ and result, and the retraction ``x ⊞ h`` (see :mod:`slamcli.solvers.nls`).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
@@ -229,7 +230,10 @@ class NlsResult:
     cost_trace : ndarray (K+1,)  cost at the start and after every accepted step.
     time_trace : ndarray (K+1,)  wall time of each accepted step (0 for the start), s.
     information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` in world coordinates (also with
-                                 the body pose chart) — for :func:`marginal_covariances`.
+                                 the body pose chart) — for :func:`marginal_covariances`. Built on first
+                                 access (a property over ``information_fn``): a solve whose caller needs no
+                                 covariances never assembles the full symmetric matrix nor rotates it out of
+                                 the body chart.
     linear_solves : int          linear systems solved (accepted + rejected steps + GN damping retries).
     notes : tuple[str, ...]      numerical fallbacks that were taken (SuperLU instead of CHOLMOD or the
                                  banded Cholesky, damped Gauss-Newton steps); empty when none were needed.
@@ -246,11 +250,16 @@ class NlsResult:
     iterations: int
     cost_trace: np.ndarray
     time_trace: np.ndarray
-    information: sp.csc_matrix
+    information_fn: Callable[[], sp.csc_matrix] = field(repr=False, compare=False)
     linear_solves: int = 0
     notes: tuple[str, ...] = ()
     linear_solver: str = ""
     workspace: tuple | None = field(default=None, repr=False, compare=False)
+
+    @functools.cached_property
+    def information(self) -> sp.csc_matrix:
+        """``H`` at ``x`` in world coordinates (class docstring), computed once on first access."""
+        return self.information_fn()
 
 
 def pose_offsets(cols: np.ndarray, n_poses: int) -> list[int]:
