@@ -339,7 +339,7 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     x, asm, lin = _refine(poses_xyt, ij, xyt, kappa, tau, workspace)
     F = sesync_cost(x, ij, xyt, kappa, tau)
     S_lo, dual = _certificate_matrix(asm, x, ij, xyt, kappa, tau)
-    S = asm.matrix(asm.full(S_lo))  # in the pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
+    S = _LowerSymmetric(asm.lower_matrix(S_lo))  # pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
     eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
     shifted = S_lo.copy()
     shifted[asm.lo_diag_pos] += eta
@@ -376,7 +376,7 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     ct, st_ = np.cos(x[:, 2]), np.sin(x[:, 2])
     Xt = np.empty((n, 3, 2))  # rows of Xᵀ: t_i, then the columns of R_i = [[c, −s], [s, c]]
     Xt[:, 0], Xt[:, 1], Xt[:, 2] = x[:, :2], np.column_stack([ct, st_]), np.column_stack([-st_, ct])
-    G = (asm.matrix(asm.full(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
+    G = (_LowerSymmetric(asm.lower_matrix(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
     Lam = G @ np.swapaxes(Xt[:, 1:], 1, 2)  # G_i R_i (R_i's columns are rows 1, 2 of Xt_i)
     Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
     d1, d2 = asm.lo_diag_pos[3 * np.arange(n) + 1], asm.lo_diag_pos[3 * np.arange(n) + 2]
@@ -389,6 +389,28 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     S_lo[below[has]] -= Lam[has, 1, 0]
     S_lo[d2] -= Lam[:, 1, 1]
     return S_lo, float(np.trace(Lam, axis1=1, axis2=2).sum())
+
+
+class _LowerSymmetric:
+    """A sparse symmetric matrix held by its lower triangle (CSC, the assembler's lower data): products
+    ``A v = L v + Lᵀ v − diag(A) v`` without the full symmetric pattern; :meth:`tocsc` builds that when a
+    routine needs the matrix itself."""
+
+    def __init__(self, lower: sp.csc_matrix) -> None:
+        self.lower, self.diag, self.shape = lower, lower.diagonal(), lower.shape
+
+    def __matmul__(self, v: np.ndarray) -> np.ndarray:
+        d = self.diag if np.ndim(v) == 1 else self.diag[:, None]
+        return self.lower @ v + self.lower.T @ v - d * v
+
+    def tocsc(self) -> sp.csc_matrix:
+        return (self.lower + self.lower.T - sp.diags(self.diag)).tocsc()
+
+    def toarray(self) -> np.ndarray:
+        return self.tocsc().toarray()
+
+    def abs_max(self) -> float:
+        return float(np.max(np.abs(self.lower.data), initial=0.0))
 
 
 def _finite_solve(lin):
@@ -414,7 +436,7 @@ def _is_positive_definite(A: sp.csc_matrix):
     return factor is not None, factor
 
 
-def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> float:
+def _lambda_min(S: sp.csc_matrix | _LowerSymmetric, eta: float, certified: bool, solve=None) -> float:
     """Smallest eigenvalue of ``S``; NaN when the iteration does not converge.
 
     Certified (every eigenvalue ≥ −η): inverse iteration with the factorisation of ``S + ηI`` that the test
@@ -431,6 +453,7 @@ def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> fl
             return lam
     import scipy.sparse.linalg as spla  # the inverse iteration is slow when λ₁ is not isolated
 
+    S = S.tocsc()
     try:
         if certified:
             vals = spla.eigsh(S, k=1, sigma=-2.0 * eta, which="LM", v0=v0, return_eigenvectors=False)
@@ -442,12 +465,12 @@ def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> fl
     return float(vals[0])
 
 
-def _inverse_iteration(S: sp.csc_matrix, solve, v: np.ndarray) -> float:
+def _inverse_iteration(S: sp.csc_matrix | _LowerSymmetric, solve, v: np.ndarray) -> float:
     """Rayleigh quotient of ``S`` at the limit of ``v ← (S + ηI)⁻¹ v / ‖·‖``: converges at the rate
     ``(λ₁ + η) / (λ₂ + η)`` (``λ₁`` the smallest eigenvalue, ``λ₂`` the next distinct one; at a certified
     optimum ``λ₁ ≈ 0`` on the gauge null space and ``λ₂ ≫ η``, so a few steps). NaN without convergence."""
     lam = np.inf
-    scale = max(float(abs(S).max()), np.finfo(float).tiny)
+    scale = max(S.abs_max() if isinstance(S, _LowerSymmetric) else float(abs(S).max()), np.finfo(float).tiny)
     for _ in range(INVERSE_ITERATIONS):
         w = np.asarray(solve(v), float).ravel()
         norm = float(np.linalg.norm(w))
