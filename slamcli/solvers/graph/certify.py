@@ -229,7 +229,11 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         flat = xn
         if done:
             break
-        cost, lo, g = asm.linearize_lower(flat, params)
+        if near:  # the next step reuses this factorisation: it needs the gradient only, not H
+            cost, g = _cost_gradient(problem, flat)
+            stale = True
+        else:
+            cost, lo, g = asm.linearize_lower(flat, params)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
@@ -362,14 +366,12 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     n = x.shape[0]
     c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
     sk, st = np.sqrt(kappa), np.sqrt(tau)
-    zero = np.zeros_like(c)
-    V = np.stack([
-        np.stack([zero, -sk * c, -sk * s, zero, sk, zero], -1),  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
-        np.stack([zero, sk * s, -sk * c, zero, zero, sk], -1),  # A_e e₂
-        np.stack([-st, -st * xyt[:, 0], -st * xyt[:, 1], st, zero, zero], -1),  # a_e
-    ], 1)  # (E, 3, 6)
+    V = np.zeros((3, 6, c.size))  # (k, n, E): the assembler's layout, edges last
+    V[0, 1], V[0, 2], V[0, 4] = -sk * c, -sk * s, sk  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
+    V[1, 1], V[1, 2], V[1, 5] = sk * s, -sk * c, sk  # A_e e₂
+    V[2, 0], V[2, 1], V[2, 2], V[2, 3] = -st, -st * xyt[:, 0], -st * xyt[:, 1], st  # a_e
     ia, ib = asm.pairs[0]
-    vals = np.einsum("eka,ekb->abe", V, V)[ia, ib]
+    vals = np.einsum("kae,kbe->abe", V, V)[ia, ib]
     if asm.twice[0] is not None:
         vals[asm.twice[0]] *= 2.0
     M_lo = np.bincount(asm.lo_scatter[0], weights=vals.ravel(), minlength=asm.lo_nnz)
