@@ -70,8 +70,9 @@ def chi2_quantile(p: float, k: int) -> float:
 CHI2_QUANTILE_RTOL = 1e-13
 
 
-def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
-    """χ² outlier counts per factor block at ``x``.
+def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray, whitened: list | None = None) -> dict:
+    """χ² outlier counts per factor block at ``x`` (``whitened``: the blocks' whitened residuals there when
+    known, :meth:`nls.Assembler.whitened_at`).
 
     A factor with whitened residual ``r̃ = L r`` (``k`` components) is an outlier at level ``p`` when
     ``‖r̃‖² > χ²_k(p)`` — the test a Gaussian factor fails with probability ``1 − p`` at the true state.
@@ -84,12 +85,15 @@ def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
     """
     out: dict[str, dict] = {}
     thresholds: dict[int, tuple[float, float]] = {}
-    for b in problem.blocks:
-        r = b.residuals(x)  # no Jacobians
-        L = np.asarray(b.sqrt_info, float)
-        rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
+    for i, b in enumerate(problem.blocks):
+        if whitened is not None:
+            rw = whitened[i]
+        else:
+            r = b.residuals(x)  # no Jacobians
+            L = np.asarray(b.sqrt_info, float)
+            rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
         s2 = np.einsum("fk,fk->f", rw, rw)
-        k = int(r.shape[1])
+        k = int(rw.shape[1])
         if k not in thresholds:
             thresholds[k] = (chi2_quantile(0.95, k), chi2_quantile(0.99, k))
         t95, t99 = thresholds[k]
@@ -404,7 +408,9 @@ class GraphSlam(BaseSolver):
                 "cost": float(robust_init.cost),
             }
         if p.outlier_counts:
-            extra["chi2_outliers"] = chi2_outlier_counts(gp.problem, res.x)
+            asm = res.workspace[0] if res.workspace is not None else None
+            extra["chi2_outliers"] = chi2_outlier_counts(gp.problem, res.x,
+                                                         asm.whitened_at(res.x) if asm is not None else None)
         message = res.message
         if p.init == "auto" and start != "odometry" and p.init_from == "odometry":
             message += f"; started from the {start} relaxation (init=auto: a pose graph with loop closures)"

@@ -185,6 +185,13 @@ class Assembler:
         cost, lo, g = self.linearize_lower(x, params)
         return cost, self.full(lo), g
 
+    def whitened_at(self, x: np.ndarray) -> list[np.ndarray] | None:
+        """Every block's whitened residuals ``L r (F, k)`` from the last :meth:`linearize_lower`, when that was at
+        this very array ``x`` (an optimiser's final estimate: the summary's χ² counts need no new evaluation),
+        else None."""
+        last = getattr(self, "_last_whitened", None)
+        return last[1] if last is not None and last[0] is x else None
+
     def _buffer(self, key, shape) -> np.ndarray:
         buf = self._work.get(key)
         if buf is None or buf.shape != shape:
@@ -199,6 +206,7 @@ class Assembler:
         vals_all = self._buffer("vals", (int(self._bounds[-1]),))
         g = np.zeros(self.D)
         total = 0.0
+        whitened = []
         body = params.pose_chart == "body" and self.problem.se2_poses > 0
         for i, b in enumerate(self.problem.blocks):
             fused = body and b.evaluate_body is not None  # Jacobians in the body chart already
@@ -207,6 +215,7 @@ class Assembler:
             JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body and not fused else [],
                                      self._buffer(("jw", i), (k, n, F)), self.identity_info[i])
             rw = r if self.identity_info[i] else whiten(b.sqrt_info, r)  # (F, k)
+            whitened.append(rw)
             rho, w = kernel_cost(rw, b.robust, params)
             total += float(np.sum(rho))
             JtT = JwT if w is None else JwT * w
@@ -229,6 +238,7 @@ class Assembler:
             if self.twice[i] is not None:
                 vals[self.twice[i]] *= 2.0
         data = np.bincount(self._scatter_all, weights=vals_all, minlength=self.lo_nnz)
+        self._last_whitened = (x, whitened)
         if self.fixed.size:
             data[self.lo_fixed_mask] = 0.0
             data[self.lo_fixed_diag] = 1.0
