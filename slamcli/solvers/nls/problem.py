@@ -287,6 +287,9 @@ def retract(problem: NlsProblem, params: NlsParams, x: np.ndarray, h: np.ndarray
     if params.pose_chart != "body" or n <= 0:
         return problem.apply_step(x, h)
     P = 3 * n
+    poses = se2.compose(x[:P].reshape(-1, 3), se2.exp(h[:P].reshape(-1, 3))).ravel()
+    if P == x.size:  # a pose graph: nothing else to step
+        return poses
     out = problem.apply_step(x, np.concatenate([np.zeros(P), h[P:]]))
-    out[:P] = se2.compose(x[:P].reshape(-1, 3), se2.exp(h[:P].reshape(-1, 3))).ravel()
+    out[:P] = poses
     return out
