@@ -132,7 +132,9 @@ def solve(
         it += 1
         decrease = cost - new_cost
         x = x_new
-        cost, data, g = asm.linearize_lower(x, params)
+        # LM linearised its accepted trial already (_Damping.eager); the other methods evaluated its cost only
+        cost, data, g = st.trial_lin if st.trial_lin is not None else asm.linearize_lower(x, params)
+        st.trial_lin = None
         now = time.perf_counter()
         costs.append(cost)
         times.append(now - t_last)
@@ -174,6 +176,11 @@ class _Damping:
     lam: float
     nu: float
     delta: float
+    #: LM: linearise a trial point at once (its cost comes with it) while the last trial was accepted — near
+    #: the optimum nearly every trial is, and the accepted point's linearisation is the next iteration's, so its
+    #: residuals are evaluated once instead of twice; after a rejection trials get a cost evaluation only
+    eager: bool = True
+    trial_lin: tuple | None = None  # (cost, H lower data, g) at the accepted trial, when eager
 
 
 def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _Damping, stats, small):
@@ -205,7 +212,8 @@ def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _
                 break
             if pred >= 0.0:
                 x_new = retract(problem, params, x, h)
-                new_cost = asm.cost(x_new, params)
+                trial = asm.linearize_lower(x_new, params) if st.eager else None
+                new_cost = trial[0] if trial is not None else asm.cost(x_new, params)
                 change = cost - new_cost
                 if not np.isfinite(new_cost):
                     ok = False
@@ -217,7 +225,9 @@ def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _
                 if not ok and abs(change) < params.rel_cost_tol * cost:
                     stop = (Status.CONVERGED, "trial cost change below rel_cost_tol")
                     break
+        st.eager = ok
         if ok:
+            st.trial_lin = trial
             if params.lambda_update == "fixed":
                 st.lam /= params.lambda_factor
             else:
