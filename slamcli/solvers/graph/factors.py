@@ -23,7 +23,7 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
     """
     p = np.asarray(p, float)
     w = wrap_angle(p[..., 2])
-    alpha, dalpha = _log_jacobian_terms(w)
+    alpha, dalpha = se2.log_terms(w)
     x, y = p[..., 0], p[..., 1]
     J = np.zeros(p.shape[:-1] + (3, 3))
     J[..., 0, 0] = alpha
@@ -34,28 +34,6 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
     J[..., 1, 2] = -0.5 * x + dalpha * y
     J[..., 2, 2] = 1.0
     return J
-
-
-def _log_jacobian_terms(w):
-    """``(α, α')`` of :func:`log_jacobian` at the wrapped angle ``w`` (series below 1e-4)."""
-    small = np.abs(w) < 1e-4
-    if np.ndim(w):  # closed forms everywhere, the series patched in where small (same values as the selects below)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            half = 0.5 * w
-            sh = np.sin(half)
-            cot = np.cos(half) / sh
-            alpha, dalpha = half * cot, 0.5 * cot - 0.25 * w / sh**2
-        if small.any():
-            ws = w[small]
-            alpha[small], dalpha[small] = 1.0 - ws**2 / 12.0, -ws / 6.0 - ws**3 / 180.0
-        return alpha, dalpha
-    ws = np.where(small, 1.0, w)
-    half = 0.5 * ws
-    sh = np.sin(half)
-    cot = np.cos(half) / sh
-    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
-    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
-    return alpha, dalpha
 
 
 def between_error(x_i, x_j, measured, meas_cs=None):
@@ -82,8 +60,8 @@ def between_error(x_i, x_j, measured, meas_cs=None):
     """
     x_i = np.asarray(x_i, float)
     ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
-    e = se2.log_of(px, py, w)
-    alpha, dalpha = _log_jacobian_terms(w)  # ∂Log/∂p (log_jacobian)
+    alpha, dalpha = se2.log_terms(w)  # ∂Log/∂p (log_jacobian)
+    e = se2.log_of(px, py, w, alpha)
     hw = 0.5 * w
     # A = ∂Log/∂p · blkdiag(R(−δθ), 1):  R(−δθ) = [[cd, sd], [−sd, cd]]
     a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
@@ -134,8 +112,8 @@ def between_error_body(x_i, x_j, measured, meas_cs=None):
     sin δθ)`` of the measurements, precomputed."""
     x_i, x_j = np.asarray(x_i, float), np.asarray(x_j, float)
     ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
-    e = se2.log_of(px, py, w)
-    alpha, dalpha = _log_jacobian_terms(w)
+    alpha, dalpha = se2.log_terms(w)
+    e = se2.log_of(px, py, w, alpha)
     hw = 0.5 * w
     a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
     a10, a11 = -hw * cd - alpha * sd, alpha * cd - hw * sd
