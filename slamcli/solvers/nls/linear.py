@@ -41,6 +41,8 @@ class Assembler:
         self.problem, self.D = problem, D
         self.cols = [np.asarray(b.cols, np.int64) for b in problem.blocks]
         self.pairs = [np.triu_indices(c.shape[1]) for c in self.cols]  # local (a, b), a ≤ b
+        self._pair_flat = [ia * c.shape[1] + ib for c, (ia, ib) in zip(self.cols, self.pairs)]  # into (n·n, F)
+        self._cols_t = [c.T.ravel() for c in self.cols]  # column of every (a, f), a-major: the gradient's scatter
         # an off-diagonal local pair on one column (a factor touching a column twice) counts twice in H
         self.twice = [_repeated_pairs(c, ia, ib) for c, (ia, ib) in zip(self.cols, self.pairs)]
         sizes = [ia.size * c.shape[0] for c, (ia, _) in zip(self.cols, self.pairs)] + [D]
@@ -222,9 +224,9 @@ class Assembler:
             ia, ib = self.pairs[i]
             vals = vals_all[self._bounds[i] : self._bounds[i + 1]].reshape(ia.size, F)
             if F <= SMALL_BLOCK:  # few factors: a handful of batched calls beat per-pair vector operations
-                vals[:] = np.einsum("kaf,kbf->abf", JtT, JwT)[ia, ib]
-                g += np.bincount(self.cols[i].T.ravel(), weights=np.einsum("kaf,fk->af", JtT, rw).ravel(),
-                                 minlength=self.D)
+                # the pairs a ≤ b of all n² products, gathered straight into the work buffer
+                np.take(np.einsum("kaf,kbf->abf", JtT, JwT).reshape(n * n, F), self._pair_flat[i], axis=0, out=vals)
+                g += np.bincount(self._cols_t[i], weights=np.einsum("kaf,fk->af", JtT, rw).ravel(), minlength=self.D)
             else:
                 for p, (a, c) in enumerate(zip(ia, ib)):  # H_ab = Σ_k w J̃_ka J̃_kb, vectorised over factors
                     np.multiply(JtT[0, a], JwT[0, c], out=vals[p])
