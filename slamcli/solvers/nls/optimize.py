@@ -78,6 +78,7 @@ def solve(
         """``H(data) h = rhs`` for lower-triangle data; None if no factorisation gives a finite solution."""
         stats["solves"] += 1
         h = lin.solve(rhs) if factorize_lower(lin, asm, data) else None
+        stats["primary_ok"] = h is not None  # lin holds a good factorisation of the last system
         if h is None and lin.name != "superlu":
             stats["fallbacks"] += 1
             if not backup:
@@ -104,6 +105,7 @@ def solve(
     status = Status.MAX_ITERATIONS
     message = f"stopped after {params.max_iterations} iterations (max_iterations)"
     it = 0
+    decrease = np.inf  # of the last accepted step
     t_last = time.perf_counter()
 
     def small(h: np.ndarray) -> bool:
@@ -116,6 +118,9 @@ def solve(
         diag = data[asm.lo_diag_pos]
         Dvec = np.clip(diag, 1e-6, 1e32) if params.damping == "marquardt" else np.ones(asm.D)
         stop = None  # (status, message) that ends the optimisation inside this iteration
+        if params.method == "lm" and _converged_by_last_factor(lin, stats, params, st, g, cost, decrease):
+            status, message = Status.CONVERGED, "predicted cost decrease below pred_cost_tol (last factorisation)"
+            break
         if params.method == "lm":
             stop, x_new, new_cost = _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st, stats,
                                                   small)
@@ -167,6 +172,27 @@ def solve(
         linear_solver=lin.name,
         workspace=(asm, lin),
     )
+
+
+#: LM's predicted-decrease stop without a new factorisation (:func:`_converged_by_last_factor`): only after an
+#: accepted step that lowered the cost by at most this fraction (the asymptotic regime, where H hardly changes
+#: between iterates), and with this margin on ``pred_cost_tol``
+LAST_FACTOR_REGIME = 1e-6
+LAST_FACTOR_MARGIN = 0.5
+
+
+def _converged_by_last_factor(lin, stats, params, st, g, cost, decrease) -> bool:
+    """Whether the Gauss-Newton decrement ``½ gᵀH⁻¹g`` at the new iterate, with the factorisation of the previous
+    iterate's (damped) ``H`` that ``lin`` still holds, is below ``LAST_FACTOR_MARGIN · pred_cost_tol · cost`` —
+    the test of ``NlsParams.pred_cost_tol`` for one solve instead of a factorisation. Used only once the last
+    step lowered the cost by at most ``LAST_FACTOR_REGIME`` (relative), so ``H`` moved by a relative amount
+    of that order and the two decrements agree far inside the margin; otherwise (or when the primary
+    factorisation failed last time) the exact test runs in :func:`_lm_iteration`."""
+    if not (params.pred_cost_tol > 0.0 and stats.get("primary_ok") and st.lam <= params.lambda_init
+            and 0.0 <= decrease <= LAST_FACTOR_REGIME * cost):
+        return False
+    h = lin.solve(-g)
+    return h is not None and 0.0 <= -0.5 * float(g @ h) <= LAST_FACTOR_MARGIN * params.pred_cost_tol * cost
 
 
 @dataclass
