@@ -131,7 +131,9 @@ class NlsParams:
         ``pred_cost_tol · cost`` while λ is at most ``lambda_init``. Near the optimum that decrement is the
         distance to the minimum in cost, so LM stops one or two iterations (a trial cost, a retraction and a
         linearisation each) before ``rel_cost_tol`` would, at a point whose cost is within about
-        ``pred_cost_tol · cost`` of the optimum's.
+        ``pred_cost_tol · cost`` of the optimum's. After a step that lowered the cost by at most 1e-6
+        (relative) the decrement is computed with the previous iterate's factorisation (one solve, no new
+        factorisation; ``optimize.LAST_FACTOR_REGIME``).
     abs_cost_tol : float
         Converged when the cost is below this value.
     step_tol : float
