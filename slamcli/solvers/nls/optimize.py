@@ -150,14 +150,6 @@ def solve(
             status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
             break
     notes = _notes(stats, lin.name)
-
-    def information() -> sp.csc_matrix:  # H for the marginals, in world coordinates (on first use)
-        full = asm.full(data)
-        if params.pose_chart == "body" and problem.se2_poses > 0:
-            world = asm.body_to_world(full, x)
-            full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
-        return asm.matrix(full)
-
     return NlsResult(
         x=x,
         cost=cost,
@@ -166,12 +158,24 @@ def solve(
         iterations=it,
         cost_trace=np.asarray(costs),
         time_trace=np.asarray(times),
-        information_fn=information,
+        information_fn=_information_fn(problem, asm, params, x, data),
         linear_solves=int(stats["solves"]),
         notes=tuple(notes),
         linear_solver=lin.name,
         workspace=(asm, lin),
     )
+
+
+def _information_fn(problem, asm, params, x, data):
+    """``NlsResult.information_fn``: ``H`` at ``x`` (lower data ``data``) in world coordinates, for the marginals
+    — rotated out of the body chart, or relinearised in the world chart when the rotation does not apply."""
+    def information() -> sp.csc_matrix:
+        full = asm.full(data)
+        if params.pose_chart == "body" and problem.se2_poses > 0:
+            world = asm.body_to_world(full, x)
+            full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
+        return asm.matrix(full)
+    return information
 
 
 #: LM's predicted-decrease stop without a new factorisation (:func:`_converged_by_last_factor`): only after an
