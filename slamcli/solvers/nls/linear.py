@@ -4,6 +4,8 @@ and CHOLMOD / SuperLU / banded-chain factorisations refilled in place (see :mod:
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -40,7 +42,7 @@ class Assembler:
         D = problem.n_vars
         self.problem, self.D = problem, D
         self.cols = [np.asarray(b.cols, np.int64) for b in problem.blocks]
-        self.pairs = [np.triu_indices(c.shape[1]) for c in self.cols]  # local (a, b), a ≤ b
+        self.pairs = [_local_pairs(c.shape[1]) for c in self.cols]  # local (a, b), a ≤ b
         self._pair_flat = [ia * c.shape[1] + ib for c, (ia, ib) in zip(self.cols, self.pairs)]  # into (n·n, F)
         self._cols_t = [c.T.ravel() for c in self.cols]  # column of every (a, f), a-major: the gradient's scatter
         # an off-diagonal local pair on one column (a factor touching a column twice) counts twice in H
@@ -275,6 +277,15 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out:
         out[:, o] = j0 * c + j1 * s  # [J_x, J_y] R(θ), R = [[c, −s], [s, c]]
         out[:, o + 1] = j0 * -s + j1 * c
     return out
+
+
+@functools.lru_cache(maxsize=16)
+def _local_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n)`` (local column pairs ``a ≤ b`` of a factor with ``n`` columns), made once per ``n``
+    (read-only: shared by every assembler)."""
+    ia, ib = np.triu_indices(n)
+    ia.flags.writeable = ib.flags.writeable = False
+    return ia, ib
 
 
 def _is_identity(L) -> bool:

@@ -272,7 +272,11 @@ def pose_offsets(cols: np.ndarray, n_poses: int) -> list[int]:
         return []
     P = 3 * n_poses
     offs, covered = [], np.zeros(cols.shape, bool)
+    first = [int(v) for v in cols[0]]
     for o in range(cols.shape[1] - 2):
+        f0 = first[o]  # a triplet in every factor is one in the first: test that before all of them
+        if not (f0 < P and f0 % 3 == 0 and first[o + 1] == f0 + 1 and first[o + 2] == f0 + 2):
+            continue
         c = cols[:, o]
         if np.all((c < P) & (c % 3 == 0) & (cols[:, o + 1] == c + 1) & (cols[:, o + 2] == c + 2)):
             offs.append(o)
