@@ -331,12 +331,21 @@ def chordal_poses(
     r = system.solve(Bi, Bj, np.zeros((E, 2)), np.array([np.cos(x0[2]), np.sin(x0[2])]))[1:]
     theta = np.concatenate([[x0[2]], np.arctan2(r[:, 1], r[:, 0])])
 
-    # 2. translations: W_e (t_j − t_i − R(θ_i) Δt) = 0,  W_e = chol(Λ̄)ᵀ R(θ_i)ᵀ, t_0 given
-    Ltt = info[:, :2, :2] - info[:, :2, 2:3] @ info[:, 2:3, :2] / np.maximum(info[:, 2:3, 2:3], 1e-300)
-    Lc = np.linalg.cholesky(Ltt)  # Λ̄ = Lc Lcᵀ → whitening Lcᵀ
-    Ri = se2.rot2(theta[i])
-    W = np.swapaxes(Lc, 1, 2) @ np.swapaxes(Ri, 1, 2)
-    c = np.einsum("eab,eb->ea", W, np.einsum("eab,eb->ea", Ri, xyt[:, :2]))
+    # 2. translations: W_e (t_j − t_i − R(θ_i) Δt) = 0,  W_e = chol(Λ̄)ᵀ R(θ_i)ᵀ, t_0 given; Λ̄ = [[a, b], [b, d]] the
+    # Schur complement of θ in Λ_e, its Cholesky factor [[l00, 0], [l10, l11]] in closed form (2×2), and
+    # W_e R(θ_i) Δt = chol(Λ̄)ᵀ Δt
+    i22 = np.maximum(info[:, 2, 2], 1e-300)
+    a = info[:, 0, 0] - info[:, 0, 2] * info[:, 2, 0] / i22
+    b = info[:, 0, 1] - info[:, 0, 2] * info[:, 2, 1] / i22
+    d = info[:, 1, 1] - info[:, 1, 2] * info[:, 2, 1] / i22
+    l00 = np.sqrt(a)
+    l10 = b / l00
+    l11 = np.sqrt(d - l10 * l10)
+    ci, si = np.cos(theta[i]), np.sin(theta[i])
+    W = np.empty((E, 2, 2))  # [[l00, l10], [0, l11]] · R(θ_i)ᵀ
+    W[:, 0, 0], W[:, 0, 1] = l00 * ci - l10 * si, l00 * si + l10 * ci
+    W[:, 1, 0], W[:, 1, 1] = -l11 * si, l11 * ci
+    c = np.column_stack([l00 * xyt[:, 0] + l10 * xyt[:, 1], l11 * xyt[:, 1]])
     t = system.solve(W, W, c, np.asarray(x0[:2], float))[1:]
     poses = np.empty((n_poses, 3))
     poses[0] = x0
