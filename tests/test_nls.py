@@ -131,6 +131,30 @@ def test_every_block_jacobian_matches_finite_differences(model):
     assert names == expected
 
 
+def test_body_chart_jacobians_match_finite_differences_of_the_retraction():
+    """``evaluate_body`` (the between factors' and the prior's fused body-chart Jacobians) against central
+    differences of the residual under GTSAM's retraction ``x_p ⊕ Exp(ξ)`` of each pose, and the residuals equal
+    ``evaluate``'s."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    x = gp.x0 + np.random.default_rng(6).normal(0, 0.3, gp.x0.size)
+    fused = [b for b in gp.problem.blocks if b.evaluate_body is not None]
+    assert {b.name for b in fused} >= {"prior", "odometry"}
+    for b in fused:
+        r, J = b.evaluate_body(x)
+        np.testing.assert_allclose(r, b.evaluate(x)[0], rtol=0, atol=1e-15)
+        for f in range(b.n_factors):
+            for o in range(0, b.cols.shape[1], 3):  # one pose per column triplet
+                c = b.cols[f, o : o + 3]
+
+                def rf(xi, f=f, c=c, b=b):
+                    xx = x.copy()
+                    xx[c] = se2.compose(x[c], se2.exp(xi))
+                    return b.evaluate(xx)[0][f]
+
+                np.testing.assert_allclose(J[f][:, o : o + 3], _num_jac(rf, np.zeros(3)), atol=2e-6,
+                                           err_msg=f"{b.name} factor {f}")
+
+
 # ---------------------------------------------------------------------------------------------------------
 # optimiser
 # ---------------------------------------------------------------------------------------------------------
@@ -446,6 +470,36 @@ def test_assembler_on_another_assemblers_pattern_gives_the_same_normal_equations
     far = nls.FactorBlock("far", np.array([[a, b]]), lambda v: (v[None, [a, b]], np.ones((1, 2, 2))), np.eye(2))
     wider = nls.Assembler(nls.NlsProblem(sub.n_vars, [*sub.blocks, far], sub.angle_cols), like=own)
     assert wider.lo_indices is not own.lo_indices and wider.lo_nnz > own.lo_nnz
+
+
+def test_assembler_on_stacked_blocks_of_another_pattern_gives_the_same_normal_equations():
+    """A block whose factors are those of consecutive blocks of ``like`` (the certificate's one block of all
+    edges over the LM problem's odometry and loop-closure blocks) takes ``like``'s scatter positions without a
+    search: same pattern object, H and g equal to JᵀJ and Jᵀr of the dense Jacobian, scatter positions equal
+    to the searched ones."""
+    from slamcli.solvers.nls import linear
+
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    odo = next(b for b in gp.problem.blocks if b.name == "odometry")
+    k = odo.n_factors // 2
+
+    def part(sl):
+        return nls.FactorBlock("half", odo.cols[sl], lambda v: tuple(a[sl] for a in odo.evaluate(v)), odo.sqrt_info)
+
+    split = nls.NlsProblem(gp.problem.n_vars, [b if b is not odo else p for b in gp.problem.blocks
+                                               for p in ((part(slice(0, k)), part(slice(k, None))) if b is odo else (b,))],
+                           gp.problem.angle_cols)
+    like = nls.Assembler(split)
+    asm = nls.Assembler(gp.problem, like=like)
+    assert asm.lo_indices is like.lo_indices
+    sizes = [a.size * c.shape[0] for c, (a, _) in zip(asm.cols, asm.pairs)] + [asm.D]
+    key = asm._keys(np.cumsum([0] + sizes))
+    np.testing.assert_array_equal(linear._positions_by_blocks(like, asm.cols), linear._positions_in(like, key))
+    x = gp.x0 + 0.01 * np.random.default_rng(5).normal(size=gp.x0.size)
+    _, lo, g = asm.linearize_lower(x, nls.NlsParams(pose_chart="world"))
+    J = nls.jacobian_matrix(gp.problem, x).toarray()
+    np.testing.assert_allclose(asm.matrix(asm.full(lo)).toarray(), J.T @ J, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g, J.T @ nls.residual_vector(gp.problem, x), rtol=1e-12, atol=1e-9)
 
 
 def test_residual_only_evaluation_equals_the_residuals_of_evaluate():

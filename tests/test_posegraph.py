@@ -73,6 +73,32 @@ def test_intel_excerpt_reaches_gtsams_optimum(init):
     assert gt_cost > 0.1  # loop closures make the graph inconsistent: a cost of 0 would test nothing
 
 
+@pytest.mark.parametrize("path", [INTEL, MIT])
+def test_pose_graph_lm_stops_on_the_predicted_decrease_within_1e_10_of_gtsams_optimum(path, monkeypatch):
+    """The default pose-graph LM stops before a step whose predicted decrease is below ``pred_cost_tol`` (1e-10
+    relative): its cost is GTSAM's fully converged one (relative tolerance 1e-12, from the same chordal start) to
+    within 1e-10, in no more iterations than the run that polishes to ``rel_cost_tol`` (``pred_cost_tol=0``). The
+    test by the previous iterate's factorisation stops where the one by a new factorisation does."""
+    from slamcli.solvers.nls import optimize
+
+    inp = import_graph(path).inputs
+    res = solve_dataset(inp, "graph", {"covariance": False})
+    assert "(last factorisation)" in res.message
+    monkeypatch.setattr(optimize, "LAST_FACTOR_REGIME", -1.0)  # the exact test only
+    exact = solve_dataset(inp, "graph", {"covariance": False})
+    monkeypatch.undo()
+    assert "(last factorisation)" not in exact.message and exact.extra["iterations"] == res.extra["iterations"]
+    np.testing.assert_array_equal(exact.poses_xyt, res.poses_xyt)
+    full = solve_dataset(inp, "graph", {"covariance": False, "pred_cost_tol": 0.0})
+    g, _, gt_cost = _gtsam_solve(inp, graph.initial_poses(inp, "chordal"))
+    assert "predicted cost decrease below pred_cost_tol" in res.message
+    assert "predicted" not in full.message
+    assert abs(_error_of(g, res.poses_xyt) - gt_cost) <= 1e-10 * gt_cost
+    assert abs(res.extra["final_cost"] - gt_cost) <= 1e-10 * gt_cost
+    assert res.extra["iterations"] <= full.extra["iterations"]
+    assert res.extra["certificate"]["certified"] is True
+
+
 def test_mit_excerpt_lm_from_odometry_stalls_chordal_does_not():
     """LM from the odometry chain ends in a local minimum on MIT; chordal initialisation reaches GTSAM's
     optimum from the same start (and GTSAM from the odometry start stalls too: the minimum is real)."""

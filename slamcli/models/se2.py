@@ -85,6 +85,13 @@ def _sinc_terms(w):
     """``A = sin(w)/w`` and ``B = (1 - cos(w))/w`` with series near zero."""
     w = np.asarray(w, float)
     small = np.abs(w) < 1e-6
+    if w.ndim:  # closed forms everywhere, the series patched in where small (same values as the selects below)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            A, B = np.sin(w) / w, (1.0 - np.cos(w)) / w
+        if small.any():
+            ws = w[small]
+            A[small], B[small] = 1.0 - ws**2 / 6.0, ws / 2.0 - ws**3 / 24.0
+        return A, B
     ws = np.where(small, 1.0, w)
     A = np.where(small, 1.0 - w**2 / 6.0, np.sin(ws) / ws)
     B = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - np.cos(ws)) / ws)
@@ -107,11 +114,40 @@ def log(p):
     return log_of(p[..., 0], p[..., 1], wrap_angle(p[..., 2]))
 
 
-def log_of(x, y, w):
-    """:func:`log` of the pose ``(x, y, w)`` given as its coordinates, ``w`` already wrapped → ``(..., 3)``."""
-    A, B = _sinc_terms(w)
-    det = A * A + B * B
-    return np.stack([(A * x + B * y) / det, (-B * x + A * y) / det, w], -1)
+def log_of(x, y, w, alpha=None):
+    """:func:`log` of the pose ``(x, y, w)`` given as its coordinates, ``w`` already wrapped → ``(..., 3)``:
+    ``[α x + (w/2) y, −(w/2) x + α y, w]`` with ``α = (w/2) cot(w/2)`` (:func:`log_terms`; ``alpha`` when the
+    caller has it already) — ``V(w)⁻¹ [x, y]`` for ``V = [[A, −B], [B, A]]``, ``A = sin w / w``,
+    ``B = (1 − cos w)/w``, whose inverse ``[[A, B], [−B, A]] / (A² + B²)`` is that in half angles."""
+    if alpha is None:
+        alpha = log_terms(w)[0]
+    hw = 0.5 * w
+    return np.stack([alpha * x + hw * y, alpha * y - hw * x, w], -1)
+
+
+def log_terms(w):
+    """``(α, α')`` of the SE(2) logarithm at the wrapped angle ``w``: ``α = (w/2) cot(w/2)`` and its derivative
+    ``α' = ½ cot(w/2) − (w/4) / sin²(w/2)`` (for the logarithm's Jacobian); series ``1 − w²/12`` and
+    ``−w/6 − w³/180`` below ``|w| < 1e-4``."""
+    w = np.asarray(w, float)
+    small = np.abs(w) < 1e-4
+    if w.ndim:  # closed forms everywhere, the series patched in where small (same values as the selects below)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            half = 0.5 * w
+            sh = np.sin(half)
+            cot = np.cos(half) / sh
+            alpha, dalpha = half * cot, 0.5 * cot - 0.25 * w / sh**2
+        if small.any():
+            ws = w[small]
+            alpha[small], dalpha[small] = 1.0 - ws**2 / 12.0, -ws / 6.0 - ws**3 / 180.0
+        return alpha, dalpha
+    ws = np.where(small, 1.0, w)
+    half = 0.5 * ws
+    sh = np.sin(half)
+    cot = np.cos(half) / sh
+    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
+    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
+    return alpha, dalpha
 
 
 def interpolate_poses(t_rows: np.ndarray, xyt_rows: np.ndarray, t: np.ndarray) -> np.ndarray:

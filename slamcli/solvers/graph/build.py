@@ -15,6 +15,7 @@ from slamcli.solvers.graph.factors import (
     bearing_range_jacobian,
     bearing_range_residual,
     between_error,
+    between_error_body,
     between_residual,
     group_returns,
     landmark_offset_error,
@@ -142,28 +143,40 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
     def res_prior(x):
         return prior_residual(poses_of(x)[first], prior)
 
+    prior_b = np.broadcast_to(prior, (first.size, 3))
+    zero = np.zeros((first.size, 3))
+
+    def ev_prior_body(x):  # the prior is the between error of (prior, x) with an identity measurement
+        e, J = between_error_body(prior_b, poses_of(x)[first], zero)
+        return e, J[..., 3:]
+
     blocks.append(
         nls.FactorBlock("prior", pc[first], ev_prior, sqrt_info_from_cov(np.diag(np.square(params.prior_std))),
-                        residual=res_prior)
+                        residual=res_prior, evaluate_body=ev_prior_body)
     )
 
     def between_block(name, meas, cov, sqrt_info=None):
         meas = meas[chain]
         if sqrt_info is not None and np.ndim(sqrt_info) == 3:
             sqrt_info = sqrt_info[chain]
+        cs = (np.cos(meas[:, 2]), np.sin(meas[:, 2]))  # the measurements' rotations, constants of the block
 
         def ev(x):
             p = poses_of(x)
-            e, Ji, Jj = between_error(p[chain], p[chain + 1], meas)
+            e, Ji, Jj = between_error(p[chain], p[chain + 1], meas, cs)
             return e, np.concatenate([Ji, Jj], axis=2)
+
+        def ev_body(x):
+            p = poses_of(x)
+            return between_error_body(p[chain], p[chain + 1], meas, cs)
 
         def res(x):
             p = poses_of(x)
-            return between_residual(p[chain], p[chain + 1], meas)
+            return between_residual(p[chain], p[chain + 1], meas, cs)
 
         cols = np.concatenate([pc[chain], pc[chain + 1]], axis=1)
         return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info,
-                               residual=res)
+                               residual=res, evaluate_body=ev_body)
 
     if n_poses > 1 and params.use_odometry:
         d = motion.odometry_increments(inputs.odometry_xyt)
@@ -177,14 +190,20 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
         bij = np.asarray(bc.between_ij, np.int64).reshape(-1, 2)
         bmeas = np.asarray(bc.between_xyt, float).reshape(-1, 3)
 
+        bcs = (np.cos(bmeas[:, 2]), np.sin(bmeas[:, 2]))
+
         def ev_between(x):
             p = poses_of(x)
-            e, Ji, Jj = between_error(p[bij[:, 0]], p[bij[:, 1]], bmeas)
+            e, Ji, Jj = between_error(p[bij[:, 0]], p[bij[:, 1]], bmeas, bcs)
             return e, np.concatenate([Ji, Jj], axis=2)
+
+        def ev_between_body(x):
+            p = poses_of(x)
+            return between_error_body(p[bij[:, 0]], p[bij[:, 1]], bmeas, bcs)
 
         def res_between(x):
             p = poses_of(x)
-            return between_residual(p[bij[:, 0]], p[bij[:, 1]], bmeas)
+            return between_residual(p[bij[:, 0]], p[bij[:, 1]], bmeas, bcs)
 
         blocks.append(
             nls.FactorBlock(
@@ -194,6 +213,7 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
                 sqrt_info_batch(bc.between_info),
                 robust=True,
                 residual=res_between,
+                evaluate_body=ev_between_body,
             )
         )
     if n_poses > 1 and params.use_controls:

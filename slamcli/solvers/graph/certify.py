@@ -97,8 +97,8 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """SE-Sync's ``κ (E,)`` and ``τ (E,)`` from edge information matrices ``info (E, 3, 3)`` over ``[x, y, θ]``."""
     info = np.asarray(info, float).reshape(-1, 3, 3)
     kappa = info[:, 2, 2].copy()
-    tran_cov = np.linalg.inv(info[:, :2, :2])
-    tau = 2.0 / np.trace(tran_cov, axis1=1, axis2=2)
+    a, b, c, d = info[:, 0, 0], info[:, 0, 1], info[:, 1, 0], info[:, 1, 1]
+    tau = 2.0 * (a * d - b * c) / (a + d)  # tr(A⁻¹) = tr(A) / det(A) for a 2×2 A
     return kappa, tau
 
 
@@ -202,7 +202,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
-            xn, cn = _frozen_step(asm, lin, params, flat, g, cost, NEWTON_SLACK)
+            xn, cn, gn = _frozen_step(problem, lin, flat, g, cost, NEWTON_SLACK)
             if xn is not None:
                 # its convergence is linear: stop on a step below F's rounding that also moved x by ≤ FROZEN_STEP_TOL
                 step = float(np.max(np.abs(xn - flat), initial=0.0))
@@ -210,7 +210,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 flat = xn
                 if done:
                     break
-                cost, g, stale = cn, _gradient(problem, flat), True
+                cost, g, stale = cn, gn, True
                 continue
         if stale:
             cost, lo, g = asm.linearize_lower(flat, params)
@@ -229,7 +229,11 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         flat = xn
         if done:
             break
-        cost, lo, g = asm.linearize_lower(flat, params)
+        if near:  # the next step reuses this factorisation: it needs the gradient only, not H
+            cost, g = _cost_gradient(problem, flat)
+            stale = True
+        else:
+            cost, lo, g = asm.linearize_lower(flat, params)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
@@ -245,25 +249,27 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _gradient(problem: nls.NlsProblem, flat: np.ndarray) -> np.ndarray:
-    """``∇(½F) = Σ_e J_eᵀ r_e`` at ``flat`` (the gradient :meth:`nls.Assembler.linearize_lower` returns for the
-    one identity-weighted block of :func:`_sesync_problem`, without assembling ``H``), pose 0 held."""
+def _cost_gradient(problem: nls.NlsProblem, flat: np.ndarray) -> tuple[float, np.ndarray]:
+    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` from one evaluation (the cost and gradient
+    :meth:`nls.Assembler.linearize_lower` returns for the one identity-weighted block of :func:`_sesync_problem`,
+    without assembling ``H``), pose 0 held."""
     b = problem.blocks[0]
     r, J = b.evaluate(flat)
+    cost = float(np.sum(0.5 * np.einsum("fk,fk->f", r, r)))  # as Assembler.cost sums it
     g = np.bincount(np.asarray(b.cols).ravel(), weights=np.einsum("fka,fk->fa", J, r).ravel(), minlength=problem.n_vars)
     g[np.asarray(problem.fixed_cols)] = 0.0
-    return g
+    return cost, g
 
 
-def _frozen_step(asm, lin, params, flat, g, cost, slack: float):
-    """``(x, cost)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's ``H``) when
-    it does not raise the cost by more than ``slack·cost``, else ``(None, None)``."""
+def _frozen_step(problem, lin, flat, g, cost, slack: float):
+    """``(x, cost, gradient)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's
+    ``H``) when it does not raise the cost by more than ``slack·cost``, else ``(None, None, None)``."""
     h = lin.solve(-g)
     if h is None:
-        return None, None
+        return None, None, None
     xn = flat + h
-    cn = asm.cost(xn, params)
-    return (xn, cn) if cn <= cost + slack * abs(cost) else (None, None)
+    cn, gn = _cost_gradient(problem, xn)
+    return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
 
 
 def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool, slack: float = 0.0):
@@ -337,7 +343,7 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     x, asm, lin = _refine(poses_xyt, ij, xyt, kappa, tau, workspace)
     F = sesync_cost(x, ij, xyt, kappa, tau)
     S_lo, dual = _certificate_matrix(asm, x, ij, xyt, kappa, tau)
-    S = asm.matrix(asm.full(S_lo))  # in the pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
+    S = _LowerSymmetric(asm.lower_matrix(S_lo))  # pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
     eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
     shifted = S_lo.copy()
     shifted[asm.lo_diag_pos] += eta
@@ -360,21 +366,19 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     n = x.shape[0]
     c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
     sk, st = np.sqrt(kappa), np.sqrt(tau)
-    zero = np.zeros_like(c)
-    V = np.stack([
-        np.stack([zero, -sk * c, -sk * s, zero, sk, zero], -1),  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
-        np.stack([zero, sk * s, -sk * c, zero, zero, sk], -1),  # A_e e₂
-        np.stack([-st, -st * xyt[:, 0], -st * xyt[:, 1], st, zero, zero], -1),  # a_e
-    ], 1)  # (E, 3, 6)
+    V = np.zeros((3, 6, c.size))  # (k, n, E): the assembler's layout, edges last
+    V[0, 1], V[0, 2], V[0, 4] = -sk * c, -sk * s, sk  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
+    V[1, 1], V[1, 2], V[1, 5] = sk * s, -sk * c, sk  # A_e e₂
+    V[2, 0], V[2, 1], V[2, 2], V[2, 3] = -st, -st * xyt[:, 0], -st * xyt[:, 1], st  # a_e
     ia, ib = asm.pairs[0]
-    vals = np.einsum("eka,ekb->abe", V, V)[ia, ib]
+    vals = np.einsum("kae,kbe->abe", V, V)[ia, ib]
     if asm.twice[0] is not None:
         vals[asm.twice[0]] *= 2.0
     M_lo = np.bincount(asm.lo_scatter[0], weights=vals.ravel(), minlength=asm.lo_nnz)
     ct, st_ = np.cos(x[:, 2]), np.sin(x[:, 2])
     Xt = np.empty((n, 3, 2))  # rows of Xᵀ: t_i, then the columns of R_i = [[c, −s], [s, c]]
     Xt[:, 0], Xt[:, 1], Xt[:, 2] = x[:, :2], np.column_stack([ct, st_]), np.column_stack([-st_, ct])
-    G = (asm.matrix(asm.full(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
+    G = (_LowerSymmetric(asm.lower_matrix(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
     Lam = G @ np.swapaxes(Xt[:, 1:], 1, 2)  # G_i R_i (R_i's columns are rows 1, 2 of Xt_i)
     Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
     d1, d2 = asm.lo_diag_pos[3 * np.arange(n) + 1], asm.lo_diag_pos[3 * np.arange(n) + 2]
@@ -387,6 +391,28 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     S_lo[below[has]] -= Lam[has, 1, 0]
     S_lo[d2] -= Lam[:, 1, 1]
     return S_lo, float(np.trace(Lam, axis1=1, axis2=2).sum())
+
+
+class _LowerSymmetric:
+    """A sparse symmetric matrix held by its lower triangle (CSC, the assembler's lower data): products
+    ``A v = L v + Lᵀ v − diag(A) v`` without the full symmetric pattern; :meth:`tocsc` builds that when a
+    routine needs the matrix itself."""
+
+    def __init__(self, lower: sp.csc_matrix) -> None:
+        self.lower, self.diag, self.shape = lower, lower.diagonal(), lower.shape
+
+    def __matmul__(self, v: np.ndarray) -> np.ndarray:
+        d = self.diag if np.ndim(v) == 1 else self.diag[:, None]
+        return self.lower @ v + self.lower.T @ v - d * v
+
+    def tocsc(self) -> sp.csc_matrix:
+        return (self.lower + self.lower.T - sp.diags(self.diag)).tocsc()
+
+    def toarray(self) -> np.ndarray:
+        return self.tocsc().toarray()
+
+    def abs_max(self) -> float:
+        return float(np.max(np.abs(self.lower.data), initial=0.0))
 
 
 def _finite_solve(lin):
@@ -412,7 +438,7 @@ def _is_positive_definite(A: sp.csc_matrix):
     return factor is not None, factor
 
 
-def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> float:
+def _lambda_min(S: sp.csc_matrix | _LowerSymmetric, eta: float, certified: bool, solve=None) -> float:
     """Smallest eigenvalue of ``S``; NaN when the iteration does not converge.
 
     Certified (every eigenvalue ≥ −η): inverse iteration with the factorisation of ``S + ηI`` that the test
@@ -429,6 +455,7 @@ def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> fl
             return lam
     import scipy.sparse.linalg as spla  # the inverse iteration is slow when λ₁ is not isolated
 
+    S = S.tocsc()
     try:
         if certified:
             vals = spla.eigsh(S, k=1, sigma=-2.0 * eta, which="LM", v0=v0, return_eigenvectors=False)
@@ -440,12 +467,12 @@ def _lambda_min(S: sp.csc_matrix, eta: float, certified: bool, solve=None) -> fl
     return float(vals[0])
 
 
-def _inverse_iteration(S: sp.csc_matrix, solve, v: np.ndarray) -> float:
+def _inverse_iteration(S: sp.csc_matrix | _LowerSymmetric, solve, v: np.ndarray) -> float:
     """Rayleigh quotient of ``S`` at the limit of ``v ← (S + ηI)⁻¹ v / ‖·‖``: converges at the rate
     ``(λ₁ + η) / (λ₂ + η)`` (``λ₁`` the smallest eigenvalue, ``λ₂`` the next distinct one; at a certified
     optimum ``λ₁ ≈ 0`` on the gauge null space and ``λ₂ ≫ η``, so a few steps). NaN without convergence."""
     lam = np.inf
-    scale = max(float(abs(S).max()), np.finfo(float).tiny)
+    scale = max(S.abs_max() if isinstance(S, _LowerSymmetric) else float(abs(S).max()), np.finfo(float).tiny)
     for _ in range(INVERSE_ITERATIONS):
         w = np.asarray(solve(v), float).ravel()
         norm = float(np.linalg.norm(w))

@@ -23,7 +23,7 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
     """
     p = np.asarray(p, float)
     w = wrap_angle(p[..., 2])
-    alpha, dalpha = _log_jacobian_terms(w)
+    alpha, dalpha = se2.log_terms(w)
     x, y = p[..., 0], p[..., 1]
     J = np.zeros(p.shape[:-1] + (3, 3))
     J[..., 0, 0] = alpha
@@ -36,31 +36,10 @@ def log_jacobian(p: np.ndarray) -> np.ndarray:
     return J
 
 
-def _log_jacobian_terms(w):
-    """``(α, α')`` of :func:`log_jacobian` at the wrapped angle ``w`` (series below 1e-4)."""
-    small = np.abs(w) < 1e-4
-    ws = np.where(small, 1.0, w)
-    half = 0.5 * ws
-    sh = np.sin(half)
-    cot = np.cos(half) / sh
-    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
-    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
-    return alpha, dalpha
-
-
-def _compose_left_jacobian(a: np.ndarray) -> np.ndarray:
-    """``∂ compose(a, b) / ∂b = blkdiag(R(θ_a), 1)``, ``(..., 3, 3)``."""
-    a = np.asarray(a, float)
-    J = np.zeros(a.shape[:-1] + (3, 3))
-    J[..., :2, :2] = se2.rot2(a[..., 2])
-    J[..., 2, 2] = 1.0
-    return J
-
-
-def between_error(x_i, x_j, measured):
+def between_error(x_i, x_j, measured, meas_cs=None):
     """GTSAM ``BetweenFactorPose2`` error ``e = Log(d⁻¹ ⊕ (x_i⁻¹ ⊕ x_j))`` and its Jacobians.
 
-    The products of :func:`log_jacobian`, :func:`_compose_left_jacobian` and
+    The products of :func:`log_jacobian`, ``∂(a ⊕ b)/∂b = blkdiag(R(θ_a), 1)`` and
     :func:`slamcli.models.se2.between_jacobians` written out entry by entry (one pass over the factors, no
     3×3 matrix products; the hot loop of every graph linearisation). With ``b = x_i⁻¹ ⊕ x_j``,
     ``p = d⁻¹ ⊕ b = (R(−δθ)(b_t − d_t), b_θ − δθ)``, ``A = ∂Log/∂p · blkdiag(R(−δθ), 1)`` and
@@ -73,15 +52,16 @@ def between_error(x_i, x_j, measured):
     Parameters
     ----------
     x_i, x_j, measured : ndarray (F, 3)
+    meas_cs : (cos δθ, sin δθ) of the measurements, optional (precomputed per factor block)
 
     Returns
     -------
     e : ndarray (F, 3);  J_i, J_j : ndarray (F, 3, 3)  (w.r.t. world coordinates of x_i, x_j)
     """
     x_i = np.asarray(x_i, float)
-    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured)
-    e = se2.log_of(px, py, w)
-    alpha, dalpha = _log_jacobian_terms(w)  # ∂Log/∂p (log_jacobian)
+    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
+    alpha, dalpha = se2.log_terms(w)  # ∂Log/∂p (log_jacobian)
+    e = se2.log_of(px, py, w, alpha)
     hw = 0.5 * w
     # A = ∂Log/∂p · blkdiag(R(−δθ), 1):  R(−δθ) = [[cd, sd], [−sd, cd]]
     a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
@@ -99,36 +79,71 @@ def between_error(x_i, x_j, measured):
     return e, Ji, Jj
 
 
-def _between_parts(x_i, x_j, measured):
+def _between_parts(x_i, x_j, measured, meas_cs=None):
     """The intermediate terms of :func:`between_error`: ``cos θ_i, sin θ_i``, ``b_t`` of ``b = x_i⁻¹ ⊕ x_j``,
-    ``cos δθ, sin δθ`` of the measurement and ``p = d⁻¹ ⊕ b`` as ``(p_x, p_y, p_θ)`` (``p_θ`` wrapped)."""
+    ``cos δθ, sin δθ`` of the measurement (``meas_cs`` when given: they are constants of a factor block) and
+    ``p = d⁻¹ ⊕ b`` as ``(p_x, p_y, p_θ)`` (``p_θ`` wrapped)."""
     x_i, x_j, d = (np.asarray(v, float) for v in (x_i, x_j, measured))
     ci, si = np.cos(x_i[..., 2]), np.sin(x_i[..., 2])
     dxw, dyw = x_j[..., 0] - x_i[..., 0], x_j[..., 1] - x_i[..., 1]
     bx, by = ci * dxw + si * dyw, ci * dyw - si * dxw
-    cd, sd = np.cos(d[..., 2]), np.sin(d[..., 2])
+    cd, sd = (np.cos(d[..., 2]), np.sin(d[..., 2])) if meas_cs is None else meas_cs
     ux, uy = bx - d[..., 0], by - d[..., 1]
     px, py = cd * ux + sd * uy, cd * uy - sd * ux  # R(−δθ)(b_t − d_t)
     w = wrap_angle(x_j[..., 2] - x_i[..., 2] - d[..., 2])
     return ci, si, bx, by, cd, sd, px, py, w
 
 
-def between_residual(x_i, x_j, measured):
-    """The error ``e (F, 3)`` of :func:`between_error` without its Jacobians (the same arithmetic)."""
-    *_, px, py, w = _between_parts(x_i, x_j, measured)
+def between_residual(x_i, x_j, measured, meas_cs=None):
+    """The error ``e (F, 3)`` of :func:`between_error` without its Jacobians (the same arithmetic;
+    ``meas_cs``: ``(cos δθ, sin δθ)`` of the measurements, precomputed)."""
+    *_, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
     return se2.log_of(px, py, w)
 
 
+def between_error_body(x_i, x_j, measured, meas_cs=None):
+    """:func:`between_error` with both poses' Jacobians in GTSAM's body chart (``x ← x ⊕ Exp(ξ)``,
+    ``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``), as one ``(F, 3, 6)`` array ``[J_i | J_j]`` — what the assembler's
+    body-chart rotation makes of :func:`between_error`'s, without the rotation pass. With its notation::
+
+        J_i = [[−A₂, A₂ [b_y, −b_x]ᵀ − a], [0, −1]]      J_j = [[A₂ R(θ_j − θ_i), a], [0, 1]]
+
+    (``R_iᵀ R_i = I`` on the left; ``R_iᵀ R_j = R(θ_j − θ_i)`` on the right). ``meas_cs``: ``(cos δθ,
+    sin δθ)`` of the measurements, precomputed."""
+    x_i, x_j = np.asarray(x_i, float), np.asarray(x_j, float)
+    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
+    alpha, dalpha = se2.log_terms(w)
+    e = se2.log_of(px, py, w, alpha)
+    hw = 0.5 * w
+    a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
+    a10, a11 = -hw * cd - alpha * sd, alpha * cd - hw * sd
+    a02, a12 = dalpha * px + 0.5 * py, dalpha * py - 0.5 * px
+    cj, sj = np.cos(x_j[..., 2]), np.sin(x_j[..., 2])
+    c, s = ci * cj + si * sj, ci * sj - si * cj  # cos, sin of θ_j − θ_i
+    J = np.zeros(x_i.shape[:-1] + (3, 6))
+    J[..., 0, 0], J[..., 0, 1], J[..., 1, 0], J[..., 1, 1] = -a00, -a01, -a10, -a11
+    J[..., 0, 2] = a00 * by - a01 * bx - a02
+    J[..., 1, 2] = a10 * by - a11 * bx - a12
+    J[..., 2, 2] = -1.0
+    J[..., 0, 3], J[..., 0, 4] = a00 * c + a01 * s, a01 * c - a00 * s
+    J[..., 1, 3], J[..., 1, 4] = a10 * c + a11 * s, a11 * c - a10 * s
+    J[..., 0, 5], J[..., 1, 5], J[..., 2, 5] = a02, a12, 1.0
+    return e, J
+
+
 def prior_error(x, prior):
-    """GTSAM ``PriorFactorPose2`` error ``e = Log(p⁻¹ ⊕ x)`` and Jacobian ``(F, 3, 3)``."""
-    p_inv = se2.inverse(prior)
-    q = se2.compose(p_inv, x)
-    return se2.log(q), log_jacobian(q) @ _compose_left_jacobian(p_inv)
+    """GTSAM ``PriorFactorPose2`` error ``e = Log(p⁻¹ ⊕ x)`` and Jacobian ``(F, 3, 3)``: the between error of
+    ``(p, x)`` with an identity measurement (:func:`between_error`'s one pass; a prior block of one factor is
+    all per-call overhead, and it is evaluated at every linearisation and trial cost)."""
+    x = np.asarray(x, float)
+    e, _, J = between_error(np.broadcast_to(np.asarray(prior, float), x.shape), x, np.zeros(x.shape))
+    return e, J
 
 
 def prior_residual(x, prior):
     """The error ``e (F, 3)`` of :func:`prior_error` without its Jacobian (the same arithmetic)."""
-    return se2.log(se2.compose(se2.inverse(prior), x))
+    x = np.asarray(x, float)
+    return between_residual(np.broadcast_to(np.asarray(prior, float), x.shape), x, np.zeros(x.shape))
 
 
 def bearing_range_error(x, m, z):

@@ -20,7 +20,8 @@ Two standard initialisations avoid that:
      ``min Σ_e ‖t_j − t_i − R(θ_i) Δt_e‖²_{Ω_e}``, ``Ω_e = R(θ_i) Λ̄_e R(θ_i)ᵀ`` with ``Λ̄_e`` the translation
      information of the edge (Schur complement of the rotation in ``Λ_e``), ``t_0`` fixed.
 
-  Both are sparse linear systems (normal equations, one sparse LU each), ``O(edges)`` to build.
+  Both are sparse linear systems (normal equations on one shared pattern and solver analysis,
+  :class:`_PairSystem`), ``O(edges)`` to build.
 """
 
 from __future__ import annotations
@@ -256,11 +257,46 @@ def component_roots(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         roots = hooked
 
 
-def _solve_normal(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
-    """Least squares ``min ‖A x − b‖`` through the normal equations ``AᵀA x = Aᵀb`` (symmetric positive
-    definite: a sparse Cholesky, :func:`slamcli.solvers.nls.solve_spd`)."""
-    At = A.T.tocsr()
-    return nls.solve_spd(At @ A, At @ b)
+class _PairSystem:
+    """Linear least squares ``min Σ_e ‖B_j,e u_j − B_i,e u_i − c_e‖²`` over 2-vectors ``u (n, 2)`` with ``u_0``
+    given, through its normal equations (symmetric positive definite when every pose is connected to pose 0).
+
+    Both chordal systems (rotations, then translations) have this form on the same edges, so they share one
+    :class:`slamcli.solvers.nls.Assembler` pattern (scatter positions computed once) and one analysis of the
+    linear solver (CHOLMOD's ordering and symbolic factorisation when installed): each solve is one assembly
+    and one numeric factorisation."""
+
+    def __init__(self, n: int, i: np.ndarray, j: np.ndarray) -> None:
+        self.n, self.i, self.j = n, i, j
+        cols = np.concatenate([2 * i[:, None] + np.arange(2), 2 * j[:, None] + np.arange(2)], axis=1)
+        self._terms: tuple = ()
+        block = nls.FactorBlock("pair", cols, self._evaluate, np.eye(2))
+        problem = nls.NlsProblem(2 * n, [block], fixed_cols=np.arange(2, dtype=np.int64))
+        self.params = nls.NlsParams(pose_chart="world")
+        self.asm = nls.Assembler(problem)
+        self.lin = nls.make_linear_solver(self.asm, self.params)
+
+    def _evaluate(self, v: np.ndarray):
+        Bi, Bj, c = self._terms
+        u = v.reshape(-1, 2)
+        r = np.einsum("eab,eb->ea", Bj, u[self.j]) - np.einsum("eab,eb->ea", Bi, u[self.i]) - c
+        return r, np.concatenate([-Bi, Bj], axis=2)
+
+    def solve(self, Bi: np.ndarray, Bj: np.ndarray, c: np.ndarray, u0: np.ndarray) -> np.ndarray:
+        """``u (n, 2)`` for blocks ``Bi``, ``Bj`` (E, 2, 2), right-hand sides ``c`` (E, 2) and the given ``u_0``.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError   the normal equations are not numerically positive definite.
+        """
+        self._terms = (Bi, Bj, c)
+        x = np.zeros(2 * self.n)
+        x[:2] = u0
+        _, lo, g = self.asm.linearize_lower(x, self.params)  # g = Jᵀ r at u_free = 0: the system is linear
+        h = self.lin.solve(-g) if nls.factorize_lower(self.lin, self.asm, lo) else None
+        if h is None:
+            raise np.linalg.LinAlgError("chordal normal equations are not positive definite")
+        return (x + h).reshape(self.n, 2)
 
 
 def chordal_poses(
@@ -286,53 +322,31 @@ def chordal_poses(
         raise ValueError(f"pose {bad} is not connected to pose 0 by any edge")
     i, j = ij[:, 0], ij[:, 1]
     E = ij.shape[0]
-    m = n_poses - 1  # unknown poses 1..n-1 → columns 2(k-1), 2(k-1)+1
+    system = _PairSystem(n_poses, i, j)
 
-    def assemble(blocks_i, blocks_j, rhs_fixed):
-        """Rows ``B_j u_j − B_i u_i = c`` (2 per edge) with u_0 known: returns A (2E, 2m), b (2E,)."""
-        rows = np.arange(2 * E).reshape(E, 2)
-        r_list, c_list, v_list = [], [], []
-        b = rhs_fixed.copy()
-        for who, B, sign in ((j, blocks_j, 1.0), (i, blocks_i, -1.0)):
-            free = who > 0
-            cols = 2 * (who[:, None] - 1) + np.arange(2)[None, :]  # (E, 2)
-            rr = np.broadcast_to(rows[:, :, None], (E, 2, 2))
-            cc = np.broadcast_to(cols[:, None, :], (E, 2, 2))
-            r_list.append(rr[free].ravel())
-            c_list.append(cc[free].ravel())
-            v_list.append((sign * B)[free].ravel())
-        A = sp.csr_matrix(
-            (np.concatenate(v_list), (np.concatenate(r_list), np.concatenate(c_list))), shape=(2 * E, 2 * m)
-        )
-        return A, b
-
-    # 1. rotations: sqrt(κ) (r_j − R(Δθ) r_i) = 0
+    # 1. rotations: sqrt(κ) (r_j − R(Δθ) r_i) = 0, r_0 = [cos θ_0, sin θ_0]
     kappa = np.sqrt(np.maximum(info[:, 2, 2], 1e-12))
-    Rd = se2.rot2(xyt[:, 2])  # (E, 2, 2)
-    I2 = np.broadcast_to(np.eye(2), (E, 2, 2))
-    Bj = kappa[:, None, None] * I2
-    Bi = kappa[:, None, None] * Rd
-    r0 = np.array([np.cos(x0[2]), np.sin(x0[2])])
-    # known u_0 moves to the right-hand side: + B_i r_0 where i = 0, − B_j r_0 where j = 0
-    rhs = np.zeros((E, 2))
-    rhs[i == 0] += np.einsum("eab,b->ea", Bi[i == 0], r0)
-    rhs[j == 0] -= np.einsum("eab,b->ea", Bj[j == 0], r0)
-    A, b = assemble(Bi, Bj, rhs.ravel())
-    r = _solve_normal(A, b).reshape(m, 2)
+    Bi = kappa[:, None, None] * se2.rot2(xyt[:, 2])  # (E, 2, 2)
+    Bj = kappa[:, None, None] * np.broadcast_to(np.eye(2), (E, 2, 2))
+    r = system.solve(Bi, Bj, np.zeros((E, 2)), np.array([np.cos(x0[2]), np.sin(x0[2])]))[1:]
     theta = np.concatenate([[x0[2]], np.arctan2(r[:, 1], r[:, 0])])
 
-    # 2. translations: W_e (t_j − t_i − R(θ_i) Δt) = 0,  W_e = chol(Λ̄)ᵀ R(θ_i)ᵀ
-    Ltt = info[:, :2, :2] - info[:, :2, 2:3] @ info[:, 2:3, :2] / np.maximum(info[:, 2:3, 2:3], 1e-300)
-    Lc = np.linalg.cholesky(Ltt)  # Λ̄ = Lc Lcᵀ → whitening Lcᵀ
-    Ri = se2.rot2(theta[i])
-    W = np.swapaxes(Lc, 1, 2) @ np.swapaxes(Ri, 1, 2)
-    c = np.einsum("eab,eb->ea", W, np.einsum("eab,eb->ea", Ri, xyt[:, :2]))
-    t0 = np.asarray(x0[:2], float)
-    rhs = c.copy()
-    rhs[i == 0] += np.einsum("eab,b->ea", W[i == 0], t0)
-    rhs[j == 0] -= np.einsum("eab,b->ea", W[j == 0], t0)
-    A, b = assemble(W, W, rhs.ravel())
-    t = _solve_normal(A, b).reshape(m, 2)
+    # 2. translations: W_e (t_j − t_i − R(θ_i) Δt) = 0,  W_e = chol(Λ̄)ᵀ R(θ_i)ᵀ, t_0 given; Λ̄ = [[a, b], [b, d]] the
+    # Schur complement of θ in Λ_e, its Cholesky factor [[l00, 0], [l10, l11]] in closed form (2×2), and
+    # W_e R(θ_i) Δt = chol(Λ̄)ᵀ Δt
+    i22 = np.maximum(info[:, 2, 2], 1e-300)
+    a = info[:, 0, 0] - info[:, 0, 2] * info[:, 2, 0] / i22
+    b = info[:, 0, 1] - info[:, 0, 2] * info[:, 2, 1] / i22
+    d = info[:, 1, 1] - info[:, 1, 2] * info[:, 2, 1] / i22
+    l00 = np.sqrt(a)
+    l10 = b / l00
+    l11 = np.sqrt(d - l10 * l10)
+    ci, si = np.cos(theta[i]), np.sin(theta[i])
+    W = np.empty((E, 2, 2))  # [[l00, l10], [0, l11]] · R(θ_i)ᵀ
+    W[:, 0, 0], W[:, 0, 1] = l00 * ci - l10 * si, l00 * si + l10 * ci
+    W[:, 1, 0], W[:, 1, 1] = -l11 * si, l11 * ci
+    c = np.column_stack([l00 * xyt[:, 0] + l10 * xyt[:, 1], l11 * xyt[:, 1]])
+    t = system.solve(W, W, c, np.asarray(x0[:2], float))[1:]
     poses = np.empty((n_poses, 3))
     poses[0] = x0
     poses[1:, :2] = t

@@ -4,6 +4,7 @@ merges → marginals).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,9 +52,11 @@ def chi2_cdf(x: float, k: int) -> float:
     return min(max(P, 0.0), 1.0)
 
 
+@functools.lru_cache(maxsize=64)
 def chi2_quantile(p: float, k: int) -> float:
     """``x`` with ``chi2_cdf(x, k) = p`` (0 < p < 1) by bisection to ``CHI2_QUANTILE_RTOL`` (the CDF is
-    monotone; the bracket doubles until it holds ``p``)."""
+    monotone; the bracket doubles until it holds ``p``). Cached: every solve's outlier counts ask for the same
+    few ``(p, k)`` (≈ 50 CDF evaluations each)."""
     lo, hi = 0.0, max(1.0, float(k))
     while chi2_cdf(hi, k) < p:
         lo, hi = hi, 2.0 * hi
@@ -67,8 +70,9 @@ def chi2_quantile(p: float, k: int) -> float:
 CHI2_QUANTILE_RTOL = 1e-13
 
 
-def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
-    """χ² outlier counts per factor block at ``x``.
+def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray, whitened: list | None = None) -> dict:
+    """χ² outlier counts per factor block at ``x`` (``whitened``: the blocks' whitened residuals there when
+    known, :meth:`nls.Assembler.whitened_at`).
 
     A factor with whitened residual ``r̃ = L r`` (``k`` components) is an outlier at level ``p`` when
     ``‖r̃‖² > χ²_k(p)`` — the test a Gaussian factor fails with probability ``1 − p`` at the true state.
@@ -81,12 +85,15 @@ def chi2_outlier_counts(problem: nls.NlsProblem, x: np.ndarray) -> dict:
     """
     out: dict[str, dict] = {}
     thresholds: dict[int, tuple[float, float]] = {}
-    for b in problem.blocks:
-        r = b.residuals(x)  # no Jacobians
-        L = np.asarray(b.sqrt_info, float)
-        rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
+    for i, b in enumerate(problem.blocks):
+        if whitened is not None:
+            rw = whitened[i]
+        else:
+            r = b.residuals(x)  # no Jacobians
+            L = np.asarray(b.sqrt_info, float)
+            rw = r @ L.T if L.ndim == 2 else np.einsum("fij,fj->fi", L, r)
         s2 = np.einsum("fk,fk->f", rw, rw)
-        k = int(r.shape[1])
+        k = int(rw.shape[1])
         if k not in thresholds:
             thresholds[k] = (chi2_quantile(0.95, k), chi2_quantile(0.99, k))
         t95, t99 = thresholds[k]
@@ -274,7 +281,7 @@ class GraphSlam(BaseSolver):
             if progress is not None:
                 progress(min(run.done_iters + k, run.budget), run.budget)
 
-        nparams = p.nls_params(kernel, p.kernel_scale(kernel))
+        nparams = p.nls_params(kernel, p.kernel_scale(kernel), pose_graph=self._is_pose_graph(inputs, len(lm0), kernel))
         x_init_poses, x_init_lms = poses0, lm0
         for rnd in range(rounds + 1):
             run.rnd = rnd
@@ -295,11 +302,11 @@ class GraphSlam(BaseSolver):
             x_init_poses, x_init_lms = merged
         return run
 
-    def _is_pose_graph(self, inputs: SlamInputs, run: _Run, kernel: str) -> bool:
+    def _is_pose_graph(self, inputs: SlamInputs, n_landmarks: int, kernel: str) -> bool:
         """Whether the solved graph is a plain pose graph (the SE-Sync certificate applies): ``gtsam`` model,
         no landmarks, no kernel, GPS, controls, range bias or second robot."""
         p = self.params
-        return (p.model == "gtsam" and run.gp.n_landmarks == 0 and kernel == "none" and inputs.robots is None
+        return (p.model == "gtsam" and n_landmarks == 0 and kernel == "none" and inputs.robots is None
                 and not p.use_controls and not uses_gps(p, inputs) and not p.estimate_range_bias and inputs.n_poses >= 2)
 
     def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress, start: str):
@@ -309,7 +316,7 @@ class GraphSlam(BaseSolver):
         Returns ``(run, certificate or None, restart dict or None)``; the run kept has the lower cost."""
         p = self.params
         auto = p.restart == "auto" and p.init_from == "odometry"
-        if self._is_pose_graph(inputs, run, kernel):
+        if self._is_pose_graph(inputs, run.gp.n_landmarks, kernel):
             if not p.certify:
                 return run, None, None
             ij, xyt, info = pose_graph_edges(inputs, p.edge_info)
@@ -401,7 +408,9 @@ class GraphSlam(BaseSolver):
                 "cost": float(robust_init.cost),
             }
         if p.outlier_counts:
-            extra["chi2_outliers"] = chi2_outlier_counts(gp.problem, res.x)
+            asm = res.workspace[0] if res.workspace is not None else None
+            extra["chi2_outliers"] = chi2_outlier_counts(gp.problem, res.x,
+                                                         asm.whitened_at(res.x) if asm is not None else None)
         message = res.message
         if p.init == "auto" and start != "odometry" and p.init_from == "odometry":
             message += f"; started from the {start} relaxation (init=auto: a pose graph with loop closures)"

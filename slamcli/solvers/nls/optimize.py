@@ -78,6 +78,7 @@ def solve(
         """``H(data) h = rhs`` for lower-triangle data; None if no factorisation gives a finite solution."""
         stats["solves"] += 1
         h = lin.solve(rhs) if factorize_lower(lin, asm, data) else None
+        stats["primary_ok"] = h is not None  # lin holds a good factorisation of the last system
         if h is None and lin.name != "superlu":
             stats["fallbacks"] += 1
             if not backup:
@@ -95,7 +96,7 @@ def solve(
             0,
             np.array([cost]),
             np.zeros(1),
-            asm.matrix(asm.full(data)),
+            lambda: asm.matrix(asm.full(data)),
         )
     costs, times = [cost], [0.0]
     if callback is not None:
@@ -104,6 +105,7 @@ def solve(
     status = Status.MAX_ITERATIONS
     message = f"stopped after {params.max_iterations} iterations (max_iterations)"
     it = 0
+    decrease = np.inf  # of the last accepted step
     t_last = time.perf_counter()
 
     def small(h: np.ndarray) -> bool:
@@ -116,6 +118,9 @@ def solve(
         diag = data[asm.lo_diag_pos]
         Dvec = np.clip(diag, 1e-6, 1e32) if params.damping == "marquardt" else np.ones(asm.D)
         stop = None  # (status, message) that ends the optimisation inside this iteration
+        if params.method == "lm" and _converged_by_last_factor(lin, stats, params, st, g, cost, decrease):
+            status, message = Status.CONVERGED, "predicted cost decrease below pred_cost_tol (last factorisation)"
+            break
         if params.method == "lm":
             stop, x_new, new_cost = _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st, stats,
                                                   small)
@@ -132,7 +137,9 @@ def solve(
         it += 1
         decrease = cost - new_cost
         x = x_new
-        cost, data, g = asm.linearize_lower(x, params)
+        # LM linearised its accepted trial already (_Damping.eager); the other methods evaluated its cost only
+        cost, data, g = st.trial_lin if st.trial_lin is not None else asm.linearize_lower(x, params)
+        st.trial_lin = None
         now = time.perf_counter()
         costs.append(cost)
         times.append(now - t_last)
@@ -143,10 +150,6 @@ def solve(
             status, message = Status.CONVERGED, "relative cost decrease below rel_cost_tol"
             break
     notes = _notes(stats, lin.name)
-    full = asm.full(data)
-    if params.pose_chart == "body" and problem.se2_poses > 0:  # H for the marginals: world coordinates
-        world = asm.body_to_world(full, x)
-        full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
     return NlsResult(
         x=x,
         cost=cost,
@@ -155,12 +158,45 @@ def solve(
         iterations=it,
         cost_trace=np.asarray(costs),
         time_trace=np.asarray(times),
-        information=asm.matrix(full),
+        information_fn=_information_fn(problem, asm, params, x, data),
         linear_solves=int(stats["solves"]),
         notes=tuple(notes),
         linear_solver=lin.name,
         workspace=(asm, lin),
     )
+
+
+def _information_fn(problem, asm, params, x, data):
+    """``NlsResult.information_fn``: ``H`` at ``x`` (lower data ``data``) in world coordinates, for the marginals
+    — rotated out of the body chart, or relinearised in the world chart when the rotation does not apply."""
+    def information() -> sp.csc_matrix:
+        full = asm.full(data)
+        if params.pose_chart == "body" and problem.se2_poses > 0:
+            world = asm.body_to_world(full, x)
+            full = world if world is not None else asm.linearize(x, dataclasses.replace(params, pose_chart="world"))[1]
+        return asm.matrix(full)
+    return information
+
+
+#: LM's predicted-decrease stop without a new factorisation (:func:`_converged_by_last_factor`): only after an
+#: accepted step that lowered the cost by at most this fraction (the asymptotic regime, where H hardly changes
+#: between iterates), and with this margin on ``pred_cost_tol``
+LAST_FACTOR_REGIME = 1e-6
+LAST_FACTOR_MARGIN = 0.5
+
+
+def _converged_by_last_factor(lin, stats, params, st, g, cost, decrease) -> bool:
+    """Whether the Gauss-Newton decrement ``½ gᵀH⁻¹g`` at the new iterate, with the factorisation of the previous
+    iterate's (damped) ``H`` that ``lin`` still holds, is below ``LAST_FACTOR_MARGIN · pred_cost_tol · cost`` —
+    the test of ``NlsParams.pred_cost_tol`` for one solve instead of a factorisation. Used only once the last
+    step lowered the cost by at most ``LAST_FACTOR_REGIME`` (relative), so ``H`` moved by a relative amount
+    of that order and the two decrements agree far inside the margin; otherwise (or when the primary
+    factorisation failed last time) the exact test runs in :func:`_lm_iteration`."""
+    if not (params.pred_cost_tol > 0.0 and stats.get("primary_ok") and st.lam <= params.lambda_init
+            and 0.0 <= decrease <= LAST_FACTOR_REGIME * cost):
+        return False
+    h = lin.solve(-g)
+    return h is not None and 0.0 <= -0.5 * float(g @ h) <= LAST_FACTOR_MARGIN * params.pred_cost_tol * cost
 
 
 @dataclass
@@ -170,6 +206,11 @@ class _Damping:
     lam: float
     nu: float
     delta: float
+    #: LM: linearise a trial point at once (its cost comes with it) while the last trial was accepted — near
+    #: the optimum nearly every trial is, and the accepted point's linearisation is the next iteration's, so its
+    #: residuals are evaluated once instead of twice; after a rejection trials get a cost evaluation only
+    eager: bool = True
+    trial_lin: tuple | None = None  # (cost, H lower data, g) at the accepted trial, when eager
 
 
 def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _Damping, stats, small):
@@ -196,9 +237,13 @@ def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _
                 break
             # predicted decrease of the undamped model: −gᵀh − ½hᵀHh = ½hᵀ(λDh − g)
             pred = 0.5 * float(h @ (st.lam * Dvec * h - g))
+            if 0.0 <= pred <= params.pred_cost_tol * cost and st.lam <= params.lambda_init:
+                stop = (Status.CONVERGED, "predicted cost decrease below pred_cost_tol")
+                break
             if pred >= 0.0:
                 x_new = retract(problem, params, x, h)
-                new_cost = asm.cost(x_new, params)
+                trial = asm.linearize_lower(x_new, params) if st.eager else None
+                new_cost = trial[0] if trial is not None else asm.cost(x_new, params)
                 change = cost - new_cost
                 if not np.isfinite(new_cost):
                     ok = False
@@ -210,7 +255,9 @@ def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _
                 if not ok and abs(change) < params.rel_cost_tol * cost:
                     stop = (Status.CONVERGED, "trial cost change below rel_cost_tol")
                     break
+        st.eager = ok
         if ok:
+            st.trial_lin = trial
             if params.lambda_update == "fixed":
                 st.lam /= params.lambda_factor
             else:

@@ -4,6 +4,7 @@ and result, and the retraction ``x ⊞ h`` (see :mod:`slamcli.solvers.nls`).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
@@ -39,6 +40,10 @@ class FactorBlock:
     residual : callable ``x (D,) -> r (F, k)`` or None
         The residuals of ``evaluate`` without the Jacobians (the same values), for cost-only evaluations
         (LM's trial steps); None = ``evaluate(x)[0]``.
+    evaluate_body : callable ``x (D,) -> (r (F, k), J (F, k, n))`` or None
+        ``evaluate`` with the columns of every SE(2) pose already in the body chart
+        (``J · blkdiag(R(θ), 1)``, ``NlsParams.pose_chart = "body"``), for blocks that get them cheaper in
+        one pass than by the assembler's rotation of ``evaluate``'s; None = ``evaluate`` then that rotation.
     """
 
     name: str
@@ -47,6 +52,7 @@ class FactorBlock:
     sqrt_info: np.ndarray
     robust: bool = False
     residual: Callable[[np.ndarray], np.ndarray] | None = None
+    evaluate_body: EvaluateFn | None = None
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Unwhitened residuals ``r (F, k)`` at ``x``."""
@@ -119,6 +125,15 @@ class NlsParams:
         GTSAM's ``LevenbergMarquardtOptimizer``; a dogleg iteration may shrink its region several times).
     rel_cost_tol : float
         Converged when an accepted step lowers the cost by less than ``rel_cost_tol · cost``.
+    pred_cost_tol : float
+        LM only (0 = off, the default): converged, before the trial step, when the step's predicted decrease
+        ``−gᵀh − ½hᵀHh`` (the Gauss-Newton decrement ``½gᵀH⁻¹g`` up to the damping) is below
+        ``pred_cost_tol · cost`` while λ is at most ``lambda_init``. Near the optimum that decrement is the
+        distance to the minimum in cost, so LM stops one or two iterations (a trial cost, a retraction and a
+        linearisation each) before ``rel_cost_tol`` would, at a point whose cost is within about
+        ``pred_cost_tol · cost`` of the optimum's. After a step that lowered the cost by at most 1e-6
+        (relative) the decrement is computed with the previous iterate's factorisation (one solve, no new
+        factorisation; ``optimize.LAST_FACTOR_REGIME``).
     abs_cost_tol : float
         Converged when the cost is below this value.
     step_tol : float
@@ -167,6 +182,7 @@ class NlsParams:
     method: Literal["lm", "gn", "dogleg"] = "lm"
     max_iterations: int = 100
     rel_cost_tol: float = 1e-12
+    pred_cost_tol: float = 0.0
     abs_cost_tol: float = 1e-20
     step_tol: float = 1e-12
     lambda_init: float = 1e-5
@@ -196,6 +212,8 @@ class NlsParams:
             raise ValueError("need 0 ≤ lambda_min ≤ lambda_init ≤ lambda_max")
         if not self.delta_init > 0.0:
             raise ValueError("delta_init must be > 0")
+        if not self.pred_cost_tol >= 0.0:
+            raise ValueError("pred_cost_tol must be ≥ 0")
         if self.pose_chart not in ("body", "world"):
             raise ValueError(f"pose_chart must be body or world, got {self.pose_chart!r}")
 
@@ -214,7 +232,10 @@ class NlsResult:
     cost_trace : ndarray (K+1,)  cost at the start and after every accepted step.
     time_trace : ndarray (K+1,)  wall time of each accepted step (0 for the start), s.
     information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` in world coordinates (also with
-                                 the body pose chart) — for :func:`marginal_covariances`.
+                                 the body pose chart) — for :func:`marginal_covariances`. Built on first
+                                 access (a property over ``information_fn``): a solve whose caller needs no
+                                 covariances never assembles the full symmetric matrix nor rotates it out of
+                                 the body chart.
     linear_solves : int          linear systems solved (accepted + rejected steps + GN damping retries).
     notes : tuple[str, ...]      numerical fallbacks that were taken (SuperLU instead of CHOLMOD or the
                                  banded Cholesky, damped Gauss-Newton steps); empty when none were needed.
@@ -231,11 +252,16 @@ class NlsResult:
     iterations: int
     cost_trace: np.ndarray
     time_trace: np.ndarray
-    information: sp.csc_matrix
+    information_fn: Callable[[], sp.csc_matrix] = field(repr=False, compare=False)
     linear_solves: int = 0
     notes: tuple[str, ...] = ()
     linear_solver: str = ""
     workspace: tuple | None = field(default=None, repr=False, compare=False)
+
+    @functools.cached_property
+    def information(self) -> sp.csc_matrix:
+        """``H`` at ``x`` in world coordinates (class docstring), computed once on first access."""
+        return self.information_fn()
 
 
 def pose_offsets(cols: np.ndarray, n_poses: int) -> list[int]:
@@ -246,7 +272,11 @@ def pose_offsets(cols: np.ndarray, n_poses: int) -> list[int]:
         return []
     P = 3 * n_poses
     offs, covered = [], np.zeros(cols.shape, bool)
+    first = [int(v) for v in cols[0]]
     for o in range(cols.shape[1] - 2):
+        f0 = first[o]  # a triplet in every factor is one in the first: test that before all of them
+        if not (f0 < P and f0 % 3 == 0 and first[o + 1] == f0 + 1 and first[o + 2] == f0 + 2):
+            continue
         c = cols[:, o]
         if np.all((c < P) & (c % 3 == 0) & (cols[:, o + 1] == c + 1) & (cols[:, o + 2] == c + 2)):
             offs.append(o)
@@ -263,6 +293,9 @@ def retract(problem: NlsProblem, params: NlsParams, x: np.ndarray, h: np.ndarray
     if params.pose_chart != "body" or n <= 0:
         return problem.apply_step(x, h)
     P = 3 * n
+    poses = se2.compose(x[:P].reshape(-1, 3), se2.exp(h[:P].reshape(-1, 3))).ravel()
+    if P == x.size:  # a pose graph: nothing else to step
+        return poses
     out = problem.apply_step(x, np.concatenate([np.zeros(P), h[P:]]))
-    out[:P] = se2.compose(x[:P].reshape(-1, 3), se2.exp(h[:P].reshape(-1, 3))).ravel()
+    out[:P] = poses
     return out
