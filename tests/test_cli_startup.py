@@ -112,6 +112,9 @@ def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_grap
             main()
         except SystemExit as exc:
             assert not exc.code, exc.code
+        import gc
+        from slamcli.cli import GC_THRESHOLD0
+        assert gc.get_threshold()[0] >= GC_THRESHOLD0  # the command's collector threshold (cli.main)
     """)
     assert out.exists()
     _check_solve_path(present)
@@ -121,8 +124,11 @@ def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_grap
 def test_default_graph_solve_through_the_api_imports_only_what_it_uses(pose_graph, tmp_path):
     out = tmp_path / "r.h5"
     present = _modules_after(f"""
+        import gc
+        threshold = gc.get_threshold()
         from slamcli.api.solve import solve_file
         solve_file({str(pose_graph)!r}, "graph", None, {str(out)!r})
+        assert gc.get_threshold() == threshold  # only the command-line entry point changes it
     """)
     assert out.exists()
     _check_solve_path(present)
