@@ -102,20 +102,24 @@ def _check_solve_path(present: list[str]) -> None:
         assert "scipy.sparse.linalg" not in present, present
 
 
-def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_graph, tmp_path):
-    out = tmp_path / "r.h5"
-    present = _modules_after(f"""
-        import sys
-        from slamcli.cli import main
-        sys.argv = ["slamcli", "solve", {str(pose_graph)!r}, "--method", "graph", "-q", "-o", {str(out)!r}]
+def _cli_solve(data: Path, method: str, out: Path) -> str:
+    """Code running ``slamcli solve DATA --method METHOD -q -o OUT`` through the console script's ``main``, then
+    checking the collector threshold the command set (:func:`slamcli.cli.main`)."""
+    return f"""
+        import gc, sys
+        from slamcli.cli import GC_THRESHOLD0, main
+        sys.argv = ["slamcli", "solve", {str(data)!r}, "--method", {method!r}, "-q", "-o", {str(out)!r}]
         try:
             main()
         except SystemExit as exc:
             assert not exc.code, exc.code
-        import gc
-        from slamcli.cli import GC_THRESHOLD0
-        assert gc.get_threshold()[0] >= GC_THRESHOLD0  # the command's collector threshold (cli.main)
-    """)
+        assert gc.get_threshold()[0] >= GC_THRESHOLD0
+    """
+
+
+def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_graph, tmp_path):
+    out = tmp_path / "r.h5"
+    present = _modules_after(_cli_solve(pose_graph, "graph", out))
     assert out.exists()
     _check_solve_path(present)
     assert "rich" not in present  # -q prints nothing
@@ -138,15 +142,7 @@ def test_built_in_solve_without_scipy_reads_no_distribution_metadata(pose_graph,
     # odometry imports no SciPy, so nothing else brings importlib.metadata in: the registry (entry-point scan)
     # and the result's solver_version (importlib.metadata.version) would be the only ones
     out = tmp_path / "r.h5"
-    present = _modules_after(f"""
-        import sys
-        from slamcli.cli import main
-        sys.argv = ["slamcli", "solve", {str(pose_graph)!r}, "--method", "odometry", "-q", "-o", {str(out)!r}]
-        try:
-            main()
-        except SystemExit as exc:
-            assert not exc.code, exc.code
-    """)
+    present = _modules_after(_cli_solve(pose_graph, "odometry", out))
     assert out.exists()
     assert "importlib.metadata" not in present and "<entry points scanned>" not in present, present
 
