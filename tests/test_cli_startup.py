@@ -104,15 +104,26 @@ def _check_solve_path(present: list[str]) -> None:
 
 def _cli_solve(data: Path, method: str, out: Path) -> str:
     """Code running ``slamcli solve DATA --method METHOD -q -o OUT`` through the console script's ``main``, then
-    checking the collector threshold the command set (:func:`slamcli.cli.main`)."""
+    checking that typer built one command (:func:`slamcli.cli.app_for`) and the collector threshold the command
+    set (:func:`slamcli.cli.main`)."""
     return f"""
         import gc, sys
+        import typer.main
         from slamcli.cli import GC_THRESHOLD0, main
+        built = []
+        _build = typer.main.get_command_from_info
+
+        def counting(*args, **kw):
+            built.append((args[0] if args else kw["command_info"]).name)
+            return _build(*args, **kw)
+
+        typer.main.get_command_from_info = counting
         sys.argv = ["slamcli", "solve", {str(data)!r}, "--method", {method!r}, "-q", "-o", {str(out)!r}]
         try:
             main()
         except SystemExit as exc:
             assert not exc.code, exc.code
+        assert built == ["solve"], built
         assert gc.get_threshold()[0] >= GC_THRESHOLD0
     """
 
