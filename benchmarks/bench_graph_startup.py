@@ -12,6 +12,15 @@ re-compiled every slamcli module from source on every run (≈ 0.1 s CPU) while 
 read from the ``.pyc`` files pip had written.
 Columns: ``cpu_slamcli_s`` (defaults: certificate and marginals included), ``cpu_slamcli_nocov_s``
 (``-p covariance=false``), ``cpu_gtsam_s`` and the ratios. The machine may be loaded: read the ratios.
+
+Breakdown, measured in the same alternating rounds: ``cpu_imports_s`` is a process that only imports the
+libraries a default solve needs (numpy, scipy.sparse, h5py, typer, and sksparse.cholmod when installed) — the
+floor below which no change inside slamcli goes; ``cpu_gtsam_import_s`` the same for ``import gtsam``;
+``cpu_numpy_star_s`` is what ``from numpy import *`` adds to ``import numpy``. SciPy (1.14 to 1.17 at least)
+runs that statement in its vendored ``array_api_compat.numpy`` whenever ``scipy.sparse`` is imported, and since
+NumPy 2.0 ``numpy.__all__`` names the lazily loaded submodules, so it imports ``numpy.f2py`` and
+``numpy.testing`` (argparse, logging, unittest, importlib.metadata, …) into every process that uses
+``scipy.sparse``.
 """
 
 from __future__ import annotations
@@ -82,6 +91,10 @@ def run(quick: bool = False) -> list[dict]:
             "nocov": lambda out: cli + ["solve", str(ds), "--method", "graph", "-p", "covariance=false", "-q",
                                         "-o", out],
             "gtsam": lambda out: [sys.executable, "-c", GTSAM_SCRIPT, str(g2o)],
+            "imports": lambda out: [sys.executable, "-c", f"import {', '.join(_solve_libraries())}"],
+            "gtsam_import": lambda out: [sys.executable, "-c", "import gtsam"],
+            "numpy": lambda out: [sys.executable, "-c", "import numpy"],
+            "numpy_star": lambda out: [sys.executable, "-c", "import numpy; from numpy import *"],
         }
         for name, cmd in sides.items():  # untimed: writes the bytecode caches (module docstring)
             _child_cpu(cmd(str(Path(tmp) / f"warm-{name}.h5")), env)
@@ -89,15 +102,25 @@ def run(quick: bool = False) -> list[dict]:
         for k in range(1 if quick else REPEATS):
             for name in list(sides) if k % 2 == 0 else list(sides)[::-1]:  # alternating order
                 cpu[name].append(_child_cpu(sides[name](str(Path(tmp) / f"r{k}-{name}.h5")), env))
-        ours, nocov, gt = cpu["ours"], cpu["nocov"], cpu["gtsam"]
-    med = {k: float(np.median(v)) for k, v in (("ours", ours), ("nocov", nocov), ("gtsam", gt))}
+    med = {name: float(np.median(v)) for name, v in cpu.items()}
     return [{
         "poses": N_POSES,
-        "repeats": len(ours),
+        "repeats": len(cpu["ours"]),
         "cpu_slamcli_s": round(med["ours"], 3),
         "cpu_slamcli_nocov_s": round(med["nocov"], 3),
         "cpu_gtsam_s": round(med["gtsam"], 3),
         "ratio": round(med["ours"] / med["gtsam"], 2),
         "ratio_nocov": round(med["nocov"] / med["gtsam"], 2),
         "goal_ratio": 1.5,
+        "cpu_imports_s": round(med["imports"], 3),
+        "cpu_gtsam_import_s": round(med["gtsam_import"], 3),
+        "cpu_numpy_star_s": round(med["numpy_star"] - med["numpy"], 3),
     }]
+
+
+def _solve_libraries() -> list[str]:
+    """The third-party modules a default graph solve imports (sksparse.cholmod only where it is installed)."""
+    import importlib.util
+
+    libs = ["numpy", "scipy.sparse", "h5py", "typer"]
+    return libs + (["sksparse.cholmod"] if importlib.util.find_spec("sksparse") is not None else [])

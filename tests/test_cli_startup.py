@@ -13,6 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from slamcli.cli import app, app_for
+from slamcli.errors import PluginError
 
 DATA = Path(__file__).parent / "data"
 #: never needed to solve a pose graph with defaults: tables, plots, statistics, the JIT, the metrics
@@ -63,12 +64,20 @@ def test_narrowed_app_runs_a_command_like_the_whole_app(tmp_path):
     assert _run(app_for(argv), argv) == _run(app, argv)
 
 
+#: watched besides: the entry-point scan of the solver registry (``"<entry points scanned>"`` when it ran)
+WATCHED = ("rich", "scipy.sparse.linalg", "sksparse", "importlib.metadata", "<entry points scanned>")
+
+
 def _modules_after(code: str) -> list[str]:
-    """Modules of :data:`NOT_ON_SOLVE_PATH` / :data:`OTHER_SOLVERS` present after ``code`` ran in a fresh
-    interpreter (also whether CHOLMOD is there: without it the solve needs scipy.sparse.linalg's SuperLU)."""
+    """Modules of :data:`NOT_ON_SOLVE_PATH` / :data:`OTHER_SOLVERS` / :data:`WATCHED` present after ``code`` ran
+    in a fresh interpreter (also whether CHOLMOD is there: without it the solve needs scipy.sparse.linalg's
+    SuperLU)."""
     probe = textwrap.dedent(f"""
         import json, sys
-        watched = {NOT_ON_SOLVE_PATH + OTHER_SOLVERS + ("rich", "scipy.sparse.linalg", "sksparse")!r}
+        watched = {NOT_ON_SOLVE_PATH + OTHER_SOLVERS + WATCHED!r}
+        reg = sys.modules.get("slamcli.solvers.registry")
+        if reg is not None and reg._scan_entry_points.cache_info().currsize:
+            sys.modules["<entry points scanned>"] = reg
         print(json.dumps(sorted(m for m in watched if m in sys.modules)))
     """)
     out = subprocess.run([sys.executable, "-c", textwrap.dedent(code) + probe], capture_output=True, text=True,
@@ -86,21 +95,42 @@ def pose_graph(tmp_path_factory) -> Path:
 
 def _check_solve_path(present: list[str]) -> None:
     assert not set(present) & set(NOT_ON_SOLVE_PATH + OTHER_SOLVERS), present
+    # a built-in solver is found in registry.BUILTIN and reports slamcli.__version__: no metadata is read
+    # (importlib.metadata itself is imported by SciPy's numpy.testing on this path, so only the scan is checked)
+    assert "<entry points scanned>" not in present, present
     if "sksparse" in present:  # CHOLMOD factorises; SciPy's SuperLU (scipy.sparse.linalg) is the fallback only
         assert "scipy.sparse.linalg" not in present, present
 
 
-def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_graph, tmp_path):
-    out = tmp_path / "r.h5"
-    present = _modules_after(f"""
-        import sys
-        from slamcli.cli import main
-        sys.argv = ["slamcli", "solve", {str(pose_graph)!r}, "--method", "graph", "-q", "-o", {str(out)!r}]
+def _cli_solve(data: Path, method: str, out: Path) -> str:
+    """Code running ``slamcli solve DATA --method METHOD -q -o OUT`` through the console script's ``main``, then
+    checking that typer built one command (:func:`slamcli.cli.app_for`) and the collector threshold the command
+    set (:func:`slamcli.cli.main`)."""
+    return f"""
+        import gc, sys
+        import typer.main
+        from slamcli.cli import GC_THRESHOLD0, main
+        built = []
+        _build = typer.main.get_command_from_info
+
+        def counting(*args, **kw):
+            built.append((args[0] if args else kw["command_info"]).name)
+            return _build(*args, **kw)
+
+        typer.main.get_command_from_info = counting
+        sys.argv = ["slamcli", "solve", {str(data)!r}, "--method", {method!r}, "-q", "-o", {str(out)!r}]
         try:
             main()
         except SystemExit as exc:
             assert not exc.code, exc.code
-    """)
+        assert built == ["solve"], built
+        assert gc.get_threshold()[0] >= GC_THRESHOLD0
+    """
+
+
+def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_graph, tmp_path):
+    out = tmp_path / "r.h5"
+    present = _modules_after(_cli_solve(pose_graph, "graph", out))
     assert out.exists()
     _check_solve_path(present)
     assert "rich" not in present  # -q prints nothing
@@ -109,8 +139,89 @@ def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_grap
 def test_default_graph_solve_through_the_api_imports_only_what_it_uses(pose_graph, tmp_path):
     out = tmp_path / "r.h5"
     present = _modules_after(f"""
+        import gc
+        threshold = gc.get_threshold()
         from slamcli.api.solve import solve_file
         solve_file({str(pose_graph)!r}, "graph", None, {str(out)!r})
+        assert gc.get_threshold() == threshold  # only the command-line entry point changes it
     """)
     assert out.exists()
     _check_solve_path(present)
+
+
+def test_built_in_solve_without_scipy_reads_no_distribution_metadata(pose_graph, tmp_path):
+    # odometry imports no SciPy, so nothing else brings importlib.metadata in: the registry (entry-point scan)
+    # and the result's solver_version (importlib.metadata.version) would be the only ones
+    out = tmp_path / "r.h5"
+    present = _modules_after(_cli_solve(pose_graph, "odometry", out))
+    assert out.exists()
+    assert "importlib.metadata" not in present and "<entry points scanned>" not in present, present
+
+
+def test_built_in_table_is_the_installed_entry_points():
+    # registry.BUILTIN repeats pyproject's [project.entry-points."slamcli.solvers"]; the installed metadata is the
+    # independent reference
+    from importlib import metadata
+
+    import slamcli
+    from slamcli.solvers import registry
+
+    ours = {ep.name: ep.value for ep in metadata.entry_points(group=registry.GROUP) if ep.dist.name == "slamcli"}
+    assert ours == registry.BUILTIN
+    assert metadata.version("slamcli") == slamcli.__version__  # what built-in solvers report without metadata
+    for name in registry.BUILTIN:
+        assert registry.load(name) is metadata.EntryPoint(name, registry.BUILTIN[name], registry.GROUP).load()
+
+
+PLUGIN = """
+from dataclasses import dataclass
+
+from slamcli.solvers.base import BaseSolver
+
+
+@dataclass(frozen=True)
+class ToyParams:
+    k: int = 3
+
+
+class ToySolver(BaseSolver):
+    name = "toy"
+    Params = ToyParams
+
+    def solve(self, inputs, *, init=None, rng, progress=None):
+        raise NotImplementedError
+"""
+
+
+def test_a_plugin_installed_with_entry_points_is_found_and_cannot_replace_a_built_in(tmp_path, monkeypatch):
+    # a real distribution on sys.path (dist-info with entry_points.txt), not a patched registry
+    from slamcli.solvers import registry
+    from slamcli.solvers.base import _distribution_version
+
+    (tmp_path / "toyplug").mkdir()
+    (tmp_path / "toyplug" / "__init__.py").write_text(PLUGIN)
+    info = tmp_path / "toyplug-2.5.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toyplug\nVersion: 2.5\n")
+    (info / "entry_points.txt").write_text(
+        f"[{registry.GROUP}]\ntoy = toyplug:ToySolver\ngraph = toyplug:ToySolver\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    registry._scan_entry_points.cache_clear()
+    _distribution_version.cache_clear()
+    try:
+        cls = registry.load("toy")
+        assert cls.__module__ == "toyplug" and cls.Params().k == 3
+        assert cls.version() == "2.5"  # the plug-in's distribution, read from its metadata
+        assert registry.load("graph").__module__ == "slamcli.solvers.graph.solver"
+        listed = {i.name: i for i in registry.available()}
+        assert (listed["toy"].package, listed["toy"].version, listed["toy"].target) == (
+            "toyplug", "2.5", "toyplug:ToySolver")
+        assert listed["graph"].target == registry.BUILTIN["graph"]
+        assert registry.describe("toy") == [("k", "int", "3")]
+        with pytest.raises(PluginError, match=r"unknown solver 'nope'; available solvers: .*graph.*toy"):
+            registry.load("nope")
+    finally:
+        registry._scan_entry_points.cache_clear()
+        _distribution_version.cache_clear()
+        registry._module_source.cache_clear()
+        sys.modules.pop("toyplug", None)

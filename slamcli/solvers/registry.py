@@ -9,6 +9,11 @@ prove (a ``Params`` inherited or built at import time, a default computed by a f
 default) makes it fall back to importing the solver and asking the real dataclass, so the listing is never
 guessed; ``tests/test_startup.py`` checks that both ways agree for every registered solver.
 Running a solver (:func:`load`) always imports it.
+
+The solvers slamcli ships (:data:`BUILTIN`) are resolved from that table: solving with one of them reads no
+distribution's metadata. Scanning the entry points of every installed distribution (``importlib.metadata``,
+≈ 5-15 ms CPU) happens only for a name that is not built in (a plug-in), for an error message that lists every
+name, and for :func:`available`. A plug-in cannot replace a built-in name.
 """
 
 from __future__ import annotations
@@ -16,14 +21,30 @@ from __future__ import annotations
 import ast
 import dataclasses
 import functools
+import importlib
 import math
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from slamcli.errors import PluginError
 
+if TYPE_CHECKING:
+    from importlib import metadata
+
 GROUP = "slamcli.solvers"
+#: slamcli's own solvers, ``name → "module:Class"``: the same table as ``[project.entry-points."slamcli.solvers"]``
+#: in pyproject.toml (``tests/test_cli_startup.py`` checks the two agree on the installed distribution)
+BUILTIN = {
+    "odometry": "slamcli.solvers.odometry:OdometrySolver",
+    "ekf": "slamcli.solvers.ekf:EkfSlam",
+    "graph": "slamcli.solvers.graph.solver:GraphSlam",
+    "isam": "slamcli.solvers.isam.solver:IsamSlam",
+    "icm": "slamcli.solvers.icm.solver:IcmSlam",
+    "fastslam": "slamcli.solvers.fastslam:FastSlam",
+    "hybrid": "slamcli.solvers.hybrid:HybridSlam",
+    "cuik": "slamcli.solvers.cuik:CuikSlam",
+}
 
 
 @dataclass(frozen=True)
@@ -42,25 +63,36 @@ def _entry_points() -> dict[str, metadata.EntryPoint]:
 def _scan_entry_points() -> tuple[tuple[str, metadata.EntryPoint], ...]:
     """The group's entry points, first of each name (scanning every installed distribution's metadata
     costs ≈ 10 ms, so it is done once per process)."""
+    from importlib import metadata
+
     eps: dict[str, metadata.EntryPoint] = {}
     for ep in metadata.entry_points(group=GROUP):
         eps.setdefault(ep.name, ep)
     return tuple(eps.items())
 
 
+def _targets() -> dict[str, str]:
+    """``name → "module:Class"`` of every solver: the plug-ins' entry points, then :data:`BUILTIN` over them."""
+    return {**{name: ep.value for name, ep in _entry_points().items()}, **BUILTIN}
+
+
+def _listing() -> str:
+    return ", ".join(sorted(_targets())) or "none"
+
+
 def available() -> list[SolverInfo]:
     """Every registered solver, sorted by name (loading none of them)."""
+    import slamcli
+
+    eps = _entry_points()
     out = []
-    for name, ep in sorted(_entry_points().items()):
-        dist = getattr(ep, "dist", None)
-        out.append(
-            SolverInfo(
-                name=name,
-                target=ep.value,
-                package=dist.name if dist is not None else "?",
-                version=dist.version if dist is not None else "?",
-            )
-        )
+    for name, target in sorted(_targets().items()):
+        if name in BUILTIN:
+            package, version = "slamcli", slamcli.__version__
+        else:
+            dist = getattr(eps[name], "dist", None)
+            package, version = (dist.name, dist.version) if dist is not None else ("?", "?")
+        out.append(SolverInfo(name=name, target=target, package=package, version=version))
     return out
 
 
@@ -68,26 +100,41 @@ def names() -> list[str]:
     return [s.name for s in available()]
 
 
+def _target(name: str) -> str | None:
+    """``"module:Class"`` registered as ``name`` (a built-in without reading any metadata), or None."""
+    if name in BUILTIN:
+        return BUILTIN[name]
+    ep = _entry_points().get(name)
+    return None if ep is None else ep.value
+
+
+def _load_target(target: str) -> type:
+    """The object ``"module:attr.path"`` names (what ``EntryPoint.load`` does)."""
+    modname, _, attr = target.partition(":")
+    obj = importlib.import_module(modname.strip())
+    for part in filter(None, attr.strip().split(".")):
+        obj = getattr(obj, part)
+    return obj
+
+
 def load(name: str) -> type:
     """The solver class registered as ``name``; :class:`PluginError` lists the available names otherwise."""
-    eps = _entry_points()
-    if name not in eps:
-        listing = ", ".join(sorted(eps)) or "none"
-        raise PluginError(f"unknown solver {name!r}; available solvers: {listing}")
-    listing = ", ".join(sorted(eps))
+    target = _target(name)
+    if target is None:
+        raise PluginError(f"unknown solver {name!r}; available solvers: {_listing()}")
     try:
-        cls = eps[name].load()
+        cls = _load_target(target)
     except Exception as exc:  # noqa: BLE001 - any import failure of a plugin is reported the same way
         first = (str(exc).strip().splitlines() or [""])[0]
         raise PluginError(
-            f"solver plugin {name!r} ({eps[name].value}) failed to load: {type(exc).__name__}: {first} "
-            f"(available solvers: {listing})"
+            f"solver plugin {name!r} ({target}) failed to load: {type(exc).__name__}: {first} "
+            f"(available solvers: {_listing()})"
         ) from None
     params_cls = getattr(cls, "Params", None)
     if not (callable(getattr(cls, "solve", None)) and params_cls and dataclasses.is_dataclass(params_cls)):
         raise PluginError(
-            f"solver plugin {name!r} ({eps[name].value}) does not follow the solver contract "
-            f"(needs a Params dataclass and a solve() method; available solvers: {listing})"
+            f"solver plugin {name!r} ({target}) does not follow the solver contract "
+            f"(needs a Params dataclass and a solve() method; available solvers: {_listing()})"
         )
     return cls
 
@@ -260,12 +307,12 @@ def describe_static(name: str) -> list[tuple[str, str, str]]:
 
     Raises :class:`_NotStatic` when the source alone does not determine it (see the module docstring).
     """
-    eps = _entry_points()
-    if name not in eps:
+    target = _target(name)
+    if target is None:
         raise _NotStatic(name)
-    modname, _, attr = eps[name].value.partition(":")
+    modname, _, attr = target.partition(":")
     if not attr or "." in attr:
-        raise _NotStatic(eps[name].value)
+        raise _NotStatic(target)
     owner, solver = _find_class(modname.strip(), attr.strip())
     params_expr = None
     for node in solver.body:
