@@ -128,9 +128,10 @@ def test_inverse_blocks_adds_the_pattern_of_a_block_off_the_factor():
 
 
 def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
-    """``graph`` on the intel excerpt (300 poses, loop closures): its marginals — computed with the LM's
-    CHOLMOD analysis (the workspace is of H's pattern, so it is used) — equal the dense inverse's blocks,
-    and the same call without the workspace (a fresh analysis) gives the same blocks."""
+    """``graph`` on the intel excerpt (300 poses, loop closures): its marginals — from the LM's lower
+    triangle at the estimate in the body chart, factored with the LM's CHOLMOD analysis, the pose blocks
+    rotated to the world chart afterwards — equal the blocks of the dense inverse of the full world-chart
+    ``H``, and the marginals of that full ``H`` with a fresh analysis give the same blocks."""
     from pathlib import Path
 
     from slamcli.datasets.g2o import import_graph
@@ -141,14 +142,16 @@ def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
     seen = {}
     inner = solver.laplace_marginals
 
-    def grab(gp, H, workspace=None):
-        seen.update(gp=gp, H=H, workspace=workspace)
-        return inner(gp, H, workspace)
+    def grab(gp, lm_res, workspace=None):
+        seen.update(gp=gp, lm_res=lm_res)
+        return inner(gp, lm_res, workspace)
 
     monkeypatch.setattr(solver, "laplace_marginals", grab)
     res = graph.GraphSlam(graph.GraphParams()).solve(inp, rng=np.random.default_rng(0))
-    gp, H, ws = seen["gp"], seen["H"], seen["workspace"]
-    assert marginals.cholmod_analysis(ws, H) is not None
+    gp, lm_res = seen["gp"], seen["lm_res"]
+    assert lm_res.information_chart == "body"
+    assert marginals._lower_at_estimate(lm_res, [gp.pose_cols()]) is not None  # the lower-triangle path ran
+    H = lm_res.information  # full, world chart: the reference
     ip = gp.pose_cols()
     Hinv = np.linalg.inv(H.toarray())
     ref = Hinv[ip[:, :, None], ip[:, None, :]]
@@ -246,3 +249,38 @@ def test_graph_solver_result_marginals_same_with_and_without_cholmod(monkeypatch
     assert np.abs(new.poses_xyt - old.poses_xyt).max() < 1e-12
     assert np.abs(new.pose_cov - old.pose_cov).max() <= 1e-9 * np.abs(old.pose_cov).max()
     assert np.abs(new.landmark_cov - old.landmark_cov).max() <= 1e-9 * np.abs(old.landmark_cov).max()
+
+
+def test_result_marginals_from_the_body_chart_lower_triangle_equal_the_world_chart_dense_inverse():
+    """``result_marginals`` (the LM's lower triangle at the estimate, body chart, pose blocks rotated after
+    the selected inverse) against the dense inverse of ``H`` relinearised in the world chart — a Jacobian
+    of its own, not a rotation of the body one — on a landmark graph, ~1e-10 relative."""
+    from slamcli.solvers.nls import marginals
+
+    ds, gp, opt = _graph_problem()
+    ip, il = gp.pose_cols(), gp.landmark_cols()
+    assert opt.information_chart == "body" and marginals._lower_at_estimate(opt, [ip, il]) is not None
+    asm = opt.workspace[0]
+    Hw = asm.matrix(asm.linearize(opt.x, nls.NlsParams(pose_chart="world"))[1]).toarray()
+    Hinv = np.linalg.inv(Hw)
+    ref_p, ref_l = Hinv[ip[:, :, None], ip[:, None, :]], Hinv[il[:, :, None], il[:, None, :]]
+    pose_cov, lm_cov = nls.result_marginals(opt, (ip, il))
+    assert np.abs(pose_cov - ref_p).max() <= 1e-10 * np.abs(ref_p).max()
+    assert np.abs(lm_cov - ref_l).max() <= 1e-10 * np.abs(ref_l).max()
+    # a set mixing pose and landmark columns cannot be rotated block by block: the full H is used, same values
+    mixed = np.concatenate([ip[:4, :2], il[:4]], axis=1)
+    assert marginals._lower_at_estimate(opt, [mixed]) is None
+    (blk,) = nls.result_marginals(opt, (mixed,))
+    ref = Hinv[mixed[:, :, None], mixed[:, None, :]]
+    assert np.abs(blk - ref).max() <= 1e-10 * np.abs(ref).max()
+
+
+def test_result_marginals_in_the_world_chart_need_no_rotation():
+    ds, gp, _ = _graph_problem()
+    opt = nls.solve(gp.problem, gp.x0, nls.NlsParams(pose_chart="world"))
+    assert opt.information_chart == "world"
+    ip = gp.pose_cols()
+    Hinv = np.linalg.inv(opt.information.toarray())
+    ref = Hinv[ip[:, :, None], ip[:, None, :]]
+    (pose_cov,) = nls.result_marginals(opt, (ip,))
+    assert np.abs(pose_cov - ref).max() <= 1e-10 * np.abs(ref).max()

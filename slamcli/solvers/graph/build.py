@@ -333,6 +333,9 @@ def laplace_marginals(gp: GraphProblem, information, workspace=None) -> tuple[np
     border elimination when every pose-pose factor links consecutive poses or is unary; else the sparse
     column solve), whose policy on an ``H`` that is not numerically positive definite is to refuse.
     ``workspace``: the LM's ``NlsResult.workspace`` (its CHOLMOD analysis is reused when it fits ``H``).
+    ``information`` may be the LM's ``NlsResult`` itself: then its lower triangle at the estimate is factored
+    directly and the pose blocks rotated out of the body chart (:func:`slamcli.solvers.nls.result_marginals`),
+    the full ``H`` is not built.
 
     Raises
     ------
@@ -340,10 +343,12 @@ def laplace_marginals(gp: GraphProblem, information, workspace=None) -> tuple[np
         ``H`` is not numerically positive definite: no factorisation gives valid marginals. The message
         names the pose or landmark where the factorisation broke down.
     """
-    pose_cov, lm_cov = nls.block_marginals(
-        information, (gp.pose_cols(), gp.landmark_cols()), names=("pose", "landmark"),
-        chain=gp.n_poses, locate=lambda c: located(gp, c), workspace=workspace,
-    )
+    sets, kw = (gp.pose_cols(), gp.landmark_cols()), dict(names=("pose", "landmark"), chain=gp.n_poses,
+                                                         locate=lambda c: located(gp, c))
+    if isinstance(information, nls.NlsResult):
+        pose_cov, lm_cov = nls.result_marginals(information, sets, **kw)
+    else:
+        pose_cov, lm_cov = nls.block_marginals(information, sets, workspace=workspace, **kw)
     return pose_cov, lm_cov
 
 

@@ -432,7 +432,7 @@ class GraphSlam(BaseSolver):
                                         "column solve takes minutes on a few thousand poses")
         if p.covariance and run.res.status != Status.FAILED and not team_cov_skipped:
             try:
-                pose_cov, landmark_cov = laplace_marginals(run.gp, run.res.information, run.res.workspace)
+                pose_cov, landmark_cov = laplace_marginals(run.gp, run.res)
             except np.linalg.LinAlgError as exc:
                 # never report covariances from a factorisation that broke down; the estimate itself stands
                 why = f"the information matrix is not numerically positive definite at the estimate ({exc})"

@@ -84,6 +84,7 @@ from slamcli.solvers.nls.marginals import (  # noqa: F401
     is_block_tridiagonal,
     marginal_covariances,
     marginals_chain_border,
+    result_marginals,
 )
 from slamcli.solvers.nls.optimize import (  # noqa: F401
     evaluate_cost,

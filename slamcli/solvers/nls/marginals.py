@@ -317,16 +317,77 @@ def block_marginals(
 
 def cholmod_analysis(workspace: tuple | None, information: sp.spmatrix):
     """The CHOLMOD factor (symbolic analysis) of an optimisation's workspace ``(Assembler, linear solver)``
-    when it is a simplicial ``LDLᵀ`` analysed on ``information``'s own pattern, else None."""
+    when it is a simplicial ``LDLᵀ`` analysed on ``information``'s own pattern — the assembler's full pattern
+    or its lower triangle (CHOLMOD reads the lower triangle of either) — else None."""
     if workspace is None:
         return None
     asm, lin = workspace
     if getattr(lin, "name", "") != "cholmod" or not getattr(lin, "ldl", False):
         return None
     H = information
-    if not (sp.isspmatrix_csc(H) and np.array_equal(H.indptr, asm.indptr) and np.array_equal(H.indices, asm.indices)):
+    if not sp.isspmatrix_csc(H):
+        return None
+    if np.array_equal(H.indptr, asm.lo_indptr) and np.array_equal(H.indices, asm.lo_indices):
+        return lin.F  # checked first: the full pattern is built on first use only
+    if not (np.array_equal(H.indptr, asm.indptr) and np.array_equal(H.indices, asm.indices)):
         return None
     return lin.F
+
+
+def result_marginals(res, index_blocks: Sequence[np.ndarray], **kw) -> list[np.ndarray]:
+    """:func:`block_marginals` of an optimisation's ``H`` at its estimate (``res``: an ``NlsResult``), world chart.
+
+    When the run factored ``H`` with CHOLMOD's simplicial ``LDLᵀ``, ``H``'s lower triangle at the estimate
+    (``res.information_lower``, the optimiser's own data) goes straight into a numeric refactorisation with
+    the run's symbolic analysis — no full symmetric matrix, no rotation of it. In the body pose chart
+    (``J_body = J_world M``, ``M = blkdiag(R(θ_p), 1, …, I)`` orthogonal, so ``Σ_world = M Σ_body Mᵀ``) each
+    requested pose block ``[x, y, θ]`` is rotated afterwards, ``R_p Σ_body,pp R_pᵀ`` with
+    ``R_p = blkdiag(R(θ_p), 1)``; blocks of other variables are the same in both charts. Anything else (another
+    linear solver, held-fixed pose columns, a set mixing pose and other columns) takes ``res.information``.
+    ``kw``: as :func:`block_marginals` (not ``workspace``)."""
+    sets = [np.asarray(b, np.int64).reshape(len(b), -1) if np.size(b) else np.zeros((0, 1), np.int64)
+            for b in index_blocks]
+    lower = _lower_at_estimate(res, sets)
+    if lower is None:
+        return block_marginals(res.information, sets, workspace=res.workspace, **kw)
+    H, rotate = lower
+    out = block_marginals(H, sets, workspace=res.workspace, **kw)
+    if rotate is None:
+        return out
+    th = np.asarray(res.x, float)[2 : 3 * rotate : 3]
+    for s, blk in zip(sets, out):
+        if s.size and s[0, 0] < 3 * rotate:  # a set of whole pose triplets (checked by _lower_at_estimate)
+            c, sn = np.cos(th[s[:, 0] // 3]), np.sin(th[s[:, 0] // 3])
+            R = np.zeros((len(s), 3, 3))
+            R[:, 0, 0] = R[:, 1, 1] = c
+            R[:, 1, 0], R[:, 0, 1] = sn, -sn
+            R[:, 2, 2] = 1.0
+            blk[:] = R @ blk @ R.mT
+    return out
+
+
+def _lower_at_estimate(res, sets: list[np.ndarray]):
+    """``(lower-triangle H, n_poses to rotate or None)`` for :func:`result_marginals`, or None when its
+    conditions fail (then ``res.information`` is used)."""
+    ws, lo = getattr(res, "workspace", None), getattr(res, "information_lower", None)
+    if ws is None or lo is None or not selinv.available():  # only the selected inverse reads a lower triangle
+        return None
+    asm = ws[0]
+    H = asm.lower_matrix(lo)
+    if cholmod_analysis(ws, H) is None:
+        return None
+    n = asm.problem.se2_poses
+    if res.information_chart != "body" or n <= 0:
+        return H, None
+    P = 3 * n
+    if np.any(np.asarray(asm.fixed) < P):  # a held-fixed pose column: its identity row is not a rotated one
+        return None
+    for s in sets:
+        if not s.size or s.min() >= P:
+            continue
+        if s.shape[1] != 3 or np.any(s[:, 0] % 3) or np.any(s != s[:, :1] + np.arange(3)) or s.max() >= P:
+            return None
+    return H, n
 
 
 def _chain_border_blocks(information: sp.spmatrix, sets: list[np.ndarray], chain: int) -> list[np.ndarray]:

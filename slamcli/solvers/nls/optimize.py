@@ -163,6 +163,8 @@ def solve(
         notes=tuple(notes),
         linear_solver=lin.name,
         workspace=(asm, lin),
+        information_lower=data,
+        information_chart="body" if params.pose_chart == "body" and problem.se2_poses > 0 else "world",
     )
 
 

@@ -243,6 +243,12 @@ class NlsResult:
     workspace : tuple or None    ``(Assembler, linear solver)`` of the run: their sparsity pattern and
                                  symbolic analysis serve a follow-up problem on the same factor graph
                                  (``Assembler(problem, like=...)``, e.g. the pose-graph certificate).
+    information_lower : ndarray (lo_nnz,) or None   the lower-triangle data of ``H`` at ``x`` on the pattern of
+                                 ``workspace``'s assembler, in the optimiser's pose chart ``information_chart``
+                                 (``"body"``: GTSAM's Pose2 chart, not rotated) — what the marginals factor
+                                 directly (:func:`slamcli.solvers.nls.marginals.result_marginals`), without the
+                                 full symmetric ``information``.
+    information_chart : "body" | "world"   the pose chart of ``information_lower``.
     """
 
     x: np.ndarray
@@ -257,6 +263,8 @@ class NlsResult:
     notes: tuple[str, ...] = ()
     linear_solver: str = ""
     workspace: tuple | None = field(default=None, repr=False, compare=False)
+    information_lower: np.ndarray | None = field(default=None, repr=False, compare=False)
+    information_chart: str = "world"
 
     @functools.cached_property
     def information(self) -> sp.csc_matrix:
