@@ -68,3 +68,21 @@ def test_singular_information_is_refused_with_the_variable_named(monkeypatch, pa
     with pytest.raises(np.linalg.LinAlgError) as exc:
         mg.block_marginals(H, (poses, lms), names=("pose", "landmark"), chain=n, locate=locate)
     assert "landmark" in str(exc.value)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4])
+def test_positive_definiteness_test_of_the_blocks_agrees_with_eigenvalues(k):
+    """The closed-form Sylvester test (k ≤ 3) and the Cholesky one (k > 3) behind ``check_covariance_blocks``
+    against the sign of the smallest eigenvalue, block by block, on random symmetric (in)definite blocks."""
+    rng = np.random.default_rng(k)
+    X = rng.standard_normal((400, k, k))
+    S = X + X.mT + rng.uniform(0.0, 3.0, (400, 1, 1)) * np.eye(k)
+    low = np.linalg.eigvalsh(S)[:, 0]
+    pd = low > 0.0
+    assert 0 < pd.sum() < pd.size  # both kinds present
+    got = np.array([mg._leading_minors_positive(S[i : i + 1]) for i in range(S.shape[0])])
+    assert np.array_equal(got, pd)
+    assert mg._leading_minors_positive(S[pd]) and not mg._leading_minors_positive(S)
+    mg.check_covariance_blocks(S[pd], "pose")
+    with pytest.raises(np.linalg.LinAlgError, match=f"pose {int(np.argmin(low))}:"):  # the most negative block
+        mg.check_covariance_blocks(S, "pose")
