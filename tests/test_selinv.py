@@ -284,3 +284,18 @@ def test_result_marginals_in_the_world_chart_need_no_rotation():
     ref = Hinv[ip[:, :, None], ip[:, None, :]]
     (pose_cov,) = nls.result_marginals(opt, (ip,))
     assert np.abs(pose_cov - ref).max() <= 1e-10 * np.abs(ref).max()
+
+
+def test_depths_by_pointer_jumping_equal_a_walk_to_the_root():
+    """``_depths`` (vectorised pointer jumping) against walking every node up to its root, on random forests
+    whose parents come after their children (as in an elimination tree)."""
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 17, 500):
+        par = np.array([rng.integers(k + 1, n) if k < n - 1 and rng.random() < 0.95 else -1 for k in range(n)])
+        ref = []
+        for k in range(n):
+            d, a = 0, par[k]
+            while a >= 0:
+                d, a = d + 1, par[a]
+            ref.append(d)
+        assert np.array_equal(selinv._depths(par), ref)

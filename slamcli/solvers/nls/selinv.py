@@ -189,13 +189,22 @@ class _Supernodes:
         # every fundamental row's place in its merged supernode's row set (entries of L are found through it)
         rep, u, _ = _ragged(fnrows)
         self.frow_sn = group[rep]
-        self.fmap = self.local_rows(self.frow_sn, frows[fkey_start[rep] + u])
+        self.fmap = self.local_rows(self.frow_sn, frows[fkey_start[rep] + u], own=True)
         # per column: where its stored entries start among the fundamental rows (minus its start in L)
         self.col_shift = fkey_start[fsn_of] + (np.arange(n) - ffirst[fsn_of]) - ip[:-1]
         self.cnt = cnt
 
-    def local_rows(self, K: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there)."""
+    def local_rows(self, K: np.ndarray, rows: np.ndarray, own: bool = False) -> np.ndarray:
+        """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there).
+
+        ``own``: the rows ``≥ first[K]`` are known to lie on the pattern (e.g. rows of a member or child of
+        ``K``): those among ``K``'s own columns are placed directly, only the others searched."""
+        if own:
+            local = rows - self.first[K]
+            below = np.flatnonzero(local >= self.width[K])
+            if below.size:
+                local[below] = self.local_rows(K[below], rows[below])
+            return local
         key = K * self.n + rows
         g = np.searchsorted(self.keys, key)
         found = g < len(self.keys)
@@ -382,6 +391,20 @@ def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return rep, np.arange(starts[-1], dtype=np.int64) - starts[:-1][rep], starts
 
 
+def _depths(par: np.ndarray) -> np.ndarray:
+    """Depth of every node of a forest given by ``par`` (−1 at a root) by pointer jumping: ⌈log₂ height⌉ rounds
+    of vector operations instead of a Python loop over the nodes."""
+    depth = (par >= 0).astype(np.int64)
+    anc = par.copy()
+    up = np.flatnonzero(anc >= 0)
+    while up.size:  # invariant: depth[K] = distance from K to anc[K] (or to its root when anc[K] = −1)
+        a = anc[up]
+        depth[up] += depth[a]
+        anc[up] = anc[a]
+        up = up[anc[up] >= 0]
+    return depth
+
+
 def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
     """Supernodes in processing order (level by level, root level first) cut into buckets of one level.
 
@@ -431,12 +454,7 @@ class _Schedule:
         below = sn.key_start + w  # position in rows of each supernode's first row below J
         par = np.full(ns, -1, np.int64)
         par[r > 0] = sn.sn_of[sn.rows[below[r > 0]]]
-        depth = [0] * ns
-        pl = par.tolist()
-        for K in range(ns - 1, -1, -1):  # a parent comes after its children
-            if pl[K] >= 0:
-                depth[K] = depth[pl[K]] + 1
-        self.depth = depth = np.asarray(depth, np.int64)
+        self.depth = depth = _depths(par)
         order, b_start, b_level = _buckets(depth, r, w)
         self.n_levels = int(depth.max()) + 1
         self.level_buckets = np.searchsorted(b_level, np.arange(self.n_levels + 1)).tolist()
@@ -486,7 +504,7 @@ class _Schedule:
         r = sn.nrows - sn.width
         rep, u, _ = _ragged(r)
         P = par[rep]
-        loc = sn.local_rows(P, sn.rows[below[rep] + u])
+        loc = sn.local_rows(P, sn.rows[below[rep] + u], own=True)
         wP = sn.width[P]
         pos = np.where(loc < wP, loc, loc - wP + self.sp[P])
         start = np.empty(r.size, np.int64)
