@@ -299,3 +299,22 @@ def test_depths_by_pointer_jumping_equal_a_walk_to_the_root():
                 d, a = d + 1, par[a]
             ref.append(d)
         assert np.array_equal(selinv._depths(par), ref)
+
+
+def test_result_marginals_with_a_held_fixed_pose_use_the_full_world_chart_matrix():
+    """A held-fixed pose column (identity row, not a rotated one): ``result_marginals`` does not rotate body
+    blocks but uses ``res.information`` — equal to its dense inverse; the fixed pose's block is the identity."""
+    import dataclasses
+
+    from slamcli.solvers.nls import marginals
+
+    ds, gp, _ = _graph_problem()
+    prob = dataclasses.replace(gp.problem, fixed_cols=np.arange(3, dtype=np.int64))
+    opt = nls.solve(prob, gp.x0)
+    ip = gp.pose_cols()
+    assert opt.information_chart == "body" and marginals._lower_at_estimate(opt, [ip]) is None
+    Hinv = np.linalg.inv(opt.information.toarray())
+    ref = Hinv[ip[:, :, None], ip[:, None, :]]
+    (pose_cov,) = nls.result_marginals(opt, (ip,))
+    assert np.abs(pose_cov - ref).max() <= 1e-10 * np.abs(ref).max()
+    assert np.allclose(pose_cov[0], np.eye(3), rtol=0.0, atol=1e-12)
