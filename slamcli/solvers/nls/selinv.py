@@ -197,8 +197,9 @@ class _Supernodes:
     def local_rows(self, K: np.ndarray, rows: np.ndarray, own: bool = False) -> np.ndarray:
         """Position of row ``rows[i]`` in the row set of supernode ``K[i]`` (ValueError if it is not there).
 
-        ``own``: the rows ``≥ first[K]`` are known to lie on the pattern (e.g. rows of a member or child of
-        ``K``): those among ``K``'s own columns are placed directly, only the others searched."""
+        ``own``: every row is ``≥ first[K]`` (a row of a member or child of ``K``, or the larger index of an
+        entry in one of ``K``'s columns): those among ``K``'s own columns lie in its row set by construction
+        and are placed directly, only the others are searched (and checked)."""
         if own:
             local = rows - self.first[K]
             below = np.flatnonzero(local >= self.width[K])
@@ -261,7 +262,7 @@ class SelectedInverse:
         qa, qb = self.iperm[rows.ravel()], self.iperm[cols.ravel()]
         lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
         K = self.sn_of[lo]
-        p = self._sn.local_rows(K, hi)
+        p = self._sn.local_rows(K, hi, own=True)  # hi ≥ lo ≥ first[K]
         return self.vals[self.off[K] + p * self.sn_width[K] + (lo - self.sn_first[K])].reshape(shape)
 
     def blocks(self, index_blocks: np.ndarray) -> np.ndarray:
@@ -329,7 +330,7 @@ def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.n
     if not sn.n:
         return np.zeros(0)
     K = sn.sn_of[lo]
-    where = sn.local_rows(K, hi)
+    where = sn.local_rows(K, hi, own=True)  # hi ≥ lo ≥ first[K]
     plan = _Schedule(sn)
     return plan.run(factor, *plan.front_index(K, where, lo - sn.first[K]))
 
