@@ -490,8 +490,8 @@ class _Schedule:
         self.b_group[ob] = g_of
         self.b_group, self.b_group_at = self.b_group.tolist(), at.tolist()
         self.group_width = gw.tolist()
-        self.group_sn = [np.concatenate([order[b_start[b] : b_start[b + 1]] for b in ob[g_of == g]])
-                         for g in range(gw.size)]
+        self.group_buckets = [ob[g_of == g].tolist() for g in range(gw.size)]
+        self.group_sn = [np.concatenate([order[b_start[b] : b_start[b + 1]] for b in bs]) for bs in self.group_buckets]
         self.rel_at, self.rel = self._relative_positions(below)
 
     def _relative_positions(self, below):
@@ -526,8 +526,7 @@ class _Schedule:
         return pos[o], at.tolist(), o
 
     def _padded_factor(self, factor: LdlFactor):
-        """``L`` as the buckets' padded ``(nb, mp, sp)`` panels, flat in bucket order (zero on the padding),
-        and the position of every supernode's panel in it."""
+        """``L`` as the buckets' padded ``(nb, mp, sp)`` panels, flat in bucket order (zero on the padding)."""
         sn, L = self.sn, factor.L
         K, w, sp_ = sn.sn_of, sn.width, self.sp
         base = np.asarray(self.l_at)[self.bucket] + self.slot * self.mp * sp_
@@ -542,18 +541,20 @@ class _Schedule:
         dst += rowoff[at]
         lpad = np.zeros(self.l_at[-1])
         lpad[dst] = L.data
-        return lpad, base
+        return lpad
 
-    def _diagonal_terms(self, lpad: np.ndarray, base: np.ndarray, d: np.ndarray):
+    def _diagonal_terms(self, lpad: np.ndarray, d: np.ndarray):
         """``L_JJ⁻¹`` (identity on the padding) and ``L_JJ⁻ᵀ D_J⁻¹ L_JJ⁻¹`` (zero on the padding) of every
         supernode, one ``(N, sp, sp)`` array per padded width ``sp`` (:attr:`group_sn`), so that a bucket's
         blocks are a view. They depend on the factor only: batched over all buckets of one width, not per
         bucket."""
         sn = self.sn
         linv, sjj = [], []
-        for sp_, Ks in zip(self.group_width, self.group_sn):
+        for sp_, Ks, bs in zip(self.group_width, self.group_sn, self.group_buckets):
             a = np.arange(sp_)
-            blk = lpad[base[Ks][:, None, None] + a[:, None] * sp_ + a]  # L_JJ, zero on the padding
+            # L_JJ (zero on the padding): the leading rows of the group's padded panels, copied as slices
+            blk = np.concatenate([lpad[self.l_at[b] : self.l_at[b + 1]].reshape(self.b_count[b], -1, sp_)[:, :sp_]
+                                  for b in bs])
             blk[:, a, a] = 1.0
             inv = _unit_lower_inverse(blk)
             col = sn.first[Ks][:, None] + a
@@ -565,8 +566,8 @@ class _Schedule:
     def run(self, factor: LdlFactor, src: np.ndarray, src_at: list, o: np.ndarray) -> np.ndarray:
         """The recurrence, root level first; returns ``Σ̃`` at the front positions ``src`` (of
         :meth:`front_index`) in the caller's order."""
-        lpad, base = self._padded_factor(factor)
-        linv, sjj = self._diagonal_terms(lpad, base, factor.d)
+        lpad = self._padded_factor(factor)
+        linv, sjj = self._diagonal_terms(lpad, factor.d)
         out = np.empty(src.size)
         # two buffers, levels alternating (position 0 stays 0: the padded gathers' slot)
         buf, prev = np.zeros(max(self.level_size) + 1), np.zeros(max(self.level_size) + 1)
