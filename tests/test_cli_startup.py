@@ -289,3 +289,20 @@ def test_a_plugin_installed_with_entry_points_is_found_and_cannot_replace_a_buil
         _distribution_version.cache_clear()
         registry._module_source.cache_clear()
         sys.modules.pop("toyplug", None)
+
+
+def _unused_numpy_executed_after_scipy_sparse() -> list[str]:
+    """Run in a sweep worker: which of :data:`NUMPY_UNUSED_DEPENDENCIES` ``import scipy.sparse`` executed."""
+    import scipy.sparse  # noqa: F401
+
+    return [m for m in NUMPY_UNUSED_DEPENDENCIES if m in sys.modules]
+
+
+def test_sweep_workers_defer_numpy_submodules_like_the_command():
+    from slamcli.sweep.runner import LocalPool
+
+    pool = LocalPool(1)
+    try:
+        assert pool.submit(_unused_numpy_executed_after_scipy_sparse).result(timeout=120) == []
+    finally:
+        pool.shutdown()
