@@ -14,13 +14,16 @@ Columns: ``cpu_slamcli_s`` (defaults: certificate and marginals included), ``cpu
 (``-p covariance=false``), ``cpu_gtsam_s`` and the ratios. The machine may be loaded: read the ratios.
 
 Breakdown, measured in the same alternating rounds: ``cpu_imports_s`` is a process that only imports the
-libraries a default solve needs (numpy, scipy.sparse, h5py, typer, and sksparse.cholmod when installed) — the
-floor below which no change inside slamcli goes; ``cpu_gtsam_import_s`` the same for ``import gtsam``;
-``cpu_numpy_star_s`` is what ``from numpy import *`` adds to ``import numpy``. SciPy (1.14 to 1.17 at least)
-runs that statement in its vendored ``array_api_compat.numpy`` whenever ``scipy.sparse`` is imported, and since
-NumPy 2.0 ``numpy.__all__`` names the lazily loaded submodules, so it imports ``numpy.f2py`` and
-``numpy.testing`` (argparse, logging, unittest, importlib.metadata, …) into every process that uses
-``scipy.sparse``.
+libraries a default solve needs (numpy, scipy.sparse, h5py, typer, and sksparse.cholmod when installed) the way
+``slamcli`` imports them — the floor below which no change inside slamcli goes; ``cpu_gtsam_import_s`` the same
+for ``import gtsam``; ``cpu_numpy_star_s`` is what ``from numpy import *`` adds to ``import numpy`` when nothing
+is deferred. SciPy (1.14 to 1.17 at least) runs that statement in its vendored ``array_api_compat.numpy``
+whenever ``scipy.sparse`` is imported, and since NumPy 2.0 ``numpy.__all__`` names the lazily loaded
+submodules, so it would execute ``numpy.f2py`` and ``numpy.testing`` (argparse, logging, unittest,
+importlib.metadata, …) in every process that uses ``scipy.sparse``; the ``slamcli`` command defers them
+(:mod:`slamcli.api.startup`), so this column is what the deferral saves. ``cpu_scipy_linalg_s`` is what
+``import scipy.linalg`` adds to the floor: a default solve imports it for LAPACK's triangular inverse in the
+marginals (``solvers/nls/selinv.py``), the largest import above the floor.
 """
 
 from __future__ import annotations
@@ -43,6 +46,8 @@ graph.add(gtsam.PriorFactorPose2(0, values.atPose2(0), gtsam.noiseModel.Diagonal
 out = gtsam.LevenbergMarquardtOptimizer(graph, values, gtsam.LevenbergMarquardtParams()).optimize()
 print(graph.error(out))
 """
+#: what ``slamcli`` runs before anything imports SciPy (:func:`slamcli.api.startup.defer_unused_numpy_submodules`)
+DEFER = "from slamcli.api.startup import defer_unused_numpy_submodules; defer_unused_numpy_submodules()"
 
 
 def write_graph(path: Path, n: int = N_POSES, seed: int = 0) -> None:
@@ -91,7 +96,9 @@ def run(quick: bool = False) -> list[dict]:
             "nocov": lambda out: cli + ["solve", str(ds), "--method", "graph", "-p", "covariance=false", "-q",
                                         "-o", out],
             "gtsam": lambda out: [sys.executable, "-c", GTSAM_SCRIPT, str(g2o)],
-            "imports": lambda out: [sys.executable, "-c", f"import {', '.join(_solve_libraries())}"],
+            "imports": lambda out: [sys.executable, "-c", f"{DEFER}; import {', '.join(_solve_libraries())}"],
+            "imports_linalg": lambda out: [sys.executable, "-c",
+                                           f"{DEFER}; import {', '.join(_solve_libraries())}, scipy.linalg"],
             "gtsam_import": lambda out: [sys.executable, "-c", "import gtsam"],
             "numpy": lambda out: [sys.executable, "-c", "import numpy"],
             "numpy_star": lambda out: [sys.executable, "-c", "import numpy; from numpy import *"],
@@ -115,6 +122,7 @@ def run(quick: bool = False) -> list[dict]:
         "cpu_imports_s": round(med["imports"], 3),
         "cpu_gtsam_import_s": round(med["gtsam_import"], 3),
         "cpu_numpy_star_s": round(med["numpy_star"] - med["numpy"], 3),
+        "cpu_scipy_linalg_s": round(med["imports_linalg"] - med["imports"], 3),
     }]
 
 
