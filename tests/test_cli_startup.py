@@ -177,6 +177,12 @@ def test_deferred_numpy_submodules_are_the_real_ones_on_first_use(numpy_first):
         import numpy as np
         executed = [m for m in {NUMPY_UNUSED_DEPENDENCIES!r} if m in sys.modules]
         assert not executed, executed
+        # first touch through a submodule that the package's __init__ imports too: one module, one class
+        import numpy.ma.core as ma_core
+        import numpy.polynomial.polynomial as poly
+        assert ma_core is np.ma.core and ma_core.MaskedArray is np.ma.MaskedArray
+        assert poly is np.polynomial.polynomial and poly.Polynomial is np.polynomial.Polynomial
+        assert ma_core.__spec__.name == "numpy.ma.core" and ma_core.__spec__.origin == ma_core.__file__
         np.testing.assert_allclose([1.0, 2.0], [1.0, 2.0 + 1e-12])
         try:
             np.testing.assert_allclose([1.0], [1.1])

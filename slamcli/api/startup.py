@@ -4,12 +4,15 @@ makes every process execute and that no slamcli command uses are registered as l
 SciPy's vendored ``array_api_compat`` runs ``from numpy import *`` whenever ``scipy.sparse`` is imported (SciPy
 1.14 to 1.17 at least), and since NumPy 2.0 ``numpy.__all__`` names the lazily loaded submodules, so that
 statement executes ``numpy.f2py``, ``numpy.testing`` (with ``unittest``, ``argparse``, ``logging``,
-``importlib.metadata``, …), ``numpy.ma``, ``numpy.polynomial`` and others: ≈ 300 M of the ≈ 1.7 G instructions
+``importlib.metadata``, …), ``numpy.ma``, ``numpy.polynomial`` and others: 306 M of the 1722 M instructions
 of a 1k-pose default ``slamcli solve --method graph`` (valgrind callgrind, ``benchmarks/bench_graph_startup.py``).
 :func:`defer_unused_numpy_submodules` gives each of them a module object whose code runs on its first attribute
 access (the standard library's :class:`importlib.util.LazyLoader`): ``from numpy import *`` binds the object,
-and code that really uses ``numpy.testing`` or ``numpy.f2py`` gets the real module. Importing this module, or
-``slamcli``, changes nothing; only the command-line entry point and sweep workers call the function.
+and code that really uses ``numpy.testing`` or ``numpy.f2py`` gets the real module — also when its first use is
+the import of a submodule (:class:`_LoadedByParent`). Importing this module, or ``slamcli``, changes nothing;
+only the command-line entry point and sweep workers call the function. (Python 3.11's LazyLoader takes no lock:
+two threads touching a deferred module for the first time at the same instant could both execute it; no
+slamcli code uses these modules.)
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ def defer_unused_numpy_submodules(names: tuple[str, ...] = UNUSED_NUMPY_SUBMODUL
 
 
 def _register_lazy(numpy: ModuleType, names: tuple[str, ...]) -> None:
+    deferred = []
     for name in names:
         full = f"numpy.{name}"
         # ``numpy.__dict__``, not hasattr: NumPy's module __getattr__ would import the submodule
@@ -53,6 +57,42 @@ def _register_lazy(numpy: ModuleType, names: tuple[str, ...]) -> None:
         sys.modules[full] = module
         spec.loader.exec_module(module)
         setattr(numpy, name, module)  # as the import system does for a submodule it loads
+        deferred.append(full + ".")
+    if deferred:
+        sys.meta_path.insert(0, _LoadedByParent(tuple(deferred)))
+
+
+class _LoadedByParent:
+    """A meta path finder for the submodules of the deferred packages: it hands back the module their package
+    has just imported.
+
+    ``import numpy.ma.core`` as the first touch of the lazy ``numpy.ma`` reads ``numpy.ma.__path__``, which
+    executes ``numpy/ma/__init__.py`` — and that imports ``numpy.ma.core`` itself. The import system has
+    already decided to load ``numpy.ma.core`` (it was not in ``sys.modules`` a moment before), so without
+    this finder it would execute it a second time: two module objects and two ``MaskedArray`` classes.
+    """
+
+    def __init__(self, prefixes: tuple[str, ...]) -> None:
+        self.prefixes = prefixes
+
+    def find_spec(self, fullname, path=None, target=None):
+        if not fullname.startswith(self.prefixes) or fullname not in sys.modules:
+            return None
+        return importlib.util.spec_from_loader(fullname, _Loaded(sys.modules[fullname]))
+
+
+class _Loaded:
+    """Loader of a module that is in ``sys.modules`` already: returns it, executes nothing and gives it back
+    its own ``__spec__`` (the import system sets the spec it loads with)."""
+
+    def __init__(self, module: ModuleType) -> None:
+        self.module, self.spec = module, module.__spec__
+
+    def create_module(self, spec):
+        return self.module
+
+    def exec_module(self, module: ModuleType) -> None:
+        module.__spec__ = self.spec
 
 
 class _AfterNumpy:
