@@ -24,6 +24,10 @@ importlib.metadata, …) in every process that uses ``scipy.sparse``; the ``slam
 (:mod:`slamcli.api.startup`), so this column is what the deferral saves. ``cpu_scipy_linalg_s`` is what
 ``import scipy.linalg`` adds to the floor: a default solve imports it for LAPACK's triangular inverse in the
 marginals (``solvers/nls/selinv.py``), the largest import above the floor.
+
+CPU time on a shared machine moves with its load (the ratio of the same code ranged 1.48-1.75 between three
+runs at load average 2-3), so where valgrind is installed the ``instr_*`` columns count the instructions of one
+run of the main sides under callgrind (millions; ``instr_ratio`` = ours / GTSAM's, the load-independent ratio).
 """
 
 from __future__ import annotations
@@ -109,6 +113,8 @@ def run(quick: bool = False) -> list[dict]:
         for k in range(1 if quick else REPEATS):
             for name in list(sides) if k % 2 == 0 else list(sides)[::-1]:  # alternating order
                 cpu[name].append(_child_cpu(sides[name](str(Path(tmp) / f"r{k}-{name}.h5")), env))
+        instr = {name: _instructions(sides[name](str(Path(tmp) / f"cg-{name}.h5")), env, Path(tmp))
+                 for name in INSTRUCTION_SIDES}
     med = {name: float(np.median(v)) for name, v in cpu.items()}
     return [{
         "poses": N_POSES,
@@ -123,7 +129,41 @@ def run(quick: bool = False) -> list[dict]:
         "cpu_gtsam_import_s": round(med["gtsam_import"], 3),
         "cpu_numpy_star_s": round(med["numpy_star"] - med["numpy"], 3),
         "cpu_scipy_linalg_s": round(med["imports_linalg"] - med["imports"], 3),
+        **_instruction_columns(instr),
     }]
+
+
+#: the sides also counted in instructions (valgrind callgrind, when installed)
+INSTRUCTION_SIDES = ("ours", "nocov", "gtsam", "imports", "imports_linalg")
+
+
+def _instructions(cmd: list[str], env: dict, tmp: Path) -> float | None:
+    """Instructions executed by ``cmd`` (millions) under valgrind's callgrind — independent of the machine's load,
+    unlike CPU time; ``PYTHONHASHSEED=0`` so that both sides run the same instructions every time. None without
+    valgrind."""
+    import re
+    import shutil
+
+    if shutil.which("valgrind") is None:
+        return None
+    out = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={tmp / 'callgrind.%p'}", *cmd],
+                         env=dict(env, PYTHONHASHSEED="0"), check=True, capture_output=True, text=True)
+    m = re.search(r"Collected\s*:\s*(\d+)", out.stderr)
+    return int(m.group(1)) / 1e6 if m else None
+
+
+def _instruction_columns(instr: dict[str, float | None]) -> dict:
+    if any(v is None for v in instr.values()):
+        return {}
+    return {
+        "instr_slamcli_M": round(instr["ours"]),
+        "instr_slamcli_nocov_M": round(instr["nocov"]),
+        "instr_gtsam_M": round(instr["gtsam"]),
+        "instr_ratio": round(instr["ours"] / instr["gtsam"], 2),
+        "instr_ratio_nocov": round(instr["nocov"] / instr["gtsam"], 2),
+        "instr_imports_M": round(instr["imports"]),
+        "instr_scipy_linalg_M": round(instr["imports_linalg"] - instr["imports"]),
+    }
 
 
 def _solve_libraries() -> list[str]:
