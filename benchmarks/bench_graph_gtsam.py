@@ -154,7 +154,8 @@ def startup_rows(quick: bool) -> list[dict]:
              "poses": r["poses"], "repeats": r["repeats"], "slamcli": r["cpu_slamcli_s"], "gtsam": r["cpu_gtsam_s"],
              "ratio": r["ratio"], "goal": 1.5, "met": r["ratio"] <= 1.5, "ratio_nocov": r["ratio_nocov"],
              "cpu_imports_s": r["cpu_imports_s"], "cpu_gtsam_import_s": r["cpu_gtsam_import_s"],
-             "cpu_numpy_star_s": r["cpu_numpy_star_s"]}]
+             "cpu_numpy_star_s": r["cpu_numpy_star_s"], "cpu_scipy_linalg_s": r["cpu_scipy_linalg_s"],
+             **{k: v for k, v in r.items() if k.startswith("instr_")}}]
 
 
 def sweep_rows() -> list[dict]:

@@ -14,13 +14,20 @@ Columns: ``cpu_slamcli_s`` (defaults: certificate and marginals included), ``cpu
 (``-p covariance=false``), ``cpu_gtsam_s`` and the ratios. The machine may be loaded: read the ratios.
 
 Breakdown, measured in the same alternating rounds: ``cpu_imports_s`` is a process that only imports the
-libraries a default solve needs (numpy, scipy.sparse, h5py, typer, and sksparse.cholmod when installed) — the
-floor below which no change inside slamcli goes; ``cpu_gtsam_import_s`` the same for ``import gtsam``;
-``cpu_numpy_star_s`` is what ``from numpy import *`` adds to ``import numpy``. SciPy (1.14 to 1.17 at least)
-runs that statement in its vendored ``array_api_compat.numpy`` whenever ``scipy.sparse`` is imported, and since
-NumPy 2.0 ``numpy.__all__`` names the lazily loaded submodules, so it imports ``numpy.f2py`` and
-``numpy.testing`` (argparse, logging, unittest, importlib.metadata, …) into every process that uses
-``scipy.sparse``.
+libraries a default solve needs (numpy, scipy.sparse, h5py, typer, and sksparse.cholmod when installed) the way
+``slamcli`` imports them — the floor below which no change inside slamcli goes; ``cpu_gtsam_import_s`` the same
+for ``import gtsam``; ``cpu_numpy_star_s`` is what ``from numpy import *`` adds to ``import numpy`` when nothing
+is deferred. SciPy (1.14 to 1.17 at least) runs that statement in its vendored ``array_api_compat.numpy``
+whenever ``scipy.sparse`` is imported, and since NumPy 2.0 ``numpy.__all__`` names the lazily loaded
+submodules, so it would execute ``numpy.f2py`` and ``numpy.testing`` (argparse, logging, unittest,
+importlib.metadata, …) in every process that uses ``scipy.sparse``; the ``slamcli`` command defers them
+(:mod:`slamcli.api.startup`), so this column is what the deferral saves. ``cpu_scipy_linalg_s`` is what
+``import scipy.linalg`` adds to the floor: a default solve imports it for LAPACK's triangular inverse in the
+marginals (``solvers/nls/selinv.py``), the largest import above the floor.
+
+CPU time on a shared machine moves with its load (the ratio of the same code ranged 1.48-1.75 between three
+runs at load average 2-3), so where valgrind is installed the ``instr_*`` columns count the instructions of one
+run of the main sides under callgrind (millions; ``instr_ratio`` = ours / GTSAM's, the load-independent ratio).
 """
 
 from __future__ import annotations
@@ -43,6 +50,8 @@ graph.add(gtsam.PriorFactorPose2(0, values.atPose2(0), gtsam.noiseModel.Diagonal
 out = gtsam.LevenbergMarquardtOptimizer(graph, values, gtsam.LevenbergMarquardtParams()).optimize()
 print(graph.error(out))
 """
+#: what ``slamcli`` runs before anything imports SciPy (:func:`slamcli.api.startup.defer_unused_numpy_submodules`)
+DEFER = "from slamcli.api.startup import defer_unused_numpy_submodules; defer_unused_numpy_submodules()"
 
 
 def write_graph(path: Path, n: int = N_POSES, seed: int = 0) -> None:
@@ -91,7 +100,9 @@ def run(quick: bool = False) -> list[dict]:
             "nocov": lambda out: cli + ["solve", str(ds), "--method", "graph", "-p", "covariance=false", "-q",
                                         "-o", out],
             "gtsam": lambda out: [sys.executable, "-c", GTSAM_SCRIPT, str(g2o)],
-            "imports": lambda out: [sys.executable, "-c", f"import {', '.join(_solve_libraries())}"],
+            "imports": lambda out: [sys.executable, "-c", f"{DEFER}; import {', '.join(_solve_libraries())}"],
+            "imports_linalg": lambda out: [sys.executable, "-c",
+                                           f"{DEFER}; import {', '.join(_solve_libraries())}, scipy.linalg"],
             "gtsam_import": lambda out: [sys.executable, "-c", "import gtsam"],
             "numpy": lambda out: [sys.executable, "-c", "import numpy"],
             "numpy_star": lambda out: [sys.executable, "-c", "import numpy; from numpy import *"],
@@ -102,6 +113,8 @@ def run(quick: bool = False) -> list[dict]:
         for k in range(1 if quick else REPEATS):
             for name in list(sides) if k % 2 == 0 else list(sides)[::-1]:  # alternating order
                 cpu[name].append(_child_cpu(sides[name](str(Path(tmp) / f"r{k}-{name}.h5")), env))
+        instr = {name: _instructions(sides[name](str(Path(tmp) / f"cg-{name}.h5")), env, Path(tmp))
+                 for name in INSTRUCTION_SIDES}
     med = {name: float(np.median(v)) for name, v in cpu.items()}
     return [{
         "poses": N_POSES,
@@ -115,7 +128,42 @@ def run(quick: bool = False) -> list[dict]:
         "cpu_imports_s": round(med["imports"], 3),
         "cpu_gtsam_import_s": round(med["gtsam_import"], 3),
         "cpu_numpy_star_s": round(med["numpy_star"] - med["numpy"], 3),
+        "cpu_scipy_linalg_s": round(med["imports_linalg"] - med["imports"], 3),
+        **_instruction_columns(instr),
     }]
+
+
+#: the sides also counted in instructions (valgrind callgrind, when installed)
+INSTRUCTION_SIDES = ("ours", "nocov", "gtsam", "imports", "imports_linalg")
+
+
+def _instructions(cmd: list[str], env: dict, tmp: Path) -> float | None:
+    """Instructions executed by ``cmd`` (millions) under valgrind's callgrind — independent of the machine's load,
+    unlike CPU time; ``PYTHONHASHSEED=0`` so that both sides run the same instructions every time. None without
+    valgrind."""
+    import re
+    import shutil
+
+    if shutil.which("valgrind") is None:
+        return None
+    out = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={tmp / 'callgrind.%p'}", *cmd],
+                         env=dict(env, PYTHONHASHSEED="0"), check=True, capture_output=True, text=True)
+    m = re.search(r"Collected\s*:\s*(\d+)", out.stderr)
+    return int(m.group(1)) / 1e6 if m else None
+
+
+def _instruction_columns(instr: dict[str, float | None]) -> dict:
+    if any(v is None for v in instr.values()):
+        return {}
+    return {
+        "instr_slamcli_M": round(instr["ours"]),
+        "instr_slamcli_nocov_M": round(instr["nocov"]),
+        "instr_gtsam_M": round(instr["gtsam"]),
+        "instr_ratio": round(instr["ours"] / instr["gtsam"], 2),
+        "instr_ratio_nocov": round(instr["nocov"] / instr["gtsam"], 2),
+        "instr_imports_M": round(instr["imports"]),
+        "instr_scipy_linalg_M": round(instr["imports_linalg"] - instr["imports"]),
+    }
 
 
 def _solve_libraries() -> list[str]:

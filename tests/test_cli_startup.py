@@ -65,19 +65,28 @@ def test_narrowed_app_runs_a_command_like_the_whole_app(tmp_path):
 
 
 #: watched besides: the entry-point scan of the solver registry (``"<entry points scanned>"`` when it ran)
-WATCHED = ("rich", "scipy.sparse.linalg", "sksparse", "importlib.metadata", "<entry points scanned>")
+WATCHED = ("rich", "scipy.sparse.linalg", "sksparse", "importlib.metadata", "<entry points scanned>",
+           "<lazy modules>")
+#: what numpy.f2py / numpy.testing / numpy.ma / numpy.polynomial import when they are executed (SciPy's
+#: ``from numpy import *`` executes them unless :mod:`slamcli.api.startup` deferred them)
+NUMPY_UNUSED_DEPENDENCIES = ("unittest", "numpy.f2py.crackfortran", "numpy.testing._private.utils", "numpy.ma.core",
+                             "numpy.polynomial.polynomial")
 
 
 def _modules_after(code: str) -> list[str]:
     """Modules of :data:`NOT_ON_SOLVE_PATH` / :data:`OTHER_SOLVERS` / :data:`WATCHED` present after ``code`` ran
     in a fresh interpreter (also whether CHOLMOD is there: without it the solve needs scipy.sparse.linalg's
-    SuperLU)."""
+    SuperLU), and of :data:`NUMPY_UNUSED_DEPENDENCIES`; ``"<lazy modules>"`` when a module in ``sys.modules``
+    is still a lazily executed one or slamcli's finder waits in ``sys.meta_path``."""
     probe = textwrap.dedent(f"""
-        import json, sys
-        watched = {NOT_ON_SOLVE_PATH + OTHER_SOLVERS + WATCHED!r}
+        import importlib.util, json, sys
+        watched = {NOT_ON_SOLVE_PATH + OTHER_SOLVERS + WATCHED + NUMPY_UNUSED_DEPENDENCIES!r}
         reg = sys.modules.get("slamcli.solvers.registry")
         if reg is not None and reg._scan_entry_points.cache_info().currsize:
             sys.modules["<entry points scanned>"] = reg
+        if (any(isinstance(m, importlib.util._LazyModule) for m in list(sys.modules.values()))
+                or any(type(f).__module__ == "slamcli.api.startup" for f in sys.meta_path)):
+            sys.modules["<lazy modules>"] = reg
         print(json.dumps(sorted(m for m in watched if m in sys.modules)))
     """)
     out = subprocess.run([sys.executable, "-c", textwrap.dedent(code) + probe], capture_output=True, text=True,
@@ -134,6 +143,10 @@ def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_grap
     assert out.exists()
     _check_solve_path(present)
     assert "rich" not in present  # -q prints nothing
+    # SciPy's ``from numpy import *`` bound numpy.f2py, numpy.testing, … without executing them; nothing else
+    # on this path imports importlib.metadata
+    assert not set(present) & {*NUMPY_UNUSED_DEPENDENCIES, "importlib.metadata"}, present
+    assert "<lazy modules>" in present
 
 
 def test_default_graph_solve_through_the_api_imports_only_what_it_uses(pose_graph, tmp_path):
@@ -147,6 +160,63 @@ def test_default_graph_solve_through_the_api_imports_only_what_it_uses(pose_grap
     """)
     assert out.exists()
     _check_solve_path(present)
+    assert "<lazy modules>" not in present, present  # the library leaves sys.modules and sys.meta_path alone
+
+
+@pytest.mark.parametrize("numpy_first", [False, True])
+def test_deferred_numpy_submodules_are_the_real_ones_on_first_use(numpy_first):
+    # registered before NumPy is imported (the command line) or after (a sweep worker that imported numpy first);
+    # the references are the modules' documented behaviour and NumPy's own files, not slamcli output
+    present = _modules_after(f"""
+        import os, sys
+        {"import numpy" if numpy_first else "assert 'numpy' not in sys.modules"}
+        from slamcli.api.startup import defer_unused_numpy_submodules
+        defer_unused_numpy_submodules()
+        assert ("numpy" in sys.modules) == {numpy_first}  # the finder imports nothing itself
+        import scipy.sparse
+        import numpy as np
+        executed = [m for m in {NUMPY_UNUSED_DEPENDENCIES!r} if m in sys.modules]
+        assert not executed, executed
+        # first touch through a submodule that the package's __init__ imports too: one module, one class
+        import numpy.ma.core as ma_core
+        import numpy.polynomial.polynomial as poly
+        assert ma_core is np.ma.core and ma_core.MaskedArray is np.ma.MaskedArray
+        assert poly is np.polynomial.polynomial and poly.Polynomial is np.polynomial.Polynomial
+        assert ma_core.__spec__.name == "numpy.ma.core" and ma_core.__spec__.origin == ma_core.__file__
+        np.testing.assert_allclose([1.0, 2.0], [1.0, 2.0 + 1e-12])
+        try:
+            np.testing.assert_allclose([1.0], [1.1])
+        except AssertionError:
+            pass
+        else:
+            raise SystemExit("assert_allclose accepted 1.0 == 1.1")
+        from numpy.testing import assert_array_equal
+        import numpy.testing as nt
+        assert nt is np.testing is sys.modules["numpy.testing"] and nt.assert_array_equal is assert_array_equal
+        inc = np.f2py.get_include()
+        assert inc == os.path.join(os.path.dirname(np.__file__), "f2py", "src"), inc
+        assert os.path.isfile(os.path.join(inc, "fortranobject.h"))
+        import numpy.f2py.crackfortran
+        assert np.ma.masked_array([1, 2, 4], mask=[0, 1, 0]).sum() == 5
+        assert np.polynomial.Polynomial([1, 2])(3) == 7
+        assert np.char.upper("ab") == "AB" and np.rec.array([(1, 2.0)]).f0[0] == 1
+    """)
+    assert {"unittest", "numpy.f2py.crackfortran", "numpy.ma.core"} <= set(present)  # loaded on use
+    assert "<lazy modules>" in present  # numpy.core, numpy.strings, numpy.ctypeslib: never touched
+
+
+def test_help_through_main_imports_no_numpy():
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        import sys
+        from slamcli.cli import main
+        sys.argv = ["slamcli", "--help"]
+        try:
+            main()
+        except SystemExit as exc:
+            assert not exc.code, exc.code
+        assert "numpy" not in sys.modules
+    """)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
 
 
 def test_built_in_solve_without_scipy_reads_no_distribution_metadata(pose_graph, tmp_path):
@@ -225,3 +295,20 @@ def test_a_plugin_installed_with_entry_points_is_found_and_cannot_replace_a_buil
         _distribution_version.cache_clear()
         registry._module_source.cache_clear()
         sys.modules.pop("toyplug", None)
+
+
+def _unused_numpy_executed_after_scipy_sparse() -> list[str]:
+    """Run in a sweep worker: which of :data:`NUMPY_UNUSED_DEPENDENCIES` ``import scipy.sparse`` executed."""
+    import scipy.sparse  # noqa: F401
+
+    return [m for m in NUMPY_UNUSED_DEPENDENCIES if m in sys.modules]
+
+
+def test_sweep_workers_defer_numpy_submodules_like_the_command():
+    from slamcli.sweep.runner import LocalPool
+
+    pool = LocalPool(1)
+    try:
+        assert pool.submit(_unused_numpy_executed_after_scipy_sparse).result(timeout=120) == []
+    finally:
+        pool.shutdown()

@@ -56,10 +56,16 @@ def main() -> None:
     work starts — ≈ 3 % of the instructions of a 1k-pose ``solve`` (valgrind, issue 25 item 1). The young
     generation is collected every :data:`GC_THRESHOLD0` net allocations instead; the older generations keep
     their ratios, so cyclic garbage is still collected (the library API leaves the threshold alone).
+    NumPy submodules that ``import scipy.sparse`` would execute and no command uses (``numpy.f2py``,
+    ``numpy.testing``, …) are registered as lazily executed modules first
+    (:func:`slamcli.api.startup.defer_unused_numpy_submodules`).
     """
     import gc
     import sys
 
+    from slamcli.api.startup import defer_unused_numpy_submodules
+
+    defer_unused_numpy_submodules()
     gc.set_threshold(max(GC_THRESHOLD0, gc.get_threshold()[0]), *gc.get_threshold()[1:])
     app_for(sys.argv[1:])()
 

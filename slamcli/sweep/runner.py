@@ -479,6 +479,15 @@ def watch_parent(parent_pid: int, interval_s: float = 0.25) -> None:
     threading.Thread(target=loop, name="slamcli-watch-parent", daemon=True).start()
 
 
+def start_worker(parent_pid: int) -> None:
+    """Pool-worker initializer: :func:`watch_parent`, and NumPy's submodules that no run uses deferred as in the
+    ``slamcli`` command (:func:`slamcli.api.startup.defer_unused_numpy_submodules`)."""
+    from slamcli.api.startup import defer_unused_numpy_submodules
+
+    defer_unused_numpy_submodules()
+    watch_parent(parent_pid)
+
+
 class LocalPool:
     """A spawn ``ProcessPoolExecutor`` whose workers die with the coordinator and that can be rebuilt.
 
@@ -497,7 +506,7 @@ class LocalPool:
 
         with _single_threaded_blas():
             self.ex = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=watch_parent, initargs=(os.getpid(),))
+                                             initializer=start_worker, initargs=(os.getpid(),))
         self._procs = {}
 
     def submit(self, fn: Callable[..., Any], /, *args: Any) -> cf.Future:
