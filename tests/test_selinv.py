@@ -108,13 +108,31 @@ def test_any_relaxed_supernodes_give_the_dense_inverse(monkeypatch, max_width, m
 
 @pytest.mark.parametrize("width, trtri_from", [(1, 128), (3, 128), (12, 128), (12, 5), (30, 128)])
 def test_unit_lower_inverse_equals_numpy_inverse(monkeypatch, width, trtri_from):
-    """Batched forward substitution and LAPACK's triangular inverse (``trtri_from`` ≤ width, or 7 blocks of 30) against
+    """Batched forward substitution and the blocked inverse (``trtri_from`` ≤ width, or 7 blocks of 30) against
     ``np.linalg.inv`` on random unit lower triangular blocks."""
     monkeypatch.setattr(selinv, "TRTRI_MIN_WIDTH", trtri_from)
     rng = np.random.default_rng(width)
     L = np.tril(rng.standard_normal((7, width, width)), -1) + np.eye(width)
     ref = np.linalg.inv(L)
     assert np.abs(selinv._unit_lower_inverse(L) - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("n_blocks, width", [(1, 33), (3, 40), (1, 90), (2, 288)])
+def test_blocked_unit_lower_inverse_equals_extended_precision_substitution(n_blocks, width):
+    """The recursive block inverse (one split at 33 and 40, two at 90, four at 288) against forward
+    substitution in extended precision (``np.longdouble``), on unit lower triangular blocks with entries
+    N(0, 1/w) (conditioned as factors of SPD matrices are; N(0, 1) entries make 40 × 40 inverses of 1e6 whose
+    float64 rounding alone exceeds 1e-12 of them)."""
+    rng = np.random.default_rng(width)
+    L = np.tril(rng.standard_normal((n_blocks, width, width)) / np.sqrt(width), -1) + np.eye(width)
+    Le = L.astype(np.longdouble)
+    ref = np.zeros_like(Le)
+    ref[:, np.arange(width), np.arange(width)] = 1
+    for i in range(1, width):
+        ref[:, i, :i] = -np.einsum("bk,bkj->bj", Le[:, i, :i], ref[:, :i, :i])
+    got = selinv._unit_lower_inverse_blocked(L)
+    assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
+    assert not np.triu(got, 1).any()
 
 
 def test_inverse_blocks_adds_the_pattern_of_a_block_off_the_factor():

@@ -54,8 +54,10 @@ BUCKET_OVERHEAD = 50_000.0
 #: relaxed supernodes (:func:`_amalgamate`): at most this many columns, at most this fraction of explicit zeros
 AMALGAMATE_MAX_WIDTH = 12
 AMALGAMATE_MAX_ZEROS = 0.5
-#: blocks at least this wide are inverted by LAPACK's triangular inverse, one call each (:func:`_unit_lower_inverse`)
+#: blocks at least this wide are inverted by the blocked triangular inverse (:func:`_unit_lower_inverse_blocked`)
 TRTRI_MIN_WIDTH = 128
+#: the blocked triangular inverse's leaves: blocks at most this wide go to numpy's batched LU inverse
+TRI_LEAF_WIDTH = 32
 
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
@@ -338,20 +340,37 @@ def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.n
 def _unit_lower_inverse(blocks: np.ndarray) -> np.ndarray:
     """Inverses of unit lower triangular ``(B, w, w)`` blocks: row by row forward substitution batched over
     the blocks (``w − 1`` einsums; a third of the flops of a general inverse and none of its per-matrix
-    LAPACK overhead: 1000 blocks of 12 × 12, 1.6 vs 5.2 ms), LAPACK's triangular inverse one block at a time
-    from :data:`TRTRI_MIN_WIDTH` on (a 288-wide separator: 1.7 vs 3.9 ms) or when the blocks are fewer than
-    about 0.6 (w − 1) (one call of ≈ 10 µs per block against w − 1 einsums of ≈ 6 µs: City10000's
-    separators of 27-96 columns, 70 calls instead of ≈ 700)."""
+    LAPACK overhead: 1000 blocks of 12 × 12, 1.6 vs 5.2 ms), the blocked inverse
+    (:func:`_unit_lower_inverse_blocked`) from :data:`TRTRI_MIN_WIDTH` on or when the blocks are fewer than
+    about 0.6 (w − 1) (City10000's separators of 27-96 columns: a few calls instead of ≈ 700 einsums)."""
     B, w, _ = blocks.shape
-    if w >= TRTRI_MIN_WIDTH or 5 * B < 3 * (w - 1):  # few wide blocks: one LAPACK call each beats w − 1 einsums
-        from scipy.linalg.lapack import dtrtri
-
-        return np.stack([dtrtri(b, lower=1, unitdiag=1)[0] for b in blocks])
+    if w >= TRTRI_MIN_WIDTH or 5 * B < 3 * (w - 1):  # few wide blocks: matrix products beat w − 1 einsums
+        return _unit_lower_inverse_blocked(blocks)
     X = np.zeros_like(blocks)
     d = np.arange(w)
     X[:, d, d] = 1.0
     for i in range(1, w):
         X[:, i, :i] = -np.einsum("bk,bkj->bj", blocks[:, i, :i], X[:, :i, :i])
+    return X
+
+
+def _unit_lower_inverse_blocked(blocks: np.ndarray) -> np.ndarray:
+    """Inverses of lower triangular ``(B, w, w)`` blocks by the 2 × 2 block formula, recursively,
+    ``[[A, 0], [C, D]]⁻¹ = [[A⁻¹, 0], [−D⁻¹ C A⁻¹, D⁻¹]]``;
+    leaves of at most :data:`TRI_LEAF_WIDTH` columns by numpy's batched LU inverse (its rounding-level upper
+    triangle dropped). Matrix products only: LAPACK's ``trtri`` would cost ``import scipy.linalg`` (≈ 220 M
+    instructions, the largest single import of a default pose-graph solve) for the same few tenths of a ms
+    (288 × 288: 0.8 vs 1.0 ms; 27 × 27: 10 vs 30 µs)."""
+    B, w, _ = blocks.shape
+    if w <= TRI_LEAF_WIDTH:
+        return np.tril(np.linalg.inv(blocks))
+    h = w // 2
+    A_inv = _unit_lower_inverse_blocked(blocks[:, :h, :h])
+    D_inv = _unit_lower_inverse_blocked(blocks[:, h:, h:])
+    X = np.zeros_like(blocks)
+    X[:, :h, :h] = A_inv
+    X[:, h:, h:] = D_inv
+    X[:, h:, :h] = -(D_inv @ (blocks[:, h:, :h] @ A_inv))
     return X
 
 
