@@ -75,6 +75,24 @@ def test_refinement_reaches_a_stationary_point_by_finite_differences():
     assert np.max(np.abs(grad)) < 1e-6
 
 
+def test_closed_form_gradient_of_the_sesync_objective_by_finite_differences():
+    """The refinement's cost and gradient without Jacobians (``_Edges.cost_gradient``) against ½F by definition
+    and its central differences, at a point far from stationary (every term of the gradient non-zero)."""
+    poses, ij, xyt, info = _hexagon(0.2)
+    kappa, tau = certify.isotropic_weights(info)
+    x = poses + np.random.default_rng(2).normal(scale=0.3, size=poses.shape)
+    cost, g = certify._Edges(ij, xyt, kappa, tau).cost_gradient(x)
+    assert cost == pytest.approx(0.5 * _F_by_definition(x, ij, xyt, kappa, tau), rel=1e-12)
+    h = 1e-6
+    fd = np.zeros(x.size)
+    for k in range(x.size):
+        e = np.zeros(x.size)
+        e[k] = h
+        fd[k] = 0.5 * (_F_by_definition((x.ravel() + e).reshape(-1, 3), ij, xyt, kappa, tau)
+                       - _F_by_definition((x.ravel() - e).reshape(-1, 3), ij, xyt, kappa, tau)) / (2 * h)
+    assert np.max(np.abs(g - fd)) < 1e-7 * max(1.0, np.max(np.abs(fd)))
+
+
 def test_certifies_the_global_minimum_and_refuses_the_local_one():
     """One loop of six poses has a stationary point per winding number of the rotations: winding 0 is the
     global minimum, winding 1 (each edge's rotation off by ≈ 60°) a local one. A brute-force multistart

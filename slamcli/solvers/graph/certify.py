@@ -158,6 +158,27 @@ class _Edges:
         J[:, 3, 2] = -st * (c * self.tx - s * self.ty)
         return self.residuals(poses, trig), J
 
+    def cost_gradient(self, poses) -> tuple[float, np.ndarray]:
+        """``(½F, ∇(½F) (3n,))`` at ``poses (n, 3)`` from the residuals and the closed-form rows of
+        :meth:`evaluate`'s Jacobian (``Jᵀr`` per edge without building ``J``; one scatter for all six columns)."""
+        trig = self.trig(poses)
+        cj, sj, ca, sa, c, s = trig
+        r = self.residuals(poses, trig)
+        if getattr(self, "_grad_cols", None) is None:
+            cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
+            self._grad_cols = cols.T.ravel()  # column-major: the six weights below, each over all edges
+        E = self.i.size
+        w = np.empty((6, E))
+        np.multiply(self.st, r[:, 2], out=w[3])
+        np.multiply(self.st, r[:, 3], out=w[4])
+        np.negative(w[3], out=w[0])
+        np.negative(w[4], out=w[1])
+        w[2] = self.sk * (sa * r[:, 0] - ca * r[:, 1]) + self.st * (r[:, 2] * (s * self.tx + c * self.ty)
+                                                                     - r[:, 3] * (c * self.tx - s * self.ty))
+        w[5] = self.sk * (cj * r[:, 1] - sj * r[:, 0])
+        g = np.bincount(self._grad_cols, weights=w.ravel(), minlength=3 * poses.shape[0])
+        return float(np.sum(0.5 * np.einsum("fk,fk->f", r, r))), g  # the cost summed as Assembler.cost sums it
+
     def theta_curvature(self, poses) -> np.ndarray:
         """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
         depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
@@ -202,7 +223,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
-            xn, cn, gn = _frozen_step(problem, lin, flat, g, cost, NEWTON_SLACK)
+            xn, cn, gn = _frozen_step(edges, lin, flat, g, cost, NEWTON_SLACK)
             if xn is not None:
                 # its convergence is linear: stop on a step below F's rounding that also moved x by ≤ FROZEN_STEP_TOL
                 step = float(np.max(np.abs(xn - flat), initial=0.0))
@@ -230,7 +251,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         if done:
             break
         if near:  # the next step reuses this factorisation: it needs the gradient only, not H
-            cost, g = _cost_gradient(problem, flat)
+            cost, g = _cost_gradient(edges, flat)
             stale = True
         else:
             cost, lo, g = asm.linearize_lower(flat, params)
@@ -249,26 +270,23 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _cost_gradient(problem: nls.NlsProblem, flat: np.ndarray) -> tuple[float, np.ndarray]:
-    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` from one evaluation (the cost and gradient
-    :meth:`nls.Assembler.linearize_lower` returns for the one identity-weighted block of :func:`_sesync_problem`,
-    without assembling ``H``), pose 0 held."""
-    b = problem.blocks[0]
-    r, J = b.evaluate(flat)
-    cost = float(np.sum(0.5 * np.einsum("fk,fk->f", r, r)))  # as Assembler.cost sums it
-    g = np.bincount(np.asarray(b.cols).ravel(), weights=np.einsum("fka,fk->fa", J, r).ravel(), minlength=problem.n_vars)
-    g[np.asarray(problem.fixed_cols)] = 0.0
+def _cost_gradient(edges: _Edges, flat: np.ndarray) -> tuple[float, np.ndarray]:
+    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` (:meth:`_Edges.cost_gradient`: the cost and gradient
+    :meth:`nls.Assembler.linearize_lower` returns for :func:`_sesync_problem`, without assembling ``H``),
+    pose 0 held."""
+    cost, g = edges.cost_gradient(flat.reshape(-1, 3))
+    g[:3] = 0.0
     return cost, g
 
 
-def _frozen_step(problem, lin, flat, g, cost, slack: float):
+def _frozen_step(edges, lin, flat, g, cost, slack: float):
     """``(x, cost, gradient)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's
     ``H``) when it does not raise the cost by more than ``slack·cost``, else ``(None, None, None)``."""
     h = lin.solve(-g)
     if h is None:
         return None, None, None
     xn = flat + h
-    cn, gn = _cost_gradient(problem, xn)
+    cn, gn = _cost_gradient(edges, xn)
     return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
 
 
