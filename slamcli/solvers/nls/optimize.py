@@ -222,7 +222,6 @@ def _frozen_lm_step(problem, asm, lin, stats, params, st, x, g, cost, decrease):
     trial = asm.linearize_lower(x_new, params)
     if not (np.isfinite(trial[0]) and cost - trial[0] >= FROZEN_MIN_FIDELITY * model):
         return None
-    stats["frozen_steps"] = stats.get("frozen_steps", 0) + 1
     st.trial_lin = trial
     return x_new, trial[0]
 
