@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from slamcli.models import se2
+from slamcli.solvers import nls
 from slamcli.solvers.graph import certify
 
 
@@ -73,6 +74,51 @@ def test_refinement_reaches_a_stationary_point_by_finite_differences():
         grad[k] = (certify.sesync_cost((x.ravel() + e).reshape(-1, 3), ij, xyt, kappa, tau)
                    - certify.sesync_cost((x.ravel() - e).reshape(-1, 3), ij, xyt, kappa, tau)) / (2 * h)
     assert np.max(np.abs(grad)) < 1e-6
+
+
+def test_closed_form_gradient_of_the_sesync_objective_by_finite_differences():
+    """The refinement's cost and gradient without Jacobians (``_Edges.cost_gradient``) against ½F by definition
+    and its central differences, at a point far from stationary (every term of the gradient non-zero)."""
+    poses, ij, xyt, info = _hexagon(0.2)
+    kappa, tau = certify.isotropic_weights(info)
+    x = poses + np.random.default_rng(2).normal(scale=0.3, size=poses.shape)
+    cost, g = certify._Edges(ij, xyt, kappa, tau).cost_gradient(x)
+    assert cost == pytest.approx(0.5 * _F_by_definition(x, ij, xyt, kappa, tau), rel=1e-12)
+    h = 1e-6
+    fd = np.zeros(x.size)
+    for k in range(x.size):
+        e = np.zeros(x.size)
+        e[k] = h
+        fd[k] = 0.5 * (_F_by_definition((x.ravel() + e).reshape(-1, 3), ij, xyt, kappa, tau)
+                       - _F_by_definition((x.ravel() - e).reshape(-1, 3), ij, xyt, kappa, tau)) / (2 * h)
+    assert np.max(np.abs(g - fd)) < 1e-7 * max(1.0, np.max(np.abs(fd)))
+
+
+def test_closed_form_gauss_newton_matrix_by_finite_difference_jacobian():
+    """``_Edges.gauss_newton``'s ``JᵀJ`` (pose 0 held: identity rows) against ``JᵀJ`` of a central-difference
+    Jacobian of the residuals, on the hexagon plus two chords (poses with three and more edges)."""
+    poses, ij, xyt, info = _hexagon(0.2)
+    ij = np.concatenate([ij, [[0, 3], [4, 1]]])
+    xyt = np.concatenate([xyt, [[0.3, -1.9, 3.0], [-1.1, 1.6, -2.0]]])
+    kappa, tau = certify.isotropic_weights(np.concatenate([info, info[:2] * 2.0]))
+    edges = certify._Edges(ij, xyt, kappa, tau)
+    asm = nls.Assembler(certify._sesync_problem(6, edges))
+    x = poses + np.random.default_rng(3).normal(scale=0.3, size=poses.shape)
+    cost, lo, g = edges.gauss_newton(x, asm)
+    h = 1e-6
+    J = np.zeros((4 * len(ij), x.size))
+    for k in range(x.size):
+        e = np.zeros(x.size)
+        e[k] = h
+        J[:, k] = (edges.residuals((x.ravel() + e).reshape(-1, 3)).ravel()
+                   - edges.residuals((x.ravel() - e).reshape(-1, 3)).ravel()) / (2 * h)
+    ref = J.T @ J
+    ref[:3], ref[:, :3] = 0.0, 0.0
+    ref[:3, :3] = np.eye(3)
+    L = asm.lower_matrix(lo).toarray()
+    H = L + L.T - np.diag(np.diag(L))
+    assert np.max(np.abs(H - ref)) < 1e-6 * np.max(np.abs(ref))
+    assert cost == pytest.approx(0.5 * _F_by_definition(x, ij, xyt, kappa, tau), rel=1e-12)
 
 
 def test_certifies_the_global_minimum_and_refuses_the_local_one():

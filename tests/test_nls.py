@@ -560,3 +560,45 @@ def test_fused_bearing_range_jacobian_equals_the_separate_one():
         e2, J = bearing_range_jacobian(x, m, z)
     np.testing.assert_array_equal(e2, e)
     np.testing.assert_array_equal(J, np.concatenate([Jx, Jm], axis=2))
+
+
+@pytest.mark.parametrize("k", [3, 2])
+def test_pose_block_pattern_equals_the_sorted_pattern_and_assembles_the_dense_products(monkeypatch, k):
+    """Blocks on whole poses of ``k`` columns (a prior on one pose; two-pose factors with a chain, loops in both
+    directions, a repeated edge and an edge from a pose to itself): the pattern derived from the pose level
+    (:func:`linear._pose_block_pattern`) is the one sorting every local pair gives, array for array, and the
+    assembled H and g equal JᵀJ and Jᵀr of the stacked dense Jacobian. An untouched pose falls back to sorting."""
+    from slamcli.solvers.nls import linear
+
+    rng = np.random.default_rng(7)
+    N = 9
+    ij = np.array([(p, p + 1) for p in range(N - 1)] + [(6, 1), (0, 5), (2, 7), (6, 1), (4, 4), (8, 3)])
+    cols2 = np.concatenate([k * ij[:, :1] + np.arange(k), k * ij[:, 1:] + np.arange(k)], axis=1)
+
+    def block(name, cols, m):
+        A = rng.normal(size=(cols.shape[0], m, cols.shape[1]))
+        return nls.FactorBlock(name, cols, lambda x, A=A, c=cols: (np.einsum("fkn,fn->fk", A, x[c]), A), np.eye(m))
+
+    def problem(n_poses, blocks):
+        return nls.NlsProblem(k * n_poses, blocks)
+
+    blocks = [block("prior", np.arange(k)[None, :], k), block("edges", cols2[:10], k), block("more", cols2[10:], k + 1)]
+    x = rng.normal(size=k * N)
+    params = nls.NlsParams(pose_chart="world")
+    for prob, derived in ((problem(N, blocks), True), (problem(N + 1, blocks), False)):  # pose N: untouched
+        assert (linear._pose_block_pattern([np.asarray(b.cols) for b in prob.blocks],
+                                           [linear._local_pairs(b.cols.shape[1]) for b in prob.blocks],
+                                           prob.n_vars) is not None) is derived
+        fast = nls.Assembler(prob)
+        monkeypatch.setattr(linear, "_pose_block_pattern", lambda *a: None)
+        ref = nls.Assembler(prob)
+        monkeypatch.undo()
+        for name in ("lo_indices", "lo_indptr", "lo_diag_pos", "_scatter_all"):
+            a, b = getattr(fast, name), getattr(ref, name)
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+        xx = np.concatenate([x, np.zeros(prob.n_vars - x.size)])
+        _, lo, g = fast.linearize_lower(xx, params)
+        J = nls.jacobian_matrix(prob, xx).toarray()
+        np.testing.assert_allclose(fast.matrix(fast.full(lo)).toarray(), J.T @ J, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(g, J.T @ nls.residual_vector(prob, xx), rtol=1e-12, atol=1e-12)

@@ -158,6 +158,70 @@ class _Edges:
         J[:, 3, 2] = -st * (c * self.tx - s * self.ty)
         return self.residuals(poses, trig), J
 
+    def cost_gradient(self, poses, trig=None, r=None) -> tuple[float, np.ndarray]:
+        """``(½F, ∇(½F) (3n,))`` at ``poses (n, 3)`` from the residuals and the closed-form rows of
+        :meth:`evaluate`'s Jacobian (``Jᵀr`` per edge without building ``J``; one scatter for all six columns)."""
+        trig = self.trig(poses) if trig is None else trig
+        cj, sj, ca, sa, c, s = trig
+        r = self.residuals(poses, trig) if r is None else r
+        if getattr(self, "_grad_cols", None) is None:
+            cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
+            self._grad_cols = cols.T.ravel()  # column-major: the six weights below, each over all edges
+        E = self.i.size
+        w = np.empty((6, E))
+        np.multiply(self.st, r[:, 2], out=w[3])
+        np.multiply(self.st, r[:, 3], out=w[4])
+        np.negative(w[3], out=w[0])
+        np.negative(w[4], out=w[1])
+        w[2] = self.sk * (sa * r[:, 0] - ca * r[:, 1]) + self.st * (r[:, 2] * (s * self.tx + c * self.ty)
+                                                                     - r[:, 3] * (c * self.tx - s * self.ty))
+        w[5] = self.sk * (cj * r[:, 1] - sj * r[:, 0])
+        g = np.bincount(self._grad_cols, weights=w.ravel(), minlength=3 * poses.shape[0])
+        return float(np.sum(0.5 * np.einsum("fk,fk->f", r, r))), g  # the cost summed as Assembler.cost sums it
+
+    #: local pairs (a ≤ b, numbered as ``np.triu_indices(6)``) of ``JᵀJ`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``
+    #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
+    VARYING_PAIRS = (2, 7, 11, 12, 13, 14)  # (x_i,θ_i) (y_i,θ_i) (θ_i,θ_i) (θ_i,x_j) (θ_i,y_j) (θ_i,θ_j)
+
+    def gauss_newton(self, poses, asm: nls.Assembler) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """``(½F, JᵀJ lower data on asm's pattern, ∇(½F))`` at ``poses``, pose 0 held, in closed form: with
+        ``p = sin θ_i t̃_x + cos θ_i t̃_y`` and ``q = cos θ_i t̃_x − sin θ_i t̃_y`` (so ``J[tr, θ_i] = √τ [p, −q]``)
+        the pose-dependent entries are ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``,
+        ``(θ_i,x_j) = τp``, ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others
+        (``±τ``, ``2κ``, 0) are scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
+        :func:`_sesync_problem`, without the ``(E, 4, 6)`` Jacobian and its 21 products per edge; None when
+        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path."""
+        E = self.i.size
+        if len(asm.lo_scatter) != 1 or asm.twice[0] is not None or asm.lo_scatter[0].size != 21 * E:
+            return None
+        if getattr(self, "_gn_of", None) is not asm:
+            pos = asm.lo_scatter[0].reshape(21, E)
+            tau, k2 = self.st * self.st, self.sk * self.sk  # τ, 2κ
+            const = {0: tau, 3: -tau, 6: tau, 9: -tau, 15: tau, 18: tau, 20: k2}
+            keys = list(const)
+            self._gn_const = np.bincount(pos[keys].ravel(), weights=np.concatenate([const[k] for k in keys]),
+                                         minlength=asm.lo_nnz)
+            self._gn_pos = pos[list(self.VARYING_PAIRS)].ravel()
+            self._gn_of = asm
+        trig = self.trig(poses)
+        cj, sj, ca, sa, c, s = trig
+        r = self.residuals(poses, trig)
+        cost, g = self.cost_gradient(poses, trig, r)
+        tau = self.st * self.st
+        tp, tq = tau * (s * self.tx + c * self.ty), tau * (c * self.tx - s * self.ty)
+        w = np.empty((6, E))
+        np.negative(tp, out=w[0])
+        w[1] = tq
+        w[2] = self.sk * self.sk + (tp * (s * self.tx + c * self.ty) + tq * (c * self.tx - s * self.ty))
+        w[3] = tp
+        np.negative(tq, out=w[4])
+        w[5] = -(self.sk * self.sk) * (cj * ca + sj * sa)
+        data = self._gn_const + np.bincount(self._gn_pos, weights=w.ravel(), minlength=asm.lo_nnz)
+        data[asm.lo_fixed_mask] = 0.0
+        data[asm.lo_fixed_diag] = 1.0
+        g[asm.fixed] = 0.0
+        return cost, data, g
+
     def theta_curvature(self, poses) -> np.ndarray:
         """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
         depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
@@ -197,12 +261,12 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     asm, lin = _workspace(problem, params, workspace)
     flat = x.reshape(-1)
     theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
-    cost, lo, g = asm.linearize_lower(flat, params)
+    cost, lo, g = _linearize(edges, asm, flat, params)
     near = False  # the last step lowered F by < FROZEN_REL: the previous factorisation is good enough
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
-            xn, cn, gn = _frozen_step(problem, lin, flat, g, cost, NEWTON_SLACK)
+            xn, cn, gn = _frozen_step(edges, lin, flat, g, cost, NEWTON_SLACK)
             if xn is not None:
                 # its convergence is linear: stop on a step below F's rounding that also moved x by ≤ FROZEN_STEP_TOL
                 step = float(np.max(np.abs(xn - flat), initial=0.0))
@@ -213,7 +277,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 cost, g, stale = cn, gn, True
                 continue
         if stale:
-            cost, lo, g = asm.linearize_lower(flat, params)
+            cost, lo, g = _linearize(edges, asm, flat, params)
             stale = False
         newton = lo.copy()
         newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3))[1:]
@@ -230,13 +294,19 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         if done:
             break
         if near:  # the next step reuses this factorisation: it needs the gradient only, not H
-            cost, g = _cost_gradient(problem, flat)
+            cost, g = _cost_gradient(edges, flat)
             stale = True
         else:
-            cost, lo, g = asm.linearize_lower(flat, params)
+            cost, lo, g = _linearize(edges, asm, flat, params)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
+
+
+def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams):
+    """``(½F, JᵀJ lower data, ∇(½F))`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the engine's."""
+    out = edges.gauss_newton(flat.reshape(-1, 3), asm)
+    return out if out is not None else asm.linearize_lower(flat, params)
 
 
 def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
@@ -249,26 +319,23 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _cost_gradient(problem: nls.NlsProblem, flat: np.ndarray) -> tuple[float, np.ndarray]:
-    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` from one evaluation (the cost and gradient
-    :meth:`nls.Assembler.linearize_lower` returns for the one identity-weighted block of :func:`_sesync_problem`,
-    without assembling ``H``), pose 0 held."""
-    b = problem.blocks[0]
-    r, J = b.evaluate(flat)
-    cost = float(np.sum(0.5 * np.einsum("fk,fk->f", r, r)))  # as Assembler.cost sums it
-    g = np.bincount(np.asarray(b.cols).ravel(), weights=np.einsum("fka,fk->fa", J, r).ravel(), minlength=problem.n_vars)
-    g[np.asarray(problem.fixed_cols)] = 0.0
+def _cost_gradient(edges: _Edges, flat: np.ndarray) -> tuple[float, np.ndarray]:
+    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` (:meth:`_Edges.cost_gradient`: the cost and gradient
+    :meth:`nls.Assembler.linearize_lower` returns for :func:`_sesync_problem`, without assembling ``H``),
+    pose 0 held."""
+    cost, g = edges.cost_gradient(flat.reshape(-1, 3))
+    g[:3] = 0.0
     return cost, g
 
 
-def _frozen_step(problem, lin, flat, g, cost, slack: float):
+def _frozen_step(edges, lin, flat, g, cost, slack: float):
     """``(x, cost, gradient)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's
     ``H``) when it does not raise the cost by more than ``slack·cost``, else ``(None, None, None)``."""
     h = lin.solve(-g)
     if h is None:
         return None, None, None
     xn = flat + h
-    cn, gn = _cost_gradient(problem, xn)
+    cn, gn = _cost_gradient(edges, xn)
     return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
 
 

@@ -215,6 +215,7 @@ class GraphParams:
             max_iterations=self.max_iterations,
             rel_cost_tol=self.rel_cost_tol if rel_cost_tol is None else rel_cost_tol,
             pred_cost_tol=self.pred_cost_tol if pose_graph else 0.0,
+            frozen_step_rel=POSE_GRAPH_FROZEN_STEP_REL if pose_graph else 0.0,
             step_tol=self.step_tol,
             robust=robust,
             huber_k=kernel_k,
@@ -224,6 +225,10 @@ class GraphParams:
         """The scale parameter of ``kernel`` (``huber_k``, ``cauchy_k`` or ``geman_mcclure_c``)."""
         return {"cauchy": self.cauchy_k, "geman_mcclure": self.geman_mcclure_c}.get(kernel, self.huber_k)
 
+
+#: LM on a plain pose graph: simplified-Newton steps (NlsParams.frozen_step_rel) once an accepted step lowered the
+#: cost by at most this fraction
+POSE_GRAPH_FROZEN_STEP_REL = 1e-3
 
 #: a landmark-graph LM run "stalls" when it reaches max_iterations and its cost fell by less than this
 #: fraction over its last STALL_WINDOW iterations (GraphParams.restart)

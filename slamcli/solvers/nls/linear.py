@@ -50,13 +50,19 @@ class Assembler:
         sizes = [ia.size * c.shape[0] for c, (ia, _) in zip(self.cols, self.pairs)] + [D]
         bounds = np.cumsum([0] + sizes)
         inv = _positions_by_blocks(like, self.cols) if like is not None and like.D == D else None
-        if inv is None:
+        key = None
+        if inv is None and like is not None and like.D == D:
             key = self._keys(bounds)
-            inv = _positions_in(like, key) if like is not None and like.D == D else None
+            inv = _positions_in(like, key)
         own = inv is None
-        if own:
-            ukey, inv = _unique_inverse(key)
-            del key
+        block_pattern = _pose_block_pattern(self.cols, self.pairs, D) if own else None
+        if block_pattern is not None:  # the pattern of whole pose blocks, from the pose-level one
+            lo_indices, lo_indptr, inv = block_pattern
+        elif own:
+            ukey, inv = _unique_inverse(self._keys(bounds) if key is None else key)
+            lo_indices, lo_indptr = (ukey % D).astype(np.int32), _indptr(ukey // D, D)
+            del ukey
+        del key
         self.lo_scatter = [inv[s:e] for s, e in zip(bounds[:-2], bounds[1:-1])]
         self._scatter_all = inv[: bounds[-2]]  # the blocks' pairs, in the order of the work buffer below
         self._bounds = bounds[:-1]
@@ -64,10 +70,7 @@ class Assembler:
         self.lo_diag_pos = inv[bounds[-2]:].astype(np.int64)
         del inv
         if own:
-            self.lo_nnz = int(ukey.size)
-            self.lo_indices = (ukey % D).astype(np.int32)
-            self.lo_indptr = _indptr(ukey // D, D)
-            del ukey
+            self.lo_nnz, self.lo_indices, self.lo_indptr = int(lo_indices.size), lo_indices, lo_indptr
         else:
             self.lo_nnz, self.lo_indices, self.lo_indptr = like.lo_nnz, like.lo_indices, like.lo_indptr
         self._full_of = None if own else like  # the full pattern: built on first use (CHOLMOD reads the lower)
@@ -343,6 +346,81 @@ def _positions_by_blocks(like: Assembler, cols: list[np.ndarray]) -> np.ndarray 
         out.append(np.concatenate(parts, axis=1).ravel() if parts else np.zeros(0, np.int32))
     out.append(like.lo_diag_pos.astype(out[0].dtype if out else np.int32))
     return np.concatenate(out)
+
+
+def _pose_groups(c: np.ndarray, k: int) -> np.ndarray | None:
+    """The poses ``(F, g)`` of a block whose columns are ``g ≤ 2`` whole pose groups ``k·p … k·p + k − 1``, else None."""
+    F, n = c.shape
+    if n % k or n // k > 2:
+        return None
+    grp = c.reshape(F, n // k, k)
+    first = grp[:, :, :1]
+    if np.any(first % k) or not np.array_equal(grp - first, np.broadcast_to(np.arange(k), grp.shape)):
+        return None
+    return grp[:, :, 0] // k
+
+
+def _pose_block_pattern(cols: list[np.ndarray], pairs: list, D: int):
+    """``(lo_indices, lo_indptr, positions)`` as :class:`Assembler` computes them by sorting every local pair's key,
+    derived instead from the pose-level pattern when every block's factors act on one or two whole poses of
+    ``k = 3`` (or 2) consecutive columns and every pose is touched (a pose graph, the chordal systems): one sort of
+    the pose pairs (E keys instead of 21 E), and each column ``kQ + b`` holding the diagonal block's rows
+    ``kQ + b … kQ + k − 1`` and then ``k`` rows of every pose ``P > Q`` coupled to ``Q``, in order. None otherwise."""
+    for k in (3, 2):
+        groups = [_pose_groups(c, k) for c in cols] if D % k == 0 else [None]
+        if cols and all(g is not None for g in groups):
+            break
+    else:
+        return None
+    N = D // k
+    touched = np.zeros(N, bool)
+    for g in groups:
+        touched[g.ravel()] = True
+    if not touched.all():  # an untouched pose has only its diagonal entries in the sorted pattern
+        return None
+    two = [g for g in groups if g.shape[1] == 2]
+    keys = [np.minimum(g[:, 0], g[:, 1]) * N + np.maximum(g[:, 0], g[:, 1]) for g in two]
+    ukey, pinv = _unique_inverse(np.concatenate(keys + [np.arange(N, dtype=np.int64) * (N + 1)]))
+    Q, P = ukey // N, ukey % N
+    pptr = _indptr(Q, N).astype(np.int64)
+    rank = np.arange(ukey.size) - pptr[Q]  # 0 on the diagonal, the first row of its column
+    m = np.diff(pptr)
+    indptr = np.zeros(D + 1, np.int64)
+    np.cumsum(((k - np.arange(k))[None, :] + k * (m[:, None] - 1)).ravel(), out=indptr[1:])
+    start = indptr[:-1].reshape(N, k)
+    lo_indices = np.empty(int(indptr[-1]), np.int32)
+    off = rank > 0
+    Qo, Po, ro = Q[off], P[off], rank[off]
+    for b in range(k):
+        base = start[Qo, b] + (k - b) + k * (ro - 1)
+        for a in range(k):
+            if a >= b:
+                lo_indices[start[:, b] + (a - b)] = k * np.arange(N) + a
+            lo_indices[base + a] = k * Po + a
+    idt = np.int32 if indptr[-1] < np.iinfo(np.int32).max else np.int64
+    out, o = [], 0
+    for g, (ia, ib) in zip(groups, pairs):
+        F = g.shape[0]
+        pos = np.empty((ia.size, F), idt)
+        if g.shape[1] == 2:
+            e = pinv[o:o + F]
+            o += F
+            swap, re, Qe = g[:, 0] > g[:, 1], rank[e], Q[e]
+            same = re == 0  # a factor on one pose twice: the pair lies in its diagonal block
+            same = same if same.any() else None
+            colbase = [start[Qe, b] + (k - b) + k * (re - 1) for b in range(k)]
+        for t, (a_, b_) in enumerate(zip(ia, ib)):
+            ra, rb = a_ % k, b_ % k
+            if a_ // k == b_ // k:  # one pose's block: column offset ra ≤ row offset rb
+                pos[t] = start[g[:, a_ // k], ra] + (rb - ra)
+                continue
+            p_ = np.where(swap, colbase[rb] + ra, colbase[ra] + rb)
+            if same is not None:
+                p_[same] = start[Qe[same], min(ra, rb)] + abs(ra - rb)
+            pos[t] = p_
+        out.append(pos.ravel())
+    out.append(start.ravel().astype(idt))
+    return lo_indices, indptr.astype(np.int32), np.concatenate(out)
 
 
 def _unique_inverse(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -121,7 +121,10 @@ def solve(
         if params.method == "lm" and _converged_by_last_factor(lin, stats, params, st, g, cost, decrease):
             status, message = Status.CONVERGED, "predicted cost decrease below pred_cost_tol (last factorisation)"
             break
-        if params.method == "lm":
+        frozen = _frozen_lm_step(problem, asm, lin, stats, params, st, x, g, cost, decrease) if params.method == "lm" else None
+        if frozen is not None:
+            x_new, new_cost = frozen
+        elif params.method == "lm":
             stop, x_new, new_cost = _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st, stats,
                                                   small)
         elif params.method == "dogleg":
@@ -199,6 +202,30 @@ def _converged_by_last_factor(lin, stats, params, st, g, cost, decrease) -> bool
         return False
     h = lin.solve(-g)
     return h is not None and 0.0 <= -0.5 * float(g @ h) <= LAST_FACTOR_MARGIN * params.pred_cost_tol * cost
+
+
+#: a simplified-Newton LM step (NlsParams.frozen_step_rel) is kept when it achieves at least this fraction of its
+#: model decrease (near the optimum the ratio is 1 − O(rate); a poor ratio says H has moved: factorise anew)
+FROZEN_MIN_FIDELITY = 0.5
+
+
+def _frozen_lm_step(problem, asm, lin, stats, params, st, x, g, cost, decrease):
+    """``(x_new, new_cost)`` of NlsParams.frozen_step_rel's simplified-Newton step ``h = −H_old⁻¹ g`` with the
+    factorisation ``lin`` holds, when the last step lowered the cost by at most ``frozen_step_rel · cost`` and
+    the trial is kept (its linearisation left in ``st.trial_lin``, as an eager LM trial's); else None."""
+    if not (params.frozen_step_rel > 0.0 and stats.get("primary_ok") and st.lam <= params.lambda_init
+            and 0.0 <= decrease <= params.frozen_step_rel * cost):
+        return None
+    h = lin.solve(-g)
+    model = -0.5 * float(g @ h) if h is not None else -1.0  # the decrease of the model with H_old
+    if not model > 0.0:
+        return None
+    x_new = retract(problem, params, x, h)
+    trial = asm.linearize_lower(x_new, params)
+    if not (np.isfinite(trial[0]) and cost - trial[0] >= FROZEN_MIN_FIDELITY * model):
+        return None
+    st.trial_lin = trial
+    return x_new, trial[0]
 
 
 @dataclass

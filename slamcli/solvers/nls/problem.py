@@ -134,6 +134,13 @@ class NlsParams:
         ``pred_cost_tol · cost`` of the optimum's. After a step that lowered the cost by at most 1e-6
         (relative) the decrement is computed with the previous iterate's factorisation (one solve, no new
         factorisation; ``optimize.LAST_FACTOR_REGIME``).
+    frozen_step_rel : float
+        LM only (0 = off, the default): after an accepted step that lowered the cost by at most this fraction,
+        the next step is first tried with the factorisation the linear solver still holds (an earlier
+        iterate's damped ``H``: simplified Newton, one solve instead of a factorisation; near the optimum ``H``
+        hardly moves, so the step converges at a rate of the order of the last relative change). It is kept
+        when it lowers the cost by at least half its model decrease ``−½gᵀh`` (``optimize.FROZEN_MIN_FIDELITY``), otherwise
+        the LM iteration runs as usual. The stopping tests are unchanged.
     abs_cost_tol : float
         Converged when the cost is below this value.
     step_tol : float
@@ -183,6 +190,7 @@ class NlsParams:
     max_iterations: int = 100
     rel_cost_tol: float = 1e-12
     pred_cost_tol: float = 0.0
+    frozen_step_rel: float = 0.0
     abs_cost_tol: float = 1e-20
     step_tol: float = 1e-12
     lambda_init: float = 1e-5
@@ -214,6 +222,8 @@ class NlsParams:
             raise ValueError("delta_init must be > 0")
         if not self.pred_cost_tol >= 0.0:
             raise ValueError("pred_cost_tol must be ≥ 0")
+        if not 0.0 <= self.frozen_step_rel < 1.0:
+            raise ValueError("frozen_step_rel must be in [0, 1)")
         if self.pose_chart not in ("body", "world"):
             raise ValueError(f"pose_chart must be body or world, got {self.pose_chart!r}")
 
