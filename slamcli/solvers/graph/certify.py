@@ -183,14 +183,15 @@ class _Edges:
     #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
     VARYING_PAIRS = (2, 7, 11, 12, 13, 14)  # (x_i,θ_i) (y_i,θ_i) (θ_i,θ_i) (θ_i,x_j) (θ_i,y_j) (θ_i,θ_j)
 
-    def gauss_newton(self, poses, asm: nls.Assembler) -> tuple[float, np.ndarray, np.ndarray] | None:
+    def gauss_newton(self, poses, asm: nls.Assembler, terms=None) -> tuple[float, np.ndarray, np.ndarray] | None:
         """``(½F, JᵀJ lower data on asm's pattern, ∇(½F))`` at ``poses``, pose 0 held, in closed form: with
         ``p = sin θ_i t̃_x + cos θ_i t̃_y`` and ``q = cos θ_i t̃_x − sin θ_i t̃_y`` (so ``J[tr, θ_i] = √τ [p, −q]``)
         the pose-dependent entries are ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``,
         ``(θ_i,x_j) = τp``, ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others
         (``±τ``, ``2κ``, 0) are scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
         :func:`_sesync_problem`, without the ``(E, 4, 6)`` Jacobian and its 21 products per edge; None when
-        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path."""
+        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path. ``terms``:
+        ``(trig, r)`` at ``poses`` (:meth:`trig`, :meth:`residuals`) when the caller has them."""
         E = self.i.size
         if len(asm.lo_scatter) != 1 or asm.twice[0] is not None or asm.lo_scatter[0].size != 21 * E:
             return None
@@ -203,9 +204,8 @@ class _Edges:
                                          minlength=asm.lo_nnz)
             self._gn_pos = pos[list(self.VARYING_PAIRS)].ravel()
             self._gn_of = asm
-        trig = self.trig(poses)
+        trig, r = self.terms(poses) if terms is None else terms
         cj, sj, ca, sa, c, s = trig
-        r = self.residuals(poses, trig)
         cost, g = self.cost_gradient(poses, trig, r)
         tau = self.st * self.st
         tp, tq = tau * (s * self.tx + c * self.ty), tau * (c * self.tx - s * self.ty)
@@ -222,13 +222,18 @@ class _Edges:
         g[asm.fixed] = 0.0
         return cost, data, g
 
-    def theta_curvature(self, poses) -> np.ndarray:
+    def terms(self, poses) -> tuple:
+        """``(trig, r)``: :meth:`trig` and :meth:`residuals` at ``poses``, which the linearisation and the θ
+        curvature at one point share."""
+        trig = self.trig(poses)
+        return trig, self.residuals(poses, trig)
+
+    def theta_curvature(self, poses, terms=None) -> np.ndarray:
         """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
         depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
         ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
-        trig = self.trig(poses)
+        trig, r = self.terms(poses) if terms is None else terms
         cj, sj, ca, sa, c, s = trig
-        r = self.residuals(poses, trig)
         on_j = -self.sk * (r[:, 0] * cj + r[:, 1] * sj)
         on_i = self.sk * (r[:, 0] * ca + r[:, 1] * sa) + self.st * (r[:, 2] * (c * self.tx - s * self.ty)
                                                                      + r[:, 3] * (s * self.tx + c * self.ty))
@@ -261,7 +266,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     asm, lin = _workspace(problem, params, workspace)
     flat = x.reshape(-1)
     theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
-    cost, lo, g = _linearize(edges, asm, flat, params)
+    cost, lo, g, terms = _linearize(edges, asm, flat, params)
     near = False  # the last step lowered F by < FROZEN_REL: the previous factorisation is good enough
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
@@ -277,10 +282,10 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 cost, g, stale = cn, gn, True
                 continue
         if stale:
-            cost, lo, g = _linearize(edges, asm, flat, params)
+            cost, lo, g, terms = _linearize(edges, asm, flat, params)
             stale = False
         newton = lo.copy()
-        newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3))[1:]
+        newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3), terms)[1:]
         # Newton (quadratic convergence); near the optimum its decrease is below F's rounding, so a Newton
         # step may raise F by that much (NEWTON_SLACK): it still shrinks the gradient, which the dual gap needs
         xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
@@ -297,16 +302,18 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
             cost, g = _cost_gradient(edges, flat)
             stale = True
         else:
-            cost, lo, g = _linearize(edges, asm, flat, params)
+            cost, lo, g, terms = _linearize(edges, asm, flat, params)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
 
 
 def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams):
-    """``(½F, JᵀJ lower data, ∇(½F))`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the engine's."""
-    out = edges.gauss_newton(flat.reshape(-1, 3), asm)
-    return out if out is not None else asm.linearize_lower(flat, params)
+    """``(½F, JᵀJ lower data, ∇(½F), terms)`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the
+    engine's; ``terms``: the edges' :meth:`_Edges.terms` there, for the θ curvature at the same point."""
+    terms = edges.terms(flat.reshape(-1, 3))
+    out = edges.gauss_newton(flat.reshape(-1, 3), asm, terms)
+    return (*(out if out is not None else asm.linearize_lower(flat, params)), terms)
 
 
 def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
