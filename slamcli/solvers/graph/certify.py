@@ -453,18 +453,21 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     Xt = np.empty((n, 3, 2))  # rows of Xᵀ: t_i, then the columns of R_i = [[c, −s], [s, c]]
     Xt[:, 0], Xt[:, 1], Xt[:, 2] = x[:, :2], np.column_stack([ct, st_]), np.column_stack([-st_, ct])
     G = (_LowerSymmetric(asm.lower_matrix(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
-    Lam = G @ np.swapaxes(Xt[:, 1:], 1, 2)  # G_i R_i (R_i's columns are rows 1, 2 of Xt_i)
-    Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
+    # Λ_i = sym(G_i R_iᵀ) (R_i's columns are rows 1, 2 of Xt_i): its three entries, without n 2×2 matmuls
+    g00, g01, g10, g11 = G[:, 0, 0], G[:, 0, 1], G[:, 1, 0], G[:, 1, 1]
+    r00, r01, r10, r11 = Xt[:, 1, 0], Xt[:, 1, 1], Xt[:, 2, 0], Xt[:, 2, 1]
+    lam00, lam11 = g00 * r00 + g01 * r01, g10 * r10 + g11 * r11
+    lam10 = 0.5 * ((g10 * r00 + g11 * r01) + (g00 * r10 + g01 * r11))
     d1, d2 = asm.lo_diag_pos[3 * np.arange(n) + 1], asm.lo_diag_pos[3 * np.arange(n) + 2]
     # (R_i e₂, R_i e₁): next after the diagonal in column 3i+1 — in the pattern for every pose with an edge
     # (a dense 3×3 block); a pose without edges has G_i = 0, so Λ_i = 0 and nothing to subtract
     below = d1 + 1
     has = asm.lo_indices[below] == 3 * np.arange(n) + 2
     S_lo = M_lo
-    S_lo[d1] -= Lam[:, 0, 0]
-    S_lo[below[has]] -= Lam[has, 1, 0]
-    S_lo[d2] -= Lam[:, 1, 1]
-    return S_lo, float(np.trace(Lam, axis1=1, axis2=2).sum())
+    S_lo[d1] -= lam00
+    S_lo[below[has]] -= lam10[has]
+    S_lo[d2] -= lam11
+    return S_lo, float(np.sum(lam00 + lam11))
 
 
 class _LowerSymmetric:
