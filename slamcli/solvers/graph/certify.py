@@ -177,7 +177,12 @@ class _Edges:
                                                                      - r[:, 3] * (c * self.tx - s * self.ty))
         w[5] = self.sk * (cj * r[:, 1] - sj * r[:, 0])
         g = np.bincount(self._grad_cols, weights=w.ravel(), minlength=3 * poses.shape[0])
-        return float(np.sum(0.5 * np.einsum("fk,fk->f", r, r))), g  # the cost summed as Assembler.cost sums it
+        return self.half_cost(r), g
+
+    @staticmethod
+    def half_cost(r: np.ndarray) -> float:
+        """``½F = ½‖r‖²`` from the residuals, summed as :meth:`nls.Assembler.cost` sums it."""
+        return float(np.sum(0.5 * np.einsum("fk,fk->f", r, r)))
 
     #: local pairs (a ≤ b, numbered as ``np.triu_indices(6)``) of ``JᵀJ`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``
     #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
@@ -288,9 +293,9 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3), terms)[1:]
         # Newton (quadratic convergence); near the optimum its decrease is below F's rounding, so a Newton
         # step may raise F by that much (NEWTON_SLACK): it still shrinks the gradient, which the dual gap needs
-        xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
+        xn, cn, tn = _try_step(edges, asm, lin, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
         if xn is None:  # H not positive definite there, or no decrease: Gauss-Newton with step halving
-            xn, cn = _try_step(asm, lin, params, flat, lo, g, cost, halving=True)
+            xn, cn, tn = _try_step(edges, asm, lin, flat, lo, g, cost, halving=True)
         if xn is None:
             break
         done = cost - cn <= REFINE_REL_TOL * cost
@@ -299,19 +304,20 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         if done:
             break
         if near:  # the next step reuses this factorisation: it needs the gradient only, not H
-            cost, g = _cost_gradient(edges, flat)
+            cost, g = _cost_gradient(edges, flat, tn)
             stale = True
         else:
-            cost, lo, g, terms = _linearize(edges, asm, flat, params)
+            cost, lo, g, terms = _linearize(edges, asm, flat, params, tn)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
 
 
-def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams):
+def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams, terms=None):
     """``(½F, JᵀJ lower data, ∇(½F), terms)`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the
-    engine's; ``terms``: the edges' :meth:`_Edges.terms` there, for the θ curvature at the same point."""
-    terms = edges.terms(flat.reshape(-1, 3))
+    engine's; ``terms``: the edges' :meth:`_Edges.terms` there (given, or computed), for the θ curvature at the
+    same point."""
+    terms = edges.terms(flat.reshape(-1, 3)) if terms is None else terms
     out = edges.gauss_newton(flat.reshape(-1, 3), asm, terms)
     return (*(out if out is not None else asm.linearize_lower(flat, params)), terms)
 
@@ -326,11 +332,11 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _cost_gradient(edges: _Edges, flat: np.ndarray) -> tuple[float, np.ndarray]:
+def _cost_gradient(edges: _Edges, flat: np.ndarray, terms=None) -> tuple[float, np.ndarray]:
     """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` (:meth:`_Edges.cost_gradient`: the cost and gradient
     :meth:`nls.Assembler.linearize_lower` returns for :func:`_sesync_problem`, without assembling ``H``),
     pose 0 held."""
-    cost, g = edges.cost_gradient(flat.reshape(-1, 3))
+    cost, g = edges.cost_gradient(flat.reshape(-1, 3), *(terms or ()))
     g[:3] = 0.0
     return cost, g
 
@@ -346,24 +352,26 @@ def _frozen_step(edges, lin, flat, g, cost, slack: float):
     return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
 
 
-def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool, slack: float = 0.0):
-    """``(x, cost)`` after the step ``−H⁻¹g`` for the matrix of lower data ``lo`` (halved until the cost does
-    not rise by more than ``slack·cost``, when ``halving``), or ``(None, None)``."""
+def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: float = 0.0):
+    """``(x, cost, terms)`` after the step ``−H⁻¹g`` for the matrix of lower data ``lo`` (halved until the cost
+    does not rise by more than ``slack·cost``, when ``halving``), with the edges' :meth:`_Edges.terms` at ``x``
+    (the next linearisation's), or ``(None, None, None)``."""
     if not nls.factorize_lower(lin, asm, lo):
-        return None, None
+        return None, None, None
     h = lin.solve(-g)
     if h is None:
-        return None, None
+        return None, None, None
     alpha = 1.0
     while alpha > 1e-4:
         xn = flat + alpha * h
-        cn = asm.cost(xn, params)
+        terms = edges.terms(xn.reshape(-1, 3))
+        cn = _Edges.half_cost(terms[1])
         if cn <= cost + slack * abs(cost):
-            return xn, cn
+            return xn, cn, terms
         if not halving:
             break
         alpha *= 0.5
-    return None, None
+    return None, None, None
 
 
 def _sesync_problem(n: int, edges: _Edges) -> nls.NlsProblem:
