@@ -485,10 +485,11 @@ class _LowerSymmetric:
 
     def __init__(self, lower: sp.csc_matrix) -> None:
         self.lower, self.diag, self.shape = lower, lower.diagonal(), lower.shape
+        self.upper = lower.T  # CSR on the same arrays, made once for every product
 
     def __matmul__(self, v: np.ndarray) -> np.ndarray:
         d = self.diag if np.ndim(v) == 1 else self.diag[:, None]
-        return self.lower @ v + self.lower.T @ v - d * v
+        return self.lower @ v + self.upper @ v - d * v
 
     def tocsc(self) -> sp.csc_matrix:
         return (self.lower + self.lower.T - sp.diags(self.diag)).tocsc()
