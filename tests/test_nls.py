@@ -602,18 +602,3 @@ def test_pose_block_pattern_equals_the_sorted_pattern_and_assembles_the_dense_pr
         J = nls.jacobian_matrix(prob, xx).toarray()
         np.testing.assert_allclose(fast.matrix(fast.full(lo)).toarray(), J.T @ J, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(g, J.T @ nls.residual_vector(prob, xx), rtol=1e-12, atol=1e-12)
-
-
-@pytest.mark.parametrize("per_factor", [True, False])
-def test_whiten_rows_equals_the_batched_matrix_product(per_factor):
-    """The slab-by-slab whitening of large blocks (:func:`linear._whiten_rows`) is ``L J`` by numpy's matmul,
-    laid out factors last, for per-factor and shared ``L``."""
-    rng = np.random.default_rng(7)
-    F, k, n = 700, 3, 6
-    L = rng.standard_normal((F, k, k) if per_factor else (k, k))
-    J = rng.standard_normal((F, k, n))
-    out = np.empty((k, n, F))
-    from slamcli.solvers.nls import linear
-
-    linear._whiten_rows(L, J, out, np.empty((k, n, F)), np.empty((n, F)))
-    np.testing.assert_allclose(out, np.matmul(L, J).transpose(1, 2, 0), rtol=1e-13, atol=1e-13)

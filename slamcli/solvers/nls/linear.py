@@ -18,9 +18,6 @@ from slamcli.solvers.nls.problem import NlsParams, NlsProblem, pose_offsets
 #: blocks of at most this many factors are assembled with batched einsum calls (Python overhead per call
 #: dominates small blocks), larger ones with per-pair vector operations on buffers (memory traffic dominates)
 SMALL_BLOCK = 4096
-#: blocks of at least this many factors (and at most SMALL_BLOCK) with a per-factor ``L`` are whitened slab by slab
-#: (:func:`_whiten_rows`): at 1044 factors of 3 × 6 ≈ 2× faster than numpy's batched matmul, at 128 slower
-WHITEN_BY_ROWS = 512
 
 
 class Assembler:
@@ -222,10 +219,8 @@ class Assembler:
             fused = body and b.evaluate_body is not None  # Jacobians in the body chart already
             r, J = b.evaluate_body(x) if fused else b.evaluate(x)
             F, k, n = J.shape
-            scratch = (self._buffer(("jt", i), (k, n, F)), self._buffer(("jrow", i), (n, F))) \
-                if WHITEN_BY_ROWS <= F <= SMALL_BLOCK and not self.identity_info[i] else None
             JwT = _whitened_jacobian(x, b, J, self.pose_offsets[i] if body and not fused else [],
-                                     self._buffer(("jw", i), (k, n, F)), self.identity_info[i], scratch)
+                                     self._buffer(("jw", i), (k, n, F)), self.identity_info[i])
             rw = r if self.identity_info[i] else whiten(b.sqrt_info, r)  # (F, k)
             whitened.append(rw)
             rho, w = kernel_cost(rw, b.robust, params)
@@ -259,16 +254,13 @@ class Assembler:
 
 
 def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out: np.ndarray,
-                       identity: bool = False, scratch: tuple | None = None) -> np.ndarray:
+                       identity: bool = False) -> np.ndarray:
     """``L J`` of a block laid out ``(k, n, F)`` (factors last, contiguous) in the work buffer ``out``, each
     pose's columns at the ``offsets`` then rotated into the body chart: ``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``
-    (``L`` acts on rows, ``R`` on columns: ``(L J) R = L (J R)``); ``identity``: ``L = I`` (no product);
-    ``scratch``: ``(k, n, F)`` and ``(n, F)`` buffers for :func:`_whiten_rows` (:data:`WHITEN_BY_ROWS`)."""
+    (``L`` acts on rows, ``R`` on columns: ``(L J) R = L (J R)``); ``identity``: ``L = I`` (no product)."""
     F, k, n = J.shape
     L = np.asarray(b.sqrt_info, float)
-    if F <= SMALL_BLOCK and scratch is not None and not identity:
-        _whiten_rows(L, J, out, *scratch)
-    elif F <= SMALL_BLOCK:  # one batched product (2-3× faster than the equivalent einsum), then factors last
+    if F <= SMALL_BLOCK:  # one batched product (2-3× faster than the equivalent einsum), then factors last
         out[:] = (J if identity else np.matmul(L, J)).transpose(1, 2, 0)
     for i in range(k if F > SMALL_BLOCK else 0):
         for a in range(n):
@@ -288,20 +280,6 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out:
         out[:, o] = j0 * c + j1 * s  # [J_x, J_y] R(θ), R = [[c, −s], [s, c]]
         out[:, o + 1] = j0 * -s + j1 * c
     return out
-
-
-def _whiten_rows(L: np.ndarray, J: np.ndarray, out: np.ndarray, Jt: np.ndarray, tmp: np.ndarray) -> None:
-    """``out[i] = Σ_j L_ij J_j`` on factors-last slabs: ``J (F, k, n)`` copied once to ``Jt (k, n, F)``, then k²
-    products of contiguous ``(n, F)`` slabs by ``L``'s entries (per factor, ``L (F, k, k)``, or shared ``(k, k)``)."""
-    k = J.shape[1]
-    np.copyto(Jt, J.transpose(1, 2, 0))
-    Lt = np.ascontiguousarray(L.transpose(1, 2, 0)) if L.ndim == 3 else L
-    for i in range(k):
-        o = out[i]
-        np.multiply(Jt[0], Lt[i, 0], out=o)
-        for j in range(1, k):
-            np.multiply(Jt[j], Lt[i, j], out=tmp)
-            o += tmp
 
 
 @functools.lru_cache(maxsize=16)
