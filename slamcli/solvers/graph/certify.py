@@ -177,20 +177,26 @@ class _Edges:
                                                                      - r[:, 3] * (c * self.tx - s * self.ty))
         w[5] = self.sk * (cj * r[:, 1] - sj * r[:, 0])
         g = np.bincount(self._grad_cols, weights=w.ravel(), minlength=3 * poses.shape[0])
-        return float(np.sum(0.5 * np.einsum("fk,fk->f", r, r))), g  # the cost summed as Assembler.cost sums it
+        return self.half_cost(r), g
+
+    @staticmethod
+    def half_cost(r: np.ndarray) -> float:
+        """``½F = ½‖r‖²`` from the residuals, summed as :meth:`nls.Assembler.cost` sums it."""
+        return float(np.sum(0.5 * np.einsum("fk,fk->f", r, r)))
 
     #: local pairs (a ≤ b, numbered as ``np.triu_indices(6)``) of ``JᵀJ`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``
     #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
     VARYING_PAIRS = (2, 7, 11, 12, 13, 14)  # (x_i,θ_i) (y_i,θ_i) (θ_i,θ_i) (θ_i,x_j) (θ_i,y_j) (θ_i,θ_j)
 
-    def gauss_newton(self, poses, asm: nls.Assembler) -> tuple[float, np.ndarray, np.ndarray] | None:
+    def gauss_newton(self, poses, asm: nls.Assembler, terms=None) -> tuple[float, np.ndarray, np.ndarray] | None:
         """``(½F, JᵀJ lower data on asm's pattern, ∇(½F))`` at ``poses``, pose 0 held, in closed form: with
         ``p = sin θ_i t̃_x + cos θ_i t̃_y`` and ``q = cos θ_i t̃_x − sin θ_i t̃_y`` (so ``J[tr, θ_i] = √τ [p, −q]``)
         the pose-dependent entries are ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``,
         ``(θ_i,x_j) = τp``, ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others
         (``±τ``, ``2κ``, 0) are scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
         :func:`_sesync_problem`, without the ``(E, 4, 6)`` Jacobian and its 21 products per edge; None when
-        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path."""
+        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path. ``terms``:
+        ``(trig, r)`` at ``poses`` (:meth:`trig`, :meth:`residuals`) when the caller has them."""
         E = self.i.size
         if len(asm.lo_scatter) != 1 or asm.twice[0] is not None or asm.lo_scatter[0].size != 21 * E:
             return None
@@ -203,9 +209,8 @@ class _Edges:
                                          minlength=asm.lo_nnz)
             self._gn_pos = pos[list(self.VARYING_PAIRS)].ravel()
             self._gn_of = asm
-        trig = self.trig(poses)
+        trig, r = self.terms(poses) if terms is None else terms
         cj, sj, ca, sa, c, s = trig
-        r = self.residuals(poses, trig)
         cost, g = self.cost_gradient(poses, trig, r)
         tau = self.st * self.st
         tp, tq = tau * (s * self.tx + c * self.ty), tau * (c * self.tx - s * self.ty)
@@ -222,13 +227,18 @@ class _Edges:
         g[asm.fixed] = 0.0
         return cost, data, g
 
-    def theta_curvature(self, poses) -> np.ndarray:
+    def terms(self, poses) -> tuple:
+        """``(trig, r)``: :meth:`trig` and :meth:`residuals` at ``poses``, which the linearisation and the θ
+        curvature at one point share."""
+        trig = self.trig(poses)
+        return trig, self.residuals(poses, trig)
+
+    def theta_curvature(self, poses, terms=None) -> np.ndarray:
         """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
         depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
         ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
-        trig = self.trig(poses)
+        trig, r = self.terms(poses) if terms is None else terms
         cj, sj, ca, sa, c, s = trig
-        r = self.residuals(poses, trig)
         on_j = -self.sk * (r[:, 0] * cj + r[:, 1] * sj)
         on_i = self.sk * (r[:, 0] * ca + r[:, 1] * sa) + self.st * (r[:, 2] * (c * self.tx - s * self.ty)
                                                                      + r[:, 3] * (s * self.tx + c * self.ty))
@@ -261,7 +271,7 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     asm, lin = _workspace(problem, params, workspace)
     flat = x.reshape(-1)
     theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
-    cost, lo, g = _linearize(edges, asm, flat, params)
+    cost, lo, g, terms = _linearize(edges, asm, flat, params)
     near = False  # the last step lowered F by < FROZEN_REL: the previous factorisation is good enough
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
@@ -277,15 +287,15 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 cost, g, stale = cn, gn, True
                 continue
         if stale:
-            cost, lo, g = _linearize(edges, asm, flat, params)
+            cost, lo, g, terms = _linearize(edges, asm, flat, params)
             stale = False
         newton = lo.copy()
-        newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3))[1:]
+        newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3), terms)[1:]
         # Newton (quadratic convergence); near the optimum its decrease is below F's rounding, so a Newton
         # step may raise F by that much (NEWTON_SLACK): it still shrinks the gradient, which the dual gap needs
-        xn, cn = _try_step(asm, lin, params, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
+        xn, cn, tn = _try_step(edges, asm, lin, flat, newton, g, cost, halving=False, slack=NEWTON_SLACK)
         if xn is None:  # H not positive definite there, or no decrease: Gauss-Newton with step halving
-            xn, cn = _try_step(asm, lin, params, flat, lo, g, cost, halving=True)
+            xn, cn, tn = _try_step(edges, asm, lin, flat, lo, g, cost, halving=True)
         if xn is None:
             break
         done = cost - cn <= REFINE_REL_TOL * cost
@@ -294,19 +304,22 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
         if done:
             break
         if near:  # the next step reuses this factorisation: it needs the gradient only, not H
-            cost, g = _cost_gradient(edges, flat)
+            cost, g = _cost_gradient(edges, flat, tn)
             stale = True
         else:
-            cost, lo, g = _linearize(edges, asm, flat, params)
+            cost, lo, g, terms = _linearize(edges, asm, flat, params, tn)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
 
 
-def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams):
-    """``(½F, JᵀJ lower data, ∇(½F))`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the engine's."""
-    out = edges.gauss_newton(flat.reshape(-1, 3), asm)
-    return out if out is not None else asm.linearize_lower(flat, params)
+def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams, terms=None):
+    """``(½F, JᵀJ lower data, ∇(½F), terms)`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the
+    engine's; ``terms``: the edges' :meth:`_Edges.terms` there (given, or computed), for the θ curvature at the
+    same point."""
+    terms = edges.terms(flat.reshape(-1, 3)) if terms is None else terms
+    out = edges.gauss_newton(flat.reshape(-1, 3), asm, terms)
+    return (*(out if out is not None else asm.linearize_lower(flat, params)), terms)
 
 
 def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
@@ -319,11 +332,11 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _cost_gradient(edges: _Edges, flat: np.ndarray) -> tuple[float, np.ndarray]:
+def _cost_gradient(edges: _Edges, flat: np.ndarray, terms=None) -> tuple[float, np.ndarray]:
     """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` (:meth:`_Edges.cost_gradient`: the cost and gradient
     :meth:`nls.Assembler.linearize_lower` returns for :func:`_sesync_problem`, without assembling ``H``),
     pose 0 held."""
-    cost, g = edges.cost_gradient(flat.reshape(-1, 3))
+    cost, g = edges.cost_gradient(flat.reshape(-1, 3), *(terms or ()))
     g[:3] = 0.0
     return cost, g
 
@@ -339,24 +352,26 @@ def _frozen_step(edges, lin, flat, g, cost, slack: float):
     return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
 
 
-def _try_step(asm, lin, params, flat, lo, g, cost, halving: bool, slack: float = 0.0):
-    """``(x, cost)`` after the step ``−H⁻¹g`` for the matrix of lower data ``lo`` (halved until the cost does
-    not rise by more than ``slack·cost``, when ``halving``), or ``(None, None)``."""
+def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: float = 0.0):
+    """``(x, cost, terms)`` after the step ``−H⁻¹g`` for the matrix of lower data ``lo`` (halved until the cost
+    does not rise by more than ``slack·cost``, when ``halving``), with the edges' :meth:`_Edges.terms` at ``x``
+    (the next linearisation's), or ``(None, None, None)``."""
     if not nls.factorize_lower(lin, asm, lo):
-        return None, None
+        return None, None, None
     h = lin.solve(-g)
     if h is None:
-        return None, None
+        return None, None, None
     alpha = 1.0
     while alpha > 1e-4:
         xn = flat + alpha * h
-        cn = asm.cost(xn, params)
+        terms = edges.terms(xn.reshape(-1, 3))
+        cn = _Edges.half_cost(terms[1])
         if cn <= cost + slack * abs(cost):
-            return xn, cn
+            return xn, cn, terms
         if not halving:
             break
         alpha *= 0.5
-    return None, None
+    return None, None, None
 
 
 def _sesync_problem(n: int, edges: _Edges) -> nls.NlsProblem:
@@ -446,18 +461,21 @@ def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.
     Xt = np.empty((n, 3, 2))  # rows of Xᵀ: t_i, then the columns of R_i = [[c, −s], [s, c]]
     Xt[:, 0], Xt[:, 1], Xt[:, 2] = x[:, :2], np.column_stack([ct, st_]), np.column_stack([-st_, ct])
     G = (_LowerSymmetric(asm.lower_matrix(M_lo)) @ Xt.reshape(3 * n, 2)).reshape(n, 3, 2)[:, 1:]  # (M Xᵀ)_{R_i}
-    Lam = G @ np.swapaxes(Xt[:, 1:], 1, 2)  # G_i R_i (R_i's columns are rows 1, 2 of Xt_i)
-    Lam = 0.5 * (Lam + np.swapaxes(Lam, 1, 2))
+    # Λ_i = sym(G_i R_iᵀ) (R_i's columns are rows 1, 2 of Xt_i): its three entries, without n 2×2 matmuls
+    g00, g01, g10, g11 = G[:, 0, 0], G[:, 0, 1], G[:, 1, 0], G[:, 1, 1]
+    r00, r01, r10, r11 = Xt[:, 1, 0], Xt[:, 1, 1], Xt[:, 2, 0], Xt[:, 2, 1]
+    lam00, lam11 = g00 * r00 + g01 * r01, g10 * r10 + g11 * r11
+    lam10 = 0.5 * ((g10 * r00 + g11 * r01) + (g00 * r10 + g01 * r11))
     d1, d2 = asm.lo_diag_pos[3 * np.arange(n) + 1], asm.lo_diag_pos[3 * np.arange(n) + 2]
     # (R_i e₂, R_i e₁): next after the diagonal in column 3i+1 — in the pattern for every pose with an edge
     # (a dense 3×3 block); a pose without edges has G_i = 0, so Λ_i = 0 and nothing to subtract
     below = d1 + 1
     has = asm.lo_indices[below] == 3 * np.arange(n) + 2
     S_lo = M_lo
-    S_lo[d1] -= Lam[:, 0, 0]
-    S_lo[below[has]] -= Lam[has, 1, 0]
-    S_lo[d2] -= Lam[:, 1, 1]
-    return S_lo, float(np.trace(Lam, axis1=1, axis2=2).sum())
+    S_lo[d1] -= lam00
+    S_lo[below[has]] -= lam10[has]
+    S_lo[d2] -= lam11
+    return S_lo, float(np.sum(lam00 + lam11))
 
 
 class _LowerSymmetric:
@@ -467,10 +485,11 @@ class _LowerSymmetric:
 
     def __init__(self, lower: sp.csc_matrix) -> None:
         self.lower, self.diag, self.shape = lower, lower.diagonal(), lower.shape
+        self.upper = lower.T  # CSR on the same arrays, made once for every product
 
     def __matmul__(self, v: np.ndarray) -> np.ndarray:
         d = self.diag if np.ndim(v) == 1 else self.diag[:, None]
-        return self.lower @ v + self.lower.T @ v - d * v
+        return self.lower @ v + self.upper @ v - d * v
 
     def tocsc(self) -> sp.csc_matrix:
         return (self.lower + self.lower.T - sp.diags(self.diag)).tocsc()

@@ -402,22 +402,20 @@ def _pose_block_pattern(cols: list[np.ndarray], pairs: list, D: int):
     for g, (ia, ib) in zip(groups, pairs):
         F = g.shape[0]
         pos = np.empty((ia.size, F), idt)
+        ra, rb, one = ia % k, ib % k, ia // k == ib // k
+        s_ = np.flatnonzero(one)  # pairs in one pose's block: column offset ra ≤ row offset rb
+        pos[s_] = (start[g[:, ia[s_] // k], ra[s_]] + (rb[s_] - ra[s_])).T
         if g.shape[1] == 2:
             e = pinv[o:o + F]
             o += F
-            swap, re, Qe = g[:, 0] > g[:, 1], rank[e], Q[e]
-            same = re == 0  # a factor on one pose twice: the pair lies in its diagonal block
-            same = same if same.any() else None
-            colbase = [start[Qe, b] + (k - b) + k * (re - 1) for b in range(k)]
-        for t, (a_, b_) in enumerate(zip(ia, ib)):
-            ra, rb = a_ % k, b_ % k
-            if a_ // k == b_ // k:  # one pose's block: column offset ra ≤ row offset rb
-                pos[t] = start[g[:, a_ // k], ra] + (rb - ra)
-                continue
-            p_ = np.where(swap, colbase[rb] + ra, colbase[ra] + rb)
-            if same is not None:
-                p_[same] = start[Qe[same], min(ra, rb)] + abs(ra - rb)
-            pos[t] = p_
+            c_, re, Qe = np.flatnonzero(~one), rank[e], Q[e]
+            colbase = start[Qe] + (k - np.arange(k)) + k * (re - 1)[:, None]  # (F, k): rows of pose P in column b
+            ca, cb = ra[c_], rb[c_]
+            p_ = np.where((g[:, 0] > g[:, 1])[:, None], colbase[:, cb] + ca, colbase[:, ca] + cb)
+            same = np.flatnonzero(re == 0)  # a factor on one pose twice: the pair lies in its diagonal block
+            if same.size:
+                p_[same] = start[Qe[same]][:, np.minimum(ca, cb)] + np.abs(ca - cb)
+            pos[c_] = p_.T
         out.append(pos.ravel())
     out.append(start.ravel().astype(idt))
     return lo_indices, indptr.astype(np.int32), np.concatenate(out)

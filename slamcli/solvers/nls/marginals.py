@@ -378,12 +378,13 @@ def result_marginals(res, index_blocks: Sequence[np.ndarray], **kw) -> list[np.n
     th = np.asarray(res.x, float)[2 : 3 * rotate : 3]
     for s, blk in zip(sets, out):
         if s.size and s[0, 0] < 3 * rotate:  # a set of whole pose triplets (checked by _lower_at_estimate)
-            c, sn = np.cos(th[s[:, 0] // 3]), np.sin(th[s[:, 0] // 3])
-            R = np.zeros((len(s), 3, 3))
-            R[:, 0, 0] = R[:, 1, 1] = c
-            R[:, 1, 0], R[:, 0, 1] = sn, -sn
-            R[:, 2, 2] = 1.0
-            blk[:] = R @ blk @ R.mT
+            # R_p Σ R_pᵀ: the x, y rows, then the x, y columns, each pair turned by R(θ_p) (no batched 3×3
+            # matmuls: 1045 blocks ≈ 170 → 85 µs)
+            c, sn = np.cos(th[s[:, 0] // 3])[:, None], np.sin(th[s[:, 0] // 3])[:, None]
+            x, y = blk[:, 0], blk[:, 1]
+            blk[:, 0], blk[:, 1] = c * x - sn * y, sn * x + c * y
+            x, y = blk[:, :, 0], blk[:, :, 1]
+            blk[:, :, 0], blk[:, :, 1] = c * x - sn * y, sn * x + c * y
     return out
 
 
