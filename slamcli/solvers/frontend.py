@@ -404,6 +404,9 @@ def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, 
         r = np.asarray(rid[lo:hi], np.int64)
         # rows without an id stay single (they are discarded anyway)
         key = np.where(r >= 0, s * (int(r.max()) + 2) + r, -1 - np.arange(hi - lo))
+        sorted_key = np.sort(key)
+        if (sorted_key[1:] != sorted_key[:-1]).all():  # one row per landmark (a point sensor): nothing to merge
+            return [(z[k], rows[k : k + 1]) for k in range(hi - lo)]
     else:
         from scipy.sparse import csr_matrix
         from scipy.sparse.csgraph import connected_components
