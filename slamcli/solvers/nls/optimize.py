@@ -118,10 +118,11 @@ def solve(
         diag = data[asm.lo_diag_pos]
         Dvec = np.clip(diag, 1e-6, 1e32) if params.damping == "marquardt" else np.ones(asm.D)
         stop = None  # (status, message) that ends the optimisation inside this iteration
-        if params.method == "lm" and _converged_by_last_factor(lin, stats, params, st, g, cost, decrease):
+        h_held = _held_factor_step(lin, stats, params, st, g, cost, decrease) if params.method == "lm" else None
+        if _converged_by_last_factor(params, h_held, g, cost, decrease):
             status, message = Status.CONVERGED, "predicted cost decrease below pred_cost_tol (last factorisation)"
             break
-        frozen = _frozen_lm_step(problem, asm, lin, stats, params, st, x, g, cost, decrease) if params.method == "lm" else None
+        frozen = _frozen_lm_step(problem, asm, params, st, h_held, x, g, cost, decrease)
         if frozen is not None:
             x_new, new_cost = frozen
         elif params.method == "lm":
@@ -190,18 +191,27 @@ LAST_FACTOR_REGIME = 1e-6
 LAST_FACTOR_MARGIN = 0.5
 
 
-def _converged_by_last_factor(lin, stats, params, st, g, cost, decrease) -> bool:
-    """Whether the Gauss-Newton decrement ``½ gᵀH⁻¹g`` at the new iterate, with the factorisation of the previous
-    iterate's (damped) ``H`` that ``lin`` still holds, is below ``LAST_FACTOR_MARGIN · pred_cost_tol · cost`` —
-    the test of ``NlsParams.pred_cost_tol`` for one solve instead of a factorisation. Used only once the last
-    step lowered the cost by at most ``LAST_FACTOR_REGIME`` (relative), so ``H`` moved by a relative amount
-    of that order and the two decrements agree far inside the margin; otherwise (or when the primary
-    factorisation failed last time) the exact test runs in :func:`_lm_iteration`."""
-    if not (params.pred_cost_tol > 0.0 and stats.get("primary_ok") and st.lam <= params.lambda_init
-            and 0.0 <= decrease <= LAST_FACTOR_REGIME * cost):
+def _held_factor_step(lin, stats, params, st, g, cost, decrease) -> np.ndarray | None:
+    """``h = −H_old⁻¹ g``: the Gauss-Newton step at the new iterate with the factorisation of the previous
+    iterate's (damped) ``H`` that ``lin`` still holds — one solve shared by :func:`_converged_by_last_factor`
+    and :func:`_frozen_lm_step`; None when neither may use it (the primary factorisation failed last time, λ
+    grew, or the last decrease is above both their regimes) or the solve fails."""
+    regime = max(LAST_FACTOR_REGIME if params.pred_cost_tol > 0.0 else 0.0, params.frozen_step_rel)
+    if not (regime > 0.0 and stats.get("primary_ok") and st.lam <= params.lambda_init
+            and 0.0 <= decrease <= regime * cost):
+        return None
+    return lin.solve(-g)
+
+
+def _converged_by_last_factor(params, h_held, g, cost, decrease) -> bool:
+    """Whether the Gauss-Newton decrement ``½ gᵀH⁻¹g`` at the new iterate, from the held factorisation's step
+    ``h_held`` (:func:`_held_factor_step`), is below ``LAST_FACTOR_MARGIN · pred_cost_tol · cost`` — the test of
+    ``NlsParams.pred_cost_tol`` for one solve instead of a factorisation. Used only once the last step lowered
+    the cost by at most ``LAST_FACTOR_REGIME`` (relative), so ``H`` moved by a relative amount of that order and
+    the two decrements agree far inside the margin; otherwise the exact test runs in :func:`_lm_iteration`."""
+    if h_held is None or not (params.pred_cost_tol > 0.0 and decrease <= LAST_FACTOR_REGIME * cost):
         return False
-    h = lin.solve(-g)
-    return h is not None and 0.0 <= -0.5 * float(g @ h) <= LAST_FACTOR_MARGIN * params.pred_cost_tol * cost
+    return 0.0 <= -0.5 * float(g @ h_held) <= LAST_FACTOR_MARGIN * params.pred_cost_tol * cost
 
 
 #: a simplified-Newton LM step (NlsParams.frozen_step_rel) is kept when it achieves at least this fraction of its
@@ -209,15 +219,13 @@ def _converged_by_last_factor(lin, stats, params, st, g, cost, decrease) -> bool
 FROZEN_MIN_FIDELITY = 0.5
 
 
-def _frozen_lm_step(problem, asm, lin, stats, params, st, x, g, cost, decrease):
-    """``(x_new, new_cost)`` of NlsParams.frozen_step_rel's simplified-Newton step ``h = −H_old⁻¹ g`` with the
-    factorisation ``lin`` holds, when the last step lowered the cost by at most ``frozen_step_rel · cost`` and
+def _frozen_lm_step(problem, asm, params, st, h, x, g, cost, decrease):
+    """``(x_new, new_cost)`` of NlsParams.frozen_step_rel's simplified-Newton step ``h = −H_old⁻¹ g``
+    (:func:`_held_factor_step`), when the last step lowered the cost by at most ``frozen_step_rel · cost`` and
     the trial is kept (its linearisation left in ``st.trial_lin``, as an eager LM trial's); else None."""
-    if not (params.frozen_step_rel > 0.0 and stats.get("primary_ok") and st.lam <= params.lambda_init
-            and 0.0 <= decrease <= params.frozen_step_rel * cost):
+    if h is None or not (params.frozen_step_rel > 0.0 and decrease <= params.frozen_step_rel * cost):
         return None
-    h = lin.solve(-g)
-    model = -0.5 * float(g @ h) if h is not None else -1.0  # the decrease of the model with H_old
+    model = -0.5 * float(g @ h)  # the decrease of the model with H_old
     if not model > 0.0:
         return None
     x_new = retract(problem, params, x, h)
