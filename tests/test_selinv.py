@@ -160,9 +160,9 @@ def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
     seen = {}
     inner = solver.laplace_marginals
 
-    def grab(gp, lm_res, workspace=None):
+    def grab(gp, lm_res):
         seen.update(gp=gp, lm_res=lm_res)
-        return inner(gp, lm_res, workspace)
+        return inner(gp, lm_res)
 
     monkeypatch.setattr(solver, "laplace_marginals", grab)
     res = graph.GraphSlam(graph.GraphParams()).solve(inp, rng=np.random.default_rng(0))

@@ -325,14 +325,13 @@ def _team_and_gps_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout) 
     return blocks
 
 
-def laplace_marginals(gp: GraphProblem, information, workspace=None) -> tuple[np.ndarray, np.ndarray]:
+def laplace_marginals(gp: GraphProblem, information) -> tuple[np.ndarray, np.ndarray]:
     """World-frame marginal covariances ``pose_cov (T+1, 3, 3)`` and ``landmark_cov (L, 2, 2)`` at the optimum.
 
     The blocks of ``H⁻¹`` for the pose and landmark columns of ``gp``, by the one marginals path
     :func:`slamcli.solvers.nls.marginals.block_marginals` (selected inverse with CHOLMOD; else the chain +
     border elimination when every pose-pose factor links consecutive poses or is unary; else the sparse
     column solve), whose policy on an ``H`` that is not numerically positive definite is to refuse.
-    ``workspace``: the LM's ``NlsResult.workspace`` (its CHOLMOD analysis is reused when it fits ``H``).
     ``information`` may be the LM's ``NlsResult`` itself: then its lower triangle at the estimate is factored
     directly and the pose blocks rotated out of the body chart (:func:`slamcli.solvers.nls.result_marginals`),
     the full ``H`` is not built.
@@ -348,7 +347,7 @@ def laplace_marginals(gp: GraphProblem, information, workspace=None) -> tuple[np
     if isinstance(information, nls.NlsResult):
         pose_cov, lm_cov = nls.result_marginals(information, sets, **kw)
     else:
-        pose_cov, lm_cov = nls.block_marginals(information, sets, workspace=workspace, **kw)
+        pose_cov, lm_cov = nls.block_marginals(information, sets, **kw)
     return pose_cov, lm_cov
 
 
