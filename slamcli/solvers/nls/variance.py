@@ -88,7 +88,8 @@ def variance_components(jacobian, residual, group, n_groups: int | None = None,
     else:
         # H = Σ_g J_gᵀJ_g summed in COO form, so that an entry the groups cancel exactly (odometry x and
         # lateral rows of equal σ do) stays on the pattern as an explicit zero
-        parts = [sp.coo_matrix(J[g == k].T @ J[g == k]) for k in [*range(G), -1]]
+        rows_of = [J[g == k] for k in [*range(G), -1]]  # each group's rows sliced once
+        parts = [sp.coo_matrix(Jk.T @ Jk) for Jk in rows_of]
         H = sp.csc_matrix((np.concatenate([P.data for P in parts]),
                            (np.concatenate([P.row for P in parts]), np.concatenate([P.col for P in parts]))),
                           shape=(n, n))
