@@ -340,19 +340,23 @@ def cholmod_analysis(workspace: tuple | None, information: sp.spmatrix):
     """The CHOLMOD factor (symbolic analysis) of an optimisation's workspace ``(Assembler, linear solver)``
     when it is a simplicial ``LDLᵀ`` analysed on ``information``'s own pattern — the assembler's full pattern
     or its lower triangle (CHOLMOD reads the lower triangle of either) — else None."""
-    if workspace is None:
+    H = information
+    if not (_simplicial_ldl(workspace) and sp.isspmatrix_csc(H)):
         return None
     asm, lin = workspace
-    if getattr(lin, "name", "") != "cholmod" or not getattr(lin, "ldl", False):
-        return None
-    H = information
-    if not sp.isspmatrix_csc(H):
-        return None
-    if np.array_equal(H.indptr, asm.lo_indptr) and np.array_equal(H.indices, asm.lo_indices):
-        return lin.F  # checked first: the full pattern is built on first use only
-    if not (np.array_equal(H.indptr, asm.indptr) and np.array_equal(H.indices, asm.indices)):
-        return None
-    return lin.F
+    # the lower pattern is checked first: the full one is built on first use only
+    if ((np.array_equal(H.indptr, asm.lo_indptr) and np.array_equal(H.indices, asm.lo_indices))
+            or (np.array_equal(H.indptr, asm.indptr) and np.array_equal(H.indices, asm.indices))):
+        return lin.F
+    return None
+
+
+def _simplicial_ldl(workspace: tuple | None) -> bool:
+    """Whether an optimisation's workspace ``(Assembler, linear solver)`` holds CHOLMOD's simplicial ``LDLᵀ``."""
+    if workspace is None:
+        return False
+    lin = workspace[1]
+    return getattr(lin, "name", "") == "cholmod" and bool(getattr(lin, "ldl", False))
 
 
 def result_marginals(res, index_blocks: Sequence[np.ndarray], **kw) -> list[np.ndarray]:
@@ -380,7 +384,8 @@ def result_marginals(res, index_blocks: Sequence[np.ndarray], **kw) -> list[np.n
         if s.size and s[0, 0] < 3 * rotate:  # a set of whole pose triplets (checked by _lower_at_estimate)
             # R_p Σ R_pᵀ: the x, y rows, then the x, y columns, each pair turned by R(θ_p) (no batched 3×3
             # matmuls: 1045 blocks ≈ 170 → 85 µs)
-            c, sn = np.cos(th[s[:, 0] // 3])[:, None], np.sin(th[s[:, 0] // 3])[:, None]
+            th_s = th[s[:, 0] // 3]
+            c, sn = np.cos(th_s)[:, None], np.sin(th_s)[:, None]
             x, y = blk[:, 0], blk[:, 1]
             blk[:, 0], blk[:, 1] = c * x - sn * y, sn * x + c * y
             x, y = blk[:, :, 0], blk[:, :, 1]
@@ -392,12 +397,11 @@ def _lower_at_estimate(res, sets: list[np.ndarray]):
     """``(lower-triangle H, n_poses to rotate or None)`` for :func:`result_marginals`, or None when its
     conditions fail (then ``res.information`` is used)."""
     ws, lo = getattr(res, "workspace", None), getattr(res, "information_lower", None)
-    if ws is None or lo is None or not selinv.available():  # only the selected inverse reads a lower triangle
+    # only the selected inverse reads a lower triangle, with the run's analysis (H below has its pattern)
+    if lo is None or not _simplicial_ldl(ws) or not selinv.available():
         return None
     asm = ws[0]
     H = asm.lower_matrix(lo)
-    if cholmod_analysis(ws, H) is None:
-        return None
     n = asm.problem.se2_poses
     if res.information_chart != "body" or n <= 0:
         return H, None
