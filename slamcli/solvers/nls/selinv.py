@@ -167,7 +167,8 @@ class _Supernodes:
         is_first = np.zeros(n, bool)
         is_first[ffirst] = True
         frows = ix[np.repeat(is_first, cnt)].astype(np.int64)
-        fkey_start = _starts(fnrows)[:-1].astype(np.int64)
+        f_rep, f_u, f_starts = _ragged(fnrows)  # every fundamental row's supernode, its place, the run starts
+        fkey_start = f_starts[:-1]
         fpar = np.full(ffirst.size, -1, np.int64)
         below = fnrows > fwidth
         fpar[below] = fsn_of[frows[fkey_start[below] + fwidth[below]]]
@@ -180,18 +181,17 @@ class _Supernodes:
         self.nrows = self.width + r_top
         ns = self.first.size
         self.sn_of = np.repeat(np.arange(ns), self.width)  # supernode of each (permuted) column
-        self.off = _starts(self.nrows * self.width).astype(np.int64)
+        self.off = _starts(self.nrows * self.width)
         # merged row set: the supernode's own columns, then the rows below its topmost member
-        self.key_start = _starts(self.nrows)[:-1].astype(np.int64)
-        rep, u, _ = _ragged(self.nrows)
+        rep, u, key_starts = _ragged(self.nrows)
+        self.key_start = key_starts[:-1]
         w_rep = self.width[rep]
         tk = top[rep]
         self.rows = np.where(u < w_rep, self.first[rep] + u, frows[fkey_start[tk] + fwidth[tk] + u - w_rep])
         self.keys = rep * n + self.rows
         # every fundamental row's place in its merged supernode's row set (entries of L are found through it)
-        rep, u, _ = _ragged(fnrows)
-        self.frow_sn = group[rep]
-        self.fmap = self.local_rows(self.frow_sn, frows[fkey_start[rep] + u], own=True)
+        self.frow_sn = group[f_rep]
+        self.fmap = self.local_rows(self.frow_sn, frows[fkey_start[f_rep] + f_u], own=True)
         # per column: where its stored entries start among the fundamental rows (minus its start in L)
         self.col_shift = fkey_start[fsn_of] + (np.arange(n) - ffirst[fsn_of]) - ip[:-1]
         self.cnt = cnt
@@ -230,16 +230,14 @@ class SelectedInverse:
         sn = _Supernodes(factor.L)
         self.n, self._sn = sn.n, sn
         self.perm = factor.perm
-        self.iperm = np.empty(sn.n, np.int64)
-        self.iperm[factor.perm] = np.arange(sn.n)
+        self.iperm = _inverse_permutation(factor.perm)
         self.sn_first, self.sn_width, self.sn_nrows, self.sn_of, self.off = (
             sn.first, sn.width, sn.nrows, sn.sn_of, sn.off)
         self.vals = np.zeros(int(sn.off[-1]))  # supernode K: dense row-major (nrows × width) at off[K]
         if not sn.n:
             return
         plan = _Schedule(sn)
-        K = np.repeat(np.arange(len(sn.first)), sn.nrows * sn.width)
-        u = np.arange(self.vals.size) - sn.off[K]
+        K, u, _ = _ragged(sn.nrows * sn.width)  # supernode of every stored entry, its place there (runs at off)
         t, c = u // sn.width[K], u % sn.width[K]  # local row and column of every stored entry
         self.vals[:] = plan.run(factor, *plan.front_index(K, t, c))
 
@@ -324,8 +322,7 @@ def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.n
     """``H⁻¹`` at the ``tri`` (lower triangle) entries of every block of ``sets``, concatenated; ValueError
     when one is off the pattern of the factor."""
     sn = _Supernodes(factor.L)
-    iperm = np.empty(sn.n, np.int64)
-    iperm[factor.perm] = np.arange(sn.n)
+    iperm = _inverse_permutation(factor.perm)
     qa = np.concatenate([iperm[b[:, i].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
     qb = np.concatenate([iperm[b[:, j].ravel()] for b, (i, j) in zip(sets, tri)] + [np.zeros(0, np.int64)])
     lo, hi = np.minimum(qa, qb), np.maximum(qa, qb)
@@ -396,6 +393,13 @@ def _amalgamate(par: np.ndarray, width: np.ndarray, nrows: np.ndarray) -> np.nda
     return np.cumsum(cut) - 1
 
 
+def _inverse_permutation(perm: np.ndarray) -> np.ndarray:
+    """``iperm`` with ``iperm[perm[i]] = i``: the permuted position of every original column."""
+    iperm = np.empty(len(perm), np.int64)
+    iperm[perm] = np.arange(len(perm))
+    return iperm
+
+
 def _starts(sizes: np.ndarray) -> np.ndarray:
     """``[0, cumsum(sizes)]`` as int64: where consecutive runs of ``sizes`` start, and the total."""
     out = np.zeros(len(sizes) + 1, np.int64)
@@ -406,7 +410,7 @@ def _starts(sizes: np.ndarray) -> np.ndarray:
 def _ragged(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For concatenated runs of ``sizes``: the run of every element, its position in the run, the run starts."""
     sizes = np.asarray(sizes, np.int64)
-    starts = _starts(sizes).astype(np.int64)
+    starts = _starts(sizes)
     rep = np.repeat(np.arange(sizes.size), sizes)
     return rep, np.arange(starts[-1], dtype=np.int64) - starts[:-1][rep], starts
 
@@ -442,15 +446,14 @@ def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
     glev = depth[order][gs].tolist()
     starts = []
     cn = cr = cw = 0
-    over = BUCKET_OVERHEAD
+    def cost(n, r, w):  # padded cost of the products and gathers of n supernodes padded to r rows, w columns
+        return n * (r * r * (w + 1) + r * w * w + w**3 + (r + w) ** 2)
+
     for g in range(len(gs)):
         n1, r1, w1 = gn[g], gr[g], gw[g]
-        if g and glev[g] == glev[g - 1]:  # padded cost of the products and gathers, merged vs apart
+        if g and glev[g] == glev[g - 1]:  # merged vs apart
             r2, w2 = max(cr, r1), max(cw, w1)
-            merged = (cn + n1) * (r2 * r2 * (w2 + 1) + r2 * w2 * w2 + w2**3 + (r2 + w2) ** 2)
-            apart = (cn * (cr * cr * (cw + 1) + cr * cw * cw + cw**3 + (cr + cw) ** 2)
-                     + n1 * (r1 * r1 * (w1 + 1) + r1 * w1 * w1 + w1**3 + (r1 + w1) ** 2) + over)
-            if merged <= apart:
+            if cost(cn + n1, r2, w2) <= cost(cn, cr, cw) + cost(n1, r1, w1) + BUCKET_OVERHEAD:
                 cn, cr, cw = cn + n1, r2, w2
                 continue
         starts.append(int(gs[g]))
@@ -478,9 +481,9 @@ class _Schedule:
         order, b_start, b_level = _buckets(depth, r, w)
         self.n_levels = int(depth.max()) + 1
         self.level_buckets = np.searchsorted(b_level, np.arange(self.n_levels + 1)).tolist()
-        bk = np.repeat(np.arange(b_start.size - 1), np.diff(b_start))  # bucket of order[i]
-        b_rows, b_width = np.maximum.reduceat(r[order], b_start[:-1]), np.maximum.reduceat(w[order], b_start[:-1])
         b_count = np.diff(b_start)
+        bk, in_bucket, _ = _ragged(b_count)  # bucket of order[i], its place there (runs start at b_start)
+        b_rows, b_width = np.maximum.reduceat(r[order], b_start[:-1]), np.maximum.reduceat(w[order], b_start[:-1])
         self.b_count, self.b_rows, self.b_width = b_count.tolist(), b_rows.tolist(), b_width.tolist()
         mp_b = b_rows + b_width
         cum = _starts(b_count * mp_b * mp_b)
@@ -491,7 +494,7 @@ class _Schedule:
         # per supernode: padded shape, front offset in its level's buffer, place in its bucket
         self.rp, self.sp, self.slot = (np.empty(ns, np.int64) for _ in range(3))
         self.rp[order], self.sp[order] = b_rows[bk], b_width[bk]
-        self.slot[order] = np.arange(ns) - b_start[bk]
+        self.slot[order] = in_bucket
         self.bucket = np.empty(ns, np.int64)
         self.bucket[order] = bk
         self.mp = self.rp + self.sp
@@ -504,7 +507,8 @@ class _Schedule:
         ob = np.argsort(b_width, kind="stable")
         gw, g_of = np.unique(b_width[ob], return_inverse=True)
         at = np.empty(b_count.size, np.int64)
-        at[ob] = _starts(b_count[ob])[:-1] - _starts(b_count[ob])[np.searchsorted(b_width[ob], gw)][g_of]
+        ob_starts = _starts(b_count[ob])
+        at[ob] = ob_starts[:-1] - ob_starts[np.searchsorted(b_width[ob], gw)][g_of]
         self.b_group = np.empty(b_count.size, np.int64)
         self.b_group[ob] = g_of
         self.b_group, self.b_group_at = self.b_group.tolist(), at.tolist()
