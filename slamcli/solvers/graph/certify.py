@@ -222,9 +222,7 @@ class _Edges:
         np.negative(tq, out=w[4])
         w[5] = -(self.sk * self.sk) * (cj * ca + sj * sa)
         data = self._gn_const + np.bincount(self._gn_pos, weights=w.ravel(), minlength=asm.lo_nnz)
-        data[asm.lo_fixed_mask] = 0.0
-        data[asm.lo_fixed_diag] = 1.0
-        g[asm.fixed] = 0.0
+        asm.hold_fixed(data, g)
         return cost, data, g
 
     def terms(self, poses) -> tuple:

@@ -246,11 +246,15 @@ class Assembler:
                 vals[self.twice[i]] *= 2.0
         data = np.bincount(self._scatter_all, weights=vals_all, minlength=self.lo_nnz)
         self._last_whitened = (x, whitened)
+        self.hold_fixed(data, g)
+        return total, data, g
+
+    def hold_fixed(self, data: np.ndarray, g: np.ndarray) -> None:
+        """Held-fixed columns, in place: identity rows and columns of ``H`` (lower data) and a zero gradient."""
         if self.fixed.size:
             data[self.lo_fixed_mask] = 0.0
             data[self.lo_fixed_diag] = 1.0
             g[self.fixed] = 0.0
-        return total, data, g
 
 
 def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out: np.ndarray,
@@ -260,9 +264,11 @@ def _whitened_jacobian(x: np.ndarray, b, J: np.ndarray, offsets: list[int], out:
     (``L`` acts on rows, ``R`` on columns: ``(L J) R = L (J R)``); ``identity``: ``L = I`` (no product)."""
     F, k, n = J.shape
     L = np.asarray(b.sqrt_info, float)
-    if F <= SMALL_BLOCK:  # one batched product (2-3× faster than the equivalent einsum), then factors last
-        out[:] = (J if identity else np.matmul(L, J)).transpose(1, 2, 0)
-    for i in range(k if F > SMALL_BLOCK else 0):
+    if identity:
+        out[:] = J.transpose(1, 2, 0)
+    elif F <= SMALL_BLOCK:  # one batched product (2-3× faster than the equivalent einsum), then factors last
+        out[:] = np.matmul(L, J).transpose(1, 2, 0)
+    for i in range(k if F > SMALL_BLOCK and not identity else 0):
         for a in range(n):
             row = out[i, a]
             if L.ndim == 2:
