@@ -59,14 +59,7 @@ def between_error(x_i, x_j, measured, meas_cs=None):
     e : ndarray (F, 3);  J_i, J_j : ndarray (F, 3, 3)  (w.r.t. world coordinates of x_i, x_j)
     """
     x_i = np.asarray(x_i, float)
-    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
-    alpha, dalpha = se2.log_terms(w)  # ∂Log/∂p (log_jacobian)
-    e = se2.log_of(px, py, w, alpha)
-    hw = 0.5 * w
-    # A = ∂Log/∂p · blkdiag(R(−δθ), 1):  R(−δθ) = [[cd, sd], [−sd, cd]]
-    a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
-    a10, a11 = -hw * cd - alpha * sd, alpha * cd - hw * sd
-    a02, a12 = dalpha * px + 0.5 * py, dalpha * py - 0.5 * px
+    e, (a00, a01, a02, a10, a11, a12), (ci, si, bx, by) = _between_a(x_i, x_j, measured, meas_cs)
     shape = x_i.shape[:-1] + (3, 3)
     Jj, Ji = np.zeros(shape), np.zeros(shape)
     Jj[..., 0, 0], Jj[..., 0, 1] = a00 * ci - a01 * si, a00 * si + a01 * ci  # A₂ R_iᵀ
@@ -77,6 +70,20 @@ def between_error(x_i, x_j, measured, meas_cs=None):
     Ji[..., 1, 2] = a10 * by - a11 * bx - a12
     Ji[..., 2, 2] = -1.0
     return e, Ji, Jj
+
+
+def _between_a(x_i, x_j, measured, meas_cs=None):
+    """``(e, A, (cos θ_i, sin θ_i, b_x, b_y))`` shared by :func:`between_error` and :func:`between_error_body`:
+    the error and the entries ``(a00, a01, a02, a10, a11, a12)`` of ``A = ∂Log/∂p · blkdiag(R(−δθ), 1)``."""
+    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
+    alpha, dalpha = se2.log_terms(w)  # ∂Log/∂p (log_jacobian)
+    e = se2.log_of(px, py, w, alpha)
+    hw = 0.5 * w
+    # R(−δθ) = [[cd, sd], [−sd, cd]]
+    a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
+    a10, a11 = -hw * cd - alpha * sd, alpha * cd - hw * sd
+    a02, a12 = dalpha * px + 0.5 * py, dalpha * py - 0.5 * px
+    return e, (a00, a01, a02, a10, a11, a12), (ci, si, bx, by)
 
 
 def _between_parts(x_i, x_j, measured, meas_cs=None):
@@ -111,13 +118,7 @@ def between_error_body(x_i, x_j, measured, meas_cs=None):
     (``R_iᵀ R_i = I`` on the left; ``R_iᵀ R_j = R(θ_j − θ_i)`` on the right). ``meas_cs``: ``(cos δθ,
     sin δθ)`` of the measurements, precomputed."""
     x_i, x_j = np.asarray(x_i, float), np.asarray(x_j, float)
-    ci, si, bx, by, cd, sd, px, py, w = _between_parts(x_i, x_j, measured, meas_cs)
-    alpha, dalpha = se2.log_terms(w)
-    e = se2.log_of(px, py, w, alpha)
-    hw = 0.5 * w
-    a00, a01 = alpha * cd - hw * sd, alpha * sd + hw * cd
-    a10, a11 = -hw * cd - alpha * sd, alpha * cd - hw * sd
-    a02, a12 = dalpha * px + 0.5 * py, dalpha * py - 0.5 * px
+    e, (a00, a01, a02, a10, a11, a12), (ci, si, bx, by) = _between_a(x_i, x_j, measured, meas_cs)
     cj, sj = np.cos(x_j[..., 2]), np.sin(x_j[..., 2])
     c, s = ci * cj + si * sj, ci * sj - si * cj  # cos, sin of θ_j − θ_i
     J = np.zeros(x_i.shape[:-1] + (3, 6))
