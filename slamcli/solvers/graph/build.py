@@ -155,74 +155,47 @@ def _pose_blocks(inputs: SlamInputs, params: GraphParams, lay: _Layout, cons) ->
                         residual=res_prior, evaluate_body=ev_prior_body)
     )
 
-    def between_block(name, meas, cov, sqrt_info=None):
-        meas = meas[chain]
-        if sqrt_info is not None and np.ndim(sqrt_info) == 3:
-            sqrt_info = sqrt_info[chain]
+    def between_block(name, i, j, meas, sqrt_info, robust=False):
+        """Between factors of poses ``i (F,)`` → ``j (F,)`` with measurements ``meas (F, 3)``."""
         cs = (np.cos(meas[:, 2]), np.sin(meas[:, 2]))  # the measurements' rotations, constants of the block
 
         def ev(x):
             p = poses_of(x)
-            e, Ji, Jj = between_error(p[chain], p[chain + 1], meas, cs)
+            e, Ji, Jj = between_error(p[i], p[j], meas, cs)
             return e, np.concatenate([Ji, Jj], axis=2)
 
         def ev_body(x):
             p = poses_of(x)
-            return between_error_body(p[chain], p[chain + 1], meas, cs)
+            return between_error_body(p[i], p[j], meas, cs)
 
         def res(x):
             p = poses_of(x)
-            return between_residual(p[chain], p[chain + 1], meas, cs)
+            return between_residual(p[i], p[j], meas, cs)
 
-        cols = np.concatenate([pc[chain], pc[chain + 1]], axis=1)
-        return nls.FactorBlock(name, cols, ev, sqrt_info_from_cov(cov) if sqrt_info is None else sqrt_info,
+        return nls.FactorBlock(name, np.concatenate([pc[i], pc[j]], axis=1), ev, sqrt_info, robust=robust,
                                residual=res, evaluate_body=ev_body)
 
     if n_poses > 1 and params.use_odometry:
         d = motion.odometry_increments(inputs.odometry_xyt)
-        odo_L = None
         if cons is not None and cons.odometry_info is not None:
-            odo_L = sqrt_info_batch(cons.odometry_info)
-        blocks.append(between_block("odometry", d, np.diag(np.square(inputs.noise.odometry_std)), odo_L))
+            odo_L = sqrt_info_batch(cons.odometry_info)[chain]
+        else:
+            odo_L = sqrt_info_from_cov(np.diag(np.square(inputs.noise.odometry_std)))
+        blocks.append(between_block("odometry", chain, chain + 1, d[chain], odo_L))
     if inputs.constraints is not None and inputs.constraints.n_between:
         # pose-pose constraints between any two poses (loop closures): always with their own information
         bc = inputs.constraints
         bij = np.asarray(bc.between_ij, np.int64).reshape(-1, 2)
         bmeas = np.asarray(bc.between_xyt, float).reshape(-1, 3)
-
-        bcs = (np.cos(bmeas[:, 2]), np.sin(bmeas[:, 2]))
-
-        def ev_between(x):
-            p = poses_of(x)
-            e, Ji, Jj = between_error(p[bij[:, 0]], p[bij[:, 1]], bmeas, bcs)
-            return e, np.concatenate([Ji, Jj], axis=2)
-
-        def ev_between_body(x):
-            p = poses_of(x)
-            return between_error_body(p[bij[:, 0]], p[bij[:, 1]], bmeas, bcs)
-
-        def res_between(x):
-            p = poses_of(x)
-            return between_residual(p[bij[:, 0]], p[bij[:, 1]], bmeas, bcs)
-
-        blocks.append(
-            nls.FactorBlock(
-                "loop_closure",
-                np.concatenate([pc[bij[:, 0]], pc[bij[:, 1]]], axis=1),
-                ev_between,
-                sqrt_info_batch(bc.between_info),
-                robust=True,
-                residual=res_between,
-                evaluate_body=ev_between_body,
-            )
-        )
+        blocks.append(between_block("loop_closure", bij[:, 0], bij[:, 1], bmeas, sqrt_info_batch(bc.between_info),
+                                    robust=True))
     if n_poses > 1 and params.use_controls:
         u = np.asarray(inputs.controls, float)
         dt = inputs.dt
         d = np.stack([u[:, 0] * dt, np.zeros(len(u)), u[:, 1] * dt], -1)
         sv, sw = inputs.noise.motion_std
         cov = np.diag([(sv * dt) ** 2, params.motion_lateral_std**2, (sw * dt) ** 2])
-        blocks.append(between_block("motion", d, cov))
+        blocks.append(between_block("motion", chain, chain + 1, d[chain], sqrt_info_from_cov(cov)))
     return blocks
 
 
