@@ -138,20 +138,27 @@ def _fill(sm, kf_poses):
     return se2.compose(kf_poses[k], se2.between(odo[sm.kf_steps[k]], odo))
 
 
-def measure(name: str, dataset) -> dict:
+def run_smoother(dataset, params=None):
+    """The smoother (``params``, default ``IsamParams()``) over ``dataset``'s inputs in the laser frame, with the
+    reported ids as association when the rows carry any, else nearest neighbour: ``(inputs, smoother, CPU s
+    of its run)``."""
     from slamcli.solvers.graph import resolve_robust
     from slamcli.solvers.isam import IncrementalSmoother, IsamParams
     from slamcli.solvers.sensor_frame import to_sensor_frame
 
     inp = to_sensor_frame(dataset.inputs)
-    p = IsamParams()
+    p = IsamParams() if params is None else params
     has_ids = bool(np.any(np.asarray(inp.observations.reported_id) >= 0))
     mode = "reported" if has_ids else "nn"
-    kernel = resolve_robust(p.robust, mode, inp.reported_id_source)
-    sm = IncrementalSmoother(inp, p, mode, kernel, p.cauchy_k)
+    sm = IncrementalSmoother(inp, p, mode, resolve_robust(p.robust, mode, inp.reported_id_source), p.cauchy_k)
     c0 = time.process_time()
     sm.run()
-    cpu = time.process_time() - c0
+    return inp, sm, time.process_time() - c0
+
+
+def measure(name: str, dataset) -> dict:
+    inp, sm, cpu = run_smoother(dataset)
+    kernel = sm.robust
     duration = float(inp.timestamps[-1] - inp.timestamps[0])
     ate, ate_raw = _ate(dataset, _to_body(sm.poses(), dataset.inputs))
     row = {"recording": name, "duration_s": round(duration, 1), "updates": int(sm.kf_steps.size),

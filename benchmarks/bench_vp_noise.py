@@ -41,6 +41,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
+from benchmarks.bench_isam import _victoria
 from slamcli.solvers.graph.variance import NOISE_GROUPS
 
 HERE = Path(__file__).resolve().parent
@@ -54,28 +55,15 @@ WIDE_GATE = 1 - 1e-9
 SEED = 2026
 
 
-def _victoria(duration, noise=None):
-    from slamcli.datasets.registry import locate
-    from slamcli.datasets.victoria_park import import_victoria_park
-
-    return import_victoria_park(locate("victoria-park"), duration=duration, noise=noise)
-
-
 def isam_run(dataset, gate_prob: float | None = None):
     """``isam`` (defaults, or another ``gate_prob``) on ``dataset``: ``(inputs in the laser frame, association
     (N,), laser-frame poses (T+1, 3), landmarks (L, 2), summary row)``."""
-    from benchmarks.bench_isam import _ate, _to_body
+    from benchmarks.bench_isam import _ate, _to_body, run_smoother
     from slamcli.solvers import frontend
-    from slamcli.solvers.graph import resolve_robust
-    from slamcli.solvers.isam import IncrementalSmoother, IsamParams
-    from slamcli.solvers.sensor_frame import to_sensor_frame
+    from slamcli.solvers.isam import IsamParams
 
-    inp = to_sensor_frame(dataset.inputs)
     p = IsamParams() if gate_prob is None else IsamParams(gate_prob=gate_prob)
-    sm = IncrementalSmoother(inp, p, "nn", resolve_robust(p.robust, "nn", inp.reported_id_source), p.cauchy_k)
-    c0 = time.process_time()
-    sm.run()
-    cpu = time.process_time() - c0
+    inp, sm, cpu = run_smoother(dataset, p)  # Victoria Park reports no ids: nearest-neighbour association
     assoc, old_of_new = frontend.compact_labels(sm.assoc)
     ate, raw = _ate(dataset, _to_body(sm.poses(), dataset.inputs))
     summary = {"gate_prob": p.gate_prob, "isam_landmarks": int(old_of_new.size), "isam_cpu_s": cpu,
@@ -146,10 +134,11 @@ def synthetic(inp, assoc, poses, lms, sigma, seed: int):
 def calibrated(rows: list[dict], window: str, stage: str) -> dict:
     """The calibrated σ of a window and stage (its last round's σ·√r) and their ratios to the import's
     defaults."""
-    from slamcli.datasets.victoria_park import DEFAULT_BEARING_STD, DEFAULT_ODOMETRY_STD, DEFAULT_RANGE_STD
+    from slamcli.datasets.victoria_park import default_noise
+    from slamcli.solvers.graph import noise_sigmas
 
     last = [r for r in rows if r["window"] == window and r["stage"] == stage][-1]
-    default = dict(zip(GROUPS, [*DEFAULT_ODOMETRY_STD, DEFAULT_RANGE_STD, DEFAULT_BEARING_STD]))
+    default = dict(zip(GROUPS, noise_sigmas(default_noise())))
     out = {"window": window, "stage": stage, "rounds": last["round"] + 1}
     for g in GROUPS:
         s = last[f"sigma_{g}"] * np.sqrt(last[f"r_{g}"])
@@ -227,7 +216,8 @@ def run(quick: bool = False) -> list[dict]:
         syn = vce(name, "synthetic, σ known", None, synthetic(inp, assoc, poses, lms, truth, SEED), assoc,
                   poses, lms)
         rows += [{**r, **{f"true_sigma_{g}": t for g, t in zip(GROUPS, truth)}} for r in syn]
-        ds_cal = _victoria(duration, calibrated_noise(cal))
+        # the same recording with the calibrated noise (the importer only stores the noise: no re-read)
+        ds_cal = dataclasses.replace(ds, inputs=dataclasses.replace(ds.inputs, noise=calibrated_noise(cal)))
         for gate in (None, WIDE_GATE):
             inp, assoc, poses, lms, summary = isam_run(ds_cal, gate)
             isam_rows.append({"window": name, "noise": "VCE", **summary})
