@@ -649,6 +649,43 @@ def _setup(inputs: SlamInputs, p: FastSlamParams) -> _Setup:
     return _Setup(p, slot_of_obs, capacity, log_p0, obs_cov, motion_std, increments, rho)
 
 
+def _known_detections(obs, z_all: np.ndarray, slot_of_obs: np.ndarray, group: bool):
+    """Every step's detections under known association, built once: ``(z (D, 2), slot (D,), offsets (T+2,))``,
+    detections of step ``t`` = ``offsets[t]:offsets[t+1]``, slot −1 for rows without an id.
+
+    Grouping by (sensor, reported id) does not depend on the state, so the detections equal
+    :func:`slamcli.solvers.frontend.group_detections` called step by step; steps that report one row per
+    landmark (every step of a point sensor) keep their rows as they are, the others go through that function.
+    """
+    off = np.asarray(obs.offsets, np.int64)
+    if not group or len(obs) == 0:
+        return z_all, slot_of_obs, off
+    step, rid = np.asarray(obs.step, np.int64), np.asarray(obs.reported_id, np.int64)
+    key = np.asarray(obs.sensor, np.int64) * (int(rid.max()) + 2) + rid
+    order = np.lexsort((key, step))  # rows with an id, sorted by (step, key): repeats are neighbours
+    order = order[rid[order] >= 0]
+    rep = (step[order][1:] == step[order][:-1]) & (key[order][1:] == key[order][:-1])
+    merge_steps = np.unique(step[order][1:][rep])
+    if merge_steps.size == 0:
+        return z_all, slot_of_obs, off
+    z_parts, s_parts, counts = [], [], np.diff(off)
+    done = 0
+    for t in merge_steps.tolist():
+        lo, hi = int(off[t]), int(off[t + 1])
+        z_parts += [z_all[done:lo]]
+        s_parts += [slot_of_obs[done:lo]]
+        dets = group_detections(z_all, obs.sensor, rid, lo, hi, None, group=True, association="known",
+                                group_dist=0.0)
+        z_parts += [np.array([zd for zd, _ in dets]).reshape(-1, 2)]
+        s_parts += [slot_of_obs[[int(g[0]) for _, g in dets]]]
+        counts[t] = len(dets)
+        done = hi
+    z_parts += [z_all[done:]]
+    s_parts += [slot_of_obs[done:]]
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    return np.concatenate(z_parts), np.concatenate(s_parts), offsets
+
+
 class _Run:
     """The state of one :meth:`FastSlam.solve` call: particles, records and counters (re-entrancy: nothing
     of a run lives on the solver). ``step(t)`` advances one step, ``outputs()`` builds the result fields."""
@@ -672,6 +709,13 @@ class _Run:
         # Slot of every observation: shared by all particles with known association (N,), per particle with
         # ML association (N, P) (pre-resampling; traced back through ``anc`` for the best particle).
         self.assoc_hist = np.full((N,) if self.known else (N, P), -1, np.int32)
+        self._z = inputs.observations.z  # (N, 2), built once (``Observations.z`` stacks on every access)
+        # Known association: the detections do not depend on the state, so all of them are built once (and
+        # every row's slot is its reported id's: assoc_hist = slot_of_obs, the size gate being ML-only).
+        self._dets = _known_detections(inputs.observations, self._z, setup.slot_of_obs, p.group_returns) \
+            if self.known else None
+        if self._dets is not None:
+            self.assoc_hist[:] = setup.slot_of_obs
         self.R_buf = np.zeros((3, 3, P))  # 2.0 motion covariance, rewritten each step (the proposal copies it)
         self.n_updates = self.n_resample = 0
         self.ess_sum = self._nis_sum = 0.0
@@ -704,7 +748,7 @@ class _Run:
         p, inputs = self.p, self.inputs
         z_all, slot_of_obs, groups = self._detections(t)
         x_hat, R = self._prior(t)
-        rows = range(len(groups))  # detection k: measurement z_all[k], observation rows groups[k]
+        rows = range(len(z_all))  # detection k: measurement z_all[k], observation rows groups[k]
         # NaN from unused slots of particles that start a new landmark is masked out with np.where.
         with np.errstate(divide="ignore", invalid="ignore"):
             if R is None:  # FastSLAM 1.0, or step 0 (x0 known)
@@ -719,7 +763,9 @@ class _Run:
                         self._update_or_init(self.ps, step_slots[i], step_new[i], z_all[n], weight=False, terms=terms)
         if self._gated:
             step_slots = self._drop_gated(step_slots)
-        for i, g in enumerate(groups):
+        if groups is None:  # known association: assoc_hist holds every row's slot already
+            self.n_updates += self.ps.n_particles * int(np.count_nonzero(slot_of_obs >= 0))
+        for i, g in enumerate(groups or ()):
             if step_slots[i] is not None:
                 self.assoc_hist[g] = step_slots[i]
                 self.n_updates += self.ps.n_particles
@@ -730,19 +776,23 @@ class _Run:
     def _detections(self, t: int):
         """Step ``t``'s detections: measurements ``z (k, 2)``, their slots ``(k,)`` (known association, else
         None) and observation rows ``[rows (m,) int64] * k`` — one row each, or merged returns
-        (``group_returns``)."""
+        (``group_returns``); the rows are None with known association (:func:`_known_detections`)."""
+        if self._dets is not None:
+            z, slots, offsets = self._dets
+            a, b = offsets[t], offsets[t + 1]
+            return z[a:b], slots[a:b], None
         obs, p = self.inputs.observations, self.p
         lo, hi = int(obs.offsets[t]), int(obs.offsets[t + 1])
         if not p.group_returns or hi - lo < 2:
             groups = [np.array([n], np.int64) for n in range(lo, hi)]
-            z = obs.z[lo:hi]
+            z = self._z[lo:hi]
         else:
             x_r = self.mean_xyt[t - 1] if t > 0 else np.asarray(self.inputs.x0, float)
-            dets = group_detections(obs.z, np.asarray(obs.sensor), np.asarray(obs.reported_id), lo, hi, x_r,
+            dets = group_detections(self._z, np.asarray(obs.sensor), np.asarray(obs.reported_id), lo, hi, x_r,
                                     group=True, association=p.association, group_dist=p.group_dist)
             groups = [g for _, g in dets]
             z = np.array([zd for zd, _ in dets]).reshape(-1, 2)
-        slots = None if self.setup.slot_of_obs is None else self.setup.slot_of_obs[[int(g[0]) for g in groups]]
+        slots = None
         rho = self.setup.rho
         self._sep = None if rho is None else np.array([2.0 * float(rho[g].max()) for g in groups])
         return z, slots, groups
