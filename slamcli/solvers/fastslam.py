@@ -330,6 +330,15 @@ def _obs_terms(x, y, th, mx, my, a, b, c, zr, zb, qr, qb) -> _ObsTerms:
     return _ObsTerms(nu_r, nu_b, h11, h12, h21, h22, p11, p12, p21, p22, S11, S12, S22)
 
 
+def _row_sums(a: np.ndarray) -> np.ndarray:
+    """``a.sum(axis=1)`` of a ``(P, k)`` array as ``k − 1`` column additions (the same left-to-right order):
+    numpy's reduction over a short inner axis costs ≈ 13 µs at ``(1000, 2)``, the additions ≈ 2 µs."""
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        out += a[:, j]
+    return out
+
+
 def _inv_sym2(S11, S12, S22):
     """``S⁻¹`` components ``(i11, i12, i22)`` and ``det S`` of symmetric 2×2 matrices."""
     det = S11 * S22 - S12 * S12
@@ -1011,43 +1020,60 @@ class _Run:
         Given the sampled poses, rows of distinct landmarks are independent (each updates its own 2×2 EKF,
         eqs. 14.22-14.24, and adds its own ``log N(ν; 0, Q_n)`` to the weight, eq. 14.28), so all of them are
         one update on ``(P, k)`` component arrays. A landmark seen again in the same step goes to the next
-        round (rows in order), as in the row-by-row filter. Returns ``(slots per row (int | None), [None…])``.
+        round (rows in order), as in the row-by-row filter. Every particle has mapped the same landmarks (the
+        ids are shared; nothing removes a landmark under known association), so particle 0's ``exists`` splits
+        a round into updated and initialised columns. Returns ``(slots per row (int | None), [None…])``.
         """
-        r = np.arange(rows.start, rows.stop)
-        s = slot_of_obs[r]
-        slots_l = [int(v) if v >= 0 else None for v in s]
-        r, s = r[s >= 0], s[s >= 0]
-        Q, x = self._Q, ps.x
-        xb, yb, thb = x[:, None, 0], x[:, None, 1], x[:, None, 2]  # (P, 1): broadcast over the k landmarks
+        s = np.asarray(slot_of_obs)
+        slots_l = [v if v >= 0 else None for v in s.tolist()]
+        use = s >= 0
+        z, s = z_all[use], s[use]
         k_max = max(1, BATCH_ELEMENTS // ps.n_particles)
-        while r.size:
-            if r.size <= k_max and len(set(s.tolist())) == r.size:  # the usual case: one round, no repeat
-                now_s, z, r, s = s, z_all[r], r[:0], s[:0]
+        while s.size:
+            if s.size <= k_max and len(set(s.tolist())) == s.size:  # the usual case: one round, no repeat
+                now_s, now_z, s, z = s, z, s[:0], z[:0]
             else:
                 _, first = np.unique(s, return_index=True)
                 first = first[:k_max]
-                later = np.ones(r.size, bool)
+                later = np.ones(s.size, bool)
                 later[first] = False
-                now_s, z = s[first], z_all[r[first]]  # (k,), (k, 2)
-                r, s = r[later], s[later]
-            mu, sig = ps.mu[:, now_s], ps.sig[:, now_s]  # (P, k, 2), (P, k, 2, 2)
-            new = ~ps.exists[:, now_s]  # (P, k)
-            comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
-            o = _obs_terms(xb, yb, thb, *comps, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
-            mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
-            old = ~new
-            self._nis_sum += float(np.sum(nis, where=old))  # 1.0: NIS of the measurement update (pose given)
-            self._nis_n += int(np.count_nonzero(old))
-            if new.any():
-                init = _init_terms(xb, yb, thb, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
-                mx, my, a, b, c = (np.where(new, i, u) for i, u in zip(init, (mx, my, a, b, c)))
-            ps.mu[:, now_s, 0], ps.mu[:, now_s, 1] = mx, my
-            ps.sig[:, now_s, 0, 0], ps.sig[:, now_s, 1, 1] = a, c
-            ps.sig[:, now_s, 0, 1] = ps.sig[:, now_s, 1, 0] = b
-            ps.count[:, now_s] = np.where(new, 1, ps.count[:, now_s] + 1)
-            ps.exists[:, now_s] = True
-            ps.log_w += np.where(new, 0.0, ll).sum(axis=1)
+                now_s, now_z, s, z = s[first], z[first], s[later], z[later]
+            mapped = ps.exists[0, now_s]  # (k,)
+            if mapped.all():
+                self._update_known(ps, now_s, now_z)
+                continue
+            if mapped.any():
+                self._update_known(ps, now_s[mapped], now_z[mapped])
+            self._init_known(ps, now_s[~mapped], now_z[~mapped])
         return slots_l, [None] * len(slots_l)
+
+    def _update_known(self, ps: ParticleSet, slots: np.ndarray, z: np.ndarray) -> None:
+        """Landmark EKFs of the distinct mapped ``slots (k,)`` with measurements ``z (k, 2)`` in every particle
+        at once, on ``(P, k)`` component arrays; adds ``Σ_k log N(ν; 0, Q_n)`` to the log-weights."""
+        Q, x = self._Q, ps.x
+        # np.take gathers whole slots (3× faster than ``mu[:, slots]`` here); scattering component by component
+        # beats stacking the components first (measured, P = 1000, k = 2 and 8)
+        mu, sig = np.take(ps.mu, slots, axis=1), np.take(ps.sig, slots, axis=1)  # (P, k, 2), (P, k, 2, 2)
+        comps = (mu[..., 0], mu[..., 1], sig[..., 0, 0], sig[..., 0, 1], sig[..., 1, 1])
+        o = _obs_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], *comps, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+        mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
+        self._nis_sum += float(np.sum(nis))  # 1.0: NIS of the measurement update (pose given)
+        self._nis_n += nis.size
+        ps.mu[:, slots, 0], ps.mu[:, slots, 1] = mx, my
+        ps.sig[:, slots, 0, 0], ps.sig[:, slots, 1, 1] = a, c
+        ps.sig[:, slots, 0, 1] = ps.sig[:, slots, 1, 0] = b
+        ps.count[:, slots] += 1
+        ps.log_w += _row_sums(ll)
+
+    def _init_known(self, ps: ParticleSet, slots: np.ndarray, z: np.ndarray) -> None:
+        """First sighting of ``slots (k,)``: ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` in every particle."""
+        Q, x = self._Q, ps.x
+        mx, my, a, b, c = _init_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+        ps.mu[:, slots, 0], ps.mu[:, slots, 1] = mx, my
+        ps.sig[:, slots, 0, 0], ps.sig[:, slots, 1, 1] = a, c
+        ps.sig[:, slots, 0, 1] = ps.sig[:, slots, 1, 0] = b
+        ps.count[:, slots] = 1
+        ps.exists[:, slots] = True
 
     def _proposal_v2(self, ps, x_hat, Sx, z_all, rows, slot_of_obs, rng):
         """FastSLAM 2.0: refine ``N(x̂, Σ_x)`` (``Σ_x (3, 3, P)``) with every observation of a mapped landmark,
