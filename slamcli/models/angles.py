@@ -56,6 +56,8 @@ def circular_mean(angles, weights=None, axis=-1):
     angles = np.asarray(angles, dtype=float)
     if weights is None:
         weights = np.ones_like(angles)
+    if angles.ndim == 1 and np.ndim(weights) == 1:  # one mean (a particle filter's heading, every step): dots
+        return wrap_angle(math.atan2(float(np.dot(weights, np.sin(angles))), float(np.dot(weights, np.cos(angles)))))
     s = np.sum(weights * np.sin(angles), axis=axis)
     c = np.sum(weights * np.cos(angles), axis=axis)
     return wrap_angle(np.arctan2(s, c))

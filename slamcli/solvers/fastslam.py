@@ -213,7 +213,8 @@ class ParticleSet:
     x : ndarray (P, 3)          poses.
     mu : ndarray (P, C, 2)      landmark means (slots ``≥ n_slots`` or with ``exists`` False are unused).
     sig : ndarray (P, C, 2, 2)  landmark covariances.
-    count : ndarray (P, C)      negative-evidence support counters.
+    count : ndarray (P, C)      negative-evidence support counters (read only with ML association, the one
+                                that removes landmarks; the known-association 1.0 update leaves them at 0).
     exists : ndarray (P, C)     slot holds a live landmark.
     n_slots : ndarray (P,)      slots used so far (ML association allocates new landmarks at ``n_slots``).
     log_w : ndarray (P,)        unnormalised log importance weights.
@@ -1062,7 +1063,6 @@ class _Run:
         ps.mu[:, slots, 0], ps.mu[:, slots, 1] = mx, my
         ps.sig[:, slots, 0, 0], ps.sig[:, slots, 1, 1] = a, c
         ps.sig[:, slots, 0, 1] = ps.sig[:, slots, 1, 0] = b
-        ps.count[:, slots] += 1
         ps.log_w += _row_sums(ll)
 
     def _init_known(self, ps: ParticleSet, slots: np.ndarray, z: np.ndarray) -> None:
@@ -1072,7 +1072,6 @@ class _Run:
         ps.mu[:, slots, 0], ps.mu[:, slots, 1] = mx, my
         ps.sig[:, slots, 0, 0], ps.sig[:, slots, 1, 1] = a, c
         ps.sig[:, slots, 0, 1] = ps.sig[:, slots, 1, 0] = b
-        ps.count[:, slots] = 1
         ps.exists[:, slots] = True
 
     def _proposal_v2(self, ps, x_hat, Sx, z_all, rows, slot_of_obs, rng):

@@ -9,6 +9,8 @@ Kitagawa (1996) / Carpenter, Clifford & Fearnhead (1999) for systematic (low-var
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -19,6 +21,10 @@ def normalise_log_weights(log_w: np.ndarray) -> np.ndarray:
     uniform, so a degenerate step never produces NaN particles.
     """
     log_w = np.asarray(log_w, float)
+    top = float(np.max(log_w))
+    if math.isfinite(top):  # no NaN / +inf (max propagates them): −inf entries get exp(−inf) = 0 as below
+        w = np.exp(log_w - top)
+        return w / w.sum()
     finite = np.isfinite(log_w)
     if not finite.any():
         return np.full(log_w.shape, 1.0 / log_w.size)
