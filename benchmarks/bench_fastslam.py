@@ -96,6 +96,7 @@ def batched_reference_fastslam1(inputs, P: int, rng) -> tuple[np.ndarray, int]:
     the particle-landmark update count.
     """
     obs = inputs.observations
+    z_all = obs.z  # (N, 2) once: Observations.z stacks the columns on every access
     rid = np.asarray(obs.reported_id)
     ids = np.unique(rid[rid >= 0])
     slot_of = np.searchsorted(ids, rid)
@@ -117,7 +118,7 @@ def batched_reference_fastslam1(inputs, P: int, rng) -> tuple[np.ndarray, int]:
         while rows.size:
             _, first = np.unique(slot_of[rows], return_index=True)
             now, rows = rows[first], np.delete(rows, first)
-            s, z = slot_of[now], obs.z[now]  # (k,), (k, 2)
+            s, z = slot_of[now], z_all[now]  # (k,), (k, 2)
             old, new = s[seen[s]], ~seen[s]
             if old.size:  # one EKF per (particle, landmark), written out on (P, k) component arrays
                 zo = z[seen[s]]
