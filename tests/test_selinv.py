@@ -319,6 +319,24 @@ def test_depths_by_pointer_jumping_equal_a_walk_to_the_root():
         assert np.array_equal(selinv._depths(par), ref)
 
 
+@pytest.mark.parametrize("max_width", [0, 12, 48])
+def test_supernode_parents_follow_the_column_elimination_tree(monkeypatch, max_width):
+    """``_Supernodes.par`` against the column elimination tree read off ``L`` column by column: a supernode's
+    parent owns the first stored row below its last column (−1 when there is none), for fundamental, default
+    and wide relaxed supernodes."""
+    monkeypatch.setattr(selinv, "AMALGAMATE_MAX_WIDTH", max_width)
+    for H in (_random_spd(200, 0.01, 2), _block_spd(150, 3, 5)):
+        L = selinv.factor_ldl(H).L
+        sn = selinv._Supernodes(L)
+        ref = []
+        for j0, w in zip(sn.first.tolist(), sn.width.tolist()):
+            col = L.indices[L.indptr[j0 + w - 1] : L.indptr[j0 + w]]
+            below = col[col > j0 + w - 1]
+            ref.append(int(np.searchsorted(sn.first, below.min(), side="right")) - 1 if below.size else -1)
+        assert np.array_equal(sn.par, ref)
+        assert (sn.par == -1).sum() >= 1 and np.all((sn.par == -1) | (sn.par > np.arange(sn.par.size)))
+
+
 def test_result_marginals_with_a_held_fixed_pose_use_the_full_world_chart_matrix():
     """A held-fixed pose column (identity row, not a rotated one): ``result_marginals`` does not rotate body
     blocks but uses ``res.information`` — equal to its dense inverse; the fixed pose's block is the identity."""
