@@ -254,11 +254,6 @@ class SelectedInverse:
         for; their pattern is added to ``H``'s as explicit zeros (:func:`with_block_pattern`)."""
         return cls(factor_ldl(with_block_pattern(H, index_blocks)))
 
-    def _sn_rows(self, K: int) -> np.ndarray:
-        """Sorted row set ``J ∪ R`` of supernode ``K`` (permuted order)."""
-        k0 = int(self._sn.key_start[K])
-        return self._sn.rows[k0 : k0 + int(self.sn_nrows[K])]
-
     def entries(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """``(H⁻¹)[rows, cols]`` (original order, equal shapes) — each pair must lie on the pattern of the
         factor (true for any two variables that share a factor of the graph, e.g. one pose's x, y, θ)."""
