@@ -8,9 +8,9 @@ import pytest
 import scipy.sparse as sp
 
 from slamcli.solvers import graph, nls
-from slamcli.solvers.nls import selinv
+from slamcli.solvers.nls import marginals, selinv
 
-pytestmark = pytest.mark.skipif(not selinv.available(), reason="needs scikit-sparse (extra cholmod)")
+pytestmark = pytest.mark.skipif(not nls.cholmod_available(), reason="needs scikit-sparse (extra cholmod)")
 
 
 def _random_spd(n: int, density: float, seed: int) -> sp.csc_matrix:
@@ -149,7 +149,6 @@ def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
 
     from slamcli.datasets.g2o import import_graph
     from slamcli.solvers.graph import solver
-    from slamcli.solvers.nls import marginals
 
     inp = import_graph(Path(__file__).parent / "data" / "intel_excerpt.g2o").inputs
     seen = {}
@@ -241,7 +240,7 @@ def test_graph_marginals_selected_inverse_equals_dense_inverse_and_the_scipy_pat
     assert np.abs(pose_cov - ref_p).max() <= 1e-10 * np.abs(ref_p).max()
     assert np.abs(lm_cov - ref_l).max() <= 1e-10 * np.abs(ref_l).max()
     # the previous (SciPy: banded chain + border Schur complement) path gives the same blocks
-    monkeypatch.setattr(selinv, "available", lambda: False)
+    monkeypatch.setattr(marginals, "cholmod_available", lambda: False)
     old_p, old_l = graph.laplace_marginals(gp, H)
     assert np.abs(pose_cov - old_p).max() <= 1e-9 * np.abs(old_p).max()
     assert np.abs(lm_cov - old_l).max() <= 1e-9 * np.abs(old_l).max()
@@ -255,7 +254,7 @@ def test_graph_solver_result_marginals_same_with_and_without_cholmod(monkeypatch
     ds = tiny_dataset(T=80, n_landmarks=10, seed=11, report_ids=True, clutter_every=0)
     params = graph.GraphParams(association="reported")
     new = graph.GraphSlam(params).solve(ds.inputs, rng=np.random.default_rng(0))
-    monkeypatch.setattr(selinv, "available", lambda: False)
+    monkeypatch.setattr(marginals, "cholmod_available", lambda: False)
     old = graph.GraphSlam(params).solve(ds.inputs, rng=np.random.default_rng(0))
     assert new.pose_cov is not None and new.landmark_cov is not None
     assert new.pose_cov.shape == (ds.inputs.n_poses, 3, 3) and new.landmark_cov.shape[1:] == (2, 2)
@@ -268,8 +267,6 @@ def test_result_marginals_from_the_body_chart_lower_triangle_equal_the_world_cha
     """``result_marginals`` (the LM's lower triangle at the estimate, body chart, pose blocks rotated after
     the selected inverse) against the dense inverse of ``H`` relinearised in the world chart — a Jacobian
     of its own, not a rotation of the body one — on a landmark graph, ~1e-10 relative."""
-    from slamcli.solvers.nls import marginals
-
     ds, gp, opt = _graph_problem()
     ip, il = gp.pose_cols(), gp.landmark_cols()
     assert opt.information_chart == "body" and marginals._lower_at_estimate(opt, [ip, il]) is not None
@@ -336,8 +333,6 @@ def test_result_marginals_with_a_held_fixed_pose_use_the_full_world_chart_matrix
     """A held-fixed pose column (identity row, not a rotated one): ``result_marginals`` does not rotate body
     blocks but uses ``res.information`` — equal to its dense inverse; the fixed pose's block is the identity."""
     import dataclasses
-
-    from slamcli.solvers.nls import marginals
 
     ds, gp, _ = _graph_problem()
     prob = dataclasses.replace(gp.problem, fixed_cols=np.arange(3, dtype=np.int64))

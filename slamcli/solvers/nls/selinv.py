@@ -35,7 +35,7 @@ lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels
 The factorisation is CHOLMOD's (``scikit-sparse``, the ``cholmod`` extra): its fill-reducing ordering
 (AMD / nested dissection) and its simplicial ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
 has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid. Without CHOLMOD, :func:`factor_ldl` raises ImportError and the
-callers use their SciPy path. Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
+callers use their SciPy path (:func:`slamcli.solvers.nls.linear.cholmod_available` tells which). Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
 """
 
 from __future__ import annotations
@@ -66,15 +66,6 @@ class NotPositiveDefiniteError(np.linalg.LinAlgError):
     def __init__(self, message: str, column: int) -> None:
         super().__init__(message)
         self.column = int(column)
-
-
-def available() -> bool:
-    """Whether CHOLMOD (``scikit-sparse``) can be imported — needed by :func:`factor_ldl`."""
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 @dataclass(frozen=True)
