@@ -167,7 +167,7 @@ def _task(task: dict) -> dict:
     status = "ok"
     if kind == "graph":
         from slamcli.solvers import graph
-        from slamcli.solvers.nls import selinv
+        from slamcli.solvers.nls import cholmod_available
 
         marg: dict = {}
         laplace = graph.laplace_marginals
@@ -185,7 +185,7 @@ def _task(task: dict) -> dict:
         status = res.status.value
         extra.update(iterations=res.extra.get("iterations"), landmarks=len(res.landmarks_xy),
                      has_marginals=res.pose_cov is not None and res.landmark_cov is not None,
-                     marginals_path="selected inverse (CHOLMOD)" if selinv.available() else "SciPy Schur",
+                     marginals_path="selected inverse (CHOLMOD)" if cholmod_available() else "SciPy Schur",
                      message=res.message[:120], **marg)
     elif kind == "icm":
         res = _solver("icm", {"accelerate": "joint", "correspondences": "reported"}).solve(

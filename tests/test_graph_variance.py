@@ -68,3 +68,38 @@ def test_row_groups_follow_the_blocks(told_wrong):
     assert np.all(grp[:3] == -1)
     assert np.array_equal(np.bincount(grp[grp >= 0], minlength=5),
                           [inp.n_poses - 1] * 3 + [gp.problem.blocks[2].n_factors] * 2)
+
+
+def test_vce_rounds_evaluate_every_factor_block_once(told_wrong):
+    """A VCE round's Jacobian and residuals (``nls.whitened_system``) come from one ``evaluate`` of every block
+    and no residual-only pass; the residuals equal that pass (``nls.residual_vector``) and the Jacobian central
+    differences of it (a few columns)."""
+    from slamcli.solvers import nls
+    from slamcli.solvers.graph import build_gtsam_problem
+
+    inp = told_wrong
+    g = GraphSlam(GraphParams(association="reported", robust="none", covariance=False)).solve(
+        inp, rng=np.random.default_rng(0))
+    gp = build_gtsam_problem(inp, g.assoc, g.poses_xyt, g.landmarks_xy, GraphParams(robust="none", use_gps=False))
+    x = gp.x0
+    calls = {"evaluate": 0, "residual": 0}
+
+    def counted(fn, kind):
+        def wrapped(v):
+            calls[kind] += 1
+            return fn(v)
+        return wrapped
+
+    blocks = [dataclasses.replace(b, evaluate=counted(b.evaluate, "evaluate"),
+                                  residual=None if b.residual is None else counted(b.residual, "residual"))
+              for b in gp.problem.blocks]
+    J, e = nls.whitened_system(dataclasses.replace(gp.problem, blocks=blocks), x)
+    assert calls == {"evaluate": len(blocks), "residual": 0}
+    e_ref = nls.residual_vector(gp.problem, x)
+    np.testing.assert_allclose(e, e_ref, rtol=1e-14, atol=1e-14)
+    rng = np.random.default_rng(1)
+    for c in rng.choice(x.size, 12, replace=False):
+        h = np.zeros(x.size)
+        h[c] = 1e-6
+        fd = (nls.residual_vector(gp.problem, x + h) - nls.residual_vector(gp.problem, x - h)) / 2e-6
+        np.testing.assert_allclose(J[:, c].toarray().ravel(), fd, atol=1e-5 * max(1.0, np.abs(fd).max()))

@@ -8,7 +8,6 @@ import pytest
 import scipy.sparse as sp
 
 from slamcli.solvers.nls import marginals as mg
-from slamcli.solvers.nls import selinv
 
 
 def _chain_border(n=6, m=2, seed=0):
@@ -32,10 +31,10 @@ def _chain_border(n=6, m=2, seed=0):
 def _use_path(monkeypatch, path, n, m):
     """Force ``path`` (the selected inverse when CHOLMOD is there, else a fallback) and return the pose
     ``(n, 3)`` and landmark ``(m, 2)`` index blocks of :func:`_chain_border`'s H."""
-    if path == "selinv" and not selinv.available():
+    if path == "selinv" and not mg.cholmod_available():
         pytest.skip("CHOLMOD not installed")
     if path != "selinv":
-        monkeypatch.setattr(selinv, "available", lambda: False)
+        monkeypatch.setattr(mg, "cholmod_available", lambda: False)
     return np.arange(3 * n).reshape(n, 3), 3 * n + np.arange(2 * m).reshape(m, 2)
 
 

@@ -1,5 +1,7 @@
 """Shared models: Jacobians against central finite differences, wrap edge cases, inverse ∘ forward."""
 
+from decimal import Decimal, localcontext
+
 import numpy as np
 import pytest
 
@@ -101,6 +103,71 @@ def test_between_jacobians_match_finite_differences():
         J_a, J_b = se2.between_jacobians(a, b)
         np.testing.assert_allclose(J_a, numeric_jacobian(lambda x: se2.between(x, b), a, wrap_rows=(2,)), atol=1e-7)
         np.testing.assert_allclose(J_b, numeric_jacobian(lambda x: se2.between(a, x), b, wrap_rows=(2,)), atol=1e-7)
+
+
+def _sin_cos_60(w: float):
+    """``sin w, cos w`` to 60 digits by their power series in :mod:`decimal` (the exact binary ``w``): the
+    independent reference of the SE(2) terms below, free of the float cancellations near ``w = 0``."""
+    with localcontext() as ctx:
+        ctx.prec = 60
+        x = Decimal(w)
+        s = c = Decimal(0)
+        term, k = Decimal(1), 0  # x^k / k!
+        while k < 80:
+            if k % 4 == 0:
+                c += term
+            elif k % 4 == 1:
+                s += term
+            elif k % 4 == 2:
+                c -= term
+            else:
+                s -= term
+            k += 1
+            term = term * x / k
+        return s, c
+
+
+def _se2_terms_reference(w: float):
+    """``(A, B, α, α')`` of :func:`se2._sinc_terms` / :func:`se2.log_terms` at ``w`` from :func:`_sin_cos_60`
+    (their limits 1, 0, 1, 0 at ``w = 0``)."""
+    if w == 0.0:
+        return 1.0, 0.0, 1.0, 0.0
+    s, c = _sin_cos_60(w)
+    sh, ch = _sin_cos_60(w / 2)  # w/2 is exact in binary
+    with localcontext() as ctx:
+        ctx.prec = 60
+        x, h = Decimal(w), Decimal(w) / 2
+        cot = ch / sh
+        return float(s / x), float((1 - c) / x), float(h * cot), float(cot / 2 - h / (2 * sh * sh))
+
+
+SE2_ANGLES = np.concatenate([[0.0, 1e-9, 5e-7, 9.99e-7, 1.001e-6, 3e-5, 9.99e-5, 1.001e-4, 1e-3, 0.3, 1.0, 2.5, 3.1]])
+SE2_ANGLES = np.concatenate([SE2_ANGLES, -SE2_ANGLES[1:]])
+
+
+def test_se2_series_terms_against_60_digit_reference():
+    """``A = sin w / w``, ``B = (1 − cos w)/w``, ``α = (w/2) cot(w/2)``, ``α'`` on both sides of their series
+    thresholds (1e-6, 1e-4), against :func:`_se2_terms_reference`. The tolerances are the float closed forms'
+    cancellation just above a threshold (``B``: 1 − cos w ≈ 5e-13 at 1e-6; ``α'``: two terms ≈ 1e4 at 1e-4)."""
+    ref = np.array([_se2_terms_reference(float(w)) for w in SE2_ANGLES])
+    A, B = se2._sinc_terms(SE2_ANGLES)
+    alpha, dalpha = se2.log_terms(SE2_ANGLES)
+    np.testing.assert_allclose(A, ref[:, 0], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(B, ref[:, 1], rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(alpha, ref[:, 2], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(dalpha, ref[:, 3], rtol=1e-12, atol=5e-12)
+
+
+def test_se2_series_terms_keep_the_input_shape():
+    """A 0-d angle gives 0-d terms equal to the same angle's entry of a vector call; a 2-d one keeps its shape."""
+    for f in (se2._sinc_terms, se2.log_terms):
+        vec = f(SE2_ANGLES)
+        for i, w in enumerate(SE2_ANGLES):
+            for v, s in zip(vec, f(w)):
+                assert np.shape(s) == () and s == v[i]
+        grid = f(SE2_ANGLES[1:].reshape(4, -1))
+        for v, g in zip(vec, grid):
+            assert g.shape == (4, 6) and np.array_equal(g.ravel(), v[1:])
 
 
 # ---------------------------------------------------------------- motion

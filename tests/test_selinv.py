@@ -8,9 +8,9 @@ import pytest
 import scipy.sparse as sp
 
 from slamcli.solvers import graph, nls
-from slamcli.solvers.nls import selinv
+from slamcli.solvers.nls import marginals, selinv
 
-pytestmark = pytest.mark.skipif(not selinv.available(), reason="needs scikit-sparse (extra cholmod)")
+pytestmark = pytest.mark.skipif(not nls.cholmod_available(), reason="needs scikit-sparse (extra cholmod)")
 
 
 def _random_spd(n: int, density: float, seed: int) -> sp.csc_matrix:
@@ -47,23 +47,18 @@ def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
     Hinv = np.linalg.inv(H.toarray())
     scale = np.abs(Hinv).max()
     S = selinv.SelectedInverse.from_matrix(H)
-    # every stored entry of Σ̃ is an entry of (P H Pᵀ)⁻¹
-    Pinv = Hinv[np.ix_(S.perm, S.perm)]
-    checked = 0
-    for K, j0 in enumerate(S.sn_first.tolist()):
-        rows = S._sn_rows(K)
-        m, w = rows.size, int(S.sn_width[K])
-        blk = S.vals[S.off[K] : S.off[K] + m * w].reshape(m, w)
-        np.testing.assert_allclose(blk, Pinv[np.ix_(rows, np.arange(j0, j0 + blk.shape[1]))], rtol=0,
-                                   atol=1e-10 * scale)
-        checked += blk.size
-    assert checked == S.vals.size
+    F = selinv.factor_ldl(H)
+    assert np.array_equal(S.perm, F.perm)
+    # H⁻¹ on the whole pattern of the factor L (read off CHOLMOD's L and mapped to the original order, not
+    # through the supernodes' own row sets): every entry the Takahashi recurrence defines
+    Lc = sp.coo_matrix(F.L)
+    got = S.entries(F.perm[Lc.row], F.perm[Lc.col])
+    assert np.abs(got - Hinv[F.perm[Lc.row], F.perm[Lc.col]]).max() <= 1e-10 * scale
     # and the original-order lookup returns H⁻¹ on the whole pattern of H
     C = sp.coo_matrix(H)
     got = S.entries(C.row, C.col)
     assert np.abs(got - Hinv[C.row, C.col]).max() <= 1e-10 * scale
     # the factorisation behind it: P H Pᵀ = L D Lᵀ
-    F = selinv.factor_ldl(H)
     LD = (F.L @ sp.diags(F.d) @ F.L.T).toarray()
     assert np.abs(LD - H.toarray()[np.ix_(F.perm, F.perm)]).max() <= 1e-12 * np.abs(H).max()
 
@@ -154,7 +149,6 @@ def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
 
     from slamcli.datasets.g2o import import_graph
     from slamcli.solvers.graph import solver
-    from slamcli.solvers.nls import marginals
 
     inp = import_graph(Path(__file__).parent / "data" / "intel_excerpt.g2o").inputs
     seen = {}
@@ -246,7 +240,7 @@ def test_graph_marginals_selected_inverse_equals_dense_inverse_and_the_scipy_pat
     assert np.abs(pose_cov - ref_p).max() <= 1e-10 * np.abs(ref_p).max()
     assert np.abs(lm_cov - ref_l).max() <= 1e-10 * np.abs(ref_l).max()
     # the previous (SciPy: banded chain + border Schur complement) path gives the same blocks
-    monkeypatch.setattr(selinv, "available", lambda: False)
+    monkeypatch.setattr(marginals, "cholmod_available", lambda: False)
     old_p, old_l = graph.laplace_marginals(gp, H)
     assert np.abs(pose_cov - old_p).max() <= 1e-9 * np.abs(old_p).max()
     assert np.abs(lm_cov - old_l).max() <= 1e-9 * np.abs(old_l).max()
@@ -260,7 +254,7 @@ def test_graph_solver_result_marginals_same_with_and_without_cholmod(monkeypatch
     ds = tiny_dataset(T=80, n_landmarks=10, seed=11, report_ids=True, clutter_every=0)
     params = graph.GraphParams(association="reported")
     new = graph.GraphSlam(params).solve(ds.inputs, rng=np.random.default_rng(0))
-    monkeypatch.setattr(selinv, "available", lambda: False)
+    monkeypatch.setattr(marginals, "cholmod_available", lambda: False)
     old = graph.GraphSlam(params).solve(ds.inputs, rng=np.random.default_rng(0))
     assert new.pose_cov is not None and new.landmark_cov is not None
     assert new.pose_cov.shape == (ds.inputs.n_poses, 3, 3) and new.landmark_cov.shape[1:] == (2, 2)
@@ -273,8 +267,6 @@ def test_result_marginals_from_the_body_chart_lower_triangle_equal_the_world_cha
     """``result_marginals`` (the LM's lower triangle at the estimate, body chart, pose blocks rotated after
     the selected inverse) against the dense inverse of ``H`` relinearised in the world chart — a Jacobian
     of its own, not a rotation of the body one — on a landmark graph, ~1e-10 relative."""
-    from slamcli.solvers.nls import marginals
-
     ds, gp, opt = _graph_problem()
     ip, il = gp.pose_cols(), gp.landmark_cols()
     assert opt.information_chart == "body" and marginals._lower_at_estimate(opt, [ip, il]) is not None
@@ -319,12 +311,28 @@ def test_depths_by_pointer_jumping_equal_a_walk_to_the_root():
         assert np.array_equal(selinv._depths(par), ref)
 
 
+@pytest.mark.parametrize("max_width", [0, 12, 48])
+def test_supernode_parents_follow_the_column_elimination_tree(monkeypatch, max_width):
+    """``_Supernodes.par`` against the column elimination tree read off ``L`` column by column: a supernode's
+    parent owns the first stored row below its last column (−1 when there is none), for fundamental, default
+    and wide relaxed supernodes."""
+    monkeypatch.setattr(selinv, "AMALGAMATE_MAX_WIDTH", max_width)
+    for H in (_random_spd(200, 0.01, 2), _block_spd(150, 3, 5)):
+        L = selinv.factor_ldl(H).L
+        sn = selinv._Supernodes(L)
+        ref = []
+        for j0, w in zip(sn.first.tolist(), sn.width.tolist()):
+            col = L.indices[L.indptr[j0 + w - 1] : L.indptr[j0 + w]]
+            below = col[col > j0 + w - 1]
+            ref.append(int(np.searchsorted(sn.first, below.min(), side="right")) - 1 if below.size else -1)
+        assert np.array_equal(sn.par, ref)
+        assert (sn.par == -1).sum() >= 1 and np.all((sn.par == -1) | (sn.par > np.arange(sn.par.size)))
+
+
 def test_result_marginals_with_a_held_fixed_pose_use_the_full_world_chart_matrix():
     """A held-fixed pose column (identity row, not a rotated one): ``result_marginals`` does not rotate body
     blocks but uses ``res.information`` — equal to its dense inverse; the fixed pose's block is the identity."""
     import dataclasses
-
-    from slamcli.solvers.nls import marginals
 
     ds, gp, _ = _graph_problem()
     prob = dataclasses.replace(gp.problem, fixed_cols=np.arange(3, dtype=np.int64))

@@ -18,14 +18,14 @@ import pytest
 
 from slamcli.models import observation
 from slamcli.solvers import frontend, graph
-from slamcli.solvers.nls import selinv
+from slamcli.solvers.nls import cholmod_available
 from slamcli.types import Status
 
 gtsam = pytest.importorskip("gtsam")
 from gtsam.symbol_shorthand import L, X  # noqa: E402 - after the importorskip guard
 from test_graph_gtsam import _gtsam_graph, _values  # noqa: E402
 
-pytestmark = pytest.mark.skipif(not selinv.available(), reason="needs scikit-sparse (extra cholmod)")
+pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs scikit-sparse (extra cholmod)")
 
 
 def test_selected_inverse_marginals_equal_gtsam_marginals_at_the_same_point():

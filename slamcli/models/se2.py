@@ -81,21 +81,25 @@ def between_jacobians(a, b):
     return J_a, J_b
 
 
+def _series_patched(w, threshold: float, closed, series):
+    """``closed(w)`` (a tuple of arrays) with ``series(w)`` patched in where ``|w| < threshold``: the one
+    evaluation of :func:`_sinc_terms` and :func:`log_terms`. The closed forms run everywhere (0/0 gives NaN
+    where the series replaces them); a 0-d ``w`` goes through as one element and comes back 0-d."""
+    w = np.asarray(w, float)
+    w1 = np.atleast_1d(w)  # ufuncs of 0-d arrays return scalars, which the patch cannot index
+    small = np.abs(w1) < threshold
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = closed(w1)
+    if small.any():
+        for o, s in zip(out, series(w1[small])):
+            o[small] = s
+    return tuple(o.reshape(w.shape) for o in out)
+
+
 def _sinc_terms(w):
     """``A = sin(w)/w`` and ``B = (1 - cos(w))/w`` with series near zero."""
-    w = np.asarray(w, float)
-    small = np.abs(w) < 1e-6
-    if w.ndim:  # closed forms everywhere, the series patched in where small (same values as the selects below)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            A, B = np.sin(w) / w, (1.0 - np.cos(w)) / w
-        if small.any():
-            ws = w[small]
-            A[small], B[small] = 1.0 - ws**2 / 6.0, ws / 2.0 - ws**3 / 24.0
-        return A, B
-    ws = np.where(small, 1.0, w)
-    A = np.where(small, 1.0 - w**2 / 6.0, np.sin(ws) / ws)
-    B = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - np.cos(ws)) / ws)
-    return A, B
+    return _series_patched(w, 1e-6, lambda v: (np.sin(v) / v, (1.0 - np.cos(v)) / v),
+                           lambda v: (1.0 - v**2 / 6.0, v / 2.0 - v**3 / 24.0))
 
 
 def exp(xi):
@@ -129,25 +133,15 @@ def log_terms(w):
     """``(α, α')`` of the SE(2) logarithm at the wrapped angle ``w``: ``α = (w/2) cot(w/2)`` and its derivative
     ``α' = ½ cot(w/2) − (w/4) / sin²(w/2)`` (for the logarithm's Jacobian); series ``1 − w²/12`` and
     ``−w/6 − w³/180`` below ``|w| < 1e-4``."""
-    w = np.asarray(w, float)
-    small = np.abs(w) < 1e-4
-    if w.ndim:  # closed forms everywhere, the series patched in where small (same values as the selects below)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            half = 0.5 * w
-            sh = np.sin(half)
-            cot = np.cos(half) / sh
-            alpha, dalpha = half * cot, 0.5 * cot - 0.25 * w / sh**2
-        if small.any():
-            ws = w[small]
-            alpha[small], dalpha[small] = 1.0 - ws**2 / 12.0, -ws / 6.0 - ws**3 / 180.0
-        return alpha, dalpha
-    ws = np.where(small, 1.0, w)
-    half = 0.5 * ws
+    return _series_patched(w, 1e-4, _log_terms_closed, lambda v: (1.0 - v**2 / 12.0, -v / 6.0 - v**3 / 180.0))
+
+
+def _log_terms_closed(w):
+    """The closed forms of :func:`log_terms` (NaN at ``w = 0``)."""
+    half = 0.5 * w
     sh = np.sin(half)
     cot = np.cos(half) / sh
-    alpha = np.where(small, 1.0 - w**2 / 12.0, half * cot)
-    dalpha = np.where(small, -w / 6.0 - w**3 / 180.0, 0.5 * cot - 0.25 * ws / sh**2)
-    return alpha, dalpha
+    return half * cot, 0.5 * cot - 0.25 * w / sh**2
 
 
 def interpolate_poses(t_rows: np.ndarray, xyt_rows: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -103,8 +103,8 @@ def calibrate_noise(
         res = nls.solve(gp.problem, gp.x0, gp_params.nls_params("none", 1.0))
         poses_r, lms_r = gp.unpack(res.x)
         state.update(poses=poses_r, lms=lms_r, noise=noise, gp=gp, res=res)
-        return (nls.jacobian_matrix(gp.problem, res.x), nls.residual_vector(gp.problem, res.x),
-                noise_row_groups(gp.problem))
+        J, e = nls.whitened_system(gp.problem, res.x)  # one evaluation of the factors for both
+        return J, e, noise_row_groups(gp.problem)
 
     def seen(rnd):
         if on_round is not None:

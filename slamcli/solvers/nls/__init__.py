@@ -91,6 +91,7 @@ from slamcli.solvers.nls.optimize import (  # noqa: F401
     jacobian_matrix,
     residual_vector,
     solve,
+    whitened_system,
 )
 from slamcli.solvers.nls.problem import (  # noqa: F401
     EvaluateFn,

@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from slamcli.solvers.nls import selinv
-from slamcli.solvers.nls.linear import factorize_symmetric
+from slamcli.solvers.nls.linear import cholmod_available, factorize_symmetric
 from slamcli.solvers.nls.selinv import NotPositiveDefiniteError
 
 
@@ -317,7 +317,7 @@ def block_marginals(
             check_covariance_blocks(b, nm)
         return blocks
 
-    if selinv.available():
+    if cholmod_available():
         try:
             return checked(selinv.inverse_blocks(information, sets, cholmod_analysis(workspace, information)))
         except np.linalg.LinAlgError as exc:
@@ -398,7 +398,7 @@ def _lower_at_estimate(res, sets: list[np.ndarray]):
     conditions fail (then ``res.information`` is used)."""
     ws, lo = getattr(res, "workspace", None), getattr(res, "information_lower", None)
     # only the selected inverse reads a lower triangle, with the run's analysis (H below has its pattern)
-    if lo is None or not _simplicial_ldl(ws) or not selinv.available():
+    if lo is None or not _simplicial_ldl(ws) or not cholmod_available():
         return None
     asm = ws[0]
     H = asm.lower_matrix(lo)

@@ -39,7 +39,14 @@ def residual_vector(problem: NlsProblem, x: np.ndarray) -> np.ndarray:
 
 def jacobian_matrix(problem: NlsProblem, x: np.ndarray) -> sp.csr_matrix:
     """Whitened sparse Jacobian ``(Σ F k, D)`` at ``x``."""
-    rows, cols, vals = [], [], []
+    return whitened_system(problem, x)[0]
+
+
+def whitened_system(problem: NlsProblem, x: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+    """:func:`jacobian_matrix` and :func:`residual_vector` at ``x`` from one evaluation of every block: the
+    whitened sparse Jacobian ``(Σ F k, D)`` and the stacked whitened residuals ``(Σ F k,)`` that come with it
+    (``evaluate``'s; a block's residual-only ``residual`` gives the same values)."""
+    rows, cols, vals, res = [], [], [], []
     off = 0
     for b in problem.blocks:
         r, J = b.evaluate(x)
@@ -49,10 +56,12 @@ def jacobian_matrix(problem: NlsProblem, x: np.ndarray) -> sp.csr_matrix:
         rows.append((off + np.arange(F * k).reshape(F, k, 1) + np.zeros((1, 1, n), np.int64)).ravel())
         cols.append(np.broadcast_to(np.asarray(b.cols)[:, None, :], (F, k, n)).ravel())
         vals.append(Jw.ravel())
+        res.append(whiten(b.sqrt_info, r).ravel())
         off += F * k
-    return sp.csr_matrix(
+    J = sp.csr_matrix(
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(off, problem.n_vars)
     )
+    return J, np.concatenate(res)
 
 
 def solve(

@@ -35,7 +35,7 @@ lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels
 The factorisation is CHOLMOD's (``scikit-sparse``, the ``cholmod`` extra): its fill-reducing ordering
 (AMD / nested dissection) and its simplicial ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
 has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid. Without CHOLMOD, :func:`factor_ldl` raises ImportError and the
-callers use their SciPy path. Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
+callers use their SciPy path (:func:`slamcli.solvers.nls.linear.cholmod_available` tells which). Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
 """
 
 from __future__ import annotations
@@ -66,15 +66,6 @@ class NotPositiveDefiniteError(np.linalg.LinAlgError):
     def __init__(self, message: str, column: int) -> None:
         super().__init__(message)
         self.column = int(column)
-
-
-def available() -> bool:
-    """Whether CHOLMOD (``scikit-sparse``) can be imported — needed by :func:`factor_ldl`."""
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 @dataclass(frozen=True)
@@ -147,7 +138,8 @@ class _Supernodes:
     ``key_start[K]``); ``keys`` = sorted ``K·n + row`` of every block row (the lookup of an entry's local row);
     ``off`` = start of ``K``'s row-major ``nrows × width`` block in the storage of :class:`SelectedInverse`;
     ``fmap`` = local row (in its supernode) of every row of every fundamental supernode, ``col_shift`` = where
-    a column's stored entries of ``L`` start in ``fmap`` minus where they start in ``L``."""
+    a column's stored entries of ``L`` start in ``fmap`` minus where they start in ``L``; ``par`` = parent of
+    every supernode in their elimination tree (the owner of its first row below ``J``; −1 at a root)."""
 
     def __init__(self, L: sp.csc_matrix) -> None:
         n = L.shape[0]
@@ -175,6 +167,10 @@ class _Supernodes:
         group = _amalgamate(fpar, fwidth, fnrows)  # merged supernode of every fundamental one
         starts = np.flatnonzero(np.concatenate(([True], group[1:] != group[:-1]))) if n else np.zeros(0, np.int64)
         top = np.append(starts[1:], ffirst.size) - 1  # last (topmost) member of every merged supernode
+        # elimination tree of the merged supernodes: the merged parent of the topmost member's parent (the owner
+        # of the first row below J; the other members' parents are members too), −1 at a root
+        ptop = fpar[top]
+        self.par = np.where(ptop >= 0, group[ptop], -1)
         self.first = ffirst[starts]
         self.width = np.diff(np.append(self.first, n)).astype(np.int64)
         r_top = fnrows[top] - fwidth[top]
@@ -248,11 +244,6 @@ class SelectedInverse:
         ``index_blocks``: arrays ``(B, k)`` of columns whose ``k × k`` blocks :meth:`blocks` will be asked
         for; their pattern is added to ``H``'s as explicit zeros (:func:`with_block_pattern`)."""
         return cls(factor_ldl(with_block_pattern(H, index_blocks)))
-
-    def _sn_rows(self, K: int) -> np.ndarray:
-        """Sorted row set ``J ∪ R`` of supernode ``K`` (permuted order)."""
-        k0 = int(self._sn.key_start[K])
-        return self._sn.rows[k0 : k0 + int(self.sn_nrows[K])]
 
     def entries(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """``(H⁻¹)[rows, cols]`` (original order, equal shapes) — each pair must lie on the pattern of the
@@ -465,7 +456,7 @@ def _buckets(depth: np.ndarray, r: np.ndarray, w: np.ndarray):
 class _Schedule:
     """The plan of the batched recurrence, from the pattern alone (module docstring).
 
-    Elimination tree of the supernodes (parent = owner of the first row below ``J``), levels by depth,
+    Elimination tree of the supernodes (:class:`_Supernodes`' ``par``), levels by depth,
     buckets of one level (:func:`_buckets`) whose members are padded to the bucket's largest row count ``rp``
     and width ``sp``. A supernode's front is ``(sp + rp)²`` row-major, ``J`` rows first, ``R`` rows from
     ``sp``; a level's fronts lie one after another in its buffer from position 1 (position 0 holds the 0
@@ -474,9 +465,7 @@ class _Schedule:
     def __init__(self, sn: _Supernodes) -> None:
         w, m = sn.width, sn.nrows
         ns, r = w.size, m - w
-        below = sn.key_start + w  # position in rows of each supernode's first row below J
-        par = np.full(ns, -1, np.int64)
-        par[r > 0] = sn.sn_of[sn.rows[below[r > 0]]]
+        par = sn.par
         self.depth = depth = _depths(par)
         order, b_start, b_level = _buckets(depth, r, w)
         self.n_levels = int(depth.max()) + 1
@@ -515,9 +504,9 @@ class _Schedule:
         self.group_width = gw.tolist()
         self.group_buckets = [ob[g_of == g].tolist() for g in range(gw.size)]
         self.group_sn = [np.concatenate([order[b_start[b] : b_start[b + 1]] for b in bs]) for bs in self.group_buckets]
-        self.rel_at, self.rel = self._relative_positions(below)
+        self.rel_at, self.rel = self._relative_positions()
 
-    def _relative_positions(self, below):
+    def _relative_positions(self):
         """Position in the parent's front of every row below every supernode, padded to ``rp`` with 0
         (supernode ``order[i]``'s at ``rel_at[i]``): its row in the parent's ``J ∪ R``, ``J`` first, ``R``
         after the parent's padded width; and the same row's start in the previous level's buffer
@@ -528,7 +517,7 @@ class _Schedule:
         r = sn.nrows - sn.width
         rep, u, _ = _ragged(r)
         P = par[rep]
-        loc = sn.local_rows(P, sn.rows[below[rep] + u], own=True)
+        loc = sn.local_rows(P, sn.rows[sn.key_start[rep] + sn.width[rep] + u], own=True)  # the rows below J
         wP = sn.width[P]
         pos = np.where(loc < wP, loc, loc - wP + self.sp[P])
         start = np.empty(r.size, np.int64)

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from slamcli.solvers.nls import selinv
+from slamcli.solvers.nls.linear import cholmod_available
 
 #: largest state dimension for the dense-inverse fallback of the exact redundancy (no CHOLMOD)
 DENSE_LIMIT = 4000
@@ -48,7 +49,7 @@ class VarianceComponents:
 def _inverse_entries(H: sp.csc_matrix, dense: bool):
     """``(rows, cols) -> (H⁻¹)[rows, cols]`` for pairs on the pattern of ``H``: selected inverse (CHOLMOD),
     or the dense inverse when ``dense`` or CHOLMOD is missing (``n ≤ DENSE_LIMIT``)."""
-    if not dense and selinv.available():
+    if not dense and cholmod_available():
         return selinv.SelectedInverse.from_matrix(H).entries
     if H.shape[0] > DENSE_LIMIT:
         raise ValueError(f"exact redundancy of a {H.shape[0]}-variable problem needs CHOLMOD (scikit-sparse); "
