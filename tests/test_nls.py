@@ -602,3 +602,24 @@ def test_pose_block_pattern_equals_the_sorted_pattern_and_assembles_the_dense_pr
         J = nls.jacobian_matrix(prob, xx).toarray()
         np.testing.assert_allclose(fast.matrix(fast.full(lo)).toarray(), J.T @ J, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(g, J.T @ nls.residual_vector(prob, xx), rtol=1e-12, atol=1e-12)
+
+
+def test_bearing_range_jacobians_on_the_pose_follow_gtsams_convention():
+    """A landmark exactly on its pose: range Jacobian [1, 1] w.r.t. the landmark (GTSAM's norm2 convention
+    below 1e-10 m, −[1, 1] w.r.t. the position), zero bearing row (Rot2::relativeBearing), no NaN; a landmark
+    1 m away keeps the closed-form Jacobian (m − p)/r."""
+    import warnings
+
+    from slamcli.solvers.graph.factors import bearing_range_error, bearing_range_jacobian
+
+    x = np.array([[1.0, 2.0, 0.3], [1.0, 2.0, 0.3]])
+    m = np.array([[1.0, 2.0], [1.6, 2.8]])  # on the pose; 1 m away along (0.6, 0.8)
+    z = np.array([[0.5, 0.1], [0.5, 0.1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, J = bearing_range_jacobian(x, m, z)
+        _, J_x, J_m = bearing_range_error(x, m, z)
+    for jm, jp in ((J[:, :, 3:], J[:, :, :2]), (J_m, J_x[:, :, :2])):
+        np.testing.assert_array_equal(jm[0], [[1.0, 1.0], [0.0, 0.0]])
+        np.testing.assert_array_equal(jp[0], [[-1.0, -1.0], [0.0, 0.0]])
+        np.testing.assert_allclose(jm[1, 0], [0.6, 0.8], rtol=1e-12)

@@ -10,6 +10,9 @@ from slamcli.errors import SolverError
 from slamcli.models import observation, se2
 from slamcli.models.angles import wrap_angle
 
+#: GTSAM's ``norm2``: below this distance (m) the range Jacobian ``(m − p)/r`` is replaced by ``[1, 1]``
+ON_THE_POSE_M = 1e-10
+
 
 # ----------------------------------------------------------------------------------------------------------
 # GTSAM-exact factor errors and Jacobians (world coordinates [x, y, θ]), vectorised over factors
@@ -163,11 +166,22 @@ def bearing_range_error(x, m, z):
     e : ndarray (F, 2);  J_x : ndarray (F, 2, 3);  J_m : ndarray (F, 2, 2)
     """
     e, near = _bearing_range_residual(x, m, z)
-    J_x, J_m = observation.range_bearing_jacobians(x, m)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a landmark on the pose: patched below
+        J_x, J_m = observation.range_bearing_jacobians(x, m)
     if np.any(near):  # GTSAM's Rot2::relativeBearing: within 1e-5 m the bearing is 0, its Jacobian zero
         J_x[near, 1] = 0.0
         J_m[near, 1] = 0.0
+        _range_row_on_the_pose(x, m, J_x[:, 0, :2], J_m[:, 0])
     return e, J_x, J_m
+
+
+def _range_row_on_the_pose(x, m, Jr_x, Jr_m) -> None:
+    """Range row at a landmark within ``ON_THE_POSE_M`` of its pose, where ``∂r/∂m = (m − p)/r`` is undefined
+    (0/0): GTSAM's ``norm2`` convention ``∂r/∂m = [1, 1]``, ``∂r/∂p = −[1, 1]``, instead of NaN."""
+    d = np.asarray(m, float) - np.asarray(x, float)[:, :2]
+    on = np.hypot(d[:, 0], d[:, 1]) <= ON_THE_POSE_M
+    Jr_m[on] = 1.0
+    Jr_x[on] = -1.0
 
 
 def bearing_range_jacobian(x, m, z):
@@ -181,15 +195,17 @@ def bearing_range_jacobian(x, m, z):
     q = dx * dx + dy * dy
     r = np.sqrt(q)
     J = np.empty((x.shape[0], 2, 5))
-    J[:, 0, 3] = dx / r
-    J[:, 0, 4] = dy / r
-    J[:, 1, 3] = -dy / q
-    J[:, 1, 4] = dx / q
+    with np.errstate(divide="ignore", invalid="ignore"):  # a landmark on the pose: patched below
+        J[:, 0, 3] = dx / r
+        J[:, 0, 4] = dy / r
+        J[:, 1, 3] = -dy / q
+        J[:, 1, 4] = dx / q
     np.negative(J[:, :, 3:], out=J[:, :, :2])
     J[:, 0, 2] = 0.0
     J[:, 1, 2] = -1.0
     if np.any(near):  # as bearing_range_error: no bearing Jacobian within 1e-5 m
         J[near, 1] = 0.0
+        _range_row_on_the_pose(x, m, J[:, 0, :2], J[:, 0, 3:])
     return e, J
 
 
