@@ -28,6 +28,7 @@ from a Lanczos run (``scipy.sparse.linalg.eigsh``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -108,6 +109,20 @@ def sesync_cost(poses_xyt, ij, xyt, kappa, tau) -> float:
     return float(r @ r)
 
 
+class _Terms(NamedTuple):
+    """The edges' pose-dependent terms at one point, each ``(E,)`` (``r (E, 4)``): computed once by
+    :meth:`_Edges.terms` and shared by the residuals, Jacobians, gradient, Gauss-Newton matrix and θ curvature
+    there. ``R(θ_i) t̃ = [q, p]`` and ``dR/dθ(θ_i) t̃ = [−p, q]``."""
+
+    cj: np.ndarray  # cos θ_j
+    sj: np.ndarray  # sin θ_j
+    ca: np.ndarray  # cos(θ_i + Δθ)
+    sa: np.ndarray  # sin(θ_i + Δθ)
+    p: np.ndarray  # sin θ_i t̃_x + cos θ_i t̃_y
+    q: np.ndarray  # cos θ_i t̃_x − sin θ_i t̃_y
+    r: np.ndarray  # the residuals (E, 4) of :class:`_Edges`
+
+
 class _Edges:
     """The edges' constant terms, and ``F``'s residuals, Jacobians and θ curvature from them.
 
@@ -126,44 +141,45 @@ class _Edges:
         self.cd, self.sd = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
         self.tx, self.ty = xyt[:, 0].copy(), xyt[:, 1].copy()
 
-    def trig(self, poses) -> tuple:
-        """``(cos θ_j, sin θ_j, cos(θ_i + Δθ), sin(θ_i + Δθ), cos θ_i, sin θ_i)`` per edge."""
+    def terms(self, poses) -> _Terms:
+        """The :class:`_Terms` at ``poses (n, 3)``."""
         cp, sp_ = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         c, s = cp[self.i], sp_[self.i]
-        return cp[self.j], sp_[self.j], c * self.cd - s * self.sd, s * self.cd + c * self.sd, c, s
-
-    def residuals(self, poses, trig=None) -> np.ndarray:
-        """``r (E, 4)`` at ``poses (n, 3)``."""
-        cj, sj, ca, sa, c, s = self.trig(poses) if trig is None else trig
+        cj, sj = cp[self.j], sp_[self.j]
+        ca, sa = c * self.cd - s * self.sd, s * self.cd + c * self.sd
+        p, q = s * self.tx + c * self.ty, c * self.tx - s * self.ty
         pi, pj = poses[self.i], poses[self.j]
         r = np.empty((self.i.size, 4))
         r[:, 0] = self.sk * (cj - ca)
         r[:, 1] = self.sk * (sj - sa)
-        r[:, 2] = self.st * (pj[:, 0] - pi[:, 0] - (c * self.tx - s * self.ty))
-        r[:, 3] = self.st * (pj[:, 1] - pi[:, 1] - (s * self.tx + c * self.ty))
-        return r
+        r[:, 2] = self.st * (pj[:, 0] - pi[:, 0] - q)
+        r[:, 3] = self.st * (pj[:, 1] - pi[:, 1] - p)
+        return _Terms(cj, sj, ca, sa, p, q, r)
+
+    def residuals(self, poses) -> np.ndarray:
+        """``r (E, 4)`` at ``poses (n, 3)``."""
+        return self.terms(poses).r
 
     def evaluate(self, poses) -> tuple[np.ndarray, np.ndarray]:
         """``(r (E, 4), J (E, 4, 6))``, ``J`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``."""
-        trig = self.trig(poses)
-        cj, sj, ca, sa, c, s = trig
+        t = self.terms(poses)
         sk, st = self.sk, self.st
         J = np.zeros((self.i.size, 4, 6))
-        J[:, 0, 5], J[:, 1, 5] = -sk * sj, sk * cj
-        J[:, 0, 2], J[:, 1, 2] = sk * sa, -sk * ca
+        J[:, 0, 5], J[:, 1, 5] = -sk * t.sj, sk * t.cj
+        J[:, 0, 2], J[:, 1, 2] = sk * t.sa, -sk * t.ca
         for k in (0, 1):
             J[:, 2 + k, 3 + k] = st
             J[:, 2 + k, k] = -st
-        J[:, 2, 2] = st * (s * self.tx + c * self.ty)  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
-        J[:, 3, 2] = -st * (c * self.tx - s * self.ty)
-        return self.residuals(poses, trig), J
+        J[:, 2, 2] = st * t.p  # −√τ dR/dθ t̃
+        J[:, 3, 2] = -st * t.q
+        return t.r, J
 
-    def cost_gradient(self, poses, trig=None, r=None) -> tuple[float, np.ndarray]:
+    def cost_gradient(self, poses, t: _Terms | None = None) -> tuple[float, np.ndarray]:
         """``(½F, ∇(½F) (3n,))`` at ``poses (n, 3)`` from the residuals and the closed-form rows of
-        :meth:`evaluate`'s Jacobian (``Jᵀr`` per edge without building ``J``; one scatter for all six columns)."""
-        trig = self.trig(poses) if trig is None else trig
-        cj, sj, ca, sa, c, s = trig
-        r = self.residuals(poses, trig) if r is None else r
+        :meth:`evaluate`'s Jacobian (``Jᵀr`` per edge without building ``J``; one scatter for all six columns).
+        ``t``: the :meth:`terms` at ``poses`` when the caller has them."""
+        t = self.terms(poses) if t is None else t
+        r = t.r
         if getattr(self, "_grad_cols", None) is None:
             cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
             self._grad_cols = cols.T.ravel()  # column-major: the six weights below, each over all edges
@@ -173,9 +189,8 @@ class _Edges:
         np.multiply(self.st, r[:, 3], out=w[4])
         np.negative(w[3], out=w[0])
         np.negative(w[4], out=w[1])
-        w[2] = self.sk * (sa * r[:, 0] - ca * r[:, 1]) + self.st * (r[:, 2] * (s * self.tx + c * self.ty)
-                                                                     - r[:, 3] * (c * self.tx - s * self.ty))
-        w[5] = self.sk * (cj * r[:, 1] - sj * r[:, 0])
+        w[2] = self.sk * (t.sa * r[:, 0] - t.ca * r[:, 1]) + self.st * (r[:, 2] * t.p - r[:, 3] * t.q)
+        w[5] = self.sk * (t.cj * r[:, 1] - t.sj * r[:, 0])
         g = np.bincount(self._grad_cols, weights=w.ravel(), minlength=3 * poses.shape[0])
         return self.half_cost(r), g
 
@@ -188,15 +203,15 @@ class _Edges:
     #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
     VARYING_PAIRS = (2, 7, 11, 12, 13, 14)  # (x_i,θ_i) (y_i,θ_i) (θ_i,θ_i) (θ_i,x_j) (θ_i,y_j) (θ_i,θ_j)
 
-    def gauss_newton(self, poses, asm: nls.Assembler, terms=None) -> tuple[float, np.ndarray, np.ndarray] | None:
+    def gauss_newton(self, poses, asm: nls.Assembler, t: _Terms | None = None):
         """``(½F, JᵀJ lower data on asm's pattern, ∇(½F))`` at ``poses``, pose 0 held, in closed form: with
-        ``p = sin θ_i t̃_x + cos θ_i t̃_y`` and ``q = cos θ_i t̃_x − sin θ_i t̃_y`` (so ``J[tr, θ_i] = √τ [p, −q]``)
-        the pose-dependent entries are ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``,
-        ``(θ_i,x_j) = τp``, ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others
-        (``±τ``, ``2κ``, 0) are scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
+        :class:`_Terms`' ``p``, ``q`` (``J[tr, θ_i] = √τ [p, −q]``) the pose-dependent entries are
+        ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``, ``(θ_i,x_j) = τp``,
+        ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others (``±τ``, ``2κ``, 0) are
+        scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
         :func:`_sesync_problem`, without the ``(E, 4, 6)`` Jacobian and its 21 products per edge; None when
-        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path. ``terms``:
-        ``(trig, r)`` at ``poses`` (:meth:`trig`, :meth:`residuals`) when the caller has them."""
+        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path. ``t``:
+        the :meth:`terms` at ``poses`` when the caller has them."""
         E = self.i.size
         if len(asm.lo_scatter) != 1 or asm.twice[0] is not None or asm.lo_scatter[0].size != 21 * E:
             return None
@@ -209,37 +224,29 @@ class _Edges:
                                          minlength=asm.lo_nnz)
             self._gn_pos = pos[list(self.VARYING_PAIRS)].ravel()
             self._gn_of = asm
-        trig, r = self.terms(poses) if terms is None else terms
-        cj, sj, ca, sa, c, s = trig
-        cost, g = self.cost_gradient(poses, trig, r)
+        t = self.terms(poses) if t is None else t
+        cost, g = self.cost_gradient(poses, t)
         tau = self.st * self.st
-        tp, tq = tau * (s * self.tx + c * self.ty), tau * (c * self.tx - s * self.ty)
+        tp, tq = tau * t.p, tau * t.q
         w = np.empty((6, E))
         np.negative(tp, out=w[0])
         w[1] = tq
-        w[2] = self.sk * self.sk + (tp * (s * self.tx + c * self.ty) + tq * (c * self.tx - s * self.ty))
+        w[2] = self.sk * self.sk + (tp * t.p + tq * t.q)
         w[3] = tp
         np.negative(tq, out=w[4])
-        w[5] = -(self.sk * self.sk) * (cj * ca + sj * sa)
+        w[5] = -(self.sk * self.sk) * (t.cj * t.ca + t.sj * t.sa)
         data = self._gn_const + np.bincount(self._gn_pos, weights=w.ravel(), minlength=asm.lo_nnz)
         asm.hold_fixed(data, g)
         return cost, data, g
 
-    def terms(self, poses) -> tuple:
-        """``(trig, r)``: :meth:`trig` and :meth:`residuals` at ``poses``, which the linearisation and the θ
-        curvature at one point share."""
-        trig = self.trig(poses)
-        return trig, self.residuals(poses, trig)
-
-    def theta_curvature(self, poses, terms=None) -> np.ndarray:
+    def theta_curvature(self, poses, t: _Terms | None = None) -> np.ndarray:
         """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
         depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
         ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
-        trig, r = self.terms(poses) if terms is None else terms
-        cj, sj, ca, sa, c, s = trig
-        on_j = -self.sk * (r[:, 0] * cj + r[:, 1] * sj)
-        on_i = self.sk * (r[:, 0] * ca + r[:, 1] * sa) + self.st * (r[:, 2] * (c * self.tx - s * self.ty)
-                                                                     + r[:, 3] * (s * self.tx + c * self.ty))
+        t = self.terms(poses) if t is None else t
+        r = t.r
+        on_j = -self.sk * (r[:, 0] * t.cj + r[:, 1] * t.sj)
+        on_i = self.sk * (r[:, 0] * t.ca + r[:, 1] * t.sa) + self.st * (r[:, 2] * t.q + r[:, 3] * t.p)
         n = poses.shape[0]
         return np.bincount(self.j, weights=on_j, minlength=n) + np.bincount(self.i, weights=on_i, minlength=n)
 
@@ -269,12 +276,13 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
     asm, lin = _workspace(problem, params, workspace)
     flat = x.reshape(-1)
     theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
-    cost, lo, g, terms = _linearize(edges, asm, flat, params)
+    terms = edges.terms(x)  # always the edges' terms at flat: every evaluation there shares them
+    cost, lo, g = _linearize(edges, asm, flat, params, terms)
     near = False  # the last step lowered F by < FROZEN_REL: the previous factorisation is good enough
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
-            xn, cn, gn = _frozen_step(edges, lin, flat, g, cost, NEWTON_SLACK)
+            xn, cn, gn, tn = _frozen_step(edges, lin, flat, g, cost, NEWTON_SLACK)
             if xn is not None:
                 # its convergence is linear: stop on a step below F's rounding that also moved x by ≤ FROZEN_STEP_TOL
                 step = float(np.max(np.abs(xn - flat), initial=0.0))
@@ -282,10 +290,10 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 flat = xn
                 if done:
                     break
-                cost, g, stale = cn, gn, True
+                cost, g, terms, stale = cn, gn, tn, True
                 continue
         if stale:
-            cost, lo, g, terms = _linearize(edges, asm, flat, params)
+            cost, lo, g = _linearize(edges, asm, flat, params, terms)
             stale = False
         newton = lo.copy()
         newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3), terms)[1:]
@@ -298,26 +306,24 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
             break
         done = cost - cn <= REFINE_REL_TOL * cost
         near = cost - cn <= FROZEN_REL * cost
-        flat = xn
+        flat, terms = xn, tn
         if done:
             break
         if near:  # the next step reuses this factorisation: it needs the gradient only, not H
-            cost, g = _cost_gradient(edges, flat, tn)
+            cost, g = _cost_gradient(edges, flat, terms)
             stale = True
         else:
-            cost, lo, g, terms = _linearize(edges, asm, flat, params, tn)
+            cost, lo, g = _linearize(edges, asm, flat, params, terms)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
 
 
-def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams, terms=None):
-    """``(½F, JᵀJ lower data, ∇(½F), terms)`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the
-    engine's; ``terms``: the edges' :meth:`_Edges.terms` there (given, or computed), for the θ curvature at the
-    same point."""
-    terms = edges.terms(flat.reshape(-1, 3)) if terms is None else terms
+def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams, terms: _Terms):
+    """``(½F, JᵀJ lower data, ∇(½F))`` at ``flat``, whose :meth:`_Edges.terms` are ``terms``: closed form
+    (:meth:`_Edges.gauss_newton`), else the engine's."""
     out = edges.gauss_newton(flat.reshape(-1, 3), asm, terms)
-    return (*(out if out is not None else asm.linearize_lower(flat, params)), terms)
+    return out if out is not None else asm.linearize_lower(flat, params)
 
 
 def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
@@ -330,24 +336,26 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _cost_gradient(edges: _Edges, flat: np.ndarray, terms=None) -> tuple[float, np.ndarray]:
-    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` (:meth:`_Edges.cost_gradient`: the cost and gradient
-    :meth:`nls.Assembler.linearize_lower` returns for :func:`_sesync_problem`, without assembling ``H``),
-    pose 0 held."""
-    cost, g = edges.cost_gradient(flat.reshape(-1, 3), *(terms or ()))
+def _cost_gradient(edges: _Edges, flat: np.ndarray, terms: _Terms) -> tuple[float, np.ndarray]:
+    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat``, whose :meth:`_Edges.terms` are ``terms``
+    (:meth:`_Edges.cost_gradient`: the cost and gradient :meth:`nls.Assembler.linearize_lower` returns for
+    :func:`_sesync_problem`, without assembling ``H``), pose 0 held."""
+    cost, g = edges.cost_gradient(flat.reshape(-1, 3), terms)
     g[:3] = 0.0
     return cost, g
 
 
 def _frozen_step(edges, lin, flat, g, cost, slack: float):
-    """``(x, cost, gradient)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's
-    ``H``) when it does not raise the cost by more than ``slack·cost``, else ``(None, None, None)``."""
+    """``(x, cost, gradient, terms)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier
+    iterate's ``H``) when it does not raise the cost by more than ``slack·cost``, else four Nones; ``terms``:
+    the edges' :meth:`_Edges.terms` at ``x``."""
     h = lin.solve(-g)
     if h is None:
-        return None, None, None
+        return None, None, None, None
     xn = flat + h
-    cn, gn = _cost_gradient(edges, xn)
-    return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
+    tn = edges.terms(xn.reshape(-1, 3))
+    cn, gn = _cost_gradient(edges, xn, tn)
+    return (xn, cn, gn, tn) if cn <= cost + slack * abs(cost) else (None, None, None, None)
 
 
 def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: float = 0.0):
@@ -363,7 +371,7 @@ def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: 
     while alpha > 1e-4:
         xn = flat + alpha * h
         terms = edges.terms(xn.reshape(-1, 3))
-        cn = _Edges.half_cost(terms[1])
+        cn = _Edges.half_cost(terms.r)
         if cn <= cost + slack * abs(cost):
             return xn, cn, terms
         if not halving:
