@@ -140,6 +140,11 @@ class _Edges:
         self.sk, self.st = np.sqrt(2.0 * kappa), np.sqrt(tau)
         self.cd, self.sd = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
         self.tx, self.ty = xyt[:, 0].copy(), xyt[:, 1].copy()
+        #: state columns ``(E, 6)`` of ``[x_i, y_i, θ_i, x_j, y_j, θ_j]`` (the block of :func:`_sesync_problem`), and
+        #: the same column-major (the six gradient weights of :meth:`cost_gradient`, each over all edges)
+        self.cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
+        self._grad_cols = self.cols.T.ravel()
+        self._gn_of = None  # the assembler :meth:`gauss_newton`'s constant part was scattered for
 
     def terms(self, poses) -> _Terms:
         """The :class:`_Terms` at ``poses (n, 3)``."""
@@ -180,9 +185,6 @@ class _Edges:
         ``t``: the :meth:`terms` at ``poses`` when the caller has them."""
         t = self.terms(poses) if t is None else t
         r = t.r
-        if getattr(self, "_grad_cols", None) is None:
-            cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
-            self._grad_cols = cols.T.ravel()  # column-major: the six weights below, each over all edges
         E = self.i.size
         w = np.empty((6, E))
         np.multiply(self.st, r[:, 2], out=w[3])
@@ -215,7 +217,7 @@ class _Edges:
         E = self.i.size
         if len(asm.lo_scatter) != 1 or asm.twice[0] is not None or asm.lo_scatter[0].size != 21 * E:
             return None
-        if getattr(self, "_gn_of", None) is not asm:
+        if self._gn_of is not asm:
             pos = asm.lo_scatter[0].reshape(21, E)
             tau, k2 = self.st * self.st, self.sk * self.sk  # τ, 2κ
             const = {0: tau, 3: -tau, 6: tau, 9: -tau, 15: tau, 18: tau, 20: k2}
@@ -383,9 +385,7 @@ def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: 
 def _sesync_problem(n: int, edges: _Edges) -> nls.NlsProblem:
     """``½F`` as a least-squares problem over ``[x, y, θ]`` of ``n`` poses, pose 0 fixed (residuals and
     Jacobians of :class:`_Edges`, per edge)."""
-    i, j = edges.i, edges.j
-    cols = np.concatenate([3 * i[:, None] + np.arange(3), 3 * j[:, None] + np.arange(3)], axis=1)
-    block = nls.FactorBlock("sesync", cols, lambda v: edges.evaluate(v.reshape(-1, 3)), np.eye(4),
+    block = nls.FactorBlock("sesync", edges.cols, lambda v: edges.evaluate(v.reshape(-1, 3)), np.eye(4),
                             residual=lambda v: edges.residuals(v.reshape(-1, 3)))
     return nls.NlsProblem(3 * n, [block], fixed_cols=np.arange(3, dtype=np.int64),
                           retract=lambda v, h: v + h)
