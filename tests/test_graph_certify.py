@@ -227,8 +227,9 @@ def test_certificate_matrix_on_the_refinement_pattern_is_the_permuted_definition
         L = G[n + 2 * i : n + 2 * i + 2] @ X[:, n + 2 * i : n + 2 * i + 2]
         S[n + 2 * i : n + 2 * i + 2, n + 2 * i : n + 2 * i + 2] -= 0.5 * (L + L.T)
         dual += np.trace(L)
-    _, asm, _ = certify._refine(poses, ij, xyt, kappa, tau)
-    S_lo, tr_lam = certify._certificate_matrix(asm, x, ij, xyt, kappa, tau)
+    edges = certify._Edges(ij, xyt, kappa, tau)
+    _, asm, _ = certify._refine(poses, edges)
+    S_lo, tr_lam = certify._certificate_matrix(asm, x, edges)
     perm = np.ravel(np.column_stack([np.arange(n), n + 2 * np.arange(n), n + 2 * np.arange(n) + 1]))
     got = asm.matrix(asm.full(S_lo)).toarray()
     np.testing.assert_allclose(got, S[np.ix_(perm, perm)], rtol=0, atol=1e-12 * np.abs(S).max())

@@ -104,9 +104,9 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sesync_cost(poses_xyt, ij, xyt, kappa, tau) -> float:
-    """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``."""
-    r = _Edges(ij, xyt, kappa, tau).residuals(np.asarray(poses_xyt, float)).ravel()
-    return float(r @ r)
+    """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``
+    (:meth:`_Edges.cost`)."""
+    return _Edges(ij, xyt, kappa, tau).cost(np.asarray(poses_xyt, float))
 
 
 class _Terms(NamedTuple):
@@ -137,6 +137,7 @@ class _Edges:
 
     def __init__(self, ij, xyt, kappa, tau) -> None:
         self.i, self.j = ij[:, 0], ij[:, 1]
+        self.kappa = kappa  # (E,), for the data matrix of :func:`_certificate_matrix`
         self.sk, self.st = np.sqrt(2.0 * kappa), np.sqrt(tau)
         self.cd, self.sd = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
         self.tx, self.ty = xyt[:, 0].copy(), xyt[:, 1].copy()
@@ -164,6 +165,11 @@ class _Edges:
     def residuals(self, poses) -> np.ndarray:
         """``r (E, 4)`` at ``poses (n, 3)``."""
         return self.terms(poses).r
+
+    def cost(self, poses) -> float:
+        """``F = ‖r‖²`` at ``poses (n, 3)``."""
+        r = self.residuals(poses).ravel()
+        return float(r @ r)
 
     def evaluate(self, poses) -> tuple[np.ndarray, np.ndarray]:
         """``(r (E, 4), J (E, 4, 6))``, ``J`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``."""
@@ -262,17 +268,16 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     ``F = ‖r‖²`` (:class:`_Edges`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
     edge over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``), so every iteration reuses the engine's assembly pattern and
     the linear solver's ordering and symbolic analysis, computed once."""
-    return _refine(poses_xyt, ij, xyt, kappa, tau)[0]
+    return _refine(poses_xyt, _Edges(ij, xyt, kappa, tau))[0]
 
 
-def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
-    """:func:`refine_sesync`'s point, with its assembler and linear solver (whose sparsity pattern and
-    symbolic analysis the certificate matrix reuses, :func:`_certificate_matrix`). ``workspace``: an earlier
+def _refine(poses_xyt, edges: _Edges, workspace=None):
+    """:func:`refine_sesync`'s point for the ``edges``, with its assembler and linear solver (whose sparsity
+    pattern and symbolic analysis the certificate matrix reuses, :func:`_certificate_matrix`). ``workspace``: an earlier
     optimisation's ``(Assembler, linear solver)`` on the same graph (``NlsResult.workspace``), whose pattern
     and CHOLMOD analysis are reused when they hold F's (City10000: 45 ms of assembly set-up and AMD saved)."""
     x = np.array(poses_xyt, float, copy=True)
     n = x.shape[0]
-    edges = _Edges(ij, xyt, kappa, tau)
     problem = _sesync_problem(n, edges)
     params = nls.NlsParams(pose_chart="world")
     asm, lin = _workspace(problem, params, workspace)
@@ -428,9 +433,10 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     xyt = np.asarray(xyt, float).reshape(-1, 3)
     kappa, tau = isotropic_weights(info)
     n = int(np.asarray(poses_xyt).shape[0])
-    x, asm, lin = _refine(poses_xyt, ij, xyt, kappa, tau, workspace)
-    F = sesync_cost(x, ij, xyt, kappa, tau)
-    S_lo, dual = _certificate_matrix(asm, x, ij, xyt, kappa, tau)
+    edges = _Edges(ij, xyt, kappa, tau)
+    x, asm, lin = _refine(poses_xyt, edges, workspace)
+    F = edges.cost(x)
+    S_lo, dual = _certificate_matrix(asm, x, edges)
     S = _LowerSymmetric(asm.lower_matrix(S_lo))  # pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
     eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
     shifted = S_lo.copy()
@@ -445,19 +451,19 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     return Certificate(bool(certified), lam_min, eta, F, dual, gap, x)
 
 
-def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.ndarray, float]:
+def _certificate_matrix(asm: nls.Assembler, x, edges: _Edges) -> tuple[np.ndarray, float]:
     """``(S, tr Λ)``: the lower data of ``S = M − blkdiag(0, Λ_i)`` (module docstring) on the refinement's
     pattern ``asm`` — its columns ``3i, 3i+1, 3i+2`` are ``t_i, R_i e₁, R_i e₂`` (a permutation of
     :func:`data_matrix`'s), so ``M`` scatters like the refinement's ``H`` (edge ``e`` adds
     ``v vᵀ`` over ``[t_i, R_i, t_j, R_j]`` for its three columns ``v`` of ``A_e``, ``a_e``) — and the
-    multipliers ``Λ``."""
+    multipliers ``Λ``, at ``x (n, 3)`` for the refinement's ``edges`` (their measurements' cos/sin, √τ and t̃)."""
     n = x.shape[0]
-    c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
-    sk, st = np.sqrt(kappa), np.sqrt(tau)
+    c, s = edges.cd, edges.sd
+    sk, st = np.sqrt(edges.kappa), edges.st
     V = np.zeros((3, 6, c.size))  # (k, n, E): the assembler's layout, edges last
     V[0, 1], V[0, 2], V[0, 4] = -sk * c, -sk * s, sk  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
     V[1, 1], V[1, 2], V[1, 5] = sk * s, -sk * c, sk  # A_e e₂
-    V[2, 0], V[2, 1], V[2, 2], V[2, 3] = -st, -st * xyt[:, 0], -st * xyt[:, 1], st  # a_e
+    V[2, 0], V[2, 1], V[2, 2], V[2, 3] = -st, -st * edges.tx, -st * edges.ty, st  # a_e
     ia, ib = asm.pairs[0]
     vals = np.einsum("kae,kbe->abe", V, V)[ia, ib]
     if asm.twice[0] is not None:
