@@ -396,30 +396,6 @@ def _sesync_problem(n: int, edges: _Edges) -> nls.NlsProblem:
                           retract=lambda v, h: v + h)
 
 
-def data_matrix(n: int, ij, xyt, kappa, tau) -> sp.csc_matrix:
-    """``M (3n, 3n)`` of the module docstring, columns ``[t_1 … t_n | R_1 (2) … R_n (2)]``."""
-    i, j = ij[:, 0], ij[:, 1]
-    E = len(i)
-    c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
-    sk, st = np.sqrt(kappa), np.sqrt(tau)
-    Ri = n + 2 * i  # first column of R_i
-    Rj = n + 2 * j
-    rows, cols, vals = [], [], []
-    # A_e = E_Rj − E_Ri R̃ (two columns 2e, 2e+1): column m of R̃ is [c, s] (m=0) or [−s, c] (m=1)
-    for m, (r0, r1) in enumerate(((c, s), (-s, c))):
-        col = 3 * np.arange(E) + m
-        rows += [Rj + m, Ri, Ri + 1]
-        cols += [col, col, col]
-        vals += [sk, -sk * r0, -sk * r1]
-    # a_e = e_tj − e_ti − E_Ri t̃
-    col = 3 * np.arange(E) + 2
-    rows += [j, i, Ri, Ri + 1]
-    cols += [col, col, col, col]
-    vals += [st, -st, -st * xyt[:, 0], -st * xyt[:, 1]]
-    B = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * E))
-    return (B @ B.T).tocsc()
-
-
 def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     """Refine ``poses_xyt (n, 3)`` to a stationary point of F and test the dual certificate (module docstring).
 
@@ -454,7 +430,7 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
 def _certificate_matrix(asm: nls.Assembler, x, edges: _Edges) -> tuple[np.ndarray, float]:
     """``(S, tr Λ)``: the lower data of ``S = M − blkdiag(0, Λ_i)`` (module docstring) on the refinement's
     pattern ``asm`` — its columns ``3i, 3i+1, 3i+2`` are ``t_i, R_i e₁, R_i e₂`` (a permutation of
-    :func:`data_matrix`'s), so ``M`` scatters like the refinement's ``H`` (edge ``e`` adds
+    the module docstring's ``[t_1 … t_n | R_1 … R_n]``), so ``M`` scatters like the refinement's ``H`` (edge ``e`` adds
     ``v vᵀ`` over ``[t_i, R_i, t_j, R_j]`` for its three columns ``v`` of ``A_e``, ``a_e``) — and the
     multipliers ``Λ``, at ``x (n, 3)`` for the refinement's ``edges`` (their measurements' cos/sin, √τ and t̃)."""
     n = x.shape[0]
