@@ -124,7 +124,8 @@ class _Terms(NamedTuple):
 
 
 class _Edges:
-    """The edges' constant terms, and ``F``'s residuals, Jacobians and θ curvature from them.
+    """The edges' constant terms for ``ij (E, 2)``, ``xyt (E, 3)``, ``κ (E,)``, ``τ (E,)``, and ``F``'s residuals,
+    Jacobians, gradient, Gauss-Newton matrix and θ curvature from them and the :class:`_Terms` at a point.
 
     Residuals per edge ``[rot_x, rot_y, tr_x, tr_y]``:
 
@@ -211,7 +212,8 @@ class _Edges:
     #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
     VARYING_PAIRS = (2, 7, 11, 12, 13, 14)  # (x_i,θ_i) (y_i,θ_i) (θ_i,θ_i) (θ_i,x_j) (θ_i,y_j) (θ_i,θ_j)
 
-    def gauss_newton(self, poses, asm: nls.Assembler, t: _Terms | None = None):
+    def gauss_newton(self, poses, asm: nls.Assembler,
+                     t: _Terms | None = None) -> tuple[float, np.ndarray, np.ndarray] | None:
         """``(½F, JᵀJ lower data on asm's pattern, ∇(½F))`` at ``poses``, pose 0 held, in closed form: with
         :class:`_Terms`' ``p``, ``q`` (``J[tr, θ_i] = √τ [p, −q]``) the pose-dependent entries are
         ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``, ``(θ_i,x_j) = τp``,
@@ -272,10 +274,11 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
 
 
 def _refine(poses_xyt, edges: _Edges, workspace=None):
-    """:func:`refine_sesync`'s point for the ``edges``, with its assembler and linear solver (whose sparsity
-    pattern and symbolic analysis the certificate matrix reuses, :func:`_certificate_matrix`). ``workspace``: an earlier
-    optimisation's ``(Assembler, linear solver)`` on the same graph (``NlsResult.workspace``), whose pattern
-    and CHOLMOD analysis are reused when they hold F's (City10000: 45 ms of assembly set-up and AMD saved)."""
+    """:func:`refine_sesync`'s point ``(n, 3)`` for the :class:`_Edges` ``edges``, with its assembler and linear
+    solver (whose sparsity pattern and symbolic analysis the certificate matrix reuses,
+    :func:`_certificate_matrix`). ``workspace``: an earlier optimisation's ``(Assembler, linear solver)`` on the
+    same graph (``NlsResult.workspace``), whose pattern and CHOLMOD analysis are reused when they hold F's
+    (City10000: 45 ms of assembly set-up and AMD saved)."""
     x = np.array(poses_xyt, float, copy=True)
     n = x.shape[0]
     problem = _sesync_problem(n, edges)
