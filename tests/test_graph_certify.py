@@ -26,17 +26,61 @@ def _hexagon(noise: float, seed: int = 0):
     return poses, ij, xyt, info
 
 
+def _rot(a: float) -> np.ndarray:
+    return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+
+
 def _F_by_definition(poses, ij, xyt, kappa, tau) -> float:
     """Σ κ‖R_j − R_i R̃‖²_F + τ‖t_j − t_i − R_i t̃‖², one edge at a time with 2×2 matrices."""
-    def rot(a):
-        return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-
     F = 0.0
     for (i, j), m, k, t in zip(ij, xyt, kappa, tau):
-        Ri, Rj = rot(poses[i, 2]), rot(poses[j, 2])
-        F += k * np.sum((Rj - Ri @ rot(m[2])) ** 2)
+        Ri, Rj = _rot(poses[i, 2]), _rot(poses[j, 2])
+        F += k * np.sum((Rj - Ri @ _rot(m[2])) ** 2)
         F += t * np.sum((poses[j, :2] - poses[i, :2] - Ri @ m[:2]) ** 2)
     return float(F)
+
+
+def _X_by_definition(poses) -> np.ndarray:
+    """X = [t_1 … t_n | R_1 … R_n] (2, 3n)."""
+    n = len(poses)
+    X = np.zeros((2, 3 * n))
+    X[:, :n] = poses[:, :2].T
+    for i, a in enumerate(poses[:, 2]):
+        X[:, n + 2 * i : n + 2 * i + 2] = _rot(a)
+    return X
+
+
+def _data_matrix_by_definition(n: int, ij, xyt, kappa, tau) -> np.ndarray:
+    """Dense M (3n, 3n) = Σ_e κ_e A_e A_eᵀ + τ_e a_e a_eᵀ, columns [t_1 … t_n | R_1 e₁, R_1 e₂, …], one rank-one
+    term at a time (A_e e_m = e_{R_j e_m} − E_{R_i} R̃ e_m, a_e = e_{t_j} − e_{t_i} − E_{R_i} t̃)."""
+    M = np.zeros((3 * n, 3 * n))
+    for (i, j), m, k, t in zip(ij, xyt, kappa, tau):
+        for col in range(2):
+            v = np.zeros(3 * n)
+            v[n + 2 * j + col] += 1.0
+            v[n + 2 * i : n + 2 * i + 2] -= _rot(m[2])[:, col]
+            M += k * np.outer(v, v)
+        v = np.zeros(3 * n)
+        v[j] += 1.0
+        v[i] -= 1.0
+        v[n + 2 * i : n + 2 * i + 2] -= m[:2]
+        M += t * np.outer(v, v)
+    return M
+
+
+def _certificate_by_definition(poses, ij, xyt, kappa, tau) -> tuple[np.ndarray, float]:
+    """Dense (S, tr Λ) with S = M − blkdiag(0, Λ_1, …, Λ_n), Λ_i = Sym(G_i R_i), G = M Xᵀ (module docstring of
+    the certificate), columns as :func:`_data_matrix_by_definition`."""
+    n = len(poses)
+    M = _data_matrix_by_definition(n, ij, xyt, kappa, tau)
+    X = _X_by_definition(poses)
+    G = M @ X.T
+    S, dual = M.copy(), 0.0
+    for i in range(n):
+        L = G[n + 2 * i : n + 2 * i + 2] @ X[:, n + 2 * i : n + 2 * i + 2]
+        S[n + 2 * i : n + 2 * i + 2, n + 2 * i : n + 2 * i + 2] -= 0.5 * (L + L.T)
+        dual += np.trace(L)
+    return S, float(dual)
 
 
 def test_isotropic_weights_by_hand():
@@ -48,17 +92,16 @@ def test_isotropic_weights_by_hand():
     assert tau[0] == pytest.approx(14.0 / 6.0)
 
 
-def test_objective_and_data_matrix_agree_with_the_definition():
+def test_objective_agrees_with_the_definition():
+    """sesync_cost against F term by term; and the reference data matrix the certificate tests use against the
+    same F (F = tr(X M Xᵀ), module docstring of the certificate)."""
     poses, ij, xyt, info = _hexagon(0.2)
     kappa, tau = certify.isotropic_weights(info)
     x = poses + np.random.default_rng(1).normal(scale=0.3, size=poses.shape)
     ref = _F_by_definition(x, ij, xyt, kappa, tau)
     assert certify.sesync_cost(x, ij, xyt, kappa, tau) == pytest.approx(ref, rel=1e-12)
-    M = certify.data_matrix(6, ij, xyt, kappa, tau).toarray()
-    X = np.zeros((2, 18))
-    X[:, :6] = x[:, :2].T
-    for i, a in enumerate(x[:, 2]):
-        X[:, 6 + 2 * i : 8 + 2 * i] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    M = _data_matrix_by_definition(6, ij, xyt, kappa, tau)
+    X = _X_by_definition(x)
     assert np.trace(X @ M @ X.T) == pytest.approx(ref, rel=1e-12)
 
 
@@ -144,20 +187,8 @@ def test_certifies_the_global_minimum_and_refuses_the_local_one():
     assert bad.sesync_cost > f_global + 1.0  # a different, worse stationary point
     assert not bad.certified and np.isnan(bad.suboptimality_bound)
     assert bad.lambda_min < -bad.eta
-    # λ_min against the dense spectrum of the certificate matrix rebuilt from the definition
-    M = certify.data_matrix(6, ij, xyt, kappa, tau).toarray()
-    x = bad.poses_xyt
-    X = np.zeros((2, 18))
-    X[:, :6] = x[:, :2].T
-    S = M.copy()
-    for i, a in enumerate(x[:, 2]):
-        R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-        X[:, 6 + 2 * i : 8 + 2 * i] = R
-    G = M @ X.T
-    for i in range(6):
-        R = X[:, 6 + 2 * i : 8 + 2 * i]
-        L = G[6 + 2 * i : 8 + 2 * i] @ R
-        S[6 + 2 * i : 8 + 2 * i, 6 + 2 * i : 8 + 2 * i] -= 0.5 * (L + L.T)
+    # λ_min against the dense spectrum of the certificate matrix built from the definition
+    S, _ = _certificate_by_definition(bad.poses_xyt, ij, xyt, kappa, tau)
     assert bad.lambda_min == pytest.approx(np.linalg.eigvalsh(S)[0], rel=1e-8)
 
 
@@ -203,32 +234,10 @@ def test_certificate_matrix_on_the_refinement_pattern_is_the_permuted_definition
     kappa, tau = certify.isotropic_weights(info)
     x = poses + np.random.default_rng(4).normal(scale=0.1, size=poses.shape)
     n = 6
-    M = np.zeros((3 * n, 3 * n))  # columns [t_1 … t_n | R_1 e₁, R_1 e₂, …], one rank-one term at a time
-    for (i, j), m, k, t in zip(ij, xyt, kappa, tau):
-        c, s = np.cos(m[2]), np.sin(m[2])
-        for col in ([c, s], [-s, c]):  # A_e e_m = e_{R_j e_m} − E_{R_i} (R̃ e_m)
-            v = np.zeros(3 * n)
-            v[n + 2 * j + (0 if col == [c, s] else 1)] += 1.0
-            v[n + 2 * i : n + 2 * i + 2] -= col
-            M += k * np.outer(v, v)
-        v = np.zeros(3 * n)
-        v[j] += 1.0
-        v[i] -= 1.0
-        v[n + 2 * i : n + 2 * i + 2] -= m[:2]
-        M += t * np.outer(v, v)
-    X = np.zeros((2, 3 * n))
-    X[:, :n] = x[:, :2].T
-    S = M.copy()
-    dual = 0.0
-    for i, a in enumerate(x[:, 2]):
-        X[:, n + 2 * i : n + 2 * i + 2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
-    G = M @ X.T
-    for i in range(n):
-        L = G[n + 2 * i : n + 2 * i + 2] @ X[:, n + 2 * i : n + 2 * i + 2]
-        S[n + 2 * i : n + 2 * i + 2, n + 2 * i : n + 2 * i + 2] -= 0.5 * (L + L.T)
-        dual += np.trace(L)
-    _, asm, _ = certify._refine(poses, ij, xyt, kappa, tau)
-    S_lo, tr_lam = certify._certificate_matrix(asm, x, ij, xyt, kappa, tau)
+    S, dual = _certificate_by_definition(x, ij, xyt, kappa, tau)
+    edges = certify._Edges(ij, xyt, kappa, tau)
+    _, asm, _ = certify._refine(poses, edges)
+    S_lo, tr_lam = certify._certificate_matrix(asm, x, edges)
     perm = np.ravel(np.column_stack([np.arange(n), n + 2 * np.arange(n), n + 2 * np.arange(n) + 1]))
     got = asm.matrix(asm.full(S_lo)).toarray()
     np.testing.assert_allclose(got, S[np.ix_(perm, perm)], rtol=0, atol=1e-12 * np.abs(S).max())

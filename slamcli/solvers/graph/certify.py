@@ -28,6 +28,7 @@ from a Lanczos run (``scipy.sparse.linalg.eigsh``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -103,13 +104,28 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sesync_cost(poses_xyt, ij, xyt, kappa, tau) -> float:
-    """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``."""
-    r = _Edges(ij, xyt, kappa, tau).residuals(np.asarray(poses_xyt, float)).ravel()
-    return float(r @ r)
+    """``F(t, R)`` of the module docstring at ``poses_xyt (n, 3)`` for edges ``ij (E, 2)``, ``xyt (E, 3)``
+    (:meth:`_Edges.cost`)."""
+    return _Edges(ij, xyt, kappa, tau).cost(np.asarray(poses_xyt, float))
+
+
+class _Terms(NamedTuple):
+    """The edges' pose-dependent terms at one point, each ``(E,)`` (``r (E, 4)``): computed once by
+    :meth:`_Edges.terms` and shared by the residuals, Jacobians, gradient, Gauss-Newton matrix and θ curvature
+    there. ``R(θ_i) t̃ = [q, p]`` and ``dR/dθ(θ_i) t̃ = [−p, q]``."""
+
+    cj: np.ndarray  # cos θ_j
+    sj: np.ndarray  # sin θ_j
+    ca: np.ndarray  # cos(θ_i + Δθ)
+    sa: np.ndarray  # sin(θ_i + Δθ)
+    p: np.ndarray  # sin θ_i t̃_x + cos θ_i t̃_y
+    q: np.ndarray  # cos θ_i t̃_x − sin θ_i t̃_y
+    r: np.ndarray  # the residuals (E, 4) of :class:`_Edges`
 
 
 class _Edges:
-    """The edges' constant terms, and ``F``'s residuals, Jacobians and θ curvature from them.
+    """The edges' constant terms for ``ij (E, 2)``, ``xyt (E, 3)``, ``κ (E,)``, ``τ (E,)``, and ``F``'s residuals,
+    Jacobians, gradient, Gauss-Newton matrix and θ curvature from them and the :class:`_Terms` at a point.
 
     Residuals per edge ``[rot_x, rot_y, tr_x, tr_y]``:
 
@@ -122,60 +138,68 @@ class _Edges:
 
     def __init__(self, ij, xyt, kappa, tau) -> None:
         self.i, self.j = ij[:, 0], ij[:, 1]
+        self.kappa = kappa  # (E,), for the data matrix of :func:`_certificate_matrix`
         self.sk, self.st = np.sqrt(2.0 * kappa), np.sqrt(tau)
         self.cd, self.sd = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
         self.tx, self.ty = xyt[:, 0].copy(), xyt[:, 1].copy()
+        #: state columns ``(E, 6)`` of ``[x_i, y_i, θ_i, x_j, y_j, θ_j]`` (the block of :func:`_sesync_problem`), and
+        #: the same column-major (the six gradient weights of :meth:`cost_gradient`, each over all edges)
+        self.cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
+        self._grad_cols = self.cols.T.ravel()
+        self._gn_of = None  # the assembler :meth:`gauss_newton`'s constant part was scattered for
 
-    def trig(self, poses) -> tuple:
-        """``(cos θ_j, sin θ_j, cos(θ_i + Δθ), sin(θ_i + Δθ), cos θ_i, sin θ_i)`` per edge."""
+    def terms(self, poses) -> _Terms:
+        """The :class:`_Terms` at ``poses (n, 3)``."""
         cp, sp_ = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         c, s = cp[self.i], sp_[self.i]
-        return cp[self.j], sp_[self.j], c * self.cd - s * self.sd, s * self.cd + c * self.sd, c, s
-
-    def residuals(self, poses, trig=None) -> np.ndarray:
-        """``r (E, 4)`` at ``poses (n, 3)``."""
-        cj, sj, ca, sa, c, s = self.trig(poses) if trig is None else trig
+        cj, sj = cp[self.j], sp_[self.j]
+        ca, sa = c * self.cd - s * self.sd, s * self.cd + c * self.sd
+        p, q = s * self.tx + c * self.ty, c * self.tx - s * self.ty
         pi, pj = poses[self.i], poses[self.j]
         r = np.empty((self.i.size, 4))
         r[:, 0] = self.sk * (cj - ca)
         r[:, 1] = self.sk * (sj - sa)
-        r[:, 2] = self.st * (pj[:, 0] - pi[:, 0] - (c * self.tx - s * self.ty))
-        r[:, 3] = self.st * (pj[:, 1] - pi[:, 1] - (s * self.tx + c * self.ty))
-        return r
+        r[:, 2] = self.st * (pj[:, 0] - pi[:, 0] - q)
+        r[:, 3] = self.st * (pj[:, 1] - pi[:, 1] - p)
+        return _Terms(cj, sj, ca, sa, p, q, r)
+
+    def residuals(self, poses) -> np.ndarray:
+        """``r (E, 4)`` at ``poses (n, 3)``."""
+        return self.terms(poses).r
+
+    def cost(self, poses) -> float:
+        """``F = ‖r‖²`` at ``poses (n, 3)``."""
+        r = self.residuals(poses).ravel()
+        return float(r @ r)
 
     def evaluate(self, poses) -> tuple[np.ndarray, np.ndarray]:
         """``(r (E, 4), J (E, 4, 6))``, ``J`` over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``."""
-        trig = self.trig(poses)
-        cj, sj, ca, sa, c, s = trig
+        t = self.terms(poses)
         sk, st = self.sk, self.st
         J = np.zeros((self.i.size, 4, 6))
-        J[:, 0, 5], J[:, 1, 5] = -sk * sj, sk * cj
-        J[:, 0, 2], J[:, 1, 2] = sk * sa, -sk * ca
+        J[:, 0, 5], J[:, 1, 5] = -sk * t.sj, sk * t.cj
+        J[:, 0, 2], J[:, 1, 2] = sk * t.sa, -sk * t.ca
         for k in (0, 1):
             J[:, 2 + k, 3 + k] = st
             J[:, 2 + k, k] = -st
-        J[:, 2, 2] = st * (s * self.tx + c * self.ty)  # −√τ dR/dθ t̃, dR/dθ t̃ = [−s tx − c ty, c tx − s ty]
-        J[:, 3, 2] = -st * (c * self.tx - s * self.ty)
-        return self.residuals(poses, trig), J
+        J[:, 2, 2] = st * t.p  # −√τ dR/dθ t̃
+        J[:, 3, 2] = -st * t.q
+        return t.r, J
 
-    def cost_gradient(self, poses, trig=None, r=None) -> tuple[float, np.ndarray]:
+    def cost_gradient(self, poses, t: _Terms | None = None) -> tuple[float, np.ndarray]:
         """``(½F, ∇(½F) (3n,))`` at ``poses (n, 3)`` from the residuals and the closed-form rows of
-        :meth:`evaluate`'s Jacobian (``Jᵀr`` per edge without building ``J``; one scatter for all six columns)."""
-        trig = self.trig(poses) if trig is None else trig
-        cj, sj, ca, sa, c, s = trig
-        r = self.residuals(poses, trig) if r is None else r
-        if getattr(self, "_grad_cols", None) is None:
-            cols = np.concatenate([3 * self.i[:, None] + np.arange(3), 3 * self.j[:, None] + np.arange(3)], axis=1)
-            self._grad_cols = cols.T.ravel()  # column-major: the six weights below, each over all edges
+        :meth:`evaluate`'s Jacobian (``Jᵀr`` per edge without building ``J``; one scatter for all six columns).
+        ``t``: the :meth:`terms` at ``poses`` when the caller has them."""
+        t = self.terms(poses) if t is None else t
+        r = t.r
         E = self.i.size
         w = np.empty((6, E))
         np.multiply(self.st, r[:, 2], out=w[3])
         np.multiply(self.st, r[:, 3], out=w[4])
         np.negative(w[3], out=w[0])
         np.negative(w[4], out=w[1])
-        w[2] = self.sk * (sa * r[:, 0] - ca * r[:, 1]) + self.st * (r[:, 2] * (s * self.tx + c * self.ty)
-                                                                     - r[:, 3] * (c * self.tx - s * self.ty))
-        w[5] = self.sk * (cj * r[:, 1] - sj * r[:, 0])
+        w[2] = self.sk * (t.sa * r[:, 0] - t.ca * r[:, 1]) + self.st * (r[:, 2] * t.p - r[:, 3] * t.q)
+        w[5] = self.sk * (t.cj * r[:, 1] - t.sj * r[:, 0])
         g = np.bincount(self._grad_cols, weights=w.ravel(), minlength=3 * poses.shape[0])
         return self.half_cost(r), g
 
@@ -188,19 +212,20 @@ class _Edges:
     #: that depend on the poses — every one involves ``θ_i``; the others are constants of ``κ``, ``τ``
     VARYING_PAIRS = (2, 7, 11, 12, 13, 14)  # (x_i,θ_i) (y_i,θ_i) (θ_i,θ_i) (θ_i,x_j) (θ_i,y_j) (θ_i,θ_j)
 
-    def gauss_newton(self, poses, asm: nls.Assembler, terms=None) -> tuple[float, np.ndarray, np.ndarray] | None:
+    def gauss_newton(self, poses, asm: nls.Assembler,
+                     t: _Terms | None = None) -> tuple[float, np.ndarray, np.ndarray] | None:
         """``(½F, JᵀJ lower data on asm's pattern, ∇(½F))`` at ``poses``, pose 0 held, in closed form: with
-        ``p = sin θ_i t̃_x + cos θ_i t̃_y`` and ``q = cos θ_i t̃_x − sin θ_i t̃_y`` (so ``J[tr, θ_i] = √τ [p, −q]``)
-        the pose-dependent entries are ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``,
-        ``(θ_i,x_j) = τp``, ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others
-        (``±τ``, ``2κ``, 0) are scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
+        :class:`_Terms`' ``p``, ``q`` (``J[tr, θ_i] = √τ [p, −q]``) the pose-dependent entries are
+        ``(x_i,θ_i) = −τp``, ``(y_i,θ_i) = τq``, ``(θ_i,θ_i) = 2κ + τ(p² + q²)``, ``(θ_i,x_j) = τp``,
+        ``(θ_i,y_j) = −τq``, ``(θ_i,θ_j) = −2κ cos(θ_j − θ_i − Δθ)``; the others (``±τ``, ``2κ``, 0) are
+        scattered once per assembler. What :meth:`nls.Assembler.linearize_lower` returns for
         :func:`_sesync_problem`, without the ``(E, 4, 6)`` Jacobian and its 21 products per edge; None when
-        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path. ``terms``:
-        ``(trig, r)`` at ``poses`` (:meth:`trig`, :meth:`residuals`) when the caller has them."""
+        ``asm`` is not that problem's single-block layout (an edge on one pose), for the generic path. ``t``:
+        the :meth:`terms` at ``poses`` when the caller has them."""
         E = self.i.size
         if len(asm.lo_scatter) != 1 or asm.twice[0] is not None or asm.lo_scatter[0].size != 21 * E:
             return None
-        if getattr(self, "_gn_of", None) is not asm:
+        if self._gn_of is not asm:
             pos = asm.lo_scatter[0].reshape(21, E)
             tau, k2 = self.st * self.st, self.sk * self.sk  # τ, 2κ
             const = {0: tau, 3: -tau, 6: tau, 9: -tau, 15: tau, 18: tau, 20: k2}
@@ -209,37 +234,29 @@ class _Edges:
                                          minlength=asm.lo_nnz)
             self._gn_pos = pos[list(self.VARYING_PAIRS)].ravel()
             self._gn_of = asm
-        trig, r = self.terms(poses) if terms is None else terms
-        cj, sj, ca, sa, c, s = trig
-        cost, g = self.cost_gradient(poses, trig, r)
+        t = self.terms(poses) if t is None else t
+        cost, g = self.cost_gradient(poses, t)
         tau = self.st * self.st
-        tp, tq = tau * (s * self.tx + c * self.ty), tau * (c * self.tx - s * self.ty)
+        tp, tq = tau * t.p, tau * t.q
         w = np.empty((6, E))
         np.negative(tp, out=w[0])
         w[1] = tq
-        w[2] = self.sk * self.sk + (tp * (s * self.tx + c * self.ty) + tq * (c * self.tx - s * self.ty))
+        w[2] = self.sk * self.sk + (tp * t.p + tq * t.q)
         w[3] = tp
         np.negative(tq, out=w[4])
-        w[5] = -(self.sk * self.sk) * (cj * ca + sj * sa)
+        w[5] = -(self.sk * self.sk) * (t.cj * t.ca + t.sj * t.sa)
         data = self._gn_const + np.bincount(self._gn_pos, weights=w.ravel(), minlength=asm.lo_nnz)
         asm.hold_fixed(data, g)
         return cost, data, g
 
-    def terms(self, poses) -> tuple:
-        """``(trig, r)``: :meth:`trig` and :meth:`residuals` at ``poses``, which the linearisation and the θ
-        curvature at one point share."""
-        trig = self.trig(poses)
-        return trig, self.residuals(poses, trig)
-
-    def theta_curvature(self, poses, terms=None) -> np.ndarray:
+    def theta_curvature(self, poses, t: _Terms | None = None) -> np.ndarray:
         """``Σ_e r_e ∂²r_e/∂θ²`` per pose ``(n,)``: what ``½F``'s exact Hessian adds to ``JᵀJ``. Every residual
         depends on a pose's θ alone through its rotation, so the second-order term lies on the θ diagonal:
         ``∂²r_rot/∂θ_j² = −√(2κ) u_j``, ``∂²r_rot/∂θ_i² = √(2κ) u(θ_i + Δθ)``, ``∂²r_tr/∂θ_i² = √τ R(θ_i) t̃``."""
-        trig, r = self.terms(poses) if terms is None else terms
-        cj, sj, ca, sa, c, s = trig
-        on_j = -self.sk * (r[:, 0] * cj + r[:, 1] * sj)
-        on_i = self.sk * (r[:, 0] * ca + r[:, 1] * sa) + self.st * (r[:, 2] * (c * self.tx - s * self.ty)
-                                                                     + r[:, 3] * (s * self.tx + c * self.ty))
+        t = self.terms(poses) if t is None else t
+        r = t.r
+        on_j = -self.sk * (r[:, 0] * t.cj + r[:, 1] * t.sj)
+        on_i = self.sk * (r[:, 0] * t.ca + r[:, 1] * t.sa) + self.st * (r[:, 2] * t.q + r[:, 3] * t.p)
         n = poses.shape[0]
         return np.bincount(self.j, weights=on_j, minlength=n) + np.bincount(self.i, weights=on_i, minlength=n)
 
@@ -253,28 +270,29 @@ def refine_sesync(poses_xyt, ij, xyt, kappa, tau) -> np.ndarray:
     ``F = ‖r‖²`` (:class:`_Edges`) is posed as an :class:`nls.NlsProblem` (one block of 4 residuals per
     edge over ``[x_i, y_i, θ_i, x_j, y_j, θ_j]``), so every iteration reuses the engine's assembly pattern and
     the linear solver's ordering and symbolic analysis, computed once."""
-    return _refine(poses_xyt, ij, xyt, kappa, tau)[0]
+    return _refine(poses_xyt, _Edges(ij, xyt, kappa, tau))[0]
 
 
-def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
-    """:func:`refine_sesync`'s point, with its assembler and linear solver (whose sparsity pattern and
-    symbolic analysis the certificate matrix reuses, :func:`_certificate_matrix`). ``workspace``: an earlier
-    optimisation's ``(Assembler, linear solver)`` on the same graph (``NlsResult.workspace``), whose pattern
-    and CHOLMOD analysis are reused when they hold F's (City10000: 45 ms of assembly set-up and AMD saved)."""
+def _refine(poses_xyt, edges: _Edges, workspace=None):
+    """:func:`refine_sesync`'s point ``(n, 3)`` for the :class:`_Edges` ``edges``, with its assembler and linear
+    solver (whose sparsity pattern and symbolic analysis the certificate matrix reuses,
+    :func:`_certificate_matrix`). ``workspace``: an earlier optimisation's ``(Assembler, linear solver)`` on the
+    same graph (``NlsResult.workspace``), whose pattern and CHOLMOD analysis are reused when they hold F's
+    (City10000: 45 ms of assembly set-up and AMD saved)."""
     x = np.array(poses_xyt, float, copy=True)
     n = x.shape[0]
-    edges = _Edges(ij, xyt, kappa, tau)
     problem = _sesync_problem(n, edges)
     params = nls.NlsParams(pose_chart="world")
     asm, lin = _workspace(problem, params, workspace)
     flat = x.reshape(-1)
     theta_diag = asm.lo_diag_pos[3 * np.arange(1, n) + 2]  # pose 0 is held (identity rows)
-    cost, lo, g, terms = _linearize(edges, asm, flat, params)
+    terms = edges.terms(x)  # always the edges' terms at flat: every evaluation there shares them
+    cost, lo, g = _linearize(edges, asm, flat, params, terms)
     near = False  # the last step lowered F by < FROZEN_REL: the previous factorisation is good enough
     stale = False  # lo is not H at flat (after simplified-Newton steps, which need the gradient only)
     for _ in range(REFINE_MAX_ITERS):
         if near:  # simplified Newton with the last factorisation: no new one for the converging last steps
-            xn, cn, gn = _frozen_step(edges, lin, flat, g, cost, NEWTON_SLACK)
+            xn, cn, gn, tn = _frozen_step(edges, lin, flat, g, cost, NEWTON_SLACK)
             if xn is not None:
                 # its convergence is linear: stop on a step below F's rounding that also moved x by ≤ FROZEN_STEP_TOL
                 step = float(np.max(np.abs(xn - flat), initial=0.0))
@@ -282,10 +300,10 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
                 flat = xn
                 if done:
                     break
-                cost, g, stale = cn, gn, True
+                cost, g, terms, stale = cn, gn, tn, True
                 continue
         if stale:
-            cost, lo, g, terms = _linearize(edges, asm, flat, params)
+            cost, lo, g = _linearize(edges, asm, flat, params, terms)
             stale = False
         newton = lo.copy()
         newton[theta_diag] += edges.theta_curvature(flat.reshape(n, 3), terms)[1:]
@@ -298,26 +316,24 @@ def _refine(poses_xyt, ij, xyt, kappa, tau, workspace=None):
             break
         done = cost - cn <= REFINE_REL_TOL * cost
         near = cost - cn <= FROZEN_REL * cost
-        flat = xn
+        flat, terms = xn, tn
         if done:
             break
         if near:  # the next step reuses this factorisation: it needs the gradient only, not H
-            cost, g = _cost_gradient(edges, flat, tn)
+            cost, g = _cost_gradient(edges, flat, terms)
             stale = True
         else:
-            cost, lo, g, terms = _linearize(edges, asm, flat, params, tn)
+            cost, lo, g = _linearize(edges, asm, flat, params, terms)
     x = flat.reshape(n, 3).copy()
     x[:, 2] = wrap_angle(x[:, 2])
     return x, asm, lin
 
 
-def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams, terms=None):
-    """``(½F, JᵀJ lower data, ∇(½F), terms)`` at ``flat``: closed form (:meth:`_Edges.gauss_newton`), else the
-    engine's; ``terms``: the edges' :meth:`_Edges.terms` there (given, or computed), for the θ curvature at the
-    same point."""
-    terms = edges.terms(flat.reshape(-1, 3)) if terms is None else terms
+def _linearize(edges: _Edges, asm: nls.Assembler, flat: np.ndarray, params: nls.NlsParams, terms: _Terms):
+    """``(½F, JᵀJ lower data, ∇(½F))`` at ``flat``, whose :meth:`_Edges.terms` are ``terms``: closed form
+    (:meth:`_Edges.gauss_newton`), else the engine's."""
     out = edges.gauss_newton(flat.reshape(-1, 3), asm, terms)
-    return (*(out if out is not None else asm.linearize_lower(flat, params)), terms)
+    return out if out is not None else asm.linearize_lower(flat, params)
 
 
 def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
@@ -330,24 +346,26 @@ def _workspace(problem: nls.NlsProblem, params: nls.NlsParams, workspace):
     return asm, lin
 
 
-def _cost_gradient(edges: _Edges, flat: np.ndarray, terms=None) -> tuple[float, np.ndarray]:
-    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat`` (:meth:`_Edges.cost_gradient`: the cost and gradient
-    :meth:`nls.Assembler.linearize_lower` returns for :func:`_sesync_problem`, without assembling ``H``),
-    pose 0 held."""
-    cost, g = edges.cost_gradient(flat.reshape(-1, 3), *(terms or ()))
+def _cost_gradient(edges: _Edges, flat: np.ndarray, terms: _Terms) -> tuple[float, np.ndarray]:
+    """``(½F, ∇(½F) = Σ_e J_eᵀ r_e)`` at ``flat``, whose :meth:`_Edges.terms` are ``terms``
+    (:meth:`_Edges.cost_gradient`: the cost and gradient :meth:`nls.Assembler.linearize_lower` returns for
+    :func:`_sesync_problem`, without assembling ``H``), pose 0 held."""
+    cost, g = edges.cost_gradient(flat.reshape(-1, 3), terms)
     g[:3] = 0.0
     return cost, g
 
 
 def _frozen_step(edges, lin, flat, g, cost, slack: float):
-    """``(x, cost, gradient)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier iterate's
-    ``H``) when it does not raise the cost by more than ``slack·cost``, else ``(None, None, None)``."""
+    """``(x, cost, gradient, terms)`` after ``−H⁻¹g`` with the factorisation ``lin`` holds (an earlier
+    iterate's ``H``) when it does not raise the cost by more than ``slack·cost``, else four Nones; ``terms``:
+    the edges' :meth:`_Edges.terms` at ``x``."""
     h = lin.solve(-g)
     if h is None:
-        return None, None, None
+        return None, None, None, None
     xn = flat + h
-    cn, gn = _cost_gradient(edges, xn)
-    return (xn, cn, gn) if cn <= cost + slack * abs(cost) else (None, None, None)
+    tn = edges.terms(xn.reshape(-1, 3))
+    cn, gn = _cost_gradient(edges, xn, tn)
+    return (xn, cn, gn, tn) if cn <= cost + slack * abs(cost) else (None, None, None, None)
 
 
 def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: float = 0.0):
@@ -363,7 +381,7 @@ def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: 
     while alpha > 1e-4:
         xn = flat + alpha * h
         terms = edges.terms(xn.reshape(-1, 3))
-        cn = _Edges.half_cost(terms[1])
+        cn = _Edges.half_cost(terms.r)
         if cn <= cost + slack * abs(cost):
             return xn, cn, terms
         if not halving:
@@ -375,36 +393,10 @@ def _try_step(edges: _Edges, asm, lin, flat, lo, g, cost, halving: bool, slack: 
 def _sesync_problem(n: int, edges: _Edges) -> nls.NlsProblem:
     """``½F`` as a least-squares problem over ``[x, y, θ]`` of ``n`` poses, pose 0 fixed (residuals and
     Jacobians of :class:`_Edges`, per edge)."""
-    i, j = edges.i, edges.j
-    cols = np.concatenate([3 * i[:, None] + np.arange(3), 3 * j[:, None] + np.arange(3)], axis=1)
-    block = nls.FactorBlock("sesync", cols, lambda v: edges.evaluate(v.reshape(-1, 3)), np.eye(4),
+    block = nls.FactorBlock("sesync", edges.cols, lambda v: edges.evaluate(v.reshape(-1, 3)), np.eye(4),
                             residual=lambda v: edges.residuals(v.reshape(-1, 3)))
     return nls.NlsProblem(3 * n, [block], fixed_cols=np.arange(3, dtype=np.int64),
                           retract=lambda v, h: v + h)
-
-
-def data_matrix(n: int, ij, xyt, kappa, tau) -> sp.csc_matrix:
-    """``M (3n, 3n)`` of the module docstring, columns ``[t_1 … t_n | R_1 (2) … R_n (2)]``."""
-    i, j = ij[:, 0], ij[:, 1]
-    E = len(i)
-    c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
-    sk, st = np.sqrt(kappa), np.sqrt(tau)
-    Ri = n + 2 * i  # first column of R_i
-    Rj = n + 2 * j
-    rows, cols, vals = [], [], []
-    # A_e = E_Rj − E_Ri R̃ (two columns 2e, 2e+1): column m of R̃ is [c, s] (m=0) or [−s, c] (m=1)
-    for m, (r0, r1) in enumerate(((c, s), (-s, c))):
-        col = 3 * np.arange(E) + m
-        rows += [Rj + m, Ri, Ri + 1]
-        cols += [col, col, col]
-        vals += [sk, -sk * r0, -sk * r1]
-    # a_e = e_tj − e_ti − E_Ri t̃
-    col = 3 * np.arange(E) + 2
-    rows += [j, i, Ri, Ri + 1]
-    cols += [col, col, col, col]
-    vals += [st, -st, -st * xyt[:, 0], -st * xyt[:, 1]]
-    B = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * E))
-    return (B @ B.T).tocsc()
 
 
 def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
@@ -420,9 +412,10 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     xyt = np.asarray(xyt, float).reshape(-1, 3)
     kappa, tau = isotropic_weights(info)
     n = int(np.asarray(poses_xyt).shape[0])
-    x, asm, lin = _refine(poses_xyt, ij, xyt, kappa, tau, workspace)
-    F = sesync_cost(x, ij, xyt, kappa, tau)
-    S_lo, dual = _certificate_matrix(asm, x, ij, xyt, kappa, tau)
+    edges = _Edges(ij, xyt, kappa, tau)
+    x, asm, lin = _refine(poses_xyt, edges, workspace)
+    F = edges.cost(x)
+    S_lo, dual = _certificate_matrix(asm, x, edges)
     S = _LowerSymmetric(asm.lower_matrix(S_lo))  # pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
     eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
     shifted = S_lo.copy()
@@ -437,19 +430,19 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     return Certificate(bool(certified), lam_min, eta, F, dual, gap, x)
 
 
-def _certificate_matrix(asm: nls.Assembler, x, ij, xyt, kappa, tau) -> tuple[np.ndarray, float]:
+def _certificate_matrix(asm: nls.Assembler, x, edges: _Edges) -> tuple[np.ndarray, float]:
     """``(S, tr Λ)``: the lower data of ``S = M − blkdiag(0, Λ_i)`` (module docstring) on the refinement's
     pattern ``asm`` — its columns ``3i, 3i+1, 3i+2`` are ``t_i, R_i e₁, R_i e₂`` (a permutation of
-    :func:`data_matrix`'s), so ``M`` scatters like the refinement's ``H`` (edge ``e`` adds
+    the module docstring's ``[t_1 … t_n | R_1 … R_n]``), so ``M`` scatters like the refinement's ``H`` (edge ``e`` adds
     ``v vᵀ`` over ``[t_i, R_i, t_j, R_j]`` for its three columns ``v`` of ``A_e``, ``a_e``) — and the
-    multipliers ``Λ``."""
+    multipliers ``Λ``, at ``x (n, 3)`` for the refinement's ``edges`` (their measurements' cos/sin, √τ and t̃)."""
     n = x.shape[0]
-    c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
-    sk, st = np.sqrt(kappa), np.sqrt(tau)
+    c, s = edges.cd, edges.sd
+    sk, st = np.sqrt(edges.kappa), edges.st
     V = np.zeros((3, 6, c.size))  # (k, n, E): the assembler's layout, edges last
     V[0, 1], V[0, 2], V[0, 4] = -sk * c, -sk * s, sk  # A_e e₁ = e_{R_j e₁} − E_{R_i} R̃ e₁
     V[1, 1], V[1, 2], V[1, 5] = sk * s, -sk * c, sk  # A_e e₂
-    V[2, 0], V[2, 1], V[2, 2], V[2, 3] = -st, -st * xyt[:, 0], -st * xyt[:, 1], st  # a_e
+    V[2, 0], V[2, 1], V[2, 2], V[2, 3] = -st, -st * edges.tx, -st * edges.ty, st  # a_e
     ia, ib = asm.pairs[0]
     vals = np.einsum("kae,kbe->abe", V, V)[ia, ib]
     if asm.twice[0] is not None:
