@@ -165,21 +165,21 @@ def bearing_range_error(x, m, z):
     -------
     e : ndarray (F, 2);  J_x : ndarray (F, 2, 3);  J_m : ndarray (F, 2, 2)
     """
-    e, near = _bearing_range_residual(x, m, z)
+    e, near, r = _bearing_range_residual(x, m, z)
     with np.errstate(divide="ignore", invalid="ignore"):  # a landmark on the pose: patched below
         J_x, J_m = observation.range_bearing_jacobians(x, m)
     if np.any(near):  # GTSAM's Rot2::relativeBearing: within 1e-5 m the bearing is 0, its Jacobian zero
         J_x[near, 1] = 0.0
         J_m[near, 1] = 0.0
-        _range_row_on_the_pose(x, m, J_x[:, 0, :2], J_m[:, 0])
+        _range_row_on_the_pose(r, J_x[:, 0, :2], J_m[:, 0])
     return e, J_x, J_m
 
 
-def _range_row_on_the_pose(x, m, Jr_x, Jr_m) -> None:
-    """Range row at a landmark within ``ON_THE_POSE_M`` of its pose, where ``∂r/∂m = (m − p)/r`` is undefined
-    (0/0): GTSAM's ``norm2`` convention ``∂r/∂m = [1, 1]``, ``∂r/∂p = −[1, 1]``, instead of NaN."""
-    d = np.asarray(m, float) - np.asarray(x, float)[:, :2]
-    on = np.hypot(d[:, 0], d[:, 1]) <= ON_THE_POSE_M
+def _range_row_on_the_pose(r, Jr_x, Jr_m) -> None:
+    """Range row of the factors whose predicted range ``r (F,)`` is within ``ON_THE_POSE_M``, where
+    ``∂r/∂m = (m − p)/r`` is undefined (0/0): GTSAM's ``norm2`` convention ``∂r/∂m = [1, 1]``,
+    ``∂r/∂p = −[1, 1]``, instead of NaN."""
+    on = r <= ON_THE_POSE_M
     Jr_m[on] = 1.0
     Jr_x[on] = -1.0
 
@@ -189,7 +189,7 @@ def bearing_range_jacobian(x, m, z):
     (the same values; the intermediates are computed once and no concatenation copies ``J``)."""
     x = np.asarray(x, float)
     m = np.asarray(m, float)
-    e, near = _bearing_range_residual(x, m, z)
+    e, near, _ = _bearing_range_residual(x, m, z)
     dx = m[:, 0] - x[:, 0]
     dy = m[:, 1] - x[:, 1]
     q = dx * dx + dy * dy
@@ -205,7 +205,7 @@ def bearing_range_jacobian(x, m, z):
     J[:, 1, 2] = -1.0
     if np.any(near):  # as bearing_range_error: no bearing Jacobian within 1e-5 m
         J[near, 1] = 0.0
-        _range_row_on_the_pose(x, m, J[:, 0, :2], J[:, 0, 3:])
+        _range_row_on_the_pose(r, J[:, 0, :2], J[:, 0, 3:])
     return e, J
 
 
@@ -215,12 +215,14 @@ def bearing_range_residual(x, m, z):
 
 
 def _bearing_range_residual(x, m, z):
+    """``(e (F, 2), near (F,), r̂ (F,))``: the error, the factors within 1e-5 m of their pose (bearing 0) and
+    the predicted ranges."""
     zh = observation.range_bearing(x, m)
     e = np.stack([zh[:, 0] - z[:, 0], wrap_angle(zh[:, 1] - z[:, 1])], -1)
     near = zh[:, 0] <= 1e-5
     if np.any(near):
         e[near, 1] = wrap_angle(-z[near, 1])
-    return e, near
+    return e, near, zh[:, 0]
 
 
 def landmark_offset_error(x, m, z_xy):
