@@ -130,7 +130,8 @@ def test_failed_status_is_still_written(data, tmp_path, monkeypatch):
 def test_solver_needing_noise_bounds_refuses_in_one_line(data, tmp_path):
     """cuik is set-membership: without declared error bounds it refuses up front and writes nothing."""
     res = run("solve", data, "--method", "cuik", "-o", tmp_path / "r.h5")
-    assert_one_line_error(res, "solver 'cuik' needs guaranteed error bounds", "inputs/noise_bounds")
+    assert_one_line_error(res, "solver 'cuik' needs guaranteed error bounds", "inputs/noise_bounds",
+                          "slamcli simulate -s cuik-room")
     assert not (tmp_path / "r.h5").exists()
 
 

@@ -124,8 +124,9 @@ def solve_dataset(
     check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics
     check_multi_robot(solver, method, inputs)  # multi-robot data: graph / icm only (issue 14 item 7)
     if getattr(solver, "needs_noise_bounds", False) and inputs.noise_bounds is None:
+        hint = getattr(solver, "noise_bounds_hint", "simulate with bounded.enabled=true")
         raise SolverError(f"solver {method!r} needs guaranteed error bounds (inputs/noise_bounds), which this "
-                          "dataset does not declare; simulate with bounded.enabled=true (e.g. -s cuik-room)")
+                          f"dataset does not declare; {hint}")
     offset = np.asarray(inputs.sensor_offset_xy, float).reshape(2).copy()
     solver_inputs = to_sensor_frame(inputs)  # the sensor mounting offset, for every solver (issue 14)
     if init is not None and offset.any():
