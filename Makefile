@@ -5,20 +5,15 @@ BIN := $(VENV)/bin
 
 .PHONY: install test bench reproduce reproduce-quick lint clean-results
 
-# CHOLMOD (extra "cholmod", scikit-sparse) is an opt-in accelerator: it compiles against SuiteSparse's headers,
-# so it is installed only when cholmod.h is found (override: make install SUITESPARSE_H=/path/to/cholmod.h, or
-# SUITESPARSE_H= to skip it). Without it the graph optimiser uses SciPy's SuperLU. No system package manager is run.
-COMMA := ,
-INCLUDE_DIRS ?= /usr/include /usr/local/include /opt/homebrew/include $(CONDA_PREFIX)/include
-SUITESPARSE_H ?= $(firstword $(wildcard $(addsuffix /suitesparse/cholmod.h,$(INCLUDE_DIRS))))
-EXTRAS := test,gtsam,dask,parquet,dev,interval,fast$(if $(strip $(SUITESPARSE_H)),$(COMMA)cholmod)
+# every extra the tests use; CHOLMOD comes with the core dependencies (CVXOPT's wheel), no system package
+EXTRAS := test,gtsam,dask,parquet,dev,interval,fast
 PIP ?= $(BIN)/pip
 
-install:  ## create the venv and install slamcli with every extra the tests use (cholmod only if its headers exist)
+install:  ## create the venv and install slamcli with every extra the tests use
 	$(PY) -m venv $(VENV)
 	$(PIP) install --upgrade --quiet pip
 	$(PIP) install --quiet -e ".[$(EXTRAS)]"
-	@$(BIN)/python -c "from slamcli.solvers.nls import cholmod_available as c; print('linear solver: ' + ('CHOLMOD (scikit-sparse, extra cholmod)' if c() else 'SciPy SuperLU (no SuiteSparse headers found: extra cholmod skipped)'))"
+	@$(BIN)/python -c "from slamcli.solvers.nls import cholmod_available as c; print('linear solver: ' + ('CHOLMOD (CVXOPT)' if c() else 'SciPy SuperLU (CVXOPT does not import)'))"
 
 test:  ## the whole test suite (what CI runs)
 	$(BIN)/pytest -q -n 2 --dist loadfile

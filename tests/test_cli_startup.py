@@ -14,11 +14,11 @@ from typer.testing import CliRunner
 
 from slamcli.cli import app, app_for
 from slamcli.errors import PluginError
+from slamcli.solvers import nls
 
 DATA = Path(__file__).parent / "data"
-#: never needed to solve a pose graph with defaults: tables, plots, statistics, dense LAPACK wrappers (≈ 220 M
-#: instructions; selinv inverts its triangular blocks with numpy), the JIT, the metrics
-NOT_ON_SOLVE_PATH = ("pandas", "matplotlib", "scipy.stats", "scipy.special", "scipy.optimize", "scipy.linalg", "numba",
+#: never needed to solve a pose graph with defaults: tables, plots, statistics, the JIT, the metrics
+NOT_ON_SOLVE_PATH = ("pandas", "matplotlib", "scipy.stats", "scipy.special", "scipy.optimize", "numba",
                      "slamcli.metrics", "slamcli.sim", "slamcli.sweep", "slamcli.plots", "dask")
 #: the other solvers' modules
 OTHER_SOLVERS = ("slamcli.solvers.ekf", "slamcli.solvers.fastslam", "slamcli.solvers.icm", "slamcli.solvers.isam",
@@ -66,7 +66,9 @@ def test_narrowed_app_runs_a_command_like_the_whole_app(tmp_path):
 
 
 #: watched besides: the entry-point scan of the solver registry (``"<entry points scanned>"`` when it ran)
-WATCHED = ("rich", "scipy.sparse.linalg", "sksparse", "importlib.metadata", "<entry points scanned>",
+#: the sparse linear algebra a solve may need: CHOLMOD, or SuperLU (and the dense LAPACK wrappers it imports)
+SPARSE_PATHS = ("cvxopt.cholmod", "scipy.sparse.linalg", "scipy.linalg")
+WATCHED = ("rich", *SPARSE_PATHS, "importlib.metadata", "<entry points scanned>",
            "<lazy modules>")
 #: what numpy.f2py / numpy.testing / numpy.ma / numpy.polynomial import when they are executed (SciPy's
 #: ``from numpy import *`` executes them unless :mod:`slamcli.api.startup` deferred them)
@@ -108,8 +110,12 @@ def _check_solve_path(present: list[str]) -> None:
     # a built-in solver is found in registry.BUILTIN and reports slamcli.__version__: no metadata is read
     # (importlib.metadata itself is imported by SciPy's numpy.testing on this path, so only the scan is checked)
     assert "<entry points scanned>" not in present, present
-    if "sksparse" in present:  # CHOLMOD factorises; SciPy's SuperLU (scipy.sparse.linalg) is the fallback only
-        assert "scipy.sparse.linalg" not in present, present
+    # what the installed linear solver needs: CHOLMOD factorises and selinv inverts its triangular blocks with
+    # numpy, so neither SuperLU nor the dense LAPACK wrappers (≈ 220 M instructions) load; SuperLU without it
+    if nls.cholmod_available():
+        assert "cvxopt.cholmod" in present and not {"scipy.sparse.linalg", "scipy.linalg"} & set(present), present
+    else:
+        assert "scipy.sparse.linalg" in present, present
 
 
 def _cli_solve(data: Path, method: str, out: Path) -> str:

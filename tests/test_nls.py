@@ -514,7 +514,7 @@ def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
         np.testing.assert_array_equal(b.residuals(x), b.evaluate(x)[0])
 
 
-@pytest.mark.skipif(not nls.cholmod_available(), reason="scikit-sparse (extra cholmod) not installed")
+@pytest.mark.skipif(not nls.cholmod_available(), reason="CHOLMOD does not import")
 def test_cholmod_factor_refuses_an_indefinite_matrix_and_solves_a_definite_one():
     """The LDLᵀ factorisation runs through negative pivots, so the solver must test D: a matrix with one
     negative eigenvalue is refused (as LLᵀ's pivot failure was), the definite one solves as the dense solve."""

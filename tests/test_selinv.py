@@ -10,7 +10,7 @@ import scipy.sparse as sp
 from slamcli.solvers import graph, nls
 from slamcli.solvers.nls import marginals, selinv
 
-pytestmark = pytest.mark.skipif(not nls.cholmod_available(), reason="needs scikit-sparse (extra cholmod)")
+pytestmark = pytest.mark.skipif(not nls.cholmod_available(), reason="needs CHOLMOD (cvxopt)")
 
 
 def _random_spd(n: int, density: float, seed: int) -> sp.csc_matrix:

@@ -25,7 +25,7 @@ gtsam = pytest.importorskip("gtsam")
 from gtsam.symbol_shorthand import L, X  # noqa: E402 - after the importorskip guard
 from test_graph_gtsam import _gtsam_graph, _values  # noqa: E402
 
-pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs scikit-sparse (extra cholmod)")
+pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
 
 
 def test_selected_inverse_marginals_equal_gtsam_marginals_at_the_same_point():

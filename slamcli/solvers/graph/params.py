@@ -23,7 +23,7 @@ class GraphParams:
         Levenberg-Marquardt (default, GTSAM's damping schedule), Gauss-Newton, or Powell's dogleg.
     linear_solver : "auto" | "cholmod" | "superlu" | "chain"
         Sparse linear solver of the optimiser (:class:`slamcli.solvers.nls.NlsParams`): ``auto`` = CHOLMOD
-        (``scikit-sparse``) when installed, else SciPy's SuperLU; ordering computed once per problem.
+        when it imports (CVXOPT, a dependency), else SciPy's SuperLU; ordering computed once per problem.
     pose_chart : "body" | "world"
         How the optimiser steps a pose: GTSAM's Pose2 retraction ``x ⊕ Exp(ξ)`` (default; follows GTSAM's
         path, hence its local minimum on non-convex real data) or additive world coordinates.

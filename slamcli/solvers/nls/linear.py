@@ -536,22 +536,16 @@ def factorize_symmetric(H: sp.csc_matrix, ordering: str = "MMD_AT_PLUS_A"):
 
 def cholmod_spd_factor(H: sp.csc_matrix):
     """CHOLMOD's simplicial ``LDLᵀ`` of a sparse symmetric ``H`` (callable: ``F(b) = H⁻¹b``), or None when ``H``
-    is not positive definite. No pivoting: the arithmetic of ``LLᵀ`` without its square roots, so every pivot
-    ``D > 0`` iff the Cholesky factor exists; an exactly zero pivot makes CHOLMOD raise. Needs the ``cholmod``
-    extra (:func:`cholmod_available`)."""
-    from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
+    is not positive definite (a pivot ≤ 0): the arithmetic of ``LLᵀ`` without its square roots, so every pivot
+    ``D > 0`` iff the Cholesky factor exists."""
+    from slamcli.solvers.nls import cholmod
 
-    try:
-        F = cholesky(H, mode="simplicial")
-    except CholmodNotPositiveDefiniteError:
-        return None
-    return F if np.all(F.D() > 0.0) else None
+    return cholmod.spd_factor(H)
 
 
 def solve_spd(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
     """``H⁻¹ rhs`` for a sparse symmetric positive definite ``H``: CHOLMOD's simplicial ``LDLᵀ`` (AMD ordering)
-    when the ``cholmod`` extra is installed, else :func:`factorize_symmetric` (SuperLU, minimum degree; on
-    City10000's chordal systems ≈ 8× slower than CHOLMOD).
+    when it imports, else :func:`factorize_symmetric` (SuperLU, minimum degree).
 
     Raises
     ------
@@ -573,34 +567,26 @@ def solve_spd(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
 # linear solvers: structure analysed once per problem, numeric factorisation refilled in place
 # ----------------------------------------------------------------------------------------------------------
 def cholmod_available() -> bool:
-    """Whether ``scikit-sparse`` (CHOLMOD) can be imported (the ``cholmod`` extra)."""
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether CHOLMOD (CVXOPT's wheel, a dependency) imports."""
+    from slamcli.solvers.nls import cholmod
+
+    return cholmod.available()
 
 
 class _CholmodFactor:
-    """Sparse ``P H Pᵀ = L D Lᵀ`` by CHOLMOD: the fill-reducing ordering ``P`` and the symbolic
-    factorisation are computed once from the fixed pattern of ``H``; :meth:`factorize` refills the
-    numeric values in place (``cholesky_inplace``). It reads the lower triangle only
-    (:meth:`factorize_lower`, no copy of the full pattern). ``H`` is positive definite iff every pivot
-    ``D_jj > 0`` (then ``L √D`` is its Cholesky factor); otherwise :meth:`factorize` returns False.
-
-    The simplicial LDLᵀ is the default: with the reference BLAS CHOLMOD is linked to on most systems its
-    supernodal LLᵀ (dense BLAS-3 blocks) factors SLAM's normal equations ~1.5× slower (50k-pose grid city:
-    0.20 vs 0.32 s); ``mode="supernodal"`` keeps it, for a CHOLMOD linked to an optimised BLAS."""
+    """Sparse ``P H Pᵀ = L D Lᵀ`` by CHOLMOD (:class:`~slamcli.solvers.nls.cholmod.CholmodFactor`): the
+    fill-reducing ordering ``P`` and the symbolic factorisation are computed once from the fixed lower pattern of
+    ``H``; :meth:`factorize_lower` refills the numeric values in place. ``H`` is positive definite iff every
+    pivot ``D_jj > 0``; otherwise the factorisation returns False. ``mode="supernodal"`` takes CHOLMOD's
+    supernodal ``LLᵀ`` (dense BLAS-3 blocks) instead of the simplicial ``LDLᵀ``."""
 
     name = "cholmod"
 
     def __init__(self, asm: Assembler, mode: str = "simplicial") -> None:
-        from sksparse.cholmod import CholmodNotPositiveDefiniteError, analyze
+        from slamcli.solvers.nls.cholmod import CholmodFactor
 
-        self._not_pd = CholmodNotPositiveDefiniteError
         self.asm = asm
-        self.H = asm.lower_matrix(np.ones(asm.lo_nnz))
-        self.F = analyze(self.H, mode=mode)
+        self.F = CholmodFactor(asm.lower_matrix(np.ones(asm.lo_nnz)), mode=mode)
         self.ldl = mode == "simplicial"
 
     def factorize(self, data: np.ndarray) -> bool:
@@ -609,16 +595,10 @@ class _CholmodFactor:
 
     def factorize_lower(self, lo_data: np.ndarray) -> bool:
         """Factorise ``H`` given by its lower-triangle data (:meth:`Assembler.linearize_lower`)."""
-        self.H.data = lo_data
-        try:
-            self.F.cholesky_inplace(self.H)
-        except self._not_pd:
-            return False
-        # LDLᵀ runs through a pivot ≤ 0 (LLᵀ stops there): the same test on D
-        return not self.ldl or bool(np.all(self.F.D() > 0.0))
+        return self.F.refactor(lo_data)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray | None:
-        h = self.F(rhs)
+        h = self.F.solve(rhs)
         return h if np.all(np.isfinite(h)) else None
 
 
@@ -719,6 +699,6 @@ def make_linear_solver(asm: Assembler, params: NlsParams):
         kind = "superlu"  # no chain + small border layout
     if kind == "cholmod":
         if not cholmod_available():
-            raise ImportError("linear_solver=cholmod needs scikit-sparse (pip install 'slamcli[cholmod]')")
+            raise ImportError("linear_solver=cholmod needs CVXOPT's CHOLMOD (pip install cvxopt)")
         return _CholmodFactor(asm)
     return SuperLUFactor(asm)

@@ -7,7 +7,7 @@ Marginals are blocks of ``Σ = H⁻¹`` (``EVALUATION-METHOD.md`` §A2), never a
 tried in this order by :func:`block_marginals`:
 
 1. the *selected inverse* (:mod:`slamcli.solvers.nls.selinv`, CHOLMOD's factor; Takahashi recurrence on the
-   pattern of ``L``), when the ``cholmod`` extra is installed;
+   pattern of ``L``), whenever CHOLMOD imports (CVXOPT, a dependency);
 2. the chain + border elimination (:func:`marginals_chain_border`) when the leading pose block of ``H`` is
    block tridiagonal;
 3. the column solve on a symmetric SuperLU elimination (:func:`factorize_information`,

@@ -167,10 +167,10 @@ class NlsParams:
     delta_init : float
         Initial trust-region radius of the dogleg (GTSAM's ``deltaInitial`` = 1).
     linear_solver : "auto" | "cholmod" | "superlu" | "chain"
-        Sparse Cholesky of CHOLMOD (``scikit-sparse``; symbolic analysis with its fill-reducing ordering
+        Sparse Cholesky of CHOLMOD (CVXOPT's; symbolic analysis with its fill-reducing ordering
         once per problem, numeric factorisation in place every solve); SciPy's SuperLU in symmetric mode
         with a minimum-degree ordering computed once; or the banded chain + dense border Schur solver.
-        ``auto`` = CHOLMOD when installed, else SuperLU. A factorisation that breaks down (pivot ≤ 0 of a
+        ``auto`` = CHOLMOD when it imports, else SuperLU. A factorisation that breaks down (pivot ≤ 0 of a
         numerically indefinite ``H``) falls back to SuperLU for that system (noted in the result).
     pose_chart : "body" | "world"
         For the SE(2) pose columns of ``NlsProblem.se2_poses``: ``body`` (default) steps as GTSAM's Pose2

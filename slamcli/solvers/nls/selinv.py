@@ -32,10 +32,10 @@ supernode (intel: 627 supernodes, 32 levels, 43 buckets; City10000: 3934, 30, 29
 ``Σ̃_{J∪R, J∪R}`` for its children, whose ``Σ̃_{R,R}`` is a gather from the parent's front (``R`` of a child
 lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels of fronts are alive at once.
 
-The factorisation is CHOLMOD's (``scikit-sparse``, the ``cholmod`` extra): its fill-reducing ordering
-(AMD / nested dissection) and its simplicial ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
-has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid. Without CHOLMOD, :func:`factor_ldl` raises ImportError and the
-callers use their SciPy path (:func:`slamcli.solvers.nls.linear.cholmod_available` tells which). Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
+The factorisation is CHOLMOD's (:mod:`slamcli.solvers.nls.cholmod`): its fill-reducing ordering (AMD)
+and its simplicial ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
+has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid.
+Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
 """
 
 from __future__ import annotations
@@ -83,45 +83,29 @@ class LdlFactor:
 
 
 def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
-    """CHOLMOD's fill-reducing ``L D Lᵀ`` of a symmetric positive definite ``H``.
+    """CHOLMOD's fill-reducing ``L D Lᵀ`` (AMD ordering, simplicial) of a symmetric positive definite ``H``.
 
-    ``analysis``: a CHOLMOD factor (``sksparse.cholmod.Factor``, simplicial) of a matrix with ``H``'s
-    pattern, e.g. the LM's: its ordering and symbolic factorisation are reused, only the numeric
-    factorisation is paid (City10000: the analysis is ≈ 15 of 65 ms).
+    ``H``: the full symmetric matrix or its lower triangle. ``analysis``: a
+    :class:`~slamcli.solvers.nls.cholmod.CholmodFactor` (simplicial) of ``H``'s lower pattern, e.g. the LM's:
+    its ordering and symbolic factorisation are reused, only the numeric factorisation is paid.
 
     Raises
     ------
-    ImportError            scikit-sparse is not installed.
+    ImportError                 CHOLMOD (CVXOPT) does not import.
     NotPositiveDefiniteError    a pivot ≤ 0 (``H`` is not numerically positive definite).
     """
-    from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
+    from slamcli.solvers.nls.cholmod import CholmodFactor, lower_csc
 
     H = H if sp.isspmatrix_csc(H) else sp.csc_matrix(H)
-    try:
-        # AMD alone: CHOLMOD's default also tries METIS when AMD's fill is high, which on these matrices
-        # costs time and keeps AMD's ordering (City10000's H: 0.108 → 0.087 s, the same L). Simplicial: with
-        # the reference BLAS CHOLMOD is linked to here, its supernodal factorisation is ≈ 2× slower (intel
-        # 5.6 vs 2.5 ms, City10000 77 vs 50 ms); the relaxed supernodes are :class:`_Supernodes`' own.
-        if analysis is None:
-            F = cholesky(H, mode="simplicial", ordering_method="amd")
-        else:
-            F = analysis.cholesky(H)
-    except CholmodNotPositiveDefiniteError as exc:
-        col = getattr(exc, "column", None)
-        perm = getattr(getattr(exc, "factor", None), "P", lambda: None)()
-        where = int(perm[col]) if perm is not None and col is not None and col < len(perm) else int(col or 0)
-        raise NotPositiveDefiniteError(f"sparse Cholesky of H: pivot ≤ 0 ({exc})", where) from None
-    perm = np.asarray(F.P(), np.int64)
-    # F.LD(): L with D on its diagonal, the symbolic pattern kept (explicit zeros included; F.L_D() drops them)
-    L = F.LD()
-    L = L if sp.isspmatrix_csc(L) else sp.csc_matrix(L)
-    L.sort_indices()
+    lo = H if analysis is not None and analysis.matches(H) else lower_csc(H)
+    F = analysis if analysis is not None and analysis.ldl and analysis.matches(lo) else CholmodFactor(lo)
+    L = F.ld_at(lo.data)
+    if L is None:
+        raise NotPositiveDefiniteError("sparse LDLᵀ of H: a pivot ≤ 0", F.failed_column or 0)
+    perm = F.perm()
     if not np.all(L.indices[L.indptr[:-1]] == np.arange(L.shape[0])):
         raise ValueError("CHOLMOD's L does not store its diagonal first")
     d = L.data[L.indptr[:-1]].copy()
-    if not np.all(d > 0.0):  # LDLᵀ runs through a negative pivot: the test is ours
-        k = int(np.argmin(d))
-        raise NotPositiveDefiniteError(f"pivot ≤ 0 in the sparse LDLᵀ of H ({d[k]:.3g})", perm[k])
     L.data[L.indptr[:-1]] = 1.0  # unit lower triangular: P H Pᵀ = L D Lᵀ
     return LdlFactor(L, d, perm)
 

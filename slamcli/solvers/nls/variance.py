@@ -52,7 +52,7 @@ def _inverse_entries(H: sp.csc_matrix, dense: bool):
     if not dense and cholmod_available():
         return selinv.SelectedInverse.from_matrix(H).entries
     if H.shape[0] > DENSE_LIMIT:
-        raise ValueError(f"exact redundancy of a {H.shape[0]}-variable problem needs CHOLMOD (scikit-sparse); "
+        raise ValueError(f"exact redundancy of a {H.shape[0]}-variable problem needs CHOLMOD (CVXOPT); "
                          "use method='approx'")
     Z = np.linalg.inv(H.toarray())
     return lambda rows, cols: Z[rows, cols]

@@ -1,0 +1,179 @@
+"""CHOLMOD's sparse Cholesky (Chen, Davis, Hager & Rajamanickam 2008) through CVXOPT, whose binary wheel ships
+SuiteSparse: ``P H Pᵀ = L D Lᵀ`` (simplicial) or ``P H Pᵀ = L Lᵀ`` (supernodal) of a sparse symmetric ``H``
+given by its lower triangle (CSC, ``(n, n)``).
+
+The fill-reducing ordering ``P`` (AMD) and the symbolic factorisation are computed once per pattern
+(:class:`CholmodFactor`); :meth:`CholmodFactor.refactor` refills the numeric values in place. CVXOPT's factor
+is opaque, so what it does not hand out is read through solves with the factor's own pieces::
+
+    P · [0, 1, …, n−1]ᵀ = perm        (perm[k] = column of H eliminated k-th)
+    D⁻¹ · 1            = 1 / d        (the pivots of the LDLᵀ)
+
+and ``L`` itself (:meth:`CholmodFactor.ld_at`) is handed over by turning the numeric factor back into a
+symbolic one; the factor refactors its previous values before its next solve.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+#: CVXOPT's solve codes: A x = b, D x = b, and Pᵀ x = b (x = P b)
+_SYS_A, _SYS_D, _SYS_P = 0, 6, 7
+
+
+def available() -> bool:
+    """Whether CVXOPT's CHOLMOD imports."""
+    try:
+        import cvxopt.cholmod  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def lower_csc(H: sp.spmatrix) -> sp.csc_matrix:
+    """The lower triangle of a symmetric ``H`` as canonical CSC (rows sorted, no duplicates), its diagonal
+    stored in full (explicit zeros where ``H`` has none)."""
+    lo = sp.tril(H, format="coo")
+    n = H.shape[0]
+    diag = np.arange(n)
+    lo = sp.coo_matrix((np.concatenate([lo.data, np.zeros(n)]), (np.concatenate([lo.row, diag]),
+                        np.concatenate([lo.col, diag]))), shape=H.shape).tocsc()
+    lo.sum_duplicates()
+    lo.sort_indices()
+    return lo
+
+
+class CholmodFactor:
+    """``P H Pᵀ = L D Lᵀ`` (``mode="simplicial"``) or ``L Lᵀ`` (``"supernodal"``) on a fixed lower pattern.
+
+    lower : csc (n, n)   the pattern of ``H``'s lower triangle, canonical (:func:`lower_csc`); its values are
+                         not read; it stores every diagonal entry. Every later ``lo_data`` is data on
+                         exactly this pattern.
+    """
+
+    def __init__(self, lower: sp.csc_matrix, mode: str = "simplicial") -> None:
+        import cvxopt
+        from cvxopt import cholmod
+
+        if mode not in ("simplicial", "supernodal"):
+            raise ValueError(f"mode must be simplicial or supernodal, got {mode!r}")
+        self._cvx, self._chol = cvxopt, cholmod
+        self.n = int(lower.shape[0])
+        self.ldl = mode == "simplicial"
+        self.indptr, self.indices = lower.indptr, lower.indices
+        cols = np.repeat(np.arange(self.n), np.diff(lower.indptr))
+        self._M = cvxopt.spmatrix(np.ones(lower.nnz), lower.indices, cols, (self.n, self.n))
+        self._diag = lower.indices == cols
+        if not np.array_equal(np.asarray(self._M.CCS[1]).ravel(), lower.indices) or self._diag.sum() != self.n:
+            raise ValueError("the lower pattern must be canonical CSC (sorted rows, no duplicates, diagonal stored)")
+        self._options()
+        self._F = cholmod.symbolic(self._M, uplo="L")
+        self._values: np.ndarray | None = None  # the data of the numeric factor (or to refactor before a solve)
+        self._numeric = False
+        self._perm: np.ndarray | None = None
+        self.failed_column: int | None = None
+
+    def _options(self) -> None:
+        self._chol.options["supernodal"] = 0 if self.ldl else 2
+
+    def matches(self, lower: sp.csc_matrix) -> bool:
+        """Whether ``lower`` has this factor's pattern (same object arrays or equal)."""
+        return lower.shape == (self.n, self.n) and (
+            (lower.indices is self.indices and lower.indptr is self.indptr)
+            or (np.array_equal(lower.indptr, self.indptr) and np.array_equal(lower.indices, self.indices)))
+
+    def refactor(self, lo_data: np.ndarray) -> bool:
+        """Numeric factorisation of ``H`` given by its lower data; whether ``H`` is positive definite (every
+        pivot ``d > 0``). When it is not, :attr:`failed_column` names the column of ``H`` where it fails."""
+        self._values = np.array(lo_data, dtype=float)
+        self.failed_column = None
+        self._numeric = False
+        self._M.V = self._cvx.matrix(self._values)
+        self._options()
+        try:
+            self._chol.numeric(self._M, self._F)
+        except ArithmeticError as exc:  # a zero pivot (LDLᵀ) or a pivot ≤ 0 (LLᵀ), at elimination step k
+            self.failed_column = self._column_at(int(exc.args[0]) if exc.args else 0)
+            return False
+        self._numeric = True
+        if self.ldl:
+            d = self.pivots()
+            bad = np.flatnonzero(~(d > 0.0))
+            if bad.size:
+                self.failed_column = int(self.perm()[bad[0]])
+                return False
+        return True
+
+    def _restore(self) -> None:
+        if not self._numeric:
+            if self._values is None:
+                raise RuntimeError("CHOLMOD factor used before its numeric factorisation")
+            values = self._values
+            if not self.refactor(values):
+                raise np.linalg.LinAlgError("matrix is not positive definite")
+
+    def _apply(self, b: np.ndarray, sys: int) -> np.ndarray:
+        self._restore()
+        b = np.asarray(b, dtype=float)
+        B = self._cvx.matrix(b.reshape(self.n, -1))
+        self._chol.solve(self._F, B, sys=sys)
+        return np.array(B).reshape(b.shape)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``H⁻¹ b`` for ``b (n,)`` or ``(n, k)``."""
+        return self._apply(b, _SYS_A)
+
+    __call__ = solve
+
+    def pivots(self) -> np.ndarray:
+        """``d (n,)``: the pivots of the ``LDLᵀ`` in elimination order (simplicial mode)."""
+        if not self.ldl:
+            raise ValueError("pivots are those of the simplicial LDLᵀ")
+        with np.errstate(divide="ignore"):
+            return 1.0 / self._apply(np.ones(self.n), _SYS_D)
+
+    def perm(self) -> np.ndarray:
+        """``perm (n,)``: ``perm[k]`` is the column of ``H`` eliminated ``k``-th (``P H Pᵀ = H[perm][:, perm]``)."""
+        if self._perm is None:
+            self._perm = np.rint(self._apply(np.arange(self.n, dtype=float), _SYS_P)).astype(np.int64)
+        return self._perm
+
+    def _column_at(self, k: int) -> int:
+        """The column of ``H`` eliminated ``k``-th, found without a valid numeric factor: the ordering is
+        read from a strictly diagonally dominant matrix of the same pattern (positive definite)."""
+        if self._perm is None:
+            lo = sp.csc_matrix((np.ones(len(self.indices)), self.indices, self.indptr), shape=(self.n, self.n))
+            degree = np.asarray((lo + lo.T).sum(axis=1)).ravel()
+            dominant = lo.data.copy()
+            dominant[self._diag] = degree + 1.0
+            saved = self._values
+            self.refactor(dominant)
+            self.perm()
+            self._values, self._numeric = saved, False
+        return int(self._perm[min(k, self.n - 1)])
+
+    def ld_at(self, lo_data: np.ndarray) -> sp.csc_matrix | None:
+        """``L`` with ``D`` on its diagonal of ``H`` given by ``lo_data`` (simplicial), as CSC with rows sorted and
+        the symbolic pattern kept (explicit zeros included); None when ``H`` is not positive definite
+        (:attr:`failed_column` says where). The factor keeps its earlier values: they are refactored before
+        its next solve."""
+        saved = self._values
+        if not self.refactor(lo_data):
+            self._values, self._numeric = saved, False
+            return None
+        self.perm()
+        Lc = self._chol.getfactor(self._F)  # CHOLMOD hands its arrays over: the factor is symbolic again
+        self._values, self._numeric = (saved if saved is not None else self._values), False
+        L = sp.csc_matrix((np.asarray(Lc.V).ravel(), np.asarray(Lc.CCS[1]).ravel(),
+                           np.asarray(Lc.CCS[0]).ravel()), shape=(self.n, self.n))
+        L.sort_indices()
+        return L
+
+
+def spd_factor(H: sp.spmatrix) -> CholmodFactor | None:
+    """The simplicial ``LDLᵀ`` of a sparse symmetric ``H`` (callable: ``F(b) = H⁻¹b``), or None when ``H`` is
+    not positive definite (a pivot ≤ 0)."""
+    lo = lower_csc(H)
+    F = CholmodFactor(lo)
+    return F if F.refactor(lo.data) else None
