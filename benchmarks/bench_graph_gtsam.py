@@ -87,7 +87,8 @@ def lm_child(n_poses: int, side: str) -> dict:
         res = nls.solve(gp.problem, gp.x0, p.nls_params("none", 1.0))
         cpu = _cpu_s() - c0
         cost, iters = float(res.cost), int(res.iterations)
-    return {"side": side, "poses": int(inputs.n_poses), "cpu_s": cpu, "cost": cost, "iterations": iters,
+    solver = "GTSAM multifrontal Cholesky" if side == "gtsam" else res.linear_solver
+    return {"side": side, "linear_solver": solver, "poses": int(inputs.n_poses), "cpu_s": cpu, "cost": cost, "iterations": iters,
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "finite": bool(np.isfinite(cost))}
 
@@ -125,6 +126,7 @@ def lm_rows(sizes) -> list[dict]:
                      "ratio": round(cpu_a / cpu_b, 3), "goal": 1.0, "met": cpu_a <= cpu_b,
                      "rss_slamcli_mb": round(rss_a, 1), "rss_gtsam_mb": round(rss_b, 1),
                      "rss_ratio": round(rss_a / rss_b, 3), "rss_goal": 1.2, "rss_met": rss_a <= 1.2 * rss_b,
+                     "linear_solver": a[0]["linear_solver"],
                      "iterations_slamcli": a[0]["iterations"], "iterations_gtsam": b[0]["iterations"],
                      "cost_slamcli": a[0]["cost"], "cost_gtsam": b[0]["cost"]})
     return rows
@@ -166,10 +168,29 @@ def sweep_rows() -> list[dict]:
              "slamcli": round(s["worker_start_cpu_s"], 3), "wall_s": round(s["worker_start_wall_s"], 3)}]
 
 
-def write_markdown(rows: list[dict], path: Path, kept_lines: dict[tuple, str] | None = None) -> None:
-    """The table; a row whose ``(case, what)`` is in ``kept_lines`` is written as that earlier line."""
-    lines = ["| case | what | slamcli CPU s | GTSAM CPU s | ratio | goal | met | details |",
-             "|---|---|---|---|---|---|---|---|"]
+def machine_state(load_before: tuple[float, float, float]) -> str:
+    """One line naming the machine state of a run: cores, load averages before and after, BLAS threads, and the
+    sparse linear solver ``linear_solver="auto"`` takes on this install."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from slamcli.solvers.nls import cholmod_available
+
+    try:
+        cvx = f"CHOLMOD (CVXOPT {version('cvxopt')})" if cholmod_available() else "SciPy SuperLU"
+    except PackageNotFoundError:
+        cvx = "CHOLMOD" if cholmod_available() else "SciPy SuperLU"
+    after = os.getloadavg()
+    return (f"Run {time.strftime('%Y-%m-%d')}: linear solver {cvx}; {os.cpu_count()} cores, load average "
+            f"{load_before[0]:.2f} before / {after[0]:.2f} after; single-threaded BLAS on both sides.")
+
+
+def write_markdown(rows: list[dict], path: Path, kept_lines: dict[tuple, str] | None = None,
+                   state: str = "") -> None:
+    """The table under the ``state`` line; a row whose ``(case, what)`` is in ``kept_lines`` is written as that
+    earlier line."""
+    lines = [state, ""] if state else []
+    lines += ["| case | what | slamcli CPU s | GTSAM CPU s | ratio | goal | met | details |",
+              "|---|---|---|---|---|---|---|---|"]
     skip = {"case", "what", "slamcli", "gtsam", "ratio", "goal", "met"}
     for r in rows:
         det = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()
@@ -193,7 +214,7 @@ def previous_md_lines(path: Path) -> dict[tuple, str]:
     """The table lines of an earlier run's Markdown by ``(case, what)`` (a kept row keeps its line as it was)."""
     if not path.exists():
         return {}
-    cells = (line.strip("| ").split(" | ") for line in path.read_text().splitlines()[2:])
+    cells = (line.strip("| ").split(" | ") for line in path.read_text().splitlines() if line.startswith("| "))
     return {(c[0], c[1]): "| " + " | ".join(c) + " |" for c in cells if len(c) > 2}
 
 
@@ -208,14 +229,14 @@ def run(quick: bool = False) -> list[dict]:
     measure = {"lm": lambda: lm_rows(sizes), "posegraph": lambda: posegraph_rows(quick),
                "startup": lambda: startup_rows(quick), "sweep": sweep_rows}
     rows: list[dict] = []
-    t0 = time.perf_counter()
+    t0, load0 = time.perf_counter(), os.getloadavg()
     for part in PARTS:  # the table's order, whichever parts run
         rows += measure[part]() if part in parts else [r for r in kept if r.get("case") == CASES[part]]
     (HERE / "results").mkdir(exist_ok=True)
     md_lines = previous_md_lines(HERE / "results" / "graph_gtsam.md")
     kept_lines = {k: md_lines[k] for k in ((r["case"], r["what"]) for r in kept if r.get("case") in
                                            {CASES[p] for p in PARTS if p not in parts}) if k in md_lines}
-    write_markdown(rows, HERE / "results" / "graph_gtsam.md", kept_lines)
+    write_markdown(rows, HERE / "results" / "graph_gtsam.md", kept_lines, machine_state(load0))
     print(f"graph_gtsam: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     return rows
 

@@ -62,15 +62,16 @@ class CholmodFactor:
         self.n = int(lower.shape[0])
         self.ldl = mode == "simplicial"
         self.indptr, self.indices = lower.indptr, lower.indices
-        cols = np.repeat(np.arange(self.n), np.diff(lower.indptr))
-        self._M = cvxopt.spmatrix(np.ones(lower.nnz), lower.indices, cols, (self.n, self.n))
-        self._diag = lower.indices == cols
-        if not np.array_equal(np.asarray(self._M.CCS[1]).ravel(), lower.indices) or self._diag.sum() != self.n:
+        if not (lower.has_canonical_format and np.all(np.diff(lower.indptr) > 0)
+                and np.array_equal(lower.indices[lower.indptr[:-1]], np.arange(self.n))):
             raise ValueError("the lower pattern must be canonical CSC (sorted rows, no duplicates, diagonal stored)")
+        cols = np.repeat(np.arange(self.n), np.diff(lower.indptr))
+        self._M = cvxopt.spmatrix(1.0, lower.indices, cols, (self.n, self.n))  # CSC in the same order
+        del cols
         self._options()
         self._F = cholmod.symbolic(self._M, uplo="L")
-        self._values: np.ndarray | None = None  # the data of the numeric factor (or to refactor before a solve)
-        self._numeric = False
+        self._numeric = False  # whether _F holds the numeric factor of the values in _M
+        self._have_values = False
         self._perm: np.ndarray | None = None
         self.failed_column: int | None = None
 
@@ -86,10 +87,10 @@ class CholmodFactor:
     def refactor(self, lo_data: np.ndarray) -> bool:
         """Numeric factorisation of ``H`` given by its lower data; whether ``H`` is positive definite (every
         pivot ``d > 0``). When it is not, :attr:`failed_column` names the column of ``H`` where it fails."""
-        self._values = np.array(lo_data, dtype=float)
         self.failed_column = None
         self._numeric = False
-        self._M.V = self._cvx.matrix(self._values)
+        self._M.V = self._cvx.matrix(np.asarray(lo_data, dtype=float))
+        self._have_values = True
         self._options()
         try:
             self._chol.numeric(self._M, self._F)
@@ -107,11 +108,15 @@ class CholmodFactor:
 
     def _restore(self) -> None:
         if not self._numeric:
-            if self._values is None:
+            if not self._have_values:
                 raise RuntimeError("CHOLMOD factor used before its numeric factorisation")
-            values = self._values
-            if not self.refactor(values):
+            if not self._refactor_held():
                 raise np.linalg.LinAlgError("matrix is not positive definite")
+
+    def _refactor_held(self) -> bool:
+        """:meth:`refactor` of the values the factor holds."""
+        values = self._M.V
+        return self.refactor(np.asarray(values).ravel())
 
     def _apply(self, b: np.ndarray, sys: int) -> np.ndarray:
         self._restore()
@@ -145,12 +150,12 @@ class CholmodFactor:
         if self._perm is None:
             lo = sp.csc_matrix((np.ones(len(self.indices)), self.indices, self.indptr), shape=(self.n, self.n))
             degree = np.asarray((lo + lo.T).sum(axis=1)).ravel()
-            dominant = lo.data.copy()
-            dominant[self._diag] = degree + 1.0
-            saved = self._values
+            dominant = lo.data
+            dominant[self.indptr[:-1]] = degree + 1.0  # the diagonal: first in every column
+            saved = self._M.V
             self.refactor(dominant)
             self.perm()
-            self._values, self._numeric = saved, False
+            self._M.V, self._numeric = saved, False
         return int(self._perm[min(k, self.n - 1)])
 
     def ld_at(self, lo_data: np.ndarray) -> sp.csc_matrix | None:
@@ -158,13 +163,17 @@ class CholmodFactor:
         the symbolic pattern kept (explicit zeros included); None when ``H`` is not positive definite
         (:attr:`failed_column` says where). The factor keeps its earlier values: they are refactored before
         its next solve."""
-        saved = self._values
+        saved = self._M.V if self._have_values else None
         if not self.refactor(lo_data):
-            self._values, self._numeric = saved, False
+            self._numeric = False
+            if saved is not None:
+                self._M.V = saved
             return None
         self.perm()
         Lc = self._chol.getfactor(self._F)  # CHOLMOD hands its arrays over: the factor is symbolic again
-        self._values, self._numeric = (saved if saved is not None else self._values), False
+        self._numeric = False
+        if saved is not None:
+            self._M.V = saved
         L = sp.csc_matrix((np.asarray(Lc.V).ravel(), np.asarray(Lc.CCS[1]).ravel(),
                            np.asarray(Lc.CCS[0]).ravel()), shape=(self.n, self.n))
         L.sort_indices()

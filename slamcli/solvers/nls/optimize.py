@@ -259,22 +259,26 @@ class _Damping:
     trial_lin: tuple | None = None  # (cost, H lower data, g) at the accepted trial, when eager
 
 
+def _solve_damped(lin_solve, asm, data: np.ndarray, damping: np.ndarray, g: np.ndarray) -> np.ndarray | None:
+    """``(H + diag(damping)) h = −g`` for ``H``'s lower data; the damped copy lives only for the solve (it is not
+    held while the trial point is linearised)."""
+    damped = data.copy()
+    damped[asm.lo_diag_pos] += damping
+    return lin_solve(damped, -g)
+
+
 def _lm_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, st: _Damping, stats, small):
     """One LM iteration: raise λ until a trial step is accepted (GTSAM's inner loop). Returns ``(stop,
     x_new, new_cost)`` with ``stop`` None or the ``(status, message)`` that ends the optimisation."""
     diag = data[asm.lo_diag_pos]
     stop = x_new = new_cost = None
     while True:
-        damped = data.copy()
-        damped[asm.lo_diag_pos] += st.lam * Dvec
-        h = lin_solve(damped, -g)
+        h = _solve_damped(lin_solve, asm, data, st.lam * Dvec, g)
         if h is None and params.damping == "levenberg":
             # λI cannot regularise an H that is numerically indefinite because of entries many orders
             # above the rest (a landmark on top of a pose): this trial uses Marquardt's D = diag(H)
             Dvec = np.clip(diag, 1e-6, 1e32)
-            damped = data.copy()
-            damped[asm.lo_diag_pos] += st.lam * Dvec
-            h = lin_solve(damped, -g)
+            h = _solve_damped(lin_solve, asm, data, st.lam * Dvec, g)
             stats["marquardt_trials"] += 1
         ok = False
         if h is not None:
@@ -347,9 +351,7 @@ def _gn_iteration(problem, asm, params, lin_solve, x, cost, data, g, Dvec, stats
         lam_gn = params.lambda_init * scale
         h = None
         while lam_gn <= 1e16 * scale:
-            damped = data.copy()
-            damped[asm.lo_diag_pos] += lam_gn * Dvec
-            h = lin_solve(damped, -g)
+            h = _solve_damped(lin_solve, asm, data, lam_gn * Dvec, g)
             if h is not None and float(g @ h) < 0.0:
                 break
             h = None
