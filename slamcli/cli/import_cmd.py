@@ -258,7 +258,8 @@ def _convention_summary(md: dict) -> str:
     readings = "; ".join(f"{tag} {' / '.join(how)}" for tag, how in md["convention_readings"].items())
     merged = md.get("equiv_merged") or []
     return (f"convention {md['convention']}: {readings}; landmark ids: {md['landmark_id_space']}"
-            + (f"; EQUIV merged {len(merged)} pose(s)" if merged else ""))
+            + (f"; EQUIV merged {len(merged)} pose(s), dropping {md['equiv_dropped_edges']} edge(s) between merged "
+               f"poses (a constant {md['equiv_dropped_cost']:.6g} of the cost)" if merged else ""))
 
 
 _RangeStd = Annotated[float | None, typer.Option(help="σ_r to store, m (default: the importer's, see its docstring).")]

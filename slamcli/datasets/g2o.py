@@ -158,8 +158,8 @@ def read_graph(path: str | Path, convention: str = "auto") -> dict:
         value, non-integer id or one ≥ 2^63, a duplicate vertex id, an edge to a vertex the file does not
         declare (when it declares vertices of that kind; for poses more than the start pose's), a landmark id
         equal to a pose id in a convention with one id space, a matrix the convention cannot read (the
-        message names the reading and the conventions that read it), a BR σ ≤ 0, an EQUIV of a non-pose or an
-        edge between merged poses (each names file:line).
+        message names the reading and the conventions that read it), a BR σ ≤ 0, an EQUIV of a non-pose (each names
+        file:line).
     """
     path = Path(path)
     if convention not in CONVENTIONS:
@@ -198,6 +198,7 @@ def read_graph(path: str | Path, convention: str = "auto") -> dict:
         "readings": {t: sorted(r) for t, r in g["readings"].items()},
         "separate_landmark_ids": separate,
         "merged": merged,
+        "within_merged_costs": g.get("within_merged", []),
     }
 
 
@@ -244,7 +245,9 @@ def _read_record(g: dict, tag: str, vals: list[float], ids: list[int], lineno: i
 
 def _merge_equivalent(path: Path, g: dict) -> list[tuple[int, int, int]]:
     """Apply the file's ``EQUIV a b`` lines to ``g`` in place: every pose of an equivalence class becomes its
-    smallest id (edges, sightings, vertices). Returns ``[(kept, merged, line)]``."""
+    smallest id (edges, sightings, vertices). An edge between two poses of one class becomes a constant
+    ``½ log(d⁻¹)ᵀ Λ log(d⁻¹)`` of the cost: it is dropped and its constant listed in ``g["within_merged"]``.
+    Returns ``[(kept, merged, line)]``."""
     if not g["equiv"]:
         return []
     pose_ids = set(g["vertices"]) | {e[0] for e in g["pose_edges"]} | {e[1] for e in g["pose_edges"]}
@@ -263,13 +266,16 @@ def _merge_equivalent(path: Path, g: dict) -> list[tuple[int, int, int]]:
         parent[max(ra, rb)] = min(ra, rb)
     rep = {v: root(v) for v in parent}
     merged = [(root(a), v, line) for a, b, line in g["equiv"] for v in (a, b) if root(v) != v]
-    edges = []
+    edges, within = [], []
     for i, j, d, cov, info, line in g["pose_edges"]:
         i2, j2 = rep.get(i, i), rep.get(j, j)
-        if i2 == j2:
-            raise DatasetImportError(f"{path}:{line}: edge {i} → {j} joins two poses merged by EQUIV into {i2}")
-        edges.append((i2, j2, d, cov, info, line))
+        if i2 == j2:  # its error log(d⁻¹) no longer depends on any estimate: a constant of the cost
+            e = se2.log(se2.inverse(d))
+            within.append(0.5 * float(e @ info @ e))
+        else:
+            edges.append((i2, j2, d, cov, info, line))
     g["pose_edges"] = edges
+    g["within_merged"] = within
     g["sightings"] = [(rep.get(o[0], o[0]), *o[1:]) for o in g["sightings"]]
     g["vertices"] = {v: p for v, p in g["vertices"].items() if rep.get(v, v) == v}
     return sorted(set(merged))
@@ -562,7 +568,9 @@ def import_graph(
     metadata.update(layout)
     metadata.update(convention=convention, convention_readings=g["readings"],
                     landmark_id_space="own id space" if g["separate_landmark_ids"] else "shared with pose ids",
-                    equiv_merged=[[int(a), int(b)] for a, b, _ in g["merged"]])
+                    equiv_merged=[[int(a), int(b)] for a, b, _ in g["merged"]],
+                    equiv_dropped_edges=len(g["within_merged_costs"]),
+                    equiv_dropped_cost=float(sum(g["within_merged_costs"])))
     return Dataset(inputs=inputs, truth=None, metadata=metadata)
 
 
