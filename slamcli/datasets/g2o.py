@@ -6,7 +6,10 @@ City10000, KITTI 00; ``shared/datasets/pose_graphs``). A graph file carries the 
 no time and usually no ground truth, so the import gives solver inputs only (``has_truth = false``): every
 solver runs on it; ``evaluate`` needs ground truth and says so.
 
-Lines understood (anything else is an error naming the line; ``#`` comments and blank lines are skipped):
+Lines understood (anything else is an error naming the line; ``#`` comments and blank lines are skipped). The
+matrices are described as the default convention ``auto`` reads them (each tag as the tool that defined it);
+``convention = "g2o" | "toro" | "gtsam" | "isam"`` reads every tag as that tool does (order of the six numbers,
+information / covariance / square-root information, landmark id space: :mod:`slamcli.datasets.graph_conventions`):
 
 ===========================================  ===================================================================
 ``VERTEX_SE2 id x y θ`` / ``VERTEX2``        initial pose guess; only the first pose's is used (as ``x0``)
@@ -23,13 +26,16 @@ C23 C33``                                    its loader detects for victoria_par
 ``LANDMARK2 i l dx dy I11 I12 I22``          the same (older tag, read as EDGE_SE2_XY)
 ``LANDMARK i l dx dy C11 C12 C22``           the same with a 2×2 covariance (GTSAM)
 ``BR i l b r σ_b σ_r``                       GTSAM bearing-range sighting: bearing (rad), range (m) and their σ
+``EQUIV a b``                                poses a and b are one pose (TORO): b is merged into the smaller id;
+                                             an edge between merged poses is a constant of the cost, dropped and
+                                             reported (``metadata["equiv_dropped_cost"]``)
 ===========================================  ===================================================================
 
 Conversion
 ----------
 * **Pose order** – pose ids are the ids used by pose-pose edges, in ascending order; pose ``p_k`` becomes step
   ``k`` (pose ids: those of the pose vertices and of the pose-pose edges). The first edge (file order) from
-  ``p_k`` to ``p_{k+1}`` is the odometry of step ``k`` (every public benchmark numbers its poses along the
+  ``p_k`` to ``p_{k+1}`` (else one from ``p_{k+1}`` to ``p_k``, inverted exactly) is the odometry of step ``k`` (every public benchmark numbers its poses along the
   trajectory). Any graph imports: where that edge is missing the step is completed from the initial estimate
   (vertices, or a spanning tree) with a near-zero information, and each further disconnected component gets
   one prior (:func:`_chain`); the import says so in one line (``metadata["import_note"]``).
@@ -60,7 +66,8 @@ Conversion
   (BR: the median σ's). The spread is in the metadata. (GTSAM's own loader reads a ``LANDMARK`` covariance
   ``c·I`` differently: σ_r = √c, σ_b = √(c/10), i.e. "the covariance describes the uncertainty at 10 m"; for
   victoria_park.txt that is 0.63 m and 0.2 rad, against our 0.63 m and a median 0.05 rad. Pass
-  ``range_std``/``bearing_std`` to choose other values.)
+  ``range_std``/``bearing_std`` to choose other values, or ``convention = "gtsam"`` to read the sightings
+  as GTSAM does: bearing-range rows with those σ's.)
 """
 
 from __future__ import annotations
