@@ -27,14 +27,11 @@ def export_command(
     use --format gtsam, whose BR sightings readG2o reads).
     """
     with handle_errors():
-        from slamcli.api.interop import export_file
+        from slamcli.api.interop import describe_export, export_file
 
         check_output(output, inputs=[src, data])
         s = export_file(src, fmt, output, data=data, check_hash=not no_hash_check)
         if not quiet:
-            edges = f", {s['n_edges']} edges" if "n_edges" in s else ""
-            what = "estimate" if s["kind"] == "result" else "ground truth"
-            typer.echo(f"wrote {output} ({s['format']}: {what}, {s['n_poses']} poses, "
-                       f"{s['n_landmarks']} landmarks{edges})")
+            typer.echo(f"wrote {output} ({describe_export(s)})")
         if "warning" in s:
             typer.echo(f"warning: {s['warning']}", err=True)
