@@ -121,9 +121,22 @@ def test_g2o_export_of_an_xy_landmark_graph_round_trips(tmp_path):
 def test_messages_say_what_each_format_holds(cluttered):
     d, _ = cluttered
     r = _invoke(["export", d / "ekf.h5", "--format", "tum", "-o", d / "e.tum"])
-    assert "landmark" not in r.stdout and "the format holds poses only" in r.stdout
+    assert "landmark" not in r.stdout and "poses; TUM holds poses only" in r.stdout
     r = _invoke(["export", d / "ekf.h5", "--format", "kitti", "-o", d / "e.kitti"])
-    assert "landmark" not in r.stdout and "the format holds poses only" in r.stdout
+    assert "landmark" not in r.stdout and "poses; KITTI holds poses only" in r.stdout
     r = _invoke(["export", d / "ekf.h5", "--format", "csv", "-o", d / "e.csv"])
     n_lm = len(read_result(d / "ekf.h5").landmarks_xy)
     assert f"poses, {n_lm} landmarks)" in r.stdout and "sightings" not in r.stdout
+
+
+def test_export_replaces_an_earlier_export_but_a_slamcli_file_only_with_force(cluttered):
+    d, _ = cluttered
+    target = d / "victim.h5"
+    target.write_bytes((d / "d.h5").read_bytes())
+    r = runner.invoke(app, ["export", str(d / "ekf.h5"), "--format", "tum", "-o", str(target)])
+    assert r.exit_code == 2 and r.output.strip().splitlines()[0] == (
+        f"error: -o {target}: exists and is a slamcli dataset, not an export; --force replaces it")
+    assert target.read_bytes() == (d / "d.h5").read_bytes()  # untouched
+    _invoke(["export", d / "ekf.h5", "--format", "tum", "-o", target, "--force"])
+    assert target.read_text().count("\n") == read_result(d / "ekf.h5").poses_xyt.shape[0]
+    _invoke(["export", d / "ekf.h5", "--format", "kitti", "-o", target])  # an earlier export: replaced

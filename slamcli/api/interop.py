@@ -134,7 +134,7 @@ def describe_export(summary: dict) -> str:
     what = "estimate" if s["kind"] == "result" else "ground truth"
     head = f"{s['format']}: {what}, {s['n_poses']} poses"
     if s["format"] in ("tum", "kitti"):
-        return f"{head} (the format holds poses only)"
+        return f"{head}; {s['format'].upper()} holds poses only"
     if s["format"] == "csv":
         return f"{head}, {s['n_landmarks']} landmarks"
     alone = (f" ({s['n_unassociated']} unassociated, written as landmarks of their own)"
