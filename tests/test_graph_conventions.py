@@ -133,7 +133,12 @@ def _isam_gtsam_graph(path: Path) -> gtsam.NonlinearFactorGraph:
             z = np.array(v[:2])
 
             def err(this, values, H, z=z):
-                return values.atPose2(this.keys()[0]).transformTo(values.atPoint2(this.keys()[1])) - z
+                pose, m = values.atPose2(this.keys()[0]), values.atPoint2(this.keys()[1])
+                local = pose.transformTo(m)
+                if H is not None:  # ∂/∂(pose tangent), ∂/∂m of Rᵀ(m − t)
+                    H[0] = np.array([[-1.0, 0.0, local[1]], [0.0, -1.0, -local[0]]])
+                    H[1] = pose.rotation().matrix().T
+                return local - z
 
             graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(R), [i, L(j)], err))
     return graph
@@ -191,3 +196,43 @@ def test_cli_summary_names_the_convention(tmp_path):
     assert r.exit_code == 0, r.output
     assert ("convention isam: ODOMETRY sqrt-information, g2o order; LANDMARK sqrt-information; EDGE2 "
             "sqrt-information, g2o order; landmark ids: own id space") in r.stdout
+
+
+@pytest.mark.parametrize(("name", "convention"), [
+    ("gtsam_example_excerpt.graph", "gtsam"),
+    ("victoria_park_excerpt.txt", "gtsam"),
+    ("toro_nondiagonal.graph", "toro"),
+    ("isam_landmarks.txt", "isam"),
+])
+def test_imports_solve_to_gtsams_optimum(name, convention):
+    """The graph solver on the import ends at the cost GTSAM's Levenberg-Marquardt reaches on GTSAM's own
+    reading of the file (plus the solver's prior on the first pose, added to GTSAM's graph)."""
+    from slamcli.api.solve import solve_dataset
+
+    path = DATA / name
+    ds = import_graph(path, forward="x", convention=convention)
+    params = {"robust": "none", "covariance": False}
+    if len(ds.inputs.observations):
+        params["association"] = "reported"
+    res = solve_dataset(ds.inputs, "graph", params)
+    assert res.status.value == "converged", res.message
+    if convention == "isam":
+        graph = _isam_gtsam_graph(path)
+        init = gtsam.Values()
+        for p, x in enumerate(ds.inputs.odometry_xyt):
+            init.insert(p, gtsam.Pose2(*x))
+        for m in range(3):
+            init.insert(L(m), np.zeros(2))
+    else:
+        fmt = gtsam.NoiseFormat.NoiseFormatTORO if convention == "toro" else gtsam.NoiseFormat.NoiseFormatAUTO
+        graph, init = gtsam.load2D(str(path), noiseFormat=fmt)
+    first = _pose_ids(path, convention)[0]
+    sigmas = np.asarray(res.params["prior_std"], float)
+    graph.add(gtsam.PriorFactorPose2(first, gtsam.Pose2(*ds.inputs.x0), gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-14)
+    params.setAbsoluteErrorTol(1e-14)
+    params.setMaxIterations(500)
+    ref = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
+    assert graph.error(init) > 1.5 * graph.error(ref)  # the start is not already the optimum
+    assert res.extra["final_cost"] == pytest.approx(graph.error(ref), rel=1e-6)  # two optimisers: 1e-6
