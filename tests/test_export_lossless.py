@@ -140,3 +140,15 @@ def test_export_replaces_an_earlier_export_but_a_slamcli_file_only_with_force(cl
     _invoke(["export", d / "ekf.h5", "--format", "tum", "-o", target, "--force"])
     assert target.read_text().count("\n") == read_result(d / "ekf.h5").poses_xyt.shape[0]
     _invoke(["export", d / "ekf.h5", "--format", "kitti", "-o", target])  # an earlier export: replaced
+
+
+def test_an_older_gtsam_export_with_landmark_ids_from_zero_imports(tmp_path):
+    """Earlier exports numbered landmarks from 0 (GTSAM keys them L(l), apart from poses): BR sightings put
+    landmark ids in their own space under the default convention, so the duplicate id 0 is no clash."""
+    f = tmp_path / "old.txt"
+    f.write_text("VERTEX_SE2 0 0.0 0.0 0.0\nVERTEX_SE2 1 1.0 0.0 0.0\nVERTEX_XY 0 2.0 1.0\n"
+                 "EDGE_SE2 0 1 1.0 0.0 0.0 100.0 0.0 0.0 100.0 0.0 400.0\n"
+                 "BR 0 0 0.4636476090008061 2.23606797749979 0.01 0.1\nBR 1 0 0.7853981633974483 1.4142135623730951 0.01 0.1\n")
+    r = _invoke(["import", "g2o", f, "-o", tmp_path / "old.h5"])
+    assert "2 poses, 0 loop closures, 1 landmarks, 2 observations" in r.stdout
+    assert "landmark ids: own id space" in r.stdout
