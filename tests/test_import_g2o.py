@@ -158,7 +158,8 @@ def test_noise_free_graph_is_recovered_exactly(tmp_path):
         ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 0 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n",
          "toy.g2o:2: duplicate vertex id 0 (first declared at line 1)"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_XY 0 1 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n",
-         "toy.g2o:2: duplicate vertex id 0"),
+         "toy.g2o:2: duplicate vertex id 0 (first declared at line 1) (convention auto: poses and landmarks share "
+         "one id space; --convention gtsam or isam read landmark ids in their own space)"),
         ("EDGE_SE2 0 9223372036854775808 1 0 0 1 0 0 1 0 1\n", "toy.g2o:1: id 9223372036854775808 ≥ 2^63"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n",
          "toy.g2o:4: edge to unknown pose vertex 2"),

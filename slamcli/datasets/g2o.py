@@ -165,8 +165,8 @@ def read_graph(path: str | Path, convention: str = "auto") -> dict:
         value, non-integer id or one ≥ 2^63, a duplicate vertex id, an edge to a vertex the file does not
         declare (when it declares vertices of that kind; for poses more than the start pose's), a landmark id
         equal to a pose id in a convention with one id space, a matrix the convention cannot read (the
-        message names the reading and the conventions that read it), a BR σ ≤ 0, an EQUIV of a non-pose (each names
-        file:line).
+        message names the reading and the conventions that read it), a BR σ ≤ 0, an EQUIV of a non-pose
+        (each names file:line).
     """
     path = Path(path)
     if convention not in CONVENTIONS:
@@ -176,20 +176,19 @@ def read_graph(path: str | Path, convention: str = "auto") -> dict:
     records = _records(path)
     separate = separate_landmark_ids(convention, {r[1] for r in records if r[1] in _SIGHTINGS})
     g = {"vertices": {}, "pose_edges": [], "sightings": [], "readings": {}, "lm_vertices": set(), "equiv": []}
-    vertex_line: dict[tuple[str, int], int] = {}  # (id space, id) → line of its VERTEX_* declaration
+    vertex_line: dict[tuple[str, int], tuple[int, str]] = {}  # (id space, id) → (line, tag) of its VERTEX_*
     for lineno, tag, vals, ids in records:
         where = f"{path}:{lineno}"
         if tag.startswith("VERTEX"):
             space = "landmark" if separate and tag == "VERTEX_XY" else "pose"
-            first = vertex_line.setdefault((space, ids[0]), lineno)
+            first, first_tag = vertex_line.setdefault((space, ids[0]), (lineno, tag))
             if first != lineno:
+                mixed = "VERTEX_XY" in (tag, first_tag) and tag != first_tag  # a landmark and a pose
                 raise DatasetImportError(f"{where}: duplicate vertex id {ids[0]} (first declared at line {first})"
-                                         + ("" if separate else _ID_SPACE_HINT.format(convention)))
+                                         + (_ID_SPACE_HINT.format(convention) if mixed else ""))
         try:
             _read_record(g, tag, vals, ids, lineno, convention)
-        except ConventionError as e:
-            raise DatasetImportError(f"{where}: {e}") from None
-        except ValueError as e:
+        except ValueError as e:  # ConventionError included: it names the reading and the alternatives
             raise DatasetImportError(f"{where}: {e}") from None
     merged = _merge_equivalent(path, g)
     _check_references(path, g["vertices"], g["lm_vertices"], g["pose_edges"], g["sightings"], separate, convention)
