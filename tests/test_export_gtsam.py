@@ -54,7 +54,7 @@ def test_gtsam_export_loads_every_factor_and_our_optimum(solved):
     assert n_sightings > 100 and len(res.landmarks_xy) > 3
     assert _count(graph, gtsam.BetweenFactorPose2) == ds.inputs.n_poses - 1
     assert _count(graph, gtsam.BearingRangeFactor2D) == n_sightings == graph.size() - (ds.inputs.n_poses - 1)
-    lm = np.array([values.atPoint2(gtsam.symbol("l", j)) for j in range(len(res.landmarks_xy))])
+    lm = np.array([values.atPoint2(gtsam.symbol("l", ds.inputs.n_poses + j)) for j in range(len(res.landmarks_xy))])
     np.testing.assert_array_equal(lm, res.landmarks_xy)
     prior_std = np.asarray(res.params["prior_std"], float)
     graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*ds.inputs.x0), gtsam.noiseModel.Diagonal.Sigmas(prior_std)))
@@ -69,7 +69,7 @@ def test_gtsam_export_loads_every_factor_and_our_optimum(solved):
         k = int(np.flatnonzero(res.assoc == j)[0])
         x, y, th = ds.inputs.odometry_xyt[obs.step[k]]
         b = th + obs.bearing_rad[k]
-        init.insert(gtsam.symbol("l", j), np.array([x + obs.range_m[k] * np.cos(b), y + obs.range_m[k] * np.sin(b)]))
+        init.insert(gtsam.symbol("l", ds.inputs.n_poses + j), np.array([x + obs.range_m[k] * np.cos(b), y + obs.range_m[k] * np.sin(b)]))
     assert graph.error(init) > 2 * cost  # dead reckoning is far from the optimum: the check below is not vacuous
     opt = gtsam.LevenbergMarquardtOptimizer(graph, init).optimize()
     got = np.array([[opt.atPose2(t).x(), opt.atPose2(t).y(), opt.atPose2(t).theta()] for t in range(ds.inputs.n_poses)])

@@ -151,12 +151,15 @@ def test_noise_free_graph_is_recovered_exactly(tmp_path):
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0\n", "toy.g2o:1: EDGE_SE2 needs 11 numbers, got 10"),
         ("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 x\n", "toy.g2o:1: not a number: 'x'"),
         ("EDGE_SE2 0 1.5 1 0 0 1 0 0 1 0 1\n", "toy.g2o:1: ids must be non-negative integers"),
-        ("EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", "toy.g2o:1: matrix is not positive definite"),
+        ("EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n",
+         "toy.g2o:1: EDGE_SE2 matrix is not positive definite read as information, g2o order (convention auto); "
+         "valid under --convention isam"),
         ("# only a comment\nVERTEX_SE2 0 0 0 0\n", "no odometry edges"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 0 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n",
          "toy.g2o:2: duplicate vertex id 0 (first declared at line 1)"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_XY 0 1 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n",
-         "toy.g2o:2: duplicate vertex id 0"),
+         "toy.g2o:2: duplicate vertex id 0 (first declared at line 1) (convention auto: poses and landmarks share "
+         "one id space; --convention gtsam or isam read landmark ids in their own space)"),
         ("EDGE_SE2 0 9223372036854775808 1 0 0 1 0 0 1 0 1\n", "toy.g2o:1: id 9223372036854775808 ≥ 2^63"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n",
          "toy.g2o:4: edge to unknown pose vertex 2"),

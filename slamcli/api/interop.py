@@ -41,9 +41,11 @@ def export_file(src: str | os.PathLike, fmt: str, out: str | os.PathLike, *, dat
 
     Returns
     -------
-    dict ``{"kind": "result"|"dataset", "format", "n_poses", "n_landmarks", "n_edges", "n_loop_closures"}``
-    (edges and loop closures: g2o/gtsam only; ``n_edges`` counts odometry, loop-closure and landmark edges),
-    plus ``"warning"`` (one line) when the file cannot carry the whole graph for GTSAM.
+    dict ``{"kind": "result"|"dataset", "format", "n_poses", "n_landmarks", "n_edges", "n_loop_closures",
+    "n_sightings", "n_unassociated"}`` (the last four: g2o/gtsam only; ``n_edges`` counts odometry,
+    loop-closure and landmark edges; every sighting is written, the ``n_unassociated`` ones as landmarks of
+    their own), plus ``"warning"`` (one line) when the file cannot carry the whole graph for GTSAM.
+    :func:`describe_export` words it as one line.
     """
     from slamcli.io import DATASET_SCHEMA, RESULT_SCHEMA, read_dataset
     from slamcli.io import export as ex
@@ -109,9 +111,11 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
                          obs.bearing_rad, assoc, inp.noise.range_std, inp.noise.bearing_std,
                          constraints=cons, use_edge_info=use_edge_info)
         n_between = cons.n_between if cons is not None else 0
-        n_sightings = int(np.count_nonzero(np.asarray(assoc) >= 0))
+        n_sightings = len(obs)
         summary["n_edges"] = int(len(poses) - 1 + n_between + n_sightings)
         summary["n_loop_closures"] = int(n_between)
+        summary["n_sightings"] = int(n_sightings)
+        summary["n_unassociated"] = int(np.count_nonzero(np.asarray(assoc) < 0))
         if fmt == "g2o" and n_sightings:
             summary["warning"] = f"GTSAM's readG2o skips the {n_sightings} EDGE_SE2_XY lines: use --format gtsam"
         elif fmt == "gtsam" and written[1]:
@@ -120,6 +124,23 @@ def export_objects(fmt: str, out: str | os.PathLike, dataset, result=None) -> di
             summary["warning"] = "; ".join(x for x in (summary.get("warning"),
                                                        "sensor offset not in the file (edges from the body pose)") if x)
     return summary
+
+
+def describe_export(summary: dict) -> str:
+    """What an export wrote, in the terms of its format (TUM and KITTI hold poses only; CSV poses and
+    landmarks; g2o/GTSAM the whole graph), e.g. ``gtsam: estimate, 151 poses, 12 landmarks, 180 sightings
+    (3 unassociated, written as landmarks of their own), 330 edges``."""
+    s = summary
+    what = "estimate" if s["kind"] == "result" else "ground truth"
+    head = f"{s['format']}: {what}, {s['n_poses']} poses"
+    if s["format"] in ("tum", "kitti"):
+        return f"{head}; {s['format'].upper()} holds poses only"
+    if s["format"] == "csv":
+        return f"{head}, {s['n_landmarks']} landmarks"
+    alone = (f" ({s['n_unassociated']} unassociated, written as landmarks of their own)"
+             if s["n_unassociated"] else "")
+    return (f"{head}, {s['n_landmarks']} landmarks, {s['n_sightings']} sightings{alone}, {s['n_loop_closures']} "
+            f"loop closures, {s['n_edges']} edges")
 
 
 def trajectory_at(t_src, poses_src, t_query, *, tol: float = STAMP_MATCH_TOL_S) -> tuple[np.ndarray, np.ndarray]:

@@ -19,6 +19,8 @@ def export_command(
         "--data", "-d", help="Dataset of a result; default: the one recorded in it.")] = None,
     no_hash_check: Annotated[bool, typer.Option("--no-hash-check", help="Skip the dataset hash check.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an existing -o that is a slamcli dataset or result (refused otherwise).")] = False,
 ) -> None:
     """Export poses (and landmarks) for evo, GTSAM, g2o or pandas.
 
@@ -27,14 +29,24 @@ def export_command(
     use --format gtsam, whose BR sightings readG2o reads).
     """
     with handle_errors():
-        from slamcli.api.interop import export_file
+        from slamcli.api.interop import describe_export, export_file
 
         check_output(output, inputs=[src, data])
+        _refuse_slamcli_file(output, force)
         s = export_file(src, fmt, output, data=data, check_hash=not no_hash_check)
         if not quiet:
-            edges = f", {s['n_edges']} edges" if "n_edges" in s else ""
-            what = "estimate" if s["kind"] == "result" else "ground truth"
-            typer.echo(f"wrote {output} ({s['format']}: {what}, {s['n_poses']} poses, "
-                       f"{s['n_landmarks']} landmarks{edges})")
+            typer.echo(f"wrote {output} ({describe_export(s)})")
         if "warning" in s:
             typer.echo(f"warning: {s['warning']}", err=True)
+
+
+def _refuse_slamcli_file(output: Path, force: bool) -> None:
+    """An export is a text file of another tool: it replaces an earlier export, but never a slamcli dataset
+    or result (the data it came from) unless ``--force`` (exit 2, as solve's and import's output guard)."""
+    from slamcli.io.guard import OutputRefused, file_kind
+
+    if force or not output.is_file() or output.stat().st_size == 0:
+        return
+    found = file_kind(output)
+    if found is not None:
+        raise OutputRefused(f"-o {output}: exists and is a slamcli {found}, not an export; --force replaces it")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import click
 import typer
 
 from slamcli.cli.app import app, check_output, fail, handle_errors, stdout_console
@@ -204,6 +205,16 @@ def import_g2o_command(
         int | None,
         typer.Option("--max-poses", help="Keep only the first N poses (ascending ids) and the edges among them."),
     ] = None,
+    convention: Annotated[
+        str,
+        typer.Option(
+            "--convention", click_type=click.Choice(["auto", "g2o", "toro", "gtsam", "isam"]),
+            metavar="[auto|g2o|toro|gtsam|isam]",
+            help="How edge numbers are read: auto (per tag: EDGE_SE2 g2o information, EDGE2 TORO information, "
+            "ODOMETRY/LANDMARK covariance), g2o (information, g2o order), toro (information, TORO order), gtsam "
+            "(covariance as GTSAM's load2D; LANDMARK as bearing-range), isam (square-root information; landmark "
+            "ids in their own space)."),
+    ] = "auto",
     quiet: _Quiet = False,
     out: _Out = None,
     force: _Force = False,
@@ -221,7 +232,8 @@ def import_g2o_command(
 
         path = resolve_source(path, "g2o")
         ds = import_graph(
-            path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std, max_poses=max_poses
+            path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std, max_poses=max_poses,
+            convention=convention,
         )
         write_dataset(out, ds)
         if quiet:
@@ -233,11 +245,21 @@ def import_g2o_command(
             f"landmarks, {len(inp.observations)} observations, "
             f"forward axis {md['forward_axis']}; median σ odometry {[round(float(s), 5) for s in n.odometry_std]}, "
             f"range {n.range_std:.4g} m, bearing {n.bearing_std:.4g} rad; no ground truth → {out}"
+            f"\n  {_convention_summary(md)}"
             + (f"\n  note: {md['import_note']}" if md.get("import_note") else ""),
             highlight=False,
             markup=False,
             soft_wrap=True,
         )
+
+
+def _convention_summary(md: dict) -> str:
+    """One line: the convention the graph was read with and what it made of each tag."""
+    readings = "; ".join(f"{tag} {' / '.join(how)}" for tag, how in md["convention_readings"].items())
+    merged = md.get("equiv_merged") or []
+    return (f"convention {md['convention']}: {readings}; landmark ids: {md['landmark_id_space']}"
+            + (f"; EQUIV merged {len(merged)} pose(s), dropping {md['equiv_dropped_edges']} edge(s) between merged "
+               f"poses (a constant {md['equiv_dropped_cost']:.6g} of the cost)" if merged else ""))
 
 
 _RangeStd = Annotated[float | None, typer.Option(help="σ_r to store, m (default: the importer's, see its docstring).")]

@@ -6,7 +6,10 @@ City10000, KITTI 00; ``shared/datasets/pose_graphs``). A graph file carries the 
 no time and usually no ground truth, so the import gives solver inputs only (``has_truth = false``): every
 solver runs on it; ``evaluate`` needs ground truth and says so.
 
-Lines understood (anything else is an error naming the line; ``#`` comments and blank lines are skipped):
+Lines understood (anything else is an error naming the line; ``#`` comments and blank lines are skipped). The
+matrices are described as the default convention ``auto`` reads them (each tag as the tool that defined it);
+``convention = "g2o" | "toro" | "gtsam" | "isam"`` reads every tag as that tool does (order of the six numbers,
+information / covariance / square-root information, landmark id space: :mod:`slamcli.datasets.graph_conventions`):
 
 ===========================================  ===================================================================
 ``VERTEX_SE2 id x y θ`` / ``VERTEX2``        initial pose guess; only the first pose's is used (as ``x0``)
@@ -23,13 +26,16 @@ C23 C33``                                    its loader detects for victoria_par
 ``LANDMARK2 i l dx dy I11 I12 I22``          the same (older tag, read as EDGE_SE2_XY)
 ``LANDMARK i l dx dy C11 C12 C22``           the same with a 2×2 covariance (GTSAM)
 ``BR i l b r σ_b σ_r``                       GTSAM bearing-range sighting: bearing (rad), range (m) and their σ
+``EQUIV a b``                                poses a and b are one pose (TORO): b is merged into the smaller id;
+                                             an edge between merged poses is a constant of the cost, dropped and
+                                             reported (``metadata["equiv_dropped_cost"]``)
 ===========================================  ===================================================================
 
 Conversion
 ----------
 * **Pose order** – pose ids are the ids used by pose-pose edges, in ascending order; pose ``p_k`` becomes step
   ``k`` (pose ids: those of the pose vertices and of the pose-pose edges). The first edge (file order) from
-  ``p_k`` to ``p_{k+1}`` is the odometry of step ``k`` (every public benchmark numbers its poses along the
+  ``p_k`` to ``p_{k+1}`` (else one from ``p_{k+1}`` to ``p_k``, inverted exactly) is the odometry of step ``k`` (every public benchmark numbers its poses along the
   trajectory). Any graph imports: where that edge is missing the step is completed from the initial estimate
   (vertices, or a spanning tree) with a near-zero information, and each further disconnected component gets
   one prior (:func:`_chain`); the import says so in one line (``metadata["import_note"]``).
@@ -60,7 +66,8 @@ Conversion
   (BR: the median σ's). The spread is in the metadata. (GTSAM's own loader reads a ``LANDMARK`` covariance
   ``c·I`` differently: σ_r = √c, σ_b = √(c/10), i.e. "the covariance describes the uncertainty at 10 m"; for
   victoria_park.txt that is 0.63 m and 0.2 rad, against our 0.63 m and a median 0.05 rad. Pass
-  ``range_std``/``bearing_std`` to choose other values.)
+  ``range_std``/``bearing_std`` to choose other values, or ``convention = "gtsam"`` to read the sightings
+  as GTSAM does: bearing-range rows with those σ's.)
 """
 
 from __future__ import annotations
@@ -72,6 +79,14 @@ from typing import Literal
 import numpy as np
 
 from slamcli.datasets import DatasetImportError
+from slamcli.datasets.graph_conventions import (
+    CONVENTIONS,
+    ConventionError,
+    gtsam_landmark_sigmas,
+    pose_matrix,
+    separate_landmark_ids,
+    xy_matrix,
+)
 from slamcli.models import se2
 from slamcli.models.angles import wrap_angle
 from slamcli.models.motion import chain_increments
@@ -89,26 +104,11 @@ _FIELDS = {
     "LANDMARK2": 7,
     "LANDMARK": 7,
     "BR": 6,
+    "EQUIV": 2,
 }
 _POSE_EDGES = ("EDGE_SE2", "EDGE2", "ODOMETRY")
+_SIGHTINGS = ("EDGE_SE2_XY", "LANDMARK2", "LANDMARK", "BR")
 _FORWARD_ANGLE = {"x": 0.0, "y": math.pi / 2, "-x": math.pi, "-y": -math.pi / 2}
-
-
-def _sym3(v) -> np.ndarray:
-    """Upper triangle ``[a11 a12 a13 a22 a23 a33]`` → symmetric 3×3."""
-    a11, a12, a13, a22, a23, a33 = v
-    return np.array([[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]], float)
-
-
-def _sym3_toro(v) -> np.ndarray:
-    """TORO order ``[ff fs ss rr fr sr]`` → symmetric 3×3 over ``(f, s, r)``."""
-    ff, fs, ss, rr, fr, sr = v
-    return np.array([[ff, fs, fr], [fs, ss, sr], [fr, sr, rr]], float)
-
-
-def _sym2(v) -> np.ndarray:
-    a11, a12, a22 = v
-    return np.array([[a11, a12], [a12, a22]], float)
 
 
 def _rot(phi: float) -> np.ndarray:
@@ -116,33 +116,10 @@ def _rot(phi: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def read_graph(path: str | Path) -> dict:
-    """Parse a graph file into plain lists (ids as ints, matrices in the file's axes).
-
-    Returns
-    -------
-    dict with ``vertices`` {id: (x, y, θ)}, ``pose_edges`` [(i, j, d (3,), cov (3,3), info (3,3), line)],
-    ``sightings`` [(i, l, z (2,), cov (2,2), info (2,2), line, model)] with ``model`` ``"xy"`` (z = offset
-    (dx, dy), matrices over (x, y)) or ``"range_bearing"`` (z = (range, bearing), matrices over (r, b)),
-    ``n_landmark_vertices``; and the short forms ``odometry`` [(i, j, d, cov, line)] (all pose-pose edges)
-    and ``landmark_obs`` [(i, l, z, cov, line)].
-
-    Raises
-    ------
-    DatasetImportError  missing file, unknown tag, wrong field count, non-numeric/non-finite value, non-integer
-        id or one ≥ 2^63, a duplicate vertex id, an edge to a vertex the file does not declare (when it declares
-        vertices of that kind; for poses more than the start pose's), a landmark id equal to a pose id, a matrix that is not positive definite, a BR
-        σ ≤ 0 (each names file:line).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetImportError(f"{path}: file not found")
-    vertices: dict[int, tuple[float, float, float]] = {}
-    pose_edges: list = []
-    landmark_obs: list = []
-    n_lm_vertices = 0
-    vertex_line: dict[int, int] = {}  # id → line of its VERTEX_* declaration
-    lm_vertices: set[int] = set()
+def _records(path: Path) -> list[tuple[int, str, list[float], list[int]]]:
+    """Every non-comment line as ``(line number, tag, numbers, ids)``, checked for tag, field count,
+    numbers and ids (one-line DatasetImportError naming file:line)."""
+    out = []
     with open(path, encoding="utf-8", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             s = line.strip()
@@ -152,9 +129,7 @@ def read_graph(path: str | Path) -> dict:
             n = _FIELDS.get(tag)
             where = f"{path}:{lineno}"
             if n is None:
-                raise DatasetImportError(
-                    f"{where}: unsupported tag {tag!r} (supported: {', '.join(_FIELDS)})"
-                )
+                raise DatasetImportError(f"{where}: unsupported tag {tag!r} (supported: {', '.join(_FIELDS)})")
             if len(parts) != n:
                 raise DatasetImportError(f"{where}: {tag} needs {n} numbers, got {len(parts)}")
             try:
@@ -165,48 +140,151 @@ def read_graph(path: str | Path) -> dict:
             if not all(math.isfinite(v) for v in vals):
                 raise DatasetImportError(f"{where}: non-finite value")
             n_ids = 1 if tag.startswith("VERTEX") else 2
-            ids = _ids(parts[:n_ids], vals[:n_ids], where)
-            if tag.startswith("VERTEX"):
-                first = vertex_line.get(ids[0])
-                if first is not None:
-                    raise DatasetImportError(f"{where}: duplicate vertex id {ids[0]} (first declared at line {first})")
-                vertex_line[ids[0]] = lineno
-            if tag in ("VERTEX_SE2", "VERTEX2"):
-                vertices[ids[0]] = tuple(vals[1:4])
-            elif tag == "VERTEX_XY":
-                n_lm_vertices += 1
-                lm_vertices.add(ids[0])
-            elif tag in _POSE_EDGES:
-                if ids[0] == ids[1]:
-                    raise DatasetImportError(f"{where}: edge from pose {ids[0]} to itself")
-                m = _sym3_toro(vals[5:11]) if tag == "EDGE2" else _sym3(vals[5:11])
-                _check_pd(m, where)
-                cov, info = (m, np.linalg.inv(m)) if tag == "ODOMETRY" else (np.linalg.inv(m), m)
-                pose_edges.append((ids[0], ids[1], np.array(vals[2:5]), cov, info, lineno))
-            elif tag == "BR":
-                b, r, sb, sr = vals[2:6]
-                if not (sb > 0 and sr > 0):
-                    raise DatasetImportError(f"{where}: BR needs σ_bearing > 0 and σ_range > 0")
-                if not r > 0:
-                    raise DatasetImportError(f"{where}: BR range must be > 0, got {r}")
-                cov = np.diag([sr * sr, sb * sb])
-                landmark_obs.append(
-                    (ids[0], ids[1], np.array([r, b]), cov, np.linalg.inv(cov), lineno, "range_bearing")
-                )
-            else:  # EDGE_SE2_XY / LANDMARK2 / LANDMARK
-                m = _sym2(vals[4:7])
-                _check_pd(m, where)
-                cov, info = (m, np.linalg.inv(m)) if tag == "LANDMARK" else (np.linalg.inv(m), m)
-                landmark_obs.append((ids[0], ids[1], np.array(vals[2:4]), cov, info, lineno, "xy"))
-    _check_references(path, vertices, lm_vertices, pose_edges, landmark_obs)
+            out.append((lineno, tag, vals, _ids(parts[:n_ids], vals[:n_ids], where)))
+    return out
+
+
+def read_graph(path: str | Path, convention: str = "auto") -> dict:
+    """Parse a graph file into plain lists (ids as ints, matrices in the file's axes) under ``convention``
+    (:mod:`slamcli.datasets.graph_conventions`: the order and meaning of each edge's numbers, landmark id
+    spaces). ``EQUIV a b`` merges pose b into pose a (the smaller id is kept; every edge and sighting of the
+    other is moved to it).
+
+    Returns
+    -------
+    dict with ``vertices`` {id: (x, y, θ)}, ``pose_edges`` [(i, j, d (3,), cov (3,3), info (3,3), line)],
+    ``sightings`` [(i, l, z (2,), cov (2,2), info (2,2), line, model)] with ``model`` ``"xy"`` (z = offset
+    (dx, dy), matrices over (x, y)) or ``"range_bearing"`` (z = (range, bearing), matrices over (r, b)),
+    ``n_landmark_vertices``; ``convention``, ``readings`` {tag: how its numbers were read},
+    ``separate_landmark_ids``, ``merged`` [(kept, merged, line)] (EQUIV); and the short forms ``odometry``
+    [(i, j, d, cov, line)] (all pose-pose edges) and ``landmark_obs`` [(i, l, z, cov, line)].
+
+    Raises
+    ------
+    DatasetImportError  missing file, unknown convention or tag, wrong field count, non-numeric/non-finite
+        value, non-integer id or one ≥ 2^63, a duplicate vertex id, an edge to a vertex the file does not
+        declare (when it declares vertices of that kind; for poses more than the start pose's), a landmark id
+        equal to a pose id in a convention with one id space, a matrix the convention cannot read (the
+        message names the reading and the conventions that read it), a BR σ ≤ 0, an EQUIV of a non-pose
+        (each names file:line).
+    """
+    path = Path(path)
+    if convention not in CONVENTIONS:
+        raise DatasetImportError(f"--convention: must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+    if not path.is_file():
+        raise DatasetImportError(f"{path}: file not found")
+    records = _records(path)
+    separate = separate_landmark_ids(convention, {r[1] for r in records if r[1] in _SIGHTINGS})
+    g = {"vertices": {}, "pose_edges": [], "sightings": [], "readings": {}, "lm_vertices": set(), "equiv": []}
+    vertex_line: dict[tuple[str, int], tuple[int, str]] = {}  # (id space, id) → (line, tag) of its VERTEX_*
+    for lineno, tag, vals, ids in records:
+        where = f"{path}:{lineno}"
+        if tag.startswith("VERTEX"):
+            space = "landmark" if separate and tag == "VERTEX_XY" else "pose"
+            first, first_tag = vertex_line.setdefault((space, ids[0]), (lineno, tag))
+            if first != lineno:
+                mixed = "VERTEX_XY" in (tag, first_tag) and tag != first_tag  # a landmark and a pose
+                raise DatasetImportError(f"{where}: duplicate vertex id {ids[0]} (first declared at line {first})"
+                                         + (_ID_SPACE_HINT.format(convention) if mixed else ""))
+        try:
+            _read_record(g, tag, vals, ids, lineno, convention)
+        except ValueError as e:  # ConventionError included: it names the reading and the alternatives
+            raise DatasetImportError(f"{where}: {e}") from None
+    merged = _merge_equivalent(path, g)
+    _check_references(path, g["vertices"], g["lm_vertices"], g["pose_edges"], g["sightings"], separate, convention)
+    edges, obs = g["pose_edges"], g["sightings"]
     return {
-        "vertices": vertices,
-        "pose_edges": pose_edges,
-        "sightings": landmark_obs,
-        "odometry": [(e[0], e[1], e[2], e[3], e[5]) for e in pose_edges],
-        "landmark_obs": [(o[0], o[1], o[2], o[3], o[5]) for o in landmark_obs],
-        "n_landmark_vertices": n_lm_vertices,
+        "vertices": g["vertices"],
+        "pose_edges": edges,
+        "sightings": obs,
+        "odometry": [(e[0], e[1], e[2], e[3], e[5]) for e in edges],
+        "landmark_obs": [(o[0], o[1], o[2], o[3], o[5]) for o in obs],
+        "n_landmark_vertices": len(g["lm_vertices"]),
+        "convention": convention,
+        "readings": {t: sorted(r) for t, r in g["readings"].items()},
+        "separate_landmark_ids": separate,
+        "merged": merged,
+        "within_merged_costs": g.get("within_merged", []),
     }
+
+
+_ID_SPACE_HINT = (" (convention {0}: poses and landmarks share one id space; --convention gtsam or isam read "
+                  "landmark ids in their own space)")
+
+
+def _read_record(g: dict, tag: str, vals: list[float], ids: list[int], lineno: int, convention: str) -> None:
+    """Add one parsed line to ``g`` (see :func:`read_graph`); ValueError/ConventionError on a bad line."""
+    if tag in ("VERTEX_SE2", "VERTEX2"):
+        g["vertices"][ids[0]] = tuple(vals[1:4])
+    elif tag == "VERTEX_XY":
+        g["lm_vertices"].add(ids[0])
+    elif tag == "EQUIV":
+        g["equiv"].append((ids[0], ids[1], lineno))
+    elif tag in _POSE_EDGES:
+        if ids[0] == ids[1]:
+            raise ValueError(f"edge from pose {ids[0]} to itself")
+        cov, info, how = pose_matrix(tag, vals[5:11], convention)
+        g["readings"].setdefault(tag, set()).add(how)
+        g["pose_edges"].append((ids[0], ids[1], np.array(vals[2:5]), cov, info, lineno))
+    elif tag == "BR" or (tag == "LANDMARK" and convention == "gtsam"):
+        if tag == "BR":
+            b, r, sb, sr = vals[2:6]
+            if not (sb > 0 and sr > 0):
+                raise ValueError("BR needs σ_bearing > 0 and σ_range > 0")
+            g["readings"].setdefault(tag, set()).add("bearing-range σ's")
+        else:  # GTSAM's load2D: the offset as bearing and range, the covariance as its 10 m σ's
+            b, r = math.atan2(vals[3], vals[2]), math.hypot(vals[2], vals[3])
+            sb, sr = gtsam_landmark_sigmas(vals[4:7])
+            g["readings"].setdefault(tag, set()).add("bearing-range, σ_r = √c, σ_b = √(c/10) (GTSAM load2D)")
+        if not r > 0:
+            raise ValueError(f"{tag} range must be > 0, got {r}")
+        cov = np.diag([sr * sr, sb * sb])
+        g["sightings"].append((ids[0], ids[1], np.array([r, b]), cov, np.linalg.inv(cov), lineno, "range_bearing"))
+    else:  # EDGE_SE2_XY / LANDMARK2 / LANDMARK
+        if convention == "gtsam":
+            raise ConventionError(f"{tag} is not read by GTSAM's load2D (convention gtsam, which skips it); "
+                                  "pass --convention g2o or auto")
+        cov, info, how = xy_matrix(tag, vals[4:7], convention)
+        g["readings"].setdefault(tag, set()).add(how)
+        g["sightings"].append((ids[0], ids[1], np.array(vals[2:4]), cov, info, lineno, "xy"))
+
+
+def _merge_equivalent(path: Path, g: dict) -> list[tuple[int, int, int]]:
+    """Apply the file's ``EQUIV a b`` lines to ``g`` in place: every pose of an equivalence class becomes its
+    smallest id (edges, sightings, vertices). An edge between two poses of one class becomes a constant
+    ``½ log(d⁻¹)ᵀ Λ log(d⁻¹)`` of the cost: it is dropped and its constant listed in ``g["within_merged"]``.
+    Returns ``[(kept, merged, line)]``."""
+    if not g["equiv"]:
+        return []
+    pose_ids = set(g["vertices"]) | {e[0] for e in g["pose_edges"]} | {e[1] for e in g["pose_edges"]}
+    parent: dict[int, int] = {}
+
+    def root(v: int) -> int:
+        while parent.get(v, v) != v:
+            v = parent[v]
+        return v
+
+    for a, b, line in g["equiv"]:
+        for v in (a, b):
+            if v not in pose_ids:
+                raise DatasetImportError(f"{path}:{line}: EQUIV {a} {b}: {v} is not a pose id of the file")
+        ra, rb = root(a), root(b)
+        parent[max(ra, rb)] = min(ra, rb)
+    rep = {v: root(v) for v in parent}
+    merged = [(root(a), v, line) for a, b, line in g["equiv"] for v in (a, b) if root(v) != v]
+    edges, within = [], []
+    for i, j, d, cov, info, line in g["pose_edges"]:
+        i2, j2 = rep.get(i, i), rep.get(j, j)
+        if i2 == j2:  # its error log(d⁻¹) no longer depends on any estimate: a constant of the cost
+            e = se2.log(se2.inverse(d))
+            within.append(0.5 * float(e @ info @ e))
+        else:
+            edges.append((i2, j2, d, cov, info, line))
+    g["pose_edges"] = edges
+    g["within_merged"] = within
+    g["sightings"] = [(rep.get(o[0], o[0]), *o[1:]) for o in g["sightings"]]
+    g["vertices"] = {v: p for v, p in g["vertices"].items() if rep.get(v, v) == v}
+    return sorted(set(merged))
 
 
 #: ids are stored as signed 64-bit integers (HDF5, numpy int64)
@@ -231,10 +309,11 @@ def _ids(texts: list[str], vals: list[float], where: str) -> list[int]:
     return out
 
 
-def _check_references(path: Path, vertices: dict, lm_vertices: set, pose_edges: list, sightings: list) -> None:
+def _check_references(path: Path, vertices: dict, lm_vertices: set, pose_edges: list, sightings: list,
+                      separate: bool, convention: str) -> None:
     """Refuse an edge to an undeclared vertex (when the file declares vertices of that kind — for poses, more
-    than one: a single VERTEX_SE2 only gives the start pose) and a landmark id that is also a pose id, naming
-    file:line of the first offending edge."""
+    than one: a single VERTEX_SE2 only gives the start pose) and, with one id space, a landmark id that is
+    also a pose id, naming file:line of the first offending edge."""
     if len(vertices) > 1:
         for e in pose_edges:
             for v in (e[0], e[1]):
@@ -247,13 +326,17 @@ def _check_references(path: Path, vertices: dict, lm_vertices: set, pose_edges: 
         for o in sightings:
             if o[1] not in lm_vertices:
                 raise DatasetImportError(f"{path}:{o[5]}: sighting of unknown landmark vertex {o[1]} (no VERTEX_XY)")
+    if separate:
+        return
     pose_ids = set(vertices) | {e[0] for e in pose_edges} | {e[1] for e in pose_edges}
     for o in sightings:
         if o[1] in pose_ids:
-            raise DatasetImportError(f"{path}:{o[5]}: landmark id {o[1]} is also a pose id")
+            raise DatasetImportError(f"{path}:{o[5]}: landmark id {o[1]} is also a pose id"
+                                     + _ID_SPACE_HINT.format(convention))
     clash = sorted(lm_vertices & pose_ids)
     if clash:
-        raise DatasetImportError(f"{path}: landmark vertex id {clash[0]} is also a pose id")
+        raise DatasetImportError(f"{path}: landmark vertex id {clash[0]} is also a pose id"
+                                 + _ID_SPACE_HINT.format(convention))
 
 
 def _is_float(p: str) -> bool:
@@ -262,12 +345,6 @@ def _is_float(p: str) -> bool:
     except ValueError:
         return False
     return True
-
-
-def _check_pd(m: np.ndarray, where: str) -> np.ndarray:
-    if np.any(np.linalg.eigvalsh(m) <= 0):
-        raise DatasetImportError(f"{where}: matrix is not positive definite")
-    return m
 
 
 #: information of an odometry step the file has no edge for, relative to the median information of the file's
@@ -279,7 +356,8 @@ VIRTUAL_INFO_REL = 1e-9
 def _chain(pose_edges: list, pose_ids: list[int], vertices: dict) -> tuple[list, list, dict]:
     """The odometry step ``p_k → p_{k+1}`` of every step and all other edges, for any pose graph.
 
-    A step is the first edge (file order) from ``p_k`` to ``p_{k+1}``. Where the file has none (a graph
+    A step is the first edge (file order) from ``p_k`` to ``p_{k+1}``, else the first from ``p_{k+1}`` to
+    ``p_k``, reversed (:func:`_oriented`, exact). Where the file has neither (a graph
     merged from several runs, a trajectory that restarts), the step is *virtual*: its measurement is the
     relative pose of the initial estimate (the file's vertices, or a breadth-first spanning tree of the edges
     from the first pose of each connected component) and its information ``VIRTUAL_INFO_REL`` × the median
@@ -298,17 +376,20 @@ def _chain(pose_edges: list, pose_ids: list[int], vertices: dict) -> tuple[list,
 
     step_of = {pid: k for k, pid in enumerate(pose_ids)}
     n = len(pose_ids)
-    first: dict[tuple[int, int], int] = {}
+    first: dict[tuple[int, int], tuple[int, bool]] = {}  # (i, j) → (edge, stored as j → i)
     for m, e in enumerate(pose_edges):
-        first.setdefault((e[0], e[1]), m)
+        first.setdefault((e[0], e[1]), (m, False))
+    for m, e in enumerate(pose_edges):
+        first.setdefault((e[1], e[0]), (m, True))
     ij = np.array([[step_of[e[0]], step_of[e[1]]] for e in pose_edges], np.int64).reshape(-1, 2)
     _, comp = connected_components(coo_matrix((np.ones(len(ij)), (ij[:, 0], ij[:, 1])), shape=(n, n)), directed=False)
     missing = [k for k, (a, b) in enumerate(zip(pose_ids[:-1], pose_ids[1:])) if (a, b) not in first]
     layout = {"components": int(comp.max(initial=0) + 1), "virtual_odometry_steps": len(missing)}
     if not missing:
         idx = [first[(a, b)] for a, b in zip(pose_ids[:-1], pose_ids[1:])]
-        used = set(idx)
-        return [pose_edges[m] for m in idx], [e for m, e in enumerate(pose_edges) if m not in used], layout
+        used = {m for m, _ in idx}
+        return ([_oriented(pose_edges[m], rev) for m, rev in idx],
+                [e for m, e in enumerate(pose_edges) if m not in used], layout)
     from_vertices = all(pid in vertices for pid in pose_ids)
     init = (np.array([vertices[pid] for pid in pose_ids], float) if from_vertices
             else _spanning_tree_estimate(n, ij, np.array([e[2] for e in pose_edges]).reshape(-1, 3), comp))
@@ -317,9 +398,9 @@ def _chain(pose_edges: list, pose_ids: list[int], vertices: dict) -> tuple[list,
     seen = {int(comp[0])}
     chain, used, priors = [], set(), []
     for k, (a, b) in enumerate(zip(pose_ids[:-1], pose_ids[1:])):
-        m = first.get((a, b))
-        if m is not None:
-            chain.append(pose_edges[m])
+        if (a, b) in first:
+            m, rev = first[(a, b)]
+            chain.append(_oriented(pose_edges[m], rev))
             used.add(m)
             continue
         new_component = int(comp[k + 1]) not in seen
@@ -336,6 +417,18 @@ def _chain(pose_edges: list, pose_ids: list[int], vertices: dict) -> tuple[list,
            f"{', '.join(map(str, priors[:5]))}{', …' if len(priors) > 5 else ''})" if priors else "")
     )
     return chain, [e for m, e in enumerate(pose_edges) if m not in used], layout
+
+
+def _oriented(edge: tuple, reverse: bool) -> tuple:
+    """The edge ``(i, j, d, Σ, Λ, line)`` itself, or with ``reverse`` the same factor stored as ``j → i``:
+    measurement ``d⁻¹``; its error is ``e' = −Ad_d e`` (``log(d g⁻¹ d⁻¹) = −Ad_d log(g)``), so
+    ``Σ' = Ad_d Σ Ad_dᵀ`` and ``Λ' = Ad_d⁻ᵀ Λ Ad_d⁻¹`` keep its cost exactly."""
+    if not reverse:
+        return edge
+    i, j, d, cov, info, line = edge
+    A = se2.adjoint(d)
+    A_inv = np.linalg.inv(A)
+    return j, i, se2.inverse(d), A @ cov @ A.T, A_inv.T @ info @ A_inv, line
 
 
 def _spanning_tree_estimate(n: int, ij: np.ndarray, d: np.ndarray, comp: np.ndarray) -> np.ndarray:
@@ -372,6 +465,7 @@ def import_graph(
     range_std: float | None = None,
     bearing_std: float | None = None,
     max_poses: int | None = None,
+    convention: str = "auto",
 ) -> Dataset:
     """Import a pose-graph or landmark-graph file as a slamcli :class:`Dataset` without ground truth.
 
@@ -382,6 +476,8 @@ def import_graph(
     forward : which axis of the file's body frame points forward (see the module docstring).
     range_std, bearing_std : σ to store in the NoiseSpec instead of the medians of the sightings.
     max_poses : keep only the first N poses (ascending ids) and the edges/sightings among them (≥ 2).
+    convention : how the file's numbers are read: auto (per tag), g2o, toro, gtsam or isam
+        (:mod:`slamcli.datasets.graph_conventions`).
 
     Raises
     ------
@@ -390,7 +486,7 @@ def import_graph(
     """
     path = Path(path)
     _check_arguments(dt, forward, range_std, bearing_std, max_poses)
-    g = read_graph(path)
+    g = read_graph(path, convention)
     edges = g["pose_edges"]
     if not edges:
         raise DatasetImportError(f"{path}: no odometry edges (EDGE_SE2, EDGE2 or ODOMETRY)")
@@ -476,6 +572,11 @@ def import_graph(
     metadata = _metadata(path, dt, forward, max_poses, obs_model, T, n_poses_file, lm_ids, between_ij, pose_ids,
                          s_inc, sr, sb)
     metadata.update(layout)
+    metadata.update(convention=convention, convention_readings=g["readings"],
+                    landmark_id_space="own id space" if g["separate_landmark_ids"] else "shared with pose ids",
+                    equiv_merged=[[int(a), int(b)] for a, b, _ in g["merged"]],
+                    equiv_dropped_edges=len(g["within_merged_costs"]),
+                    equiv_dropped_cost=float(sum(g["within_merged_costs"])))
     return Dataset(inputs=inputs, truth=None, metadata=metadata)
 
 

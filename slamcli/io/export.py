@@ -14,12 +14,15 @@ g2o        ``VERTEX_SE2 i x y θ`` (poses, ids ``0..T``), ``VERTEX_XY j x y`` (l
            every loop closure / between-factor ``i → j`` of the dataset; information matrix upper triangle
            row by row) and ``EDGE_SE2_XY i j dx dy I11 I12 I22`` (landmark seen from pose i, in pose i's
            frame). g2o and ``slamcli import g2o`` load it all; GTSAM's ``readG2o`` skips the
-           ``EDGE_SE2_XY`` lines (the export then warns in one line).
+           ``EDGE_SE2_XY`` lines (the export then warns in one line). Every sighting is written: one that
+           no landmark holds (unassociated, clutter) becomes a landmark of its own, ids after the others,
+           placed where it was seen, so its edge adds nothing to the cost.
 GTSAM      GTSAM's own 2-D text format, which ``gtsam.readG2o(path, False)`` reads completely (so does
            ``gtsam.load2D`` with ``noiseFormat=NoiseFormatG2O``; its default AUTO takes the EDGE_SE2 numbers
            for a covariance): the
-           same ``VERTEX_SE2`` / ``EDGE_SE2`` lines, landmarks as ``VERTEX_XY l x y`` (GTSAM key
-           ``L(l)``) and each sighting as ``BR i l bearing range σ_b σ_r`` (a ``BearingRangeFactor2D``
+           same ``VERTEX_SE2`` / ``EDGE_SE2`` lines, landmarks as ``VERTEX_XY T+1+l x y`` (GTSAM key
+           ``L(T+1+l)``: landmark ids never collide with pose ids, so g2o-style readers load it too) and
+           each sighting (unassociated ones as for g2o) as ``BR i l bearing range σ_b σ_r`` (a ``BearingRangeFactor2D``
            with diagonal noise). Exact for range-bearing data with one σ each (simulated data); per-row
            information is carried by its diagonal: ``σ = sqrt(diag Σ_rb)``, where an ``xy`` row's
            ``Σ_rb = J⁻¹ Σ_xy J⁻ᵀ`` (first order, ``J`` below); a dropped correlation is warned about.
@@ -157,12 +160,15 @@ def observation_xy_information(range_m, bearing_rad, range_std: float, bearing_s
 
 
 def _graph_parts(poses_xyt, odometry_xyt, odometry_std, obs_step, obs_range_m, obs_bearing_rad, obs_landmark,
-                 range_std: float, bearing_std: float, constraints, use_edge_info: bool) -> dict:
+                 range_std: float, bearing_std: float, constraints, use_edge_info: bool, n_landmarks: int) -> dict:
     """The factor graph ``graph`` optimises, as arrays shared by the g2o and GTSAM writers.
 
     Returns ``edges_ij (E, 2)``, ``edges_xyt (E, 3)``, ``edges_info (E, 3, 3)`` (odometry chain first, then
-    the constraints' between-factors) and for the M attached sightings ``rows (M,)`` (observation rows),
-    ``r, b (M,)``, ``info_xy (M, 2, 2)`` (Cartesian, body frame) and ``cov_rb (M, 2, 2)`` over (r, b).
+    the constraints' between-factors) and for every one of the N sightings ``step``, ``landmark (N,)``,
+    ``r, b (N,)``, ``info_xy (N, 2, 2)`` (Cartesian, body frame) and ``cov_rb (N, 2, 2)`` over (r, b). A
+    sighting attached to no landmark (``obs_landmark < 0``) gets a landmark of its own, rows ``L, L+1, …``
+    after the ``L`` landmarks, placed where it was seen (``poses[step] ⊕ (r cos b, r sin b)``, body frame),
+    so its factor adds nothing to the cost there: ``extra_landmarks_xy (U, 2)``, ``n_unassociated = U``.
     """
     from slamcli.models import se2
 
@@ -184,10 +190,15 @@ def _graph_parts(poses_xyt, odometry_xyt, odometry_std, obs_step, obs_range_m, o
         ij = np.concatenate([ij, np.asarray(c.between_ij, np.int64).reshape(-1, 2)])
         d = np.concatenate([d, np.asarray(c.between_xyt, float).reshape(-1, 3)])
         I_odo = np.concatenate([I_odo, np.asarray(c.between_info, float).reshape(-1, 3, 3)])
-    lab = np.asarray(obs_landmark, np.int64).reshape(-1)
-    keep = np.flatnonzero(lab >= 0)
-    r = np.asarray(obs_range_m, float).reshape(-1)[keep]
-    b = np.asarray(obs_bearing_rad, float).reshape(-1)[keep]
+    lab = np.asarray(obs_landmark, np.int64).reshape(-1).copy()
+    keep = np.arange(len(lab))
+    r = np.asarray(obs_range_m, float).reshape(-1)
+    b = np.asarray(obs_bearing_rad, float).reshape(-1)
+    step = np.asarray(obs_step, np.int64).reshape(-1)
+    alone = np.flatnonzero(lab < 0)
+    lab[alone] = n_landmarks + np.arange(alone.size)
+    seen_at = se2.compose(poses[step[alone]], np.column_stack([r[alone] * np.cos(b[alone]),
+                                                                  r[alone] * np.sin(b[alone]), np.zeros(alone.size)]))
     cs, sn = np.cos(b), np.sin(b)
     J = np.stack([np.stack([cs, -r * sn], -1), np.stack([sn, r * cs], -1)], -2)  # ∂(x, y)/∂(r, b), (M,2,2)
     obs_info = c.observation_info if (c is not None and use_edge_info) else None
@@ -201,18 +212,19 @@ def _graph_parts(poses_xyt, odometry_xyt, odometry_std, obs_step, obs_range_m, o
     else:  # per-row information over (r, b): first order for g2o, as for the σ's
         cov_rb = np.linalg.inv(np.asarray(obs_info, float)[keep])
         I_xy = rb_to_xy_information(r, b, cov_rb)
-    return {"n": n, "edges_ij": ij, "edges_xyt": d, "edges_info": I_odo,
-            "step": np.asarray(obs_step, np.int64).reshape(-1)[keep], "landmark": lab[keep],
-            "r": r, "b": b, "info_xy": I_xy, "cov_rb": np.asarray(cov_rb)}
+    return {"n": n, "edges_ij": ij, "edges_xyt": d, "edges_info": I_odo, "step": step, "landmark": lab,
+            "r": r, "b": b, "info_xy": I_xy, "cov_rb": np.asarray(cov_rb),
+            "extra_landmarks_xy": seen_at[:, :2].reshape(-1, 2), "n_unassociated": int(alone.size)}
 
 
 def _vertex_and_se2_lines(poses, lms, parts: dict, landmark_id0: int):
     """``VERTEX_SE2`` / ``VERTEX_XY`` / ``EDGE_SE2`` lines (no comment line: GTSAM stops at one it does not
-    understand); landmark l gets vertex id ``landmark_id0 + l``."""
+    understand); landmark l (the ``lms`` rows, then each unassociated sighting's own) gets vertex id
+    ``landmark_id0 + l``."""
     iu3 = np.triu_indices(3)
     for i, (x, y, th) in enumerate(poses):
         yield f"VERTEX_SE2 {i} {_g(x)} {_g(y)} {_g(th)}"
-    for l, (x, y) in enumerate(lms):
+    for l, (x, y) in enumerate(np.concatenate([lms, parts["extra_landmarks_xy"]])):
         yield f"VERTEX_XY {landmark_id0 + l} {_g(x)} {_g(y)}"
     for (i, j), m, info in zip(parts["edges_ij"], parts["edges_xyt"], parts["edges_info"]):
         yield f"EDGE_SE2 {int(i)} {int(j)} {_g(m[0])} {_g(m[1])} {_g(m[2])} " + " ".join(_g(v) for v in info[iu3])
@@ -230,7 +242,8 @@ def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_ste
     odometry_xyt : (T+1, 3)       dead-reckoning poses; edge t→t+1 measures ``between(odo_t, odo_{t+1})``.
     odometry_std : (3,)           σ of one odometry increment (used when there is no per-edge information).
     obs_step, obs_range_m, obs_bearing_rad : (N,)   observation rows.
-    obs_landmark : (N,)           row of ``landmarks_xy`` each observation is attached to; -1 = not written.
+    obs_landmark : (N,)           row of ``landmarks_xy`` each observation is attached to; -1 = none: the
+                                  sighting is written with a landmark of its own (ids after the others).
     range_std, bearing_std        σ of one observation (used when there is no per-edge information).
     constraints : PoseConstraints | None   the dataset's per-edge constraints: its between-factors are
                                   written as ``EDGE_SE2 i j`` after the odometry chain, always with their own
@@ -242,7 +255,7 @@ def write_g2o(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_ste
     poses = np.asarray(poses_xyt, float).reshape(-1, 3)
     lms = np.asarray(landmarks_xy, float).reshape(-1, 2)
     g = _graph_parts(poses, odometry_xyt, odometry_std, obs_step, obs_range_m, obs_bearing_rad, obs_landmark,
-                     range_std, bearing_std, constraints, use_edge_info)
+                     range_std, bearing_std, constraints, use_edge_info, len(lms))
     n = g["n"]
     xy = np.column_stack([g["r"] * np.cos(g["b"]), g["r"] * np.sin(g["b"])])
 
@@ -261,7 +274,7 @@ def write_gtsam(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_s
                 constraints=None, use_edge_info: bool = True) -> tuple[Path, int]:
     """GTSAM 2-D text file (module docstring): what :func:`write_g2o` writes, with each sighting as a
     ``BR i l bearing range σ_b σ_r`` line that ``gtsam.readG2o`` turns into a
-    ``BearingRangeFactor2D(i, L(l))``; landmark vertices are ``VERTEX_XY l`` (key ``L(l)``).
+    ``BearingRangeFactor2D(i, L(T+1+l))``; landmark vertices are ``VERTEX_XY T+1+l`` (key ``L(T+1+l)``).
 
     Parameters are those of :func:`write_g2o`. Returns the path and the number of sightings whose
     (bearing, range) correlation exceeds :data:`BR_CORRELATION_TOL` (dropped by the diagonal BR noise).
@@ -269,15 +282,16 @@ def write_gtsam(path, poses_xyt, landmarks_xy, odometry_xyt, odometry_std, obs_s
     poses = np.asarray(poses_xyt, float).reshape(-1, 3)
     lms = np.asarray(landmarks_xy, float).reshape(-1, 2)
     g = _graph_parts(poses, odometry_xyt, odometry_std, obs_step, obs_range_m, obs_bearing_rad, obs_landmark,
-                     range_std, bearing_std, constraints, use_edge_info)
+                     range_std, bearing_std, constraints, use_edge_info, len(lms))
+    n = g["n"]
     cov = g["cov_rb"]
     sd_r, sd_b = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1])
     n_correlated = int(np.count_nonzero(np.abs(cov[:, 0, 1]) > BR_CORRELATION_TOL * sd_r * sd_b))
 
     def lines():
-        yield from _vertex_and_se2_lines(poses, lms, g, 0)
+        yield from _vertex_and_se2_lines(poses, lms, g, n)
         for k in range(len(sd_r)):
-            yield (f"BR {int(g['step'][k])} {int(g['landmark'][k])} {_g(g['b'][k])} {_g(g['r'][k])} "
+            yield (f"BR {int(g['step'][k])} {n + int(g['landmark'][k])} {_g(g['b'][k])} {_g(g['r'][k])} "
                    f"{_g(sd_b[k])} {_g(sd_r[k])}")
 
     return _write_lines(path, lines()), n_correlated

@@ -81,6 +81,18 @@ def between_jacobians(a, b):
     return J_a, J_b
 
 
+def adjoint(p):
+    """Adjoint ``Ad_p (..., 3, 3)`` on tangents ``[v_x, v_y, ω]``: ``log(p g p⁻¹) = Ad_p log(g)``,
+    ``Ad_p = [[c, −s, y], [s, c, −x], [0, 0, 1]]`` (GTSAM's ``Pose2.AdjointMap``)."""
+    p = np.asarray(p, float)
+    A = np.zeros(p.shape[:-1] + (3, 3))
+    A[..., :2, :2] = rot2(p[..., 2])
+    A[..., 0, 2] = p[..., 1]
+    A[..., 1, 2] = -p[..., 0]
+    A[..., 2, 2] = 1.0
+    return A
+
+
 def _series_patched(w, threshold: float, closed, series):
     """``closed(w)`` (a tuple of arrays) with ``series(w)`` patched in where ``|w| < threshold``: the one
     evaluation of :func:`_sinc_terms` and :func:`log_terms`. The closed forms run everywhere (0/0 gives NaN
