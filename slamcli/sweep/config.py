@@ -719,7 +719,8 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
 
     ``key=value`` fixes a sweep key (``scenario.<dotted key>``, ``solver.<label>.<param>``, ``evaluate.<opt>``;
     an axis of that key is dropped); ``key=v1,v2,...`` makes it a grid axis (replacing the file's values of that
-    axis); ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
+    axis; a new axis varies fastest, except ``data``, which stays the slowest as when it is not swept);
+    ``data=label`` keeps one ``[[data]]`` entry; ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
     ``"<file> (command line): <key>: ..."`` with the TOML checks' "did you mean".
     """
     import dataclasses
@@ -760,5 +761,6 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     except ConfigError as exc:  # name the override as typed, not the probe's sweep.grid table
         raise ConfigError(re.sub(r"sweep\.grid '([^']+)'", r"\1", str(exc))) from None
     out = apply_fixed(cfg, fixed, replicates=replicates)
-    grid = [(k, axes.pop(k) if k in axes else v) for k, v in out.sweep.grid] + list(axes.items())
+    first = [("data", axes.pop("data"))] if "data" in axes and "data" not in [k for k, _ in out.sweep.grid] else []
+    grid = first + [(k, axes.pop(k) if k in axes else v) for k, v in out.sweep.grid] + list(axes.items())
     return dataclasses.replace(out, sweep=dataclasses.replace(out.sweep, grid=tuple(grid)))

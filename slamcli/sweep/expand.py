@@ -2,14 +2,15 @@
 
 Order (deterministic, independent of execution order)::
 
-    for point in grid (cartesian, first key slowest) × zip groups (advanced together):
-        for replicate in replicates:
+    for point in [data entries, unless data is swept] × grid (cartesian, first key slowest) × zip groups:
+        for replicate in replicates (a recording, graph or dataset file: the first replicate id only):
             for solver in [[solver]] tables (file order):
                 RunSpec
 
-A point's ``solver.<label>.*`` axes only apply to the solver with that label; for every other solver they are
-irrelevant, so those runs resolve to the same configuration and are de-duplicated by their run id (the first
-occurrence is kept). Each run records only the axis values that apply to it (``RunSpec.point``).
+A point's ``solver.<label>.*`` axes only apply to the solver with that label, its ``scenario.*`` axes only to
+simulated entries; elsewhere they are irrelevant, so those runs resolve to the same configuration and are
+de-duplicated by their run id (the first occurrence is kept). Each run records only the axis values that
+apply to it (``RunSpec.point``).
 
 Seeds (EVALUATION-METHOD.md B5; NumPy's list form, varying id first, never ``root + i``)::
 
@@ -17,7 +18,9 @@ Seeds (EVALUATION-METHOD.md B5; NumPy's list form, varying id first, never ``roo
     solver seed  = default_rng([STREAM_SOLVER + solver.seed, replicate, root_seed]).integers(2**63 - 1)
 
 The dataset seed does not depend on the solver, so every solver of a replicate sees the *same* dataset
-(common random numbers; one dataset file per (scenario config, replicate), shared by all its runs).
+(common random numbers; one dataset file per (scenario config, replicate), shared by all its runs). An
+imported dataset's id is a content hash of the importer, its version and options and the source's sha256
+(:meth:`DatasetSpec.config`), which also names its import cache file (:mod:`slamcli.api.recordings`).
 
 Run id = the first 12 hex digits of SHA-256 over the canonical JSON (sorted keys, no whitespace, floats by
 ``repr``) of the fully resolved run configuration, which includes the slamcli and file-schema versions.
@@ -429,12 +432,12 @@ def sweep_points(cfg: ExperimentConfig) -> list[dict[str, Any]]:
     return points
 
 
-def _resolve_data(cfg: ExperimentConfig, resolver: Resolver) -> dict[str, dict[str, Any]]:
-    """``{label: resolver.data(...)}`` for every entry that is not simulated, before anything else is resolved
-    (a missing recording fails the sweep before any run starts)."""
+def _resolve_data(cfg: ExperimentConfig, resolver: Resolver, used: set[str]) -> dict[str, dict[str, Any]]:
+    """``{label: resolver.data(...)}`` for every entry of ``used`` that is not simulated, before anything else
+    is resolved (a missing recording fails the sweep before any run starts)."""
     out = {}
     for d in cfg.data:
-        if not d.simulated:
+        if not d.simulated and d.label in used:
             out[d.label] = resolver.data(d, f"{cfg.source}: {d.where}")
     return out
 
@@ -470,12 +473,13 @@ def expand(
 
         check_keys(cfg, resolver.known_keys)
     vers = run_versions if run_versions is not None else versions()
-    imported = _resolve_data(cfg, resolver)
+    points = sweep_points(cfg)
+    imported = _resolve_data(cfg, resolver, {p["data"] for p in points})
     axes = _swept(cfg)
     scen_cache: dict[str, dict[str, Any]] = {}
     solver_cache: dict[str, dict[str, Any]] = {}
     runs: dict[str, RunSpec] = {}
-    for point in sweep_points(cfg):
+    for point in points:
         entry = cfg.entry(point["data"])
         scen_over, evaluate, solver_over = route_overrides(cfg, point)
         scen_over = {**entry.parameters, **scen_over}
