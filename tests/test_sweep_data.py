@@ -207,7 +207,7 @@ def test_data_grid_axis_expands_as_documented():
     assert _runs(_cfg({"grid": {"solver.a.gain": [1.0, 2.0]}})) == _documented(["loop", "oct", "rec"], [1.0, 2.0])
 
     # the command line selects the same way (a list is a grid axis, one value fixes the entry)
-    known = lambda kind, name: None  # noqa: E731 - no key sets: only the data labels are checked
+    known = lambda kind, name: None  # no key sets: only the data labels are checked
     base = _cfg({"grid": {"solver.a.gain": [1.0, 2.0]}})
     assert _runs(apply_overrides(base, ["data=rec,loop"], known)) == _runs(cfg)
     assert _runs(apply_overrides(base, ["data=oct"], known)) == _documented(["oct"], [1.0, 2.0])
@@ -251,3 +251,37 @@ def test_bad_data_entries_are_one_line(data, message):
     with pytest.raises(ConfigError, match=r"give either one \[scenario\] table or \[\[data\]\] entries"):
         parse_experiment({"experiment": {"name": "x"}, "scenario": {"name": "loop"}, "data": ENTRIES,
                           "solver": SOLVERS}, source="x.toml")
+
+
+def test_multi_robot_recording_takes_the_import_flags(tmp_path, monkeypatch, import_calls):
+    from slamcli.datasets.mrclam import import_mrclam_team
+    from slamcli.io import read_dataset
+
+    shutil.copytree(DATA / "mrclam_team_excerpt", tmp_path / "shared" / "mrclam_dataset7")
+    monkeypatch.setenv(reg.ENV_SHARED, str(tmp_path / "shared"))
+    monkeypatch.setenv(reg.ENV_DATA_DIR, str(tmp_path / "cache"))
+    monkeypatch.delenv(reg.ENV_REGISTRY, raising=False)
+    exp = tmp_path / "exp.toml"
+    exp.write_text(HEAD + '[[data]]\nrecording = "mrclam7"\nall-robots = true\nrange-std = 0.1\n\n'
+                   '[[solver]]\nmethod = "graph"\n')  # odometry takes one robot only
+    assert _sweep(exp, tmp_path / "out").ok
+    assert import_calls == [("mrclam", {"all-robots": True, "range-std": 0.1})]
+    ds_id = pd.read_csv(tmp_path / "out" / "real" / "results.csv")["dataset_id"][0]
+    swept = read_dataset(tmp_path / "out" / "real" / "datasets" / f"{ds_id}.h5")
+    direct = import_mrclam_team(DATA / "mrclam_team_excerpt", [1, 2, 3, 4, 5])  # the five RobotN files
+    assert np.array_equal(swept.inputs.odometry_xyt, direct.inputs.odometry_xyt)
+    assert swept.inputs.noise.range_std == 0.1 != direct.inputs.noise.range_std
+
+
+def test_docs_datasets_example_expands_as_it_says(shared):
+    import re
+
+    text = (Path(__file__).parent.parent / "docs" / "experiments.md").read_text()
+    block = re.findall(r"```toml\n(.*?)```", text, re.S)[1]
+    exp = shared / "docs.toml"
+    exp.write_text(block)
+    runs = expand(load_experiment(exp)).runs
+    assert "It runs 15 runs" in text and len(runs) == 15
+    per_data = {lab: sum(r.dataset.label == lab for r in runs) for lab in ("mrclam7", "acfr-carpark", "loop")}
+    assert per_data == {"mrclam7": 1 + 2, "acfr-carpark": 1 + 2, "loop": 3 * (1 + 2)}
+    assert len(expand(apply_overrides(load_experiment(exp), ["data=mrclam7"], lambda kind, name: None)).runs) == 3
