@@ -307,6 +307,17 @@ class _Checker:
     def fail(self, key: str, message: str) -> ConfigError:
         return ConfigError(f"{self.source}: {key}: {message}")
 
+    def tables(self, raw: dict[str, Any], key: str, alternative: str = "") -> list[dict[str, Any]]:
+        """The ``[[key]]`` tables of ``raw``: present, an array of tables, at least one."""
+        if key not in raw:
+            raise self.fail(f"[[{key}]]", f"missing: give at least one [[{key}]] table{alternative}")
+        value = raw[key]
+        if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+            raise self.fail(key, f"expected [[{key}]] tables (an array of tables)")
+        if not value:
+            raise self.fail(f"[[{key}]]", f"empty: give at least one [[{key}]] table")
+        return value
+
     def table(self, value: Any, key: str) -> dict[str, Any]:
         if not isinstance(value, dict):
             raise self.fail(key, f"expected a table, got {_type_name(value)}")
@@ -474,15 +485,8 @@ def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...],
         name = c.string(scen["name"], "scenario.name")
         params = flatten(c.table(scen.get("parameters", {}), "scenario.parameters"))
         return (DataSpec(label=name, kind="scenario", name=name, where="scenario"),), params
-    if "data" not in raw:
-        raise c.fail("[[data]]", "missing: give [[data]] entries (or one [scenario] table)")
-    entries = raw["data"]
-    if not isinstance(entries, list) or not all(isinstance(d, dict) for d in entries):
-        raise c.fail("data", "expected [[data]] tables (an array of tables)")
-    if not entries:
-        raise c.fail("[[data]]", "empty: give at least one [[data]] table")
     out: list[DataSpec] = []
-    for i, d in enumerate(entries):
+    for i, d in enumerate(c.tables(raw, "data", " (or one [scenario] table)")):
         spec = _data_entry(c, d, f"data[{i}]")
         if any(o.label == spec.label for o in out):
             raise c.fail(f"data[{i}].label", f"duplicate label {spec.label!r}; give each [[data]] entry a "
@@ -539,16 +543,9 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
     data, scenario_params = _parse_data(c, raw)
     c.data_labels = tuple(d.label for d in data)
 
-    if "solver" not in raw:
-        raise c.fail("[[solver]]", "missing: give at least one [[solver]] table")
-    solvers_raw = raw["solver"]
-    if not isinstance(solvers_raw, list) or not all(isinstance(s, dict) for s in solvers_raw):
-        raise c.fail("solver", "expected [[solver]] tables (an array of tables)")
-    if not solvers_raw:
-        raise c.fail("[[solver]]", "empty: give at least one [[solver]] table")
     solvers: list[SolverSpec] = []
     labels: set[str] = set()
-    for i, s in enumerate(solvers_raw):
+    for i, s in enumerate(c.tables(raw, "solver")):
         where = f"solver[{i}]"
         c.known(s, SOLVER_KEYS, where)
         if "method" not in s:
