@@ -285,3 +285,29 @@ def test_docs_datasets_example_expands_as_it_says(shared):
     per_data = {lab: sum(r.dataset.label == lab for r in runs) for lab in ("mrclam7", "acfr-carpark", "loop")}
     assert per_data == {"mrclam7": 1 + 2, "acfr-carpark": 1 + 2, "loop": 3 * (1 + 2)}
     assert len(expand(apply_overrides(load_experiment(exp), ["data=mrclam7"], lambda kind, name: None)).runs) == 3
+
+
+def test_registered_graph_by_name_and_content_addressed_ids(shared):
+    (shared / "shared" / "dlr_g2o").mkdir()
+    shutil.copy(DATA / "dlr_excerpt.g2o", shared / "shared" / "dlr_g2o" / "dlr.g2o")
+    exp = _experiment(shared, '[[data]]\ngraph = "dlr"\nmax-poses = 50\n\n[[data]]\nrecording = "mrclam7"\n\n')
+    first = {r.dataset.label: r.dataset for r in expand(load_experiment(exp)).runs}
+    assert first["dlr"].kind == "graph" and first["dlr"].source["options"] == {"max-poses": 50}
+    assert first["dlr"].source["source_sha256"] == hashlib.sha256(
+        (DATA / "dlr_excerpt.g2o").read_bytes()).hexdigest()
+
+    # the id follows the content: the same bytes elsewhere give the same id, a changed source another one
+    moved = shared / "moved"
+    shutil.move(shared / "shared" / "mrclam_dataset7", moved)
+    reg.add("mrclam7", moved)
+    assert {r.dataset.label: r.dataset.dataset_id for r in expand(load_experiment(exp)).runs} == \
+        {k: v.dataset_id for k, v in first.items()}
+    with open(moved / "Barcodes.dat", "a") as fh:
+        fh.write("# one more comment line\n")
+    again = {r.dataset.label: r.dataset.dataset_id for r in expand(load_experiment(exp)).runs}
+    assert again["dlr"] == first["dlr"].dataset_id and again["mrclam7"] != first["mrclam7"].dataset_id
+
+    exp.write_text(exp.read_text().replace('graph = "dlr"', 'graph = "acfr-carpark"'))
+    with pytest.raises(ConfigError, match=r"data\[0\]\.graph: 'acfr-carpark' is a recording read by `slamcli "
+                                          r"import carpark`: write recording = 'acfr-carpark'"):
+        expand(load_experiment(exp))
