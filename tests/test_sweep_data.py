@@ -311,3 +311,26 @@ def test_registered_graph_by_name_and_content_addressed_ids(shared):
     with pytest.raises(ConfigError, match=r"data\[0\]\.graph: 'acfr-carpark' is a recording read by `slamcli "
                                           r"import carpark`: write recording = 'acfr-carpark'"):
         expand(load_experiment(exp))
+
+
+@pytest.mark.parametrize("options, message", [
+    ("robots = [1, 2]\nall-robots = true", r"data\[0\]\.all-robots: not an option of a multi-robot import \(robots\)"),
+    ("all-robots = true\nrobot = 2", r"data\[0\]\.robot: not an option of a multi-robot import \(all-robots\)"),
+    ('non-landmark = "keep"', r"data\[0\]\.non-landmark: 'keep' is not one of drop, clutter"),
+])
+def test_contradictory_import_options_fail_before_any_run(shared, options, message):
+    exp = _experiment(shared, f'[[data]]\nrecording = "mrclam7"\n{options}\n\n')
+    with pytest.raises(ConfigError, match=message):
+        expand(load_experiment(exp))
+
+
+def test_selecting_only_recordings_drops_the_scenario_keys(shared):
+    exp = _experiment(shared, '[[data]]\nrecording = "mrclam7"\n\n[[data]]\nscenario = "loop"\n\n'
+                              '[sweep]\nreplicates = 2\ngrid = { "scenario.n_steps" = [50, 100] }\n\n'
+                              '[quick]\n"scenario.n_steps" = 20\n')
+    from slamcli.sweep.config import quick_variant
+    from slamcli.sweep.expand import RegistryResolver
+
+    cfg = apply_overrides(quick_variant(load_experiment(exp)), ["data=mrclam7"], RegistryResolver().known_keys)
+    runs = expand(cfg).runs
+    assert [(r.dataset.label, r.replicate, r.point) for r in runs] == [("mrclam7", 0, {})]

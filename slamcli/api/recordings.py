@@ -59,9 +59,10 @@ def _link_or_copy(src: Path, dst: Path) -> None:
 
 
 def cached_import(key: str, source: dict[str, Any], out_path: str | os.PathLike) -> dict[str, Any]:
-    """Put the import of ``source`` (``importer``, ``path``, ``options``) at ``out_path`` (a hard link to the
-    cache file, or a copy), importing it only when the cache has no valid ``<key>.h5``. Returns the cache
-    record (``reference``, ``file_sha256``, ``imported_utc``, what went in)."""
+    """Put the import of ``source`` (``importer``, ``path``, ``options``; ``cache``: the cache folder, default
+    :func:`cache_dir`) at ``out_path`` (a hard link to the cache file, or a copy), importing it only when the
+    cache has no valid ``<key>.h5``. Returns the cache record (``reference``, ``file_sha256``,
+    ``imported_utc``, what went in)."""
     import json
 
     from slamcli.datasets.options import import_recording
@@ -69,7 +70,7 @@ def cached_import(key: str, source: dict[str, Any], out_path: str | os.PathLike)
     from slamcli.io import write_dataset
     from slamcli.io.schema import utc_now, write_json
 
-    cache = cache_dir()
+    cache = Path(source["cache"]) if source.get("cache") else cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     target, sidecar = cache / f"{key}.h5", cache / f"{key}.json"
     try:
@@ -79,7 +80,8 @@ def cached_import(key: str, source: dict[str, Any], out_path: str | os.PathLike)
     if not (isinstance(rec, dict) and target.is_file() and rec.get("file_sha256") == sha256_of(target)):
         ds = import_recording(source["importer"], source["path"], source["options"])
         write_dataset(target, ds)
-        rec = {"key": key, **{k: v for k, v in source.items() if k != "path"}, "file_sha256": sha256_of(target),
+        rec = {"key": key, **{k: v for k, v in source.items() if k not in ("path", "cache")},
+               "file_sha256": sha256_of(target),
                "reference": reference_kind(ds), "imported_utc": utc_now()}
         write_json(sidecar, rec)
     _link_or_copy(target, Path(out_path))

@@ -45,8 +45,13 @@ def check_options(importer: str, options: dict[str, Any], where: str) -> dict[st
             raise ConfigError(f"{where}.{key}: not an option of `slamcli import {importer}`{hint} "
                               f"(options: {', '.join(known)})")
         out[key] = _coerce(value, known[key], f"{where}.{key}")
-    if importer == "mrclam" and out.get("robots") is not None and out.get("all-robots"):
-        raise ConfigError(f"{where}.robots: give robots or all-robots, not both")
+    if importer == "mrclam" and (out.get("robots") is not None or out.get("all-robots")):
+        team = "robots" if out.get("robots") is not None else "all-robots"
+        clash = [k for k in ("robot", "no-truth", "non-landmark") if k in out]
+        if team == "robots" and out.get("all-robots"):
+            clash.insert(0, "all-robots")
+        if clash:
+            raise ConfigError(f"{where}.{clash[0]}: not an option of a multi-robot import ({team})")
     return out
 
 
@@ -86,7 +91,4 @@ def _import_mrclam(path: str | Path, o: dict[str, Any]):
     robots, all_robots = o.pop("robots", None), o.pop("all_robots", False)
     if robots is None and not all_robots:
         return import_mrclam(path, o.pop("robot", 1), dt=dt, noise=noise, **o)
-    for key in ("robot", "no_truth", "non_landmark"):
-        if key in o:
-            raise ConfigError(f"{key.replace('_', '-')}: not an option of a multi-robot import (robots/all-robots)")
     return import_mrclam_team(path, robot_numbers(path, robots, all_robots), dt=dt, noise=noise, **o)

@@ -667,15 +667,22 @@ def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates:
     """A copy of ``cfg`` with fixed overrides in sweep-key form (``scenario.x``, ``solver.<label>.p``, ...).
 
     A fixed override of a key that is also swept replaces that axis (the axis is dropped); a fixed ``data``
-    keeps only that entry.
+    keeps only that entry, and when it is not simulated, the ``scenario.*`` keys (which then apply to nothing)
+    are dropped too.
     """
     import dataclasses
 
+    data = tuple(d for d in cfg.data if "data" not in overrides or d.label == overrides["data"])
     scenario_params, evaluate, solvers = route_overrides(cfg, overrides)
-    grid = tuple((k, v) for k, v in cfg.sweep.grid if k not in overrides)
-    zips = tuple(
-        g2 for g2 in (tuple((k, v) for k, v in g if k not in overrides) for g in cfg.sweep.zips) if g2
-    )
+    simulated = any(d.simulated for d in data)
+    if not simulated:
+        scenario_params = {}
+
+    def dropped(k: str) -> bool:
+        return k in overrides or (not simulated and k.startswith("scenario."))
+
+    grid = tuple((k, v) for k, v in cfg.sweep.grid if not dropped(k))
+    zips = tuple(g2 for g2 in (tuple((k, v) for k, v in g if not dropped(k)) for g in cfg.sweep.zips) if g2)
     sweep = dataclasses.replace(
         cfg.sweep, grid=grid, zips=zips, replicates=replicates if replicates is not None else cfg.sweep.replicates
     )
@@ -685,7 +692,8 @@ def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates:
         evaluate=evaluate,
         solvers=tuple(dataclasses.replace(s, params=solvers[s.label]) for s in cfg.solvers),
         sweep=sweep,
-        data=tuple(d for d in cfg.data if "data" not in overrides or d.label == overrides["data"]),
+        data=data,
+        quick={k: v for k, v in cfg.quick.items() if simulated or not k.startswith("scenario.")},
     )
 
 

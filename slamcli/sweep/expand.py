@@ -154,7 +154,7 @@ class RegistryResolver:
         """A recording, graph or dataset file: where it is and what identifies its content (the importer, its
         version and options, the source's sha256; a file's sha256). A recording that is not on this machine is
         one line naming the command that gets it."""
-        from slamcli.api.recordings import source_sha256
+        from slamcli.api.recordings import cache_dir, source_sha256
 
         if entry.kind == "file":
             if not Path(entry.path).is_file():
@@ -165,7 +165,7 @@ class RegistryResolver:
 
         options = check_options(importer, entry.options, where)
         return _canonical({"importer": importer, "importer_version": IMPORTER_VERSION, "options": options,
-                           "path": str(path), "source_sha256": source_sha256(path)})
+                           "path": str(path), "source_sha256": source_sha256(path), "cache": str(cache_dir())})
 
     def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
         from slamcli.sim import resolve_scenario
@@ -279,7 +279,8 @@ class DatasetSpec:
     seed : int                  simulator seed (stream ``STREAM_SIMULATION``; 0 when not simulated).
     label : str                 the ``[[data]]`` entry's label (results.csv column ``data``).
     kind : str                  ``scenario``, ``recording``, ``graph`` or ``file``.
-    source : dict               not simulated: what the resolver found (path, importer, options, sha256).
+    source : dict               not simulated: what the resolver found (path, importer, options, sha256, and
+                                the import cache folder of the machine that expanded the sweep).
     """
 
     dataset_id: str
@@ -302,7 +303,7 @@ class DatasetSpec:
         if self.simulated:
             return {"scenario": self.scenario, "resolved": self.resolved, "replicate": self.replicate,
                     "seed": self.seed}
-        return {"kind": self.kind, **{k: v for k, v in self.source.items() if k != "path"}}
+        return {"kind": self.kind, **{k: v for k, v in self.source.items() if k not in ("path", "cache")}}
 
 
 @dataclass(frozen=True)
