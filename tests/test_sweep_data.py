@@ -334,3 +334,15 @@ def test_selecting_only_recordings_drops_the_scenario_keys(shared):
     cfg = apply_overrides(quick_variant(load_experiment(exp)), ["data=mrclam7"], RegistryResolver().known_keys)
     runs = expand(cfg).runs
     assert [(r.dataset.label, r.replicate, r.point) for r in runs] == [("mrclam7", 0, {})]
+
+
+@pytest.mark.parametrize("entry, message", [
+    ('scenario = "lop"', r"data\[1\]\.scenario: unknown scenario 'lop'; did you mean 'loop'"),
+    ('scenario = "loop"\n[data.parameters]\nn_stepz = 5', r"data\[1\]\.parameters\.n_stepz: unknown scenario key "
+                                                         r"'n_stepz'; did you mean 'n_steps'"),
+    ('scenario = "loop"\n[data.parameters]\nn_steps = "many"', r"data\[1\]\.parameters\.n_steps: expected an integer"),
+])
+def test_scenario_entries_are_checked_like_the_scenario_table(shared, entry, message):
+    exp = _experiment(shared, f'[[data]]\nrecording = "mrclam7"\n\n[[data]]\n{entry}\n\n')
+    with pytest.raises(ConfigError, match=message):
+        expand(load_experiment(exp))

@@ -39,8 +39,8 @@ An experiment file::
 
 Sweep keys live in three namespaces: ``scenario.<dotted simulator key>`` (every simulated entry),
 ``solver.<label>.<param>`` and ``evaluate.<option>``, plus the key ``data`` whose values are entry labels
-(without a ``data`` axis every entry is used, as the slowest axis). ``grid`` is a cartesian product (first key varies slowest); ``zip`` holds equal-length
-lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
+(without a ``data`` axis every entry is used, as the slowest axis). ``grid`` is a cartesian product (first key
+varies slowest); ``zip`` holds equal-length lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
 ``seed``) are the Monte-Carlo replicate ids that feed the seed derivation of :mod:`slamcli.sweep.expand`.
 
 Every error is one line naming the file and the TOML key (``ConfigError``); an unknown key gets a "did you
