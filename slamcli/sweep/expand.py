@@ -155,17 +155,23 @@ class RegistryResolver:
         version and options, the source's sha256; a file's sha256). A recording that is not on this machine is
         one line naming the command that gets it."""
         from slamcli.api.recordings import cache_dir, source_sha256
+        from slamcli.datasets.options import IMPORTER_VERSION, check_options
 
         if entry.kind == "file":
             if not Path(entry.path).is_file():
                 raise ConfigError(f"{where}.file: {entry.path}: no such file")
-            return {"path": entry.path, "file_sha256": source_sha256(entry.path)}
-        importer, path = _locate(entry, where)
-        from slamcli.datasets.options import IMPORTER_VERSION, check_options
-
+            importer, path = "", Path(entry.path)
+        else:
+            importer, path = _locate(entry, where)
+        try:
+            digest = source_sha256(path)
+        except OSError as exc:
+            raise ConfigError(f"{where}.{entry.kind}: cannot read {exc.filename or path} ({exc.strerror})") from None
+        if entry.kind == "file":
+            return {"path": entry.path, "file_sha256": digest}
         options = check_options(importer, entry.options, where)
         return _canonical({"importer": importer, "importer_version": IMPORTER_VERSION, "options": options,
-                           "path": str(path), "source_sha256": source_sha256(path), "cache": str(cache_dir())})
+                           "path": str(path), "source_sha256": digest, "cache": str(cache_dir())})
 
     def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
         from slamcli.sim import resolve_scenario
