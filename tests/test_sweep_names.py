@@ -77,7 +77,7 @@ def test_overrides_equal_the_same_overrides_written_in_toml(tmp_path):
     ("solver.ekff.gate_prob=0.9", "no [[solver]] labelled 'ekff'"),
     ("replicates=0", "replicates: must be >= 1, got 0"),
     ("gate_prob", "'gate_prob': expected key=value or key=v1,v2"),
-    ("colour.x=1", "keys must be scenario.<dotted key>, solver.<label>.<param> or evaluate.<option>"),
+    ("colour.x=1", "keys must be scenario.<dotted key>, solver.<label>.<param>, evaluate.<option> or data"),
 ])
 def test_bad_overrides_are_one_line_like_the_toml(item, expected):
     res = _run("sweep", "compare", item, "--dry-run")

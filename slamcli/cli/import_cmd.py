@@ -25,9 +25,8 @@ app.add_typer(import_app, name="import")
 def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, solo_dir: Path | None, out: Path,
                         quiet: bool, *, no_truth: bool, non_landmark: str, **kw) -> None:
     """``import mrclam --robots`` / ``--all-robots``: one multi-robot dataset (issue 14 item 7)."""
-    import re
-
     from slamcli.datasets.mrclam import import_mrclam_team
+    from slamcli.datasets.options import robot_numbers
     from slamcli.datasets.team import solo_dataset
     from slamcli.io import write_dataset
 
@@ -37,15 +36,11 @@ def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, s
         fail("--no-truth: a multi-robot import needs the motion-capture start poses (one world frame for all robots)")
     if non_landmark != "drop":
         fail("--non-landmark: with --robots, robot rows become inter-robot readings; only 'drop' applies")
-    if all_robots:
-        found = sorted(int(m.group(1)) for p in Path(directory).glob("Robot*_Odometry.dat")
-                       if (m := re.fullmatch(r"Robot(\d+)_Odometry\.dat", p.name)))
-        numbers = found
-    else:
-        try:
-            numbers = [int(x) for x in robots.split(",") if x.strip()]
-        except ValueError:
-            fail(f"--robots: expected comma-separated robot numbers like 1,2,3, got {robots!r}")
+    try:
+        listed = None if all_robots else [int(x) for x in robots.split(",") if x.strip()]
+    except ValueError:
+        fail(f"--robots: expected comma-separated robot numbers like 1,2,3, got {robots!r}")
+    numbers = robot_numbers(directory, listed, all_robots)
     if solo_dir is not None:
         check_output(solo_dir, folder=True, option="--solo-dir", inputs=[directory, out])
     ds = import_mrclam_team(directory, numbers, **kw)

@@ -30,7 +30,8 @@ def sweep_command(
         help=f"Experiment: a shipped name ({_shipped_names()}; see --list) or a TOML file.", show_default=False)] = None,
     overrides: Annotated[list[str] | None, typer.Argument(
         help="Overrides key=value (fixed) or key=v1,v2 (a grid axis), validated like the file: "
-             "solver.ekf.gate_prob=0.9,0.99 replicates=20 scenario.n_steps=200.", show_default=False)] = None,
+             "solver.ekf.gate_prob=0.9,0.99 replicates=20 scenario.n_steps=200 data=mrclam7,loop.",
+        show_default=False)] = None,
     list_names: Annotated[bool, typer.Option("--list", help="List the shipped experiments and exit.")] = False,
     workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
     executor: Annotated[str, typer.Option("--executor", help="local (process pool, spawn) or dask.")] = "local",
@@ -140,14 +141,17 @@ def _print_dry_run(expansion, out) -> None:
     exp_dir = Path(out) / expansion.experiment.name
     table = Table(title=f"{expansion.experiment.name}: {len(expansion.runs)} runs, "
                         f"{len(expansion.datasets)} datasets → {exp_dir}")
-    for col in ("run_id", "solver", "replicate", "dataset", *expansion.axes, "on disk"):
+    labelled = "data" not in expansion.axes  # the data column, unless it is a swept axis
+    for col in ("run_id", "solver", "replicate", "dataset", *(["data"] if labelled else []), *expansion.axes,
+                "on disk"):
         table.add_column(col)
     n_done = 0
     for r in expansion.runs:
         st = run_status(exp_dir, r.run_id)
         n_done += st == "completed"
         table.add_row(r.run_id, r.label, str(r.replicate), r.dataset.dataset_id,
-                      *[str(r.point.get(a, "—")) for a in expansion.axes], st)
+                      *([r.dataset.label] if labelled else []), *[str(r.point.get(a, "—")) for a in expansion.axes],
+                      st)
     con = stdout_console()
     con.print(table)
     con.print(f"{n_done} completed, {len(expansion.runs) - n_done} to run")

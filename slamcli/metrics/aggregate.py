@@ -149,11 +149,13 @@ def summarise(values, confidence: float = 0.95, nonnegative: bool = False) -> di
 
 
 def _columns(df, by, metrics) -> tuple[list[str], list[str]]:
-    """Grouping and metric columns (resolved; default ``label`` + sweep axes and :data:`DEFAULT_METRICS`)."""
+    """Grouping and metric columns (resolved; default ``label``, ``data`` when the runs used several datasets,
+    the sweep axes, and :data:`DEFAULT_METRICS`)."""
     import pandas as pd
 
+    several = "data" in df.columns and df["data"].nunique(dropna=False) > 1
     by_cols = [resolve_column(b, df.columns, "--by column") for b in by] if by else \
-        ["label"] + sweep_axes(df)
+        ["label", *(["data"] if several else []), *(a for a in sweep_axes(df) if a != "data")]
     if metrics:
         metric_cols = [resolve_column(m, df.columns, "metric") for m in metrics]
     else:

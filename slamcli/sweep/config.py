@@ -7,10 +7,15 @@ An experiment file::
     description = "..."               # optional
     root_seed = 0                     # optional, int >= 0 (default 0)
 
-    [scenario]
-    name = "loop"                     # a registered simulator scenario
-    [scenario.parameters]             # dotted keys of the simulator config
-    sensor.max_range = 10.0
+    [[data]]                          # one table per dataset (or one [scenario] table, the shorthand)
+    scenario = "loop"                 # a registered simulator scenario ...
+    [data.parameters]                 # ... with dotted keys of the simulator config
+    "sensor.max_range" = 10.0
+
+    # more [[data]] tables may name: recording = "mrclam7" (a registered recording, `slamcli datasets list`)
+    # with its importer's options named as the CLI flags without dashes (robot = 3, range-std = 0.1);
+    # graph = "dlr" (a registered graph or a path); file = "runs/day1.h5" (an existing dataset). Paths are
+    # relative to this file and stay inside its folder. label = "..." (any entry): its name in results.csv.
 
     [[solver]]                        # one table per solver configuration
     method = "ekf"                    # registered solver name (entry point)
@@ -32,9 +37,10 @@ An experiment file::
     replicates = 2
     "scenario.n_steps" = 150
 
-Sweep keys live in three namespaces: ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
-``evaluate.<option>``. ``grid`` is a cartesian product (first key varies slowest); ``zip`` holds equal-length
-lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
+Sweep keys live in three namespaces: ``scenario.<dotted simulator key>`` (every simulated entry),
+``solver.<label>.<param>`` and ``evaluate.<option>``, plus the key ``data`` whose values are entry labels
+(without a ``data`` axis every entry is used, as the slowest axis). ``grid`` is a cartesian product (first key
+varies slowest); ``zip`` holds equal-length lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
 ``seed``) are the Monte-Carlo replicate ids that feed the seed derivation of :mod:`slamcli.sweep.expand`.
 
 Every error is one line naming the file and the TOML key (``ConfigError``); an unknown key gets a "did you
@@ -56,11 +62,13 @@ from slamcli.errors import ConfigError
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 _RANGE_RE = re.compile(r"^\s*range\(\s*(-?\d+)\s*(?:,\s*(-?\d+)\s*)?(?:,\s*(-?\d+)\s*)?\)\s*$")
 
-TOP_KEYS = ("experiment", "scenario", "solver", "evaluate", "sweep", "quick")
+TOP_KEYS = ("experiment", "scenario", "data", "solver", "evaluate", "sweep", "quick")
 EXPERIMENT_KEYS = ("name", "description", "root_seed")
 SCENARIO_KEYS = ("name", "parameters")
 SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
 SWEEP_KEYS = ("grid", "zip", "replicates", "seed")
+#: the keys that say what a [[data]] entry is (exactly one per entry)
+DATA_KINDS = ("scenario", "recording", "graph", "file")
 NAMESPACES = ("scenario", "solver", "evaluate")
 
 
@@ -85,6 +93,34 @@ class SolverSpec:
 
 
 @dataclass(frozen=True)
+class DataSpec:
+    """One ``[[data]]`` entry, or the ``[scenario]`` shorthand.
+
+    Attributes
+    ----------
+    label : str         its name in ``results.csv`` (column ``data``) and in the ``data`` sweep axis.
+    kind : str          ``scenario``, ``recording``, ``graph`` or ``file`` (:data:`DATA_KINDS`).
+    name : str          the scenario, the registered recording/graph name, or the path as written.
+    where : str         TOML key of the entry, for messages (``data[2]`` or ``scenario``).
+    path : str          a graph or file given by path: the absolute path ("" for a registered name).
+    parameters : dict   scenario: flat dotted simulator keys.
+    options : dict      recording / graph: importer options by CLI flag without dashes.
+    """
+
+    label: str
+    kind: str
+    name: str
+    where: str
+    path: str = ""
+    parameters: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def simulated(self) -> bool:
+        return self.kind == "scenario"
+
+
+@dataclass(frozen=True)
 class SweepSpec:
     """The ``[sweep]`` table.
 
@@ -106,14 +142,25 @@ class ExperimentConfig:
 
     name: str
     source: str  # file the config came from (for error messages)
-    scenario: str
-    scenario_params: dict[str, Any]  # flat dotted keys
+    scenario_params: dict[str, Any]  # flat dotted keys applied to every simulated entry
     solvers: tuple[SolverSpec, ...]
     evaluate: dict[str, Any] = field(default_factory=dict)
     sweep: SweepSpec = field(default_factory=SweepSpec)
     root_seed: int = 0
     description: str = ""
     quick: dict[str, Any] = field(default_factory=dict)
+    data: tuple[DataSpec, ...] = ()
+
+    @property
+    def scenario(self) -> str:
+        """The first simulated entry's scenario ("" when every entry is a recording or a file)."""
+        return next((d.name for d in self.data if d.simulated), "")
+
+    def entry(self, label: str) -> DataSpec:
+        for d in self.data:
+            if d.label == label:
+                return d
+        raise KeyError(label)
 
     def solver(self, label: str) -> SolverSpec:
         for s in self.solvers:
@@ -168,10 +215,13 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     from slamcli.sim.scenarios import SCENARIOS
 
     c = _Checker(cfg.source)
-    if cfg.scenario not in SCENARIOS:
-        raise c.fail("scenario.name", f"unknown scenario {cfg.scenario!r}{did_you_mean(cfg.scenario, SCENARIOS)} "
-                                      f"(known: {', '.join(SCENARIOS)})")
-    scen = known("scenario", cfg.scenario) or []
+    scenarios: dict[str, Any] = {}  # scenario name -> its known keys, for every simulated entry
+    for d in cfg.data:
+        if d.simulated and d.name not in SCENARIOS:
+            raise c.fail(f"{d.where}.name" if d.where == "scenario" else f"{d.where}.scenario",
+                         f"unknown scenario {d.name!r}{did_you_mean(d.name, SCENARIOS)} (known: {', '.join(SCENARIOS)})")
+        if d.simulated:
+            scenarios[d.name] = known("scenario", d.name) or []
     methods = {s.label: s.method for s in cfg.solvers}
 
     def typed(values: tuple, tp: Any, toml_key: str) -> None:
@@ -181,14 +231,20 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
             except ConfigError as exc:
                 raise c.fail(toml_key, str(exc).split("\0", 1)[-1].lstrip(": ")) from None
 
+    def scenario_key(scen: Any, rest: str, toml_key: str, values: tuple) -> None:
+        if scen and rest not in scen:
+            raise c.fail(toml_key, f"unknown scenario key {rest!r}{did_you_mean(rest, scen)} "
+                                   f"(`slamcli simulate --keys` lists them)")
+        if isinstance(scen, dict):
+            typed(values, scen[rest], toml_key)
+
     def check(ns_key: str, toml_key: str, values: tuple) -> None:
         ns, _, rest = ns_key.partition(".")
         if ns == "scenario":
-            if scen and rest not in scen:
-                raise c.fail(toml_key, f"unknown scenario key {rest!r}{did_you_mean(rest, scen)} "
-                                       f"(`slamcli simulate --keys` lists them)")
-            if isinstance(scen, dict):
-                typed(values, scen[rest], toml_key)
+            if not scenarios:
+                raise c.fail(toml_key, "no simulated [[data]] entry (scenario = ...) for a scenario key")
+            for scen in scenarios.values():
+                scenario_key(scen, rest, toml_key, values)
         elif ns == "solver":
             label, _, param = rest.partition(".")
             fields = known("solver", methods[label]) if label in methods else None
@@ -204,6 +260,9 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
 
     for k, v in cfg.scenario_params.items():
         check(f"scenario.{k}", f"scenario.parameters.{k}", (v,))
+    for d in cfg.data:
+        for k, v in d.parameters.items():
+            scenario_key(scenarios[d.name], k, f"{d.where}.parameters.{k}", (v,))
     for i, s in enumerate(cfg.solvers):
         for k, v in s.params.items():
             check(f"solver.{s.label}.{k}", f"solver[{i}].params.{k}", (v,))
@@ -241,11 +300,23 @@ def parse_range(text: str) -> list[int] | None:
 
 
 class _Checker:
-    def __init__(self, source: str) -> None:
+    def __init__(self, source: str, data_labels: tuple[str, ...] = ()) -> None:
         self.source = source
+        self.data_labels = data_labels  # labels of the [[data]] entries (for the data axis)
 
     def fail(self, key: str, message: str) -> ConfigError:
         return ConfigError(f"{self.source}: {key}: {message}")
+
+    def tables(self, raw: dict[str, Any], key: str, alternative: str = "") -> list[dict[str, Any]]:
+        """The ``[[key]]`` tables of ``raw``: present, an array of tables, at least one."""
+        if key not in raw:
+            raise self.fail(f"[[{key}]]", f"missing: give at least one [[{key}]] table{alternative}")
+        value = raw[key]
+        if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+            raise self.fail(key, f"expected [[{key}]] tables (an array of tables)")
+        if not value:
+            raise self.fail(f"[[{key}]]", f"empty: give at least one [[{key}]] table")
+        return value
 
     def table(self, value: Any, key: str) -> dict[str, Any]:
         if not isinstance(value, dict):
@@ -257,6 +328,15 @@ class _Checker:
             if k not in allowed:
                 raise self.fail(f"{where}.{k}" if where else k,
                                 f"unknown key{did_you_mean(k, allowed)} (allowed: {', '.join(allowed)})")
+
+    def inside(self, name: str, key: str) -> str:
+        """``name`` resolved against the experiment file's folder; refused when it leaves that folder."""
+        base = Path(self.source).resolve().parent
+        p = (base / name).resolve()
+        if not p.is_relative_to(base):
+            raise self.fail(key, f"{name!r} leaves the experiment file's folder {base} (put the file beside the "
+                                 "experiment, or register it: `slamcli datasets add`)")
+        return str(p)
 
     def string(self, value: Any, key: str) -> str:
         if not isinstance(value, str):
@@ -313,13 +393,32 @@ class _Checker:
             raise self.fail(key, "replicate ids must be unique")
         return tuple(vals)
 
+    def axis(self, key: str, value: Any, where: str, labels: set[str]) -> tuple[Any, ...]:
+        """A checked sweep axis ``key = value`` (see :meth:`sweep_key`, :meth:`values`)."""
+        self.sweep_key(key, where, labels)
+        vals = self.values(value, f"{where} {key!r}")
+        if key == "data":
+            self.data_values(vals, f"{where} {key!r}")
+        return vals
+
+    def data_values(self, values: tuple[Any, ...], key: str) -> None:
+        """Every value of a ``data`` axis names a ``[[data]]`` entry (its label)."""
+        for v in values:
+            if v not in self.data_labels:
+                raise self.fail(key, f"no [[data]] entry labelled {v!r}{did_you_mean(str(v), self.data_labels)} "
+                                     f"(labels: {', '.join(self.data_labels)})")
+        if len(set(values)) != len(values):
+            raise self.fail(key, "a data label is given twice")
+
     def sweep_key(self, key: str, where: str, labels: set[str]) -> None:
+        if key == "data":
+            return
         parts = key.split(".")
         ns = parts[0]
         if ns not in NAMESPACES or len(parts) < 2 or not all(parts):
             raise self.fail(
                 f"{where} {key!r}",
-                "keys must be scenario.<dotted key>, solver.<label>.<param> or evaluate.<option>",
+                "keys must be scenario.<dotted key>, solver.<label>.<param>, evaluate.<option> or data",
             )
         if ns == "solver":
             if len(parts) != 3:
@@ -373,6 +472,59 @@ def _depth(v: Any) -> int:
     return best
 
 
+def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...], dict[str, Any]]:
+    """The dataset entries and the experiment-wide scenario parameters: ``[scenario]`` is one simulated entry
+    whose parameters apply as ``scenario.*`` keys; ``[[data]]`` entries carry their own."""
+    if "scenario" in raw and "data" in raw:
+        raise c.fail("[scenario]", "give either one [scenario] table or [[data]] entries, not both")
+    if "scenario" in raw:
+        scen = c.table(raw["scenario"], "[scenario]")
+        c.known(scen, SCENARIO_KEYS, "scenario")
+        if "name" not in scen:
+            raise c.fail("scenario.name", "missing")
+        name = c.string(scen["name"], "scenario.name")
+        params = flatten(c.table(scen.get("parameters", {}), "scenario.parameters"))
+        return (DataSpec(label=name, kind="scenario", name=name, where="scenario"),), params
+    out: list[DataSpec] = []
+    for i, d in enumerate(c.tables(raw, "data", " (or one [scenario] table)")):
+        spec = _data_entry(c, d, f"data[{i}]")
+        if any(o.label == spec.label for o in out):
+            raise c.fail(f"data[{i}].label", f"duplicate label {spec.label!r}; give each [[data]] entry a "
+                                             "unique label")
+        out.append(spec)
+    return tuple(out), {}
+
+
+def _data_entry(c: _Checker, d: dict[str, Any], where: str) -> DataSpec:
+    """One ``[[data]]`` table (see the module docstring)."""
+    kinds = [k for k in DATA_KINDS if k in d]
+    if len(kinds) != 1:
+        raise c.fail(where, f"give exactly one of {', '.join(DATA_KINDS)}"
+                            + (f" (got {', '.join(kinds)})" if kinds else ""))
+    kind = kinds[0]
+    name = c.string(d[kind], f"{where}.{kind}")
+    if not name:
+        raise c.fail(f"{where}.{kind}", "empty")
+    rest = {k: v for k, v in d.items() if k not in (kind, "label")}
+    path = ""
+    if kind == "scenario":
+        c.known(rest, ("parameters",), where)
+    elif kind == "file" or (kind == "graph" and looks_like_path(name)):
+        if kind == "file":
+            c.known(rest, (), where)
+        path = c.inside(name, f"{where}.{kind}")
+    default = Path(name).stem if path else name
+    label = c.name(d.get("label", default), f"{where}.label")
+    params = flatten(c.table(rest.pop("parameters", {}), f"{where}.parameters")) if kind == "scenario" else {}
+    return DataSpec(label=label, kind=kind, name=name, where=where, path=path, parameters=params,
+                    options=rest if kind in ("recording", "graph") else {})
+
+
+def looks_like_path(name: str) -> bool:
+    """Whether a graph entry names a file (a folder separator or a suffix) rather than a registered name."""
+    return "/" in name or "\\" in name or bool(Path(name).suffix)
+
+
 def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> ExperimentConfig:
     """Validate the parsed TOML document ``raw`` (see the module docstring for the schema)."""
     c = _Checker(source)
@@ -388,25 +540,12 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
     description = c.string(exp.get("description", ""), "experiment.description")
     root_seed = c.nonneg_int(exp.get("root_seed", 0), "experiment.root_seed")
 
-    if "scenario" not in raw:
-        raise c.fail("[scenario]", "missing table")
-    scen = c.table(raw["scenario"], "[scenario]")
-    c.known(scen, SCENARIO_KEYS, "scenario")
-    if "name" not in scen:
-        raise c.fail("scenario.name", "missing")
-    scenario = c.string(scen["name"], "scenario.name")
-    scenario_params = flatten(c.table(scen.get("parameters", {}), "scenario.parameters"))
+    data, scenario_params = _parse_data(c, raw)
+    c.data_labels = tuple(d.label for d in data)
 
-    if "solver" not in raw:
-        raise c.fail("[[solver]]", "missing: give at least one [[solver]] table")
-    solvers_raw = raw["solver"]
-    if not isinstance(solvers_raw, list) or not all(isinstance(s, dict) for s in solvers_raw):
-        raise c.fail("solver", "expected [[solver]] tables (an array of tables)")
-    if not solvers_raw:
-        raise c.fail("[[solver]]", "empty: give at least one [[solver]] table")
     solvers: list[SolverSpec] = []
     labels: set[str] = set()
-    for i, s in enumerate(solvers_raw):
+    for i, s in enumerate(c.tables(raw, "solver")):
         where = f"solver[{i}]"
         c.known(s, SOLVER_KEYS, where)
         if "method" not in s:
@@ -445,8 +584,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         grid_raw = flatten(grid_raw)
         grid = []
         for k, v in grid_raw.items():
-            c.sweep_key(k, "sweep.grid", labels)
-            grid.append((k, c.values(v, f"sweep.grid {k!r}")))
+            grid.append((k, c.axis(k, v, "sweep.grid", labels)))
         zips = []
         if "zip" in sw:
             groups = sw["zip"] if isinstance(sw["zip"], list) else [sw["zip"]]
@@ -457,8 +595,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
                     raise c.fail(where, "empty zip group: give at least one key = [values]")
                 group = []
                 for k, v in g.items():
-                    c.sweep_key(k, where, labels)
-                    group.append((k, c.values(v, f"{where} {k!r}")))
+                    group.append((k, c.axis(k, v, where, labels)))
                 lengths = {k: len(v) for k, v in group}
                 if len(set(lengths.values())) != 1:
                     listing = ", ".join(f"{k}={n}" for k, n in lengths.items())
@@ -478,12 +615,14 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
                 quick["replicates"] = c.replicates(v, f"quick.{k}")
             else:
                 c.sweep_key(k, "quick", labels)
+                if k == "data":
+                    c.data_values((v,), f"quick {k!r}")
                 quick[k] = v
 
     return ExperimentConfig(
         name=name,
         source=source,
-        scenario=scenario,
+        data=data,
         scenario_params=scenario_params,
         solvers=tuple(solvers),
         evaluate=evaluate,
@@ -508,6 +647,8 @@ def route_overrides(
     solvers = {s.label: dict(s.params) for s in cfg.solvers}
     for key, value in overrides.items():
         ns, _, rest = key.partition(".")
+        if key == "data":  # selects an entry (sweep.expand); no parameter to route
+            continue
         if ns == "scenario":
             scenario_params[rest] = value
         elif ns == "evaluate":
@@ -518,22 +659,30 @@ def route_overrides(
                 raise cfg.err(key, f"no [[solver]] labelled {label!r}")
             solvers[label][param] = value
         else:
-            raise cfg.err(key, "override keys must be scenario.*, solver.<label>.* or evaluate.*")
+            raise cfg.err(key, "override keys must be scenario.*, solver.<label>.*, evaluate.* or data")
     return scenario_params, evaluate, solvers
 
 
 def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates: tuple[int, ...] | None = None):
     """A copy of ``cfg`` with fixed overrides in sweep-key form (``scenario.x``, ``solver.<label>.p``, ...).
 
-    A fixed override of a key that is also swept replaces that axis (the axis is dropped).
+    A fixed override of a key that is also swept replaces that axis (the axis is dropped); a fixed ``data``
+    keeps only that entry, and when it is not simulated, the ``scenario.*`` keys (which then apply to nothing)
+    are dropped too.
     """
     import dataclasses
 
+    data = tuple(d for d in cfg.data if "data" not in overrides or d.label == overrides["data"])
     scenario_params, evaluate, solvers = route_overrides(cfg, overrides)
-    grid = tuple((k, v) for k, v in cfg.sweep.grid if k not in overrides)
-    zips = tuple(
-        g2 for g2 in (tuple((k, v) for k, v in g if k not in overrides) for g in cfg.sweep.zips) if g2
-    )
+    simulated = any(d.simulated for d in data)
+    if not simulated:
+        scenario_params = {}
+
+    def dropped(k: str) -> bool:
+        return k in overrides or (not simulated and k.startswith("scenario."))
+
+    grid = tuple((k, v) for k, v in cfg.sweep.grid if not dropped(k))
+    zips = tuple(g2 for g2 in (tuple((k, v) for k, v in g if not dropped(k)) for g in cfg.sweep.zips) if g2)
     sweep = dataclasses.replace(
         cfg.sweep, grid=grid, zips=zips, replicates=replicates if replicates is not None else cfg.sweep.replicates
     )
@@ -543,6 +692,8 @@ def apply_fixed(cfg: ExperimentConfig, overrides: dict[str, Any], *, replicates:
         evaluate=evaluate,
         solvers=tuple(dataclasses.replace(s, params=solvers[s.label]) for s in cfg.solvers),
         sweep=sweep,
+        data=data,
+        quick={k: v for k, v in cfg.quick.items() if simulated or not k.startswith("scenario.")},
     )
 
 
@@ -573,12 +724,13 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
 
     ``key=value`` fixes a sweep key (``scenario.<dotted key>``, ``solver.<label>.<param>``, ``evaluate.<opt>``;
     an axis of that key is dropped); ``key=v1,v2,...`` makes it a grid axis (replacing the file's values of that
-    axis); ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
+    axis; a new axis varies fastest, except ``data``, which stays the slowest as when it is not swept);
+    ``data=label`` keeps one ``[[data]]`` entry; ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
     ``"<file> (command line): <key>: ..."`` with the TOML checks' "did you mean".
     """
     import dataclasses
 
-    c = _Checker(f"{cfg.source} (command line)")
+    c = _Checker(f"{cfg.source} (command line)", tuple(d.label for d in cfg.data))
     labels = {s.label for s in cfg.solvers}
     fixed: dict[str, Any] = {}
     axes: dict[str, tuple[Any, ...]] = {}
@@ -598,6 +750,8 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
         if key in fixed or key in axes:
             raise c.fail(key, "given twice on the command line")
         values = _override_values(text)
+        if key == "data":
+            c.data_values(values, key)
         if len(values) == 1:
             fixed[key] = values[0]
         elif any(key == k for g in cfg.sweep.zips for k, _ in g):
@@ -612,5 +766,6 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     except ConfigError as exc:  # name the override as typed, not the probe's sweep.grid table
         raise ConfigError(re.sub(r"sweep\.grid '([^']+)'", r"\1", str(exc))) from None
     out = apply_fixed(cfg, fixed, replicates=replicates)
-    grid = [(k, axes.pop(k) if k in axes else v) for k, v in out.sweep.grid] + list(axes.items())
+    first = [("data", axes.pop("data"))] if "data" in axes and "data" not in [k for k, _ in out.sweep.grid] else []
+    grid = first + [(k, axes.pop(k) if k in axes else v) for k, v in out.sweep.grid] + list(axes.items())
     return dataclasses.replace(out, sweep=dataclasses.replace(out.sweep, grid=tuple(grid)))

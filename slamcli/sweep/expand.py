@@ -2,14 +2,15 @@
 
 Order (deterministic, independent of execution order)::
 
-    for point in grid (cartesian, first key slowest) × zip groups (advanced together):
-        for replicate in replicates:
+    for point in [data entries, unless data is swept] × grid (cartesian, first key slowest) × zip groups:
+        for replicate in replicates (a recording, graph or dataset file: the first replicate id only):
             for solver in [[solver]] tables (file order):
                 RunSpec
 
-A point's ``solver.<label>.*`` axes only apply to the solver with that label; for every other solver they are
-irrelevant, so those runs resolve to the same configuration and are de-duplicated by their run id (the first
-occurrence is kept). Each run records only the axis values that apply to it (``RunSpec.point``).
+A point's ``solver.<label>.*`` axes only apply to the solver with that label, its ``scenario.*`` axes only to
+simulated entries; elsewhere they are irrelevant, so those runs resolve to the same configuration and are
+de-duplicated by their run id (the first occurrence is kept). Each run records only the axis values that
+apply to it (``RunSpec.point``).
 
 Seeds (EVALUATION-METHOD.md B5; NumPy's list form, varying id first, never ``root + i``)::
 
@@ -17,7 +18,9 @@ Seeds (EVALUATION-METHOD.md B5; NumPy's list form, varying id first, never ``roo
     solver seed  = default_rng([STREAM_SOLVER + solver.seed, replicate, root_seed]).integers(2**63 - 1)
 
 The dataset seed does not depend on the solver, so every solver of a replicate sees the *same* dataset
-(common random numbers; one dataset file per (scenario config, replicate), shared by all its runs).
+(common random numbers; one dataset file per (scenario config, replicate), shared by all its runs). An
+imported dataset's id is a content hash of the importer, its version and options and the source's sha256
+(:meth:`DatasetSpec.config`), which also names its import cache file (:mod:`slamcli.api.recordings`).
 
 Run id = the first 12 hex digits of SHA-256 over the canonical JSON (sorted keys, no whitespace, floats by
 ``repr``) of the fully resolved run configuration, which includes the slamcli and file-schema versions.
@@ -32,10 +35,11 @@ import itertools
 import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError, SlamcliError
-from slamcli.sweep.config import ExperimentConfig, route_overrides
+from slamcli.sweep.config import DataSpec, ExperimentConfig, route_overrides
 
 STREAM_SIMULATION = 0
 STREAM_SOLVER = 1
@@ -107,6 +111,8 @@ def solver_seed(replicate: int, root_seed: int, solver_stream: int = 0) -> int:
 class Resolver(Protocol):
     def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]: ...
 
+    def data(self, entry: DataSpec, where: str) -> dict[str, Any]: ...
+
     def solver(self, method: str, params: dict[str, Any], where: str) -> dict[str, Any]: ...
 
     def evaluate(self, options: dict[str, Any], where: str) -> dict[str, Any]: ...
@@ -143,6 +149,29 @@ class RegistryResolver:
 
         internal = {"result_path", "data_path", "out_dir", "check_hash", "return_tables"}
         return sorted(n for n in inspect.signature(evaluate_files).parameters if n not in internal)
+
+    def data(self, entry: DataSpec, where: str) -> dict[str, Any]:
+        """A recording, graph or dataset file: where it is and what identifies its content (the importer, its
+        version and options, the source's sha256; a file's sha256). A recording that is not on this machine is
+        one line naming the command that gets it."""
+        from slamcli.api.recordings import cache_dir, source_sha256
+        from slamcli.datasets.options import IMPORTER_VERSION, check_options
+
+        if entry.kind == "file":
+            if not Path(entry.path).is_file():
+                raise ConfigError(f"{where}.file: {entry.path}: no such file")
+            importer, path = "", Path(entry.path)
+        else:
+            importer, path = _locate(entry, where)
+        try:
+            digest = source_sha256(path)
+        except OSError as exc:
+            raise ConfigError(f"{where}.{entry.kind}: cannot read {exc.filename or path} ({exc.strerror})") from None
+        if entry.kind == "file":
+            return {"path": entry.path, "file_sha256": digest}
+        options = check_options(importer, entry.options, where)
+        return _canonical({"importer": importer, "importer_version": IMPORTER_VERSION, "options": options,
+                           "path": str(path), "source_sha256": digest, "cache": str(cache_dir())})
 
     def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
         from slamcli.sim import resolve_scenario
@@ -197,8 +226,36 @@ class RegistryResolver:
         return _canonical(out)
 
 
+def _locate(entry: DataSpec, where: str) -> tuple[str, Path]:
+    """``(importer, import path)`` of a recording or graph entry; one-line ConfigError when the name is not
+    registered, is read by another importer, or is not on this machine."""
+    from slamcli.datasets import DatasetImportError, registry
+    from slamcli.sweep.config import did_you_mean
+
+    key = f"{where}.{entry.kind}"
+    if entry.path:
+        if not Path(entry.path).is_file():
+            raise ConfigError(f"{key}: {entry.path}: no such file")
+        return "g2o", Path(entry.path)
+    reg = registry.registry()
+    if entry.name not in reg:
+        raise ConfigError(f"{key}: {entry.name!r} is not a registered dataset{did_you_mean(entry.name, reg)} "
+                          "(`slamcli datasets list` shows them)")
+    importer = reg[entry.name].importer
+    if entry.kind == "graph" and importer != "g2o":
+        raise ConfigError(f"{key}: {entry.name!r} is a recording read by `slamcli import {importer}`: write "
+                          f"recording = {entry.name!r}")
+    try:
+        return importer, registry.locate(entry.name)
+    except DatasetImportError as exc:
+        raise ConfigError(f"{key}: {exc}") from None
+
+
 class LiteralResolver:
     """No resolution: the overrides as written (tests, or dry runs before the simulator exists)."""
+
+    def data(self, entry: DataSpec, where: str) -> dict[str, Any]:
+        return _canonical({"name": entry.name, "path": entry.path, "options": entry.options})
 
     def scenario(self, name: str, overrides: dict[str, Any], where: str) -> dict[str, Any]:
         return _canonical(dict(overrides))
@@ -215,16 +272,21 @@ class LiteralResolver:
 
 @dataclass(frozen=True)
 class DatasetSpec:
-    """One simulated dataset, shared by every run with the same scenario configuration and replicate.
+    """One dataset, shared by every run on it: a simulated one per (scenario configuration, replicate), or an
+    imported recording / graph / dataset file (one replicate).
 
     Attributes
     ----------
     dataset_id : str            content hash of ``config()``.
-    scenario : str              scenario name.
+    scenario : str              scenario name ("" for a dataset that is not simulated).
     overrides : dict            flat dotted overrides as given (what ``simulate_to_file`` receives).
     resolved : dict             the fully resolved scenario configuration.
     replicate : int
-    seed : int                  simulator seed (stream ``STREAM_SIMULATION``).
+    seed : int                  simulator seed (stream ``STREAM_SIMULATION``; 0 when not simulated).
+    label : str                 the ``[[data]]`` entry's label (results.csv column ``data``).
+    kind : str                  ``scenario``, ``recording``, ``graph`` or ``file``.
+    source : dict               not simulated: what the resolver found (path, importer, options, sha256, and
+                                the import cache folder of the machine that expanded the sweep).
     """
 
     dataset_id: str
@@ -233,9 +295,21 @@ class DatasetSpec:
     resolved: dict[str, Any]
     replicate: int
     seed: int
+    label: str = ""
+    kind: str = "scenario"
+    source: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def simulated(self) -> bool:
+        return self.kind == "scenario"
 
     def config(self) -> dict[str, Any]:
-        return {"scenario": self.scenario, "resolved": self.resolved, "replicate": self.replicate, "seed": self.seed}
+        """What defines the dataset's content: the scenario, its resolved configuration, replicate and seed; or
+        for an import the importer, its version, options and the source's sha256 (not where it lies)."""
+        if self.simulated:
+            return {"scenario": self.scenario, "resolved": self.resolved, "replicate": self.replicate,
+                    "seed": self.seed}
+        return {"kind": self.kind, **{k: v for k, v in self.source.items() if k not in ("path", "cache")}}
 
 
 @dataclass(frozen=True)
@@ -329,8 +403,10 @@ MAX_RUNS = 100_000
 
 
 def check_size(cfg: ExperimentConfig) -> int:
-    """Number of runs of ``cfg`` from its axis lengths alone; ConfigError above :data:`MAX_RUNS`."""
+    """Most runs ``cfg`` can expand to, from its axis lengths alone; ConfigError above :data:`MAX_RUNS`."""
     sizes = [len(v) for _, v in cfg.sweep.grid] + [len(g[0][1]) for g in cfg.sweep.zips]
+    if "data" not in _swept(cfg):
+        sizes.insert(0, len(cfg.data))
     n = math.prod(sizes) * len(cfg.sweep.replicates) * max(len(cfg.solvers), 1)
     if n > MAX_RUNS:
         shape = "×".join(str(s) for s in sizes) or "1"
@@ -339,9 +415,16 @@ def check_size(cfg: ExperimentConfig) -> int:
     return n
 
 
+def _swept(cfg: ExperimentConfig) -> tuple[str, ...]:
+    return tuple(k for k, _ in cfg.sweep.grid) + tuple(k for g in cfg.sweep.zips for k, _ in g)
+
+
 def sweep_points(cfg: ExperimentConfig) -> list[dict[str, Any]]:
-    """The sweep points (key → value dicts): grid product × each zip group, in deterministic order."""
+    """The sweep points (key → value dicts): grid product × each zip group, in deterministic order. Every
+    point names its ``data`` entry: without a ``data`` axis, every entry in file order is the slowest axis."""
     factors: list[list[dict[str, Any]]] = []
+    if "data" not in _swept(cfg):
+        factors.append([{"data": d.label} for d in cfg.data])
     for key, values in cfg.sweep.grid:
         factors.append([{key: v} for v in values])
     for group in cfg.sweep.zips:
@@ -354,6 +437,33 @@ def sweep_points(cfg: ExperimentConfig) -> list[dict[str, Any]]:
             p.update(part)
         points.append(p)
     return points
+
+
+def _resolve_data(cfg: ExperimentConfig, resolver: Resolver, used: set[str]) -> dict[str, dict[str, Any]]:
+    """``{label: resolver.data(...)}`` for every entry of ``used`` that is not simulated, before anything else
+    is resolved (a missing recording fails the sweep before any run starts)."""
+    out = {}
+    for d in cfg.data:
+        if not d.simulated and d.label in used:
+            out[d.label] = resolver.data(d, f"{cfg.source}: {d.where}")
+    return out
+
+
+def _datasets(cfg: ExperimentConfig, entry: DataSpec, scen_over: dict[str, Any], resolved: dict[str, Any],
+              vers: dict[str, Any]) -> list[DatasetSpec]:
+    """The datasets of one sweep point: one per replicate for a scenario, one (the first replicate id) for a
+    recording, graph or file, whose ``resolved`` is the resolver's ``data`` record."""
+    if not entry.simulated:
+        ds = DatasetSpec(dataset_id="", scenario="", overrides={}, resolved={}, replicate=cfg.sweep.replicates[0],
+                         seed=0, label=entry.label, kind=entry.kind, source=resolved)
+        return [dataclasses.replace(ds, dataset_id=content_hash({"dataset": ds.config(), "versions": vers}))]
+    out = []
+    for rep in cfg.sweep.replicates:
+        seed = dataset_seed(rep, cfg.root_seed)
+        ds = DatasetSpec(dataset_id="", scenario=entry.name, overrides=_canonical(scen_over), resolved=resolved,
+                         replicate=rep, seed=seed, label=entry.label)
+        out.append(dataclasses.replace(ds, dataset_id=content_hash({"dataset": ds.config(), "versions": vers})))
+    return out
 
 
 def expand(
@@ -370,39 +480,30 @@ def expand(
 
         check_keys(cfg, resolver.known_keys)
     vers = run_versions if run_versions is not None else versions()
-    axes = tuple(k for k, _ in cfg.sweep.grid) + tuple(k for g in cfg.sweep.zips for k, _ in g)
+    points = sweep_points(cfg)
+    imported = _resolve_data(cfg, resolver, {p["data"] for p in points})
+    axes = _swept(cfg)
     scen_cache: dict[str, dict[str, Any]] = {}
     solver_cache: dict[str, dict[str, Any]] = {}
     runs: dict[str, RunSpec] = {}
-    for point in sweep_points(cfg):
+    for point in points:
+        entry = cfg.entry(point["data"])
         scen_over, evaluate, solver_over = route_overrides(cfg, point)
-        skey = canonical_json([cfg.scenario, scen_over])
-        if skey not in scen_cache:
-            scen_cache[skey] = resolver.scenario(cfg.scenario, scen_over, f"{cfg.source}: [scenario]")
-        resolved_scen = scen_cache[skey]
+        scen_over = {**entry.parameters, **scen_over}
+        if entry.simulated:
+            skey = canonical_json([entry.name, scen_over])
+            if skey not in scen_cache:
+                scen_cache[skey] = resolver.scenario(entry.name, scen_over, f"{cfg.source}: [{entry.where}]")
+        resolved = scen_cache[skey] if entry.simulated else imported[entry.label]
         resolved_eval = resolver.evaluate(evaluate, f"{cfg.source}: [evaluate]")
-        for rep in cfg.sweep.replicates:
-            seed = dataset_seed(rep, cfg.root_seed)
-            ds_cfg = {"scenario": cfg.scenario, "resolved": resolved_scen, "replicate": rep, "seed": seed}
-            ds = DatasetSpec(
-                dataset_id=content_hash({"dataset": ds_cfg, "versions": vers}),
-                scenario=cfg.scenario,
-                overrides=_canonical(scen_over),
-                resolved=resolved_scen,
-                replicate=rep,
-                seed=seed,
-            )
+        for ds in _datasets(cfg, entry, scen_over, resolved, vers):
             for s in cfg.solvers:
                 pkey = canonical_json([s.method, solver_over[s.label]])
                 if pkey not in solver_cache:
                     solver_cache[pkey] = resolver.solver(
                         s.method, solver_over[s.label], f"{cfg.source}: solver {s.label!r} params"
                     )
-                relevant = {
-                    k: v
-                    for k, v in point.items()
-                    if not k.startswith("solver.") or k.startswith(f"solver.{s.label}.")
-                }
+                relevant = {k: v for k, v in point.items() if _applies(k, s.label, entry, axes)}
                 spec = RunSpec(
                     run_id="",
                     experiment=cfg.name,
@@ -410,7 +511,7 @@ def expand(
                     method=s.method,
                     params=solver_cache[pkey],
                     param_overrides=_canonical(solver_over[s.label]),
-                    seed=solver_seed(rep, cfg.root_seed, s.seed),
+                    seed=solver_seed(ds.replicate, cfg.root_seed, s.seed),
                     solver_stream=s.seed,
                     oracle_association=s.oracle_association,
                     evaluate=resolved_eval,
@@ -422,3 +523,13 @@ def expand(
                 if rid not in runs:
                     runs[rid] = dataclasses.replace(spec, run_id=rid)
     return Expansion(experiment=cfg, runs=tuple(runs.values()), axes=axes)
+
+
+def _applies(key: str, label: str, entry: DataSpec, axes: tuple[str, ...]) -> bool:
+    """Whether point key ``key`` is recorded for the run of solver ``label`` on ``entry``: a ``solver.<label>.*``
+    key only for that solver's runs, a ``scenario.*`` key only for simulated entries, ``data`` when swept."""
+    if key == "data":
+        return key in axes
+    if key.startswith("solver."):
+        return key.startswith(f"solver.{label}.")
+    return entry.simulated or not key.startswith("scenario.")

@@ -2,7 +2,10 @@
 
 On disk (``results/<experiment>/``)::
 
-    datasets/<dataset_id>.h5       one simulated dataset per (scenario config, replicate), shared by its runs
+    datasets/<dataset_id>.h5       one simulated dataset per (scenario config, replicate), or one imported
+                                   recording / graph / dataset file (a hard link into the import cache,
+                                   :mod:`slamcli.api.recordings`), shared by its runs; ``<dataset_id>.json``
+                                   beside it records its sha256 and reference (truth, gps or none)
     <run_id>/config.json           the resolved run configuration (+ run id, dataset id, sweep point)
     <run_id>/dataset.h5            hard link to datasets/<dataset_id>.h5 (a copy where links are impossible)
     <run_id>/result.h5             solver result
@@ -10,7 +13,8 @@ On disk (``results/<experiment>/``)::
     <run_id>/status.json           {"status": "completed" | "failed", "solver_status", "error", "traceback",
                                     times, host}
     <run_id>/run.log               log of the run
-    manifest.csv                   one row per run of the expansion: ids, labels, sweep point, status
+    manifest.csv                   one row per run of the expansion: ids, labels, dataset (``data``,
+                                   ``data_kind``, ``reference``), sweep point, status
     results.csv / results.parquet  the tidy table: manifest columns + every scalar metric, one row per run
 
 Atomicity: a run is built in a hidden temporary directory ``.<run_id>.tmp-<pid>-<rand>/`` and renamed onto
@@ -89,8 +93,9 @@ log = logging.getLogger(__name__)
 class Pipeline(Protocol):
     """What one run does; injectable so tests can exercise the runner with a trivial picklable pipeline."""
 
-    def simulate(self, dataset: DatasetSpec, out_path: Path) -> None:
-        """Write the dataset for ``dataset`` to ``out_path`` (the runner handles atomic renaming)."""
+    def simulate(self, dataset: DatasetSpec, out_path: Path) -> dict[str, Any] | None:
+        """Write the dataset for ``dataset`` to ``out_path`` (the runner handles atomic renaming); may return
+        facts to record beside it (``{"reference": "truth" | "gps" | "none"}``)."""
 
     def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> Any:
         """Solve ``dataset_path`` with the run's solver configuration, writing ``result_path``.
@@ -105,12 +110,20 @@ class Pipeline(Protocol):
 class WorkflowPipeline:
     """The real pipeline: ``slamcli.api.simulate`` → ``slamcli.api.solve`` → ``slamcli.api.evaluate``."""
 
-    def simulate(self, dataset: DatasetSpec, out_path: Path) -> None:
+    def simulate(self, dataset: DatasetSpec, out_path: Path) -> dict[str, Any]:
+        """Simulate the dataset, or put an imported recording / graph / dataset file there
+        (:func:`slamcli.api.recordings.prepare_dataset`); returns ``{"reference": truth | gps | none, ...}``."""
+        if not dataset.simulated:
+            from slamcli.api.recordings import prepare_dataset
+
+            rec = prepare_dataset(dataset.kind, dataset.dataset_id, dict(dataset.source), out_path)
+            return {"reference": rec["reference"], "imported_utc": rec.get("imported_utc")}
         from slamcli.api.simulate import simulate_to_file
 
         simulate_to_file(
             scenario=dataset.scenario, seed=dataset.seed, overrides=dict(dataset.overrides), out_path=out_path
         )
+        return {"reference": "truth"}
 
     def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> Any:
         from slamcli.api.solve import solve_file
@@ -292,12 +305,12 @@ def _ensure_dataset(dataset: DatasetSpec, exp_dir: Path, pipeline: Pipeline, fre
         log.warning("%s: cached dataset does not match its recorded hash; simulating it again", path)
     tmp = ds_dir / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
-        pipeline.simulate(dataset, tmp)
+        facts = pipeline.simulate(dataset, tmp)
         digest = file_sha256(tmp)
         if path.is_symlink() or path.is_dir():
             _remove(path)
         os.replace(tmp, path)
-        write_json(sidecar, {"dataset_id": dataset.dataset_id, "file_sha256": digest})
+        write_json(sidecar, {**(facts or {}), "dataset_id": dataset.dataset_id, "file_sha256": digest})
         return path, None
     except Exception:  # noqa: BLE001 - fail-soft: every run of the group records this failure
         with contextlib.suppress(FileNotFoundError):
@@ -858,18 +871,25 @@ def _cell(v: Any) -> Any:
 def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
     """One row per run of the expansion: ids, labels, seeds, sweep point and on-disk status."""
     rows = []
+    facts: dict[str, dict[str, Any]] = {}
     for r in expansion.runs:
         st = read_json(exp_dir / r.run_id / "status.json") or {}
         status = run_status(exp_dir, r.run_id)
+        ds = r.dataset
+        if ds.dataset_id not in facts:
+            facts[ds.dataset_id] = read_json(dataset_path(exp_dir, ds).with_suffix(".json")) or {}
         row: dict[str, Any] = {
             "run_id": r.run_id,
             "experiment": r.experiment,
             "label": r.label,
             "method": r.method,
+            "data": ds.label,
+            "data_kind": ds.kind,  # a recording, graph or file is one replicate (the first id)
+            "reference": facts[ds.dataset_id].get("reference", "truth" if ds.simulated else ""),
             "replicate": r.replicate,
-            "dataset_id": r.dataset.dataset_id,
-            "scenario": r.dataset.scenario,
-            "dataset_seed": r.dataset.seed,
+            "dataset_id": ds.dataset_id,
+            "scenario": ds.scenario,
+            "dataset_seed": ds.seed if ds.simulated else None,
             "solver_seed": r.seed,
             "status": status,
             "solver_status": st.get("solver_status", ""),
