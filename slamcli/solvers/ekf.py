@@ -58,7 +58,7 @@ from slamcli.models.observation import (
 )
 from slamcli.models.se2 import compose, rot2
 from slamcli.solvers.base import BaseSolver
-from slamcli.solvers.frontend import group_detections, inside_declared_size
+from slamcli.solvers.frontend import group_detections, inside_declared_size, resolve_motion_input
 from slamcli.solvers.surface import declared_radius, require_radius
 from slamcli.types import SlamInputs, SolverResult, Status
 
@@ -74,9 +74,12 @@ class EkfParams:
         ``ml``: maximum-likelihood association by Mahalanobis distance (paper 002 §14.7, Fig. 14.5);
         ``auto`` (default): ``known`` when the dataset reports ids, else ``ml``.
         The association used is recorded as ``extra["association"]``.
-    motion_input : "controls" | "odometry"
+    motion_input : "auto" | "controls" | "odometry"
         Drive the prediction by the commanded controls through the DDMR model (noise ``motion_std``) or by
-        the encoder odometry increments (noise ``odometry_std``, on the body-frame increment).
+        the encoder odometry increments (noise ``odometry_std``, on the body-frame increment). ``auto``
+        (default): the dataset's ``motion_source`` (``odometry`` for graph imports, whose controls are derived
+        from the increments and lose their sideways part; ``controls`` otherwise). The input used
+        is recorded as ``extra["motion_input"]``.
     gate_prob : float
         χ²(2) probability of the association gate: a row is fused with its best landmark when
         ``d² ≤ chi2.ppf(gate_prob, 2)`` (0.99 → 9.21).
@@ -137,7 +140,7 @@ class EkfParams:
     """
 
     association: Literal["auto", "known", "ml"] = "auto"
-    motion_input: Literal["controls", "odometry"] = "controls"
+    motion_input: Literal["auto", "controls", "odometry"] = "auto"
     gate_prob: float = 0.99
     new_landmark_prob: float = 0.9999
     provisional: bool = False
@@ -260,6 +263,10 @@ class EkfSlam(BaseSolver):
         sensor = np.asarray(obs.sensor)
         rid = np.asarray(obs.reported_id, np.int64)
         p, gate, new_thr = _resolve_association(p, rid, N)
+        if p.motion_input == "auto":
+            from dataclasses import replace
+
+            p = replace(p, motion_input=resolve_motion_input(p.motion_input, inputs))
         obs_cov, Q_stab, motion_cov, drive = _noise_and_drive(inputs, p, T)
         gps_at, gps_cov = _gps_fixes(inputs, p)
 
@@ -323,6 +330,7 @@ class EkfSlam(BaseSolver):
             landmark_cov=landmark_cov,
             extra={
                 "association": p.association,
+                "motion_input": p.motion_input,
                 "mean_nis": tally.nis_sum / tally.n_upd if tally.n_upd else None,
                 "n_updates": tally.n_upd,
                 "n_new_landmarks": tally.n_new,
