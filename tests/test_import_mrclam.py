@@ -454,3 +454,25 @@ def test_cli_import_summary_names_the_repair(tmp_path):
     assert res.exit_code == 0, res.output
     assert "repaired stamps: Robot1_Odometry.dat 1 out of order (lines 5, 6 sorted)" in res.stdout
     assert read_dataset(tmp_path / "r.h5").metadata["stamp_repairs"]["Robot1_Odometry.dat"]["n_out_of_order"] == 1
+
+
+def test_team_import_counts_each_robots_repair(tmp_path):
+    """Four robots of one public dataset were refused for one swapped row each: a team import repairs the
+    swap in robot 2's log, lists it under robot 2, says so in the summary, and imports robot 2's controls as
+    the unswapped excerpt gives them."""
+    from slamcli.datasets.mrclam import import_mrclam_team
+
+    team_src = Path(__file__).parent / "data" / "mrclam_team_excerpt"
+    d = tmp_path / "team"
+    d.mkdir()
+    for f in team_src.glob("*.dat"):
+        (d / f.name).write_text(f.read_text())
+    _swap_lines(d, "Robot2_Odometry.dat", 5, 6)
+    ds = import_mrclam_team(d, [1, 2])
+    per = {pr["robot"]: pr["stamp_repairs"] for pr in ds.metadata["per_robot"]}
+    assert per[1] == {} and per[2]["Robot2_Odometry.dat"]["reordered_lines"] == [5, 6]
+    ref = import_mrclam_team(team_src, [1, 2])
+    np.testing.assert_array_equal(ds.inputs.controls, ref.inputs.controls)
+    res = run("import", "mrclam", d, "--robots", "1,2", "-o", tmp_path / "t.h5")
+    assert res.exit_code == 0, res.output
+    assert "repaired stamps: Robot2_Odometry.dat 1 out of order (lines 5, 6 sorted)" in res.stdout
