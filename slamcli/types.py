@@ -281,6 +281,12 @@ class SlamInputs:
                                      file's data association), ``"unknown"`` (default; the simulator's ids).
     noise_bounds : NoiseBounds | None  guaranteed error bounds (bounded-noise datasets only).
     robots : RobotTeam | None        multi-robot layout (stacked poses, inter-robot readings); None = one robot.
+    motion_source : str              what the dataset's motion data is: ``"controls"`` (default; commanded
+                                     controls, the odometry a separate encoder log — the simulator) or
+                                     ``"odometry"`` (measured SE(2) increments: a graph file's odometry edges;
+                                     ``controls`` are derived from them and lose a part, the sideways step).
+                                     Solvers' ``motion_input="auto"`` follows it. MRCLAM stays ``controls``:
+                                     its odometry is the integral of its velocity log, no more.
     """
 
     dt: float
@@ -301,6 +307,7 @@ class SlamInputs:
     reported_id_source: str = "unknown"
     noise_bounds: NoiseBounds | None = None
     robots: RobotTeam | None = None
+    motion_source: str = "controls"
 
     @property
     def n_poses(self) -> int:

@@ -83,6 +83,20 @@ def test_result_summary(tmp_path):
     assert row(out, "params.max_iterations") == "30"
 
 
+def test_result_certificate_row_gives_the_reason(tmp_path):
+    """A certificate that is not certified shows its reason, never a NaN comparison."""
+    reason = "the estimate has non-finite poses"
+    cert = {"certified": False, "lambda_min": float("nan"), "eta": float("nan"), "sesync_cost": float("nan"),
+            "dual_bound": float("nan"), "suboptimality_bound": float("nan"), "lambda_min_method": "none",
+            "reason": reason}
+    r = SolverResult(solver="graph", solver_version="0.1.0", params={}, status=Status.CONVERGED, message="m",
+                     poses_xyt=np.zeros((3, 3)), landmarks_xy=np.zeros((0, 2)), assoc=np.zeros(0, np.int64),
+                     wall_time_s=0.1, dataset_hash="sha256:" + "0" * 64, extra={"certificate": cert})
+    res = info(write_result(tmp_path / "c.h5", r))
+    assert res.exit_code == 0, res.output
+    assert row(res.stdout, "optimality certificate") == f"NOT certified: {reason}"
+
+
 def test_info_bad_files_are_one_line(tmp_path):
     txt = tmp_path / "a.h5"
     txt.write_text("hello")

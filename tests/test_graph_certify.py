@@ -204,7 +204,8 @@ def test_certified_lambda_min_by_inverse_iteration_equals_the_dense_eigenvalue(r
     eta = certify.ETA_REL * float(np.max(S.diagonal()))
     ok, solve = certify._is_positive_definite((S + eta * sp.identity(n, format="csc")).tocsc())
     assert ok
-    lam = certify._lambda_min(S, eta, True, solve)
+    lam, method = certify._lambda_min(S, eta, True, solve)
+    assert method in ("inverse iteration", "Lanczos")
     ref = np.linalg.eigvalsh(S.toarray())[0]
     assert lam == pytest.approx(ref, abs=1e-9 * float(np.max(S.diagonal())))
 
@@ -242,3 +243,74 @@ def test_certificate_matrix_on_the_refinement_pattern_is_the_permuted_definition
     got = asm.matrix(asm.full(S_lo)).toarray()
     np.testing.assert_allclose(got, S[np.ix_(perm, perm)], rtol=0, atol=1e-12 * np.abs(S).max())
     assert tr_lam == pytest.approx(dual, rel=1e-12)
+
+
+# -- certificates that say why -----------------------------------------------------------------------------
+def _indefinite(shift: float, n: int = 200, seed: int = 3):
+    """A sparse symmetric matrix whose smallest eigenvalue is ``shift`` below that of a PSD one (dense reference)."""
+    import scipy.sparse as sp
+
+    A = sp.random(n, n - 3, density=0.02, random_state=seed) + sp.eye(n, n - 3)
+    S = (A @ A.T).tocsc() - shift * sp.eye(n, format="csc")
+    return S, float(np.linalg.eigvalsh(S.toarray())[0])
+
+
+@pytest.mark.parametrize(("shift", "certified"), [(0.0, True), (1e-3, False), (0.7, False)])
+def test_inertia_bisection_brackets_the_dense_lambda_min(shift, certified):
+    """Sylvester's inertia (S − σI factors iff σ < λ_min) brackets λ_min: against numpy's dense eigvalsh, for a
+    PSD matrix with a null space (certified) and two indefinite ones."""
+    S, ref = _indefinite(shift)
+    eta = certify.ETA_REL * float(np.max(S.diagonal()))
+    lo, hi = certify._lambda_min_by_inertia(S, eta, certified)
+    assert lo <= ref + 1e-12 and ref <= hi + 1e-12
+    assert hi - lo <= certify.INERTIA_REL_TOL * max(abs(ref), eta) * 1.01 + 1e-15
+
+
+def test_a_failed_eigen_solve_is_replaced_by_the_inertia_bracket(monkeypatch):
+    """When Lanczos does not converge (forced here), the uncertified λ_min comes from the inertia bisection: a
+    finite value within the bracket that holds the dense eigenvalue, and the reason names it — never NaN."""
+    import scipy.sparse.linalg as spla
+
+    def no_convergence(*args, **kwargs):
+        raise spla.ArpackNoConvergence("forced", np.zeros(0), np.zeros((0, 0)))
+
+    monkeypatch.setattr(certify, "DENSE_EIG_MAX", 10)
+    monkeypatch.setattr(spla, "eigsh", no_convergence)
+    poses, ij, xyt, info = _hexagon(0.15, seed=2)
+    wound = poses.copy()
+    wound[:, 2] += np.arange(6) * np.pi / 3  # the local, uncertified stationary point of the test above
+    cert = certify.certify_pose_graph(wound, ij, xyt, info)
+    assert not cert.certified and np.isfinite(cert.lambda_min)
+    assert cert.lambda_method == "inertia bisection"
+    kappa, tau = certify.isotropic_weights(info)
+    S, _ = _certificate_by_definition(cert.poses_xyt, ij, xyt, kappa, tau)
+    ref = np.linalg.eigvalsh(S)[0]
+    lo, hi = cert.lambda_bracket
+    assert lo <= ref <= hi and ref < -cert.eta
+    verdict = cert.verdict()
+    assert verdict.startswith("not certified: S + ηI is not positive definite") and "nan" not in verdict
+    assert cert.as_extra()["reason"] == cert.reason and cert.as_extra()["lambda_min_bracket"] == [lo, hi]
+
+
+def test_no_translation_information_is_tau_zero_and_still_certifies():
+    """An edge with zero [x, y] information carries no translation term: τ = 2 / tr(Σ_xy) → 0 (not 0/0), and
+    the certificate of the rest is as without that term — against the objective evaluated by definition."""
+    poses, ij, xyt, info = _hexagon(0.05, seed=1)
+    info[2] = np.diag([0.0, 0.0, 25.0])
+    kappa, tau = certify.isotropic_weights(info)
+    assert tau[2] == 0.0 and tau[0] == pytest.approx(2.0 / (1 / 4 + 1 / 9))
+    cert = certify.certify_pose_graph(poses, ij, xyt, info)
+    assert np.isfinite(cert.lambda_min) and cert.certified
+    assert cert.sesync_cost == pytest.approx(_F_by_definition(cert.poses_xyt, ij, xyt, kappa, tau), rel=1e-12)
+
+
+@pytest.mark.parametrize(("mutate", "fragment"), [
+    (lambda p, i: p.__setitem__((3, 0), np.nan), "the estimate has non-finite poses"),
+    (lambda p, i: i.__setitem__((1, 2, 2), np.inf), "edge 1 (1 → 2) has no finite non-negative SE-Sync weights"),
+])
+def test_a_certificate_that_cannot_be_computed_says_why(mutate, fragment):
+    poses, ij, xyt, info = _hexagon(0.05, seed=1)
+    mutate(poses, info)
+    cert = certify.certify_pose_graph(poses, ij, xyt, info)
+    assert not cert.certified and cert.verdict() == f"not certified: {cert.reason}"
+    assert fragment in cert.reason

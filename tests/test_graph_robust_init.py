@@ -206,3 +206,22 @@ def test_stalled_landmark_graph_is_re_solved_from_init_robust(victoria, monkeypa
     assert capped.extra["restart"]["first_cost"] > capped.extra["final_cost"]
     assert "LM stalled at the iteration cap from the odometry start" in capped.message
     assert capped.extra["final_cost"] == pytest.approx(reference.extra["final_cost"], rel=1e-9)
+
+
+def test_a_restart_that_cannot_help_is_skipped_and_said(victoria, monkeypatch):
+    """A converged run judged stalled: init=robust's start costs more than the estimate and the cost rises all
+    the way to it (its basin), so the solve stops and says why — and forcing that restart indeed ends at the
+    first run's cost (what skipping saves is a whole second solve)."""
+    from slamcli.solvers.graph import solver as gs
+
+    inputs, _ = victoria
+    reference = _solve(inputs, restart="off")
+    monkeypatch.setattr(gs, "_stalled", lambda run: True)
+    judged = _solve(inputs)
+    rst = judged.extra["restart"]
+    assert rst["from"] == "robust" and "same basin" in rst["skipped"] and rst["start_cost"] > rst["first_cost"]
+    assert "stopped without re-solving from init=robust: its start costs more" in judged.message
+    assert judged.extra["final_cost"] == reference.extra["final_cost"]
+    monkeypatch.setattr(gs.GraphSlam, "_restart_skip", lambda self, *args: "")
+    forced = _solve(inputs)
+    assert forced.extra["restart"]["restart_cost"] == pytest.approx(reference.extra["final_cost"], rel=1e-9)

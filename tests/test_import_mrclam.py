@@ -361,3 +361,118 @@ def test_cli_import_options_and_errors(tmp_path):
         assert len(lines) == 1 and lines[0].startswith("error: ") and fragment in lines[0], res.stderr
         assert "Traceback" not in res.output
     assert not (tmp_path / "b.h5").exists()
+
+
+# -- irregular stamps: isolated disorder is repaired, the rest refused with its count ----------------------
+def _swap_lines(d: Path, name: str, a: int, b: int) -> None:
+    """Swap the 1-based lines ``a`` and ``b`` of ``d/name``."""
+    lines = (d / name).read_text().splitlines(keepends=True)
+    lines[a - 1], lines[b - 1] = lines[b - 1], lines[a - 1]
+    (d / name).write_text("".join(lines))
+
+
+@pytest.mark.parametrize(("name", "line"), [("Robot1_Odometry.dat", 5), ("Robot1_Measurement.dat", 59),
+                                            ("Robot1_Groundtruth.dat", 100)])
+def test_one_swapped_stamp_is_sorted_back_and_counted(tmp_path, name, line):
+    """One swapped pair of rows (the odometry's at the first data line) imports as the unswapped file does."""
+    d = _copy_excerpt(tmp_path)
+    t_a, t_b = _raw_rows(d / name)[line - 5: line - 3, 0]
+    assert t_a < t_b  # the pair really is out of order once swapped
+    _swap_lines(d, name, line, line + 1)
+    raw = load_mrclam(d, 1)
+    table = {"Robot1_Odometry.dat": raw.odometry, "Robot1_Measurement.dat": raw.measurements,
+             "Robot1_Groundtruth.dat": raw.groundtruth}[name]
+    # the reference is the original excerpt's file, in its own order
+    np.testing.assert_array_equal(table, _raw_rows(EXCERPT / name))
+    assert table[line - 5, 0] == t_a and table[line - 4, 0] == t_b
+    ds = import_mrclam(d, 1, dt=0.1)
+    assert ds.metadata["stamp_repairs"] == {
+        name: {"n_out_of_order": 1, "reordered_lines": [line, line + 1], "n_duplicate_stamps": 0,
+               "duplicate_lines": []}}
+    ref = import_mrclam(EXCERPT, 1, dt=0.1)
+    assert ref.metadata["stamp_repairs"] == {}
+    np.testing.assert_array_equal(ds.inputs.controls, ref.inputs.controls)
+    np.testing.assert_array_equal(ds.truth.poses_xyt, ref.truth.poses_xyt)
+    np.testing.assert_array_equal(ds.inputs.observations.z, ref.inputs.observations.z)
+    np.testing.assert_array_equal(ds.inputs.observations.step, ref.inputs.observations.step)
+
+
+def test_duplicate_truth_stamp_keeps_the_last_row_and_is_listed(tmp_path):
+    d = _copy_excerpt(tmp_path)
+    gt = _raw_rows(d / "Robot1_Groundtruth.dat")
+    lines = (d / "Robot1_Groundtruth.dat").read_text().splitlines(keepends=True)
+    # a second row with the stamp of data row 50 (line 54) and a pose 1 m off, placed right after it: it wins
+    moved = gt[49].copy()
+    moved[1] += 1.0
+    lines.insert(54, " ".join(repr(float(v)) for v in moved) + "\n")
+    (d / "Robot1_Groundtruth.dat").write_text("".join(lines))
+    ds = import_mrclam(d, 1, dt=0.1)
+    rep = ds.metadata["stamp_repairs"]["Robot1_Groundtruth.dat"]
+    assert rep == {"n_out_of_order": 0, "reordered_lines": [], "n_duplicate_stamps": 1, "duplicate_lines": [54]}
+    # truth at the grid time nearest that stamp interpolates towards the later (shifted) row
+    src = np.vstack([gt[:49], moved[None], gt[50:]])  # the file with the later of the two rows only
+    ref = np.interp(ds.inputs.timestamps, src[:, 0] - ds.metadata["time_origin_unix_s"], src[:, 1])
+    np.testing.assert_allclose(ds.truth.poses_xyt[:, 0], ref, atol=1e-9)
+
+
+@pytest.mark.parametrize(("mutate", "fragment"), [
+    # one row 5 places from its own: not a local swap
+    (lambda d: _swap_lines(d, "Robot1_Odometry.dat", 20, 25),
+     "Robot1_Odometry.dat:21: time goes backwards (1248446290.614 after 1248446291.133); 2 row(s) out of time "
+     "order, up to 5 rows from their place"),
+    # five separate swapped pairs in a 346-row file: more than max(4, 1 %) rows out of order
+    (lambda d: [_swap_lines(d, "Robot1_Odometry.dat", a, a + 1) for a in (10, 30, 50, 70, 90)],
+     "5 row(s) out of time order, up to 1 rows from their place"),
+])
+def test_disorder_a_sort_cannot_explain_is_refused_with_its_count(tmp_path, mutate, fragment):
+    d = _copy_excerpt(tmp_path)
+    mutate(d)
+    with pytest.raises(DatasetImportError) as exc:
+        import_mrclam(d, 1)
+    assert fragment in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
+
+
+def test_out_of_order_count_matches_brute_force():
+    """``n - longest non-decreasing subsequence`` against an O(n²) dynamic programme on random stamps."""
+    from slamcli.datasets.mrclam import _n_out_of_order
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        t = rng.integers(0, 6, size=rng.integers(1, 12)).astype(float)
+        best = np.ones(len(t), int)
+        for i in range(len(t)):
+            for j in range(i):
+                if t[j] <= t[i]:
+                    best[i] = max(best[i], best[j] + 1)
+        assert _n_out_of_order(t) == len(t) - best.max()
+
+
+def test_cli_import_summary_names_the_repair(tmp_path):
+    d = _copy_excerpt(tmp_path)
+    _swap_lines(d, "Robot1_Odometry.dat", 5, 6)
+    res = run("import", "mrclam", d, "-o", tmp_path / "r.h5")
+    assert res.exit_code == 0, res.output
+    assert "repaired stamps: Robot1_Odometry.dat 1 out of order (lines 5, 6 sorted)" in res.stdout
+    assert read_dataset(tmp_path / "r.h5").metadata["stamp_repairs"]["Robot1_Odometry.dat"]["n_out_of_order"] == 1
+
+
+def test_team_import_counts_each_robots_repair(tmp_path):
+    """Four robots of one public dataset were refused for one swapped row each: a team import repairs the
+    swap in robot 2's log, lists it under robot 2, says so in the summary, and imports robot 2's controls as
+    the unswapped excerpt gives them."""
+    from slamcli.datasets.mrclam import import_mrclam_team
+
+    team_src = Path(__file__).parent / "data" / "mrclam_team_excerpt"
+    d = tmp_path / "team"
+    d.mkdir()
+    for f in team_src.glob("*.dat"):
+        (d / f.name).write_text(f.read_text())
+    _swap_lines(d, "Robot2_Odometry.dat", 5, 6)
+    ds = import_mrclam_team(d, [1, 2])
+    per = {pr["robot"]: pr["stamp_repairs"] for pr in ds.metadata["per_robot"]}
+    assert per[1] == {} and per[2]["Robot2_Odometry.dat"]["reordered_lines"] == [5, 6]
+    ref = import_mrclam_team(team_src, [1, 2])
+    np.testing.assert_array_equal(ds.inputs.controls, ref.inputs.controls)
+    res = run("import", "mrclam", d, "--robots", "1,2", "-o", tmp_path / "t.h5")
+    assert res.exit_code == 0, res.output
+    assert "repaired stamps: Robot2_Odometry.dat 1 out of order (lines 5, 6 sorted)" in res.stdout

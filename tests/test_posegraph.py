@@ -319,3 +319,37 @@ def test_robust_auto_is_cauchy_only_for_real_sensor_ids(tmp_path):
     assert sim.inputs.reported_id_source == "unknown"
     r = solve_dataset(sim.inputs, "graph", {"covariance": False})
     assert r.extra["association"] == "reported" and r.extra["robust"] == "none"
+
+
+def test_a_restart_runs_only_from_another_basin_or_a_lower_cost():
+    """The restart gate on MIT's two minima (GTSAM reaches both: the chordal start's global one and the
+    odometry chain's local one, cost > 10×, test above). From the global minimum a restart at the local one
+    costs more but lies beyond a ridge (another basin): it may run. A start a small step from the global
+    minimum costs more and lies in its basin: skipped, and LM from there indeed returns to the same cost."""
+    from types import SimpleNamespace
+
+    from slamcli.solvers.graph import solver as gs
+    from slamcli.solvers.graph.build import build_gtsam_problem
+
+    inp = import_graph(MIT).inputs
+    glob = solve_dataset(inp, "graph", {"init": "chordal", "covariance": False})
+    loc = solve_dataset(inp, "graph", {"init": "odometry", "covariance": False, "restart": "off"})
+    assert loc.extra["final_cost"] > 10 * glob.extra["final_cost"]
+    assert "not certified: S + ηI is not positive definite" in loc.message and "nan" not in loc.message
+    solver = gs.GraphSlam(graph.GraphParams(covariance=False))
+    p = solver.params
+    assoc, none = np.zeros(0, np.int64), np.zeros((0, 2))
+    gp = build_gtsam_problem(inp, assoc, glob.poses_xyt, none, p)
+    nparams = p.nls_params("none", p.kernel_scale("none"), pose_graph=True)
+    run = SimpleNamespace(res=SimpleNamespace(x=gp.x0, cost=nls.evaluate_cost(gp.problem, gp.x0, nparams)),
+                          gp=SimpleNamespace(n_landmarks=0))
+    assert run.res.cost == pytest.approx(glob.extra["final_cost"], rel=1e-9)
+    record: dict = {}
+    assert solver._restart_skip(inp, run, assoc, loc.poses_xyt, none, "none", record) == ""
+    assert record["start_cost"] == pytest.approx(loc.extra["final_cost"], rel=1e-9)
+    near = glob.poses_xyt + np.random.default_rng(1).normal(scale=0.02, size=glob.poses_xyt.shape)
+    why = solver._restart_skip(inp, run, assoc, near, none, "none", record)
+    assert record["start_cost"] > run.res.cost and "same basin" in why
+    from_near = gs.GraphSlam(graph.GraphParams(covariance=False, restart="off", certify=False))
+    res = from_near._optimise(inp, assoc, near, none, "reported", "none", None).res
+    assert res.cost == pytest.approx(glob.extra["final_cost"], rel=1e-6)

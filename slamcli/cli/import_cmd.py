@@ -58,7 +58,8 @@ def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, s
         f"MRCLAM {Path(directory).name} robots {','.join(map(str, numbers))}: {T} steps each ({T * inp.dt:.1f} s, "
         f"dt {inp.dt:g} s), {len(inp.observations)} landmark observations, {rr['kept']} inter-robot readings of "
         f"{rr['n_rows_with_robot_barcode']} rows with a robot's barcode ({rr['dropped_outside_time_base']} outside "
-        f"the common time base, {rr['dropped_robot_not_imported']} of robots not imported) → "
+        f"the common time base, {rr['dropped_robot_not_imported']} of robots not imported)"
+        f"{_repairs_phrase({k: v for pr in ds.metadata['per_robot'] for k, v in pr['stamp_repairs'].items()})} → "
         f"{', '.join(map(str, written))}",
         highlight=False, markup=False, soft_wrap=True)
 
@@ -161,14 +162,24 @@ def _mrclam_summary(ds, directory: Path, robot: int, non_landmark: str) -> str:
     if ds.truth is None:
         return (f"MRCLAM {directory.name} robot {robot} (no ground truth): {T} steps of {inp.dt:g} s, "
                 f"{len(inp.observations)} observations, odometry path "
-                f"{float(np.sum(np.hypot(*np.diff(inp.odometry_xyt[:, :2], axis=0).T))):.1f} m")
+                f"{float(np.sum(np.hypot(*np.diff(inp.odometry_xyt[:, :2], axis=0).T))):.1f} m"
+                f"{_repairs_phrase(md['stamp_repairs'])}")
     path_len = float(np.sum(np.hypot(*np.diff(ds.truth.poses_xyt[:, :2], axis=0).T)))
     n_clutter = int(np.sum(inp.observations.reported_id < 0))
     return (f"MRCLAM {directory.name} robot {robot}: {T} steps ({T * inp.dt:.1f} s from {inp.timestamps[0]:g} s, "
             f"dt {inp.dt:g} s), {len(ds.truth.landmarks_xy)} landmarks, {len(inp.observations)} observations "
             f"({n_clutter} clutter; {md['n_robot_rows_in_window']} robot and "
             f"{md['n_unknown_barcode_rows_in_window']} unknown-barcode rows "
-            f"{'kept' if non_landmark == 'clutter' else 'dropped'}), true path {path_len:.1f} m")
+            f"{'kept' if non_landmark == 'clutter' else 'dropped'}), true path {path_len:.1f} m"
+            f"{_repairs_phrase(md['stamp_repairs'])}")
+
+
+def _repairs_phrase(repairs: dict) -> str:
+    """``"; repaired stamps: ..."`` for a summary line, or ``""`` when the files needed no repair."""
+    from slamcli.datasets.mrclam import repair_summary
+
+    text = repair_summary(repairs)
+    return f"; {text}" if text else ""
 
 
 @import_app.command("g2o")

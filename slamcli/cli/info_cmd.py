@@ -129,10 +129,13 @@ def result_rows(path: Path) -> tuple[list[tuple[str, str]], list[tuple[str, str]
             if isinstance(d, dict))))
     cert = res.extra.get("certificate")
     if isinstance(cert, dict) and "certified" in cert:
-        verdict = "certified global optimum" if cert["certified"] else "NOT certified"
-        rows.append(("optimality certificate", f"{verdict} (SE-Sync dual: λ_min(S) = {cert.get('lambda_min', float('nan')):.3g},"
-                     f" η = {cert.get('eta', float('nan')):.3g}, suboptimality bound "
-                     f"{cert.get('suboptimality_bound', float('nan')):.3g})"))
+        if not cert["certified"] and cert.get("reason"):
+            rows.append(("optimality certificate", f"NOT certified: {cert['reason']}"))
+        else:
+            verdict = "certified global optimum" if cert["certified"] else "NOT certified"
+            rows.append(("optimality certificate", f"{verdict} (SE-Sync dual: λ_min(S) = "
+                         f"{cert.get('lambda_min', float('nan')):.3g}, η = {cert.get('eta', float('nan')):.3g}, "
+                         f"suboptimality bound {cert.get('suboptimality_bound', float('nan')):.3g})"))
     extra = {k: v for k, v in res.extra.items() if k not in ("dataset_path", "chi2_outliers")}
     params = _flatten({"params": res.params, "extra": extra})
     return rows, params

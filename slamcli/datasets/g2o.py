@@ -50,7 +50,8 @@ Conversion
   (the SE(2) error transforms as ``e' = R₃ e``, so every factor's cost is unchanged: exact).
 * **Odometry** – ``odometry_xyt`` chains the converted increments from ``x0`` (the first pose's vertex,
   converted, or the origin); ``controls = [d_x/dt, d_θ/dt]`` per step (the DDMR model has no lateral
-  velocity, so d_y is only in the odometry). ``dt`` is nominal (default 1 s): a graph carries no time.
+  velocity, so d_y is only in the odometry; ``motion_source = "odometry"`` tells the solvers to propagate with
+  the increments). ``dt`` is nominal (default 1 s): a graph carries no time.
 * **Observations** – ``range = ‖[dx, dy]‖``, ``bearing = atan2(dy, dx)`` in the converted body frame;
   ``reported_id`` = landmark index (landmark ids in ascending order), because the file's data association
   is part of the data. Rows keep the file order within a step.
@@ -567,6 +568,7 @@ def import_graph(
         noise=noise,
         constraints=constraints,
         reported_id_source="file",
+        motion_source="odometry",  # the file's odometry edges; controls drop their sideways part
     )
 
     metadata = _metadata(path, dt, forward, max_poses, obs_model, T, n_poses_file, lm_ids, between_ij, pose_ids,

@@ -35,6 +35,10 @@ Conversion to the fixed-rate schema (``dt``; pose k at time ``t_k = t_start + k�
   is the same index except for barcode misreads (``misread_gate``), which are −1 there. Rows that see
   another robot or an unknown barcode are not landmark observations: ``non_landmark="drop"`` (default)
   leaves them out, ``"clutter"`` keeps them with ``reported_id = −1`` and ``truth.obs_landmark = −1``.
+* **Stamp order** – rows are taken in time order: an isolated out-of-order row (a swapped pair, a row a few
+  places early or late) is put in place by a stable sort, and equal stamps keep the last row; both are counted
+  and their file lines listed in ``metadata["stamp_repairs"]`` (file name → counts and lines). Disorder that a
+  local sort cannot explain (a row far from its place, many rows out of order) is refused with its count.
 * **Start pose** – ``x0`` is the ground truth at ``t_start`` (the known start pose of paper 000 §3).
 * **Truth** – poses are the motion-capture track interpolated at ``t_k``: x, y linearly, the heading on
   the circle (``θ_i + w·angle_diff(θ_{i+1}, θ_i)``). Landmarks come from ``Landmark_Groundtruth.dat``.
@@ -137,7 +141,8 @@ def noise_from_options(dt: float, range_std: float | None = None, bearing_std: f
 # --------------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MrclamRaw:
-    """The parsed text files of one robot (times in Unix seconds, rows in file order).
+    """The parsed text files of one robot (times in Unix seconds; the three time-stamped files' rows in time
+    order, isolated disorder repaired by a stable sort and recorded in ``stamp_repairs``).
 
     Attributes
     ----------
@@ -147,6 +152,7 @@ class MrclamRaw:
     odometry : ndarray (K, 3)              [t, v, ω] rows.
     measurements : ndarray (M, 4)          [t, barcode, range, bearing] rows.
     groundtruth : ndarray (G, 4)           [t, x, y, θ] rows.
+    stamp_repairs : dict                   file name → record of :func:`_time_order` (files with a repair only).
     """
 
     directory: Path
@@ -157,6 +163,7 @@ class MrclamRaw:
     odometry: np.ndarray
     measurements: np.ndarray
     groundtruth: np.ndarray
+    stamp_repairs: dict = dataclasses.field(default_factory=dict)
 
 
 def read_table(path: Path, columns: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -213,12 +220,82 @@ def _require_integers(col: np.ndarray, lines: np.ndarray, path: Path, name: str)
     return col.astype(np.int64)
 
 
-def _require_sorted(t: np.ndarray, lines: np.ndarray, path: Path) -> None:
-    bad = np.flatnonzero(np.diff(t) < 0)
-    if bad.size:
-        raise DatasetImportError(
-            f"{path}:{lines[bad[0] + 1]}: time goes backwards ({float(t[bad[0] + 1]):.3f} after {float(t[bad[0]]):.3f})"
-        )
+#: the most places a stable sort may move a row for a file's disorder to count as isolated (a swapped pair: 1)
+MAX_REORDER_ROWS = 3
+#: the most out-of-order rows a file may hold and still be repaired: this fraction of its rows ...
+MAX_OUT_OF_ORDER_FRACTION = 0.01
+#: ... but never fewer than this many rows
+MIN_REPAIRABLE_ROWS = 4
+#: line numbers listed per file and kind of repair in the metadata (the counts are complete)
+MAX_LISTED_LINES = 20
+
+
+def _n_out_of_order(t: np.ndarray) -> int:
+    """The fewest rows whose stamps must be wrong for ``t`` to be in time order: ``len(t)`` minus the length of
+    its longest non-decreasing subsequence (patience sorting, O(n log n)). One swapped pair gives 1."""
+    import bisect
+
+    tails: list[float] = []
+    for v in t.tolist():
+        i = bisect.bisect_right(tails, v)
+        if i == len(tails):
+            tails.append(v)
+        else:
+            tails[i] = v
+    return len(t) - len(tails)
+
+
+def _time_order(t: np.ndarray, lines: np.ndarray, path: Path, duplicates: bool = True) -> tuple[np.ndarray, dict]:
+    """Stable time order of a file's rows, and the record of what that order repaired.
+
+    Isolated disorder (no row more than :data:`MAX_REORDER_ROWS` places from its sorted place, at most
+    ``max(MIN_REPAIRABLE_ROWS, MAX_OUT_OF_ORDER_FRACTION·rows)`` rows out of order) is repaired by the stable
+    sort; anything else is refused. With ``duplicates`` the rows that share their stamp with the next row are
+    counted as well (the importer keeps the last row of equal stamps).
+
+    Returns
+    -------
+    order : ndarray (rows,) int64    row indices in time order.
+    record : dict                    ``{}`` when nothing was repaired, else ``n_out_of_order``, ``reordered_lines``
+                                     (1-based lines the sort moved), ``n_duplicate_stamps``, ``duplicate_lines``.
+
+    Raises
+    ------
+    DatasetImportError  disorder beyond those bounds (names the first backward line and the counts).
+    """
+    order = np.argsort(t, kind="stable")
+    moved = order != np.arange(len(t))
+    n_bad = _n_out_of_order(t) if moved.any() else 0
+    if n_bad:
+        far = int(np.max(np.abs(order - np.arange(len(t)))))
+        limit = max(MIN_REPAIRABLE_ROWS, int(MAX_OUT_OF_ORDER_FRACTION * len(t)))
+        if far > MAX_REORDER_ROWS or n_bad > limit:
+            i = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
+            raise DatasetImportError(
+                f"{path}:{lines[i]}: time goes backwards ({float(t[i]):.3f} after {float(t[i - 1]):.3f}); "
+                f"{n_bad} row(s) out of time order, up to {far} rows from their place: only isolated disorder "
+                f"(at most {limit} rows, each within {MAX_REORDER_ROWS} rows of its place) is repaired")
+    dup = np.flatnonzero(np.diff(t[order]) == 0) if duplicates else np.zeros(0, np.int64)
+    if not n_bad and not dup.size:
+        return order, {}
+    return order, {"n_out_of_order": n_bad, "reordered_lines": np.sort(lines[moved]).tolist()[:MAX_LISTED_LINES],
+                   "n_duplicate_stamps": int(dup.size),
+                   "duplicate_lines": np.sort(lines[order[dup]]).tolist()[:MAX_LISTED_LINES]}
+
+
+def repair_summary(repairs: dict[str, dict]) -> str:
+    """One phrase naming the stamp repairs of an import (``""`` when there were none), e.g.
+    ``"repaired stamps: Robot1_Odometry.dat 1 out of order (lines 5, 6 sorted), 2 duplicates (last kept)"``."""
+    parts = []
+    for name, r in repairs.items():
+        bits = []
+        if r["n_out_of_order"]:
+            bits.append(f"{r['n_out_of_order']} out of order (lines {', '.join(map(str, r['reordered_lines']))} "
+                        "sorted)")
+        if r["n_duplicate_stamps"]:
+            bits.append(f"{r['n_duplicate_stamps']} duplicate(s) (last kept)")
+        parts.append(f"{name} {', '.join(bits)}")
+    return f"repaired stamps: {'; '.join(parts)}" if parts else ""
 
 
 #: MRCLAM subject numbering (dataset documentation): subjects 1-5 are the robots, 6-20 the landmarks
@@ -234,7 +311,8 @@ def load_mrclam(directory: str | Path, robot: int, *, with_truth: bool = True) -
 
     Raises
     ------
-    DatasetImportError  missing directory/file, malformed row, time going backwards, duplicate barcode.
+    DatasetImportError  missing directory/file, malformed row, time order beyond isolated disorder (see
+        :func:`_time_order`), duplicate barcode.
     """
     d = Path(directory)
     if not d.is_dir():
@@ -281,7 +359,8 @@ def load_mrclam(directory: str | Path, robot: int, *, with_truth: bool = True) -
         raise DatasetImportError(f"{p_odo}: file not found (robots present: {', '.join(present) or 'none'})")
     odo, ln = read_table(p_odo, ("time", "v", "omega"))
     _require_rows(odo, p_odo)
-    _require_sorted(odo[:, 0], ln, p_odo)
+    repairs: dict[str, dict] = {}
+    odo = _sorted_rows(odo, ln, p_odo, repairs)
     meas, ln = read_table(p_meas, ("time", "barcode", "range", "bearing"))
     meas[:, 1] = _require_integers(meas[:, 1], ln, p_meas, "barcode")
     neg = np.flatnonzero(meas[:, 2] < 0)
@@ -293,12 +372,24 @@ def load_mrclam(directory: str | Path, robot: int, *, with_truth: bool = True) -
     if far.size:
         raise DatasetImportError(f"{p_meas}:{ln[far[0]]}: bearing {float(meas[far[0], 3]):g} rad outside "
                                  "[-2pi, 2pi] (degrees? corrupt row?)")
+    # several barcodes read in one image share a stamp: not a repair
+    meas = _sorted_rows(meas, ln, p_meas, repairs, duplicates=False)
     if not with_truth:
-        return MrclamRaw(d, int(robot), bar, lm_subj, lm_xy, odo, meas, None)
+        return MrclamRaw(d, int(robot), bar, lm_subj, lm_xy, odo, meas, None, repairs)
     gt, ln = read_table(p_gt, ("time", "x", "y", "theta"))
     _require_rows(gt, p_gt, 2)
-    _require_sorted(gt[:, 0], ln, p_gt)
-    return MrclamRaw(d, int(robot), bar, lm_subj, lm_xy, odo, meas, gt)
+    gt = _sorted_rows(gt, ln, p_gt, repairs)
+    return MrclamRaw(d, int(robot), bar, lm_subj, lm_xy, odo, meas, gt, repairs)
+
+
+def _sorted_rows(rows: np.ndarray, lines: np.ndarray, path: Path, repairs: dict[str, dict],
+                 duplicates: bool = True) -> np.ndarray:
+    """``rows`` (n, c) in time order (column 0) by :func:`_time_order`; a repair is recorded under the file's name
+    in ``repairs``."""
+    order, record = _time_order(rows[:, 0], lines, path, duplicates)
+    if record:
+        repairs[path.name] = record
+    return rows[order]
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -444,6 +535,7 @@ def _metadata(raw: MrclamRaw, robot: int, dt: float, start: float, T: int, non_l
         "n_unknown_barcode_rows_in_window": int(np.sum(is_unknown & in_window)),
         "misread_gate_rad": float(misread_gate),
         "n_misread_rows": int(np.sum((lm_index >= 0) & (true_lm < 0))),
+        "stamp_repairs": raw.stamp_repairs,
         "truth": "none (imported with no_truth: x0 = [0, 0, 0], the robot's own frame)" if no_truth else "motion capture",
     }
 
@@ -743,7 +835,7 @@ def _team_metadata(directory: str | Path, numbers: list[int], dt: float, start: 
         },
         "per_robot": [
             {k: ds.metadata[k] for k in ("n_landmark_rows", "n_misread_rows", "observed_max_timing_error_s",
-                                         "truth_max_gap_s")} | {"robot": n}
+                                         "truth_max_gap_s", "stamp_repairs")} | {"robot": n}
             for n, ds in zip(numbers, solo)
         ],
         "truth": "motion capture",

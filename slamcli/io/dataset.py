@@ -15,6 +15,7 @@ Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``
         observations/landmark_type (N,)   (only when the sensor reports type labels)
         gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
         @motion_model ("ddmr" default | "ackermann")   vehicle/ wheelbase_m encoder_offset_m  (ackermann)
+        @motion_source ("controls" default, absent | "odometry": the motion data are measured increments)
         sensor_offset_xy (2,)  (only when non-zero)    observations/diameter_m (N,) (only when reported)
         constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
                            between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
@@ -199,6 +200,8 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 def _write_motion_model(g, go, inp: SlamInputs) -> None:
     """Motion-model tag, car geometry, sensor mount and per-observation object size (issue 14)."""
     g.attrs["motion_model"] = str(inp.motion_model)
+    if inp.motion_source != "controls":  # written only when set, so older files read back unchanged
+        g.attrs["motion_source"] = str(inp.motion_source)
     if inp.vehicle is not None:
         gv = g.create_group("vehicle")
         gv.attrs["doc"] = "car geometry of the ackermann motion model (slamcli.models.ackermann.AckermannParams)"
@@ -239,6 +242,9 @@ def _read_motion_model(r: Reader, inputs: SlamInputs) -> SlamInputs:
     model = r.attr("inputs", "motion_model", str, default="ddmr")
     if model not in MOTION_MODELS:
         raise r.fail("inputs/@motion_model", f"unknown motion model {model!r} (known: {', '.join(MOTION_MODELS)})")
+    source = r.attr("inputs", "motion_source", str, default="controls")
+    if source not in MOTION_SOURCES:
+        raise r.fail("inputs/@motion_source", f"must be one of {MOTION_SOURCES}, got {source!r}")
     vehicle = None
     if r.has("inputs/vehicle"):
         L = float(r.array("inputs/vehicle/wheelbase_m", dtype="f", shape=()))
@@ -257,11 +263,13 @@ def _read_motion_model(r: Reader, inputs: SlamInputs) -> SlamInputs:
         r.expect_len("inputs/observations/diameter_m", diam, len(obs), "number of observations")
         obs = dataclasses.replace(obs, diameter_m=diam)
     return dataclasses.replace(inputs, motion_model=model, vehicle=vehicle, sensor_offset_xy=off,
-                               observations=obs)
+                               observations=obs, motion_source=source)
 
 
 OBSERVATION_MODELS = ("range_bearing", "xy")
 REPORTED_ID_SOURCES = ("sensor", "file", "unknown")
+#: values of ``inputs@motion_source`` (SlamInputs.motion_source)
+MOTION_SOURCES = ("controls", "odometry")
 
 
 def _write_constraints(g, c: PoseConstraints) -> None:
@@ -789,6 +797,8 @@ def dataset_hash(dataset: Dataset) -> str:
     _feed(h, "gps_std", inp.gps_std if len(inp.gps_step) else 0.0, np.float64)
     if inp.reported_id_source != "unknown":  # fed only when set, so older hashes are unchanged
         h.update(f"reported_id_source|{inp.reported_id_source}|".encode())
+    if inp.motion_source != "controls":  # likewise
+        h.update(f"motion_source|{inp.motion_source}|".encode())
     c = inp.constraints
     if c is not None:  # fed only when present, so the hash of a dataset without constraints is unchanged
         _feed(h, "constraints.between_ij", np.asarray(c.between_ij, np.int64).reshape(-1, 2), np.int64)

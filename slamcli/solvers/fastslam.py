@@ -104,9 +104,11 @@ class FastSlamParams:
         per-particle maximum likelihood (eq. 14.30; keeps an ``(N_obs, P)`` int32 association history);
         ``auto`` (default) = ``known`` when the dataset reports ids, else ``ml``; the association used is
         recorded as ``extra["association"]``.
-    motion_source : "controls" | "odometry"
+    motion_source : "auto" | "controls" | "odometry"
         Motion model used for the proposal: commanded controls with ``noise.motion_std`` (DDMR, paper 000
-        §4), or the encoder odometry increments (eq. 16) with ``noise.odometry_std``.
+        §4), or the encoder odometry increments (eq. 16) with ``noise.odometry_std``. ``auto`` (default): the
+        dataset's ``motion_source`` (odometry for graph imports, whose controls lose the sideways part of each
+        step); the source used is recorded as ``extra["motion_input"]``.
     motion_noise_scale : float
         Multiplies the motion noise standard deviations (``>1`` = stabilising noise; 1 = as specified).
     resampling : "systematic" | "multinomial"
@@ -157,7 +159,7 @@ class FastSlamParams:
     n_particles: int = 50
     version: Literal[1, 2] = 2
     association: Literal["auto", "known", "ml"] = "auto"
-    motion_source: Literal["controls", "odometry"] = "controls"
+    motion_source: Literal["auto", "controls", "odometry"] = "auto"
     motion_noise_scale: float = 1.0
     resampling: Literal["systematic", "multinomial"] = "systematic"
     resample_threshold: float = 0.5
@@ -178,8 +180,8 @@ class FastSlamParams:
             raise ValueError(f"version must be 1 or 2, got {self.version}")
         if self.association not in ("auto", "known", "ml"):
             raise ValueError(f"association must be 'auto', 'known' or 'ml', got {self.association!r}")
-        if self.motion_source not in ("controls", "odometry"):
-            raise ValueError(f"motion_source must be 'controls' or 'odometry', got {self.motion_source!r}")
+        if self.motion_source not in ("auto", "controls", "odometry"):
+            raise ValueError(f"motion_source must be 'auto', 'controls' or 'odometry', got {self.motion_source!r}")
         if self.resampling not in RESAMPLERS:
             raise ValueError(f"resampling must be one of {', '.join(RESAMPLERS)}, got {self.resampling!r}")
         if self.output not in ("mean", "best"):
@@ -641,6 +643,10 @@ def _setup(inputs: SlamInputs, p: FastSlamParams) -> _Setup:
         from slamcli.solvers.frontend import resolve_association
 
         p = dataclasses.replace(p, association=resolve_association(p.association, obs.reported_id))
+    if p.motion_source == "auto":
+        from slamcli.solvers.frontend import resolve_motion_input
+
+        p = dataclasses.replace(p, motion_source=resolve_motion_input(p.motion_source, inputs))
     slot_of_obs, capacity = None, 16
     if p.association == "known":
         rid = np.asarray(obs.reported_id, np.int64)
@@ -868,6 +874,7 @@ class _Run:
         assoc = np.where(alive, row_of_slot[np.clip(assoc_slots, 0, None)], -1)
         extra = {
             "association": p.association,
+            "motion_input": p.motion_source,
             "version": int(p.version),
             "n_resamples": self.n_resample,
             "n_size_gated": int(self.n_size_gated),

@@ -381,6 +381,18 @@ def resolve_association(mode: str, reported_id: np.ndarray, *, force_ml: bool = 
     return "known" if bool(np.any(np.asarray(reported_id) >= 0)) else "ml"
 
 
+def resolve_motion_input(mode: str, inputs) -> str:
+    """The motion input a filter or ICM actually uses: ``"auto"`` → the dataset's ``motion_source``
+    (``"odometry"`` when its motion data are measured SE(2) increments, else ``"controls"``); an ackermann
+    dataset's controls are its data, so ``auto`` keeps them there. Explicit ``"controls"``/``"odometry"`` pass
+    through unchanged."""
+    if mode != "auto":
+        return mode
+    if getattr(inputs, "motion_model", "ddmr") != "ddmr":
+        return "controls"
+    return "odometry" if getattr(inputs, "motion_source", "controls") == "odometry" else "controls"
+
+
 def group_detections(z_all, sensor, rid, lo: int, hi: int, x_r, *, group: bool, association: str,
                      group_dist: float, range_offset: float = 0.0):
     """The detections of one step: ``[(z (2,), rows (k,) int64), ...]`` in row order (EKF's and FastSLAM's).

@@ -22,7 +22,9 @@ with ``F(X) − tr(Λ)`` the duality gap (0 at a stationary point, ``S Xᵀ = 0`
 gauge null space (the two rows of X and the common translation), so ``λ_min(S) = 0`` at best; the test is
 a sparse Cholesky of ``S + η I`` with ``η = ETA_REL · max diag(S)`` (:data:`ETA_REL`), i.e.
 ``λ_min(S) ≥ −η``. ``λ_min`` is reported by inverse iteration with that factorisation when certified, else
-from a Lanczos run (``scipy.sparse.linalg.eigsh``).
+from a Lanczos run (``scipy.sparse.linalg.eigsh``); when those do not converge, by bisection on Sylvester's
+inertia (``S − σI`` has a Cholesky factor iff ``σ < λ_min``), which brackets it to :data:`INERTIA_REL_TOL`.
+An estimate the test cannot be made for (non-finite poses or weights) is "not certified" with that reason.
 """
 
 from __future__ import annotations
@@ -55,6 +57,10 @@ LANCZOS_MAX_ITERS = 2000
 #: max |S_ij|) at which it stops
 INVERSE_ITERATIONS = 50
 INVERSE_ITERATION_TOL = 1e-14
+#: bisection of λ_min on the inertia of S − σI (when the eigen-solvers fail): stop at a bracket this wide
+#: relative to max(|λ_min|, η), or after INERTIA_MAX_FACTORS factorisations
+INERTIA_REL_TOL = 1e-4
+INERTIA_MAX_FACTORS = 80
 
 
 @dataclass(frozen=True)
@@ -72,6 +78,10 @@ class Certificate:
     suboptimality_bound : float ``F − tr(Λ)`` when certified (the estimate is within it of the optimum of F;
                                  exact up to the slack η‖X*‖²_F), else NaN (no bound).
     poses_xyt : ndarray (n, 3)  the refined stationary point of F.
+    reason : str                why it is not certified (``""`` when certified).
+    lambda_method : str         how ``lambda_min`` was found: dense, inverse iteration, Lanczos, inertia
+                                 bisection (then ``lambda_bracket`` holds it), or none.
+    lambda_bracket : tuple      ``(lo, hi)`` with ``lo < λ_min ≤ hi`` from the inertia bisection, else ().
     """
 
     certified: bool
@@ -81,17 +91,33 @@ class Certificate:
     dual_bound: float
     suboptimality_bound: float
     poses_xyt: np.ndarray
+    reason: str = ""
+    lambda_method: str = ""
+    lambda_bracket: tuple = ()
 
     def as_extra(self) -> dict:
         """The result's ``extra["certificate"]`` entry (JSON-able)."""
-        return {
+        out = {
             "certified": bool(self.certified),
             "lambda_min": float(self.lambda_min),
             "eta": float(self.eta),
             "sesync_cost": float(self.sesync_cost),
             "dual_bound": float(self.dual_bound),
             "suboptimality_bound": float(self.suboptimality_bound),
+            "lambda_min_method": self.lambda_method,
         }
+        if self.lambda_bracket:
+            out["lambda_min_bracket"] = [float(v) for v in self.lambda_bracket]
+        if not self.certified:
+            out["reason"] = self.reason
+        return out
+
+    def verdict(self) -> str:
+        """The phrase a solver's message carries: ``certified global optimum (…)`` or ``not certified: <reason>``."""
+        if self.certified:
+            return (f"certified global optimum (SE-Sync dual: λ_min(S) = {self.lambda_min:.3g} ≥ −η, "
+                    f"bound {self.suboptimality_bound:.3g} on the SE-Sync objective)")
+        return f"not certified: {self.reason}"
 
 
 def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +125,9 @@ def isotropic_weights(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     info = np.asarray(info, float).reshape(-1, 3, 3)
     kappa = info[:, 2, 2].copy()
     a, b, c, d = info[:, 0, 0], info[:, 0, 1], info[:, 1, 0], info[:, 1, 1]
-    tau = 2.0 * (a * d - b * c) / (a + d)  # tr(A⁻¹) = tr(A) / det(A) for a 2×2 A
+    # tr(A⁻¹) = tr(A) / det(A) for a 2×2 A; no translation information (A = 0) is τ = 0, the limit
+    trace = a + d
+    tau = np.divide(2.0 * (a * d - b * c), trace, out=np.zeros_like(trace), where=trace != 0)
     return kappa, tau
 
 
@@ -412,9 +440,21 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     xyt = np.asarray(xyt, float).reshape(-1, 3)
     kappa, tau = isotropic_weights(info)
     n = int(np.asarray(poses_xyt).shape[0])
+    nan = float("nan")
+    bad = np.flatnonzero(~(np.isfinite(kappa) & np.isfinite(tau) & (kappa >= 0) & (tau >= 0)))
+    if bad.size:
+        return Certificate(False, nan, nan, nan, nan, nan, np.array(poses_xyt, float), lambda_method="none",
+                           reason=f"edge {int(bad[0])} ({int(ij[bad[0], 0])} → {int(ij[bad[0], 1])}) has no finite "
+                                  f"non-negative SE-Sync weights (κ = {kappa[bad[0]]:.3g}, τ = {tau[bad[0]]:.3g})")
+    if not np.all(np.isfinite(poses_xyt)):
+        return Certificate(False, nan, nan, nan, nan, nan, np.array(poses_xyt, float), lambda_method="none",
+                           reason="the estimate has non-finite poses")
     edges = _Edges(ij, xyt, kappa, tau)
     x, asm, lin = _refine(poses_xyt, edges, workspace)
     F = edges.cost(x)
+    if not (np.isfinite(F) and np.all(np.isfinite(x))):
+        return Certificate(False, nan, nan, F, nan, nan, x, lambda_method="none",
+                           reason="the refinement to a stationary point of the SE-Sync objective did not stay finite")
     S_lo, dual = _certificate_matrix(asm, x, edges)
     S = _LowerSymmetric(asm.lower_matrix(S_lo))  # pose-interleaved order [t_i, R_i e₁, R_i e₂] of the refinement
     eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
@@ -425,9 +465,16 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
         solve = _finite_solve(lin) if certified else None
     else:
         certified, solve = _is_positive_definite(asm.matrix(asm.full(shifted)))
-    lam_min = _lambda_min(S, eta, certified, solve)
-    gap = max(F - dual, 0.0) if certified else float("nan")
-    return Certificate(bool(certified), lam_min, eta, F, dual, gap, x)
+    lam_min, method = _lambda_min(S, eta, certified, solve)
+    bracket: tuple = ()
+    if not np.isfinite(lam_min):  # the eigen-solvers failed: the inertia of S − σI brackets λ_min all the same
+        bracket = _lambda_min_by_inertia(S.tocsc(), eta, certified)
+        lam_min, method = 0.5 * (bracket[0] + bracket[1]), "inertia bisection"
+    gap = max(F - dual, 0.0) if certified else nan
+    reason = "" if certified else (
+        f"S + ηI is not positive definite (λ_min(S) = {lam_min:.3g} < −η = {-eta:.3g}, {method}): the refined "
+        "estimate is a stationary point of the SE-Sync objective that its dual does not prove globally optimal")
+    return Certificate(bool(certified), lam_min, eta, F, dual, gap, x, reason, method, bracket)
 
 
 def _certificate_matrix(asm: nls.Assembler, x, edges: _Edges) -> tuple[np.ndarray, float]:
@@ -515,8 +562,8 @@ def _is_positive_definite(A: sp.csc_matrix):
     return factor is not None, factor
 
 
-def _lambda_min(S: sp.csc_matrix | _LowerSymmetric, eta: float, certified: bool, solve=None) -> float:
-    """Smallest eigenvalue of ``S``; NaN when the iteration does not converge.
+def _lambda_min(S: sp.csc_matrix | _LowerSymmetric, eta: float, certified: bool, solve=None) -> tuple[float, str]:
+    """``(λ_min(S), method)``; ``(NaN, "")`` when the iterations do not converge.
 
     Certified (every eigenvalue ≥ −η): inverse iteration with the factorisation of ``S + ηI`` that the test
     made (``solve``), whose dominant eigenvalue ``1/(λ_min + η)`` is the smallest one's, then the Rayleigh
@@ -524,12 +571,15 @@ def _lambda_min(S: sp.csc_matrix | _LowerSymmetric, eta: float, certified: bool,
     run, with a bounded budget (the value then only says how negative)."""
     n = S.shape[0]
     if n <= DENSE_EIG_MAX:
-        return float(np.linalg.eigvalsh(S.toarray())[0])
+        try:
+            return float(np.linalg.eigvalsh(S.toarray())[0]), "dense"
+        except np.linalg.LinAlgError:
+            return float("nan"), ""
     v0 = np.ones(n) / np.sqrt(n)
     if certified and solve is not None:
         lam = _inverse_iteration(S, solve, v0)
         if np.isfinite(lam):
-            return lam
+            return lam, "inverse iteration"
     import scipy.sparse.linalg as spla  # the inverse iteration is slow when λ₁ is not isolated
 
     S = S.tocsc()
@@ -540,8 +590,48 @@ def _lambda_min(S: sp.csc_matrix | _LowerSymmetric, eta: float, certified: bool,
             vals = spla.eigsh(S, k=1, which="SA", tol=1e-4, maxiter=LANCZOS_MAX_ITERS, v0=v0,
                               return_eigenvectors=False)
     except (spla.ArpackNoConvergence, RuntimeError):
-        return float("nan")
-    return float(vals[0])
+        return float("nan"), ""
+    return float(vals[0]), "Lanczos"
+
+
+def _lambda_min_by_inertia(S: sp.csc_matrix, eta: float, certified: bool) -> tuple[float, float]:
+    """``(lo, hi)`` with ``lo ≤ λ_min(S) ≤ hi`` by bisection on Sylvester's inertia: ``S − σI`` has a Cholesky
+    factor iff ``σ < λ_min``. The certificate's test is the first probe (``S + ηI`` positive definite or not);
+    the other end is found by doubling the step from it, within the Gershgorin interval of ``S``; then the
+    bracket is halved to :data:`INERTIA_REL_TOL` (at most :data:`INERTIA_MAX_FACTORS` factorisations)."""
+    eye = sp.identity(S.shape[0], format="csc")
+    radius = np.asarray(abs(S).sum(axis=1)).ravel() - np.abs(S.diagonal())
+    g_lo, g_hi = float(np.min(S.diagonal() - radius)), float(np.max(S.diagonal() + radius))
+
+    def below(sigma: float) -> bool:  # σ < λ_min
+        return _is_positive_definite((S - sigma * eye).tocsc())[0]
+
+    step, factors = max(2.0 * eta, np.finfo(float).tiny), 0
+    if certified:  # λ_min ≥ −η: step up from it until S − σI is not positive definite (at most g_hi)
+        lo, hi = -eta, -eta + step
+        while hi < g_hi and factors < INERTIA_MAX_FACTORS:
+            factors += 1
+            if not below(hi):
+                break
+            lo, step = hi, 2.0 * step
+            hi = -eta + step
+        else:
+            hi = g_hi
+    else:  # λ_min < −η: step down from it until S − σI is positive definite (at least g_lo)
+        lo, hi = -eta - step, -eta
+        while lo > g_lo and factors < INERTIA_MAX_FACTORS:
+            factors += 1
+            if below(lo):
+                break
+            hi, step = lo, 2.0 * step
+            lo = -eta - step
+        else:
+            lo = g_lo
+    while hi - lo > INERTIA_REL_TOL * max(abs(lo), abs(hi), eta) and factors < INERTIA_MAX_FACTORS:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if below(mid) else (lo, mid)
+        factors += 1
+    return lo, hi
 
 
 def _inverse_iteration(S: sp.csc_matrix | _LowerSymmetric, solve, v: np.ndarray) -> float:

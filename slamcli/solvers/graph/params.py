@@ -135,8 +135,10 @@ class GraphParams:
         ``auto`` (default): a pose-graph solve from the odometry (or spanning-tree) start that is not
         certified is solved again from the chordal relaxation, and the lower cost is kept; a landmark-graph
         solve that stalls (iteration cap reached with a relative decrease below ``STALL_REL_DECREASE`` over
-        its last ``STALL_WINDOW`` iterations) is solved again from ``init=robust``. Both are said in
-        ``extra["restart"]`` and the message.
+        its last ``STALL_WINDOW`` iterations) is solved again from ``init=robust``. A restart runs only when
+        it can help: its start has a lower cost than the estimate, or a ridge of the cost lies between them
+        (another basin, ``BASIN_PROBES``); otherwise the solve stops there. Each is said in
+        ``extra["restart"]`` (``skipped``: why not) and the message.
     """
 
     model: Literal["gtsam", "paper"] = "gtsam"
@@ -234,6 +236,11 @@ POSE_GRAPH_FROZEN_STEP_REL = 1e-3
 #: fraction over its last STALL_WINDOW iterations (GraphParams.restart)
 STALL_REL_DECREASE = 1e-3
 STALL_WINDOW = 10
+#: a restart is skipped when its start costs more than the estimate and lies in the same basin: the cost, at
+#: BASIN_PROBES evenly spaced points of the straight path from the estimate to the start, never falls by more
+#: than BASIN_REL_TOL of the estimate's cost from one point to the next (no ridge between them)
+BASIN_PROBES = 16
+BASIN_REL_TOL = 1e-9
 
 
 def resolve_robust(robust: str, association: str, id_source: str = "unknown") -> str:

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from slamcli.errors import SolverError
+from slamcli.models.angles import wrap_angle
 from slamcli.solvers import frontend, nls
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.graph.build import GraphProblem, build_gtsam_problem, laplace_marginals
@@ -26,6 +27,8 @@ from slamcli.solvers.graph.init import (
 from slamcli.solvers.graph.merge import merge_candidates
 from slamcli.solvers.graph.paper import build_paper_problem, default_paper_weights
 from slamcli.solvers.graph.params import (
+    BASIN_PROBES,
+    BASIN_REL_TOL,
     STALL_REL_DECREASE,
     STALL_WINDOW,
     GraphParams,
@@ -311,7 +314,8 @@ class GraphSlam(BaseSolver):
 
     def _certify_or_restart(self, inputs, run: _Run, assoc, poses0, mode, kernel, progress, start: str):
         """Certify a pose graph's optimum, re-solving from the chordal relaxation when the first start is not
-        certified; re-solve a stalled landmark graph from ``init=robust`` (GraphParams.restart).
+        certified; re-solve a stalled landmark graph from ``init=robust`` (GraphParams.restart). Either restart
+        runs only when :meth:`_restart_skip` finds it can help.
 
         Returns ``(run, certificate or None, restart dict or None)``; the run kept has the lower cost."""
         p = self.params
@@ -325,9 +329,13 @@ class GraphSlam(BaseSolver):
                 return run, cert, None
             restart = {"from": "chordal", "first_cost": float(run.res.cost),
                        "first_lambda_min": float(cert.lambda_min), "first_init": start}
-            run2 = self._optimise(inputs, assoc, initial_poses(inputs, "chordal"), np.zeros((0, 2)), mode, kernel,
-                                  progress)
+            poses_c, lm_c = initial_poses(inputs, "chordal"), np.zeros((0, 2))
+            skip = self._restart_skip(inputs, run, assoc, poses_c, lm_c, kernel, restart)
+            if skip:
+                return run, cert, {**restart, "skipped": skip}
+            run2 = self._optimise(inputs, assoc, poses_c, lm_c, mode, kernel, progress)
             cert2 = certify_pose_graph(run2.gp.unpack(run2.res.x)[0], ij, xyt, info, run2.res.workspace)
+            restart["restart_cost"] = float(run2.res.cost)
             if run2.res.cost <= run.res.cost:
                 return run2, cert2, restart
             return run, cert, {**restart, "kept": "first"}
@@ -335,30 +343,60 @@ class GraphSlam(BaseSolver):
             return run, None, None
         poses_r, robust_res = robust_initial_poses(inputs, assoc, poses0, p)
         lm_r = frontend.landmarks_from_observations(poses_r, inputs.observations, assoc, int(assoc.max(initial=-1)) + 1)
-        run2 = self._optimise(inputs, assoc, poses_r, lm_r, mode, kernel, progress)
         restart = {"from": "robust", "first_cost": float(run.res.cost), "first_init": start,
                    "robust_cost": float(robust_res.cost)}
+        skip = self._restart_skip(inputs, run, assoc, poses_r, lm_r, kernel, restart)
+        if skip:
+            return run, None, {**restart, "skipped": skip}
+        run2 = self._optimise(inputs, assoc, poses_r, lm_r, mode, kernel, progress)
+        restart["restart_cost"] = float(run2.res.cost)
         if run2.res.cost <= run.res.cost:
             return run2, None, restart
         return run, None, {**restart, "kept": "first"}
+
+    def _restart_skip(self, inputs, run: _Run, assoc, poses_r, lm_r, kernel, restart: dict) -> str:
+        """Why a restart from ``poses_r (T+1, 3)``, ``lm_r (L, 2)`` cannot help ``run``'s estimate, or ``""``.
+
+        It can help when its start has a lower cost (stored as ``restart["start_cost"]``), or when the cost
+        falls somewhere on the straight path from the estimate to it (angles the short way round; the cost at
+        :data:`BASIN_PROBES` points): a ridge between the two, so LM from there descends into another basin.
+        A start that costs more and is reached from the estimate uphill all the way lies in the estimate's
+        basin: LM would come back. When the two graphs differ (landmarks merged since), the restart runs."""
+        gp_r = build_gtsam_problem(inputs, assoc, poses_r, lm_r, self.params)
+        nparams = self.params.nls_params(kernel, self.params.kernel_scale(kernel),
+                                         pose_graph=self._is_pose_graph(inputs, len(lm_r), kernel))
+        start_cost = nls.evaluate_cost(gp_r.problem, gp_r.x0, nparams)
+        restart["start_cost"] = float(start_cost)
+        x_est = np.asarray(run.res.x, float)
+        if not start_cost >= run.res.cost or gp_r.x0.shape != x_est.shape or run.gp.n_landmarks != gp_r.n_landmarks:
+            return ""
+        delta = gp_r.x0 - x_est
+        ang = gp_r.problem.angle_cols
+        delta[ang] = np.asarray(wrap_angle(delta[ang]), float)
+        path = [nls.evaluate_cost(gp_r.problem, x_est + t * delta, nparams)
+                for t in np.linspace(0.0, 1.0, BASIN_PROBES + 2)]
+        if np.any(np.diff(path) < -BASIN_REL_TOL * abs(path[0])):
+            return ""
+        return (f"its start costs more ({start_cost:.6g}) and lies in the same basin (the cost rises all the way "
+                "from the estimate to it), so LM would return here")
 
     @staticmethod
     def _report_restart(extra: dict, message: str, cert, restart) -> str:
         """Put the certificate and the restart into ``extra`` and the message."""
         if restart is not None:
             extra["restart"] = restart
-            kept = "kept the first run (lower cost)" if restart.get("kept") == "first" else "kept the restart"
             why = ("not certified" if restart["from"] == "chordal"
                    else "LM stalled at the iteration cap")
-            message += (f"; {why} from the {restart['first_init']} start (cost {restart['first_cost']:.6g}), "
-                        f"re-solved from init={restart['from']}: {kept}")
+            if restart.get("skipped"):
+                message += (f"; {why} from the {restart['first_init']} start (cost {restart['first_cost']:.6g}); "
+                            f"stopped without re-solving from init={restart['from']}: {restart['skipped']}")
+            else:
+                kept = "kept the first run (lower cost)" if restart.get("kept") == "first" else "kept the restart"
+                message += (f"; {why} from the {restart['first_init']} start (cost {restart['first_cost']:.6g}), "
+                            f"re-solved from init={restart['from']}: {kept}")
         if cert is not None:
             extra["certificate"] = cert.as_extra()
-            if cert.certified:
-                message += (f"; certified global optimum (SE-Sync dual: λ_min(S) = {cert.lambda_min:.3g} ≥ −η, "
-                            f"bound {cert.suboptimality_bound:.3g} on the SE-Sync objective)")
-            else:
-                message += f"; not certified (SE-Sync dual: λ_min(S) = {cert.lambda_min:.3g} < −η = {-cert.eta:.3g})"
+            message += f"; {cert.verdict()}"
         return message
 
     def _merge_round(self, inputs: SlamInputs, run: _Run):

@@ -200,9 +200,12 @@ class Problem:
     vehicle: object = None
 
     @staticmethod
-    def from_inputs(inputs: SlamInputs, range_offset: float = 0.0, use_gps: bool = True) -> Problem:
+    def from_inputs(inputs: SlamInputs, range_offset: float = 0.0, use_gps: bool = True,
+                    motion_input: str = "controls") -> Problem:
         """``range_offset`` (m) is added to every measured range (beyond the paper: laser returns from the
-        surface of a post, see :attr:`slamcli.solvers.icm.solver.IcmParams.range_offset`)."""
+        surface of a post, see :attr:`slamcli.solvers.icm.solver.IcmParams.range_offset`). ``motion_input =
+        "odometry"`` (DDMR data): the motion terms follow the odometry increments ``d`` instead of the controls,
+        ``controls = [d_x, d_θ]/dt`` and ``lateral = d_y/dt``, so ``g(x, u) = x ⊕ d`` exactly."""
         obs = inputs.observations
         z = obs.z
         if range_offset:
@@ -218,6 +221,9 @@ class Problem:
             controls = np.column_stack([v_c - w * veh.ref_y_m, w])
         elif getattr(inputs, "motion_model", "ddmr") != "ddmr":
             raise ValueError(f"motion model {inputs.motion_model!r} is not implemented")
+        elif motion_input == "odometry":
+            inc = se2.between(odo[:-1], odo[1:]) / float(inputs.dt)
+            controls, car = inc[:, [0, 2]].copy(), dict(lateral=inc[:, 1].copy())
         return Problem(
             T=int(inputs.n_poses - 1),
             dt=float(inputs.dt),
@@ -243,12 +249,17 @@ class Problem:
         ``ackermann_step``); ``poses_prev (T, 3)``."""
         if self.car_controls is not None:
             return ackermann_step(poses_prev, self.car_controls, self.dt, self.vehicle)
+        if self.lateral is not None:  # odometry increments: x ⊕ d
+            return wrap_angle_last(_motion(np.asarray(poses_prev, float), self.controls, self.dt, self.lateral))
         return motion.ddmr_step(poses_prev, self.controls, self.dt)
 
     def kinematic_poses(self) -> np.ndarray:
         """Poses ``(T+1, 3)`` from x_0 and the controls only (the paper's Fig. 6 initialisation)."""
         if self.car_controls is not None:
             return integrate_ackermann(self.x0, self.car_controls, self.dt, self.vehicle)
+        if self.lateral is not None:  # odometry increments: the chain x_0 ⊕ d_1 ⊕ …
+            inc = self.dt * np.column_stack([self.controls[:, 0], self.lateral, self.controls[:, 1]])
+            return motion.chain_increments(self.x0, inc)
         return motion.integrate(self.x0, self.controls, self.dt)
 
     @property
@@ -782,6 +793,9 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
             Jb = np.broadcast_to(-np.eye(3), Ja.shape).copy()
         else:
             Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
+            if prob.lateral is not None:  # ∂/∂θ of dt·R(θ)[0, v_y]
+                Ja[:, 0, 2] -= prob.dt * prob.lateral * np.cos(poses[:-1, 2])
+                Ja[:, 1, 2] -= prob.dt * prob.lateral * np.sin(poses[:-1, 2])
         add_block(r, np.sqrt(W.R), [(Ja, pose_cols(t - 1)), (Jb, pose_cols(t))])
     if W.use_odometry and T > 0:
         r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)

@@ -31,7 +31,10 @@ chosen by measurement (``slamcli reproduce --section real``, the real-data secti
 
 A preset sets each of its keys that is still at its paper default; a key given explicitly with another value
 wins (``-p preset=real -p weights=information``). A key set explicitly to its paper default cannot be told
-apart from an unset one and takes the preset's value.
+apart from an unset one and takes the preset's value. Weight matrices given explicitly (``R``, ``S``, ``Q`` or
+``K`` away from their defaults) keep ``weights=design``: the data rule's ``weights=information``, which would
+replace them by the dataset's noise model, is then not applied, and the result says so
+(:func:`weights_note`).
 """
 
 from __future__ import annotations
@@ -82,7 +85,30 @@ def apply_data_rule(params, defaults: dict[str, Any], has_ids: bool) -> dict[str
     if not has_ids:
         return {}
     base = defaults | PRESETS[params.preset]
-    return {k: v for k, v in WITH_IDS[params.preset].items() if getattr(params, k) == base[k]}
+    out = {k: v for k, v in WITH_IDS[params.preset].items() if getattr(params, k) == base[k]}
+    if explicit_weights(params, defaults) and out.get("weights") == "information":
+        del out["weights"]  # the user's R, S, Q, K win over the dataset's noise model
+    return out
+
+
+#: the design weight matrices that ``weights=information`` replaces
+WEIGHT_KEYS = ("R", "S", "Q", "K")
+
+
+def explicit_weights(params, defaults: dict[str, Any]) -> list[str]:
+    """The design weight matrices ``params`` holds away from their paper defaults (given explicitly)."""
+    return [k for k in WEIGHT_KEYS if getattr(params, k) != defaults[k]]
+
+
+def weights_note(params, defaults: dict[str, Any], has_ids: bool) -> str:
+    """One line when the preset's data rule would have set ``weights=information`` but explicit weight matrices
+    kept ``weights=design``; ``""`` otherwise."""
+    given = explicit_weights(params, defaults)
+    if not (has_ids and given and WITH_IDS[params.preset].get("weights") == "information"
+            and params.weights == "design"):
+        return ""
+    return (f"preset={params.preset}: weights=information not applied, {', '.join(given)} given explicitly "
+            "(weights=design uses them)")
 
 
 def apply_preset(params, defaults: dict[str, Any]) -> dict[str, Any]:

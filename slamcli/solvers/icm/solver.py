@@ -98,6 +98,7 @@ from typing import Literal
 import numpy as np
 
 from slamcli.solvers.base import BaseSolver, ProgressFn
+from slamcli.solvers.frontend import resolve_motion_input
 from slamcli.solvers.icm import energy as en
 from slamcli.solvers.icm import gate
 from slamcli.solvers.icm import map_step as mp
@@ -106,7 +107,7 @@ from slamcli.solvers.icm.common import online_init, reported_labels, stop_decisi
 from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
-from slamcli.solvers.icm.presets import apply_data_rule, apply_preset
+from slamcli.solvers.icm.presets import apply_data_rule, apply_preset, explicit_weights, weights_note
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -206,6 +207,11 @@ class IcmParams:
                                  current estimate, refreshed every sweep.
     range_bias : "none" | "estimate"  beyond the paper: one more node, a common range bias estimated in every
                                  sweep (its closed-form conditional mode), with or without ``surface``.
+    motion_input : "auto" | "controls" | "odometry"  what drives the motion potential and the initialisation: the
+                                 controls through g(x, u), or the odometry increments (``x ⊕ d``, the full SE(2)
+                                 step, sideways part included); ``auto`` (default) = the dataset's
+                                 ``motion_source`` (odometry for graph imports). Recorded as
+                                 ``extra["motion_input"]``. Single-robot solves.
     trace_poses_every : int      record the poses of iteration 0 (the initialisation), of every k-th iteration
                                  and of the last one in ``result.trace`` (paper Figs 5b-d / 6b / 9b-c draw the
                                  trajectory after iterations 10, 20, 30, …); 0 = no poses in the trace. Memory:
@@ -250,12 +256,17 @@ class IcmParams:
     team_range_weights: bool = False
     team_odometry_only: bool = False
     preset: Literal["paper", "real"] = "paper"
+    motion_input: Literal["auto", "controls", "odometry"] = "auto"
 
     def __post_init__(self) -> None:
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
         for key, value in apply_preset(self, defaults).items():
             object.__setattr__(self, key, value)
         en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
+        given = explicit_weights(self, defaults)
+        if self.weights == "information" and given:
+            raise ValueError(f"{', '.join(given)} given with weights=information, which takes R, S, Q, K from the "
+                             "dataset's noise model: drop them or use weights=design")
         if not (self.fusion_radius >= 0 and math.isfinite(self.fusion_radius)):
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
         if self.min_observations < 0:
@@ -286,13 +297,15 @@ class IcmParams:
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
 
+    def weights_note(self, inputs: SlamInputs) -> str:
+        """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
+        return weights_note(self, {f.name: f.default for f in dataclasses.fields(self)}, _has_ids(inputs))
+
     def for_data(self, inputs: SlamInputs) -> IcmParams:
         """These parameters with the preset's rule for the dataset applied (``preset=real`` on data with
         sensor-reported ids: :data:`slamcli.solvers.icm.presets.WITH_IDS`); ``self`` when nothing changes."""
-        rid = inputs.observations.reported_id
-        has_ids = bool(len(rid)) and bool(np.any(np.asarray(rid) >= 0))
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
-        changes = apply_data_rule(self, defaults, has_ids)
+        changes = apply_data_rule(self, defaults, _has_ids(inputs))
         if not changes:
             return self
         out = dataclasses.replace(self)  # a copy; the rule's values are set after __post_init__, which would
@@ -307,6 +320,12 @@ class IcmParams:
     def weights_for(self, inputs: SlamInputs) -> en.Weights:
         """The weights a solve uses: the design matrices, or the dataset's information matrices."""
         return en.information_weights(inputs) if self.weights == "information" else self.design_weights()
+
+
+def _has_ids(inputs: SlamInputs) -> bool:
+    """Whether any observation row carries a sensor-reported id (the presets' data rule)."""
+    rid = inputs.observations.reported_id
+    return bool(len(rid)) and bool(np.any(np.asarray(rid) >= 0))
 
 
 def _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts=None) -> np.ndarray:
@@ -398,8 +417,11 @@ class IcmSlam(BaseSolver):
         if reported and N and not np.any(fixed >= 0):
             raise ConfigError("icm: correspondences=reported needs sensor-reported ids, the dataset has none")
         extra: dict = {"schedule": p.schedule, "accelerate": p.accelerate, "weights": p.weights,
+                       "motion_input": resolve_motion_input(p.motion_input, inputs),
                        "weights_used": {"R": list(W.R), "S": list(W.S), "Q": list(W.Q), "K": W.K},
                        "gps_fixes_used": int(prob.gps_step.size), "filtered": p.filtered}
+        if p.weights_note(inputs):
+            extra["preset_note"] = p.weights_note(inputs)
         rematch = p.filtered == "rematch" and not reported
         # null matching behind a gate (outlier_sigma > 0, reported ids only): τ_i per observation, or None
         tau = (gate.null_costs(prob, W, inputs.noise.range_std, inputs.noise.bearing_std, p.outlier_sigma)
@@ -493,7 +515,8 @@ class IcmSlam(BaseSolver):
         p: IcmParams = self.params
         try:
             W = p.weights_for(inputs)
-            prob = en.Problem.from_inputs(inputs, p.range_offset, use_gps=p.use_gps and W.K > 0)
+            prob = en.Problem.from_inputs(inputs, p.range_offset, use_gps=p.use_gps and W.K > 0,
+                                          motion_input=resolve_motion_input(p.motion_input, inputs))
             if prob.gps_step.size:
                 W.gps_obs_weight()  # the GPS pseudo-observation needs an isotropic Q
         except ValueError as exc:
@@ -640,7 +663,7 @@ class IcmSlam(BaseSolver):
             + (f"; energy rose in {increases} sweep(s)" if increases else "")
             + (_not_converged_note(objective, p.energy_rtol) if status == Status.MAX_ITERATIONS else "")
             + (f"; joint step failed: {joint_errors[0]}" if joint_errors else "")
-            + cov_note,
+            + cov_note + (f"; {extra['preset_note']}" if "preset_note" in extra else ""),
             pose_cov=pose_cov,
             landmark_cov=lm_cov,
             trace=trace,
