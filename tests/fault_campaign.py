@@ -10,6 +10,8 @@ disk      a full 256 kB tmpfs (when this process may mount one) and a size-limit
           child): exit != 0, one line naming the file, no temporary, an existing output left as it was.
 import    Victoria Park bearings outside the field of view, ranges <= 0; car park --max-range <= 0; mrclam
           --dt bounds.
+escapes   HDF5 inputs that would read another file: an external link (to an HDF5 file, to a FIFO), external
+          storage, a virtual dataset, a FIFO named as the input: refused before anything is followed.
 bounds    parameters bounded by memory (n_particles, --dpi, mrclam --dt), seeds >= 2^63, bad mathtext titles,
           deeply nested TOML, inputs of magnitude 1e300.
 
@@ -363,6 +365,60 @@ def bounds_cases(W: World) -> list[Fault]:
     return cases
 
 
+def _escaping_copy(W: World, src: Path, cid: str, name: str, how: str) -> Path:
+    """A copy of ``src`` whose dataset ``name`` reads another file (``how``: ``link``, ``fifo-link``,
+    ``virtual``, ``external``); the other files sit beside it and hold valid data."""
+    d = W.w / "escapes"
+    d.mkdir(exist_ok=True)
+    p = d / f"{cid}.h5"
+    shutil.copyfile(src, p)
+    with h5py.File(p, "r+") as f:
+        data = f[name][()]
+        side = d / f"{cid}-side.h5"
+        with h5py.File(side, "w") as g:
+            g["v"] = data
+        del f[name]
+        if how == "link":
+            f[name] = h5py.ExternalLink(side.name, "v")
+        elif how == "fifo-link":
+            os.mkfifo(d / f"{cid}.fifo")
+            f[name] = h5py.ExternalLink(f"{cid}.fifo", "v")
+        elif how == "virtual":
+            layout = h5py.VirtualLayout(shape=data.shape, dtype=data.dtype)
+            layout[...] = h5py.VirtualSource(side.name, "v", shape=data.shape)
+            f.create_virtual_dataset(name, layout)
+        else:
+            raw = d / f"{cid}.raw"
+            raw.write_bytes(data.tobytes())
+            f.create_dataset(name, shape=data.shape, dtype=data.dtype, external=[(raw.name, 0, data.nbytes)])
+    return p
+
+
+def escape_cases(W: World) -> list[Fault]:
+    out = W.w / "out"
+    cases: list[Fault] = []
+    for how in ("link", "fifo-link", "virtual", "external"):
+        p = _escaping_copy(W, W.ds, f"ds-{how}", "inputs/x0", how)
+        r = _escaping_copy(W, W.res, f"res-{how}", "poses_xyt", how)
+        for cid, args, target in (
+                ("solve", ["solve", p, "-m", "odometry", "-o", out / f"e-{how}.h5", "-q"], out / f"e-{how}.h5"),
+                ("info", ["info", p], None),
+                ("export-data", ["export", W.res, "-f", "tum", "--data", p, "-o", out / f"e-{how}.tum", "-q"],
+                 out / f"e-{how}.tum"),
+                ("evaluate-data", ["evaluate", W.res, "--data", p, "-o", out / f"ev-{how}", "-q"], out / f"ev-{how}"),
+                ("export-result", ["export", r, "-f", "tum", "-o", out / f"r-{how}.tum", "-q"], out / f"r-{how}.tum"),
+                ("info-result", ["info", r], None),
+                ("diff", ["diff", W.res, r], None)):
+            names = f"{'inputs/x0' if 'result' not in cid and cid != 'diff' else 'poses_xyt'}"
+            cases.append(Fault("escapes", f"{cid}-{how}", args, names, absent=target, watch=(p, r)))
+    fifo = W.w / "escapes" / "named.fifo"
+    os.mkfifo(fifo)
+    for cid, args in (("solve", ["solve", fifo, "-m", "odometry", "-o", out / "fifo.h5", "-q"]), ("info", ["info", fifo]),
+                      ("export", ["export", fifo, "-f", "tum", "-o", out / "fifo.tum", "-q"])):
+        cases.append(Fault("escapes", f"{cid}-named-fifo", args, "not a regular file"))
+    return cases
+
+
 @contextlib.contextmanager
 def full_tmpfs(path: Path):
     """A 256 kB tmpfs at ``path`` with an existing dataset ``old.h5`` and a filler leaving ~4 kB free; yields
@@ -412,8 +468,9 @@ def judge(c: Fault, r: dict, before: dict[Path, str], w: Path) -> tuple[str, lis
     return kind, why
 
 
-def run_campaign(w: Path) -> dict:
-    """Build every case under ``w``, run them, return totals and the problems (one line each)."""
+def run_campaign(w: Path, only: tuple[str, ...] = ()) -> dict:
+    """Build every case under ``w`` (``only``: of these families), run them, return totals and the problems
+    (one line each)."""
     from test_bad_input_helpers import CliServer
 
     W = make_world(w / "world")
@@ -424,9 +481,10 @@ def run_campaign(w: Path) -> dict:
     server = CliServer(w)
     try:
         with full_tmpfs(W.w / "full") as full:
-            cases = guard_cases(W) + disk_cases(W, full) + import_cases(W) + bounds_cases(W)
+            cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + escape_cases(W)
+                     + bounds_cases(W))
             totals["tmpfs"] = full is not None
-            for c in cases:
+            for c in (c for c in cases if not only or c.family in only):
                 watch = {Path(p): sha(p) for p in (*c.watch, W.ds, W.res, W.tum, W.g2o)}
                 t0 = time.perf_counter()
                 r = server.run(c.args, W.w, fsize=c.fsize)
@@ -461,7 +519,7 @@ if __name__ == "__main__":  # pragma: no cover - see benchmarks/faults.py
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
-        res = run_campaign(Path(d))
+        res = run_campaign(Path(d), tuple(sys.argv[1:]))
     print(report(res))
     print(f"  wall {res['wall_s']:.1f} s; slowest: " + ", ".join(f"{n} {t:.1f} s" for t, n in res["slowest"]))
     for line in res["problems"]:

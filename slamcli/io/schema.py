@@ -129,6 +129,8 @@ def check_path(path: str | os.PathLike) -> Path:
         raise SchemaError(f"{p}: no such file")
     if p.is_dir():
         raise SchemaError(f"{p}: is a directory, expected an HDF5 file")
+    if not p.is_file():  # a FIFO or a device: opening it could block forever
+        raise SchemaError(f"{p}: not a regular file (a FIFO, socket or device), expected an HDF5 file")
     try:
         ok = h5py.is_hdf5(str(p))
     except OSError as exc:
@@ -315,14 +317,60 @@ class Reader:
             raise self.fail(name, f"length {data.shape[0]} does not match {what} ({n})")
 
 
-@contextlib.contextmanager
-def open_for_read(path: str | os.PathLike) -> Iterator[Reader]:
-    """Open ``path`` read-only as a :class:`Reader`; low-level HDF5 failures become one-line SchemaErrors."""
+def _refuse_escapes(f: h5py.File, p: Path) -> None:
+    """Raise a one-line SchemaError when ``f`` could make a read leave the file ``p``: an external link (or a
+    user-defined link) anywhere in it, or a dataset with external storage or a virtual layout. Nothing is
+    followed: links are listed (``H5Lvisit``, hard links only), then each dataset's creation properties read."""
+    from h5py import h5l
+
+    escapes: list[str] = []
+
+    def check_link(name: bytes, info) -> None:
+        if info.type not in (h5l.TYPE_HARD, h5l.TYPE_SOFT) and not escapes:
+            escapes.append(name.decode("utf-8", "backslashreplace"))
+
+    f.id.links.visit(check_link, info=True)
+    if escapes:
+        link = f.get(escapes[0], getlink=True)
+        target = f" to {link.path!r} in {link.filename!r}" if isinstance(link, h5py.ExternalLink) else ""
+        raise SchemaError(f"{p}: {escapes[0]}: external link{target} refused (slamcli reads only the file named)")
+
+    def check_object(name: str, obj: Any) -> None:
+        if isinstance(obj, h5py.Dataset) and not escapes and (obj.is_virtual or obj.external):
+            escapes.append(name)
+
+    f.visititems(check_object)
+    if escapes:
+        raise SchemaError(f"{p}: {escapes[0]}: external or virtual storage refused "
+                          "(slamcli reads only the file named)")
+
+
+def open_h5(path: str | os.PathLike) -> h5py.File:
+    """Open the HDF5 file ``path`` read-only, refusing anything that would read another file (external links,
+    external storage, virtual datasets: :func:`_refuse_escapes`); the one place slamcli opens a file it reads.
+    Failures are one-line SchemaErrors naming the file."""
     p = check_path(path)
     try:
         f = h5py.File(p, "r")
     except Exception as exc:  # noqa: BLE001 - h5py raises OSError for truncated/corrupt files
         raise SchemaError(f"{p}: cannot open HDF5 file, truncated or corrupt ({_one_line(exc)})") from None
+    try:
+        _refuse_escapes(f, p)
+    except SchemaError:
+        f.close()
+        raise
+    except Exception as exc:  # noqa: BLE001 - corrupt link or object headers surface here
+        f.close()
+        raise SchemaError(f"{p}: corrupt HDF5 file ({_one_line(exc)})") from None
+    return f
+
+
+@contextlib.contextmanager
+def open_for_read(path: str | os.PathLike) -> Iterator[Reader]:
+    """Open ``path`` read-only (:func:`open_h5`) as a :class:`Reader`; low-level HDF5 failures become one-line
+    SchemaErrors."""
+    f = open_h5(path)
+    p = Path(path)
     try:
         with f:
             yield Reader(f, p)
