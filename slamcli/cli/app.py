@@ -80,10 +80,22 @@ def stdout_console():
     return Console()
 
 
+#: characters never printed as they are: C0 controls (ESC starts a terminal escape sequence), DEL, C1
+#: controls, and the bidirectional overrides that reorder what a terminal shows
+_UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+
+
+def printable(text: str) -> str:
+    """``text`` safe for a terminal: control characters (from file names, attributes or messages stored in a
+    file) as ``\\xNN`` / ``\\uNNNN`` escapes, non-UTF-8 bytes of file names as ``\\udcNN``."""
+    text = _UNPRINTABLE.sub(lambda m: ascii(m.group())[1:-1], text)
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def one_line(text: str) -> str:
-    """First line of ``text``, printable whatever the file names in it (non-UTF-8 bytes → ``\\udcxx``)."""
+    """First line of ``text``, :func:`printable` whatever the file names or stored strings in it."""
     line = text.splitlines()[0] if text.strip() else ""
-    return line.encode("utf-8", "backslashreplace").decode("utf-8")
+    return printable(line)
 
 
 @contextlib.contextmanager

@@ -43,6 +43,7 @@ from slamcli.io.schema import (
     MAX_POSES,
     SCHEMA_VERSION,
     Reader,
+    attr_text,
     create_h5,
     open_for_read,
     to_json,
@@ -114,7 +115,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         if meta.get("seed") is not None:
             a["seed"] = int(meta["seed"])
         if meta.get("scenario") is not None:
-            a["scenario"] = str(meta["scenario"])
+            a["scenario"] = attr_text(meta["scenario"])
         for key, value in promoted_sections(meta).items():
             a[f"{key}_json"] = to_json(value)
 
@@ -148,7 +149,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         write_array(go, "offsets", np.asarray(obs.offsets, np.int64), units="-", frame="-",
                     doc="CSR row offsets per pose (T+2,)")
         if inp.reported_id_source != "unknown":
-            go["reported_id"].attrs["source"] = str(inp.reported_id_source)
+            go["reported_id"].attrs["source"] = attr_text(inp.reported_id_source)
 
         if obs.landmark_type is not None:
             write_array(go, "landmark_type", np.asarray(obs.landmark_type, np.int64), units="-", frame="-",

@@ -79,6 +79,12 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     write_bytes_atomic(path, text.encode())
 
 
+def attr_text(value: Any) -> str:
+    """``str(value)`` as a valid UTF-8 attribute string: a file name's undecodable bytes (``\\udcNN``
+    surrogates, which HDF5 cannot store) kept as the visible escape ``\\udcNN``."""
+    return str(value).encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, frame: str, doc: str) -> None:
     """Write one dataset with ``units``/``frame``/``doc`` attributes; gzip+shuffle, chunked along axis 0."""
     data = np.asarray(data)

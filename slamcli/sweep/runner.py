@@ -261,7 +261,7 @@ def file_sha256(path: Path) -> str:
 @contextlib.contextmanager
 def _run_log(path: Path) -> Iterator[logging.Logger]:
     """Send every log record of this process to ``path`` while the run lasts."""
-    handler = logging.FileHandler(path, mode="a", encoding="utf-8")
+    handler = logging.FileHandler(path, mode="a", encoding="utf-8", errors="backslashreplace")  # (file names)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()
     old_level = root.level
