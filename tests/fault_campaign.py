@@ -10,6 +10,10 @@ disk      a full 256 kB tmpfs (when this process may mount one) and a size-limit
           child): exit != 0, one line naming the file, no temporary, an existing output left as it was.
 import    Victoria Park bearings outside the field of view, ranges <= 0; car park --max-range <= 0; mrclam
           --dt bounds.
+implicit  outputs over files a command reads without naming them: the dataset a result records (export to
+          every format, plot, evaluate), registry recordings' folders (importers by name, with --force, and
+          any writer), a user folder given to evaluate -o, existing --solo-dir files: exit != 0, no --force
+          suggested for an input, the file byte-identical.
 escapes   HDF5 inputs that would read another file: an external link (to an HDF5 file, to a FIFO), external
           storage, a virtual dataset, a FIFO named as the input: refused before anything is followed.
 bounds    parameters bounded by memory (n_particles, --dpi, mrclam --dt), seeds >= 2^63, bad mathtext titles,
@@ -25,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
+import json
 import os
 import shutil
 import socket
@@ -54,6 +59,8 @@ class Fault:
     absent: Path | None = None  # must not exist afterwards
     fsize: int | None = None
     one_line: bool = True  # a sweep prints its failure table; then only "no traceback" is asked
+    env: dict | None = None  # environment variables of the child (a registry, a data folder)
+    forbid: str | None = None  # the error line must not contain this (e.g. "--force" for an input)
 
 
 def sha(p: Path) -> str:
@@ -365,6 +372,84 @@ def bounds_cases(W: World) -> list[Fault]:
     return cases
 
 
+def _registry_env(W: World) -> tuple[dict, dict[str, Path]]:
+    """A local registry (a g2o, an MRCLAM and a Victoria Park recording) whose copies are registered as added
+    folders of a data folder: the child's environment and name → folder."""
+    root = W.w / "registered"
+    folders = {"graph-t": root / "graphs", "mr-t": root / "mrclam", "vp-t": root / "vp"}
+    if not root.exists():
+        folders["graph-t"].mkdir(parents=True)
+        shutil.copyfile(W.g2o, folders["graph-t"] / "intel.g2o")
+        shutil.copytree(W.mrclam, folders["mr-t"])
+        shutil.copytree(W.vp, folders["vp-t"])
+        (root / "data").mkdir()
+        (root / "data" / "registered.json").write_text(json.dumps({k: str(v) for k, v in folders.items()}))
+        (root / "registry.toml").write_text("".join(
+            f'[[dataset]]\nname = "{n}"\nimporter = "{imp}"\nmarker = "{m}"\nfolder = "{n}"\n'
+            for n, imp, m in (("graph-t", "g2o", "intel.g2o"), ("mr-t", "mrclam", "Barcodes.dat"),
+                              ("vp-t", "victoria-park", "inputs.dat"))))
+    env = {"SLAMCLI_DATA_DIR": str(root / "data"), "SLAMCLI_DATASET_REGISTRY": str(root / "registry.toml")}
+    return env, folders
+
+
+def implicit_cases(W: World) -> list[Fault]:
+    from slamcli.api.simulate import simulate_to_file
+    from slamcli.api.solve import solve_file
+
+    d, links = W.w / "implicit", W.w / "links"
+    d.mkdir()
+    cases: list[Fault] = []
+    for how in ("direct", "symlink", "hardlink", "relative"):
+        target = _alias(W.ds, how, links)
+        for fmt in ("tum", "kitti", "csv", "g2o", "gtsam"):
+            cases.append(Fault("implicit", f"export-{fmt}-over-recorded-dataset-{how}",
+                               ["export", W.res, "-f", fmt, "-o", target, "-q"], "input", exit=2, watch=(W.ds,)))
+    dpng = d / "dataset.png"  # a dataset with an image's name: what plot map/errors would write over
+    simulate_to_file("loop", 4, {"n_steps": 40}, dpng)
+    rpng = d / "on-png.h5"
+    solve_file(dpng, "odometry", {}, rpng)
+    for kind in ("map", "errors"):
+        cases.append(Fault("implicit", f"plot-{kind}-over-recorded-dataset", ["plot", kind, rpng, "-o", dpng, "-q"],
+                           "input", exit=2, watch=(dpng,)))
+    inner = d / "inner"
+    inner.mkdir()
+    dsin = inner / "d.h5"
+    shutil.copyfile(W.ds, dsin)
+    rin = d / "r-inner.h5"
+    solve_file(dsin, "odometry", {}, rin)
+    cases.append(Fault("implicit", "evaluate-folder-holds-recorded-dataset", ["evaluate", rin, "-o", inner, "-q"],
+                       "contains the input", exit=2, watch=(dsin,)))
+    user = d / "ev-user" / "per_step.csv"  # a user folder whose entries carry evaluate's output names
+    user.mkdir(parents=True)
+    (user / "thesis.tex").write_text("\\chapter{x}\n")
+    cases.append(Fault("implicit", "evaluate-user-folder-named-like-outputs",
+                       ["evaluate", W.res, "-o", user.parent, "-q"], "per_step.csv", watch=(user / "thesis.tex",)))
+    env, reg = _registry_env(W)
+    for cid, args, target in (
+            ("g2o-by-name", ["import", "g2o", "graph-t", "-o", reg["graph-t"] / "intel.g2o"], reg["graph-t"] / "intel.g2o"),
+            ("mrclam-by-name", ["import", "mrclam", "mr-t", "-o", reg["mr-t"] / "Barcodes.dat"],
+             reg["mr-t"] / "Barcodes.dat"),
+            ("vp-by-name", ["import", "victoria-park", "vp-t", "-o", reg["vp-t"] / "gps.dat"], reg["vp-t"] / "gps.dat"),
+            ("g2o-other-file", ["import", "g2o", W.g2o, "-o", reg["mr-t"] / "Robot1_Odometry.dat"],
+             reg["mr-t"] / "Robot1_Odometry.dat"),
+            ("simulate", ["simulate", "-s", "loop", "--set", "n_steps=20", "-o", reg["vp-t"] / "inputs.dat"],
+             reg["vp-t"] / "inputs.dat"),
+            ("solve", ["solve", W.ds, "-m", "odometry", "-o", reg["graph-t"] / "intel.g2o"], reg["graph-t"] / "intel.g2o")):
+        for force in ((), ("--force",)):
+            cases.append(Fault("implicit", f"registered-{cid}{'-force' if force else ''}", [*args, *force, "-q"],
+                               "input", exit=2, watch=(target,), env=env, forbid="--force"))
+    cases.append(Fault("implicit", "registered-export", ["export", W.res, "-f", "tum", "-o",
+                                                         reg["mr-t"] / "Robot1_Measurement.dat", "-q"],
+                       "input folder", exit=2, watch=(reg["mr-t"] / "Robot1_Measurement.dat",), env=env))
+    solo = d / "solo"
+    solo.mkdir()
+    shutil.copyfile(W.ds2, solo / "robot1.h5")  # the user's own file of that name
+    cases.append(Fault("implicit", "mrclam-solo-dir-existing", ["import", "mrclam", W.team, "--robots", "1,2",
+                                                                "--solo-dir", solo, "-o", d / "team.h5", "-q"],
+                       "robot1.h5", exit=2, watch=(solo / "robot1.h5",), absent=d / "team.h5"))
+    return cases
+
+
 def _escaping_copy(W: World, src: Path, cid: str, name: str, how: str) -> Path:
     """A copy of ``src`` whose dataset ``name`` reads another file (``how``: ``link``, ``fifo-link``,
     ``virtual``, ``external``); the other files sit beside it and hold valid data."""
@@ -452,6 +537,8 @@ def judge(c: Fault, r: dict, before: dict[Path, str], w: Path) -> tuple[str, lis
         why.append(f"exit {r['code']}, expected {c.exit}")
     if c.one_line and (len(lines) != 1 or not lines[0].startswith("error: ") or c.names not in lines[0]):
         why.append(f"not one error line naming {c.names!r}")
+    if c.forbid is not None and c.forbid in err:
+        why.append(f"the error suggests {c.forbid!r}")
     lost = [str(p) for p, h in before.items() if not p.exists() or sha(p) != h]
     if c.absent is not None and os.path.lexists(c.absent):
         lost.append(f"{c.absent} exists")
@@ -481,13 +568,13 @@ def run_campaign(w: Path, only: tuple[str, ...] = ()) -> dict:
     server = CliServer(w)
     try:
         with full_tmpfs(W.w / "full") as full:
-            cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + escape_cases(W)
+            cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + implicit_cases(W) + escape_cases(W)
                      + bounds_cases(W))
             totals["tmpfs"] = full is not None
             for c in (c for c in cases if not only or c.family in only):
                 watch = {Path(p): sha(p) for p in (*c.watch, W.ds, W.res, W.tum, W.g2o)}
                 t0 = time.perf_counter()
-                r = server.run(c.args, W.w, fsize=c.fsize)
+                r = server.run(c.args, W.w, fsize=c.fsize, env=c.env)
                 times.append((time.perf_counter() - t0, f"{c.family}/{c.id}"))
                 kind, why = judge(c, r, watch, W.w)
                 totals["cases"] += 1

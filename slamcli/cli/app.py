@@ -235,7 +235,21 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
         fail(f"{option} {p}: folder {anc} is not writable")
     from slamcli.io.guard import guard_output
 
-    guard_output(p, inputs, folder=folder, replaces_folder=replaces_folder, option=option, kind=kind, force=force)
+    guard_output(p, files_read(inputs), folder=folder, replaces_folder=replaces_folder, option=option, kind=kind, force=force)
+
+
+def files_read(named) -> list:
+    """Every file and folder a command with the inputs ``named`` may read: the named paths, the dataset each
+    named result records (read when ``--data`` is not given), and every registry recording's folder on this
+    machine (an importer reads them by name)."""
+    from pathlib import Path
+
+    from slamcli.api.evaluate import recorded_dataset
+    from slamcli.datasets.registry import recording_folders
+
+    out = [Path(p) for p in named if p is not None]
+    out += [d for p in out if p.is_file() and (d := recorded_dataset(p)) is not None]
+    return out + recording_folders()
 
 
 def iteration_count(result) -> int | None:

@@ -23,12 +23,12 @@ PROVENANCE.txt records each as an unmodified copy of the pinned URL; the MRCLAM 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
 import shutil
 import urllib.parse
-import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -342,6 +342,20 @@ def where(name: str) -> tuple[str, Path] | None:
     return None
 
 
+def recording_folders() -> list[Path]:
+    """Every folder on this machine that holds a registry recording (added, under ``$SLAMCLI_DATASETS`` or
+    fetched), whether or not it is read now: the output guard treats them all as inputs. An unreadable
+    registry or list of added copies contributes nothing here (the command that reads them reports it)."""
+    found: list[Path] = []
+    with contextlib.suppress(DatasetImportError):
+        found += [Path(folder) for folder in registered().values()]
+    with contextlib.suppress(DatasetImportError):
+        entries = registry().values()
+        shared = _shared_root()
+        found += [shared / e.folder for e in entries if shared is not None] + [data_dir() / e.name for e in entries]
+    return [p for p in found if p.is_dir()]
+
+
 def locate(name: str) -> Path:
     """The path the importer of ``name`` reads; :class:`DatasetMissingError` (one line) when it is not here."""
     found = where(name)
@@ -409,6 +423,8 @@ def add(name: str, directory: str | os.PathLike) -> Path:
 
 def _copy_file_url(url: str, output_file, pooch_obj=None, check_only: bool = False):
     """pooch downloader for ``file://`` URLs (local mirrors, the tests' registry): a plain copy."""
+    import urllib.request
+
     src = Path(urllib.request.url2pathname(urllib.parse.urlparse(url).path))
     if check_only:
         return src.is_file()
