@@ -14,6 +14,9 @@ implicit  outputs over files a command reads without naming them: the dataset a 
           every format, plot, evaluate), registry recordings' folders (importers by name, with --force, and
           any writer), a user folder given to evaluate -o, existing --solo-dir files: exit != 0, no --force
           suggested for an input, the file byte-identical.
+wrong     the last tracebacks and wrong successes: importers writing what their reader refuses (values of 1e300,
+          NaN noise, --dt 1e-320), g2o σ = 1e-200, GPS time running backwards, a MAT array of strings, a MAT
+          zlib bomb, simulate/evaluate values of 1e300, symbolic link loops in -o, negative plot options.
 escapes   HDF5 inputs that would read another file: an external link (to an HDF5 file, to a FIFO), external
           storage, a virtual dataset, a FIFO named as the input: refused before anything is followed.
 bounds    parameters bounded by memory (n_particles, --dpi, mrclam --dt), seeds >= 2^63, bad mathtext titles,
@@ -450,6 +453,102 @@ def implicit_cases(W: World) -> list[Fault]:
     return cases
 
 
+def _text_copy(W: World, src: Path, cid: str, edit) -> Path:
+    """A copy of the file or folder ``src`` under ``wrong/cid``; ``edit(path)`` changes the copy."""
+    d = W.w / "wrong" / cid
+    d.parent.mkdir(exist_ok=True)
+    if src.is_dir():
+        shutil.copytree(src, d)
+    else:
+        d.mkdir()
+        shutil.copyfile(src, d / src.name)
+    edit(d if src.is_dir() else d / src.name)
+    return d if src.is_dir() else d / src.name
+
+
+def _set_field(path: Path, row: int, col: int, value: str) -> None:
+    """Set whitespace-separated field ``col`` of data row ``row`` (comments skipped) of a text file."""
+    lines = path.read_text().splitlines()
+    rows = [i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")]
+    parts = lines[rows[row]].split()
+    parts[col] = value
+    lines[rows[row]] = " ".join(parts)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _mat_edit(**changes):
+    """An edit of a car-park folder: variables of its data_set.mat replaced (scipy.io, compressed)."""
+
+    def edit(d: Path) -> None:
+        import scipy.io as sio
+
+        m = {k: v for k, v in sio.loadmat(d / "data_set.mat").items() if not k.startswith("__")}
+        m.update({k: (f(m[k]) if callable(f) else f) for k, f in changes.items()})
+        sio.savemat(d / "data_set.mat", m, do_compression=True)
+
+    return edit
+
+
+def _reverse_edges(p: Path) -> None:
+    lines = [s.split() for s in p.read_text().splitlines()]
+    p.write_text("\n".join(" ".join([*s[:1], s[2], s[1], *s[3:]] if s and s[0] == "EDGE_SE2" else s) for s in lines))
+
+
+def wrong_cases(W: World) -> list[Fault]:
+    import numpy as np
+
+    out = W.w / "out"
+    cases: list[Fault] = []
+
+    def add(cid, args, names, watch=()):
+        t = out / f"wrong-{cid}.h5"
+        cases.append(Fault("wrong", cid, [*args, "-o", t, "-q"], names, absent=t, watch=tuple(watch)))
+
+    g = lambda cid, edit: _text_copy(W, W.g2o, cid, edit)
+    add("g2o-dx-1e300", ["import", "g2o", g("g2o-dx", lambda p: _set_field(p, 0, 3, "1e300"))], "g2o-dx")
+    add("g2o-only-reversed-edges", ["import", "g2o", g("g2o-rev", _reverse_edges)], "g2o-rev")
+    add("g2o-dt-1e-320", ["import", "g2o", W.g2o, "--dt", "1e-320"], "wrong-g2o-dt-1e-320.h5")
+    for sigma in ("1e-200", "1e200"):
+        br = g(f"g2o-br-{sigma}", lambda p, s=sigma: p.write_text(p.read_text() + f"BR 1 9000 0.3 2.0 {s} 0.1\n"))
+        add(f"g2o-br-sigma-{sigma}", ["import", "g2o", br], "positive definite")
+    mr = _text_copy(W, W.mrclam, "mrclam-v", lambda d: _set_field(d / "Robot1_Odometry.dat", 15, 1, "1e300"))
+    add("mrclam-v-1e300", ["import", "mrclam", mr], "wrong-mrclam-v-1e300.h5")
+    vp = _text_copy(W, W.vp, "vp-speed", lambda d: _set_field(d / "inputs.dat", 4, 1, "1e300"))
+    add("vp-speed-1e300", ["import", "victoria-park", vp], "wrong-vp-speed-1e300.h5")
+    vp = _text_copy(W, W.vp, "vp-gps-back", lambda d: _set_field(d / "gps.dat", 2, 0, "0.5"))
+    add("vp-gps-time-backwards", ["import", "victoria-park", vp], "gps.dat: row 3")
+    for cid, edit, names in (
+            ("velocity-1e300", _mat_edit(Velocity=lambda a: np.where(np.arange(a.size).reshape(a.shape) == 7, 1e300, a)),
+             "wrong-carpark-velocity-1e300.h5"),
+            ("laser-strings", _mat_edit(Laser=lambda a: np.full(a.shape, "ab", dtype="<U2")), "'Laser'"),
+            ("mat-bomb", _mat_edit(Index=np.zeros((1, 30_000_000), np.uint8)), "'Index'")):
+        add(f"carpark-{cid}", ["import", "carpark", _text_copy(W, W.carpark, f"cp-{cid}", edit)], names)
+    for cid, setting, names in (("dt-1e300", "dt=1e300", "dt"), ("start-1e300", "robot.start=[1e300,0,0]",
+                                                                      "robot.start")):
+        add(f"simulate-{cid}", ["simulate", "-s", "loop", "--set", setting], names)
+    for cid, opt in (("cutoff-1e300", ["--cutoff", "1e300"]), ("cutoff-1e-300", ["--cutoff", "1e-300"]),
+                     ("rpe-delta-1e300", ["--rpe-delta", "1e300"])):
+        t = out / f"wrong-ev-{cid}"
+        cases.append(Fault("wrong", f"evaluate-{cid}", ["evaluate", W.res, *opt, "-o", t, "-q"], cid.split("-")[0],
+                           absent=t))
+    t = out / "wrong-ellipse.png"
+    cases.append(Fault("wrong", "plot-pose-ellipse-every-minus-1", ["plot", "map", W.res, "--ellipses",
+                                                                    "--pose-ellipse-every", "-1", "-o", t, "-q"],
+                       "--pose-ellipse-every", absent=t))
+    loop = W.w / "wrong" / "loop-a"
+    loop.symlink_to("loop-b")
+    (W.w / "wrong" / "loop-b").symlink_to("loop-a")
+    for cid, args in (("solve", ["solve", W.ds, "-m", "odometry", "-o", loop]),
+                      ("solve-inside", ["solve", W.ds, "-m", "odometry", "-o", loop / "r.h5"]),
+                      ("simulate-force", ["simulate", "-s", "loop", "--force", "-o", loop]),
+                      ("export", ["export", W.res, "-f", "tum", "-o", loop]),
+                      ("evaluate", ["evaluate", W.res, "-o", loop]),
+                      ("plot", ["plot", "map", W.res, "-o", loop / "m.png"]),
+                      ("sweep", ["sweep", W.toml, "--out", loop / "s"])):
+        cases.append(Fault("wrong", f"symlink-loop-{cid}", [*args, "-q"], "loop of symbolic links"))
+    return cases
+
+
 def _escaping_copy(W: World, src: Path, cid: str, name: str, how: str) -> Path:
     """A copy of ``src`` whose dataset ``name`` reads another file (``how``: ``link``, ``fifo-link``,
     ``virtual``, ``external``); the other files sit beside it and hold valid data."""
@@ -568,7 +667,8 @@ def run_campaign(w: Path, only: tuple[str, ...] = ()) -> dict:
     server = CliServer(w)
     try:
         with full_tmpfs(W.w / "full") as full:
-            cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + implicit_cases(W) + escape_cases(W)
+            cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + implicit_cases(W) + wrong_cases(W)
+                     + escape_cases(W)
                      + bounds_cases(W))
             totals["tmpfs"] = full is not None
             for c in (c for c in cases if not only or c.family in only):

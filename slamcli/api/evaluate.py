@@ -21,6 +21,8 @@ from pathlib import Path
 
 from slamcli.errors import SlamcliError
 
+#: bound on |log10(cutoff^ospa_order)|: OSPA/GOSPA sum such powers over landmarks in float64 (max ≈ 1e308)
+MAX_POWER_DECADES = 250
 OUTPUT_FILES = ("metrics.json", "per_iteration.csv", "per_step.csv", "per_landmark.csv")
 #: the empty file evaluate writes into every folder it makes: only a folder holding it (and nothing but the
 #: files above) is evaluate's own, to be replaced whole by the next evaluation
@@ -41,8 +43,11 @@ def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, ne
     """Value checks of the evaluation options (CLI flags and experiment ``[evaluate]`` tables alike).
 
     Raises a one-line :class:`SlamcliError` naming the option: cut-off, RPE separation and near-path distance
-    must be finite and > 0, the OSPA order finite and >= 1, the RPE unit ``steps`` or ``m``.
+    must be finite and > 0, the OSPA order finite and >= 1, the RPE unit ``steps`` or ``m``; cutoff^order
+    within 1e±:data:`MAX_POWER_DECADES`, an RPE separation in steps at most :data:`~slamcli.io.schema.MAX_POSES`.
     """
+    from slamcli.io.schema import MAX_POSES
+
     pre = f"{where}: " if where else ""
 
     def num(v) -> float | None:
@@ -59,6 +64,11 @@ def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, ne
         raise SlamcliError(f"{pre}ospa_order: must be a finite number >= 1, got {ospa_order!r}")
     if rpe_unit not in ("steps", "m"):
         raise SlamcliError(f"{pre}rpe_unit: must be 'steps' or 'm', got {rpe_unit!r}")
+    if abs(math.log10(float(cutoff))) * float(ospa_order) > MAX_POWER_DECADES:
+        raise SlamcliError(f"{pre}cutoff: cutoff^ospa_order = {float(cutoff):g}^{float(ospa_order):g} is beyond "
+                           f"1e±{MAX_POWER_DECADES} (over- or underflows in OSPA/GOSPA)")
+    if rpe_unit == "steps" and float(rpe_delta) > MAX_POSES:
+        raise SlamcliError(f"{pre}rpe_delta: {float(rpe_delta):g} steps is more than any dataset has ({MAX_POSES})")
 
 
 def _resolve_dataset_path(result_path: Path, recorded: str, relpath: str = "") -> Path:

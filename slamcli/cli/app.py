@@ -215,10 +215,17 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
     or a file inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or
     (with ``kind``, unless ``force``) an existing file of another kind.
     """
+    import errno
     import os
     from pathlib import Path
 
     p = Path(path)
+    for q in reversed((p, *p.parents)):  # a symbolic link loop on the way (a later resolve() would raise)
+        try:
+            os.stat(q)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                fail(f"{option} {p}: {q} is a loop of symbolic links")
     for part in p.parts:
         if len(os.fsencode(part)) > 255:
             fail(f"{option} {p}: a name is too long ({len(os.fsencode(part))} bytes, limit 255)")

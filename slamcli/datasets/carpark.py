@@ -83,7 +83,37 @@ def _get(m: dict, key: str, path: Path) -> np.ndarray:
     a = np.asarray(m[key])
     if a.size == 0:
         raise DatasetImportError(f"{path}: field {key!r} is empty")
+    if a.dtype.kind not in "biuf":  # MATLAB strings, cells or structs where numbers belong
+        raise DatasetImportError(f"{path}: field {key!r}: expected a numeric array, got MATLAB {a.dtype.kind!r} "
+                                 f"data ({a.dtype})")
     return a
+
+
+#: bound on the elements all variables of one .mat file declare together: 20× the published recording's
+#: 0.45 M (a 10⁷-element file is 80 MB of float64 once loaded)
+MAX_MAT_ELEMENTS = 10_000_000
+
+
+def _loadmat(path: Path) -> dict:
+    """``scipy.io.loadmat(path)`` after the declared sizes of its variables (``whosmat``: headers only, no
+    array inflated) are checked against :data:`MAX_MAT_ELEMENTS`: a small compressed file that declares
+    gigabytes is refused before it is inflated. Failures are one line naming the file."""
+    import math
+
+    import scipy.io as sio
+
+    try:
+        total = 0
+        for name, shape, _ in sio.whosmat(path):
+            total += math.prod(int(d) for d in shape)
+            if total > MAX_MAT_ELEMENTS:
+                raise DatasetImportError(f"{path}: variable {name!r} {tuple(shape)} brings the declared elements to "
+                                         f"{total}, above the limit of {MAX_MAT_ELEMENTS}")
+        return sio.loadmat(path)
+    except DatasetImportError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - any loadmat failure is a bad file
+        raise DatasetImportError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:120]})") from None
 
 
 def default_noise(*, range_std: float | None = None, bearing_std: float | None = None,
@@ -98,8 +128,6 @@ def default_noise(*, range_std: float | None = None, bearing_std: float | None =
 def import_carpark(directory, *, max_range: float = NO_RETURN_M, noise: NoiseSpec | None = None) -> Dataset:
     """Read ``data_set.mat`` and ``beac_juan3.mat`` from ``directory`` into a :class:`Dataset` (``noise``: None =
     the defaults, see "Noise")."""
-    import scipy.io as sio
-
     d = Path(directory)
     if not (max_range > 0):  # negative, zero and nan keep no beacon (or every one): a mistyped option
         raise DatasetImportError(f"--max-range: must be > 0 m (or inf), got {max_range}")
@@ -110,10 +138,7 @@ def import_carpark(directory, *, max_range: float = NO_RETURN_M, noise: NoiseSpe
     for p in (p_data, p_beac):
         if not p.is_file():
             raise DatasetImportError(f"{p}: file not found (expected the ACFR car-park .mat files)")
-        try:
-            mats[p] = sio.loadmat(p)
-        except Exception as exc:  # noqa: BLE001 - any loadmat failure is a bad file
-            raise DatasetImportError(f"{p}: not a readable MATLAB file ({str(exc).splitlines()[0][:120]})") from None
+        mats[p] = _loadmat(p)
     m = mats[p_data]
     t_vs = _get(m, "Time_VS", p_data).ravel().astype(float)
     vel = _get(m, "Velocity", p_data).ravel().astype(float)

@@ -189,7 +189,7 @@ def read_graph(path: str | Path) -> dict:
                     raise DatasetImportError(f"{where}: BR needs σ_bearing > 0 and σ_range > 0")
                 if not r > 0:
                     raise DatasetImportError(f"{where}: BR range must be > 0, got {r}")
-                cov = np.diag([sr * sr, sb * sb])
+                cov = _check_pd(np.diag([sr * sr, sb * sb]), where)
                 landmark_obs.append(
                     (ids[0], ids[1], np.array([r, b]), cov, np.linalg.inv(cov), lineno, "range_bearing")
                 )
@@ -265,8 +265,13 @@ def _is_float(p: str) -> bool:
 
 
 def _check_pd(m: np.ndarray, where: str) -> np.ndarray:
-    if np.any(np.linalg.eigvalsh(m) <= 0):
-        raise DatasetImportError(f"{where}: matrix is not positive definite")
+    """``m`` when it is a finite, positive definite matrix whose inverse is finite too (its eigenvalues and
+    their reciprocals finite and > 0: σ = 1e-200 squares to 0, σ = 1e200 to inf); else one line naming ``where``."""
+    eig = np.linalg.eigvalsh(m) if np.isfinite(m).all() else np.array([np.nan])
+    with np.errstate(divide="ignore", over="ignore"):
+        inverse_ok = np.isfinite(1.0 / eig).all()
+    if not (np.isfinite(eig).all() and np.all(eig > 0) and inverse_ok):
+        raise DatasetImportError(f"{where}: matrix is not positive definite with a finite inverse")
     return m
 
 
@@ -404,6 +409,9 @@ def import_graph(
     chain, others, layout = _chain(edges, pose_ids, g["vertices"])
     T = len(chain)
     real = np.array([e[5] is not None for e in chain], bool)  # steps with an edge of the file
+    if T and not real.any():  # the odometry noise and the forward axis are medians over these steps
+        raise DatasetImportError(f"{path}: no edge links a pose to the next one in id order (every pose-pose edge "
+                                 "runs backwards or skips poses): no odometry to take the motion noise from")
 
     d_file = np.array([e[2] for e in chain])  # (T, 3) in the file's body axes
     if forward == "auto":

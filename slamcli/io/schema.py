@@ -12,7 +12,7 @@ import itertools
 import json
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -101,13 +101,15 @@ def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, f
 
 
 @contextlib.contextmanager
-def create_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
+def create_h5(path: str | os.PathLike, check: Callable[[h5py.File], None] | None = None) -> Iterator[h5py.File]:
     """Open a new HDF5 file for writing at ``path`` atomically (see :func:`~slamcli.io.atomic.atomic_path`).
 
     The file is built in memory (HDF5's ``core`` driver, no backing store) and its image written in one
     piece by :func:`~slamcli.io.atomic.write_bytes_atomic`: a full disk or an I/O error then fails in plain
     Python (one line naming the file, the temporary removed) instead of inside HDF5's close, where h5py
     raised and then crashed the interpreter at exit (exit 139) when it closed the file a second time.
+    ``check(f)``, when given, reads the finished in-memory file first; whatever it raises leaves ``path`` as
+    it was.
     """
     if Path(path).is_dir():
         raise SlamcliError(f"{path}: is a directory, expected a file name")
@@ -117,6 +119,8 @@ def create_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
         try:
             yield f
             f.flush()
+            if check is not None:
+                check(f)
             image = f.id.get_file_image()
         finally:
             f.close()
