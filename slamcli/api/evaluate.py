@@ -171,7 +171,7 @@ def write_evaluation(evaluation, out_dir, extra_scalars: dict | None = None) -> 
 
     OS failures (read-only folder, a file in the way) become one-line SlamcliErrors.
     """
-    from slamcli.io.atomic import atomic_folder, clean_stale_temporaries, temporary_sibling
+    from slamcli.io.atomic import atomic_files, atomic_folder
 
     out = Path(out_dir)
     scalars = dict(evaluation.scalars)
@@ -193,17 +193,9 @@ def write_evaluation(evaluation, out_dir, extra_scalars: dict | None = None) -> 
             if os.path.lexists(out / name) and not (out / name).is_file():
                 raise SlamcliError(f"{out / name}: exists and is not a regular file; refusing to replace it "
                                    "(give -o a new folder)")
-        clean_stale_temporaries(out)
-        staged = {}
-        try:
-            for name, write in files.items():
-                staged[name] = temporary_sibling(out / name)
-                write(staged[name])
-            for name, tmp in staged.items():
-                os.replace(tmp, out / name)
-        finally:
-            for tmp in staged.values():
-                tmp.unlink(missing_ok=True)
+        with atomic_files([out / name for name in files]) as tmps:
+            for write, tmp in zip(files.values(), tmps):
+                write(tmp)
     except OSError as exc:
         where = exc.filename if exc.filename is not None else out
         raise SlamcliError(f"{where}: cannot write the evaluation ({exc.strerror or exc})") from None
