@@ -17,6 +17,8 @@ implicit  outputs over files a command reads without naming them: the dataset a 
 wrong     the last tracebacks and wrong successes: importers writing what their reader refuses (values of 1e300,
           NaN noise, --dt 1e-320), g2o σ = 1e-200, GPS time running backwards, a MAT array of strings, a MAT
           zlib bomb, simulate/evaluate values of 1e300, symbolic link loops in -o, negative plot options.
+names     file names that are not UTF-8 (``b'\\xff'``) in inputs and outputs of failing commands: one line
+          showing the name escaped (``\\udcff``), never a UnicodeEncodeError.
 escapes   HDF5 inputs that would read another file: an external link (to an HDF5 file, to a FIFO), external
           storage, a virtual dataset, a FIFO named as the input: refused before anything is followed.
 bounds    parameters bounded by memory (n_particles, --dpi, mrclam --dt), seeds >= 2^63, bad mathtext titles,
@@ -549,6 +551,31 @@ def wrong_cases(W: World) -> list[Fault]:
     return cases
 
 
+def name_cases(W: World) -> list[Fault]:
+    d = W.w / "names"
+    d.mkdir()
+    bad = lambda s: d / os.fsdecode(s.encode() + b"\xff")
+    text = bad("notes.h5")
+    text.write_text("not hdf5\n")
+    g2o = bad("graph.g2o")
+    g2o.write_text(W.g2o.read_text() + "EDGE_SE2 1 1 0 0 0 1 0 0 1 0 1\n")
+    link = bad("D.h5")
+    os.link(W.ds, link)
+    folder_file = bad("sw")
+    folder_file.write_text("x")
+    cases = [Fault("names", "info-missing", ["info", bad("missing.h5")], "missing.h5\\udcff"),
+             Fault("names", "solve-not-hdf5", ["solve", text, "-m", "odometry", "-o", d / "r.h5", "-q"],
+                   "notes.h5\\udcff: not an HDF5 file", absent=d / "r.h5"),
+             Fault("names", "g2o-bad-line", ["import", "g2o", g2o, "-o", bad("g.h5"), "-q"], "graph.g2o\\udcff:",
+                   absent=bad("g.h5")),
+             Fault("names", "export-over-linked-dataset", ["export", W.res, "-f", "tum", "-o", link, "-q"], "input",
+                   exit=2, watch=(W.ds,)),
+             Fault("names", "sweep-out-is-a-file", ["sweep", W.toml, "--out", folder_file, "-q"], "sw\\udcff"),
+             Fault("names", "evaluate-into-bad-name", ["evaluate", text, "-o", bad("ev"), "-q"], "notes.h5\\udcff",
+                   absent=bad("ev"))]
+    return cases
+
+
 def _escaping_copy(W: World, src: Path, cid: str, name: str, how: str) -> Path:
     """A copy of ``src`` whose dataset ``name`` reads another file (``how``: ``link``, ``fifo-link``,
     ``virtual``, ``external``); the other files sit beside it and hold valid data."""
@@ -668,7 +695,7 @@ def run_campaign(w: Path, only: tuple[str, ...] = ()) -> dict:
     try:
         with full_tmpfs(W.w / "full") as full:
             cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + implicit_cases(W) + wrong_cases(W)
-                     + escape_cases(W)
+                     + name_cases(W) + escape_cases(W)
                      + bounds_cases(W))
             totals["tmpfs"] = full is not None
             for c in (c for c in cases if not only or c.family in only):
