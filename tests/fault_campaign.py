@@ -17,6 +17,8 @@ implicit  outputs over files a command reads without naming them: the dataset a 
 wrong     the last tracebacks and wrong successes: importers writing what their reader refuses (values of 1e300,
           NaN noise, --dt 1e-320), g2o σ = 1e-200, GPS time running backwards, a MAT array of strings, a MAT
           zlib bomb, simulate/evaluate values of 1e300, symbolic link loops in -o, negative plot options.
+registry  hostile registry entries: a marker or folder leaving the data folder (``../../etc/passwd``, ``/etc``,
+          ``..``), control characters in a name, a 100,000-deep registry TOML or registered.json.
 names     file names that are not UTF-8 (``b'\\xff'``) in inputs and outputs of failing commands: one line
           showing the name escaped (``\\udcff``), never a UnicodeEncodeError.
 escapes   HDF5 inputs that would read another file: an external link (to an HDF5 file, to a FIFO), external
@@ -551,6 +553,32 @@ def wrong_cases(W: World) -> list[Fault]:
     return cases
 
 
+def registry_cases(W: World) -> list[Fault]:
+    d = W.w / "hostile"
+    d.mkdir()
+    cases: list[Fault] = []
+    base = {"name": "evil", "importer": "victoria-park", "marker": "inputs.dat", "folder": "evil"}
+    for cid, field_name, value in (("marker-dotdot", "marker", "../../../../../../etc/passwd"),
+                                   ("marker-absolute", "marker", "/etc/passwd"),
+                                   ("folder-dotdot", "folder", ".."), ("folder-absolute", "folder", "/etc"),
+                                   ("folder-nested", "folder", "a/../../b"), ("name-escape", "name", "e\\u001b[2J")):
+        toml = d / f"{cid}.toml"
+        toml.write_text("[[dataset]]\n" + "".join(f'{k} = "{v}"\n' for k, v in {**base, field_name: value}.items()))
+        env = {"SLAMCLI_DATASET_REGISTRY": str(toml), "SLAMCLI_DATA_DIR": str(d / "data"), "SLAMCLI_DATASETS": "/"}
+        t = d / f"{cid}.h5"
+        for sub, args in (("path", ["datasets", "path", "evil"]),
+                          ("import", ["import", "victoria-park", "evil", "-o", t, "-q"])):
+            cases.append(Fault("registry", f"{cid}-{sub}", args, field_name, env=env, absent=t, forbid="\x1b"))
+    deep = "[" * 100_000 + "]" * 100_000
+    (d / "deep.toml").write_text(f'[[dataset]]\nname = "x"\nv = {deep}\n')
+    (d / "deepdata").mkdir()
+    (d / "deepdata" / "registered.json").write_text(deep)
+    for cid, env, names in (("deep-toml", {"SLAMCLI_DATASET_REGISTRY": str(d / "deep.toml")}, "deep.toml"),
+                            ("deep-registered-json", {"SLAMCLI_DATA_DIR": str(d / "deepdata")}, "registered.json")):
+        cases.append(Fault("registry", cid, ["datasets", "list"], names, env=env))
+    return cases
+
+
 def name_cases(W: World) -> list[Fault]:
     d = W.w / "names"
     d.mkdir()
@@ -695,7 +723,7 @@ def run_campaign(w: Path, only: tuple[str, ...] = ()) -> dict:
     try:
         with full_tmpfs(W.w / "full") as full:
             cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + implicit_cases(W) + wrong_cases(W)
-                     + name_cases(W) + escape_cases(W)
+                     + name_cases(W) + registry_cases(W) + escape_cases(W)
                      + bounds_cases(W))
             totals["tmpfs"] = full is not None
             for c in (c for c in cases if not only or c.family in only):
