@@ -209,11 +209,12 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
                  kind: str | None = None, force: bool = False) -> None:
     """Refuse an output path that cannot be written, before any work is done (one line, exit 1).
 
-    A directory where a file is expected (or a file where a folder is expected), a name longer than the
-    file system allows, a parent that is a file, or a parent folder this process may not write into. Then
-    the output guard (:func:`slamcli.io.guard.guard_output`, exit 2): an output that is one of ``inputs``
-    or a file inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or
-    (with ``kind``, unless ``force``) an existing file of another kind.
+    A symbolic-link loop on the path, a directory where a file is expected (or a file where a folder is
+    expected), a name longer than the file system allows, a parent that is a file, or a parent folder this
+    process may not write into. Then the output guard (:func:`slamcli.io.guard.guard_output`, exit 2) with
+    every file the command reads (:func:`files_read` of ``inputs``): an output that is one of them or a file
+    inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or (with
+    ``kind``, unless ``force``) an existing file of another kind.
     """
     import errno
     import os
@@ -242,7 +243,8 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
         fail(f"{option} {p}: folder {anc} is not writable")
     from slamcli.io.guard import guard_output
 
-    guard_output(p, files_read(inputs), folder=folder, replaces_folder=replaces_folder, option=option, kind=kind, force=force)
+    guard_output(p, files_read(inputs), folder=folder, replaces_folder=replaces_folder, option=option, kind=kind,
+                 force=force)
 
 
 def files_read(named) -> list:
