@@ -89,26 +89,63 @@ def _get(m: dict, key: str, path: Path) -> np.ndarray:
     return a
 
 
-#: bound on the elements all variables of one .mat file declare together: 20× the published recording's
-#: 0.45 M (a 10⁷-element file is 80 MB of float64 once loaded)
-MAX_MAT_ELEMENTS = 10_000_000
+#: bound on the bytes the variables of one .mat file hold once inflated: 20× the published recording's
+#: 3.6 MB (0.45 M float64 values); loadmat then holds at most this much
+MAX_MAT_BYTES = 80 << 20
+#: a MAT 5 data element whose payload is one zlib stream
+_MI_COMPRESSED = 15
+#: bytes read or inflated at a time while measuring a compressed variable
+_PIECE = 1 << 16
+
+
+def _inflated_bytes(fh, nbytes: int, budget: int) -> int:
+    """Bytes that the zlib stream of ``nbytes`` at ``fh``'s position inflates to, counted piece by piece and
+    nothing kept; stops once past ``budget``. Leaves ``fh`` at the end of the stream."""
+    import zlib
+
+    z, left, out = zlib.decompressobj(), nbytes, 0
+    while left > 0 and out <= budget:
+        piece = fh.read(min(left, _PIECE))
+        if not piece:
+            break
+        left -= len(piece)
+        out += len(z.decompress(piece, _PIECE))
+        while z.unconsumed_tail and out <= budget:
+            out += len(z.decompress(z.unconsumed_tail, _PIECE))
+    fh.seek(left, 1)
+    return out
+
+
+def _check_inflated_size(path: Path) -> None:
+    """Refuse a MAT 5 file whose variables would hold more than :data:`MAX_MAT_BYTES` once inflated — measured
+    by inflating each compressed variable in pieces and keeping none, so a small zlib bomb costs at most
+    :data:`MAX_MAT_BYTES` of work and one piece of memory, never its inflated size. Other MAT versions (v4
+    stores arrays uncompressed; v7.3 is HDF5, which loadmat refuses) are left to loadmat."""
+    import struct
+
+    with open(path, "rb") as fh:
+        header = fh.read(128)
+        order = {b"IM": "<", b"MI": ">"}.get(header[126:128]) if len(header) == 128 else None
+        total = 0
+        while order is not None and len(tag := fh.read(8)) == 8:
+            mdtype, nbytes = struct.unpack(order + "II", tag)
+            if mdtype == _MI_COMPRESSED:
+                total += _inflated_bytes(fh, nbytes, MAX_MAT_BYTES - total)
+            else:
+                total += nbytes
+                fh.seek(nbytes + (-nbytes) % 8, 1)
+            if total > MAX_MAT_BYTES:
+                raise DatasetImportError(f"{path}: its variables hold more than {MAX_MAT_BYTES >> 20} MB once "
+                                         f"inflated (the limit; the published recording holds 3.6 MB)")
 
 
 def _loadmat(path: Path) -> dict:
-    """``scipy.io.loadmat(path)`` after the declared sizes of its variables (``whosmat``: headers only, no
-    array inflated) are checked against :data:`MAX_MAT_ELEMENTS`: a small compressed file that declares
-    gigabytes is refused before it is inflated. Failures are one line naming the file."""
-    import math
-
+    """``scipy.io.loadmat(path)`` once :func:`_check_inflated_size` has bounded what it will inflate; failures
+    are one line naming the file."""
     import scipy.io as sio
 
     try:
-        total = 0
-        for name, shape, _ in sio.whosmat(path):
-            total += math.prod(int(d) for d in shape)
-            if total > MAX_MAT_ELEMENTS:
-                raise DatasetImportError(f"{path}: variable {name!r} {tuple(shape)} brings the declared elements to "
-                                         f"{total}, above the limit of {MAX_MAT_ELEMENTS}")
+        _check_inflated_size(path)
         return sio.loadmat(path)
     except DatasetImportError:
         raise
