@@ -17,3 +17,7 @@ POINT_EPS_M = 1e-9
 #: Relative / absolute slack of a near-degenerate geometric test (a ray parallel to a wall: ``|den| ≤ this``;
 #: a circle radius grown by ``1 + this`` so a tangent beam still hits).
 GEOMETRY_EPS = 1e-12
+#: Bound on the magnitude of any physical value a user or a file gives (m, s, m/s, rad, …): beyond it a value
+#: is a typo or a hostile file, and squaring it (a distance, a cost) would overflow float64 (1e9² = 1e18 is
+#: far from 1e308). Dataset arrays, imports and simulator parameters are checked against it.
+MAX_INPUT_MAGNITUDE = 1e9

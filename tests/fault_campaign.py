@@ -10,6 +10,19 @@ disk      a full 256 kB tmpfs (when this process may mount one) and a size-limit
           child): exit != 0, one line naming the file, no temporary, an existing output left as it was.
 import    Victoria Park bearings outside the field of view, ranges <= 0; car park --max-range <= 0; mrclam
           --dt bounds.
+implicit  outputs over files a command reads without naming them: the dataset a result records (export to
+          every format, plot, evaluate), registry recordings' folders (importers by name, with --force, and
+          any writer), a user folder given to evaluate -o, existing --solo-dir files: exit != 0, no --force
+          suggested for an input, the file byte-identical.
+wrong     the last tracebacks and wrong successes: importers writing what their reader refuses (values of 1e300,
+          NaN noise, --dt 1e-320), g2o σ = 1e-200, GPS time running backwards, a MAT array of strings, a MAT
+          zlib bomb, simulate/evaluate values of 1e300, symbolic link loops in -o, negative plot options.
+registry  hostile registry entries: a marker or folder leaving the data folder (``../../etc/passwd``, ``/etc``,
+          ``..``), control characters in a name, a 100,000-deep registry TOML or registered.json.
+names     file names that are not UTF-8 (``b'\\xff'``) in inputs and outputs of failing commands: one line
+          showing the name escaped (``\\udcff``), never a UnicodeEncodeError.
+escapes   HDF5 inputs that would read another file: an external link (to an HDF5 file, to a FIFO), external
+          storage, a virtual dataset, a FIFO named as the input: refused before anything is followed.
 bounds    parameters bounded by memory (n_particles, --dpi, mrclam --dt), seeds >= 2^63, bad mathtext titles,
           deeply nested TOML, inputs of magnitude 1e300.
 
@@ -23,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
+import json
 import os
 import shutil
 import socket
@@ -52,6 +66,8 @@ class Fault:
     absent: Path | None = None  # must not exist afterwards
     fsize: int | None = None
     one_line: bool = True  # a sweep prints its failure table; then only "no traceback" is asked
+    env: dict | None = None  # environment variables of the child (a registry, a data folder)
+    forbid: str | None = None  # the error line must not contain this (e.g. "--force" for an input)
 
 
 def sha(p: Path) -> str:
@@ -363,6 +379,285 @@ def bounds_cases(W: World) -> list[Fault]:
     return cases
 
 
+def _registry_env(W: World) -> tuple[dict, dict[str, Path]]:
+    """A local registry (a g2o, an MRCLAM and a Victoria Park recording) whose copies are registered as added
+    folders of a data folder: the child's environment and name → folder."""
+    root = W.w / "registered"
+    folders = {"graph-t": root / "graphs", "mr-t": root / "mrclam", "vp-t": root / "vp"}
+    if not root.exists():
+        folders["graph-t"].mkdir(parents=True)
+        shutil.copyfile(W.g2o, folders["graph-t"] / "intel.g2o")
+        shutil.copytree(W.mrclam, folders["mr-t"])
+        shutil.copytree(W.vp, folders["vp-t"])
+        (root / "data").mkdir()
+        (root / "data" / "registered.json").write_text(json.dumps({k: str(v) for k, v in folders.items()}))
+        (root / "registry.toml").write_text("".join(
+            f'[[dataset]]\nname = "{n}"\nimporter = "{imp}"\nmarker = "{m}"\nfolder = "{n}"\n'
+            for n, imp, m in (("graph-t", "g2o", "intel.g2o"), ("mr-t", "mrclam", "Barcodes.dat"),
+                              ("vp-t", "victoria-park", "inputs.dat"))))
+    env = {"SLAMCLI_DATA_DIR": str(root / "data"), "SLAMCLI_DATASET_REGISTRY": str(root / "registry.toml")}
+    return env, folders
+
+
+def implicit_cases(W: World) -> list[Fault]:
+    from slamcli.api.simulate import simulate_to_file
+    from slamcli.api.solve import solve_file
+
+    d, links = W.w / "implicit", W.w / "links"
+    d.mkdir()
+    cases: list[Fault] = []
+    for how in ("direct", "symlink", "hardlink", "relative"):
+        target = _alias(W.ds, how, links)
+        for fmt in ("tum", "kitti", "csv", "g2o", "gtsam"):
+            cases.append(Fault("implicit", f"export-{fmt}-over-recorded-dataset-{how}",
+                               ["export", W.res, "-f", fmt, "-o", target, "-q"], "input", exit=2, watch=(W.ds,)))
+    dpng = d / "dataset.png"  # a dataset with an image's name: what plot map/errors would write over
+    simulate_to_file("loop", 4, {"n_steps": 40}, dpng)
+    rpng = d / "on-png.h5"
+    solve_file(dpng, "odometry", {}, rpng)
+    for kind in ("map", "errors"):
+        cases.append(Fault("implicit", f"plot-{kind}-over-recorded-dataset", ["plot", kind, rpng, "-o", dpng, "-q"],
+                           "input", exit=2, watch=(dpng,)))
+    inner = d / "inner"
+    inner.mkdir()
+    dsin = inner / "d.h5"
+    shutil.copyfile(W.ds, dsin)
+    rin = d / "r-inner.h5"
+    solve_file(dsin, "odometry", {}, rin)
+    cases.append(Fault("implicit", "evaluate-folder-holds-recorded-dataset", ["evaluate", rin, "-o", inner, "-q"],
+                       "contains the input", exit=2, watch=(dsin,)))
+    user = d / "ev-user" / "per_step.csv"  # a user folder whose entries carry evaluate's output names
+    user.mkdir(parents=True)
+    (user / "thesis.tex").write_text("\\chapter{x}\n")
+    cases.append(Fault("implicit", "evaluate-user-folder-named-like-outputs",
+                       ["evaluate", W.res, "-o", user.parent, "-q"], "per_step.csv", watch=(user / "thesis.tex",)))
+    env, reg = _registry_env(W)
+    for cid, args, target in (
+            ("g2o-by-name", ["import", "g2o", "graph-t", "-o", reg["graph-t"] / "intel.g2o"], reg["graph-t"] / "intel.g2o"),
+            ("mrclam-by-name", ["import", "mrclam", "mr-t", "-o", reg["mr-t"] / "Barcodes.dat"],
+             reg["mr-t"] / "Barcodes.dat"),
+            ("vp-by-name", ["import", "victoria-park", "vp-t", "-o", reg["vp-t"] / "gps.dat"], reg["vp-t"] / "gps.dat"),
+            ("g2o-other-file", ["import", "g2o", W.g2o, "-o", reg["mr-t"] / "Robot1_Odometry.dat"],
+             reg["mr-t"] / "Robot1_Odometry.dat"),
+            ("simulate", ["simulate", "-s", "loop", "--set", "n_steps=20", "-o", reg["vp-t"] / "inputs.dat"],
+             reg["vp-t"] / "inputs.dat"),
+            ("solve", ["solve", W.ds, "-m", "odometry", "-o", reg["graph-t"] / "intel.g2o"], reg["graph-t"] / "intel.g2o")):
+        for force in ((), ("--force",)):
+            cases.append(Fault("implicit", f"registered-{cid}{'-force' if force else ''}", [*args, *force, "-q"],
+                               "input", exit=2, watch=(target,), env=env, forbid="--force"))
+    cases.append(Fault("implicit", "registered-export", ["export", W.res, "-f", "tum", "-o",
+                                                         reg["mr-t"] / "Robot1_Measurement.dat", "-q"],
+                       "input folder", exit=2, watch=(reg["mr-t"] / "Robot1_Measurement.dat",), env=env))
+    solo = d / "solo"
+    solo.mkdir()
+    shutil.copyfile(W.ds2, solo / "robot1.h5")  # the user's own file of that name
+    cases.append(Fault("implicit", "mrclam-solo-dir-existing", ["import", "mrclam", W.team, "--robots", "1,2",
+                                                                "--solo-dir", solo, "-o", d / "team.h5", "-q"],
+                       "robot1.h5", exit=2, watch=(solo / "robot1.h5",), absent=d / "team.h5"))
+    return cases
+
+
+def _text_copy(W: World, src: Path, cid: str, edit) -> Path:
+    """A copy of the file or folder ``src`` under ``wrong/cid``; ``edit(path)`` changes the copy."""
+    d = W.w / "wrong" / cid
+    d.parent.mkdir(exist_ok=True)
+    if src.is_dir():
+        shutil.copytree(src, d)
+    else:
+        d.mkdir()
+        shutil.copyfile(src, d / src.name)
+    edit(d if src.is_dir() else d / src.name)
+    return d if src.is_dir() else d / src.name
+
+
+def _set_field(path: Path, row: int, col: int, value: str) -> None:
+    """Set whitespace-separated field ``col`` of data row ``row`` (comments skipped) of a text file."""
+    lines = path.read_text().splitlines()
+    rows = [i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")]
+    parts = lines[rows[row]].split()
+    parts[col] = value
+    lines[rows[row]] = " ".join(parts)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _mat_edit(**changes):
+    """An edit of a car-park folder: variables of its data_set.mat replaced (scipy.io, compressed)."""
+
+    def edit(d: Path) -> None:
+        import scipy.io as sio
+
+        m = {k: v for k, v in sio.loadmat(d / "data_set.mat").items() if not k.startswith("__")}
+        m.update({k: (f(m[k]) if callable(f) else f) for k, f in changes.items()})
+        sio.savemat(d / "data_set.mat", m, do_compression=True)
+
+    return edit
+
+
+def _reverse_edges(p: Path) -> None:
+    lines = [s.split() for s in p.read_text().splitlines()]
+    p.write_text("\n".join(" ".join([*s[:1], s[2], s[1], *s[3:]] if s and s[0] == "EDGE_SE2" else s) for s in lines))
+
+
+def wrong_cases(W: World) -> list[Fault]:
+    import numpy as np
+
+    out = W.w / "out"
+    cases: list[Fault] = []
+
+    def add(cid, args, names, watch=()):
+        t = out / f"wrong-{cid}.h5"
+        cases.append(Fault("wrong", cid, [*args, "-o", t, "-q"], names, absent=t, watch=tuple(watch)))
+
+    g = lambda cid, edit: _text_copy(W, W.g2o, cid, edit)
+    add("g2o-dx-1e300", ["import", "g2o", g("g2o-dx", lambda p: _set_field(p, 0, 3, "1e300"))], "g2o-dx")
+    add("g2o-only-reversed-edges", ["import", "g2o", g("g2o-rev", _reverse_edges)], "g2o-rev")
+    add("g2o-dt-1e-320", ["import", "g2o", W.g2o, "--dt", "1e-320"], "wrong-g2o-dt-1e-320.h5")
+    for sigma in ("1e-200", "1e200"):
+        br = g(f"g2o-br-{sigma}", lambda p, s=sigma: p.write_text(p.read_text() + f"BR 1 9000 0.3 2.0 {s} 0.1\n"))
+        add(f"g2o-br-sigma-{sigma}", ["import", "g2o", br], "positive definite")
+    mr = _text_copy(W, W.mrclam, "mrclam-v", lambda d: _set_field(d / "Robot1_Odometry.dat", 15, 1, "1e300"))
+    add("mrclam-v-1e300", ["import", "mrclam", mr], "wrong-mrclam-v-1e300.h5")
+    vp = _text_copy(W, W.vp, "vp-speed", lambda d: _set_field(d / "inputs.dat", 4, 1, "1e300"))
+    add("vp-speed-1e300", ["import", "victoria-park", vp], "wrong-vp-speed-1e300.h5")
+    vp = _text_copy(W, W.vp, "vp-gps-back", lambda d: _set_field(d / "gps.dat", 2, 0, "0.5"))
+    add("vp-gps-time-backwards", ["import", "victoria-park", vp], "gps.dat: row 3")
+    for cid, edit, names in (
+            ("velocity-1e300", _mat_edit(Velocity=lambda a: np.where(np.arange(a.size).reshape(a.shape) == 7, 1e300, a)),
+             "wrong-carpark-velocity-1e300.h5"),
+            ("laser-strings", _mat_edit(Laser=lambda a: np.full(a.shape, "ab", dtype="<U2")), "'Laser'"),
+            ("mat-bomb", _mat_edit(Index=np.zeros((1, 100_000_000), np.uint8)), "inflated")):  # ~100 kB on disk
+        add(f"carpark-{cid}", ["import", "carpark", _text_copy(W, W.carpark, f"cp-{cid}", edit)], names)
+    for cid, setting, names in (("dt-1e300", "dt=1e300", "dt"), ("start-1e300", "robot.start=[1e300,0,0]",
+                                                                      "robot.start")):
+        add(f"simulate-{cid}", ["simulate", "-s", "loop", "--set", setting], names)
+    for cid, opt in (("cutoff-1e300", ["--cutoff", "1e300"]), ("cutoff-1e-300", ["--cutoff", "1e-300"]),
+                     ("rpe-delta-1e300", ["--rpe-delta", "1e300"])):
+        t = out / f"wrong-ev-{cid}"
+        cases.append(Fault("wrong", f"evaluate-{cid}", ["evaluate", W.res, *opt, "-o", t, "-q"], cid.split("-")[0],
+                           absent=t))
+    t = out / "wrong-ellipse.png"
+    cases.append(Fault("wrong", "plot-pose-ellipse-every-minus-1", ["plot", "map", W.res, "--ellipses",
+                                                                    "--pose-ellipse-every", "-1", "-o", t, "-q"],
+                       "--pose-ellipse-every", absent=t))
+    loop = W.w / "wrong" / "loop-a"
+    loop.symlink_to("loop-b")
+    (W.w / "wrong" / "loop-b").symlink_to("loop-a")
+    for cid, args in (("solve", ["solve", W.ds, "-m", "odometry", "-o", loop]),
+                      ("solve-inside", ["solve", W.ds, "-m", "odometry", "-o", loop / "r.h5"]),
+                      ("simulate-force", ["simulate", "-s", "loop", "--force", "-o", loop]),
+                      ("export", ["export", W.res, "-f", "tum", "-o", loop]),
+                      ("evaluate", ["evaluate", W.res, "-o", loop]),
+                      ("plot", ["plot", "map", W.res, "-o", loop / "m.png"]),
+                      ("sweep", ["sweep", W.toml, "--out", loop / "s"])):
+        cases.append(Fault("wrong", f"symlink-loop-{cid}", [*args, "-q"], "loop of symbolic links"))
+    return cases
+
+
+def registry_cases(W: World) -> list[Fault]:
+    d = W.w / "hostile"
+    d.mkdir()
+    cases: list[Fault] = []
+    base = {"name": "evil", "importer": "victoria-park", "marker": "inputs.dat", "folder": "evil"}
+    for cid, field_name, value in (("marker-dotdot", "marker", "../../../../../../etc/passwd"),
+                                   ("marker-absolute", "marker", "/etc/passwd"),
+                                   ("folder-dotdot", "folder", ".."), ("folder-absolute", "folder", "/etc"),
+                                   ("folder-nested", "folder", "a/../../b"), ("name-escape", "name", "e\\u001b[2J")):
+        toml = d / f"{cid}.toml"
+        toml.write_text("[[dataset]]\n" + "".join(f'{k} = "{v}"\n' for k, v in {**base, field_name: value}.items()))
+        env = {"SLAMCLI_DATASET_REGISTRY": str(toml), "SLAMCLI_DATA_DIR": str(d / "data"), "SLAMCLI_DATASETS": "/"}
+        t = d / f"{cid}.h5"
+        for sub, args in (("path", ["datasets", "path", "evil"]),
+                          ("import", ["import", "victoria-park", "evil", "-o", t, "-q"])):
+            cases.append(Fault("registry", f"{cid}-{sub}", args, field_name, env=env, absent=t, forbid="\x1b"))
+    deep = "[" * 100_000 + "]" * 100_000
+    (d / "deep.toml").write_text(f'[[dataset]]\nname = "x"\nv = {deep}\n')
+    (d / "deepdata").mkdir()
+    (d / "deepdata" / "registered.json").write_text(deep)
+    for cid, env, names in (("deep-toml", {"SLAMCLI_DATASET_REGISTRY": str(d / "deep.toml")}, "deep.toml"),
+                            ("deep-registered-json", {"SLAMCLI_DATA_DIR": str(d / "deepdata")}, "registered.json")):
+        cases.append(Fault("registry", cid, ["datasets", "list"], names, env=env))
+    return cases
+
+
+def name_cases(W: World) -> list[Fault]:
+    d = W.w / "names"
+    d.mkdir()
+    bad = lambda s: d / os.fsdecode(s.encode() + b"\xff")
+    text = bad("notes.h5")
+    text.write_text("not hdf5\n")
+    g2o = bad("graph.g2o")
+    g2o.write_text(W.g2o.read_text() + "EDGE_SE2 1 1 0 0 0 1 0 0 1 0 1\n")
+    link = bad("D.h5")
+    os.link(W.ds, link)
+    folder_file = bad("sw")
+    folder_file.write_text("x")
+    cases = [Fault("names", "info-missing", ["info", bad("missing.h5")], "missing.h5\\udcff"),
+             Fault("names", "solve-not-hdf5", ["solve", text, "-m", "odometry", "-o", d / "r.h5", "-q"],
+                   "notes.h5\\udcff: not an HDF5 file", absent=d / "r.h5"),
+             Fault("names", "g2o-bad-line", ["import", "g2o", g2o, "-o", bad("g.h5"), "-q"], "graph.g2o\\udcff:",
+                   absent=bad("g.h5")),
+             Fault("names", "export-over-linked-dataset", ["export", W.res, "-f", "tum", "-o", link, "-q"], "input",
+                   exit=2, watch=(W.ds,)),
+             Fault("names", "sweep-out-is-a-file", ["sweep", W.toml, "--out", folder_file, "-q"], "sw\\udcff"),
+             Fault("names", "evaluate-into-bad-name", ["evaluate", text, "-o", bad("ev"), "-q"], "notes.h5\\udcff",
+                   absent=bad("ev"))]
+    return cases
+
+
+def _escaping_copy(W: World, src: Path, cid: str, name: str, how: str) -> Path:
+    """A copy of ``src`` whose dataset ``name`` reads another file (``how``: ``link``, ``fifo-link``,
+    ``virtual``, ``external``); the other files sit beside it and hold valid data."""
+    d = W.w / "escapes"
+    d.mkdir(exist_ok=True)
+    p = d / f"{cid}.h5"
+    shutil.copyfile(src, p)
+    with h5py.File(p, "r+") as f:
+        data = f[name][()]
+        side = d / f"{cid}-side.h5"
+        with h5py.File(side, "w") as g:
+            g["v"] = data
+        del f[name]
+        if how == "link":
+            f[name] = h5py.ExternalLink(side.name, "v")
+        elif how == "fifo-link":
+            os.mkfifo(d / f"{cid}.fifo")
+            f[name] = h5py.ExternalLink(f"{cid}.fifo", "v")
+        elif how == "virtual":
+            layout = h5py.VirtualLayout(shape=data.shape, dtype=data.dtype)
+            layout[...] = h5py.VirtualSource(side.name, "v", shape=data.shape)
+            f.create_virtual_dataset(name, layout)
+        else:
+            raw = d / f"{cid}.raw"
+            raw.write_bytes(data.tobytes())
+            f.create_dataset(name, shape=data.shape, dtype=data.dtype, external=[(raw.name, 0, data.nbytes)])
+    return p
+
+
+def escape_cases(W: World) -> list[Fault]:
+    out = W.w / "out"
+    cases: list[Fault] = []
+    for how in ("link", "fifo-link", "virtual", "external"):
+        p = _escaping_copy(W, W.ds, f"ds-{how}", "inputs/x0", how)
+        r = _escaping_copy(W, W.res, f"res-{how}", "poses_xyt", how)
+        for cid, args, target in (
+                ("solve", ["solve", p, "-m", "odometry", "-o", out / f"e-{how}.h5", "-q"], out / f"e-{how}.h5"),
+                ("info", ["info", p], None),
+                ("export-data", ["export", W.res, "-f", "tum", "--data", p, "-o", out / f"e-{how}.tum", "-q"],
+                 out / f"e-{how}.tum"),
+                ("evaluate-data", ["evaluate", W.res, "--data", p, "-o", out / f"ev-{how}", "-q"], out / f"ev-{how}"),
+                ("export-result", ["export", r, "-f", "tum", "-o", out / f"r-{how}.tum", "-q"], out / f"r-{how}.tum"),
+                ("info-result", ["info", r], None),
+                ("diff", ["diff", W.res, r], None)):
+            names = f"{'inputs/x0' if 'result' not in cid and cid != 'diff' else 'poses_xyt'}"
+            cases.append(Fault("escapes", f"{cid}-{how}", args, names, absent=target, watch=(p, r)))
+    fifo = W.w / "escapes" / "named.fifo"
+    os.mkfifo(fifo)
+    for cid, args in (("solve", ["solve", fifo, "-m", "odometry", "-o", out / "fifo.h5", "-q"]), ("info", ["info", fifo]),
+                      ("export", ["export", fifo, "-f", "tum", "-o", out / "fifo.tum", "-q"])):
+        cases.append(Fault("escapes", f"{cid}-named-fifo", args, "not a regular file"))
+    return cases
+
+
 @contextlib.contextmanager
 def full_tmpfs(path: Path):
     """A 256 kB tmpfs at ``path`` with an existing dataset ``old.h5`` and a filler leaving ~4 kB free; yields
@@ -396,6 +691,8 @@ def judge(c: Fault, r: dict, before: dict[Path, str], w: Path) -> tuple[str, lis
         why.append(f"exit {r['code']}, expected {c.exit}")
     if c.one_line and (len(lines) != 1 or not lines[0].startswith("error: ") or c.names not in lines[0]):
         why.append(f"not one error line naming {c.names!r}")
+    if c.forbid is not None and c.forbid in err:
+        why.append(f"the error suggests {c.forbid!r}")
     lost = [str(p) for p, h in before.items() if not p.exists() or sha(p) != h]
     if c.absent is not None and os.path.lexists(c.absent):
         lost.append(f"{c.absent} exists")
@@ -412,8 +709,9 @@ def judge(c: Fault, r: dict, before: dict[Path, str], w: Path) -> tuple[str, lis
     return kind, why
 
 
-def run_campaign(w: Path) -> dict:
-    """Build every case under ``w``, run them, return totals and the problems (one line each)."""
+def run_campaign(w: Path, only: tuple[str, ...] = ()) -> dict:
+    """Build every case under ``w`` (``only``: of these families), run them, return totals and the problems
+    (one line each)."""
     from test_bad_input_helpers import CliServer
 
     W = make_world(w / "world")
@@ -424,12 +722,14 @@ def run_campaign(w: Path) -> dict:
     server = CliServer(w)
     try:
         with full_tmpfs(W.w / "full") as full:
-            cases = guard_cases(W) + disk_cases(W, full) + import_cases(W) + bounds_cases(W)
+            cases = (guard_cases(W) + disk_cases(W, full) + import_cases(W) + implicit_cases(W) + wrong_cases(W)
+                     + name_cases(W) + registry_cases(W) + escape_cases(W)
+                     + bounds_cases(W))
             totals["tmpfs"] = full is not None
-            for c in cases:
+            for c in (c for c in cases if not only or c.family in only):
                 watch = {Path(p): sha(p) for p in (*c.watch, W.ds, W.res, W.tum, W.g2o)}
                 t0 = time.perf_counter()
-                r = server.run(c.args, W.w, fsize=c.fsize)
+                r = server.run(c.args, W.w, fsize=c.fsize, env=c.env)
                 times.append((time.perf_counter() - t0, f"{c.family}/{c.id}"))
                 kind, why = judge(c, r, watch, W.w)
                 totals["cases"] += 1
@@ -461,7 +761,7 @@ if __name__ == "__main__":  # pragma: no cover - see benchmarks/faults.py
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
-        res = run_campaign(Path(d))
+        res = run_campaign(Path(d), tuple(sys.argv[1:]))
     print(report(res))
     print(f"  wall {res['wall_s']:.1f} s; slowest: " + ", ".join(f"{n} {t:.1f} s" for t, n in res["slowest"]))
     for line in res["problems"]:

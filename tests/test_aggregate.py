@@ -85,6 +85,30 @@ def test_aggregate_dir_writes_three_tables(tmp_path):
     assert len(back) == 3 and set(back["metric"]) == {"ate_rmse_m"}
 
 
+def test_a_full_disk_while_writing_the_tables_leaves_none_of_them(tmp_path, monkeypatch):
+    """ISSUE: ``aggregate -o agg`` on a nearly full disk left aggregate.csv while its error said nothing was
+    written. The four tables are written together: the third failing leaves none (and no temporary)."""
+    import pathlib
+
+    _write_sweep(tmp_path / "exp")
+    out = tmp_path / "agg"
+    orig = pathlib.Path.write_text
+
+    def full(self, *a, **k):
+        if ".aggregate.tex" in self.name:
+            raise OSError(28, "No space left on device", str(self))
+        return orig(self, *a, **k)
+
+    monkeypatch.setattr(pathlib.Path, "write_text", full)
+    res = CliRunner().invoke(app, ["aggregate", str(tmp_path / "exp"), "-m", "ate_rmse", "-o", str(out), "-q"])
+    assert res.exit_code == 1 and "No space left" in res.stderr and "aggregate.tex" in res.stderr, res.output
+    assert list(out.iterdir()) == []
+    monkeypatch.setattr(pathlib.Path, "write_text", orig)
+    assert CliRunner().invoke(app, ["aggregate", str(tmp_path / "exp"), "-m", "ate_rmse", "-o", str(out),
+                                    "-q"]).exit_code == 0
+    assert sorted(p.name for p in out.iterdir()) == ["aggregate.csv", "aggregate.md", "aggregate.tex", "paired.csv"]
+
+
 def test_by_solver_and_cli(tmp_path):
     _write_sweep(tmp_path / "exp")
     r = runner.invoke(app, ["aggregate", str(tmp_path / "exp"), "--by", "solver", "-m", "ate_rmse_m",

@@ -338,3 +338,34 @@ def test_malformed_inputs_fail_with_one_line_no_traceback_no_file_low_memory(wor
     assert 0 < peak < PEAK_MB
     # no temporary file or folder was left anywhere by any case
     assert not [p for p in tmp_path.rglob("*") if ".tmp-" in p.name]
+
+
+def test_file_names_that_are_not_utf8_are_read_written_and_shown_escaped(world, tmp_path):
+    """ISSUE: a file name with a byte that is not UTF-8 (``b'\\xff'``, legal on Linux) was a UnicodeEncodeError
+    traceback when recorded in the HDF5 attributes (solve, import g2o, sweep)."""
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+    from slamcli.io import read_dataset, read_result
+
+    _, ds, *_ = world
+    name = lambda s: os.fsdecode(s.encode() + b"\xff")  # the surrogate-escaped str Python gives
+    data = tmp_path / name("b") / "d.h5"
+    data.parent.mkdir()
+    data.write_bytes(ds.read_bytes())
+    g2o = tmp_path / f"{name('g')}.g2o"
+    g2o.write_bytes((HERE / "data" / "intel_excerpt.g2o").read_bytes())
+    toml = tmp_path / "e.toml"
+    toml.write_text('[experiment]\nname = "e"\n[scenario]\nname = "loop"\nparameters = {n_steps = 20}\n'
+                    '[[solver]]\nmethod = "odometry"\n')
+    runner = CliRunner()
+    for args, out in ((["solve", data, "-m", "odometry", "-o", tmp_path / f"{name('r')}.h5"], f"{name('r')}.h5"),
+                      (["import", "g2o", g2o, "-o", tmp_path / f"{name('g')}.h5"], f"{name('g')}.h5"),
+                      (["sweep", toml, "--out", tmp_path / name("sw")], name("sw"))):
+        res = runner.invoke(app, [*(str(a) for a in args), "-q"])
+        assert res.exit_code == 0 and "Traceback" not in res.output, res.output
+        assert (tmp_path / out).exists()
+    assert str(data) == read_result(tmp_path / f"{name('r')}.h5").extra["dataset_path"]  # (kept in extra_json)
+    assert name("g") in read_dataset(tmp_path / f"{name('g')}.h5").metadata["scenario"]
+    info = runner.invoke(app, ["info", str(tmp_path / f"{name('r')}.h5")])
+    assert info.exit_code == 0 and "\udcff" not in info.stdout and "b\\udcff" in info.stdout

@@ -103,3 +103,56 @@ def test_a_previous_output_inside_an_input_folder_may_be_replaced_an_input_may_n
     before = sha(d / "Robot1_Odometry.dat")
     res = runner.invoke(app, [*args, str(d / "Robot1_Odometry.dat")])
     assert res.exit_code == 2 and sha(d / "Robot1_Odometry.dat") == before
+
+
+def _flip_middle(p):
+    """Change one byte in the middle of ``p`` in place (the same inode: every hard link sees it)."""
+    with open(p, "r+b") as fh:
+        fh.seek(p.stat().st_size // 2)
+        b = fh.read(1)
+        fh.seek(-1, os.SEEK_CUR)
+        fh.write(bytes([b[0] ^ 0xFF]))
+
+
+@pytest.mark.parametrize("damage", ["config.json", "dataset.h5", "result.h5", "metrics.json", "shared-dataset",
+                                    "shared-dataset-replaced", "old-status-truncated-result"])
+def test_resume_redoes_a_run_whose_kept_files_changed(tmp_path, damage):
+    """ISSUE: resume kept runs "completed" over a corrupted dataset.h5 (the hard link of the shared
+    datasets/<id>.h5) and over a truncated result.h5 when status.json (an older run) had no sha256. Every
+    file a later step reads is hashed; a damaged one, or a status without hashes, means redo. Reference: the
+    first, undamaged sweep's table (the redone runs are the same seeded runs)."""
+    from slamcli.io import read_dataset, read_result
+
+    toml = _tiny_sweep(tmp_path, "kept", replicates=2)
+    assert runner.invoke(app, ["sweep", str(toml), "--out", str(tmp_path / "r"), "-q"]).exit_code == 0
+    exp = tmp_path / "r" / "kept"
+    first = pd.read_csv(exp / "results.csv").set_index("run_id")
+    run_id = first.index[0]
+    d = exp / run_id
+    status_before = (d / "status.json").read_text()
+    shared = exp / "datasets" / f"{json.loads(status_before)['dataset_id']}.h5"
+    if damage == "shared-dataset":
+        _flip_middle(shared)
+    elif damage == "shared-dataset-replaced":  # another inode with other bytes: the runs' links still agree
+        data = shared.read_bytes()
+        shared.unlink()
+        shared.write_bytes(data[: len(data) // 2])
+    elif damage == "old-status-truncated-result":
+        st = json.loads(status_before)
+        del st["sha256"]
+        (d / "status.json").write_text(json.dumps(st))
+        (d / "result.h5").write_bytes((d / "result.h5").read_bytes()[:1000])
+    else:
+        _flip_middle(d / damage)
+    res = runner.invoke(app, ["sweep", str(toml), "--out", str(tmp_path / "r"), "-q"])
+    assert res.exit_code == 0, res.output
+    assert (d / "status.json").read_text() != status_before  # redone, not skipped
+    after = pd.read_csv(exp / "results.csv").set_index("run_id")
+    assert after.ate_rmse_m[run_id] == pytest.approx(first.ate_rmse_m[run_id], rel=0, abs=0)
+    for r in first.index:  # every kept or redone run reads back, through its own names and the shared one
+        read_dataset(exp / r / "dataset.h5")
+        read_result(exp / r / "result.h5")
+    read_dataset(shared)
+    untouched = [r for r in first.index if r != run_id and damage not in ("shared-dataset",)]
+    for r in untouched:  # the other runs were checked and kept (another dataset, or a link still valid)
+        assert json.loads((exp / r / "status.json").read_text())["sha256"]["dataset.h5"].startswith("sha256:")

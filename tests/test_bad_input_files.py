@@ -137,6 +137,28 @@ evaluate_files({str(a)!r}, {str(ds)!r}, {str(out)!r}, cutoff=0.3)
     assert not [q for q in tmp_path.iterdir() if ".tmp-" in q.name]
 
 
+def test_evaluate_replaces_only_a_folder_it_made(files, tmp_path):
+    """ISSUE: ``evaluate -o ev`` deleted ``ev/per_step.csv/thesis.tex`` — entry names were taken for proof that
+    evaluate made the folder. Only a folder holding evaluate's marker (and its files) is replaced whole."""
+    from slamcli.api.evaluate import EVALUATION_MARKER, OUTPUT_FILES
+    from slamcli.errors import SlamcliError
+
+    _, ds, a, _ = files
+    out = tmp_path / "ev"
+    evaluate_files(a, ds, out)
+    assert sorted(p.name for p in out.iterdir()) == sorted((*OUTPUT_FILES, EVALUATION_MARKER))
+    (out / "notes.txt").write_text("mine")  # now a user's folder: the four files are replaced in place
+    evaluate_files(a, ds, out, cutoff=0.5)
+    assert (out / "notes.txt").read_text() == "mine"
+    user = tmp_path / "user"
+    (user / "per_step.csv").mkdir(parents=True)
+    (user / "per_step.csv" / "thesis.tex").write_text("x")
+    (user / "metrics.json").write_text("{}")  # no marker: a folder named like outputs is still the user's
+    with pytest.raises(SlamcliError, match="per_step.csv: exists and is not a regular file"):
+        evaluate_files(a, ds, user)
+    assert (user / "per_step.csv" / "thesis.tex").read_text() == "x" and (user / "metrics.json").read_text() == "{}"
+
+
 def test_evaluate_failure_mid_write_changes_nothing(files, tmp_path, monkeypatch):
     _, ds, a, _ = files
     out = tmp_path / "ev"

@@ -57,6 +57,7 @@ for line in sys.stdin:
             resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
             if req.get("fsize"):  # a size-limited file: writes beyond it fail with EFBIG (SIGXFSZ is ignored)
                 resource.setrlimit(resource.RLIMIT_FSIZE, (req["fsize"], req["fsize"]))
+            os.environ.update(req.get("env") or {})
             args = [os.fsdecode(os.fsencode(a)) if isinstance(a, str) else a for a in req["args"]]
             try:
                 app(args=args, prog_name="slamcli", standalone_mode=True)
@@ -85,13 +86,13 @@ class CliServer:
                                      text=True, env=env)
         self.n = 0
 
-    def run(self, args: list[str], cwd: Path, fsize: int | None = None) -> dict:
-        """``fsize``: RLIMIT_FSIZE of the child, bytes (None = unlimited)."""
+    def run(self, args: list[str], cwd: Path, fsize: int | None = None, env: dict | None = None) -> dict:
+        """``fsize``: RLIMIT_FSIZE of the child, bytes (None = unlimited); ``env``: variables set in the child."""
         self.n += 1
         out, err = self.workdir / f"case{self.n}.out", self.workdir / f"case{self.n}.err"
         # non-UTF-8 file names travel as surrogate escapes: JSON keeps the lone surrogates as \udcxx
         req = {"args": list(map(str, args)), "cwd": str(cwd), "stdout": str(out), "stderr": str(err),
-               "fsize": fsize}
+               "fsize": fsize, "env": env}
         self.proc.stdin.write(json.dumps(req) + "\n")
         self.proc.stdin.flush()
         line = self.proc.stdout.readline()

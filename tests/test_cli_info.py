@@ -113,3 +113,26 @@ def test_info_bad_files_are_one_line(tmp_path):
         lines = res.stderr.strip().splitlines()
         assert len(lines) == 1 and fragment in lines[0] and str(path) in lines[0], res.stderr
         assert "Traceback" not in res.output
+
+
+def test_strings_stored_in_a_file_are_shown_escaped_never_obeyed(tmp_path):
+    """Terminal escapes (ESC, BEL, CR, a bidi override) and rich markup in a file's attributes or parameter
+    names are printed as escapes, never sent to the terminal as they are."""
+    hostile = "x\x1b]0;owned\x07\x1b[2J\r\u202e[bold red]y[/bold red]"
+    ds = write_dataset(tmp_path / "d.h5", tiny_dataset(T=10))
+    with h5py.File(ds, "r+") as f:
+        f.attrs["scenario"] = hostile
+        f.attrs["scenario_params_json"] = '{"k\\u001b[31m": "v\\u001b[0m"}'
+    r = SolverResult(solver="icm", solver_version="0.1.0", params={}, status=Status.FAILED, message=hostile,
+                     poses_xyt=np.zeros((3, 3)), landmarks_xy=np.zeros((0, 2)), assoc=np.zeros(0, int),
+                     wall_time_s=0.1, dataset_hash="sha256:" + "0" * 64, extra={})
+    rp = write_result(tmp_path / "r.h5", r)
+    with h5py.File(rp, "r+") as f:
+        f.attrs["solver"] = hostile
+    for p in (ds, rp):
+        res = info(p)
+        assert res.exit_code == 0, res.output
+        out = res.stdout
+        assert not any(c in out for c in "\x1b\x07\r\u202e"), repr(out)
+        assert "\\x1b]0;owned\\x07\\x1b[2J\\r\\u202e[bold red]y[/bold red]" in out  # markup shown as text
+    assert "k\\x1b[31m" in info(ds).stdout and "v\\x1b[0m" in info(ds).stdout

@@ -115,16 +115,20 @@ def test_failed_status_is_still_written(data, tmp_path, monkeypatch):
     def failing(self, inputs, *, init=None, rng, progress=None):
         return self.make_result(status=Status.FAILED, poses_xyt=np.full((inputs.n_poses, 3), np.nan),
                                 landmarks_xy=np.zeros((0, 2)), assoc=np.full(len(inputs.observations), -1),
-                                t_start=0.0, message="diverged at step 3")
+                                t_start=0.0, message="diverged at step 3\x1b[2J")
 
     monkeypatch.setattr(OdometrySolver, "solve", failing)
     res = run("solve", data, "--method", "odometry", "-o", tmp_path / "r.h5")
     # the complete result records why it failed; the exit status tells scripts (as a sweep run does)
     assert res.exit_code == 1 and "failed" in res.stdout and "diverged at step 3" in res.stdout
     r = read_result(tmp_path / "r.h5")
-    assert r.status is Status.FAILED and r.message == "diverged at step 3"
+    assert r.status is Status.FAILED and r.message == "diverged at step 3\x1b[2J"
+    assert "\x1b" not in res.stdout and "diverged at step 3\\x1b[2J" in res.stdout  # shown, never obeyed
     res = run("solve", data, "--method", "odometry", "-q", "-o", tmp_path / "q.h5")
     assert res.exit_code == 1 and read_result(tmp_path / "q.h5").status is Status.FAILED
+    # -q drops the summary, not the reason: one line on stderr naming the solver, the reason and the file
+    assert res.stdout == "" and res.stderr.count("\n") == 1, res.output
+    assert res.stderr.startswith("error: odometry failed: diverged at step 3\\x1b[2J; ") and "q.h5" in res.stderr
 
 
 def test_solver_needing_noise_bounds_refuses_in_one_line(data, tmp_path):

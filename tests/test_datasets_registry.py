@@ -165,3 +165,40 @@ def test_a_broken_registry_file_is_one_line(env, monkeypatch):
     monkeypatch.setenv(reg.ENV_REGISTRY, str(env / "bad.toml"))
     res = _run("datasets", "list")
     assert res.exit_code == 1 and "importer must be one of" in res.stderr and res.stderr.count("\n") == 1
+
+
+@pytest.mark.parametrize("field, value", [("marker", "../../../../etc/passwd"), ("marker", "/etc/passwd"),
+                                          ("marker", "a/../../b"), ("folder", ".."), ("folder", "../x"),
+                                          ("folder", "a/b"), ("folder", "/etc"), ("name", "x\\n"),
+                                          ("marker", "in\\u001b[31mputs.dat")])
+def test_registry_entries_that_would_leave_the_data_folder_are_refused(env, monkeypatch, field, value):
+    """A registry entry's name, marker and folder are joined onto the data folder: each must stay inside it."""
+    table = {"name": "evil", "importer": "victoria-park", "marker": "inputs.dat", "folder": "evil"}
+    table[field] = value
+    text = "[[dataset]]\n" + "".join(f'{k} = "{v}"\n' for k, v in table.items())
+    (env / "evil.toml").write_text(text)
+    monkeypatch.setenv(reg.ENV_REGISTRY, str(env / "evil.toml"))
+    monkeypatch.setenv(reg.ENV_SHARED, "/")  # a marker "../../etc/passwd" would be found from here
+    for args in (("datasets", "list"), ("datasets", "path", "evil"), ("import", "victoria-park", "evil", "-o",
+                                                                       env / "o.h5")):
+        res = _run(*args)
+        assert res.exit_code == 1 and res.stderr.count("\n") == 1, (args, res.output)
+        assert str(env / "evil.toml") in res.stderr and field in res.stderr
+        assert "\x1b" not in res.stderr
+    assert not (env / "o.h5").exists()
+
+
+@pytest.mark.parametrize("which", ["registry", "registered"])
+def test_deeply_nested_registry_files_are_one_line(env, monkeypatch, which):
+    deep = "[" * 100_000 + "]" * 100_000
+    if which == "registry":
+        (env / "deep.toml").write_text(f"[[dataset]]\nname = \"x\"\nv = {deep}\n")
+        monkeypatch.setenv(reg.ENV_REGISTRY, str(env / "deep.toml"))
+        named = "deep.toml"
+    else:
+        (env / "data").mkdir()
+        (env / "data" / "registered.json").write_text(deep)
+        named = "registered.json"
+    res = _run("datasets", "list")
+    assert res.exit_code == 1 and res.stderr.count("\n") == 1 and named in res.stderr, res.output
+    assert "nested too deeply" in res.stderr

@@ -533,3 +533,18 @@ def test_group_returns_equals_filtering_the_averaged_measurements(association):
     np.testing.assert_allclose(grouped.pose_cov, ref.pose_cov, atol=1e-15)
     np.testing.assert_allclose(grouped.landmarks_xy, ref.landmarks_xy, atol=1e-12)
     np.testing.assert_array_equal(grouped.assoc, ref.assoc[rep])  # both rows of a pair get the pair's label
+
+
+def test_the_covariance_a_dataset_makes_the_ekf_grow_to_is_checked_before_it_is_allocated(monkeypatch):
+    """The joint covariance grows with the landmarks the data create: each growth goes through
+    check_allocation, so a file that makes millions of landmarks is one line, not a 2 PiB request."""
+    from tiny_world import tiny_dataset
+
+    from slamcli.errors import ConfigError
+
+    ds = tiny_dataset(T=30, n_landmarks=6, seed=2)
+    monkeypatch.setenv("SLAMCLI_MEMORY_LIMIT_MB", "0.0005")  # 524 bytes: the first 11×11 block (968 B) is over
+    with pytest.raises(ConfigError, match=r"landmarks=4: needs about 9.68e-07 GB for the EKF's joint covariance"):
+        EkfSlam(EkfParams()).solve(ds.inputs, rng=np.random.default_rng(0))
+    monkeypatch.setenv("SLAMCLI_MEMORY_LIMIT_MB", "1")
+    assert EkfSlam(EkfParams()).solve(ds.inputs, rng=np.random.default_rng(0)).status is not Status.FAILED

@@ -92,6 +92,32 @@ def test_compact_labels_order_and_min_obs():
     np.testing.assert_array_equal(out, [0, 1, 0, -1, 1, -1, 0])
 
 
+
+def test_compact_labels_of_huge_ids_allocate_nothing_sized_by_the_id():
+    """ISSUE: a legal reported_id of 2^31 made graph and isam allocate a 16 GiB lookup table (2^40: 8 TiB).
+    The ids are remapped densely; the same labels shifted by 2^62 give the same answer (reference: the small
+    labels above), and a table of 2^62 entries could not even be asked for."""
+    assoc = np.array([7, 3, 7, -1, 3, 9, 7])
+    for shift in (2**31, 2**40, 2**62):
+        big = np.where(assoc >= 0, assoc + shift, -1)
+        for min_obs in (1, 2):
+            out_small, old_small = frontend.compact_labels(assoc, min_obs)
+            out, old = frontend.compact_labels(big, min_obs)
+            np.testing.assert_array_equal(out, out_small)
+            np.testing.assert_array_equal(old, old_small + shift)
+
+
+def test_graph_solves_a_dataset_whose_reported_ids_are_huge():
+    ds = tiny_dataset(T=40, n_landmarks=5, seed=3)
+    obs = ds.inputs.observations
+    rid = np.where(obs.reported_id >= 0, obs.reported_id + 2**40, -1)
+    inputs = dataclasses.replace(ds.inputs, observations=dataclasses.replace(obs, reported_id=rid))
+    small = _solve(ds.inputs)
+    big = _solve(inputs)
+    np.testing.assert_array_equal(big.assoc, small.assoc)
+    np.testing.assert_allclose(big.poses_xyt, small.poses_xyt, rtol=0, atol=1e-12)
+
+
 def test_nearest_neighbour_front_end_recovers_identities_and_rejects_clutter():
     ds = tiny_dataset(T=80, n_landmarks=6, seed=5, report_ids=False, clutter_every=5)
     inp, truth = ds.inputs, ds.truth

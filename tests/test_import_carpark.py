@@ -84,3 +84,37 @@ def test_import_and_evaluate(tmp_path):
 def test_missing_file_is_one_line(tmp_path):
     with pytest.raises(DatasetImportError, match="data_set.mat: file not found"):
         import_carpark(tmp_path)
+
+
+def test_inflated_size_is_measured_in_pieces_and_stops_at_the_budget():
+    """A zlib stream is measured without keeping what it inflates to: the exact size when under the budget,
+    and at most one piece past the budget otherwise (a 1 MB bomb never costs its inflated size)."""
+    import io
+    import zlib
+
+    from slamcli.datasets import carpark
+
+    raw = b"\0" * (10 << 20)
+    packed = zlib.compress(raw)
+    fh = io.BytesIO(packed + b"after")
+    assert carpark._inflated_bytes(fh, len(packed), 64 << 20) == len(raw)
+    assert fh.read() == b"after"  # left at the end of the stream
+    fh = io.BytesIO(packed)
+    n = carpark._inflated_bytes(fh, len(packed), 1 << 20)
+    assert (1 << 20) < n <= (1 << 20) + 2 * carpark._PIECE
+
+
+def test_a_mat_file_that_inflates_beyond_the_limit_is_refused_before_loadmat(tmp_path, monkeypatch):
+    from slamcli.datasets import carpark
+
+    d = tmp_path / "cp"
+    d.mkdir()
+    for name in ("data_set.mat", "beac_juan3.mat"):
+        (d / name).write_bytes((CP / name).read_bytes())
+    m = {k: v for k, v in sio.loadmat(d / "data_set.mat").items() if not k.startswith("__")}
+    m["Index"] = np.zeros((1, 3 << 20), np.uint8)  # 3 MB of zeros: a few kB compressed
+    sio.savemat(d / "data_set.mat", m, do_compression=True)
+    monkeypatch.setattr(carpark, "MAX_MAT_BYTES", 2 << 20)
+    monkeypatch.setattr(sio, "loadmat", lambda *a, **k: pytest.fail("loadmat reached"))
+    with pytest.raises(DatasetImportError, match="data_set.mat: its variables hold more than 2 MB once inflated"):
+        import_carpark(d)

@@ -21,7 +21,21 @@ from pathlib import Path
 
 from slamcli.errors import SlamcliError
 
+#: bound on |log10(cutoff^ospa_order)|: OSPA/GOSPA sum such powers over landmarks in float64 (max ≈ 1e308)
+MAX_POWER_DECADES = 250
 OUTPUT_FILES = ("metrics.json", "per_iteration.csv", "per_step.csv", "per_landmark.csv")
+#: the empty file evaluate writes into every folder it makes: only a folder holding it (and nothing but the
+#: files above) is evaluate's own, to be replaced whole by the next evaluation
+EVALUATION_MARKER = ".slamcli-evaluation"
+
+
+def _own_folder(out: Path) -> bool:
+    """``out`` is missing, or a folder evaluate made: its marker and regular files of :data:`OUTPUT_FILES` only."""
+    if not out.exists():
+        return True
+    entries = list(out.iterdir())
+    return any(e.name == EVALUATION_MARKER for e in entries) and all(
+        e.name in (*OUTPUT_FILES, EVALUATION_MARKER) and e.is_file() and not e.is_symlink() for e in entries)
 
 
 def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, near_path_m: float | None = None,
@@ -29,8 +43,11 @@ def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, ne
     """Value checks of the evaluation options (CLI flags and experiment ``[evaluate]`` tables alike).
 
     Raises a one-line :class:`SlamcliError` naming the option: cut-off, RPE separation and near-path distance
-    must be finite and > 0, the OSPA order finite and >= 1, the RPE unit ``steps`` or ``m``.
+    must be finite and > 0, the OSPA order finite and >= 1, the RPE unit ``steps`` or ``m``; cutoff^order
+    within 1e±:data:`MAX_POWER_DECADES`, an RPE separation in steps at most :data:`~slamcli.io.schema.MAX_POSES`.
     """
+    from slamcli.io.schema import MAX_POSES
+
     pre = f"{where}: " if where else ""
 
     def num(v) -> float | None:
@@ -47,6 +64,11 @@ def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, ne
         raise SlamcliError(f"{pre}ospa_order: must be a finite number >= 1, got {ospa_order!r}")
     if rpe_unit not in ("steps", "m"):
         raise SlamcliError(f"{pre}rpe_unit: must be 'steps' or 'm', got {rpe_unit!r}")
+    if abs(math.log10(float(cutoff))) * float(ospa_order) > MAX_POWER_DECADES:
+        raise SlamcliError(f"{pre}cutoff: cutoff^ospa_order = {float(cutoff):g}^{float(ospa_order):g} is beyond "
+                           f"1e±{MAX_POWER_DECADES} (over- or underflows in OSPA/GOSPA)")
+    if rpe_unit == "steps" and float(rpe_delta) > MAX_POSES:
+        raise SlamcliError(f"{pre}rpe_delta: {float(rpe_delta):g} steps is more than any dataset has ({MAX_POSES})")
 
 
 def _resolve_dataset_path(result_path: Path, recorded: str, relpath: str = "") -> Path:
@@ -119,18 +141,37 @@ def _json_clean(obj):
     return obj
 
 
+def recorded_dataset(result_path: str | os.PathLike) -> Path | None:
+    """The dataset file the result ``result_path`` records and :func:`load_result_and_dataset` would read
+    without ``--data`` (from the header only); None for a file that is not a readable result, or whose
+    recorded dataset is not found."""
+    from slamcli.io import RESULT_SCHEMA, read_header
+
+    try:
+        hdr = read_header(result_path)
+        if hdr.get("schema") != RESULT_SCHEMA:
+            return None
+        extra = hdr.get("extra_json") if isinstance(hdr.get("extra_json"), dict) else {}
+        recorded = str(extra.get("dataset_path") or hdr.get("dataset_path") or "")
+        return _resolve_dataset_path(Path(result_path), recorded, str(extra.get("dataset_relpath") or ""))
+    except SlamcliError:
+        return None
+
+
 def write_evaluation(evaluation, out_dir, extra_scalars: dict | None = None) -> Path:
     """Write ``metrics.json`` and the three CSVs into ``out_dir`` without ever mixing two evaluations.
 
-    * ``out_dir`` missing, or holding only the files of an earlier evaluation: the four files are written
-      into a temporary sibling folder that then replaces ``out_dir`` (:func:`slamcli.io.atomic.atomic_folder`);
-      a ``kill -9`` leaves the previous folder intact.
-    * ``out_dir`` holding other files too (a sweep's run folder, a user's folder): the four files are written
-      under temporary names first and renamed into place together at the end.
+    * ``out_dir`` missing, or a folder an earlier evaluation made (:data:`EVALUATION_MARKER` and its files,
+      nothing else): the four files and the marker are written into a temporary sibling folder that then
+      replaces ``out_dir`` (:func:`slamcli.io.atomic.atomic_folder`); a ``kill -9`` leaves the previous
+      folder intact.
+    * any other folder (a sweep's run folder, a user's folder, even one holding only files with these names):
+      the four files are written under temporary names first and renamed into place together at the end; an
+      entry of one of these names that is not a regular file is refused before anything is written.
 
     OS failures (read-only folder, a file in the way) become one-line SlamcliErrors.
     """
-    from slamcli.io.atomic import atomic_folder, clean_stale_temporaries, temporary_sibling
+    from slamcli.io.atomic import atomic_files, atomic_folder
 
     out = Path(out_dir)
     scalars = dict(evaluation.scalars)
@@ -142,23 +183,19 @@ def write_evaluation(evaluation, out_dir, extra_scalars: dict | None = None) -> 
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise SlamcliError(f"{out}: exists and is not a folder; give -o a folder name")
     try:
-        own = not out.exists() or all(e.name in OUTPUT_FILES for e in out.iterdir())
-        if own:
+        if _own_folder(out):
             with atomic_folder(out) as tmp:
                 for name, write in files.items():
                     write(tmp / name)
+                (tmp / EVALUATION_MARKER).write_bytes(b"")
             return out
-        clean_stale_temporaries(out)
-        staged = {}
-        try:
-            for name, write in files.items():
-                staged[name] = temporary_sibling(out / name)
-                write(staged[name])
-            for name, tmp in staged.items():
-                os.replace(tmp, out / name)
-        finally:
-            for tmp in staged.values():
-                tmp.unlink(missing_ok=True)
+        for name in files:
+            if os.path.lexists(out / name) and not (out / name).is_file():
+                raise SlamcliError(f"{out / name}: exists and is not a regular file; refusing to replace it "
+                                   "(give -o a new folder)")
+        with atomic_files([out / name for name in files]) as tmps:
+            for write, tmp in zip(files.values(), tmps):
+                write(tmp)
     except OSError as exc:
         where = exc.filename if exc.filename is not None else out
         raise SlamcliError(f"{where}: cannot write the evaluation ({exc.strerror or exc})") from None

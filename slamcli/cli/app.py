@@ -80,10 +80,22 @@ def stdout_console():
     return Console()
 
 
+#: characters never printed as they are: C0 controls (ESC starts a terminal escape sequence), DEL, C1
+#: controls, and the bidirectional overrides that reorder what a terminal shows
+_UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+
+
+def printable(text: str) -> str:
+    """``text`` safe for a terminal: control characters (from file names, attributes or messages stored in a
+    file) as ``\\xNN`` / ``\\uNNNN`` escapes, non-UTF-8 bytes of file names as ``\\udcNN``."""
+    text = _UNPRINTABLE.sub(lambda m: ascii(m.group())[1:-1], text)
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def one_line(text: str) -> str:
-    """First line of ``text``, printable whatever the file names in it (non-UTF-8 bytes → ``\\udcxx``)."""
+    """First line of ``text``, :func:`printable` whatever the file names or stored strings in it."""
     line = text.splitlines()[0] if text.strip() else ""
-    return line.encode("utf-8", "backslashreplace").decode("utf-8")
+    return printable(line)
 
 
 @contextlib.contextmanager
@@ -197,16 +209,24 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
                  kind: str | None = None, force: bool = False) -> None:
     """Refuse an output path that cannot be written, before any work is done (one line, exit 1).
 
-    A directory where a file is expected (or a file where a folder is expected), a name longer than the
-    file system allows, a parent that is a file, or a parent folder this process may not write into. Then
-    the output guard (:func:`slamcli.io.guard.guard_output`, exit 2): an output that is one of ``inputs``
-    or a file inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or
-    (with ``kind``, unless ``force``) an existing file of another kind.
+    A symbolic-link loop on the path, a directory where a file is expected (or a file where a folder is
+    expected), a name longer than the file system allows, a parent that is a file, or a parent folder this
+    process may not write into. Then the output guard (:func:`slamcli.io.guard.guard_output`, exit 2) with
+    every file the command reads (:func:`files_read` of ``inputs``): an output that is one of them or a file
+    inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or (with
+    ``kind``, unless ``force``) an existing file of another kind.
     """
+    import errno
     import os
     from pathlib import Path
 
     p = Path(path)
+    for q in reversed((p, *p.parents)):  # a symbolic link loop on the way (a later resolve() would raise)
+        try:
+            os.stat(q)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                fail(f"{option} {p}: {q} is a loop of symbolic links")
     for part in p.parts:
         if len(os.fsencode(part)) > 255:
             fail(f"{option} {p}: a name is too long ({len(os.fsencode(part))} bytes, limit 255)")
@@ -223,7 +243,22 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
         fail(f"{option} {p}: folder {anc} is not writable")
     from slamcli.io.guard import guard_output
 
-    guard_output(p, inputs, folder=folder, replaces_folder=replaces_folder, option=option, kind=kind, force=force)
+    guard_output(p, files_read(inputs), folder=folder, replaces_folder=replaces_folder, option=option, kind=kind,
+                 force=force)
+
+
+def files_read(named) -> list:
+    """Every file and folder a command with the inputs ``named`` may read: the named paths, the dataset each
+    named result records (read when ``--data`` is not given), and every registry recording's folder on this
+    machine (an importer reads them by name)."""
+    from pathlib import Path
+
+    from slamcli.api.evaluate import recorded_dataset
+    from slamcli.datasets.registry import recording_folders
+
+    out = [Path(p) for p in named if p is not None]
+    out += [d for p in out if p.is_file() and (d := recorded_dataset(p)) is not None]
+    return out + recording_folders()
 
 
 def iteration_count(result) -> int | None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, handle_errors
+from slamcli.cli.app import app, handle_errors, printable
 
 
 @app.command("diff")
@@ -26,5 +26,5 @@ def diff_command(
         from slamcli.io.diff import diff_files
 
         d = diff_files(a, b, paths=paths)
-    typer.echo(d.summary(str(a), str(b)))
+    typer.echo(printable(d.summary(str(a), str(b))))
     raise typer.Exit(0 if d.same else 1)

@@ -10,7 +10,8 @@ import typer
 
 from slamcli.cli.app import app, check_output, fail, handle_errors, stdout_console
 
-_Force = Annotated[bool, typer.Option("--force", help="Replace an existing -o that is not a slamcli dataset.")]
+_Force = Annotated[bool, typer.Option("--force", help="Replace an existing -o that is not a slamcli dataset (mrclam "
+                                                     "--solo-dir: replace existing robotN.h5).")]
 _Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")]
 _Out = Annotated[Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")]
 
@@ -23,12 +24,15 @@ app.add_typer(import_app, name="import")
 
 
 def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, solo_dir: Path | None, out: Path,
-                        quiet: bool, *, no_truth: bool, non_landmark: str, **kw) -> None:
+                        quiet: bool, *, no_truth: bool, non_landmark: str, force: bool, **kw) -> None:
     """``import mrclam --robots`` / ``--all-robots``: one multi-robot dataset (issue 14 item 7)."""
+    import os
+
     from slamcli.datasets.mrclam import import_mrclam_team
     from slamcli.datasets.options import robot_numbers
     from slamcli.datasets.team import solo_dataset
     from slamcli.io import write_dataset
+    from slamcli.io.guard import OutputRefused
 
     if robots is not None and all_robots:
         fail("--robots and --all-robots: give one of them")
@@ -43,6 +47,11 @@ def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, s
     numbers = robot_numbers(directory, listed, all_robots)
     if solo_dir is not None:
         check_output(solo_dir, folder=True, option="--solo-dir", inputs=[directory, out])
+        for n in numbers:  # each solo file: guarded like -o, and an existing one is replaced only with --force
+            solo = solo_dir / f"robot{n}.h5"
+            check_output(solo, option="--solo-dir", inputs=[directory, out], kind="dataset", force=force)
+            if os.path.lexists(solo) and not force:
+                raise OutputRefused(f"--solo-dir {solo_dir}: {solo.name} exists; --force replaces it")
     ds = import_mrclam_team(directory, numbers, **kw)
     write_dataset(out, ds)
     written = [out]
@@ -119,19 +128,19 @@ def import_mrclam_command(
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
-        check_output(out, inputs=[directory], kind="dataset", force=force)
         from slamcli.datasets.mrclam import import_mrclam, noise_from_options
         from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
 
-        directory = resolve_source(directory, "mrclam")
+        directory = resolve_source(directory, "mrclam")  # (first: a registered name's folder is the input)
+        check_output(out, inputs=[directory], kind="dataset", force=force)
         if non_landmark not in ("drop", "clutter"):
             fail(f"--non-landmark: must be drop or clutter, got {non_landmark!r}")
         noise = noise_from_options(dt, range_std, bearing_std, v_std, omega_std)
         if robots is not None or all_robots:
             _import_mrclam_team(directory, robots, all_robots, solo_dir, out, quiet, dt=dt, start=start,
                                 duration=duration, noise=noise, control_delay=control_delay, max_range=max_range,
-                                no_truth=no_truth, non_landmark=non_landmark)
+                                no_truth=no_truth, non_landmark=non_landmark, force=force)
             return
         if solo_dir is not None:
             fail("--solo-dir: only with --robots or --all-robots")
@@ -231,12 +240,12 @@ def import_g2o_command(
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
-        check_output(out, inputs=[path], kind="dataset", force=force)
         from slamcli.datasets.g2o import import_graph
         from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
 
-        path = resolve_source(path, "g2o")
+        path = resolve_source(path, "g2o")  # (first: a registered name's file is the input)
+        check_output(out, inputs=[path], kind="dataset", force=force)
         ds = import_graph(
             path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std, max_poses=max_poses,
             convention=convention,
@@ -274,16 +283,20 @@ _VStd = Annotated[float | None, typer.Option(help="σ of the encoder speed, m/s 
 _SteerStd = Annotated[float | None, typer.Option(help="σ of the steering angle, rad (default: the importer's).")]
 
 
-def _import_car_recording(out: Path | None, quiet: bool, load, summary, directory: Path, force: bool) -> None:
-    """The shared body of the car-recording imports: ``load()`` → Dataset, written atomically to ``out``, then
-    ``summary(ds)`` (one line) unless ``quiet``; every failure is one line (handle_errors)."""
+def _import_car_recording(out: Path | None, quiet: bool, load, summary, directory: Path, force: bool,
+                          importer: str) -> None:
+    """The shared body of the car-recording imports: ``directory`` (a folder or a registered name of
+    ``importer``) resolved, ``load(folder)`` → Dataset, written atomically to ``out``, then ``summary(ds)``
+    (one line) unless ``quiet``; every failure is one line (handle_errors)."""
     with handle_errors():
         if out is None:
             fail("-o/--out is required")
-        check_output(out, inputs=[directory], kind="dataset", force=force)
+        from slamcli.datasets.registry import resolve_source
         from slamcli.io import write_dataset
 
-        ds = load()
+        folder = resolve_source(directory, importer)
+        check_output(out, inputs=[folder], kind="dataset", force=force)
+        ds = load(folder)
         write_dataset(out, ds)
         if not quiet:
             stdout_console().print(f"{summary(ds)} → {out}", highlight=False, markup=False, soft_wrap=True)
@@ -309,12 +322,11 @@ def import_victoria_park_command(
     """Import Sydney Victoria Park: 40 Hz speed/steering as Ackermann controls, laser at (3.78, 0.50) m, tree
     detections without identities (trunk diameter kept per row), GPS as a position-only reference."""
 
-    def load():
-        from slamcli.datasets.registry import resolve_source
+    def load(folder):
         from slamcli.datasets.victoria_park import default_noise, import_victoria_park
 
         noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
-        return import_victoria_park(resolve_source(directory, "victoria-park"), start=start, duration=duration, max_range=max_range, noise=noise)
+        return import_victoria_park(folder, start=start, duration=duration, max_range=max_range, noise=noise)
 
     def summary(ds):
         inp, md = ds.inputs, ds.metadata
@@ -322,7 +334,7 @@ def import_victoria_park_command(
                 f"{len(inp.observations)} tree detections (no ids), {md['n_gps_fixes']} GPS fixes "
                 f"({md['gps_gaps_over_1s']} gaps > 1 s, longest {md['gps_longest_gap_s']:.1f} s)")
 
-    _import_car_recording(out, quiet, load, summary, directory, force)
+    _import_car_recording(out, quiet, load, summary, directory, force, "victoria-park")
 
 
 @import_app.command("carpark")
@@ -341,12 +353,11 @@ def import_carpark_command(
     """Import the ACFR car park: Ackermann controls, beacons extracted from high-intensity laser returns (no
     ids), the 15 surveyed beacons as landmark truth and GPS as the path reference."""
 
-    def load():
+    def load(folder):
         from slamcli.datasets.carpark import default_noise, import_carpark
-        from slamcli.datasets.registry import resolve_source
 
         noise = default_noise(range_std=range_std, bearing_std=bearing_std, v_std=v_std, steer_std=steer_std)
-        return import_carpark(resolve_source(directory, "carpark"), max_range=max_range, noise=noise)
+        return import_carpark(folder, max_range=max_range, noise=noise)
 
     def summary(ds):
         inp, md = ds.inputs, ds.metadata
@@ -355,4 +366,4 @@ def import_carpark_command(
                 f"{md['beacon_intensity_threshold']}), {md['n_surveyed_beacons']} surveyed beacons, "
                 f"{md['n_gps_fixes']} GPS fixes")
 
-    _import_car_recording(out, quiet, load, summary, directory, force)
+    _import_car_recording(out, quiet, load, summary, directory, force, "carpark")

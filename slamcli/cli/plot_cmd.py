@@ -61,6 +61,8 @@ def plot_command(
             fail(f"--dpi: must be > 0, got {dpi}")
         if not sigma > 0:
             fail(f"--sigma: must be > 0, got {sigma}")
+        if pose_ellipse_every < 0:
+            fail(f"--pose-ellipse-every: must be >= 0 (0 = none), got {pose_ellipse_every}")
         if data and len(data) != len(results):
             fail(f"got {len(results)} result(s) but {len(data)} --data file(s); give one per result or none")
         if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:

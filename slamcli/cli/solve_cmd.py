@@ -13,6 +13,8 @@ from slamcli.cli.app import (
     fail,
     handle_errors,
     iteration_count,
+    one_line,
+    printable,
     progress_bar,
     stdout_console,
 )
@@ -65,7 +67,10 @@ def solve_command(
             )
         failed = result.status.value == "failed"
         if quiet:
-            if failed:
+            if failed:  # -q drops the summary, never the reason for a non-zero exit
+                reason = one_line(result.message) or "no reason given"
+                typer.echo(f"error: {result.solver} failed: {reason}; the result in {printable(str(out))} records it",
+                           err=True)
                 raise typer.Exit(1)
             return
         n_assoc = int((result.assoc >= 0).sum())
@@ -82,7 +87,7 @@ def solve_command(
             console.print("  [yellow]oracle association[/yellow]: the true data association was used",
                           highlight=False)
         if result.message:
-            console.print(f"  {result.message}", highlight=False, markup=False)
-        console.print(f"  wrote {out}", highlight=False, markup=False, soft_wrap=True)
+            console.print(f"  {printable(result.message)}", highlight=False, markup=False)
+        console.print(f"  wrote {printable(str(out))}", highlight=False, markup=False, soft_wrap=True)
         if failed:  # the result file records why; the exit status says it to scripts
             raise typer.Exit(1)

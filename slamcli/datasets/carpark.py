@@ -83,7 +83,74 @@ def _get(m: dict, key: str, path: Path) -> np.ndarray:
     a = np.asarray(m[key])
     if a.size == 0:
         raise DatasetImportError(f"{path}: field {key!r} is empty")
+    if a.dtype.kind not in "biuf":  # MATLAB strings, cells or structs where numbers belong
+        raise DatasetImportError(f"{path}: field {key!r}: expected a numeric array, got MATLAB {a.dtype.kind!r} "
+                                 f"data ({a.dtype})")
     return a
+
+
+#: bound on the bytes the variables of one .mat file hold once inflated: 20× the published recording's
+#: 3.6 MB (0.45 M float64 values); loadmat then holds at most this much
+MAX_MAT_BYTES = 80 << 20
+#: a MAT 5 data element whose payload is one zlib stream
+_MI_COMPRESSED = 15
+#: bytes read or inflated at a time while measuring a compressed variable
+_PIECE = 1 << 16
+
+
+def _inflated_bytes(fh, nbytes: int, budget: int) -> int:
+    """Bytes that the zlib stream of ``nbytes`` at ``fh``'s position inflates to, counted piece by piece and
+    nothing kept; stops once past ``budget``. Leaves ``fh`` at the end of the stream."""
+    import zlib
+
+    z, left, out = zlib.decompressobj(), nbytes, 0
+    while left > 0 and out <= budget:
+        piece = fh.read(min(left, _PIECE))
+        if not piece:
+            break
+        left -= len(piece)
+        out += len(z.decompress(piece, _PIECE))
+        while z.unconsumed_tail and out <= budget:
+            out += len(z.decompress(z.unconsumed_tail, _PIECE))
+    fh.seek(left, 1)
+    return out
+
+
+def _check_inflated_size(path: Path) -> None:
+    """Refuse a MAT 5 file whose variables would hold more than :data:`MAX_MAT_BYTES` once inflated — measured
+    by inflating each compressed variable in pieces and keeping none, so a small zlib bomb costs at most
+    :data:`MAX_MAT_BYTES` of work and one piece of memory, never its inflated size. Other MAT versions (v4
+    stores arrays uncompressed; v7.3 is HDF5, which loadmat refuses) are left to loadmat."""
+    import struct
+
+    with open(path, "rb") as fh:
+        header = fh.read(128)
+        order = {b"IM": "<", b"MI": ">"}.get(header[126:128]) if len(header) == 128 else None
+        total = 0
+        while order is not None and len(tag := fh.read(8)) == 8:
+            mdtype, nbytes = struct.unpack(order + "II", tag)
+            if mdtype == _MI_COMPRESSED:
+                total += _inflated_bytes(fh, nbytes, MAX_MAT_BYTES - total)
+            else:
+                total += nbytes
+                fh.seek(nbytes + (-nbytes) % 8, 1)
+            if total > MAX_MAT_BYTES:
+                raise DatasetImportError(f"{path}: its variables hold more than {MAX_MAT_BYTES >> 20} MB once "
+                                         f"inflated (the limit; the published recording holds 3.6 MB)")
+
+
+def _loadmat(path: Path) -> dict:
+    """``scipy.io.loadmat(path)`` once :func:`_check_inflated_size` has bounded what it will inflate; failures
+    are one line naming the file."""
+    import scipy.io as sio
+
+    try:
+        _check_inflated_size(path)
+        return sio.loadmat(path)
+    except DatasetImportError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - any loadmat failure is a bad file
+        raise DatasetImportError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:120]})") from None
 
 
 def default_noise(*, range_std: float | None = None, bearing_std: float | None = None,
@@ -98,8 +165,6 @@ def default_noise(*, range_std: float | None = None, bearing_std: float | None =
 def import_carpark(directory, *, max_range: float = NO_RETURN_M, noise: NoiseSpec | None = None) -> Dataset:
     """Read ``data_set.mat`` and ``beac_juan3.mat`` from ``directory`` into a :class:`Dataset` (``noise``: None =
     the defaults, see "Noise")."""
-    import scipy.io as sio
-
     d = Path(directory)
     if not (max_range > 0):  # negative, zero and nan keep no beacon (or every one): a mistyped option
         raise DatasetImportError(f"--max-range: must be > 0 m (or inf), got {max_range}")
@@ -110,10 +175,7 @@ def import_carpark(directory, *, max_range: float = NO_RETURN_M, noise: NoiseSpe
     for p in (p_data, p_beac):
         if not p.is_file():
             raise DatasetImportError(f"{p}: file not found (expected the ACFR car-park .mat files)")
-        try:
-            mats[p] = sio.loadmat(p)
-        except Exception as exc:  # noqa: BLE001 - any loadmat failure is a bad file
-            raise DatasetImportError(f"{p}: not a readable MATLAB file ({str(exc).splitlines()[0][:120]})") from None
+        mats[p] = _loadmat(p)
     m = mats[p_data]
     t_vs = _get(m, "Time_VS", p_data).ravel().astype(float)
     vel = _get(m, "Velocity", p_data).ravel().astype(float)

@@ -240,6 +240,9 @@ def _read_record(g: dict, tag: str, vals: list[float], ids: list[int], lineno: i
         if not r > 0:
             raise ValueError(f"{tag} range must be > 0, got {r}")
         cov = np.diag([sr * sr, sb * sb])
+        with np.errstate(divide="ignore", over="ignore"):
+            if not np.all(np.isfinite(1.0 / np.diag(cov))) or not np.all(np.isfinite(cov)):
+                raise ValueError(f"{tag} σ's give a covariance without a finite inverse ({sr:g}, {sb:g})")
         g["sightings"].append((ids[0], ids[1], np.array([r, b]), cov, np.linalg.inv(cov), lineno, "range_bearing"))
     else:  # EDGE_SE2_XY / LANDMARK2 / LANDMARK
         if convention == "gtsam":

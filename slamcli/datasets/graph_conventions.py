@@ -81,7 +81,12 @@ def _upper3(v) -> np.ndarray:
 
 
 def _is_pd(m: np.ndarray) -> bool:
-    return bool(np.all(np.isfinite(m))) and bool(np.all(np.linalg.eigvalsh(0.5 * (m + m.T)) > 0))
+    """Finite, positive definite, and with a finite inverse (σ = 1e-200 squares to 0, σ = 1e200 to inf)."""
+    if not np.all(np.isfinite(m)):
+        return False
+    eig = np.linalg.eigvalsh(0.5 * (m + m.T))
+    with np.errstate(divide="ignore", over="ignore"):
+        return bool(np.all(eig > 0) and np.all(np.isfinite(1.0 / eig)))
 
 
 def _cov_info(m: np.ndarray, kind: str, upper) -> tuple[np.ndarray, np.ndarray] | None:

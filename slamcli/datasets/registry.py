@@ -23,12 +23,12 @@ PROVENANCE.txt records each as an unmodified copy of the pinned URL; the MRCLAM 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
 import shutil
 import urllib.parse
-import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,8 +39,19 @@ ENV_SHARED = "SLAMCLI_DATASETS"
 ENV_REGISTRY = "SLAMCLI_DATASET_REGISTRY"
 #: the importers a recording can be read with (``slamcli import <importer>``)
 IMPORTERS = ("mrclam", "victoria-park", "carpark", "g2o")
-_NAME = re.compile(r"^[a-z][a-z0-9-]*$")
-_SHA256 = re.compile(r"^[0-9a-f]{64}$")
+_NAME = re.compile(r"[a-z][a-z0-9-]*")  # (fullmatch: ``$`` would accept a final newline)
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+#: one file or folder name: no separator, not ``.``/``..``, no control character
+_COMPONENT = re.compile(r"(?!\.{1,2}\Z)[^/\\\x00-\x1f\x7f]+")
+
+
+def _check_relative(value: object, what: str, *, single: bool = False) -> None:
+    """Raise ValueError unless ``value`` is a relative path of plain names (``single``: exactly one name), so
+    that joining it onto a folder cannot leave that folder (no ``..``, no absolute path)."""
+    parts = value.split("/") if isinstance(value, str) else []
+    if not parts or (single and len(parts) > 1) or not all(_COMPONENT.fullmatch(c) for c in parts):
+        how = "one file or folder name" if single else "a relative path of plain names"
+        raise ValueError(f"{what} must be {how} (no '..', '/' at the start or control characters), got {value!r}"[:200])
 
 
 class DatasetMissingError(DatasetImportError):
@@ -62,11 +73,10 @@ class RemoteFile:
     unzip: bool = False
 
     def __post_init__(self) -> None:
-        if not self.path or Path(self.path).is_absolute() or ".." in Path(self.path).parts:
-            raise ValueError(f"file path must be relative inside the dataset folder, got {self.path!r}")
+        _check_relative(self.path, "file path")
         if urllib.parse.urlparse(self.url).scheme not in ("https", "http", "ftp", "file"):
             raise ValueError(f"{self.path}: url must be https/http/ftp/file, got {self.url!r}")
-        if self.sha256 is not None and not _SHA256.match(self.sha256):
+        if self.sha256 is not None and not (isinstance(self.sha256, str) and _SHA256.fullmatch(self.sha256)):
             raise ValueError(f"{self.path}: sha256 must be 64 lowercase hex digits or absent")
 
 
@@ -91,12 +101,12 @@ class DatasetEntry:
     note: str = ""
 
     def __post_init__(self) -> None:
-        if not _NAME.match(self.name):
+        if not (isinstance(self.name, str) and _NAME.fullmatch(self.name)):
             raise ValueError(f"dataset name must be lowercase letters, digits and '-', got {self.name!r}")
         if self.importer not in IMPORTERS:
             raise ValueError(f"{self.name}: importer must be one of {', '.join(IMPORTERS)}, got {self.importer!r}")
-        if not self.marker or Path(self.marker).is_absolute():
-            raise ValueError(f"{self.name}: marker must be a relative file path")
+        _check_relative(self.marker, f"{self.name}: marker")
+        _check_relative(self.folder, f"{self.name}: folder", single=True)
 
     @property
     def sha256_known(self) -> bool:
@@ -220,6 +230,10 @@ def _entry_from_table(t: dict, src: str) -> DatasetEntry:
         raise DatasetImportError(f"{src}: dataset {t.get('name', '?')!r}: {exc}") from None
 
 
+def _why(exc: BaseException) -> str:
+    return "nested too deeply" if isinstance(exc, RecursionError) else str(exc).splitlines()[0][:160]
+
+
 def registry() -> dict[str, DatasetEntry]:
     """Name → entry: the built-in entries, replaced or extended by ``$SLAMCLI_DATASET_REGISTRY`` (TOML)."""
     import tomllib
@@ -234,6 +248,10 @@ def registry() -> dict[str, DatasetEntry]:
             raise DatasetImportError(f"{ENV_REGISTRY}={extra}: cannot read ({exc.strerror})") from None
         except tomllib.TOMLDecodeError as exc:
             raise DatasetImportError(f"{ENV_REGISTRY}={extra}: not valid TOML ({exc})") from None
+        except (RecursionError, UnicodeDecodeError) as exc:
+            raise DatasetImportError(f"{ENV_REGISTRY}={extra}: not valid TOML ({_why(exc)})") from None
+        if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+            raise DatasetImportError(f"{ENV_REGISTRY}={extra}: [[dataset]] must be an array of tables")
         for t in tables:
             e = _entry_from_table(t, extra)
             out[e.name] = e
@@ -269,8 +287,9 @@ def registered() -> dict[str, str]:
         return {}
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise DatasetImportError(f"{p}: unreadable list of registered datasets ({exc}); delete it and re-add") from None
+    except (OSError, ValueError, RecursionError) as exc:  # (JSONDecodeError and UnicodeDecodeError are ValueErrors)
+        raise DatasetImportError(f"{p}: unreadable list of registered datasets ({_why(exc)}); delete it and "
+                                 "re-add") from None
     if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):
         raise DatasetImportError(f"{p}: not a JSON object of dataset name -> folder; delete it and re-add")
     return data
@@ -321,6 +340,20 @@ def where(name: str) -> tuple[str, Path] | None:
     if (f := _find_marker(data_dir() / name, e.marker)) is not None:
         return "fetched", _import_path(e, f)
     return None
+
+
+def recording_folders() -> list[Path]:
+    """Every folder on this machine that holds a registry recording (added, under ``$SLAMCLI_DATASETS`` or
+    fetched), whether or not it is read now: the output guard treats them all as inputs. An unreadable
+    registry or list of added copies contributes nothing here (the command that reads them reports it)."""
+    found: list[Path] = []
+    with contextlib.suppress(DatasetImportError):
+        found += [Path(folder) for folder in registered().values()]
+    with contextlib.suppress(DatasetImportError):
+        entries = registry().values()
+        shared = _shared_root()
+        found += [shared / e.folder for e in entries if shared is not None] + [data_dir() / e.name for e in entries]
+    return [p for p in found if p.is_dir()]
 
 
 def locate(name: str) -> Path:
@@ -390,6 +423,8 @@ def add(name: str, directory: str | os.PathLike) -> Path:
 
 def _copy_file_url(url: str, output_file, pooch_obj=None, check_only: bool = False):
     """pooch downloader for ``file://`` URLs (local mirrors, the tests' registry): a plain copy."""
+    import urllib.request
+
     src = Path(urllib.request.url2pathname(urllib.parse.urlparse(url).path))
     if check_only:
         return src.is_file()

@@ -208,6 +208,10 @@ def import_victoria_park(directory, *, start: float = 0.0, duration: float | Non
     if not (max_range > 0):  # nan, 0 and negative; inf = unlimited
         raise DatasetImportError(f"--max-range: must be > 0 (or inf), got {max_range}")
     gps = _load(d / "gps.dat", 3)
+    if (back := np.flatnonzero(np.diff(gps[:, 0]) < 0)).size:  # (equal stamps are repeats, dropped below)
+        k = int(back[0]) + 1
+        raise DatasetImportError(f"{d / 'gps.dat'}: row {k + 1}: time {gps[k, 0]:g} s runs backwards (previous row "
+                                 f"{gps[k - 1, 0]:g} s)")
     t_in = inputs[:, 0]
     if len(t_in) < 2 or not (np.diff(t_in) > 0).all():
         raise DatasetImportError(f"{d / 'inputs.dat'}: times must be strictly increasing with >= 2 rows")

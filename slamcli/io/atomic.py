@@ -118,6 +118,34 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
+def atomic_files(paths: list[Path]) -> Iterator[list[Path]]:
+    """Yield one temporary sibling per path of ``paths``; on clean exit all are renamed into place together.
+
+    Several outputs written as one: a failure while any of them is written (a full disk on the third of four
+    tables) removes every temporary and leaves every ``path`` as it was — never some new files beside old
+    ones. Write faults become one line naming the file, as in :func:`atomic_path`.
+    """
+    finals = [Path(p) for p in paths]
+    for folder in {f.parent for f in finals}:
+        folder.mkdir(parents=True, exist_ok=True)
+        clean_stale_temporaries(folder)
+    tmps: list[Path] = []
+    try:
+        tmps.extend(temporary_sibling(f) for f in finals)
+        yield tmps
+        for tmp, final in zip(tmps, finals):
+            os.replace(tmp, final)
+    except BaseException as exc:
+        for tmp in tmps:
+            with contextlib.suppress(FileNotFoundError, IsADirectoryError, NotADirectoryError):
+                tmp.unlink()
+        if isinstance(exc, OSError) and exc.errno in WRITE_FAULTS:
+            where = next((f for t, f in zip(tmps, finals) if exc.filename in (str(t), t)), finals[0])
+            raise SlamcliError(write_fault_message(where, exc)) from None
+        raise
+
+
+@contextlib.contextmanager
 def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary folder next to ``path``; on clean exit it *becomes* ``path``.
 

@@ -44,12 +44,14 @@ from slamcli.io.schema import (
     MAX_POSES,
     SCHEMA_VERSION,
     Reader,
+    attr_text,
     create_h5,
     open_for_read,
     to_json,
     utc_now,
     write_array,
 )
+from slamcli.numerics import MAX_INPUT_MAGNITUDE
 from slamcli.types import (
     Dataset,
     GroundTruth,
@@ -91,7 +93,9 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
     """Write ``dataset`` to ``path`` atomically (temp file in the same directory + ``os.replace``).
 
     Arrays are stored in canonical dtypes (float64; int64 indices; int16 sensor ids) so a read gives
-    bit-identical arrays. Returns the final path.
+    bit-identical arrays. The file is validated by the reader before it is written (a dataset slamcli would
+    refuse to read — a value beyond the input bounds, a NaN noise σ — is a one-line SchemaError, nothing
+    written). Returns the final path.
     """
     import slamcli
 
@@ -103,7 +107,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         metadata_json = to_json(meta)
     except (TypeError, ValueError) as exc:
         raise SchemaError(f"{final}: metadata: not JSON-serialisable ({exc})") from None
-    with create_h5(final) as f:
+    with create_h5(final, check=_readable(final)) as f:
         a = f.attrs
         a["schema"] = DATASET_SCHEMA
         a["schema_version"] = SCHEMA_VERSION
@@ -115,7 +119,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         if meta.get("seed") is not None:
             a["seed"] = int(meta["seed"])
         if meta.get("scenario") is not None:
-            a["scenario"] = str(meta["scenario"])
+            a["scenario"] = attr_text(meta["scenario"])
         for key, value in promoted_sections(meta).items():
             a[f"{key}_json"] = to_json(value)
 
@@ -149,7 +153,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
         write_array(go, "offsets", np.asarray(obs.offsets, np.int64), units="-", frame="-",
                     doc="CSR row offsets per pose (T+2,)")
         if inp.reported_id_source != "unknown":
-            go["reported_id"].attrs["source"] = str(inp.reported_id_source)
+            go["reported_id"].attrs["source"] = attr_text(inp.reported_id_source)
 
         if obs.landmark_type is not None:
             write_array(go, "landmark_type", np.asarray(obs.landmark_type, np.int64), units="-", frame="-",
@@ -461,18 +465,37 @@ def read_dataset(path: str | os.PathLike, *, with_truth: bool = True) -> Dataset
         one line ``<file>: <group/field>: <problem>`` for any missing/corrupt/inconsistent content.
     """
     with open_for_read(path) as r:
-        r.check_schema(DATASET_SCHEMA)
-        dt = r.finite_attr("/", "dt", positive=True)
-        metadata = r.json_attr("/", "metadata_json", default={})
-        if not isinstance(metadata, dict):
-            raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
-        has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
-        check_declared_shapes(r, with_truth=with_truth and has_truth)
-        inputs = _read_motion_model(r, _read_inputs(r, dt))
-        truth = None
-        if with_truth and has_truth:
-            truth = _read_truth(r, inputs)
+        return _read_dataset(r, with_truth)
+
+
+def _read_dataset(r: Reader, with_truth: bool = True) -> Dataset:
+    r.check_schema(DATASET_SCHEMA)
+    dt = r.finite_attr("/", "dt", positive=True)
+    metadata = r.json_attr("/", "metadata_json", default={})
+    if not isinstance(metadata, dict):
+        raise r.fail("@metadata_json", f"expected a JSON object, got {type(metadata).__name__}")
+    has_truth = r.attr("/", "has_truth", bool, default=r.has("truth"))
+    check_declared_shapes(r, with_truth=with_truth and has_truth)
+    inputs = _read_motion_model(r, _read_inputs(r, dt))
+    truth = None
+    if with_truth and has_truth:
+        truth = _read_truth(r, inputs)
     return Dataset(inputs=inputs, truth=truth, metadata=metadata)
+
+
+def _readable(final: Path):
+    """The ``create_h5`` check of :func:`write_dataset`: the finished file must pass :func:`read_dataset`'s
+    validation (what slamcli writes, slamcli reads), else a one-line SchemaError naming ``final`` and the
+    field, and nothing is written."""
+
+    def check(f) -> None:
+        try:
+            _read_dataset(Reader(f, final))
+        except SchemaError as exc:
+            what = str(exc).removeprefix(f"{final}: ")
+            raise SchemaError(f"{final}: not written, slamcli could not read it back: {what}") from None
+
+    return check
 
 
 def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
@@ -518,9 +541,6 @@ def check_declared_shapes(r: Reader, *, with_truth: bool = True) -> None:
             raise r.fail(name, f"declared length {shp[0]} does not match {what} ({n})")
 
 
-#: largest magnitude of a pose coordinate, control or odometry value, m (m/s, rad): beyond it squared distances
-#: overflow float64 within a few products (1e300² = inf) and a solver writes a result nobody can read
-MAX_INPUT_MAGNITUDE = 1e9
 
 
 def check_magnitude(r: Reader, name: str, a: np.ndarray) -> None:

@@ -74,14 +74,12 @@ def _sweep_lock_holder(path: Path) -> Path | None:
 
 def file_kind(path: Path) -> str | None:
     """``"dataset"`` / ``"result"`` for a slamcli HDF5 file (its ``schema`` attribute), else None."""
-    import h5py
+    from slamcli.io.schema import open_h5
 
     try:
-        if not h5py.is_hdf5(str(path)):
-            return None
-        with h5py.File(path, "r") as f:
+        with open_h5(path) as f:
             schema = f.attrs.get("schema")
-    except (OSError, RuntimeError):
+    except (SlamcliError, OSError, RuntimeError):
         return None
     schema = schema.decode() if isinstance(schema, bytes) else str(schema)
     return {"slamcli.dataset": "dataset", "slamcli.result": "result"}.get(schema)

@@ -28,6 +28,7 @@ from slamcli.io.schema import (
     RESULT_SCHEMA,
     SCHEMA_VERSION,
     Reader,
+    attr_text,
     create_h5,
     open_for_read,
     to_json,
@@ -58,14 +59,14 @@ def write_result(path: str | os.PathLike, result: SolverResult) -> Path:
         a["schema_version"] = SCHEMA_VERSION
         a["slamcli_version"] = slamcli.__version__
         a["created_utc"] = utc_now()
-        a["solver"] = str(result.solver)
-        a["solver_version"] = str(result.solver_version)
+        a["solver"] = attr_text(result.solver)
+        a["solver_version"] = attr_text(result.solver_version)
         a["status"] = status.value
-        a["message"] = str(result.message)
+        a["message"] = attr_text(result.message)
         a["wall_time_s"] = float(result.wall_time_s)
         a["params_json"] = params_json
         a["dataset_hash"] = str(result.dataset_hash)
-        a["dataset_path"] = str(result.extra.get("dataset_path", ""))
+        a["dataset_path"] = attr_text(result.extra.get("dataset_path", ""))
         a["extra_json"] = extra_json
         a["timings_json"] = timings_json
         write_array(f, "poses_xyt", np.asarray(result.poses_xyt, np.float64).reshape(-1, 3),

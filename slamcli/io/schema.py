@@ -12,7 +12,7 @@ import itertools
 import json
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +79,12 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     write_bytes_atomic(path, text.encode())
 
 
+def attr_text(value: Any) -> str:
+    """``str(value)`` as a valid UTF-8 attribute string: a file name's undecodable bytes (``\\udcNN``
+    surrogates, which HDF5 cannot store) kept as the visible escape ``\\udcNN``."""
+    return str(value).encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, frame: str, doc: str) -> None:
     """Write one dataset with ``units``/``frame``/``doc`` attributes; gzip+shuffle, chunked along axis 0."""
     data = np.asarray(data)
@@ -95,13 +101,15 @@ def write_array(group: h5py.Group, name: str, data: np.ndarray, *, units: str, f
 
 
 @contextlib.contextmanager
-def create_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
+def create_h5(path: str | os.PathLike, check: Callable[[h5py.File], None] | None = None) -> Iterator[h5py.File]:
     """Open a new HDF5 file for writing at ``path`` atomically (see :func:`~slamcli.io.atomic.atomic_path`).
 
     The file is built in memory (HDF5's ``core`` driver, no backing store) and its image written in one
     piece by :func:`~slamcli.io.atomic.write_bytes_atomic`: a full disk or an I/O error then fails in plain
     Python (one line naming the file, the temporary removed) instead of inside HDF5's close, where h5py
     raised and then crashed the interpreter at exit (exit 139) when it closed the file a second time.
+    ``check(f)``, when given, reads the finished in-memory file first; whatever it raises leaves ``path`` as
+    it was.
     """
     if Path(path).is_dir():
         raise SlamcliError(f"{path}: is a directory, expected a file name")
@@ -111,6 +119,8 @@ def create_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
         try:
             yield f
             f.flush()
+            if check is not None:
+                check(f)
             image = f.id.get_file_image()
         finally:
             f.close()
@@ -129,6 +139,8 @@ def check_path(path: str | os.PathLike) -> Path:
         raise SchemaError(f"{p}: no such file")
     if p.is_dir():
         raise SchemaError(f"{p}: is a directory, expected an HDF5 file")
+    if not p.is_file():  # a FIFO or a device: opening it could block forever
+        raise SchemaError(f"{p}: not a regular file (a FIFO, socket or device), expected an HDF5 file")
     try:
         ok = h5py.is_hdf5(str(p))
     except OSError as exc:
@@ -315,14 +327,60 @@ class Reader:
             raise self.fail(name, f"length {data.shape[0]} does not match {what} ({n})")
 
 
-@contextlib.contextmanager
-def open_for_read(path: str | os.PathLike) -> Iterator[Reader]:
-    """Open ``path`` read-only as a :class:`Reader`; low-level HDF5 failures become one-line SchemaErrors."""
+def _refuse_escapes(f: h5py.File, p: Path) -> None:
+    """Raise a one-line SchemaError when ``f`` could make a read leave the file ``p``: an external link (or a
+    user-defined link) anywhere in it, or a dataset with external storage or a virtual layout. Nothing is
+    followed: links are listed (``H5Lvisit``, hard links only), then each dataset's creation properties read."""
+    from h5py import h5l
+
+    escapes: list[str] = []
+
+    def check_link(name: bytes, info) -> None:
+        if info.type not in (h5l.TYPE_HARD, h5l.TYPE_SOFT) and not escapes:
+            escapes.append(name.decode("utf-8", "backslashreplace"))
+
+    f.id.links.visit(check_link, info=True)
+    if escapes:
+        link = f.get(escapes[0], getlink=True)
+        target = f" to {link.path!r} in {link.filename!r}" if isinstance(link, h5py.ExternalLink) else ""
+        raise SchemaError(f"{p}: {escapes[0]}: external link{target} refused (slamcli reads only the file named)")
+
+    def check_object(name: str, obj: Any) -> None:
+        if isinstance(obj, h5py.Dataset) and not escapes and (obj.is_virtual or obj.external):
+            escapes.append(name)
+
+    f.visititems(check_object)
+    if escapes:
+        raise SchemaError(f"{p}: {escapes[0]}: external or virtual storage refused "
+                          "(slamcli reads only the file named)")
+
+
+def open_h5(path: str | os.PathLike) -> h5py.File:
+    """Open the HDF5 file ``path`` read-only, refusing anything that would read another file (external links,
+    external storage, virtual datasets: :func:`_refuse_escapes`); the one place slamcli opens a file it reads.
+    Failures are one-line SchemaErrors naming the file."""
     p = check_path(path)
     try:
         f = h5py.File(p, "r")
     except Exception as exc:  # noqa: BLE001 - h5py raises OSError for truncated/corrupt files
         raise SchemaError(f"{p}: cannot open HDF5 file, truncated or corrupt ({_one_line(exc)})") from None
+    try:
+        _refuse_escapes(f, p)
+    except SchemaError:
+        f.close()
+        raise
+    except Exception as exc:  # noqa: BLE001 - corrupt link or object headers surface here
+        f.close()
+        raise SchemaError(f"{p}: corrupt HDF5 file ({_one_line(exc)})") from None
+    return f
+
+
+@contextlib.contextmanager
+def open_for_read(path: str | os.PathLike) -> Iterator[Reader]:
+    """Open ``path`` read-only (:func:`open_h5`) as a :class:`Reader`; low-level HDF5 failures become one-line
+    SchemaErrors."""
+    f = open_h5(path)
+    p = Path(path)
     try:
         with f:
             yield Reader(f, p)

@@ -445,27 +445,22 @@ def aggregate_dir(exp_dir: str | Path, by: Sequence[str] | None = None, metrics:
 
 
 def _write_tables(out: Path, name: str, summary, pairs, md_table, tex_table, note: str, pnote: str):
-    from slamcli.io import atomic_path
+    """The four tables, written together (:func:`~slamcli.io.atomic.atomic_files`): all or none."""
+    from slamcli.io.atomic import atomic_files
 
-    paths = {}
-    with atomic_path(out / "aggregate.csv") as tmp:
-        summary.to_csv(tmp, index=False)
-    paths["csv"] = out / "aggregate.csv"
-    with atomic_path(out / "paired.csv") as tmp:
-        pairs.to_csv(tmp, index=False)
-    paths["paired"] = out / "paired.csv"
     md = to_markdown(*md_table, note)
     if len(pairs):
         md += "\n" + to_markdown(*paired_rows(pairs), pnote)
-    with atomic_path(out / "aggregate.md") as tmp:
-        tmp.write_text(md, encoding="utf-8")
-    paths["md"] = out / "aggregate.md"
     tex = to_latex(*tex_table, f"{name}: {note}")
     if len(pairs):
         tex += "\n" + to_latex(*paired_rows(pairs, tex=True), f"{name}: {pnote}")
-    with atomic_path(out / "aggregate.tex") as tmp:
-        tmp.write_text(tex, encoding="utf-8")
-    paths["tex"] = out / "aggregate.tex"
+    paths = {"csv": out / "aggregate.csv", "paired": out / "paired.csv", "md": out / "aggregate.md",
+             "tex": out / "aggregate.tex"}
+    with atomic_files(list(paths.values())) as (csv, paired_csv, md_path, tex_path):
+        summary.to_csv(csv, index=False)
+        pairs.to_csv(paired_csv, index=False)
+        md_path.write_text(md, encoding="utf-8")
+        tex_path.write_text(tex, encoding="utf-8")
     return paths
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from slamcli.errors import ConfigError
+from slamcli.numerics import MAX_INPUT_MAGNITUDE
 from slamcli.params import _coerce
 
 
@@ -36,14 +37,15 @@ MAX_CLUTTER_RATE = 1_000.0
 
 
 def _check_finite(obj: Any) -> None:
-    """Every float field (and every entry of a float tuple) of a config dataclass must be finite."""
+    """Every float field (and every entry of a float tuple) of a config dataclass must be finite and within
+    ±:data:`~slamcli.numerics.MAX_INPUT_MAGNITUDE` (``dt=1e300`` overflowed deep inside the simulation)."""
     for f in dataclasses.fields(obj):
         v = getattr(obj, f.name)
         vals = v if isinstance(v, tuple) else (v,)
         for x in vals:
-            if isinstance(x, float) and not math.isfinite(x):
-                raise ConfigError(f"{type(obj).__name__.removesuffix('Config').lower()}.{f.name}: must be finite, "
-                                  f"got {x}")
+            if isinstance(x, float) and not (math.isfinite(x) and abs(x) <= MAX_INPUT_MAGNITUDE):
+                what = "must be finite" if not math.isfinite(x) else f"must be within ±{MAX_INPUT_MAGNITUDE:g}"
+                raise ConfigError(f"{type(obj).__name__.removesuffix('Config').lower()}.{f.name}: {what}, got {x}")
 
 
 @dataclass(frozen=True)
@@ -481,6 +483,7 @@ class ScenarioConfig:
 
     def __post_init__(self) -> None:
         _check(self.dt > 0 and math.isfinite(self.dt), "dt must be a finite number > 0")
+        _check_finite(self)
         _check(self.n_steps >= 1, "n_steps must be >= 1")
         _check(self.n_steps <= MAX_STEPS, f"n_steps must be <= {MAX_STEPS} (got {self.n_steps}; the limit of one run)")
 

@@ -56,7 +56,8 @@ from slamcli.models.observation import (
     range_bearing,
     range_bearing_jacobians,
 )
-from slamcli.models.se2 import rot2
+from slamcli.models.se2 import compose, rot2
+from slamcli.params import check_allocation
 from slamcli.solvers.base import BaseSolver
 from slamcli.solvers.frontend import group_detections, inside_declared_size, resolve_motion_input
 from slamcli.solvers.surface import declared_radius, require_radius
@@ -210,6 +211,8 @@ class _GrowingState:
     def _alloc(self, na: int) -> None:
         """Move the active block into fresh zeroed buffers of size ``na ≥ n``."""
         n = self.n
+        check_allocation("landmarks", (na - 3) // 2, 8.0 * na * na, "the EKF's joint covariance",
+                         "the data make more landmarks than an EKF can hold; try -m graph or -m icm")
         xa, Pa = np.zeros(na), np.zeros((na, na))
         if hasattr(self, "xa"):
             xa[:n] = self.x

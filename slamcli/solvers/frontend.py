@@ -83,10 +83,14 @@ def compact_labels(assoc: np.ndarray, min_obs: int = 1) -> tuple[np.ndarray, np.
     labels, first, counts = np.unique(assoc[ok], return_index=True, return_counts=True)
     keep = counts >= min_obs
     labels, first = labels[keep], first[keep]
-    old_of_new = labels[np.argsort(first, kind="stable")]
-    lut = np.full(int(assoc[ok].max()) + 1, -1, np.int64)
-    lut[old_of_new] = np.arange(old_of_new.size)
-    out[ok] = lut[assoc[ok]]
+    order = np.argsort(first, kind="stable")
+    old_of_new = labels[order]
+    new_of_sorted = np.empty(labels.size, np.int64)  # (a search in the sorted labels, never a table indexed
+    new_of_sorted[order] = np.arange(labels.size)    # by label value: a label may be 2^62)
+    vals = assoc[ok]
+    pos = np.minimum(np.searchsorted(labels, vals), max(labels.size - 1, 0))
+    found = (labels[pos] == vals) if labels.size else np.zeros(vals.shape, bool)
+    out[ok] = np.where(found, new_of_sorted[pos] if labels.size else -1, -1)
     return out, old_of_new
 
 

@@ -37,8 +37,11 @@ and the other in-flight runs are resubmitted.
 Dataset cache: ``datasets/<dataset_id>.json`` records the SHA-256 of the dataset file written for that id;
 a cached file whose bytes no longer match (swapped, truncated) is simulated again instead of being reused.
 
-Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id and every
-artefact exists. Failed and missing runs are (re)done. ``resume=False`` redoes everything.
+Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id, every
+artefact exists, the sha256 it records of every file a later step reads (config, dataset, result, metrics)
+matches, and the shared ``datasets/<dataset_id>.h5`` its result records still holds the same bytes. Failed
+and missing runs, and runs whose status records no hashes (an older slamcli), are (re)done.
+``resume=False`` redoes everything.
 
 Parallel execution has two phases: each shared dataset is simulated once (one task per dataset, written under
 a temporary name and renamed), and as soon as it exists its runs are submitted one task each, so the runs of
@@ -184,28 +187,57 @@ def run_status(exp_dir: Path, run_id: str) -> str:
     st = read_json(d / "status.json")
     if st is None or st.get("run_id") != run_id:
         return MISSING
-    if st.get("status") == COMPLETED and all((d / a).exists() for a in ARTEFACTS) and _artefacts_valid(d, st):
+    if (st.get("status") == COMPLETED and all((d / a).exists() for a in ARTEFACTS) and _artefacts_valid(d, st)
+            and _shared_dataset_valid(exp_dir, st)):
         return COMPLETED
     return FAILED if st.get("status") == FAILED else MISSING
 
 
-#: artefacts whose sha256 a completed run records in status.json and a resume checks (the dataset is
-#: checked by its own sidecar)
-HASHED = ("config.json", "result.h5", "metrics.json")
+#: artefacts whose sha256 a completed run records in status.json and a resume checks: every file a later
+#: step (aggregate, plot, evaluate, export) reads. ``dataset.h5`` is a hard link to the shared
+#: ``datasets/<id>.h5`` (checked by its own sidecar): a corrupted inode is caught through both names.
+HASHED = ("config.json", "dataset.h5", "result.h5", "metrics.json")
 
 
 def _artefacts_valid(d: Path, st: dict[str, Any]) -> bool:
-    """Whether the finished run ``d`` still holds what it recorded: every hash in ``status.json`` matches
-    and ``metrics.json`` is a JSON object. A run written before hashes were recorded is checked by the
-    schema part only. A run that fails is redone by the resume (a corrupted ``metrics.json`` value never
-    reaches results.csv)."""
+    """Whether the finished run ``d`` still holds what it recorded: a hash in ``status.json`` for every
+    :data:`HASHED` file, each matching the file, and ``metrics.json`` a JSON object. A run without a hash
+    of one of them (written by an older slamcli) is redone, as is any run that fails here (a corrupted
+    ``metrics.json`` value never reaches results.csv)."""
     recorded = st.get("sha256")
-    if isinstance(recorded, dict):
-        for name in HASHED:
-            if recorded.get(name) != file_sha256(d / name):
-                log.warning("%s: %s does not match its recorded hash; the run is redone", d, name)
-                return False
+    if not isinstance(recorded, dict):
+        log.warning("%s: status.json records no sha256 of its files; the run is redone", d)
+        return False
+    for name in HASHED:
+        if recorded.get(name) is None or recorded.get(name) != _cached_sha256(d / name):
+            log.warning("%s: %s does not match its recorded hash (or has none); the run is redone", d, name)
+            return False
     return isinstance(read_json(d / "metrics.json"), dict)
+
+
+def _shared_dataset_valid(exp_dir: Path, st: dict[str, Any]) -> bool:
+    """Whether ``datasets/<dataset_id>.h5`` — the file the run's result records, which evaluate, plot and
+    export read — still holds the bytes of the run's ``dataset.h5`` (as its sidecar says too)."""
+    shared = exp_dir / "datasets" / f"{st.get('dataset_id')}.h5"
+    rec = read_json(shared.with_suffix(".json")) or {}
+    want = (st.get("sha256") or {}).get("dataset.h5")
+    ok = shared.is_file() and not shared.is_symlink() and rec.get("file_sha256") == want == _cached_sha256(shared)
+    if not ok:
+        log.warning("%s: missing or does not match the run's dataset.h5; the run is redone", shared)
+    return ok
+
+
+#: (device, inode, size, mtime) → sha256 of files hashed by this process: the runs of one dataset share
+#: one inode (hard links), which a resume then reads once instead of once per run
+_SHA_BY_INODE: dict[tuple[int, int, int, int], str] = {}
+
+
+def _cached_sha256(path: Path) -> str:
+    st = os.stat(path)
+    key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    if key not in _SHA_BY_INODE:
+        _SHA_BY_INODE[key] = file_sha256(path)
+    return _SHA_BY_INODE[key]
 
 
 def clean_temporaries(exp_dir: Path) -> int:
@@ -274,7 +306,7 @@ def file_sha256(path: Path) -> str:
 @contextlib.contextmanager
 def _run_log(path: Path) -> Iterator[logging.Logger]:
     """Send every log record of this process to ``path`` while the run lasts."""
-    handler = logging.FileHandler(path, mode="a", encoding="utf-8")
+    handler = logging.FileHandler(path, mode="a", encoding="utf-8", errors="backslashreplace")  # (file names)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()
     old_level = root.level
