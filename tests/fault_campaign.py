@@ -493,11 +493,6 @@ def _mat_edit(**changes):
     return edit
 
 
-def _reverse_edges(p: Path) -> None:
-    lines = [s.split() for s in p.read_text().splitlines()]
-    p.write_text("\n".join(" ".join([*s[:1], s[2], s[1], *s[3:]] if s and s[0] == "EDGE_SE2" else s) for s in lines))
-
-
 def wrong_cases(W: World) -> list[Fault]:
     import numpy as np
 
@@ -510,7 +505,6 @@ def wrong_cases(W: World) -> list[Fault]:
 
     g = lambda cid, edit: _text_copy(W, W.g2o, cid, edit)
     add("g2o-dx-1e300", ["import", "g2o", g("g2o-dx", lambda p: _set_field(p, 0, 3, "1e300"))], "g2o-dx")
-    add("g2o-only-reversed-edges", ["import", "g2o", g("g2o-rev", _reverse_edges)], "g2o-rev")
     add("g2o-dt-1e-320", ["import", "g2o", W.g2o, "--dt", "1e-320"], "wrong-g2o-dt-1e-320.h5")
     for sigma in ("1e-200", "1e200"):
         br = g(f"g2o-br-{sigma}", lambda p, s=sigma: p.write_text(p.read_text() + f"BR 1 9000 0.3 2.0 {s} 0.1\n"))

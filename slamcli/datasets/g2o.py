@@ -242,7 +242,7 @@ def _read_record(g: dict, tag: str, vals: list[float], ids: list[int], lineno: i
         cov = np.diag([sr * sr, sb * sb])
         with np.errstate(divide="ignore", over="ignore"):
             if not np.all(np.isfinite(1.0 / np.diag(cov))) or not np.all(np.isfinite(cov)):
-                raise ValueError(f"{tag} σ's give a covariance without a finite inverse ({sr:g}, {sb:g})")
+                raise ValueError(f"{tag} σ's ({sr:g}, {sb:g}) give a covariance that is not positive definite with a finite inverse")
         g["sightings"].append((ids[0], ids[1], np.array([r, b]), cov, np.linalg.inv(cov), lineno, "range_bearing"))
     else:  # EDGE_SE2_XY / LANDMARK2 / LANDMARK
         if convention == "gtsam":

@@ -56,7 +56,7 @@ from slamcli.models.observation import (
     range_bearing,
     range_bearing_jacobians,
 )
-from slamcli.models.se2 import compose, rot2
+from slamcli.models.se2 import rot2
 from slamcli.params import check_allocation
 from slamcli.solvers.base import BaseSolver
 from slamcli.solvers.frontend import group_detections, inside_declared_size, resolve_motion_input
