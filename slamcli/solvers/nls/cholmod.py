@@ -1,6 +1,7 @@
 """CHOLMOD's sparse Cholesky (Chen, Davis, Hager & Rajamanickam 2008) through CVXOPT, whose binary wheel ships
-SuiteSparse and OpenBLAS: ``P H Pᵀ = L Lᵀ`` (supernodal, dense BLAS-3 blocks; the default) or ``P H Pᵀ = L D Lᵀ``
-(simplicial) of a sparse symmetric ``H`` given by its lower triangle (CSC, ``(n, n)``).
+SuiteSparse and OpenBLAS: ``P H Pᵀ = L Lᵀ`` (supernodal, dense BLAS-3 blocks) or ``P H Pᵀ = L D Lᵀ``
+(simplicial) of a sparse symmetric ``H`` given by its lower triangle (CSC, ``(n, n)``); by default CHOLMOD
+chooses between them by the flops per entry of ``L``.
 
 The fill-reducing ordering ``P`` (AMD) and the symbolic factorisation are computed once per pattern
 (:class:`CholmodFactor`); :meth:`CholmodFactor.refactor` refills the numeric values in place. CVXOPT's factor
@@ -18,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+#: CHOLMOD's ``supernodal`` option by mode
+_MODES = {"simplicial": 0, "auto": 1, "supernodal": 2}
 #: CVXOPT's solve codes: A x = b, D x = b, and Pᵀ x = b (x = P b)
 _SYS_A, _SYS_D, _SYS_P = 0, 6, 7
 
@@ -45,22 +48,23 @@ def lower_csc(H: sp.spmatrix) -> sp.csc_matrix:
 
 
 class CholmodFactor:
-    """``P H Pᵀ = L Lᵀ`` (``mode="supernodal"``) or ``L D Lᵀ`` (``"simplicial"``) on a fixed lower pattern.
+    """``P H Pᵀ = L Lᵀ`` (``mode="supernodal"``), ``L D Lᵀ`` (``"simplicial"``) or CHOLMOD's choice (``"auto"``)
+    on a fixed lower pattern.
 
     lower : csc (n, n)   the pattern of ``H``'s lower triangle, canonical (:func:`lower_csc`); its values are
                          not read; it stores every diagonal entry. Every later ``lo_data`` is data on
                          exactly this pattern.
     """
 
-    def __init__(self, lower: sp.csc_matrix, mode: str = "supernodal") -> None:
+    def __init__(self, lower: sp.csc_matrix, mode: str = "auto") -> None:
         import cvxopt
         from cvxopt import cholmod
 
-        if mode not in ("simplicial", "supernodal"):
-            raise ValueError(f"mode must be simplicial or supernodal, got {mode!r}")
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
         self._cvx, self._chol = cvxopt, cholmod
         self.n = int(lower.shape[0])
-        self.ldl = mode == "simplicial"
+        self.mode = mode
         self.indptr, self.indices = lower.indptr, lower.indices
         if not (lower.has_canonical_format and np.all(np.diff(lower.indptr) > 0)
                 and np.array_equal(lower.indices[lower.indptr[:-1]], np.arange(self.n))):
@@ -74,14 +78,23 @@ class CholmodFactor:
         self.failed_column: int | None = None
 
     def _options(self) -> None:
-        self._chol.options["supernodal"] = 0 if self.ldl else 2
+        self._chol.options["supernodal"] = _MODES[self.mode]
 
     def _analyse(self) -> None:
-        """The ordering and symbolic factorisation of the pattern."""
+        """The ordering and symbolic factorisation of the pattern (``auto``: CHOLMOD chooses the kind by the
+        flops per entry of ``L``; :attr:`ldl` is known after the first numeric factorisation)."""
         self._options()
         self._F = self._chol.symbolic(self._M, uplo="L")
         self._analysed = True
         self._perm = None
+        self.ldl = {"simplicial": True, "supernodal": False}.get(self.mode)
+
+    def _is_supernodal(self) -> bool:
+        try:
+            self._chol.diag(self._F)  # defined for a numeric supernodal LLᵀ only
+        except ValueError:
+            return False
+        return True
 
     def matches(self, lower: sp.csc_matrix) -> bool:
         """Whether ``lower`` has this factor's pattern (same object arrays or equal)."""
@@ -105,6 +118,8 @@ class CholmodFactor:
             self.failed_column = self._column_at(int(exc.args[0]) if exc.args else 0)
             return False
         self._numeric = True
+        if self.ldl is None:
+            self.ldl = not self._is_supernodal()
         if self.ldl:
             d = self.pivots()
             bad = np.flatnonzero(~(d > 0.0))
@@ -181,7 +196,7 @@ class CholmodFactor:
         # CHOLMOD hands its arrays over: the factor is symbolic again, and a supernodal one simplicial (it is
         # analysed anew before its next factorisation)
         Lc = self._chol.getfactor(self._F)
-        self._numeric, self._analysed = False, self.ldl
+        self._numeric, self._analysed = False, bool(self.ldl)
         if saved is not None:
             self._M.V = saved
         L = sp.csc_matrix((np.asarray(Lc.V).ravel(), np.asarray(Lc.CCS[1]).ravel(),

@@ -576,12 +576,13 @@ class _CholmodFactor:
     """Sparse ``P H Pᵀ = L Lᵀ`` by CHOLMOD (:class:`~slamcli.solvers.nls.cholmod.CholmodFactor`): the
     fill-reducing ordering ``P`` and the symbolic factorisation are computed once from the fixed lower pattern of
     ``H``; :meth:`factorize_lower` refills the numeric values in place and returns False when ``H`` is not
-    positive definite. Supernodal (dense BLAS-3 blocks with the OpenBLAS CVXOPT ships) by default;
-    ``mode="simplicial"`` takes the ``LDLᵀ`` with a positive-pivot test."""
+    positive definite. ``mode="auto"`` lets CHOLMOD choose by the flops per entry of ``L``: the supernodal
+    ``LLᵀ`` (dense BLAS-3 blocks with the OpenBLAS CVXOPT ships) for large fronts, else the simplicial ``LDLᵀ``
+    with a positive-pivot test."""
 
     name = "cholmod"
 
-    def __init__(self, asm: Assembler, mode: str = "supernodal") -> None:
+    def __init__(self, asm: Assembler, mode: str = "auto") -> None:
         from slamcli.solvers.nls.cholmod import CholmodFactor
 
         self.asm = asm
