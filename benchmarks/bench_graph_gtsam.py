@@ -168,9 +168,9 @@ def sweep_rows() -> list[dict]:
              "slamcli": round(s["worker_start_cpu_s"], 3), "wall_s": round(s["worker_start_wall_s"], 3)}]
 
 
-def machine_state(load_before: tuple[float, float, float]) -> str:
-    """One line naming the machine state of a run: cores, load averages before and after, BLAS threads, and the
-    sparse linear solver ``linear_solver="auto"`` takes on this install."""
+def machine_state(load_before: tuple[float, float, float], parts: tuple[str, ...]) -> str:
+    """One line naming the machine state of a run: the parts it measured, cores, load averages before and after,
+    BLAS threads, and the sparse linear solver ``linear_solver="auto"`` takes on this install."""
     from importlib.metadata import PackageNotFoundError, version
 
     from slamcli.solvers.nls import cholmod_available
@@ -180,8 +180,11 @@ def machine_state(load_before: tuple[float, float, float]) -> str:
     except PackageNotFoundError:
         cvx = "CHOLMOD" if cholmod_available() else "SciPy SuperLU"
     after = os.getloadavg()
-    return (f"Run {time.strftime('%Y-%m-%d')}: linear solver {cvx}; {os.cpu_count()} cores, load average "
-            f"{load_before[0]:.2f} before / {after[0]:.2f} after; single-threaded BLAS on both sides.")
+    kept = [p for p in PARTS if p not in parts]
+    return (f"Run {time.strftime('%Y-%m-%d')} of {', '.join(parts)}"
+            + (f" (rows of {', '.join(kept)} kept from earlier runs)" if kept else "")
+            + f": linear solver {cvx}; {os.cpu_count()} cores, load average {load_before[0]:.2f} before / "
+            f"{after[0]:.2f} after; single-threaded BLAS on both sides.")
 
 
 def write_markdown(rows: list[dict], path: Path, kept_lines: dict[tuple, str] | None = None,
@@ -236,7 +239,7 @@ def run(quick: bool = False) -> list[dict]:
     md_lines = previous_md_lines(HERE / "results" / "graph_gtsam.md")
     kept_lines = {k: md_lines[k] for k in ((r["case"], r["what"]) for r in kept if r.get("case") in
                                            {CASES[p] for p in PARTS if p not in parts}) if k in md_lines}
-    write_markdown(rows, HERE / "results" / "graph_gtsam.md", kept_lines, machine_state(load0))
+    write_markdown(rows, HERE / "results" / "graph_gtsam.md", kept_lines, machine_state(load0, parts))
     print(f"graph_gtsam: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     return rows
 

@@ -460,7 +460,7 @@ def certify_pose_graph(poses_xyt, ij, xyt, info, workspace=None) -> Certificate:
     eta = ETA_REL * float(np.max(np.abs(S_lo[asm.lo_diag_pos]))) if n else 0.0
     shifted = S_lo.copy()
     shifted[asm.lo_diag_pos] += eta
-    if lin.name == "cholmod":  # the refinement's symbolic analysis: a numeric LDLᵀ with a positive-pivot test
+    if lin.name == "cholmod":  # the refinement's symbolic analysis: a numeric Cholesky, which fails at a pivot ≤ 0
         certified = nls.factorize_lower(lin, asm, shifted)
         solve = _finite_solve(lin) if certified else None
     else:
@@ -556,8 +556,6 @@ def _is_positive_definite(A: sp.csc_matrix):
         except RuntimeError:
             return False, None
         return bool(np.array_equal(lu.perm_r, lu.perm_c) and np.all(lu.U.diagonal() > 0)), lu.solve
-    # the simplicial LDLᵀ — with the reference BLAS CHOLMOD is linked to, 2-3× faster than the supernodal LLᵀ
-    # on these matrices (City10000: 0.13 → 0.05 s)
     factor = nls.cholmod_spd_factor(A)
     return factor is not None, factor
 

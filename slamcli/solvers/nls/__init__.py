@@ -18,8 +18,8 @@ Normal equations (Gauss-Newton approximation of the Hessian; IRLS weights ``w_f`
 factor's columns) computed once per problem; every iteration is one vectorised evaluation per block, the pair
 products into buffers kept across iterations and one ``np.bincount`` scatter — no Python loop over factors
 (:class:`Assembler`; the full symmetric matrix by a precomputed gather). LM's trial steps evaluate residuals
-only (``FactorBlock.residual``). Linear systems (:func:`make_linear_solver`): CHOLMOD's simplicial
-``LDLᵀ`` with a positive-pivot test (:mod:`~slamcli.solvers.nls.cholmod`) with its fill-reducing ordering
+only (``FactorBlock.residual``). Linear systems (:func:`make_linear_solver`): CHOLMOD's supernodal
+``LLᵀ`` (:mod:`~slamcli.solvers.nls.cholmod`) with its fill-reducing ordering
 and symbolic analysis done once per problem and the numeric factorisation refilled in place; or SciPy's SuperLU in symmetric mode with the
 minimum-degree ordering of the first factorisation reused; or the chain solver (:class:`_ChainSolver`,
 banded Cholesky + dense border Schur complement). ``H`` is positive semi-definite in exact arithmetic, but

@@ -1,13 +1,14 @@
 """CHOLMOD's sparse Cholesky (Chen, Davis, Hager & Rajamanickam 2008) through CVXOPT, whose binary wheel ships
-SuiteSparse: ``P H Pᵀ = L D Lᵀ`` (simplicial) or ``P H Pᵀ = L Lᵀ`` (supernodal) of a sparse symmetric ``H``
-given by its lower triangle (CSC, ``(n, n)``).
+SuiteSparse and OpenBLAS: ``P H Pᵀ = L Lᵀ`` (supernodal, dense BLAS-3 blocks) or ``P H Pᵀ = L D Lᵀ``
+(simplicial) of a sparse symmetric ``H`` given by its lower triangle (CSC, ``(n, n)``); by default CHOLMOD
+chooses between them by the flops per entry of ``L``.
 
 The fill-reducing ordering ``P`` (AMD) and the symbolic factorisation are computed once per pattern
 (:class:`CholmodFactor`); :meth:`CholmodFactor.refactor` refills the numeric values in place. CVXOPT's factor
 is opaque, so what it does not hand out is read through solves with the factor's own pieces::
 
     P · [0, 1, …, n−1]ᵀ = perm        (perm[k] = column of H eliminated k-th)
-    D⁻¹ · 1            = 1 / d        (the pivots of the LDLᵀ)
+    D⁻¹ · 1            = 1 / d        (the pivots of the simplicial LDLᵀ)
 
 and ``L`` itself (:meth:`CholmodFactor.ld_at`) is handed over by turning the numeric factor back into a
 symbolic one; the factor refactors its previous values before its next solve.
@@ -18,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+#: CHOLMOD's ``supernodal`` option by mode
+_MODES = {"simplicial": 0, "auto": 1, "supernodal": 2}
 #: CVXOPT's solve codes: A x = b, D x = b, and Pᵀ x = b (x = P b)
 _SYS_A, _SYS_D, _SYS_P = 0, 6, 7
 
@@ -45,22 +48,23 @@ def lower_csc(H: sp.spmatrix) -> sp.csc_matrix:
 
 
 class CholmodFactor:
-    """``P H Pᵀ = L D Lᵀ`` (``mode="simplicial"``) or ``L Lᵀ`` (``"supernodal"``) on a fixed lower pattern.
+    """``P H Pᵀ = L Lᵀ`` (``mode="supernodal"``), ``L D Lᵀ`` (``"simplicial"``) or CHOLMOD's choice (``"auto"``)
+    on a fixed lower pattern.
 
     lower : csc (n, n)   the pattern of ``H``'s lower triangle, canonical (:func:`lower_csc`); its values are
                          not read; it stores every diagonal entry. Every later ``lo_data`` is data on
                          exactly this pattern.
     """
 
-    def __init__(self, lower: sp.csc_matrix, mode: str = "simplicial") -> None:
+    def __init__(self, lower: sp.csc_matrix, mode: str = "auto") -> None:
         import cvxopt
         from cvxopt import cholmod
 
-        if mode not in ("simplicial", "supernodal"):
-            raise ValueError(f"mode must be simplicial or supernodal, got {mode!r}")
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
         self._cvx, self._chol = cvxopt, cholmod
         self.n = int(lower.shape[0])
-        self.ldl = mode == "simplicial"
+        self.mode = mode
         self.indptr, self.indices = lower.indptr, lower.indices
         if not (lower.has_canonical_format and np.all(np.diff(lower.indptr) > 0)
                 and np.array_equal(lower.indices[lower.indptr[:-1]], np.arange(self.n))):
@@ -68,15 +72,29 @@ class CholmodFactor:
         cols = np.repeat(np.arange(self.n), np.diff(lower.indptr))
         self._M = cvxopt.spmatrix(1.0, lower.indices, cols, (self.n, self.n))  # CSC in the same order
         del cols
-        self._options()
-        self._F = cholmod.symbolic(self._M, uplo="L")
+        self._analyse()
         self._numeric = False  # whether _F holds the numeric factor of the values in _M
         self._have_values = False
-        self._perm: np.ndarray | None = None
         self.failed_column: int | None = None
 
     def _options(self) -> None:
-        self._chol.options["supernodal"] = 0 if self.ldl else 2
+        self._chol.options["supernodal"] = _MODES[self.mode]
+
+    def _analyse(self) -> None:
+        """The ordering and symbolic factorisation of the pattern (``auto``: CHOLMOD chooses the kind by the
+        flops per entry of ``L``; :attr:`ldl` is known after the first numeric factorisation)."""
+        self._options()
+        self._F = self._chol.symbolic(self._M, uplo="L")
+        self._analysed = True
+        self._perm = None
+        self.ldl = {"simplicial": True, "supernodal": False}.get(self.mode)
+
+    def _is_supernodal(self) -> bool:
+        try:
+            self._chol.diag(self._F)  # defined for a numeric supernodal LLᵀ only
+        except ValueError:
+            return False
+        return True
 
     def matches(self, lower: sp.csc_matrix) -> bool:
         """Whether ``lower`` has this factor's pattern (same object arrays or equal)."""
@@ -89,6 +107,8 @@ class CholmodFactor:
         pivot ``d > 0``). When it is not, :attr:`failed_column` names the column of ``H`` where it fails."""
         self.failed_column = None
         self._numeric = False
+        if not self._analysed:
+            self._analyse()
         self._M.V = self._cvx.matrix(np.asarray(lo_data, dtype=float))
         self._have_values = True
         self._options()
@@ -98,6 +118,8 @@ class CholmodFactor:
             self.failed_column = self._column_at(int(exc.args[0]) if exc.args else 0)
             return False
         self._numeric = True
+        if self.ldl is None:
+            self.ldl = not self._is_supernodal()
         if self.ldl:
             d = self.pivots()
             bad = np.flatnonzero(~(d > 0.0))
@@ -159,8 +181,9 @@ class CholmodFactor:
         return int(self._perm[min(k, self.n - 1)])
 
     def ld_at(self, lo_data: np.ndarray) -> sp.csc_matrix | None:
-        """``L`` with ``D`` on its diagonal of ``H`` given by ``lo_data`` (simplicial), as CSC with rows sorted and
-        the symbolic pattern kept (explicit zeros included); None when ``H`` is not positive definite
+        """``L`` (unit lower) with ``D`` on its diagonal, ``P H Pᵀ = L D Lᵀ``, of ``H`` given by ``lo_data``, as CSC
+        with rows sorted and the symbolic pattern kept (explicit zeros included; from a supernodal ``C Cᵀ``:
+        ``d = diag(C)²``, ``L = C diag(C)⁻¹``); None when ``H`` is not positive definite
         (:attr:`failed_column` says where). The factor keeps its earlier values: they are refactored before
         its next solve."""
         saved = self._M.V if self._have_values else None
@@ -170,13 +193,19 @@ class CholmodFactor:
                 self._M.V = saved
             return None
         self.perm()
-        Lc = self._chol.getfactor(self._F)  # CHOLMOD hands its arrays over: the factor is symbolic again
-        self._numeric = False
+        # CHOLMOD hands its arrays over: the factor is symbolic again, and a supernodal one simplicial (it is
+        # analysed anew before its next factorisation)
+        Lc = self._chol.getfactor(self._F)
+        self._numeric, self._analysed = False, bool(self.ldl)
         if saved is not None:
             self._M.V = saved
         L = sp.csc_matrix((np.asarray(Lc.V).ravel(), np.asarray(Lc.CCS[1]).ravel(),
                            np.asarray(Lc.CCS[0]).ravel()), shape=(self.n, self.n))
         L.sort_indices()
+        if not self.ldl:  # C Cᵀ → L D Lᵀ, column by column
+            c = L.diagonal()
+            L.data /= np.repeat(c, np.diff(L.indptr))
+            L.setdiag(c * c)
         return L
 
 

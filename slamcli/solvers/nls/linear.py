@@ -535,16 +535,15 @@ def factorize_symmetric(H: sp.csc_matrix, ordering: str = "MMD_AT_PLUS_A"):
 
 
 def cholmod_spd_factor(H: sp.csc_matrix):
-    """CHOLMOD's simplicial ``LDLᵀ`` of a sparse symmetric ``H`` (callable: ``F(b) = H⁻¹b``), or None when ``H``
-    is not positive definite (a pivot ≤ 0): the arithmetic of ``LLᵀ`` without its square roots, so every pivot
-    ``D > 0`` iff the Cholesky factor exists."""
+    """CHOLMOD's Cholesky factor of a sparse symmetric ``H`` (callable: ``F(b) = H⁻¹b``), or None when ``H`` is
+    not positive definite (a pivot ≤ 0)."""
     from slamcli.solvers.nls import cholmod
 
     return cholmod.spd_factor(H)
 
 
 def solve_spd(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
-    """``H⁻¹ rhs`` for a sparse symmetric positive definite ``H``: CHOLMOD's simplicial ``LDLᵀ`` (AMD ordering)
+    """``H⁻¹ rhs`` for a sparse symmetric positive definite ``H``: CHOLMOD's Cholesky (AMD ordering)
     when it imports, else :func:`factorize_symmetric` (SuperLU, minimum degree).
 
     Raises
@@ -574,20 +573,20 @@ def cholmod_available() -> bool:
 
 
 class _CholmodFactor:
-    """Sparse ``P H Pᵀ = L D Lᵀ`` by CHOLMOD (:class:`~slamcli.solvers.nls.cholmod.CholmodFactor`): the
+    """Sparse ``P H Pᵀ = L Lᵀ`` by CHOLMOD (:class:`~slamcli.solvers.nls.cholmod.CholmodFactor`): the
     fill-reducing ordering ``P`` and the symbolic factorisation are computed once from the fixed lower pattern of
-    ``H``; :meth:`factorize_lower` refills the numeric values in place. ``H`` is positive definite iff every
-    pivot ``D_jj > 0``; otherwise the factorisation returns False. ``mode="supernodal"`` takes CHOLMOD's
-    supernodal ``LLᵀ`` (dense BLAS-3 blocks) instead of the simplicial ``LDLᵀ``."""
+    ``H``; :meth:`factorize_lower` refills the numeric values in place and returns False when ``H`` is not
+    positive definite. ``mode="auto"`` lets CHOLMOD choose by the flops per entry of ``L``: the supernodal
+    ``LLᵀ`` (dense BLAS-3 blocks with the OpenBLAS CVXOPT ships) for large fronts, else the simplicial ``LDLᵀ``
+    with a positive-pivot test."""
 
     name = "cholmod"
 
-    def __init__(self, asm: Assembler, mode: str = "simplicial") -> None:
+    def __init__(self, asm: Assembler, mode: str = "auto") -> None:
         from slamcli.solvers.nls.cholmod import CholmodFactor
 
         self.asm = asm
         self.F = CholmodFactor(asm.lower_matrix(np.ones(asm.lo_nnz)), mode=mode)
-        self.ldl = mode == "simplicial"
 
     def factorize(self, data: np.ndarray) -> bool:
         """Factorise ``H`` given by data of the full pattern (:meth:`Assembler.linearize`)."""

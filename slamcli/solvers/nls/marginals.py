@@ -293,7 +293,7 @@ def block_marginals(
     locate : ``column → "pose 17"``-style name of the variable owning a column of ``H`` (for messages).
     batch_size : columns of ``H⁻¹`` per batch of the column solve.
     workspace : the ``NlsResult.workspace`` of the optimisation that produced ``H``: when its linear solver is
-        CHOLMOD's simplicial factorisation of ``H``'s pattern, the selected inverse reuses its ordering and
+        CHOLMOD's factorisation of ``H``'s pattern, the selected inverse reuses its ordering and
         symbolic analysis (:func:`cholmod_analysis`).
 
     Returns
@@ -338,10 +338,10 @@ def block_marginals(
 
 def cholmod_analysis(workspace: tuple | None, information: sp.spmatrix):
     """The CHOLMOD factor (symbolic analysis) of an optimisation's workspace ``(Assembler, linear solver)``
-    when it is a simplicial ``LDLᵀ`` analysed on ``information``'s own pattern — the assembler's full pattern
+    when it was analysed on ``information``'s own pattern — the assembler's full pattern
     or its lower triangle (CHOLMOD reads the lower triangle of either) — else None."""
     H = information
-    if not (_simplicial_ldl(workspace) and sp.isspmatrix_csc(H)):
+    if not (_cholmod_workspace(workspace) and sp.isspmatrix_csc(H)):
         return None
     asm, lin = workspace
     # the lower pattern is checked first: the full one is built on first use only
@@ -351,18 +351,18 @@ def cholmod_analysis(workspace: tuple | None, information: sp.spmatrix):
     return None
 
 
-def _simplicial_ldl(workspace: tuple | None) -> bool:
-    """Whether an optimisation's workspace ``(Assembler, linear solver)`` holds CHOLMOD's simplicial ``LDLᵀ``."""
+def _cholmod_workspace(workspace: tuple | None) -> bool:
+    """Whether an optimisation's workspace ``(Assembler, linear solver)`` holds a CHOLMOD factor."""
     if workspace is None:
         return False
     lin = workspace[1]
-    return getattr(lin, "name", "") == "cholmod" and bool(getattr(lin, "ldl", False))
+    return getattr(lin, "name", "") == "cholmod"
 
 
 def result_marginals(res, index_blocks: Sequence[np.ndarray], **kw) -> list[np.ndarray]:
     """:func:`block_marginals` of an optimisation's ``H`` at its estimate (``res``: an ``NlsResult``), world chart.
 
-    When the run factored ``H`` with CHOLMOD's simplicial ``LDLᵀ``, ``H``'s lower triangle at the estimate
+    When the run factored ``H`` with CHOLMOD, ``H``'s lower triangle at the estimate
     (``res.information_lower``, the optimiser's own data) goes straight into a numeric refactorisation with
     the run's symbolic analysis — no full symmetric matrix, no rotation of it. In the body pose chart
     (``J_body = J_world M``, ``M = blkdiag(R(θ_p), 1, …, I)`` orthogonal, so ``Σ_world = M Σ_body Mᵀ``) each
@@ -398,7 +398,7 @@ def _lower_at_estimate(res, sets: list[np.ndarray]):
     conditions fail (then ``res.information`` is used)."""
     ws, lo = getattr(res, "workspace", None), getattr(res, "information_lower", None)
     # only the selected inverse reads a lower triangle, with the run's analysis (H below has its pattern)
-    if lo is None or not _simplicial_ldl(ws) or not cholmod_available():
+    if lo is None or not _cholmod_workspace(ws) or not cholmod_available():
         return None
     asm = ws[0]
     H = asm.lower_matrix(lo)

@@ -33,7 +33,7 @@ supernode (intel: 627 supernodes, 32 levels, 43 buckets; City10000: 3934, 30, 29
 lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels of fronts are alive at once.
 
 The factorisation is CHOLMOD's (:mod:`slamcli.solvers.nls.cholmod`): its fill-reducing ordering (AMD)
-and its simplicial ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
+and its factor as ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
 has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid.
 Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
 """
@@ -83,10 +83,10 @@ class LdlFactor:
 
 
 def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
-    """CHOLMOD's fill-reducing ``L D Lᵀ`` (AMD ordering, simplicial) of a symmetric positive definite ``H``.
+    """CHOLMOD's fill-reducing ``L D Lᵀ`` (AMD ordering) of a symmetric positive definite ``H``.
 
     ``H``: the full symmetric matrix or its lower triangle. ``analysis``: a
-    :class:`~slamcli.solvers.nls.cholmod.CholmodFactor` (simplicial) of ``H``'s lower pattern, e.g. the LM's:
+    :class:`~slamcli.solvers.nls.cholmod.CholmodFactor` of ``H``'s lower pattern, e.g. the LM's:
     its ordering and symbolic factorisation are reused, only the numeric factorisation is paid.
 
     Raises
@@ -98,7 +98,7 @@ def factor_ldl(H: sp.spmatrix, analysis=None) -> LdlFactor:
 
     H = H if sp.isspmatrix_csc(H) else sp.csc_matrix(H)
     lo = H if analysis is not None and analysis.matches(H) else lower_csc(H)
-    F = analysis if analysis is not None and analysis.ldl and analysis.matches(lo) else CholmodFactor(lo)
+    F = analysis if analysis is not None and analysis.matches(lo) else CholmodFactor(lo)
     L = F.ld_at(lo.data)
     if L is None:
         raise NotPositiveDefiniteError("sparse LDLᵀ of H: a pivot ≤ 0", F.failed_column or 0)
