@@ -61,3 +61,7 @@ def test_section_status_and_pm():
     assert "**ok**" in oc.section_status(True, [])
     assert "**FAILED** — a; b" in oc.section_status(False, ["a", "b"])
     assert oc.pm([1.0, 3.0]) == "2.000 ± 1.000" and oc.pm([math.nan]) == "n/a"
+
+
+def test_pm_range():
+    assert oc.pm_range([1.0, 3.0, float("nan")]) == "2.000 ± 1.000 (1.000-3.000)" and oc.pm_range([]) == "n/a"

@@ -35,6 +35,12 @@ def pm(xs, digits: int = 3) -> str:
     return "n/a" if n == 0 else f"{m:.{digits}f} ± {s:.{digits}f}"
 
 
+def pm_range(xs, digits: int = 3) -> str:
+    """``"m ± s (min-max)"`` over the finite values, or ``"n/a"``."""
+    v = _finite(xs)
+    return "n/a" if not v else f"{pm(v, digits)} ({min(v):.{digits}f}-{max(v):.{digits}f})"
+
+
 def lowers(before: Sequence[float], after: Sequence[float], what: str, who: str = "ICM", unit: str = "m",
            item: str = "seed") -> str:
     """Paired comparison per ``item`` (seed or run): "lowers" when ``after < before`` in every one, "does not
@@ -214,7 +220,7 @@ def value_claim(values: Sequence[float], paper: float, what: str, *, kind: str =
     v = [float(x) for x in values if x is not None and math.isfinite(float(x))]
     ev = vd.evidence([paper - x for x in v])
     if not v:
-        return vd.judge(what, ev, "no completed run", unit=unit, kind=kind)
+        return vd.judge(what, ev, f"no seed gives a {quantity}", unit=unit, kind=kind)
     m, s, n = mean_sd(v)
     ms, ps = vd.show(m, paper)
     numbers = f"{quantity} {ms} ± {vd.show(s)[0]} {unit} over {n} seed{'s' if n != 1 else ''} vs the paper's {ps} {unit}"

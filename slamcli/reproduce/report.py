@@ -619,13 +619,14 @@ class Reproduction:
                                  "n_landmarks_est": sc.get("n_landmarks_est")})
             self.log(f"fig5 radius study: ρ = {rho} done")
         table = self._write_table("fig5-radius", rows)
-        md = [[f"{rho:.2f}"] + [oc.pm(g[g.model == m]["paper_err_mean_m"]) for m in ("exact", "surface")]
+        md = [[f"{rho:.2f}"] + [oc.pm_range(g[g.model == m]["paper_err_mean_m"]) for m in ("exact", "surface")]
               + [oc.pm(g[g.model == "exact"]["n_landmarks_est"], 1)] for rho, g in table.groupby("rho_m")]
         sec.add(f"**Surface bias: sensitivity to the post radius** (beyond the paper, which gives no radius). The "
                 f"laser returns come from the posts' surfaces, π/4 · ρ short of the centres on average. "
                 f"`paper-sim1` re-simulated with post radius ρ, seeds {list(cfg['seeds'])}, ICM with S = 0, "
-                f"ς = {cfg['varsigma']}, {cfg['sweeps']} sweeps; final mean landmark error (m, nearest true), mean ± "
-                "standard deviation (table: `runs/fig5-radius/results.csv`):")
+                f"ς = {cfg['varsigma']}, {cfg['sweeps']} sweeps, eq. 13 re-matching; final mean landmark error (m, "
+                "nearest true), mean ± standard deviation (smallest-largest over the seeds; table: "
+                "`runs/fig5-radius/results.csv`):")
         sec.add(_md_table(["post radius ρ (m)", "paper-exact ICM", "surface-aware ICM (`surface = true`)",
                            "landmarks kept by ς (paper-exact, of 63)"], md))
         sec.add("Thinner posts give fewer returns per post, so fewer posts reach ς returns and are kept: the error "

@@ -92,9 +92,10 @@ def worded(v: str, kind: str) -> str:
 
 
 def rule_text(ev: Evidence, unit: str, item: str = "seed") -> str:
-    """Why the rule gave its verdict: the fraction holding and the mean effect against the spread."""
+    """Why the rule gave its verdict: the fraction holding and the mean effect against the spread ("" when no
+    replicate has the numbers; the claim's own numbers then say so)."""
     if ev.n == 0:
-        return f"no {item} has the numbers"
+        return ""
     items = f"{item}s" if ev.n != 1 else item
     text = f"holds in {ev.n_hold} of {ev.n} {items}"
     if math.isfinite(ev.spread):
