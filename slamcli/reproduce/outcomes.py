@@ -70,7 +70,8 @@ def versus_paper(ours: Sequence[float], paper: float, what: str, unit: str = "m"
     if n == 0:
         return f"No completed run gives a {what} to compare with the paper's {paper:g} {unit}."
     rel = "below" if m < paper else ("above" if m > paper else "equal to")
-    return f"Our {what} {m:.3f} ± {s:.3f} {unit} ({n} seed{'s' if n > 1 else ''}) is {rel} the paper's {paper:g} {unit}."
+    m_txt, p_txt = vd.show(m, paper)
+    return f"Our {what} {m_txt} ± {s:.3f} {unit} ({n} seed{'s' if n > 1 else ''}) is {rel} the paper's {p_txt} {unit}."
 
 
 def faster(iters_a: Sequence[int | None], iters_b: Sequence[int | None], name_a: str, name_b: str,
@@ -132,7 +133,8 @@ def ratio(a: Sequence[float], b: Sequence[float], name_a: str, name_b: str, what
         return f"{name_a} and {name_b} cannot be compared on the {what} (no completed runs of both)."
     r = ma / mb
     rel = "lower than" if ma < mb else ("higher than" if ma > mb else "equal to")
-    return f"{name_a}'s {what} ({ma:.3f}) is {rel} {name_b}'s ({mb:.3f}), ratio {r:.2f}."
+    a_txt, b_txt = vd.show(ma, mb)
+    return f"{name_a}'s {what} ({a_txt}) is {rel} {name_b}'s ({b_txt}), ratio {r:.2f}."
 
 
 def nees_verdict(fraction_inside: float, mean_nees: float, lower: float, upper: float, label: str,

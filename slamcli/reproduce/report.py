@@ -18,7 +18,9 @@ order of :data:`SECTIONS`:
 
 Experiment files ship inside the package (:mod:`slamcli.experiments`); another directory is used only when
 given (``--experiments``). Every figure section runs several seeds and reports mean ± standard deviation.
-Every outcome sentence comes from :mod:`slamcli.reproduce.outcomes` with the numbers of this run. A section whose
+Every outcome sentence comes from :mod:`slamcli.reproduce.outcomes` with the numbers of this run, and every claim's
+verdict from the one rule of :mod:`slamcli.reproduce.verdicts`; ``REPORT.md`` opens with the verdict count and a
+table of every judged claim, and ``slamcli reproduce`` prints the count as its last line. A section whose
 solver is missing or whose runs fail is marked FAILED in the report, and ``slamcli reproduce`` then exits
 non-zero with a summary.
 
