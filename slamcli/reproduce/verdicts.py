@@ -11,7 +11,8 @@ s the sample standard deviation of the e_i:
   ≥ 80 % of the replicates but is smaller than the spread or than the stated size);
 * **not reproduced**: otherwise, with no replicate, or when a condition the claim states fails.
 
-Only a paper's claims get these verdicts. Our own hypotheses are *findings*: the same rule, worded supported /
+Only a paper's claims, judged on the paper's own configuration, get these verdicts. Our own hypotheses, and a
+paper's claim judged on a configuration beyond the paper, are *findings*: the same rule, worded supported /
 partly supported / not supported and counted apart. Everything here is a pure function of numbers.
 """
 
@@ -28,7 +29,7 @@ FINDING_WORDS = {REPRODUCED: "supported", PARTLY: "partly supported", NOT_REPROD
 PAPER, FINDING = "paper", "finding"
 #: fraction of replicates in which the effect must hold for "reproduced"
 HOLDS_FRACTION = 0.8
-#: the mean effect exceeds the replicate spread when ē > SPREAD_Z · s/√n (≈ 95 % one-sided, normal)
+#: the mean effect exceeds the replicate spread when ē > SPREAD_Z · s/√n (2 ≈ the normal two-sided 95 % quantile)
 SPREAD_Z = 2.0
 #: most decimals :func:`show` uses to tell two different numbers apart
 MAX_DIGITS = 6
