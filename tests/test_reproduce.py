@@ -34,8 +34,14 @@ def quick_report(tmp_path_factory):
     # the packaged experiment files (no --experiments): what a wheel install runs
     res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(out), "--quiet"])
     assert res.exit_code == 0, res.output
-    assert "all sections completed" in res.output
-    return out, (out / "REPORT.md").read_text()
+    assert "all sections' runs completed" in res.output
+    report = (out / "REPORT.md").read_text()
+    # the CLI's last line is the verdict count, the same count the report opens with
+    last = res.output.strip().splitlines()[-1]
+    assert re.fullmatch(r"Verdicts: \d+ reproduced / \d+ partly reproduced / \d+ not reproduced paper claims; "
+                        r"\d+ findings? of our own\.", last), last
+    assert report.splitlines()[2] == f"**{last}** " + report.splitlines()[2].split("** ", 1)[1]
+    return out, report
 
 
 def test_quick_report_has_every_section_and_figure(quick_report):
@@ -49,10 +55,20 @@ def test_quick_report_has_every_section_and_figure(quick_report):
     for fig in figs:
         assert (out / fig).stat().st_size > 1000
         assert (out / fig).with_suffix(".pdf").stat().st_size > 1000  # PDF beside every PNG
-    assert report.count("Section status:") == 8 and "Every section completed." in report
+    assert report.count("Section status:") == 8 and "Every section completed" not in report
+    summary = report.split("## Summary", 1)[1].split("\n## ", 1)[0]
+    assert "The runs of every section completed. Verdicts: " in summary
     # a section that checks paper claims closes with their verdicts, never with "ok"
     claim_parts = [part for part in report.split("\n## ")[1:] if "**Paper claim" in part]
-    assert len(claim_parts) >= 6  # Figs 5, 6, 7, 9, the init study, post-processing
+    # every claim line of the sections is a row of the opening table, and the count adds up
+    head = report.split("\n## ", 1)[0]
+    table_rows = [ln for ln in head.splitlines() if ln.startswith("| ") and not ln.startswith("| section")]
+    n_lines = report.count("**Paper claim — ") + report.count("**Finding — ")
+    assert len(table_rows) == n_lines >= 12
+    counted = [int(x) for x in re.findall(r"(\d+) (?:reproduced|partly reproduced|not reproduced paper claims|"
+                                          r"findings? of our own)", head.splitlines()[2])]
+    assert sum(counted) == n_lines
+    assert len(claim_parts) >= 5  # Figs 5, 6, 7, 9, post-processing (the init study's answer is a finding)
     for part in claim_parts:
         status = [ln for ln in part.splitlines() if ln.startswith("Section status:")]
         assert len(status) == 1 and "paper claims:" in status[0] and "**ok**" not in status[0]
@@ -239,3 +255,25 @@ def test_icm_figure_sentences_flip_with_the_numbers():
     close = text({"icm-S0": [_stat(0.3, 0.31, 3)]}, paper_final=None, close_rel=0.1)
     far = text({"icm-S0": [_stat(0.3, 0.5, 3)]}, paper_final=None, close_rel=0.1)
     assert "ICM converges close to its initialisation" in close and "ICM moves away" in far
+
+
+def test_icm_figure_claims_are_judged_on_the_paper_configurations_only():
+    from slamcli.reproduce.report import Section
+
+    stats = {"icm-S0": [_stat(0.5, 0.2, 20), _stat(0.6, 0.25, 22), _stat(0.55, 0.2, 21)],
+             "icm-SI": [_stat(0.5, 0.2, 10), _stat(0.6, 0.2, 12), _stat(0.55, 0.2, 11)],
+             "icm-S0-drop": [_stat(0.5, 0.6, 5)] * 3}
+    sec = Section("t", "t")
+    Reproduction._icm_checks(sec, stats, list(stats), paper_final=None, figure="Fig. 5",
+                             paper_labels={"icm-S0", "icm-SI"})
+    whats = [j.what for j in sec.claims]
+    assert whats == ["ICM corrects the initial map (Fig. 5, `icm-S0`)", "ICM corrects the initial map (Fig. 5, `icm-SI`)",
+                     "S = I (odometry used) converges faster than S = 0 (Fig. 5)"]
+    assert [j.verdict for j in sec.claims] == ["reproduced"] * 3
+    text = "\n".join(sec.markdown)
+    assert "ICM (icm-S0-drop) does not lower" in text  # a configuration beyond the paper: a sentence, no verdict
+    close = Section("t", "t")
+    Reproduction._icm_checks(close, {"icm-S0": [_stat(0.616, 0.807, 3)] * 2}, ["icm-S0"], paper_final=None,
+                             close_rel=0.1, figure="Fig. 7", paper_labels={"icm-S0"})
+    assert close.claims[0].what.startswith("ICM converges close to its initialisation (Fig. 7")
+    assert close.claims[0].verdict == "not reproduced" and "0.616 → 0.807 m" in close.claims[0].numbers

@@ -22,6 +22,7 @@ def test_versus_paper_sides():
     assert "is above the paper's 0.148 m" in oc.versus_paper([0.20, 0.30], 0.148, "error")
     assert "equal to" in oc.versus_paper([0.148], 0.148, "error")
     assert "No completed run" in oc.versus_paper([], 0.148, "error")
+    assert "0.1479 ± 0.000 m (1 seed) is below the paper's 0.1480 m" in oc.versus_paper([0.1479], 0.148, "error")
 
 
 def test_faster_flips_and_counts_never_reached():
@@ -61,3 +62,7 @@ def test_section_status_and_pm():
     assert "**ok**" in oc.section_status(True, [])
     assert "**FAILED** — a; b" in oc.section_status(False, ["a", "b"])
     assert oc.pm([1.0, 3.0]) == "2.000 ± 1.000" and oc.pm([math.nan]) == "n/a"
+
+
+def test_pm_range():
+    assert oc.pm_range([1.0, 3.0, float("nan")]) == "2.000 ± 1.000 (1.000-3.000)" and oc.pm_range([]) == "n/a"

@@ -44,6 +44,6 @@ def reproduce_command(
             out, quick=quick, workers=workers, experiments_dir=experiments,
             log=(lambda s: None) if quiet else (lambda s: con.print(s, markup=False)), only=section or None,
         )
-        con.print(result.summary(), markup=False)
+        con.print(result.summary(), markup=False, soft_wrap=True)  # the count stays one line, the last
         if not result.ok:
             raise typer.Exit(1)

@@ -1,15 +1,19 @@
 """Outcome sentences of ``REPORT.md``, computed from a run's numbers.
 
-Every function takes the measured numbers and returns one sentence whose verdict follows from a stated
-condition (the condition is part of the sentence, so a reader can check it against the tables). Nothing here
-reads files or knows the paper's wording; ``tests/test_reproduce_outcomes.py`` feeds numbers on both sides of
-every condition and checks that the wording flips.
+Every function takes the measured numbers and returns one sentence whose wording follows from a stated
+condition (the condition is part of the sentence, so a reader can check it against the tables). The ``*_claim``
+functions judge a claim by the rule of :mod:`slamcli.reproduce.verdicts` and return its
+:class:`~slamcli.reproduce.verdicts.Judgement`. Nothing here reads files; ``tests/test_reproduce_outcomes.py``
+and ``tests/test_reproduce_claims.py`` feed numbers on both sides of every condition and check that the wording
+and the verdict flip.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+
+from slamcli.reproduce import verdicts as vd
 
 
 def _finite(xs) -> list[float]:
@@ -31,6 +35,12 @@ def pm(xs, digits: int = 3) -> str:
     return "n/a" if n == 0 else f"{m:.{digits}f} ± {s:.{digits}f}"
 
 
+def pm_range(xs, digits: int = 3) -> str:
+    """``"m ± s (min-max)"`` over the finite values, or ``"n/a"``."""
+    v = _finite(xs)
+    return "n/a" if not v else f"{pm(v, digits)} ({min(v):.{digits}f}-{max(v):.{digits}f})"
+
+
 def lowers(before: Sequence[float], after: Sequence[float], what: str, who: str = "ICM", unit: str = "m",
            item: str = "seed") -> str:
     """Paired comparison per ``item`` (seed or run): "lowers" when ``after < before`` in every one, "does not
@@ -43,7 +53,8 @@ def lowers(before: Sequence[float], after: Sequence[float], what: str, who: str 
     k = sum(a < b for b, a in pairs)
     mb, _, _ = mean_sd([b for b, _ in pairs])
     ma, _, _ = mean_sd([a for _, a in pairs])
-    nums = f"{mb:.3f} → {ma:.3f} {unit} (mean over {n} {item}{'s' if n > 1 else ''})"
+    b_txt, a_txt = vd.show(mb, ma)
+    nums = f"{b_txt} → {a_txt} {unit} (mean over {n} {item}{'s' if n > 1 else ''})"
     if k == n:
         verdict = f"{who} lowers the {what} in every {item}"
     elif k == 0:
@@ -59,7 +70,8 @@ def versus_paper(ours: Sequence[float], paper: float, what: str, unit: str = "m"
     if n == 0:
         return f"No completed run gives a {what} to compare with the paper's {paper:g} {unit}."
     rel = "below" if m < paper else ("above" if m > paper else "equal to")
-    return f"Our {what} {m:.3f} ± {s:.3f} {unit} ({n} seed{'s' if n > 1 else ''}) is {rel} the paper's {paper:g} {unit}."
+    m_txt, p_txt = vd.show(m, paper)
+    return f"Our {what} {m_txt} ± {s:.3f} {unit} ({n} seed{'s' if n > 1 else ''}) is {rel} the paper's {p_txt} {unit}."
 
 
 def faster(iters_a: Sequence[int | None], iters_b: Sequence[int | None], name_a: str, name_b: str,
@@ -94,7 +106,8 @@ def stays_close(before: Sequence[float], after: Sequence[float], rel_tol: float,
         return "No seed has both numbers; whether ICM stays close to its initialisation cannot be said."
     d = sum(abs(a - b) for b, a in pairs) / len(pairs)
     ref = sum(b for b, _ in pairs) / len(pairs)
-    cond = f"mean |change| of the {what} {d:.3f} m vs {100 * rel_tol:.0f} % of its initial {ref:.3f} m"
+    d_txt, lim_txt = vd.show(d, rel_tol * ref)
+    cond = f"mean |change| of the {what} {d_txt} m vs {100 * rel_tol:.0f} % of its initial {ref:.3f} m = {lim_txt} m"
     if d <= rel_tol * ref:
         return f"ICM converges close to its initialisation ({cond})."
     return f"ICM moves away from its initialisation ({cond})."
@@ -120,19 +133,17 @@ def ratio(a: Sequence[float], b: Sequence[float], name_a: str, name_b: str, what
         return f"{name_a} and {name_b} cannot be compared on the {what} (no completed runs of both)."
     r = ma / mb
     rel = "lower than" if ma < mb else ("higher than" if ma > mb else "equal to")
-    return f"{name_a}'s {what} ({ma:.3f}) is {rel} {name_b}'s ({mb:.3f}), ratio {r:.2f}."
+    a_txt, b_txt = vd.show(ma, mb)
+    return f"{name_a}'s {what} ({a_txt}) is {rel} {name_b}'s ({b_txt}), ratio {r:.2f}."
 
 
 def nees_verdict(fraction_inside: float, mean_nees: float, lower: float, upper: float, label: str,
                  min_fraction: float = 0.9) -> str:
-    """Consistent when ≥ ``min_fraction`` of the steps lie inside the 95 % band, else over-/under-confident
-    by the side the time-averaged NEES falls on."""
+    """The NEES sentence: :func:`nees_note`'s word with the fraction of steps inside the 95 % band and the
+    time-averaged NEES."""
     cond = (f"{100 * fraction_inside:.0f} % of steps inside [{lower:.2f}, {upper:.2f}], condition ≥ "
             f"{100 * min_fraction:.0f} %; time-average {mean_nees:.2f}")
-    if fraction_inside >= min_fraction:
-        return f"`{label}` is consistent ({cond})."
-    side = "overconfident" if mean_nees > upper else ("underconfident" if mean_nees < lower else "inconsistent")
-    return f"`{label}` is {side} ({cond})."
+    return f"`{label}` is {nees_note(fraction_inside, mean_nees, lower, upper, min_fraction)} ({cond})."
 
 
 def section_status(ok: bool, problems: Sequence[str]) -> str:
@@ -140,38 +151,6 @@ def section_status(ok: bool, problems: Sequence[str]) -> str:
     if ok:
         return "Section status: **ok** (every configured run completed)."
     return "Section status: **FAILED** — " + "; ".join(problems) + "."
-
-
-# -- paper-claim verdicts (issue 22): each returns (verdict, sentence); the verdict is one of the three below ---
-REPRODUCED, PARTLY, NOT_REPRODUCED = "reproduced", "partly reproduced", "not reproduced"
-#: a paired difference "exceeds the replicate spread" when |mean d| > SPREAD_Z · sd(d)/√n (≈ 95 %, normal)
-SPREAD_Z = 2.0
-
-
-def _pairs(a, b) -> list[tuple[float, float]]:
-    return [(float(x), float(y)) for x, y in zip(a, b)
-            if x is not None and y is not None and math.isfinite(float(x)) and math.isfinite(float(y))]
-
-
-def claim(what: str, verdict: str, reason: str) -> str:
-    """One claim line of REPORT.md: ``**Paper claim — what: verdict** (reason).``"""
-    return f"**Paper claim — {what}: {verdict}** ({reason})."
-
-
-def paper_value_claim(exact: Sequence[float], aware: Sequence[float], paper: float, what: str) -> tuple[str, str]:
-    """Fig. 5: reproduced when the paper-exact mean ≤ ``paper``; partly when only the surface-aware mean is."""
-    me, se, ne = mean_sd(exact)
-    ma, sa, na = mean_sd(aware)
-    if ne == 0:
-        return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, "no completed paper-exact run")
-    nums = f"paper-exact {me:.3f} ± {se:.3f} m over {ne} seed(s) vs the paper's {paper:g} m"
-    if na:
-        nums += f"; surface-aware {ma:.3f} ± {sa:.3f} m over {na} seed(s)"
-    if me <= paper:
-        return REPRODUCED, claim(what, REPRODUCED, nums)
-    if na and ma <= paper:
-        return PARTLY, claim(what, PARTLY, nums + ": only once the laser's surface bias is modelled")
-    return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, nums)
 
 
 def crossing_radius(radii: Sequence[float], errs: Sequence[float], level: float) -> float | None:
@@ -214,102 +193,172 @@ def sensitivity_sentence(rows: Sequence[dict], paper: float) -> str:
     return f"Final mean landmark error against the post radius (mean over seeds) — {part}: {where}."
 
 
-def map_not_worse_claim(init: Sequence[float], final: Sequence[float], what: str) -> tuple[str, str]:
-    """Fig. 9: ICM should not make the map worse than its initialisation, per seed."""
-    pairs = _pairs(init, final)
+# -- claims: each returns a verdicts.Judgement whose verdict is the rule of slamcli.reproduce.verdicts -----------
+
+
+def _mean(xs) -> float:
+    return mean_sd(xs)[0]
+
+
+def lowers_claim(before: Sequence[float], after: Sequence[float], what: str, *, quantity: str = "mean landmark error",
+                 kind: str = vd.PAPER, item: str = "seed", unit: str = "m",
+                 condition: tuple[bool, str] | None = None) -> vd.Judgement:
+    """"``after`` is lower than ``before``" per ``item`` (e_i = before_i − after_i); ``condition`` = (holds,
+    its wording) of a condition the claim states, which makes the verdict "not reproduced" when it fails."""
+    pairs = vd.paired(before, after)
+    ev = vd.evidence(vd.drop_effects(before, after), condition_ok=None if condition is None else condition[0])
     if not pairs:
-        return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, "no seed has both numbers")
-    worse = sum(f > i for i, f in pairs)
-    mi, _, n = mean_sd([i for i, _ in pairs])
-    mf, _, _ = mean_sd([f for _, f in pairs])
-    nums = f"mean landmark error init {mi:.3f} m → final {mf:.3f} m; ICM made the map worse in {worse} of {n} seed(s)"
-    verdict = REPRODUCED if worse == 0 else (NOT_REPRODUCED if worse == n else PARTLY)
-    return verdict, claim(what, verdict, nums)
+        return vd.judge(what, ev, f"no {item} has both numbers", unit=unit, kind=kind, item=item)
+    b, a = vd.show(_mean([x for x, _ in pairs]), _mean([y for _, y in pairs]))
+    numbers = f"{quantity} {b} → {a} {unit}, mean over {len(pairs)} {item}{'s' if len(pairs) != 1 else ''}"
+    if condition is not None:
+        numbers += f"; stated condition {condition[1]}: {'met' if condition[0] else 'FAILED'}"
+    return vd.judge(what, ev, numbers, unit=unit, kind=kind, item=item)
 
 
-def falls(series: Sequence[Sequence[float]], what: str, frac: float = 0.25) -> str:
-    """"falls" in a seed when the mean of the last ``frac`` of its values is below the mean of the first."""
-    k = n = 0
+def value_claim(values: Sequence[float], paper: float, what: str, *, kind: str = vd.PAPER,
+                quantity: str = "final mean landmark error", unit: str = "m") -> vd.Judgement:
+    """"our value is at most the paper's" per seed (e_i = paper − value_i)."""
+    v = [float(x) for x in values if x is not None and math.isfinite(float(x))]
+    ev = vd.evidence([paper - x for x in v])
+    if not v:
+        return vd.judge(what, ev, f"no seed gives a {quantity}", unit=unit, kind=kind)
+    m, s, n = mean_sd(v)
+    ms, ps = vd.show(m, paper)
+    numbers = f"{quantity} {ms} ± {vd.show(s)[0]} {unit} over {n} seed{'s' if n != 1 else ''} vs the paper's {ps} {unit}"
+    return vd.judge(what, ev, numbers, unit=unit, kind=kind)
+
+
+def bound_claim(values: Sequence[float], bound: float, what: str, *, quantity: str, unit: str,
+                kind: str = vd.PAPER) -> vd.Judgement:
+    """"the value stays below ``bound``" per seed (e_i = bound − value_i)."""
+    v = [float(x) for x in values if x is not None and math.isfinite(float(x))]
+    ev = vd.evidence([bound - x for x in v])
+    if not v:
+        return vd.judge(what, ev, f"no completed run gives the {quantity}", unit=unit, kind=kind)
+    mx, b = vd.show(max(v), bound, base=1)
+    numbers = f"{quantity}: largest {mx} {unit} over {len(v)} seed{'s' if len(v) != 1 else ''}, bound {b} {unit}"
+    return vd.judge(what, ev, numbers, unit=unit, kind=kind)
+
+
+def faster_claim(iters_fast: Sequence[int | None], iters_slow: Sequence[int | None], name_fast: str,
+                 name_slow: str, n_max: int, what: str, criterion: str, kind: str = vd.PAPER) -> vd.Judgement:
+    """"``name_fast`` meets ``criterion`` in fewer iterations" per seed (e_i = slow_i − fast_i; a seed that never
+    meets it counts as ``n_max + 1``)."""
+    def cost(x):
+        return n_max + 1 if x is None else int(x)
+
+    pairs = [(cost(f), cost(s)) for f, s in zip(iters_fast, iters_slow)]
+    ev = vd.evidence([s - f for f, s in pairs])
+    if not pairs:
+        return vd.judge(what, ev, "no seed ran both", unit="iterations", kind=kind)
+    f, s = (sum(p[i] for p in pairs) / len(pairs) for i in (0, 1))
+    numbers = (f"mean first iteration with {criterion}: {f:.1f} ({name_fast}) vs {s:.1f} ({name_slow}); a seed "
+               f"that never reaches it counts as {n_max + 1}")
+    return vd.judge(what, ev, numbers, unit="iterations", kind=kind)
+
+
+def better_initial_claim(init_lower: Sequence[float], init_higher: Sequence[float], what: str, *,
+                         names: tuple[str, str] = ("10 m laser", "full range"), reason: str = "",
+                         kind: str = vd.PAPER) -> vd.Judgement:
+    """"the first initial map is better than the second", paired by replicate (the same dataset seeds):
+    e_i = higher_i − lower_i."""
+    pairs = vd.paired(init_lower, init_higher)
+    ev = vd.evidence([h - lo for lo, h in pairs])
+    if not pairs:
+        return vd.judge(what, ev, "not compared: the runs of both are needed (run the fig5 section in the same "
+                        "invocation)", unit="m", kind=kind)
+    a, b = vd.show(_mean([p[0] for p in pairs]), _mean([p[1] for p in pairs]))
+    numbers = f"initial mean landmark error {a} m ({names[0]}) vs {b} m ({names[1]})" + (f"; {reason}" if reason else "")
+    return vd.judge(what, ev, numbers, unit="m", kind=kind)
+
+
+def stays_close_claim(before: Sequence[float], after: Sequence[float], rel_tol: float, what: str,
+                      kind: str = vd.PAPER) -> vd.Judgement:
+    """"the final error stays within ``rel_tol`` of the initial one" per seed (e_i = rel_tol·before_i −
+    |after_i − before_i|)."""
+    pairs = vd.paired(before, after)
+    ev = vd.evidence([rel_tol * b - abs(a - b) for b, a in pairs])
+    if not pairs:
+        return vd.judge(what, ev, "no seed has both numbers", unit="m", kind=kind)
+    b, a = vd.show(_mean([p[0] for p in pairs]), _mean([p[1] for p in pairs]))
+    numbers = (f"mean landmark error {b} → {a} m, mean over {len(pairs)} seed{'s' if len(pairs) != 1 else ''}; "
+               f"close = within {100 * rel_tol:.0f} % of the initial value")
+    return vd.judge(what, ev, numbers, unit="m", kind=kind)
+
+
+def falls_claim(series: Sequence[Sequence[float]], what: str, *, quantity: str, unit: str, frac: float = 0.25,
+                kind: str = vd.PAPER) -> vd.Judgement:
+    """"``quantity`` falls over the iterations" per seed: e_i = mean of the first ``frac`` of its values − mean
+    of the last ``frac``."""
+    firsts, lasts = [], []
     for s in series:
-        v = _finite(s)
-        if len(v) < 2:
-            continue
-        w = max(1, int(round(frac * len(v))))
-        n += 1
-        k += (sum(v[-w:]) / w) < (sum(v[:w]) / w)
-    if n == 0:
-        return f"No seed has two or more values of the {what}."
-    if k == n:
-        return f"The {what} falls in every seed (mean of the last {100 * frac:.0f} % of sweeps below the first's, {n} seeds)."
-    return f"The {what} falls in {k} of {n} seeds only (mean of the last {100 * frac:.0f} % of sweeps vs the first)."
-
-
-def better_initial_claim(init_short: Sequence[float], init_long: Sequence[float], what: str,
-                         reason: str = "") -> tuple[str, str]:
-    """Fig. 7: the shorter laser should give a lower initial mean landmark error than the long one."""
-    ms, ss, ns = mean_sd(init_short)
-    ml, sl, nl = mean_sd(init_long)
-    if ns == 0 or nl == 0:
-        return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, "not compared: the runs of both lasers are needed "
-                                     "(run the fig5 section in the same invocation)")
-    nums = f"initial mean landmark error {ms:.3f} ± {ss:.3f} m (10 m laser) vs {ml:.3f} ± {sl:.3f} m (full range)"
-    if ms < ml:
-        return REPRODUCED, claim(what, REPRODUCED, nums)
-    return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, nums + (f"; {reason}" if reason else ""))
+        v = [float(x) for x in s if x is not None and math.isfinite(float(x))]
+        if len(v) >= 2:
+            w = max(1, int(round(frac * len(v))))
+            firsts.append(sum(v[:w]) / w)
+            lasts.append(sum(v[-w:]) / w)
+    ev = vd.evidence(vd.drop_effects(firsts, lasts))
+    if not firsts:
+        return vd.judge(what, ev, f"no seed has two or more values of the {quantity}", unit=unit, kind=kind)
+    a, b = vd.show(_mean(firsts), _mean(lasts))
+    numbers = (f"{quantity}, mean of the first {100 * frac:.0f} % of iterations {a} → last {100 * frac:.0f} % {b} "
+               f"{unit}, mean over {len(firsts)} seed{'s' if len(firsts) != 1 else ''}")
+    return vd.judge(what, ev, numbers, unit=unit, kind=kind)
 
 
 def recovery_claim(init: Sequence[float], final: Sequence[float], missed: Sequence[float], n_true: float,
-                   what: str, max_missed_frac: float = 0.05) -> tuple[str, str]:
-    """Fig. 6: recovery from a very bad init — the error falls in every seed and at most ``max_missed_frac`` of
-    the true landmarks are missed; partly when the error falls in some seed; not when in none."""
-    pairs = _pairs(init, final)
+                   what: str, max_missed_frac: float = 0.05, kind: str = vd.PAPER) -> vd.Judgement:
+    """Fig. 6: recovery from a very bad initialisation — the error falls (:func:`lowers_claim`) with the stated
+    condition that at most ``max_missed_frac`` of the true landmarks are missed (mean over seeds)."""
     mm, _, nm = mean_sd(missed)
-    if not pairs:
-        return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, "no seed has both numbers")
-    k = sum(f < i for i, f in pairs)
-    mi, _, n = mean_sd([i for i, _ in pairs])
-    mf, _, _ = mean_sd([f for _, f in pairs])
-    miss_ok = nm > 0 and n_true > 0 and mm <= max_missed_frac * n_true
-    nums = (f"mean landmark error {mi:.3f} → {mf:.3f} m, lower in {k} of {n} seed(s); {mm:.1f} of {n_true:.0f} "
-            f"true landmarks missed (condition ≤ {100 * max_missed_frac:.0f} %)")
-    verdict = REPRODUCED if (k == n and miss_ok) else (PARTLY if k > 0 else NOT_REPRODUCED)
-    return verdict, claim(what, verdict, nums)
+    ok = nm > 0 and n_true > 0 and mm <= max_missed_frac * n_true
+    cond = (f"≤ {100 * max_missed_frac:.0f} % of the {n_true:.0f} true landmarks missed "
+            f"({'n/a' if nm == 0 else f'{mm:.1f}'} missed)")
+    return lowers_claim(init, final, what, condition=(ok, cond), kind=kind)
+
+
+def postprocess_claim(per_base: dict[str, tuple[Sequence[float], Sequence[float]]], what: str) -> vd.Judgement:
+    """Post-processing: ICM lowers the ATE of the base solvers' results, judged over every paired run of every
+    base (e_i = ATE before − ATE after); the numbers say how many runs per base."""
+    before, after, parts = [], [], []
+    for base, (b, a) in per_base.items():
+        pairs = vd.paired(b, a)
+        parts.append(f"lower after `{base}` in {sum(y < x for x, y in pairs)} of {len(pairs)} runs")
+        before += [x for x, _ in pairs]
+        after += [y for _, y in pairs]
+    j = lowers_claim(before, after, what, quantity="ATE RMSE", item="run")
+    return vd.Judgement(j.what, j.kind, j.verdict, j.numbers + ("; " + ", ".join(parts) if parts else ""), j.rule)
+
+
+def claims_status(judgements: Sequence[vd.Judgement], ok: bool, problems: Sequence[str]) -> str:
+    """The closing line of a section that judges claims: runs completed or not, and the verdict count."""
+    c = vd.count(judgements)
+    parts = [f"{c[v]} {v}" for v in vd.VERDICTS if c[v]]
+    text = ("paper claims: " + ", ".join(parts)) if parts else "no paper claim checked"
+    if c[vd.FINDING]:
+        text += f"; {c[vd.FINDING]} finding{'s' if c[vd.FINDING] != 1 else ''} of our own"
+    if not ok:
+        return "Section status: **FAILED** — " + "; ".join(problems) + f"; {text}."
+    return f"Section status: every configured run completed; {text}."
+
+
+def nees_note(fraction_inside: float, mean_nees: float, lower: float, upper: float,
+              min_fraction: float = 0.9) -> str:
+    """The NEES table's note: "consistent" when ≥ ``min_fraction`` of the steps lie inside the 95 % band, else
+    over-/under-confident by the side the time-averaged NEES falls on ("inconsistent" when inside it)."""
+    if fraction_inside >= min_fraction:
+        return "consistent"
+    return "overconfident" if mean_nees > upper else ("underconfident" if mean_nees < lower else "inconsistent")
 
 
 def spread(a: Sequence[float], b: Sequence[float], name_a: str, name_b: str, what: str) -> str:
-    """Paired difference per replicate of ``a − b`` against its spread: "exceeds the replicate spread" when
-    |mean d| > SPREAD_Z · sd(d)/√n (n ≥ 2)."""
-    d = [x - y for x, y in _pairs(a, b)]
-    md, sd, n = mean_sd(d)
-    if n < 2:
+    """Paired difference per replicate of ``a − b`` against the replicate spread of
+    :mod:`slamcli.reproduce.verdicts` (SPREAD_Z · s/√n, n ≥ 2): "exceeds" when |mean d| is larger."""
+    ev = vd.evidence([x - y for x, y in vd.paired(a, b)])
+    if ev.n < 2:
         return f"{name_a} and {name_b}: fewer than two paired replicates, the {what} difference is not tested."
-    se = sd * math.sqrt(n / (n - 1)) / math.sqrt(n)  # sample sd / √n
-    rel = "exceeds" if abs(md) > SPREAD_Z * se else "is within"
-    return (f"{name_a} − {name_b}, {what}: {md:+.3f} (paired over {n} replicates, standard error {se:.3f}) — "
-            f"{rel} the replicate spread (|mean| vs {SPREAD_Z:g} × standard error = {SPREAD_Z * se:.3f}).")
-
-
-def postprocess_claim(per_base: dict[str, tuple[Sequence[float], Sequence[float]]], what: str) -> tuple[str, str]:
-    """Post-processing: reproduced when ICM lowers the ATE in every run of every base solver; partly when in
-    some; not when in none. ``per_base``: base → (ATE before, ATE after) per run."""
-    parts, k_all, n_all = [], 0, 0
-    for base, (before, after) in per_base.items():
-        pairs = _pairs(before, after)
-        k = sum(a < b for b, a in pairs)
-        parts.append(f"after `{base}` in {k} of {len(pairs)} runs")
-        k_all, n_all = k_all + k, n_all + len(pairs)
-    if n_all == 0:
-        return NOT_REPRODUCED, claim(what, NOT_REPRODUCED, "no paired run")
-    verdict = REPRODUCED if k_all == n_all else (PARTLY if k_all else NOT_REPRODUCED)
-    return verdict, claim(what, verdict, "ICM lowers the ATE " + ", ".join(parts))
-
-
-def claims_status(verdicts: Sequence[str], ok: bool, problems: Sequence[str]) -> str:
-    """The closing line of a paper-claim section: runs completed or not, and the count of each verdict —
-    never "ok" when a claim was not reproduced."""
-    counts = [f"{sum(v == w for v in verdicts)} {w}" for w in (REPRODUCED, PARTLY, NOT_REPRODUCED)
-              if any(v == w for v in verdicts)]
-    claims = ("paper claims: " + ", ".join(counts)) if counts else "no paper claim checked"
-    if not ok:
-        return "Section status: **FAILED** — " + "; ".join(problems) + f"; {claims}."
-    return f"Section status: every configured run completed; {claims}."
+    rel = "exceeds" if abs(ev.effect) > ev.spread else "is within"
+    md, sp = vd.show(ev.effect, ev.spread)
+    return (f"{name_a} − {name_b}, {what}: {'+' if ev.effect >= 0 else ''}{md} (paired over {ev.n} replicates) — "
+            f"{rel} the replicate spread ({vd.SPREAD_Z:g} × standard error = {sp}).")
