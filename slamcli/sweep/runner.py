@@ -33,6 +33,10 @@ and the other in-flight runs are resubmitted.
 Dataset cache: ``datasets/<dataset_id>.json`` records the SHA-256 of the dataset file written for that id;
 a cached file whose bytes no longer match (swapped, truncated) is simulated again instead of being reused.
 
+Paths: the results folder and every file-valued run option (``[evaluate] against``) are made absolute in the
+coordinator before any task is built, so a worker whose working directory is not the coordinator's (a Dask
+worker started elsewhere) writes and reads exactly where a ``-j 1`` sweep would.
+
 Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id and every
 artefact exists. Failed and missing runs are (re)done. ``resume=False`` redoes everything.
 
@@ -647,7 +651,9 @@ def run_sweep(
     sweep after writing the tables of what finished (``summary.interrupted``), then re-raises.
     """
     pipeline = pipeline if pipeline is not None else WorkflowPipeline()
-    exp_dir = Path(out_dir) / expansion.experiment.name
+    # absolute before anything is handed to a worker: a Dask worker's working directory is its own, not ours
+    exp_dir = Path(os.path.abspath(out_dir)) / expansion.experiment.name
+    expansion = _paths_for_workers(expansion)
     if exp_dir.is_symlink() or (exp_dir.exists() and not exp_dir.is_dir()):
         raise ConfigError(f"{exp_dir}: exists and is not a directory; remove it or use another --out")
     try:
@@ -658,6 +664,25 @@ def run_sweep(
         raise ConfigError(f"{exp_dir}: results folder is not writable")
     with sweep_lock(exp_dir):
         return _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress)
+
+
+#: ``[evaluate]`` options that name a file (relative to the directory the sweep is started from)
+PATH_OPTIONS = ("against",)
+
+
+def _paths_for_workers(expansion: Expansion) -> Expansion:
+    """``expansion`` with every file-valued run option made absolute against this process's working directory.
+
+    The run ids are kept (they hash the options as written); ``config.json`` records the absolute path, the
+    one the worker read.
+    """
+    import dataclasses
+
+    def absolute(run: RunSpec) -> RunSpec:
+        paths = {k: os.path.abspath(v) for k in PATH_OPTIONS if isinstance(v := run.evaluate.get(k), str | os.PathLike)}
+        return dataclasses.replace(run, evaluate={**run.evaluate, **paths}) if paths else run
+
+    return dataclasses.replace(expansion, runs=tuple(absolute(r) for r in expansion.runs))
 
 
 def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress) -> SweepSummary:
