@@ -363,3 +363,18 @@ def test_relative_paths_are_made_absolute_before_any_worker_sees_them(tmp_path, 
     assert all(Path(p).is_absolute() and Path(p).parent == summary.exp_dir for p in tidy["out_seen"])
     config = json.loads((summary.exp_dir / exp.runs[0].run_id / "config.json").read_text())
     assert config["evaluate"]["against"] == str(tmp_path / "ref" / "other.h5")
+
+
+def test_progress_lines_count_finished_runs_and_a_resume_reports_only_skips(tmp_path):
+    from slamcli.sweep.runner import progress_lines
+
+    exp = _expand(fake_experiment(replicates=3))  # 6 runs
+    lines: list[str] = []
+    run_sweep(exp, tmp_path, pipeline=FakePipeline(), progress=progress_lines("sweep fake", lines.append))
+    assert lines[0].startswith("sweep fake: 0% (0/6 runs; 0 done, 0 failed, 0 skipped)")
+    assert len(lines) == 7  # the start, then every run (each is more than a tenth of the sweep)
+    assert lines[-1].startswith("sweep fake: 100% (6/6 runs; 6 done, 0 failed, 0 skipped)")
+    assert lines[-1].endswith(", done")
+    again: list[str] = []
+    run_sweep(exp, tmp_path, pipeline=FakePipeline(), progress=progress_lines("sweep fake", again.append))
+    assert len(again) == 1 and again[0].startswith("sweep fake: 100% (6/6 runs; 0 done, 0 failed, 6 skipped)")

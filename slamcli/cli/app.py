@@ -68,16 +68,30 @@ def _root(
     """2-D SLAM experiment runner."""
 
 
-def stderr_console():
+#: columns of a console that is not a terminal (a file, a pipe): wide enough that no table or line of ours is
+#: wrapped (rich would otherwise wrap at 80); ``COLUMNS`` in the environment still wins
+UNWRAPPED_WIDTH = 10_000
+
+
+def _console(stderr: bool):
+    import os
+
     from rich.console import Console
 
-    return Console(stderr=True)
+    console = Console(stderr=stderr)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = UNWRAPPED_WIDTH
+    return console
+
+
+def stderr_console():
+    """A rich console on stderr; off a terminal it does not wrap lines (a log keeps each row on one line)."""
+    return _console(stderr=True)
 
 
 def stdout_console():
-    from rich.console import Console
-
-    return Console()
+    """A rich console on stdout; off a terminal it does not wrap lines (a pipe gets each row on one line)."""
+    return _console(stderr=False)
 
 
 def one_line(text: str) -> str:
@@ -169,10 +183,16 @@ def rich_progress(*status_columns):
 def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[[int, int], None]]:
     """A rich progress bar on stderr, exposed as a ``progress(done, total)`` callback.
 
-    With ``quiet`` (or when stderr is not a terminal and ``quiet`` is forced), the callback does nothing.
+    When stderr is not a terminal (a log file, a pipe), plain lines at a bounded rate instead
+    (:class:`slamcli.progress.ProgressLines`); with ``quiet`` the callback does nothing.
     """
     if quiet:
         yield lambda done, total: None
+        return
+    if not stderr_is_terminal():
+        from slamcli.progress import ProgressLines
+
+        yield ProgressLines(description, echo_stderr)
         return
     with rich_progress() as prog:
         task = prog.add_task(description, total=None)
@@ -189,8 +209,15 @@ def fail(message: str) -> None:
     raise typer.Exit(1)
 
 
-def is_tty() -> bool:
-    return sys.stderr.isatty()
+def stderr_is_terminal() -> bool:
+    """Whether a progress bar on stderr would be redrawn in place (rich's test: a TTY, or forced by the
+    environment); otherwise long work reports plain lines."""
+    return stderr_console().is_terminal
+
+
+def echo_stderr(line: str) -> None:
+    """Write ``line`` to stderr and flush it (a log read while the work runs sees it at once)."""
+    typer.echo(line, err=True)
 
 
 def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), replaces_folder: bool = False,

@@ -10,10 +10,12 @@ import typer
 from slamcli.cli.app import (
     app,
     check_output,
+    echo_stderr,
     fail,
     handle_errors,
     rich_progress,
     stderr_console,
+    stderr_is_terminal,
     stdout_console,
 )
 
@@ -104,9 +106,12 @@ def _print_list() -> None:
 def _run(expansion, out, workers, executor, scheduler, resume, quiet):
     from slamcli.sweep.runner import run_sweep
 
-    if quiet:
+    if quiet or not stderr_is_terminal():
+        from slamcli.sweep.runner import progress_lines
+
         return run_sweep(
-            expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume
+            expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume,
+            progress=None if quiet else progress_lines(f"sweep {expansion.experiment.name}", echo_stderr),
         )
     from rich.progress import TextColumn
 

@@ -634,6 +634,20 @@ def _single_threaded_blas() -> Iterator[None]:
 ProgressCallback = Callable[[Counts], None]
 
 
+def progress_lines(label: str, write: Callable[[str], None]) -> ProgressCallback:
+    """A :data:`ProgressCallback` that writes plain lines at a bounded rate
+    (:class:`slamcli.progress.ProgressLines`): finished runs of the total, the done / failed / skipped counts,
+    the rate and ETA of the runs this sweep executes (skipped runs are not counted as work)."""
+    from slamcli.progress import ProgressLines
+
+    lines = ProgressLines(label, write, unit="runs")
+
+    def report(c: Counts) -> None:
+        lines(c.finished, c.total, f"{c.done} done, {c.failed} failed, {c.skipped} skipped")
+
+    return report
+
+
 def run_sweep(
     expansion: Expansion,
     out_dir: str | Path,
