@@ -7,12 +7,67 @@ inside the function body, so ``slamcli --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import os
 import re
 import sys
 from collections.abc import Callable, Iterator
+from enum import StrEnum
 
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
+
+#: click's placeholder names for typer's parameter types (typer's own help reads ``<str>``, ``{data}``)
+_CLICK_METAVARS = {"str": "TEXT", "int": "INTEGER", "float": "FLOAT", "boolean": "BOOLEAN", "path": "PATH"}
+
+
+def click_metavar(param) -> str:
+    """The placeholder click would print for ``param``: ``TEXT``, ``INTEGER``, ``PATH``, ``[a|b|c]`` for a
+    choice option, the upper-case name (``DATA``, ``RESULTS...``) for an argument."""
+    if param.param_type_name == "argument":
+        return param.name.upper() + ("..." if param.nargs != 1 else "")
+    choices = getattr(param.type, "choices", None)
+    if choices:
+        return "[" + "|".join(str(getattr(c, "value", c)) for c in choices) + "]"
+    return _CLICK_METAVARS.get(param.type.name, param.type.name.upper())
+
+
+def choice(name: str, values: tuple[str, ...]) -> type[StrEnum]:
+    """A string enumeration typer turns into a choice: help lists ``[a|b|c]``, shell completion offers the
+    values, anything else is refused with one line. Members compare equal to (and format as) their value."""
+    return StrEnum(name, {v: v for v in values})
+
+
+class SlamcliCommand(TyperCommand):
+    """A command whose help uses click's placeholders (``TEXT``, ``PATH``, ``[local|dask]``; usage
+    ``[OPTIONS] DATA`` with ``[NAME]`` for an optional argument)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            if param.metavar is None and not getattr(param, "is_flag", False):
+                param.metavar = click_metavar(param)
+
+    def collect_usage_pieces(self, ctx) -> list[str]:
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            if param.param_type_name == "argument":
+                pieces.append(param.metavar if param.required else f"[{param.metavar}]")
+        return pieces
+
+
+class SlamcliTyper(typer.Typer):
+    """``typer.Typer`` whose commands are :class:`SlamcliCommand` and answer ``-h`` as well as ``--help``."""
+
+    def __init__(self, **kwargs) -> None:
+        settings = {"help_option_names": ["-h", "--help"], **kwargs.pop("context_settings", {})}
+        super().__init__(context_settings=settings, rich_markup_mode=None, **kwargs)
+
+    def command(self, *args, cls=None, **kwargs):
+        return super().command(*args, cls=cls or SlamcliCommand, **kwargs)
+
+
+#: environment variable that asks the command for its shell-completion script or candidates
+COMPLETE_VAR = "_SLAMCLI_COMPLETE"
 
 
 class SlamcliGroup(TyperGroup):
@@ -20,6 +75,12 @@ class SlamcliGroup(TyperGroup):
     ``error:`` line and one hint line on stderr (exit status 2) instead of click's usage block."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if os.environ.get(complete_var or COMPLETE_VAR):
+            # shell completion (README "Shell completion"): typer registers its bash/zsh/fish/powershell
+            # scripts only when it adds --install-completion; register them for this call alone
+            from typer.completion import completion_init
+
+            completion_init()
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         try:
@@ -42,14 +103,13 @@ class SlamcliGroup(TyperGroup):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-app = typer.Typer(
+app = SlamcliTyper(
     name="slamcli",
     cls=SlamcliGroup,
     help="2-D SLAM experiment runner: simulate → solve → evaluate → plot, and parameter sweeps.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    rich_markup_mode=None,
 )
 
 
@@ -74,8 +134,6 @@ UNWRAPPED_WIDTH = 10_000
 
 
 def _console(stderr: bool):
-    import os
-
     from rich.console import Console
 
     console = Console(stderr=stderr)
@@ -230,7 +288,6 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
     or a file inside an input folder, a device or FIFO, a path inside a running sweep's results folder, or
     (with ``kind``, unless ``force``) an existing file of another kind.
     """
-    import os
     from pathlib import Path
 
     p = Path(path)

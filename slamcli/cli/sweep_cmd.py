@@ -10,6 +10,7 @@ import typer
 from slamcli.cli.app import (
     app,
     check_output,
+    choice,
     echo_stderr,
     fail,
     handle_errors,
@@ -18,6 +19,9 @@ from slamcli.cli.app import (
     stderr_is_terminal,
     stdout_console,
 )
+
+#: the sweep executors (slamcli.sweep.runner.make_executor)
+EXECUTORS = ("local", "dask")
 
 
 def _shipped_names() -> str:
@@ -35,7 +39,8 @@ def sweep_command(
              "solver.ekf.gate_prob=0.9,0.99 replicates=20 scenario.n_steps=200.", show_default=False)] = None,
     list_names: Annotated[bool, typer.Option("--list", help="List the shipped experiments and exit.")] = False,
     workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
-    executor: Annotated[str, typer.Option("--executor", help="local (process pool, spawn) or dask.")] = "local",
+    executor: Annotated[choice("Executor", EXECUTORS), typer.Option(
+        "--executor", help="local: a process pool (spawn); dask: a Dask cluster (--scheduler).")] = "local",
     scheduler: Annotated[
         str | None,
         typer.Option("--scheduler", help="Existing Dask scheduler (tcp://host:8786); default: a LocalCluster."),
@@ -58,8 +63,6 @@ def sweep_command(
             return
         if experiment is None:
             fail("give an experiment name or file (slamcli sweep --list shows the shipped ones)")
-        if executor not in ("local", "dask"):
-            fail(f"--executor: {executor!r} is not one of local, dask")
         if workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
         cfg = load_experiment(_experiment_file(experiment))
@@ -72,7 +75,7 @@ def sweep_command(
             _print_dry_run(expansion, out)
             return
         check_output(out, folder=True, option="--out", inputs=[experiment])
-        summary = _run(expansion, out, workers, executor, scheduler, resume, quiet)
+        summary = _run(expansion, out, workers, str(executor), scheduler, resume, quiet)
         _print_summary(summary)
         if not summary.ok:
             raise typer.Exit(1)
