@@ -23,8 +23,8 @@ message in ``status.json["error"]``; it is not evaluated, so its numbers never r
 sweep exits non-zero. Every other status (``converged``, ``max_iterations``, ``completed``) is recorded as
 ``solver_status`` in ``status.json``, the manifest and the results table.
 
-Locking: a sweep holds an exclusive ``flock`` on ``<experiment>/.sweep.lock`` for its whole duration; a second
-sweep on the same folder is refused with one line naming the holder's pid (the lock dies with its process).
+Locking: a sweep holds an exclusive lock (``filelock``) on ``<experiment>/.sweep.lock`` for its whole duration; a
+second sweep on the same folder is refused with one line naming the holder's pid (the lock dies with its process).
 
 Worker hygiene: every pool worker polls its parent and exits when the coordinator is gone (``kill -9``), so no
 orphan keeps starting queued runs. A worker that dies during a run fails only that run; the pool is rebuilt
@@ -83,6 +83,8 @@ MISSING = "missing"
 #: solver statuses (``SolverResult.status`` values) that make a run failed: no usable estimate
 FAILING_SOLVER_STATUSES = ("failed", "diverged")
 LOCK_NAME = ".sweep.lock"
+#: the running sweep's pid, for the message that refuses a second sweep
+PID_NAME = ".sweep.pid"
 
 log = logging.getLogger(__name__)
 
@@ -222,33 +224,34 @@ def _remove(p: Path) -> None:
 
 @contextlib.contextmanager
 def sweep_lock(exp_dir: Path) -> Iterator[None]:
-    """Exclusive, non-blocking ``flock`` on ``exp_dir/.sweep.lock`` for the duration of a sweep.
+    """Exclusive, non-blocking lock on ``exp_dir/.sweep.lock`` for the duration of a sweep
+    (:class:`filelock.FileLock`: ``flock`` on POSIX, ``LockFileEx`` on Windows); the holder's pid is in
+    ``exp_dir/.sweep.pid`` while it holds the lock.
 
-    Raises a one-line :class:`ConfigError` when another process holds it. The kernel drops the lock when its
-    holder dies (even by ``kill -9``), so a crashed sweep never blocks the next one.
+    Raises a one-line :class:`ConfigError` when another process holds it. The operating system drops the lock
+    when its holder dies (even by ``kill -9``), so a crashed sweep never blocks the next one.
     """
-    import fcntl
+    from filelock import FileLock, Timeout
 
-    path = exp_dir / LOCK_NAME
+    path, pid_path = exp_dir / LOCK_NAME, exp_dir / PID_NAME
+    lock = FileLock(path, timeout=0)
     try:
-        fh = open(path, "a+")  # held open for the whole sweep
+        lock.acquire()
+    except Timeout:
+        try:
+            holder = pid_path.read_text().strip() or "unknown"
+        except OSError:
+            holder = "unknown"
+        raise ConfigError(f"{exp_dir}: another sweep (pid {holder}) is running on this results folder; "
+                          "wait for it to finish or use another --out") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot create the sweep lock ({exc.strerror})") from None
     try:
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            fh.seek(0)
-            holder = fh.read().strip() or "unknown"
-            raise ConfigError(f"{exp_dir}: another sweep (pid {holder}) is running on this results folder; "
-                              "wait for it to finish or use another --out") from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(f"{os.getpid()}\n")
-        fh.flush()
+        pid_path.write_text(f"{os.getpid()}\n")
         yield
     finally:
-        fh.close()
+        pid_path.unlink(missing_ok=True)  # before the release: a next holder's pid is never removed
+        lock.release()
 
 
 def file_sha256(path: Path) -> str:
