@@ -152,10 +152,14 @@ def stdout_console():
     return _console(stderr=False)
 
 
+def printable(text: str) -> str:
+    """``text`` printable on any UTF-8 stream whatever the file names in it (non-UTF-8 bytes → ``\\udcxx``)."""
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def one_line(text: str) -> str:
-    """First line of ``text``, printable whatever the file names in it (non-UTF-8 bytes → ``\\udcxx``)."""
-    line = text.splitlines()[0] if text.strip() else ""
-    return line.encode("utf-8", "backslashreplace").decode("utf-8")
+    """First line of ``text``, printable whatever the file names in it (:func:`printable`)."""
+    return printable(text.splitlines()[0] if text.strip() else "")
 
 
 @contextlib.contextmanager

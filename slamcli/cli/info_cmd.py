@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from slamcli.cli.app import app, handle_errors, iteration_count, stdout_console
+from slamcli.cli.app import app, handle_errors, iteration_count, printable, stdout_console
 
 
 def _flatten(d, prefix: str = "") -> list[tuple[str, str]]:
@@ -178,12 +178,12 @@ def info_command(
         table.add_column(style="bold")
         table.add_column()
         for k, v in rows:
-            table.add_row(k, Text(v))
+            table.add_row(k, Text(printable(v)))
         console.print(table)
         if params:
             pt = Table(title=ptitle, show_header=False, title_justify="left")
             pt.add_column(style="bold")
             pt.add_column()
             for k, v in params:
-                pt.add_row(k, Text(v))
+                pt.add_row(k, Text(printable(v)))
             console.print(pt)
