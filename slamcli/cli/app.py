@@ -33,7 +33,8 @@ def click_metavar(param) -> str:
 
 def choice(name: str, values: tuple[str, ...]) -> type[StrEnum]:
     """A string enumeration typer turns into a choice: help lists ``[a|b|c]``, shell completion offers the
-    values, anything else is refused with one line. Members compare equal to (and format as) their value."""
+    values, any other value is a usage error naming the option and the values. Members compare equal to (and
+    format as) their value."""
     return StrEnum(name, {v: v for v in values})
 
 

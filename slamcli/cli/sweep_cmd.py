@@ -107,11 +107,9 @@ def _print_list() -> None:
 
 
 def _run(expansion, out, workers, executor, scheduler, resume, quiet):
-    from slamcli.sweep.runner import run_sweep
+    from slamcli.sweep.runner import progress_lines, run_sweep
 
-    if quiet or not stderr_is_terminal():
-        from slamcli.sweep.runner import progress_lines
-
+    if quiet or not stderr_is_terminal():  # off a terminal: plain lines a log can read
         return run_sweep(
             expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume,
             progress=None if quiet else progress_lines(f"sweep {expansion.experiment.name}", echo_stderr),
