@@ -108,3 +108,17 @@ def test_shell_completion_offers_the_choices():
     source = subprocess.run([script], env=dict(os.environ, _SLAMCLI_COMPLETE="source_bash"),
                             capture_output=True, text=True, timeout=60).stdout
     assert "complete -o default -F _slamcli_completion slamcli" in source
+
+
+def test_a_reader_that_stops_early_gets_no_error_line(tmp_path):
+    """``slamcli datasets list | head -1``: the pipe's reader is gone before the command writes (closed here
+    before the command has even started), which is no error to report."""
+    import os
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "slamcli", "datasets", "list"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env={**os.environ, "SLAMCLI_DATA_DIR": str(tmp_path)})
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 1 and err == "", err

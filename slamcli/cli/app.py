@@ -199,6 +199,11 @@ def handle_errors(exit_code: int = 1) -> Iterator[None]:
             msg = one_line(str(exc)) or type(exc).__name__
             typer.echo(f"error: {msg}", err=True)
             raise typer.Exit(getattr(exc, "exit_code", exit_code)) from None  # OutputRefused: 2
+        except BrokenPipeError:
+            # the reader of our output stopped (`slamcli datasets list | head -1`): not an error worth a line;
+            # stdout goes to devnull so the interpreter's last flush does not fail again
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise typer.Exit(exit_code) from None
         except OSError as exc:
             where = f"{exc.filename}: " if exc.filename is not None else ""
             typer.echo(f"error: {one_line(where + (exc.strerror or str(exc) or type(exc).__name__))}", err=True)
