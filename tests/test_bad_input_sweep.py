@@ -201,8 +201,8 @@ def test_concurrent_sweeps_on_one_folder_second_is_refused(tmp_path):
     """ISSUE High 4: two sweeps on one folder computed every run twice and broke each other's temp files."""
     proc = _start(tmp_path, "shared", 4, 0.3, 1)
     exp_dir = tmp_path / "shared"
-    _wait_for(lambda: (exp_dir / ".sweep.lock").is_file() and (exp_dir / ".sweep.lock").read_text().strip(),
-              what="the first sweep's lock")
+    _wait_for(lambda: (exp_dir / ".sweep.pid").is_file() and (exp_dir / ".sweep.pid").read_text().strip(),
+              what="the first sweep's lock")  # the pid is written once the lock is held
     with pytest.raises(ConfigError, match=rf"another sweep \(pid {proc.pid}\) is running"):
         run_sweep(_slow_exp("shared", 4, 0.3), tmp_path, pipeline=FakePipeline())
     out, err = proc.communicate(timeout=60)

@@ -41,7 +41,7 @@ def loop(tmp_path_factory):
 
 @pytest.mark.parametrize("args, first", [
     (["solve", "--bogus"], "error: No such option: --bogus"),
-    (["solve"], "error: Missing argument 'data'."),
+    (["solve"], "error: Missing argument 'DATA'."),
     (["export", "x.h5"], "error: Missing option '--format'"),
 ])
 def test_usage_error_is_one_line_plus_hint(args, first):

@@ -202,3 +202,30 @@ def test_deeply_nested_registry_files_are_one_line(env, monkeypatch, which):
     res = _run("datasets", "list")
     assert res.exit_code == 1 and res.stderr.count("\n") == 1 and named in res.stderr, res.output
     assert "nested too deeply" in res.stderr
+
+
+def test_fetch_without_network_is_one_line_that_names_datasets_add(env, monkeypatch):
+    """A download that cannot connect (here a closed port on 127.0.0.1: loopback only) says so in one line and
+    names the command that registers a local copy, without the HTTP library's connection-pool text."""
+    import socket
+
+    with socket.socket() as s:  # a port nothing listens on once the socket is closed
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    text = _file_entry("off-test", "victoria-park", "ascii/inputs.dat", [])
+    text = text.replace("files = []", f'files = [{{path = "ascii/inputs.dat", url = "http://127.0.0.1:{port}/i.dat"}}]')
+    (env / "offline.toml").write_text(text)
+    monkeypatch.setenv(reg.ENV_REGISTRY, str(env / "offline.toml"))
+    res = _run("datasets", "fetch", "off-test", "-q")
+    assert res.exit_code == 1
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: off-test: "), res.stderr
+    assert "cannot reach 127.0.0.1" in lines[0] and "slamcli datasets add off-test DIR" in lines[0]
+    assert "Pool" not in lines[0] and "Max retries" not in lines[0] and "Errno" not in lines[0]
+
+
+def test_datasets_list_has_a_header_over_its_columns(env):
+    lines = _run("datasets", "list").stdout.splitlines()
+    assert lines[0].split() == ["name", "importer", "here", "checksum", "title"]
+    row = next(ln for ln in lines if ln.startswith("vp-test "))
+    assert row.index("victoria-park") == lines[0].index("importer")  # the header stands over its column

@@ -130,7 +130,7 @@ def test_cli_export_and_errors(run, tmp_path):
     assert r.exit_code == 0, r.output
     assert len(np.loadtxt(tmp_path / "e.kitti")) == len(read_result(res).poses_xyt)
     r = runner.invoke(app, ["export", str(res), "--format", "ply", "-o", str(tmp_path / "e.ply")])
-    assert r.exit_code == 1 and "tum, kitti, g2o, gtsam, csv" in r.output
+    assert r.exit_code == 2 and "'tum', 'kitti', 'g2o', 'gtsam', 'csv'" in r.output
     assert not (tmp_path / "e.ply").exists()
 
 

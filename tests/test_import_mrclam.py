@@ -351,7 +351,6 @@ def test_cli_import_options_and_errors(tmp_path):
         (("mrclam", tmp_path / "nope", "-o", tmp_path / "b.h5"), "not a directory"),
         (("mrclam", EXCERPT, "--robot", "3", "-o", tmp_path / "b.h5"), "Robot3_Odometry.dat: file not found"),
         (("mrclam", EXCERPT, "--duration", "100", "-o", tmp_path / "b.h5"), "--duration"),
-        (("mrclam", EXCERPT, "--non-landmark", "x", "-o", tmp_path / "b.h5"), "--non-landmark"),
         (("mrclam", EXCERPT, "--max-range", "0", "-o", tmp_path / "b.h5"), "--max-range: must be > 0"),
         (("mrclam", EXCERPT), "-o/--out is required"),
     ]:
@@ -360,6 +359,8 @@ def test_cli_import_options_and_errors(tmp_path):
         lines = res.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: ") and fragment in lines[0], res.stderr
         assert "Traceback" not in res.output
+    res = run("import", "mrclam", EXCERPT, "--non-landmark", "x", "-o", tmp_path / "b.h5")
+    assert res.exit_code == 2 and "--non-landmark" in res.stderr and "'drop', 'clutter'" in res.stderr
     assert not (tmp_path / "b.h5").exists()
 
 

@@ -17,6 +17,7 @@ not in a cycle:
 rank  members
 ====  ==================================================================================================
 0     ``slamcli`` (the package ``__init__``, version only), ``errors``, ``types``, ``params``, ``numerics``,
+      ``progress`` (plain progress lines for logs, standard library only),
       ``models.angles`` (the one angle-wrap helper, numpy only; ``types`` wraps bearings with it),
       ``experiments`` (package data: the TOML files and a function returning their folder)
 1     ``models``
@@ -52,6 +53,7 @@ RANKS: dict[str, int] = {
     "types": 0,
     "params": 0,
     "numerics": 0,
+    "progress": 0,
     "models.angles": 0,
     "experiments": 0,
     "models": 1,

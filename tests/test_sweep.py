@@ -338,3 +338,43 @@ def test_dask_existing_cluster_gives_the_same_numbers(tmp_path):
     d = pd.read_csv(tmp_path / "dask" / "fake" / "results.csv")
     np.testing.assert_array_equal(s["value"].to_numpy(), d["value"].to_numpy())
     assert (d["nested.pid"] != os.getpid()).all()  # computed in the cluster's worker processes
+
+
+class _AgainstPipeline(FakePipeline):
+    """The fake pipeline, reporting the ``against`` path and the output folder it was handed."""
+
+    def evaluate(self, run, dataset_path, result_path, out_dir):
+        return {**super().evaluate(run, dataset_path, result_path, out_dir),
+                "against_seen": run.evaluate["against"], "out_seen": str(out_dir)}
+
+
+def test_relative_paths_are_made_absolute_before_any_worker_sees_them(tmp_path, monkeypatch):
+    """A worker may run in another directory (Dask): the results folder and a file-valued ``[evaluate]``
+    option reach it absolute, resolved against the directory the sweep was started from; run ids keep
+    hashing the options as written."""
+    monkeypatch.chdir(tmp_path)
+    cfg = dataclasses.replace(fake_experiment(replicates=1), evaluate={"against": "ref/other.h5"})
+    exp = _expand(cfg)
+    summary = run_sweep(exp, "rel-out", pipeline=_AgainstPipeline())
+    assert summary.ok and summary.exp_dir == tmp_path / "rel-out" / "fake"
+    tidy = pd.read_csv(tmp_path / "rel-out" / "fake" / "results.csv")
+    assert sorted(tidy["run_id"]) == sorted(r.run_id for r in exp.runs)
+    assert set(tidy["against_seen"]) == {str(tmp_path / "ref" / "other.h5")}
+    assert all(Path(p).is_absolute() and Path(p).parent == summary.exp_dir for p in tidy["out_seen"])
+    config = json.loads((summary.exp_dir / exp.runs[0].run_id / "config.json").read_text())
+    assert config["evaluate"]["against"] == str(tmp_path / "ref" / "other.h5")
+
+
+def test_progress_lines_count_finished_runs_and_a_resume_reports_only_skips(tmp_path):
+    from slamcli.sweep.runner import progress_lines
+
+    exp = _expand(fake_experiment(replicates=3))  # 6 runs
+    lines: list[str] = []
+    run_sweep(exp, tmp_path, pipeline=FakePipeline(), progress=progress_lines("sweep fake", lines.append))
+    assert lines[0].startswith("sweep fake: 0% (0/6 runs; 0 done, 0 failed, 0 skipped)")
+    assert len(lines) == 7  # the start, then every run (each is more than a tenth of the sweep)
+    assert lines[-1].startswith("sweep fake: 100% (6/6 runs; 6 done, 0 failed, 0 skipped)")
+    assert lines[-1].endswith(", done")
+    again: list[str] = []
+    run_sweep(exp, tmp_path, pipeline=FakePipeline(), progress=progress_lines("sweep fake", again.append))
+    assert len(again) == 1 and again[0].startswith("sweep fake: 100% (6/6 runs; 0 done, 0 failed, 6 skipped)")

@@ -115,7 +115,7 @@ def test_cli_config_errors_are_one_line(tmp_path):
     res = CliRunner().invoke(app, ["sweep", str(path), "--dry-run"])
     assert res.exit_code == 1 and "unknown option 'cutof'" in res.output
     res = CliRunner().invoke(app, ["sweep", str(path), "--executor", "slurm"])
-    assert res.exit_code == 1 and "--executor" in res.output
+    assert res.exit_code == 2 and "--executor" in res.output and "'local', 'dask'" in res.output
 
 
 def test_experiment_files_in_repo_validate():

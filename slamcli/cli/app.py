@@ -7,12 +7,68 @@ inside the function body, so ``slamcli --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import os
 import re
 import sys
 from collections.abc import Callable, Iterator
+from enum import StrEnum
 
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
+
+#: click's placeholder names for typer's parameter types (typer's own help reads ``<str>``, ``{data}``)
+_CLICK_METAVARS = {"str": "TEXT", "int": "INTEGER", "float": "FLOAT", "boolean": "BOOLEAN", "path": "PATH"}
+
+
+def click_metavar(param) -> str:
+    """The placeholder click would print for ``param``: ``TEXT``, ``INTEGER``, ``PATH``, ``[a|b|c]`` for a
+    choice option, the upper-case name (``DATA``, ``RESULTS...``) for an argument."""
+    if param.param_type_name == "argument":
+        return param.name.upper() + ("..." if param.nargs != 1 else "")
+    choices = getattr(param.type, "choices", None)
+    if choices:
+        return "[" + "|".join(str(getattr(c, "value", c)) for c in choices) + "]"
+    return _CLICK_METAVARS.get(param.type.name, param.type.name.upper())
+
+
+def choice(name: str, values: tuple[str, ...]) -> type[StrEnum]:
+    """A string enumeration typer turns into a choice: help lists ``[a|b|c]``, shell completion offers the
+    values, any other value is a usage error naming the option and the values. Members compare equal to (and
+    format as) their value."""
+    return StrEnum(name, {v: v for v in values})
+
+
+class SlamcliCommand(TyperCommand):
+    """A command whose help uses click's placeholders (``TEXT``, ``PATH``, ``[local|dask]``; usage
+    ``[OPTIONS] DATA`` with ``[NAME]`` for an optional argument)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            if param.metavar is None and not getattr(param, "is_flag", False):
+                param.metavar = click_metavar(param)
+
+    def collect_usage_pieces(self, ctx) -> list[str]:
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            if param.param_type_name == "argument":
+                pieces.append(param.metavar if param.required else f"[{param.metavar}]")
+        return pieces
+
+
+class SlamcliTyper(typer.Typer):
+    """``typer.Typer`` whose commands are :class:`SlamcliCommand` and answer ``-h`` as well as ``--help``."""
+
+    def __init__(self, **kwargs) -> None:
+        settings = {"help_option_names": ["-h", "--help"], **kwargs.pop("context_settings", {})}
+        super().__init__(context_settings=settings, rich_markup_mode=None, **kwargs)
+
+    def command(self, *args, cls=None, **kwargs):
+        return super().command(*args, cls=cls or SlamcliCommand, **kwargs)
+
+
+#: environment variable that asks the command for its shell-completion script or candidates
+COMPLETE_VAR = "_SLAMCLI_COMPLETE"
 
 
 class SlamcliGroup(TyperGroup):
@@ -20,6 +76,12 @@ class SlamcliGroup(TyperGroup):
     ``error:`` line and one hint line on stderr (exit status 2) instead of click's usage block."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if os.environ.get(complete_var or COMPLETE_VAR):
+            # shell completion (README "Shell completion"): typer registers its bash/zsh/fish/powershell
+            # scripts only when it adds --install-completion; register them for this call alone
+            from typer.completion import completion_init
+
+            completion_init()
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         try:
@@ -42,14 +104,13 @@ class SlamcliGroup(TyperGroup):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-app = typer.Typer(
+app = SlamcliTyper(
     name="slamcli",
     cls=SlamcliGroup,
     help="2-D SLAM experiment runner: simulate → solve → evaluate → plot, and parameter sweeps.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    rich_markup_mode=None,
 )
 
 
@@ -68,16 +129,28 @@ def _root(
     """2-D SLAM experiment runner."""
 
 
-def stderr_console():
+#: columns of a console that is not a terminal (a file, a pipe): wide enough that no table or line of ours is
+#: wrapped (rich would otherwise wrap at 80); ``COLUMNS`` in the environment still wins
+UNWRAPPED_WIDTH = 10_000
+
+
+def _console(stderr: bool):
     from rich.console import Console
 
-    return Console(stderr=True)
+    console = Console(stderr=stderr)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = UNWRAPPED_WIDTH
+    return console
+
+
+def stderr_console():
+    """A rich console on stderr; off a terminal it does not wrap lines (a log keeps each row on one line)."""
+    return _console(stderr=True)
 
 
 def stdout_console():
-    from rich.console import Console
-
-    return Console()
+    """A rich console on stdout; off a terminal it does not wrap lines (a pipe gets each row on one line)."""
+    return _console(stderr=False)
 
 
 #: characters never printed as they are: C0 controls (ESC starts a terminal escape sequence), DEL, C1
@@ -94,8 +167,7 @@ def printable(text: str) -> str:
 
 def one_line(text: str) -> str:
     """First line of ``text``, :func:`printable` whatever the file names or stored strings in it."""
-    line = text.splitlines()[0] if text.strip() else ""
-    return printable(line)
+    return printable(text.splitlines()[0] if text.strip() else "")
 
 
 @contextlib.contextmanager
@@ -134,6 +206,11 @@ def handle_errors(exit_code: int = 1) -> Iterator[None]:
             msg = one_line(str(exc)) or type(exc).__name__
             typer.echo(f"error: {msg}", err=True)
             raise typer.Exit(getattr(exc, "exit_code", exit_code)) from None  # OutputRefused: 2
+        except BrokenPipeError:
+            # the reader of our output stopped (`slamcli datasets list | head -1`): not an error worth a line;
+            # stdout goes to devnull so the interpreter's last flush does not fail again
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise typer.Exit(exit_code) from None
         except OSError as exc:
             where = f"{exc.filename}: " if exc.filename is not None else ""
             typer.echo(f"error: {one_line(where + (exc.strerror or str(exc) or type(exc).__name__))}", err=True)
@@ -181,10 +258,16 @@ def rich_progress(*status_columns):
 def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[[int, int], None]]:
     """A rich progress bar on stderr, exposed as a ``progress(done, total)`` callback.
 
-    With ``quiet`` (or when stderr is not a terminal and ``quiet`` is forced), the callback does nothing.
+    When stderr is not a terminal (a log file, a pipe), plain lines at a bounded rate instead
+    (:class:`slamcli.progress.ProgressLines`); with ``quiet`` the callback does nothing.
     """
     if quiet:
         yield lambda done, total: None
+        return
+    if not stderr_is_terminal():
+        from slamcli.progress import ProgressLines
+
+        yield ProgressLines(description, echo_stderr)
         return
     with rich_progress() as prog:
         task = prog.add_task(description, total=None)
@@ -201,8 +284,15 @@ def fail(message: str) -> None:
     raise typer.Exit(1)
 
 
-def is_tty() -> bool:
-    return sys.stderr.isatty()
+def stderr_is_terminal() -> bool:
+    """Whether a progress bar on stderr would be redrawn in place (rich's test: a TTY, or forced by the
+    environment); otherwise long work reports plain lines."""
+    return stderr_console().is_terminal
+
+
+def echo_stderr(line: str) -> None:
+    """Write ``line`` to stderr and flush it (a log read while the work runs sees it at once)."""
+    typer.echo(line, err=True)
 
 
 def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), replaces_folder: bool = False,
@@ -217,7 +307,6 @@ def check_output(path, *, folder: bool = False, option: str = "-o", inputs=(), r
     ``kind``, unless ``force``) an existing file of another kind.
     """
     import errno
-    import os
     from pathlib import Path
 
     p = Path(path)

@@ -7,13 +7,12 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, handle_errors
+from slamcli.cli.app import SlamcliTyper, app, handle_errors
 
-datasets_app = typer.Typer(
+datasets_app = SlamcliTyper(
     help="Public recordings by name: list, fetch NAME, path NAME, add NAME DIR, info NAME. Importers and "
          "reproduce accept the names (slamcli import mrclam mrclam7 --robot 1).",
     no_args_is_help=True,
-    rich_markup_mode=None,
 )
 app.add_typer(datasets_app, name="datasets")
 
@@ -27,6 +26,7 @@ def list_command() -> None:
 
         reg = r.registry()
         width = max(len(n) for n in reg)
+        typer.echo(f"{'name':<{width}}  {'importer':<13} {'here':<18} {'checksum':<9}  title")
         for name in sorted(reg):
             e = reg[name]
             found = r.where(name)

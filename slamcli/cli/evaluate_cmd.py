@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, check_output, handle_errors, stdout_console
+from slamcli.cli.app import app, check_output, choice, handle_errors, stdout_console
 
 # (row name, key(s) in metrics.json) in display order; a row of one key is named by the metric registry
 # (None), a row of several keys gets a group name. Units always come from the registry
@@ -87,7 +87,8 @@ def evaluate_command(
     near_path: Annotated[float | None, typer.Option(
         help="Also report the paper's error over landmarks within this distance of the true path, m.")] = None,
     rpe_delta: Annotated[float, typer.Option(help="RPE pair separation (see --rpe-unit).")] = 1.0,
-    rpe_unit: Annotated[str, typer.Option(help="RPE separation unit: steps or m.")] = "steps",
+    rpe_unit: Annotated[choice("RpeUnit", ("steps", "m")), typer.Option(
+        help="RPE separation unit: pose steps or metres travelled.")] = "steps",
     no_hash_check: Annotated[bool, typer.Option(
         "--no-hash-check", help="Do not require the dataset hash to match the result's record.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing; just write the files.")] = False,
@@ -102,7 +103,7 @@ def evaluate_command(
         check_output(out, folder=True, option="-o" if out_dir is not None else "output folder",
                      inputs=[result, data, against], replaces_folder=True)
         m = evaluate_files(result, data, out, cutoff=cutoff, near_path_m=near_path, rpe_delta=rpe_delta,
-                           rpe_unit=rpe_unit, check_hash=not no_hash_check, against=against)
+                           rpe_unit=str(rpe_unit), check_hash=not no_hash_check, against=against)
         if quiet:
             return
         from rich.table import Table

@@ -7,13 +7,17 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, check_output, handle_errors
+from slamcli.cli.app import app, check_output, choice, handle_errors
+
+#: the export formats (slamcli.io.export.FORMATS; the CLI does not import io to keep start-up light)
+EXPORT_FORMATS = ("tum", "kitti", "g2o", "gtsam", "csv")
 
 
 @app.command("export")
 def export_command(
     src: Annotated[Path, typer.Argument(help="Result file (estimate) or dataset file (ground truth).")],
-    fmt: Annotated[str, typer.Option("--format", "-f", help="tum | kitti | g2o | gtsam | csv (gtsam: GTSAM's text format, sightings as BR lines readG2o reads)")],
+    fmt: Annotated[choice("ExportFormat", EXPORT_FORMATS), typer.Option(
+        "--format", "-f", help="Output format (gtsam: GTSAM's text format, sightings as BR lines readG2o reads).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="File to write (atomically).")],
     data: Annotated[Path | None, typer.Option(
         "--data", "-d", help="Dataset of a result; default: the one recorded in it.")] = None,
@@ -33,7 +37,7 @@ def export_command(
 
         check_output(output, inputs=[src, data])
         _refuse_slamcli_file(output, force)
-        s = export_file(src, fmt, output, data=data, check_hash=not no_hash_check)
+        s = export_file(src, str(fmt), output, data=data, check_hash=not no_hash_check)
         if not quiet:
             typer.echo(f"wrote {output} ({describe_export(s)})")
         if "warning" in s:

@@ -8,17 +8,16 @@ from typing import Annotated
 import click
 import typer
 
-from slamcli.cli.app import app, check_output, fail, handle_errors, stdout_console
+from slamcli.cli.app import SlamcliTyper, app, check_output, choice, fail, handle_errors, stdout_console
 
 _Force = Annotated[bool, typer.Option("--force", help="Replace an existing -o that is not a slamcli dataset (mrclam "
                                                      "--solo-dir: replace existing robotN.h5).")]
 _Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No summary line.")]
 _Out = Annotated[Path | None, typer.Option("-o", "--out", help="Dataset file to write (HDF5, atomically).")]
 
-import_app = typer.Typer(
+import_app = SlamcliTyper(
     help="Import a recording, a landmark graph or another estimator's trajectory: then solve/evaluate/plot work on it.",
     no_args_is_help=True,
-    rich_markup_mode=None,
 )
 app.add_typer(import_app, name="import")
 
@@ -86,7 +85,7 @@ def import_mrclam_command(
     ] = 0.0,
     duration: Annotated[float | None, typer.Option(help="Window length, s (default: to the end).")] = None,
     non_landmark: Annotated[
-        str,
+        choice("NonLandmark", ("drop", "clutter")),
         typer.Option(
             help="Rows that see another robot or an unknown barcode: drop, or clutter (reported_id -1)."
         ),
@@ -134,8 +133,7 @@ def import_mrclam_command(
 
         directory = resolve_source(directory, "mrclam")  # (first: a registered name's folder is the input)
         check_output(out, inputs=[directory], kind="dataset", force=force)
-        if non_landmark not in ("drop", "clutter"):
-            fail(f"--non-landmark: must be drop or clutter, got {non_landmark!r}")
+        non_landmark = str(non_landmark)
         noise = noise_from_options(dt, range_std, bearing_std, v_std, omega_std)
         if robots is not None or all_robots:
             _import_mrclam_team(directory, robots, all_robots, solo_dir, out, quiet, dt=dt, start=start,
@@ -203,7 +201,7 @@ def import_g2o_command(
     ],
     dt: Annotated[float, typer.Option(help="Nominal sampling period, s (a graph has no time).")] = 1.0,
     forward: Annotated[
-        str,
+        choice("Forward", ("auto", "x", "y", "-x", "-y")),
         typer.Option(
             help="Forward axis of the file's body frame: auto (largest summed motion), x, y, -x or -y."
         ),
@@ -247,7 +245,7 @@ def import_g2o_command(
         path = resolve_source(path, "g2o")  # (first: a registered name's file is the input)
         check_output(out, inputs=[path], kind="dataset", force=force)
         ds = import_graph(
-            path, dt=dt, forward=forward, range_std=range_std, bearing_std=bearing_std, max_poses=max_poses,
+            path, dt=dt, forward=str(forward), range_std=range_std, bearing_std=bearing_std, max_poses=max_poses,
             convention=convention,
         )
         write_dataset(out, ds)

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import check_output, handle_errors
+from slamcli.cli.app import check_output, choice, handle_errors
 from slamcli.cli.import_cmd import import_app
 
 
@@ -16,10 +16,11 @@ def import_trajectory_command(
     path: Annotated[Path, typer.Argument(help="Trajectory file: TUM (t x y z qx qy qz qw) or KITTI (3x4).")],
     data: Annotated[Path, typer.Option("--data", "-d", help="Dataset the trajectory was estimated on.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Result file to write (atomically).")],
-    fmt: Annotated[str, typer.Option("--format", "-f", help="tum | kitti | auto (by extension/columns).")] = "auto",
+    fmt: Annotated[choice("TrajectoryFormat", ("tum", "kitti", "auto")), typer.Option(
+        "--format", "-f", help="File format; auto: by extension / column count.")] = "auto",
     times: Annotated[Path | None, typer.Option(help="KITTI: times.txt, one stamp per pose.")] = None,
     time_offset: Annotated[float, typer.Option(help="Seconds added to the file's stamps.")] = 0.0,
-    extrapolate: Annotated[str, typer.Option(
+    extrapolate: Annotated[choice("Extrapolate", ("error", "hold")), typer.Option(
         help="Dataset stamps outside the file's span: error, or hold the end pose.")] = "error",
     name: Annotated[str | None, typer.Option(help="Solver name to record (default imported:<format>).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing.")] = False,
@@ -33,7 +34,7 @@ def import_trajectory_command(
         from slamcli.api.interop import import_trajectory_file
 
         check_output(output, inputs=[path, data, times], kind="result", force=force)
-        r = import_trajectory_file(path, data, output, fmt=fmt, times=times, time_offset=time_offset,
-                                   extrapolate=extrapolate, name=name)
+        r = import_trajectory_file(path, data, output, fmt=str(fmt), times=times, time_offset=time_offset,
+                                   extrapolate=str(extrapolate), name=name)
         if not quiet:
             typer.echo(f"{r.solver} from {path.name}: {r.message}\n  wrote {output}")

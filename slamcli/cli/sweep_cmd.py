@@ -10,12 +10,18 @@ import typer
 from slamcli.cli.app import (
     app,
     check_output,
+    choice,
+    echo_stderr,
     fail,
     handle_errors,
     rich_progress,
     stderr_console,
+    stderr_is_terminal,
     stdout_console,
 )
+
+#: the sweep executors (slamcli.sweep.runner.make_executor)
+EXECUTORS = ("local", "dask")
 
 
 def _shipped_names() -> str:
@@ -34,7 +40,8 @@ def sweep_command(
         show_default=False)] = None,
     list_names: Annotated[bool, typer.Option("--list", help="List the shipped experiments and exit.")] = False,
     workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
-    executor: Annotated[str, typer.Option("--executor", help="local (process pool, spawn) or dask.")] = "local",
+    executor: Annotated[choice("Executor", EXECUTORS), typer.Option(
+        "--executor", help="local: a process pool (spawn); dask: a Dask cluster (--scheduler).")] = "local",
     scheduler: Annotated[
         str | None,
         typer.Option("--scheduler", help="Existing Dask scheduler (tcp://host:8786); default: a LocalCluster."),
@@ -57,8 +64,6 @@ def sweep_command(
             return
         if experiment is None:
             fail("give an experiment name or file (slamcli sweep --list shows the shipped ones)")
-        if executor not in ("local", "dask"):
-            fail(f"--executor: {executor!r} is not one of local, dask")
         if workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
         cfg = load_experiment(_experiment_file(experiment))
@@ -71,7 +76,7 @@ def sweep_command(
             _print_dry_run(expansion, out)
             return
         check_output(out, folder=True, option="--out", inputs=[experiment])
-        summary = _run(expansion, out, workers, executor, scheduler, resume, quiet)
+        summary = _run(expansion, out, workers, str(executor), scheduler, resume, quiet)
         _print_summary(summary)
         if not summary.ok:
             raise typer.Exit(1)
@@ -103,11 +108,12 @@ def _print_list() -> None:
 
 
 def _run(expansion, out, workers, executor, scheduler, resume, quiet):
-    from slamcli.sweep.runner import run_sweep
+    from slamcli.sweep.runner import progress_lines, run_sweep
 
-    if quiet:
+    if quiet or not stderr_is_terminal():  # off a terminal: plain lines a log can read
         return run_sweep(
-            expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume
+            expansion, out, executor=executor, workers=workers, scheduler=scheduler, resume=resume,
+            progress=None if quiet else progress_lines(f"sweep {expansion.experiment.name}", echo_stderr),
         )
     from rich.progress import TextColumn
 

@@ -438,6 +438,22 @@ def _copy_file_url(url: str, output_file, pooch_obj=None, check_only: bool = Fal
     return None
 
 
+def _download_failure(exc: BaseException, url: str) -> str:
+    """Why a download failed, in a few words: the kind of network failure and the host, not the HTTP
+    library's retry and connection-pool text."""
+    from urllib.parse import urlsplit
+
+    kinds = {c.__name__ for c in type(exc).__mro__}
+    host = urlsplit(url).hostname or url
+    if "HTTPError" in kinds:
+        status = getattr(getattr(exc, "response", None), "status_code", None)
+        return f"{host} answered HTTP {status}" if status else f"{host} refused the request"
+    if kinds & {"ConnectionError", "Timeout", "TimeoutError", "gaierror"}:
+        return f"cannot reach {host}: offline, or the network blocks it"
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0][:120]}" if text else type(exc).__name__
+
+
 def fetch(name: str, progress=None) -> tuple[Path, list[str]]:
     """Download recording ``name`` into ``data_dir()/name`` (files already there with the right sha256 are kept).
 
@@ -466,7 +482,8 @@ def fetch(name: str, progress=None) -> tuple[Path, list[str]]:
         except DatasetFetchError:
             raise
         except Exception as exc:  # noqa: BLE001 — requests/ftplib/OSError: one line, not a traceback
-            raise DatasetFetchError(f"{name}: {f.url}: download failed ({type(exc).__name__}: {exc})") from None
+            raise DatasetFetchError(f"{name}: {f.path}: download failed ({_download_failure(exc, f.url)}); "
+                                    f"with a copy of the files, register it: slamcli datasets add {name} DIR") from None
         if not f.sha256:
             notes.append(f"{f.path}: sha256 unknown to the registry; downloaded file's is {sha256_of(target)}")
     marker = _find_marker(dest, e.marker)

@@ -53,23 +53,26 @@ def _same(a: Path, b: Path) -> bool:
 
 def _sweep_lock_holder(path: Path) -> Path | None:
     """The results folder of a running sweep that contains ``path`` (its lock is held), else None."""
-    import fcntl
-
     for folder in (path, *path.parents):
         lock = folder / SWEEP_LOCK_NAME
-        if not lock.is_file():
-            continue
-        try:
-            fh = open(lock)
-        except OSError:
-            continue
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except OSError:
+        if lock.is_file() and _is_held(lock):
             return folder
-        finally:
-            fh.close()  # also drops the shared lock we may have taken
     return None
+
+
+def _is_held(lock: Path) -> bool:
+    """Whether another process holds the sweep lock file ``lock`` (a probe: taken and given back at once)."""
+    from filelock import FileLock, Timeout
+
+    probe = FileLock(lock, timeout=0)
+    try:
+        probe.acquire()
+    except Timeout:
+        return True
+    except OSError:  # cannot even open it (permissions): not a lock this user's sweep holds
+        return False
+    probe.release()
+    return False
 
 
 def file_kind(path: Path) -> str | None:

@@ -233,14 +233,14 @@ class Reproduction:
         import pandas as pd
 
         from slamcli.sweep.expand import expand
-        from slamcli.sweep.runner import load_results, run_sweep
+        from slamcli.sweep.runner import load_results, progress_lines, run_sweep
 
         cfg, missing = self.prepare(file, add_all_solvers=add_all_solvers)
         if not cfg.solvers:
             return SweepOutcome(cfg, None, None, pd.DataFrame(), self.runs_dir / cfg.name, missing)
         expansion = expand(cfg)
         self.log(f"{cfg.name}: {len(expansion.runs)} runs")
-        summary = run_sweep(expansion, self.runs_dir, workers=self.workers)
+        summary = run_sweep(expansion, self.runs_dir, workers=self.workers, progress=progress_lines(cfg.name, self.log))
         table = load_results(summary.exp_dir)  # path columns joined onto the sweep folder
         return SweepOutcome(cfg, expansion, summary, table, summary.exp_dir, missing)
 

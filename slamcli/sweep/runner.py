@@ -27,8 +27,8 @@ message in ``status.json["error"]``; it is not evaluated, so its numbers never r
 sweep exits non-zero. Every other status (``converged``, ``max_iterations``, ``completed``) is recorded as
 ``solver_status`` in ``status.json``, the manifest and the results table.
 
-Locking: a sweep holds an exclusive ``flock`` on ``<experiment>/.sweep.lock`` for its whole duration; a second
-sweep on the same folder is refused with one line naming the holder's pid (the lock dies with its process).
+Locking: a sweep holds an exclusive lock (``filelock``) on ``<experiment>/.sweep.lock`` for its whole duration; a
+second sweep on the same folder is refused with one line naming the holder's pid (the lock dies with its process).
 
 Worker hygiene: every pool worker polls its parent and exits when the coordinator is gone (``kill -9``), so no
 orphan keeps starting queued runs. A worker that dies during a run fails only that run; the pool is rebuilt
@@ -36,6 +36,10 @@ and the other in-flight runs are resubmitted.
 
 Dataset cache: ``datasets/<dataset_id>.json`` records the SHA-256 of the dataset file written for that id;
 a cached file whose bytes no longer match (swapped, truncated) is simulated again instead of being reused.
+
+Paths: the results folder and every file-valued run option (``[evaluate] against``) are made absolute in the
+coordinator before any task is built, so a worker whose working directory is not the coordinator's (a Dask
+worker started elsewhere) writes and reads exactly where a ``-j 1`` sweep would.
 
 Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id, every
 artefact exists, the sha256 it records of every file a later step reads (config, dataset, result, metrics)
@@ -86,6 +90,8 @@ MISSING = "missing"
 #: solver statuses (``SolverResult.status`` values) that make a run failed: no usable estimate
 FAILING_SOLVER_STATUSES = ("failed", "diverged")
 LOCK_NAME = ".sweep.lock"
+#: the running sweep's pid, for the message that refuses a second sweep
+PID_NAME = ".sweep.pid"
 
 log = logging.getLogger(__name__)
 
@@ -263,33 +269,34 @@ def _remove(p: Path) -> None:
 
 @contextlib.contextmanager
 def sweep_lock(exp_dir: Path) -> Iterator[None]:
-    """Exclusive, non-blocking ``flock`` on ``exp_dir/.sweep.lock`` for the duration of a sweep.
+    """Exclusive, non-blocking lock on ``exp_dir/.sweep.lock`` for the duration of a sweep
+    (:class:`filelock.FileLock`: ``flock`` on POSIX, ``LockFileEx`` on Windows); the holder's pid is in
+    ``exp_dir/.sweep.pid`` while it holds the lock.
 
-    Raises a one-line :class:`ConfigError` when another process holds it. The kernel drops the lock when its
-    holder dies (even by ``kill -9``), so a crashed sweep never blocks the next one.
+    Raises a one-line :class:`ConfigError` when another process holds it. The operating system drops the lock
+    when its holder dies (even by ``kill -9``), so a crashed sweep never blocks the next one.
     """
-    import fcntl
+    from filelock import FileLock, Timeout
 
-    path = exp_dir / LOCK_NAME
+    path, pid_path = exp_dir / LOCK_NAME, exp_dir / PID_NAME
+    lock = FileLock(path, timeout=0)
     try:
-        fh = open(path, "a+")  # held open for the whole sweep
+        lock.acquire()
+    except Timeout:
+        try:
+            holder = pid_path.read_text().strip() or "unknown"
+        except OSError:
+            holder = "unknown"
+        raise ConfigError(f"{exp_dir}: another sweep (pid {holder}) is running on this results folder; "
+                          "wait for it to finish or use another --out") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot create the sweep lock ({exc.strerror})") from None
     try:
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            fh.seek(0)
-            holder = fh.read().strip() or "unknown"
-            raise ConfigError(f"{exp_dir}: another sweep (pid {holder}) is running on this results folder; "
-                              "wait for it to finish or use another --out") from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(f"{os.getpid()}\n")
-        fh.flush()
+        pid_path.write_text(f"{os.getpid()}\n")
         yield
     finally:
-        fh.close()
+        pid_path.unlink(missing_ok=True)  # before the release: a next holder's pid is never removed
+        lock.release()
 
 
 def file_sha256(path: Path) -> str:
@@ -675,6 +682,20 @@ def _single_threaded_blas() -> Iterator[None]:
 ProgressCallback = Callable[[Counts], None]
 
 
+def progress_lines(label: str, write: Callable[[str], None]) -> ProgressCallback:
+    """A :data:`ProgressCallback` that writes plain lines at a bounded rate
+    (:class:`slamcli.progress.ProgressLines`): finished runs of the total, the done / failed / skipped counts,
+    the rate and ETA of the runs this sweep executes (skipped runs are not counted as work)."""
+    from slamcli.progress import ProgressLines
+
+    lines = ProgressLines(label, write, unit="runs")
+
+    def report(c: Counts) -> None:
+        lines(c.finished, c.total, f"{c.done} done, {c.failed} failed, {c.skipped} skipped")
+
+    return report
+
+
 def run_sweep(
     expansion: Expansion,
     out_dir: str | Path,
@@ -692,7 +713,9 @@ def run_sweep(
     sweep after writing the tables of what finished (``summary.interrupted``), then re-raises.
     """
     pipeline = pipeline if pipeline is not None else WorkflowPipeline()
-    exp_dir = Path(out_dir) / expansion.experiment.name
+    # absolute before anything is handed to a worker: a Dask worker's working directory is its own, not ours
+    exp_dir = Path(os.path.abspath(out_dir)) / expansion.experiment.name
+    expansion = _paths_for_workers(expansion)
     if exp_dir.is_symlink() or (exp_dir.exists() and not exp_dir.is_dir()):
         raise ConfigError(f"{exp_dir}: exists and is not a directory; remove it or use another --out")
     try:
@@ -703,6 +726,25 @@ def run_sweep(
         raise ConfigError(f"{exp_dir}: results folder is not writable")
     with sweep_lock(exp_dir):
         return _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress)
+
+
+#: ``[evaluate]`` options that name a file (relative to the directory the sweep is started from)
+PATH_OPTIONS = ("against",)
+
+
+def _paths_for_workers(expansion: Expansion) -> Expansion:
+    """``expansion`` with every file-valued run option made absolute against this process's working directory.
+
+    The run ids are kept (they hash the options as written); ``config.json`` records the absolute path, the
+    one the worker read.
+    """
+    import dataclasses
+
+    def absolute(run: RunSpec) -> RunSpec:
+        paths = {k: os.path.abspath(v) for k in PATH_OPTIONS if isinstance(v := run.evaluate.get(k), str | os.PathLike)}
+        return dataclasses.replace(run, evaluate={**run.evaluate, **paths}) if paths else run
+
+    return dataclasses.replace(expansion, runs=tuple(absolute(r) for r in expansion.runs))
 
 
 def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress) -> SweepSummary:

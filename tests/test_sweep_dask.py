@@ -1,0 +1,168 @@
+"""A sweep on a real ``distributed`` cluster (``dask scheduler`` + two ``dask worker`` processes on 127.0.0.1)
+started from another working directory than the workers', with a relative ``-o``, a worker killed mid-run."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("distributed")
+
+EXPERIMENT = """
+[experiment]
+name = "dask-relative"
+root_seed = 5
+
+[scenario]
+name = "loop"
+[scenario.parameters]
+n_steps = 2000
+
+[[solver]]
+method = "odometry"
+
+[[solver]]
+method = "ekf"
+oracle_association = true
+
+[sweep]
+replicates = 3
+"""
+
+#: how long the cluster may take to come up, and a whole sweep to finish, on a loaded machine
+START_TIMEOUT_S = 90.0
+SWEEP_TIMEOUT_S = 300.0
+#: columns that differ between two honest executions of the same run (clocks, where, which process)
+VOLATILE = ("wall_time_s", "solve_time_s", "metric.wall_time_s", "path", "dataset_path", "result_path")
+SUMMARY_RE = re.compile(r"(\d+) done, (\d+) failed, (\d+) skipped of (\d+)")
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_for_port(port: int, proc: subprocess.Popen) -> None:
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, "the dask scheduler exited while starting"
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"no dask scheduler on 127.0.0.1:{port} after {START_TIMEOUT_S} s")
+
+
+def _wait_for_workers(address: str, n: int) -> None:
+    from distributed import Client
+
+    with Client(address, timeout=f"{START_TIMEOUT_S}s") as client:
+        client.wait_for_workers(n, timeout=START_TIMEOUT_S)
+
+
+def _sweep(cwd: Path, *args: str, wait: bool = True):
+    cmd = [sys.executable, "-m", "slamcli", "sweep", "exp.toml", "-o", "res", "--quiet", *args]
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if not wait:
+        return proc
+    out, err = proc.communicate(timeout=SWEEP_TIMEOUT_S)
+    return proc.returncode, out + err
+
+
+def _counts(text: str) -> tuple[int, int, int, int]:
+    m = SUMMARY_RE.search(text)
+    assert m, text
+    return tuple(int(g) for g in m.groups())
+
+
+def _kill_when_running(proc: subprocess.Popen, sweep: subprocess.Popen, exp_dir: Path) -> None:
+    """SIGKILL the worker ``proc`` once a run has finished and the worker holds a run's temporary folder."""
+    deadline = time.monotonic() + SWEEP_TIMEOUT_S
+    mine = f".tmp-{proc.pid}-"
+    while time.monotonic() < deadline and sweep.poll() is None:
+        if exp_dir.is_dir():
+            names = [p.name for p in exp_dir.iterdir()]
+            finished = [n for n in names if (exp_dir / n / "status.json").is_file()]
+            if finished and any(mine in n and n.startswith(".") for n in names):
+                proc.kill()
+                proc.wait(timeout=30)
+                return
+        time.sleep(0.02)
+    raise AssertionError("the sweep ended before the worker could be killed mid-run")
+
+
+@pytest.mark.slow
+def test_dask_sweep_with_relative_out_keeps_results_survives_a_killed_worker_and_resumes(tmp_path):
+    client_dir = tmp_path / "client"
+    client_dir.mkdir()
+    (client_dir / "exp.toml").write_text(EXPERIMENT)
+    worker_dirs = [tmp_path / f"worker{i}" for i in range(2)]
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    procs: list[subprocess.Popen] = []
+    try:
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+             "--no-dashboard"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_port(port, procs[0])
+        for d in worker_dirs:
+            d.mkdir()
+            # --no-nanny: the process started here is the one that runs the tasks (its pid names the run's
+            # temporary folder), so killing it kills a worker mid-run
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "dask", "worker", address, "--nthreads", "1", "--no-nanny",
+                 "--host", "127.0.0.1", "--no-dashboard"],
+                cwd=d, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_workers(address, 2)
+
+        exp_dir = client_dir / "res" / "dask-relative"
+        sweep = _sweep(client_dir, "--executor", "dask", "--scheduler", address, wait=False)
+        _kill_when_running(procs[2], sweep, exp_dir)
+        out, err = sweep.communicate(timeout=SWEEP_TIMEOUT_S)
+        # the scheduler hands the killed worker's task to the other worker: nothing is lost
+        assert _counts(out + err) == (6, 0, 0, 6), out + err
+
+        # every run is in the client's -o folder, nothing in the workers' working directories
+        assert not [p for d in worker_dirs for p in d.rglob("status.json")]
+        rc, text = _sweep(client_dir, "--executor", "dask", "--scheduler", address)
+        assert rc == 0, text
+        assert _counts(text) == (0, 0, 6, 6)  # the resume finds every finished run
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout=30)
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+
+    assert not any(".tmp-" in p.name for p in exp_dir.iterdir())  # the killed worker's run folder is gone
+    serial_dir = tmp_path / "serial"
+    serial_dir.mkdir()
+    (serial_dir / "exp.toml").write_text(EXPERIMENT)
+    rc, text = _sweep(serial_dir, "-j", "1")
+    assert rc == 0 and _counts(text) == (6, 0, 0, 6), text
+    dask_table = pd.read_csv(exp_dir / "results.csv").set_index("run_id").sort_index()
+    serial_table = pd.read_csv(serial_dir / "res" / "dask-relative" / "results.csv").set_index("run_id").sort_index()
+    assert list(dask_table.index) == list(serial_table.index)
+    assert set(dask_table["status"]) == {"completed"}
+    compared = [c for c in serial_table.columns if c not in VOLATILE]
+    numeric = [c for c in compared if pd.api.types.is_numeric_dtype(serial_table[c])]
+    assert "ate_rmse_m" in numeric and serial_table["ate_rmse_m"].notna().all()
+    np.testing.assert_array_equal(dask_table[numeric].to_numpy(float), serial_table[numeric].to_numpy(float))
+    text_cols = [c for c in compared if c not in numeric]
+    pd.testing.assert_frame_equal(dask_table[text_cols], serial_table[text_cols])
