@@ -1,17 +1,27 @@
-"""Suite-wide pytest hooks."""
+"""Suite-wide pytest hooks: what a test reports is sent between pytest-xdist's processes as UTF-8, and the
+bad-input tests make file names that are not UTF-8 (legal on Linux, ``\\udcXX`` in Python strings); a report or
+warning naming one would otherwise end the whole run with an internal error. Such bytes are shown escaped."""
 
 from __future__ import annotations
 
 import pytest
 
 
+def _utf8(text: str) -> str:
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_warning_recorded(warning_message, when, nodeid, location):
-    """A warning whose text names a file that is not UTF-8 (legal on Linux; the bad-input tests make such
-    names) is shown with the bytes escaped: pytest-xdist sends warnings between processes as UTF-8, and a
-    lone surrogate there ends the whole run with an internal error."""
     text = str(warning_message.message)
-    safe = text.encode("utf-8", "backslashreplace").decode("utf-8")
-    if safe != text:
-        warning_message.message = type(warning_message.message)(safe) if isinstance(
-            warning_message.message, Warning) else safe
+    if _utf8(text) != text:
+        category = type(warning_message.message)
+        warning_message.message = category(_utf8(text)) if issubclass(category, Warning) else _utf8(text)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    report = (yield).get_result()
+    if report.longrepr is not None and _utf8(str(report.longrepr)) != str(report.longrepr):
+        report.longrepr = _utf8(str(report.longrepr))
+    report.sections = [(title, _utf8(text)) for title, text in report.sections]

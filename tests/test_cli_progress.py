@@ -81,7 +81,8 @@ def test_sweep_table_off_a_terminal_is_not_wrapped(tmp_path):
     toml = tmp_path / "wide.toml"
     toml.write_text(WIDE_EXPERIMENT)
     runs = expand(load_experiment(toml)).runs
-    r = CliRunner().invoke(app, ["sweep", str(toml), "--dry-run", "-o", str(tmp_path / "res")])
+    # off a terminal and with no COLUMNS (pytest-xdist sets it in its workers)
+    r = CliRunner().invoke(app, ["sweep", str(toml), "--dry-run", "-o", str(tmp_path / "res")], env={"COLUMNS": None})
     assert r.exit_code == 0, r.output
     rows = [ln for ln in r.output.splitlines() if any(run.run_id in ln for run in runs)]
     assert len(rows) == len(runs) == 8
