@@ -106,6 +106,7 @@ from slamcli.solvers.icm.common import online_init, reported_labels, stop_decisi
 from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
+from slamcli.solvers.icm.polish import optimality, polish
 from slamcli.solvers.icm.presets import apply_data_rule, apply_preset
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
@@ -250,6 +251,11 @@ class IcmParams:
     team_range_weights: bool = False
     team_odometry_only: bool = False
     preset: Literal["paper", "real"] = "paper"
+    polish: Literal["none", "nls"] = "nls"
+    polish_rtol: float = 1e-3
+    polish_iters: int = 100
+    opt_step_tol: float = 1e-4
+    opt_rtol: float = 1e-8
 
     def __post_init__(self) -> None:
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
@@ -260,7 +266,7 @@ class IcmParams:
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
         if self.min_observations < 0:
             raise ValueError(f"min_observations must be >= 0, got {self.min_observations}")
-        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters"):
+        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters", "polish_iters"):
             if getattr(self, name) < (0 if name == "max_sweeps" else 1):
                 raise ValueError(
                     f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
@@ -276,7 +282,9 @@ class IcmParams:
             raise ValueError(f"cauchy_k must be a finite number > 0, got {self.cauchy_k}")
         if not (0.0 < self.merge_prob < 1.0):
             raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
-        for name in ("joint_step_tol", "label_cost"):
+        if self.polish not in ("none", "nls"):
+            raise ValueError(f"polish must be none or nls, got {self.polish!r}")
+        for name in ("joint_step_tol", "label_cost", "polish_rtol", "opt_step_tol", "opt_rtol"):
             v = getattr(self, name)
             if not (v >= 0 and math.isfinite(v)):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
@@ -347,8 +355,10 @@ class _SweepLog:
     parts_log: list = dataclasses.field(default_factory=list)
     joint_errors: list = dataclasses.field(default_factory=list)
     joint_log: list = dataclasses.field(default_factory=list)
+    polishes: list = dataclasses.field(default_factory=list)
     rejected: int = 0
     increases: int = 0
+    unconfirmed: int = 0
     joint_accepted: int = 0
     merges: int = 0
 
@@ -459,10 +469,12 @@ class IcmSlam(BaseSolver):
             elif not reported:  # reported ids: the model keeps every observation with an id (null or not)
                 in_model = labels >= 0
             E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q) + null_E(labels)
+            decision = stop_decision(E_start, E_same, p.energy_rtol)
+            poses, landmarks, E, decision = self._polish_or_confirm(prob, W, poses, landmarks, labels, E, E_start,
+                                                                    E_same, decision, n, log, null_E)
             log.record(n, E, mp.map_change(prev_landmarks, landmarks), time.perf_counter() - t0, landmarks, poses)
             if progress is not None:
                 progress(n, p.max_sweeps)
-            decision = stop_decision(E_start, E_same, p.energy_rtol)
             if decision == "increase":
                 log.increases += 1
             elif decision == "converged":
@@ -553,6 +565,31 @@ class IcmSlam(BaseSolver):
             log.joint_errors.append(f"sweep {n}: {jo.reason[7:]}")
         return poses, landmarks
 
+    def _polish_or_confirm(self, prob, W, poses, landmarks, labels, E, E_start, E_same, decision, n, log, null_E):
+        """The end of sweep ``n``. ``polish="nls"``: when the sweep lowered the energy by a relative amount
+        ≤ ``polish_rtol`` (or rose), or it is the last sweep, the joint optimum of H for ``labels``
+        (:func:`~slamcli.solvers.icm.polish.polish`); the run is ``converged`` only when neither the sweep nor
+        the polish lowered the energy by more than ``energy_rtol``. ``polish="none"``: a ``converged`` by the
+        energy rule stands only when the estimate passes the optimality test (Gauss-Newton step ≤
+        ``opt_step_tol``, predicted gap ≤ ``opt_rtol`` · H); otherwise the sweeps go on. ``E``: the sweep's
+        recorded energy. Returns ``(poses, landmarks, E, decision)``."""
+        p: IcmParams = self.params
+        if p.polish == "none":
+            if decision == "converged" and not optimality(prob, W, poses, landmarks, labels).holds(
+                    E, p.opt_step_tol, p.opt_rtol):
+                log.unconfirmed += 1
+                decision = "continue"
+            return poses, landmarks, E, decision
+        drop = (E_start - E_same) / max(abs(E_start), 1e-300)
+        if drop > p.polish_rtol and n < p.max_sweeps:
+            return poses, landmarks, E, decision
+        poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters)
+        E_new = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
+        log.polishes.append({"sweep": n, **out.as_extra()})
+        if decision == "converged" and E - E_new > p.energy_rtol * max(abs(E), 1e-300):
+            decision = "continue"
+        return poses, landmarks, E_new, decision
+
     def _pose_sweep(self, prob, W, poses, labels, landmarks):
         """x_1..x_T (eq. 14): one sweep of the pose conditional modes, on a copy of ``poses``."""
         p: IcmParams = self.params
@@ -597,13 +634,23 @@ class IcmSlam(BaseSolver):
         """The result: ``extra``'s sweep counters and energy terms, the optional Laplace covariances, the
         iteration trace (the last iteration's poses always recorded) and the message."""
         p: IcmParams = self.params
-        objective, joint_errors, increases = log.objective, log.joint_errors, log.increases
+        objective, joint_errors = log.objective, log.joint_errors
+        increases = int(np.count_nonzero(np.diff(objective) > 0))  # every rise of the recorded trace
+        opt = optimality(prob, W, poses, landmarks, labels)
         timings["s_per_sweep"] = float(np.mean(log.times[1:])) if len(log.times) > 1 else 0.0
         extra.update(
             sweeps=len(objective) - 1,
             map_steps_rejected=log.rejected,
             map_step_parts=log.parts_log,
             energy_increases=increases,
+            energy_increases_same_terms=log.increases,
+            polish=p.polish,
+            polishes=log.polishes,
+            converged_unconfirmed=log.unconfirmed,
+            gradient_norm=opt.gradient_norm,
+            newton_step_max=None if math.isnan(opt.step_max) else opt.step_max,
+            optimum_gap=None if math.isnan(opt.gap) else opt.gap,
+            distance_to_optimum_m=log.polishes[-1]["distance_to_optimum_m"] if log.polishes else None,
             joint_steps_accepted=log.joint_accepted,
             joint_refinements=log.joint_log,
             labels_merged=log.merges,
