@@ -44,8 +44,25 @@ Deliberate deviations from the paper (Algorithm 2 as printed), each an option or
   which parts ran (``eq17``, ``fusion``, ``filter``, or ``rejected`` when the guard kept the eq.-17 map).
 * **stopping rule** — the paper runs a fixed number of iterations (30 / 100); here the run stops early
   (status ``converged``) when one sweep lowers the energy by a non-negative relative amount ≤
-  ``energy_rtol``, over the same observations. An energy *increase* (possible with ``monotone=False``)
-  never stops the run; it is counted in ``extra["energy_increases"]``.
+  ``energy_rtol``, over the same observations, *and* the estimate is at the optimum of its energy for its
+  matchings: with ``polish="none"`` the Gauss-Newton step to that optimum is at most ``opt_step_tol`` and
+  the decrease it predicts at most ``opt_rtol`` · H (:func:`slamcli.solvers.icm.polish.optimality`), with
+  ``polish="nls"`` the sweep's polish lowered the energy by at most ``energy_rtol``. An energy *increase*
+  (possible with ``monotone=False``) never stops the run. ``extra["energy_increases"]`` counts every rise
+  of the recorded trace (with ``surface=true`` the offsets refreshed at the start of a sweep change the
+  energy itself, so the trace can rise while each sweep lowers the energy of its own offsets);
+  ``extra["energy_increases_same_terms"]`` counts the sweeps that raised the energy over the same terms.
+* **polish="nls" is the default** (beyond the paper; ``polish="none"`` is Algorithm 2's Gauss-Seidel alone)
+  — when a sweep lowers the energy by a relative amount ≤ ``polish_rtol`` (and after the last sweep), all
+  poses and the map move at once to the optimum of the energy under the current matchings
+  (:mod:`slamcli.solvers.icm.polish`, the project's least-squares engine); the next sweep re-matches from
+  there. Gauss-Seidel sweeps stall on a long chain far from that optimum (``loop`` with known
+  correspondences: 100 sweeps end 0.03-0.9 % above it, poses up to 0.3 m away); with the polish the same
+  runs converge in 6-13 sweeps to within 1e-12 of it. The optimum is not always nearer the truth than a
+  stalled sweep (paper-sim1 seed 0: ATE 0.331 m at the optimum, 0.301 m after 100 Gauss-Seidel sweeps):
+  that is a property of the energy. ``extra`` records ``polishes`` (per polish: sweep, LM iterations,
+  energies, ``distance_to_optimum_m`` / ``_rad``: how far it moved the estimate), and at the end
+  ``gradient_norm`` (‖∇H‖₂ over poses and map, fixed matchings), ``newton_step_max`` and ``optimum_gap``.
 
 Observations of map points removed by the ς filter: ``filtered="rematch"`` (the paper's eq. 13) matches them
 again to the nearest remaining map point in the next sweep — they stay in the energy; ``filtered="drop"``
@@ -207,6 +224,14 @@ class IcmParams:
                                  current estimate, refreshed every sweep.
     range_bias : "none" | "estimate"  beyond the paper: one more node, a common range bias estimated in every
                                  sweep (its closed-form conditional mode), with or without ``surface``.
+    polish : "none" | "nls"      beyond the paper (default "nls"): the joint optimum of the energy under the
+                                 current matchings when the sweeps stall (module docstring); "none" =
+                                 Gauss-Seidel sweeps only (Algorithm 2).
+    polish_rtol : float          polish after a sweep that lowered the energy by a relative amount ≤ this.
+    polish_iters : int           Levenberg-Marquardt iterations per polish at most.
+    opt_step_tol : float         polish="none": a run is ``converged`` only when the Gauss-Newton step to the
+                                 optimum has no component above this (m / rad) …
+    opt_rtol : float             … and the energy decrease it predicts is at most this · H.
     trace_poses_every : int      record the poses of iteration 0 (the initialisation), of every k-th iteration
                                  and of the last one in ``result.trace`` (paper Figs 5b-d / 6b / 9b-c draw the
                                  trajectory after iterations 10, 20, 30, …); 0 = no poses in the trace. Memory:
