@@ -500,9 +500,7 @@ class IcmSlam(BaseSolver):
             log.record(n, E, mp.map_change(prev_landmarks, landmarks), time.perf_counter() - t0, landmarks, poses)
             if progress is not None:
                 progress(n, p.max_sweeps)
-            if decision == "increase":
-                log.increases += 1
-            elif decision == "converged":
+            if decision == "converged":
                 status = Status.CONVERGED
                 break
         if tau is not None:
@@ -597,8 +595,10 @@ class IcmSlam(BaseSolver):
         the polish lowered the energy by more than ``energy_rtol``. ``polish="none"``: a ``converged`` by the
         energy rule stands only when the estimate passes the optimality test (Gauss-Newton step ≤
         ``opt_step_tol``, predicted gap ≤ ``opt_rtol`` · H); otherwise the sweeps go on. ``E``: the sweep's
-        recorded energy. Returns ``(poses, landmarks, E, decision)``."""
+        recorded energy. A sweep that raised the energy over the same terms is counted in ``log``. Returns
+        ``(poses, landmarks, E, decision)``."""
         p: IcmParams = self.params
+        log.increases += decision == "increase"
         if p.polish == "none":
             if decision == "converged" and not optimality(prob, W, poses, landmarks, labels).holds(
                     E, p.opt_step_tol, p.opt_rtol):
@@ -611,9 +611,9 @@ class IcmSlam(BaseSolver):
         poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters)
         E_new = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
         log.polishes.append({"sweep": n, **out.as_extra()})
-        if decision == "converged" and E - E_new > p.energy_rtol * max(abs(E), 1e-300):
-            decision = "continue"
-        return poses, landmarks, E_new, decision
+        tol = p.energy_rtol * max(abs(E_start), 1e-300)  # sweep and polish together moved nothing (a rounding
+        settled = abs(E_start - E_same) <= tol and E - E_new <= tol  # rise at the optimum included)
+        return poses, landmarks, E_new, "converged" if settled else "continue"
 
     def _pose_sweep(self, prob, W, poses, labels, landmarks):
         """x_1..x_T (eq. 14): one sweep of the pose conditional modes, on a copy of ``poses``."""
