@@ -709,6 +709,8 @@ class IcmSlam(BaseSolver):
             assoc=labels,
             t_start=t_start,
             message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}"
+            + (f"; {len(log.polishes)} joint polish(es), final gradient norm {opt.gradient_norm:.2g}"
+               if log.polishes else "")
             + (f"; energy rose in {increases} sweep(s)" if increases else "")
             + (_not_converged_note(objective, p.energy_rtol) if status == Status.MAX_ITERATIONS else "")
             + (f"; joint step failed: {joint_errors[0]}" if joint_errors else "")
