@@ -228,7 +228,8 @@ class IcmParams:
                                  sweep (its closed-form conditional mode), with or without ``surface``.
     polish : "none" | "nls"      beyond the paper (default "nls"): the joint optimum of the energy under the
                                  current matchings when the sweeps stall (module docstring); "none" =
-                                 Gauss-Seidel sweeps only (Algorithm 2).
+                                 Gauss-Seidel sweeps only (Algorithm 2). Single-robot solves; the
+                                 multi-robot solve (:mod:`slamcli.solvers.icm.team`) ignores it.
     polish_rtol : float          polish after a sweep that lowered the energy by a relative amount ≤ this.
     polish_iters : int           Levenberg-Marquardt iterations per polish at most.
     opt_step_tol : float         polish="none": a run is ``converged`` only when the Gauss-Newton step to the
