@@ -788,14 +788,7 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
     pose_cols = lambda tt: np.where(tt[:, None] >= 1, 3 * (tt[:, None] - 1) + np.arange(3)[None, :], -1)
     if W.use_motion and T > 0:
         r = wrap_angle_last(prob.motion_prediction(poses[:-1]) - poses[1:])
-        if prob.car_controls is not None:  # ∂g/∂x of the shared car model, ∂r/∂x_t = −I
-            Ja = ackermann_jacobians(poses[:-1], prob.car_controls, prob.dt, prob.vehicle)[0]
-            Jb = np.broadcast_to(-np.eye(3), Ja.shape).copy()
-        else:
-            Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
-            if prob.lateral is not None:  # ∂/∂θ of dt·R(θ)[0, v_y]
-                Ja[:, 0, 2] -= prob.dt * prob.lateral * np.cos(poses[:-1, 2])
-                Ja[:, 1, 2] -= prob.dt * prob.lateral * np.sin(poses[:-1, 2])
+        Ja, Jb = motion_jacobians(prob, poses)
         add_block(r, np.sqrt(W.R), [(Ja, pose_cols(t - 1)), (Jb, pose_cols(t))])
     if W.use_odometry and T > 0:
         r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)
@@ -830,6 +823,19 @@ def joint_residuals(prob: Problem, W: Weights, poses, landmarks, labels, *, jaco
         shape=(row0, n_var),
     )
     return rvec, J
+
+
+def motion_jacobians(prob: Problem, poses):
+    """``(∂r/∂x_{t-1}, ∂r/∂x_t)``, each ``(T, 3, 3)``, of the motion residuals ``r_t = g(x_{t-1}, u_{t-1}) − x_t``
+    of ``poses (T+1, 3)`` by the dataset's own model (DDMR, or the shared car model)."""
+    if prob.car_controls is not None:  # ∂g/∂x of the shared car model, ∂r/∂x_t = −I
+        Ja = ackermann_jacobians(poses[:-1], prob.car_controls, prob.dt, prob.vehicle)[0]
+        return Ja, np.broadcast_to(-np.eye(3), Ja.shape).copy()
+    Ja, Jb = potentials.motion_residual_jacobians(poses[:-1], prob.controls, poses[1:], prob.dt)
+    if prob.lateral is not None:  # ∂/∂θ of dt·R(θ)[0, v_y]
+        Ja[:, 0, 2] -= prob.dt * prob.lateral * np.cos(poses[:-1, 2])
+        Ja[:, 1, 2] -= prob.dt * prob.lateral * np.sin(poses[:-1, 2])
+    return Ja, Jb
 
 
 def solve_normal_schur(J, r, n_pose: int, damping: float = 1e-9) -> np.ndarray:

@@ -44,8 +44,27 @@ Deliberate deviations from the paper (Algorithm 2 as printed), each an option or
   which parts ran (``eq17``, ``fusion``, ``filter``, or ``rejected`` when the guard kept the eq.-17 map).
 * **stopping rule** — the paper runs a fixed number of iterations (30 / 100); here the run stops early
   (status ``converged``) when one sweep lowers the energy by a non-negative relative amount ≤
-  ``energy_rtol``, over the same observations. An energy *increase* (possible with ``monotone=False``)
-  never stops the run; it is counted in ``extra["energy_increases"]``.
+  ``energy_rtol``, over the same observations, *and* the estimate is at the optimum of its energy for its
+  matchings: with ``polish="none"`` the Gauss-Newton step to that optimum is at most ``opt_step_tol`` and
+  the decrease it predicts at most ``opt_rtol`` · H (:func:`slamcli.solvers.icm.polish.optimality`), with
+  ``polish="nls"`` the sweep's polish lowered the energy by at most ``energy_rtol``. An energy *increase*
+  (possible with ``monotone=False``) never stops the run. ``extra["energy_increases"]`` counts every rise
+  of the recorded trace (with ``surface=true`` the offsets refreshed at the start of a sweep change the
+  energy itself, so the trace can rise while each sweep lowers the energy of its own offsets);
+  ``extra["energy_increases_same_terms"]`` counts the sweeps that raised the energy over the same terms.
+* **polish="nls" is the default** (beyond the paper; ``polish="none"`` is Algorithm 2's Gauss-Seidel alone)
+  — when a sweep lowers the energy by a relative amount ≤ ``polish_rtol`` (and after the last sweep), all
+  poses and the map move at once to the optimum of the energy under the current matchings
+  (:mod:`slamcli.solvers.icm.polish`, the project's least-squares engine); the next sweep re-matches from
+  there. Gauss-Seidel sweeps stall on a long chain far from that optimum (``loop`` with known
+  correspondences: 100 sweeps end 0.03-0.9 % above it, poses up to 0.3 m away); with the polish the same
+  runs converge in 6-13 sweeps to within 1e-12 of it. The optimum is not always nearer the truth than a
+  stalled sweep (paper-sim1 seed 0: ATE 0.331 m at the optimum, 0.301 m after 100 Gauss-Seidel sweeps;
+  the octagon of Fig. 9 with R = Q = S = I, ς = 500, seeds 0-2: mean landmark error 0.18-0.23 m at the
+  optimum under the matchings of 100 sweeps, 0.10-0.11 m at those sweeps' stalled estimate, 0.31-0.39 m
+  away): that is a property of the energy. ``extra`` records ``polishes`` (per polish: sweep, LM iterations,
+  energies, ``distance_to_optimum_m`` / ``_rad``: how far it moved the estimate), and at the end
+  ``gradient_norm`` (‖∇H‖₂ over poses and map, fixed matchings), ``newton_step_max`` and ``optimum_gap``.
 
 Observations of map points removed by the ς filter: ``filtered="rematch"`` (the paper's eq. 13) matches them
 again to the nearest remaining map point in the next sweep — they stay in the energy; ``filtered="drop"``
@@ -107,6 +126,7 @@ from slamcli.solvers.icm.common import online_init, reported_labels, stop_decisi
 from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
+from slamcli.solvers.icm.polish import optimality, polish
 from slamcli.solvers.icm.presets import apply_data_rule, apply_preset, explicit_weights, weights_note
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
@@ -212,6 +232,15 @@ class IcmParams:
                                  step, sideways part included); ``auto`` (default) = the dataset's
                                  ``motion_source`` (odometry for graph imports). Recorded as
                                  ``extra["motion_input"]``. Single-robot solves.
+    polish : "none" | "nls"      beyond the paper (default "nls"): the joint optimum of the energy under the
+                                 current matchings when the sweeps stall (module docstring); "none" =
+                                 Gauss-Seidel sweeps only (Algorithm 2). Single-robot solves; the
+                                 multi-robot solve (:mod:`slamcli.solvers.icm.team`) ignores it.
+    polish_rtol : float          polish after a sweep that lowered the energy by a relative amount ≤ this.
+    polish_iters : int           Levenberg-Marquardt iterations per polish at most.
+    opt_step_tol : float         polish="none": a run is ``converged`` only when the Gauss-Newton step to the
+                                 optimum has no component above this (m / rad) …
+    opt_rtol : float             … and the energy decrease it predicts is at most this · H.
     trace_poses_every : int      record the poses of iteration 0 (the initialisation), of every k-th iteration
                                  and of the last one in ``result.trace`` (paper Figs 5b-d / 6b / 9b-c draw the
                                  trajectory after iterations 10, 20, 30, …); 0 = no poses in the trace. Memory:
@@ -257,6 +286,11 @@ class IcmParams:
     team_odometry_only: bool = False
     preset: Literal["paper", "real"] = "paper"
     motion_input: Literal["auto", "controls", "odometry"] = "auto"
+    polish: Literal["none", "nls"] = "nls"
+    polish_rtol: float = 1e-3
+    polish_iters: int = 100
+    opt_step_tol: float = 1e-4
+    opt_rtol: float = 1e-8
 
     def __post_init__(self) -> None:
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
@@ -271,7 +305,7 @@ class IcmParams:
             raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
         if self.min_observations < 0:
             raise ValueError(f"min_observations must be >= 0, got {self.min_observations}")
-        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters"):
+        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters", "polish_iters"):
             if getattr(self, name) < (0 if name == "max_sweeps" else 1):
                 raise ValueError(
                     f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
@@ -287,7 +321,9 @@ class IcmParams:
             raise ValueError(f"cauchy_k must be a finite number > 0, got {self.cauchy_k}")
         if not (0.0 < self.merge_prob < 1.0):
             raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
-        for name in ("joint_step_tol", "label_cost"):
+        if self.polish not in ("none", "nls"):
+            raise ValueError(f"polish must be none or nls, got {self.polish!r}")
+        for name in ("joint_step_tol", "label_cost", "polish_rtol", "opt_step_tol", "opt_rtol"):
             v = getattr(self, name)
             if not (v >= 0 and math.isfinite(v)):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
@@ -366,8 +402,10 @@ class _SweepLog:
     parts_log: list = dataclasses.field(default_factory=list)
     joint_errors: list = dataclasses.field(default_factory=list)
     joint_log: list = dataclasses.field(default_factory=list)
+    polishes: list = dataclasses.field(default_factory=list)
     rejected: int = 0
     increases: int = 0
+    unconfirmed: int = 0
     joint_accepted: int = 0
     merges: int = 0
 
@@ -481,13 +519,13 @@ class IcmSlam(BaseSolver):
             elif not reported:  # reported ids: the model keeps every observation with an id (null or not)
                 in_model = labels >= 0
             E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q) + null_E(labels)
+            decision = stop_decision(E_start, E_same, p.energy_rtol)
+            poses, landmarks, E, decision = self._polish_or_confirm(prob, W, poses, landmarks, labels, E, E_start,
+                                                                    E_same, decision, n, log, null_E)
             log.record(n, E, mp.map_change(prev_landmarks, landmarks), time.perf_counter() - t0, landmarks, poses)
             if progress is not None:
                 progress(n, p.max_sweeps)
-            decision = stop_decision(E_start, E_same, p.energy_rtol)
-            if decision == "increase":
-                log.increases += 1
-            elif decision == "converged":
+            if decision == "converged":
                 status = Status.CONVERGED
                 break
         if tau is not None:
@@ -576,6 +614,33 @@ class IcmSlam(BaseSolver):
             log.joint_errors.append(f"sweep {n}: {jo.reason[7:]}")
         return poses, landmarks
 
+    def _polish_or_confirm(self, prob, W, poses, landmarks, labels, E, E_start, E_same, decision, n, log, null_E):
+        """The end of sweep ``n``. ``polish="nls"``: when the sweep lowered the energy by a relative amount
+        ≤ ``polish_rtol`` (or rose), or it is the last sweep, the joint optimum of H for ``labels``
+        (:func:`~slamcli.solvers.icm.polish.polish`); the run is ``converged`` only when neither the sweep nor
+        the polish lowered the energy by more than ``energy_rtol``. ``polish="none"``: a ``converged`` by the
+        energy rule stands only when the estimate passes the optimality test (Gauss-Newton step ≤
+        ``opt_step_tol``, predicted gap ≤ ``opt_rtol`` · H); otherwise the sweeps go on. ``E``: the sweep's
+        recorded energy. A sweep that raised the energy over the same terms is counted in ``log``. Returns
+        ``(poses, landmarks, E, decision)``."""
+        p: IcmParams = self.params
+        log.increases += decision == "increase"
+        if p.polish == "none":
+            if decision == "converged" and not optimality(prob, W, poses, landmarks, labels).holds(
+                    E, p.opt_step_tol, p.opt_rtol):
+                log.unconfirmed += 1
+                decision = "continue"
+            return poses, landmarks, E, decision
+        drop = (E_start - E_same) / max(abs(E_start), 1e-300)
+        if drop > p.polish_rtol and n < p.max_sweeps:
+            return poses, landmarks, E, decision
+        poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters)
+        E_new = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
+        log.polishes.append({"sweep": n, **out.as_extra()})
+        tol = p.energy_rtol * max(abs(E_start), 1e-300)  # sweep and polish together moved nothing (a rounding
+        settled = abs(E_start - E_same) <= tol and E - E_new <= tol  # rise at the optimum included)
+        return poses, landmarks, E_new, "converged" if settled else "continue"
+
     def _pose_sweep(self, prob, W, poses, labels, landmarks):
         """x_1..x_T (eq. 14): one sweep of the pose conditional modes, on a copy of ``poses``."""
         p: IcmParams = self.params
@@ -620,13 +685,23 @@ class IcmSlam(BaseSolver):
         """The result: ``extra``'s sweep counters and energy terms, the optional Laplace covariances, the
         iteration trace (the last iteration's poses always recorded) and the message."""
         p: IcmParams = self.params
-        objective, joint_errors, increases = log.objective, log.joint_errors, log.increases
+        objective, joint_errors = log.objective, log.joint_errors
+        increases = int(np.count_nonzero(np.diff(objective) > 0))  # every rise of the recorded trace
+        opt = optimality(prob, W, poses, landmarks, labels)
         timings["s_per_sweep"] = float(np.mean(log.times[1:])) if len(log.times) > 1 else 0.0
         extra.update(
             sweeps=len(objective) - 1,
             map_steps_rejected=log.rejected,
             map_step_parts=log.parts_log,
             energy_increases=increases,
+            energy_increases_same_terms=log.increases,
+            polish=p.polish,
+            polishes=log.polishes,
+            converged_unconfirmed=log.unconfirmed,
+            gradient_norm=opt.gradient_norm,
+            newton_step_max=None if math.isnan(opt.step_max) else opt.step_max,
+            optimum_gap=None if math.isnan(opt.gap) else opt.gap,
+            distance_to_optimum_m=log.polishes[-1]["distance_to_optimum_m"] if log.polishes else None,
             joint_steps_accepted=log.joint_accepted,
             joint_refinements=log.joint_log,
             labels_merged=log.merges,
@@ -660,6 +735,8 @@ class IcmSlam(BaseSolver):
             assoc=labels,
             t_start=t_start,
             message=f"{len(objective) - 1} ICM sweeps, energy {objective[0]:.6g} -> {objective[-1]:.6g}"
+            + (f"; {len(log.polishes)} joint polish(es), final gradient norm {opt.gradient_norm:.2g}"
+               if log.polishes else "")
             + (f"; energy rose in {increases} sweep(s)" if increases else "")
             + (_not_converged_note(objective, p.energy_rtol) if status == Status.MAX_ITERATIONS else "")
             + (f"; joint step failed: {joint_errors[0]}" if joint_errors else "")
