@@ -275,3 +275,24 @@ def test_run_folder_that_is_a_symlink_or_a_file_is_replaced(tmp_path):
         assert (exp_dir / r).is_dir() and not (exp_dir / r).is_symlink()
         assert run_status(exp_dir, r) == "completed"
     assert (precious / "keep.txt").read_text() == "mine" and (precious / "copy" / "status.json").is_file()
+
+
+@pytest.mark.parametrize("against", ['"/etc/passwd"', '"../../x.h5"', "5", "{a = 1}"])
+def test_evaluate_against_outside_the_experiment_folder_or_not_a_path_is_one_line(tmp_path, against):
+    exp = tmp_path / "exp"
+    exp.mkdir()
+    toml = exp / "e.toml"
+    toml.write_text('[experiment]\nname = "e"\n[scenario]\nname = "loop"\n[[solver]]\nmethod = "odometry"\n'
+                    f"[evaluate]\nagainst = {against}\n")
+    res = CliRunner().invoke(app, ["sweep", str(toml), "--dry-run", "-o", str(tmp_path / "out")])
+    assert res.exit_code != 0 and "Traceback" not in res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and "evaluate.against" in lines[0] and str(toml) in lines[0], res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_evaluate_against_beside_the_experiment_is_made_absolute(tmp_path):
+    toml = tmp_path / "e.toml"
+    toml.write_text('[experiment]\nname = "e"\n[scenario]\nname = "loop"\n[[solver]]\nmethod = "odometry"\n'
+                    '[evaluate]\nagainst = "ref/other.h5"\n')
+    assert load_experiment(toml).evaluate["against"] == str(tmp_path / "ref" / "other.h5")

@@ -569,6 +569,8 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         )
 
     evaluate = dict(c.table(raw.get("evaluate", {}), "[evaluate]"))
+    if "against" in evaluate:  # a result file: resolved here, and it must stay beside the experiment
+        evaluate["against"] = c.inside(c.string(evaluate["against"], "evaluate.against"), "evaluate.against")
 
     sweep = SweepSpec()
     if "sweep" in raw:
