@@ -168,24 +168,36 @@ def mine_plugin(monkeypatch):
     monkeypatch.setattr(solvers, "_entry_points", lambda: dict(fake))
 
 
-def test_plugin_on_the_suite_then_leaderboard(shared, mine_plugin):
-    """The tutorial's commands (docs/suite.md) on the car-park excerpt: the plugin is the odometry solver
-    under another name, so against the odometry baseline its difference is exactly 0."""
-    out = shared / "results"
-    base = ["sweep", "suite", "--quick", "data=acfr-carpark", "solver=odometry,graph", "-o", str(out), "-q"]
-    assert runner.invoke(app, base).exit_code == 0
-    res = runner.invoke(app, [*base, "+solver=mine"])
+def _tutorial_commands() -> list[list[str]]:
+    """The commands of the last ``bash`` block of docs/suite.md (its smoke check), without ``slamcli``."""
+    import re
+    import shlex
+
+    text = (Path(__file__).parent.parent / "docs" / "suite.md").read_text()
+    block = re.findall(r"```bash\n(.*?)```", text, re.S)[-1]
+    return [shlex.split(line)[1:] for line in block.splitlines() if line.startswith("slamcli ")]
+
+
+def test_plugin_on_the_suite_then_leaderboard(shared, mine_plugin, monkeypatch):
+    """The tutorial's smoke check (docs/suite.md) as written, on the car-park excerpt: the plugin is the
+    odometry solver under another name, so against the odometry baseline its difference is exactly 0."""
+    monkeypatch.chdir(shared)
+    first, second, board_cmd = _tutorial_commands()
+    assert first[:2] == ["sweep", "suite"] and sorted(second) == sorted([*first, "+solver=mine"])
+    assert runner.invoke(app, first).exit_code == 0
+    res = runner.invoke(app, second)
     assert res.exit_code == 0, res.output
     assert "1 done, 0 failed, 2 skipped of 3" in res.stderr  # the built-ins already on disk are not re-run
-    res = runner.invoke(app, ["aggregate", str(out / "suite"), "--leaderboard", "--baseline", "odometry"])
+    res = runner.invoke(app, board_cmd)
     assert res.exit_code == 0, res.output
-    board = pd.read_csv(out / "suite" / "leaderboard.csv")
+    out = shared / "results" / "suite"
+    board = pd.read_csv(out / "leaderboard.csv")
     ate = board[board["metric"] == "ate_reference_m"].set_index("label")
     assert list(ate.index) == ["odometry", "graph", "mine"]
     assert ate.loc["mine", "mean_diff"] == 0.0 and ate.loc["mine", "mean"] == ate.loc["odometry", "mean"]
-    results = pd.read_csv(out / "suite" / "results.csv").set_index("label")
+    results = pd.read_csv(out / "results.csv").set_index("label")
     assert ate.loc["graph", "mean"] == results.loc["graph", "gps_ate_aligned_rmse_m"]  # the car park's reference
-    assert "| mine | " in res.stdout and (out / "suite" / "leaderboard.tex").is_file()
+    assert "| mine | " in res.stdout and (out / "leaderboard.tex").is_file()
 
 
 # -- the leaderboard renderer ------------------------------------------------------------------------------
@@ -244,9 +256,27 @@ def test_leaderboard_of_a_hand_written_results_table(tmp_path):
 def test_leaderboard_bad_baseline_and_options_are_one_line(tmp_path):
     (tmp_path / "results.csv").write_text(RESULTS_CSV)
     res = runner.invoke(app, ["aggregate", str(tmp_path), "--leaderboard", "--baseline", "C"])
-    assert res.exit_code == 1 and res.stderr == "error: --baseline 'C' is not a solver label; choose one of A, B\n"
+    assert res.exit_code == 1 and res.stderr == "error: --baseline 'C' is not a solver configuration; choose one of A, B\n"
     res = runner.invoke(app, ["aggregate", str(tmp_path), "--leaderboard", "--by", "data"])
     assert res.exit_code == 1 and "drop --by/--metric" in res.stderr
     assert not (tmp_path / "leaderboard.csv").exists()
     with pytest.raises(ConfigError, match="needs the results column 'data'"):
         leaderboard(pd.DataFrame({"label": ["A"]}))
+
+
+def test_swept_solver_and_scenario_values_are_their_own_rows_and_groups():
+    """A solver.<label>.* axis makes one configuration per value (the other labels' runs have no such cell),
+    a scenario.* axis one dataset group per value; pairing stays on dataset_id within a group. Integer axes
+    are Int64 columns, as read_table restores them."""
+    df = pd.DataFrame({
+        "label": ["A", "B", "B", "A", "B", "B"], "data": ["loop"] * 6, "reference": ["truth"] * 6,
+        "dataset_id": ["d1", "d1", "d1", "d2", "d2", "d2"], "status": ["completed"] * 6,
+        "solver.B.k": pd.array([None, 1, 2, None, 1, 2], dtype="Int64"), "scenario.n_steps": [50, 50, 50, 80, 80, 80],
+        "ate_rmse_m": [1.0, 1.25, 1.5, 2.0, 2.5, 3.0]})
+    board = leaderboard(df, baseline="A").set_index(["label", "data", "metric"])
+    ate = board.xs("ate_reference_m", level="metric")
+    assert list(dict.fromkeys(ate.index.get_level_values(0))) == ["A", "B, k=1", "B, k=2"]
+    assert list(dict.fromkeys(ate.index.get_level_values(1))) == ["loop, n_steps=50", "loop, n_steps=80"]
+    # each (configuration, dataset) cell is one run: B, k=2 on n_steps=80 is 3.0, 1.0 above A's 2.0
+    cell = ate.loc[("B, k=2", "loop, n_steps=80")]
+    assert cell["n"] == 1 and cell["mean"] == 3.0 and cell["mean_diff"] == 1.0

@@ -1,4 +1,5 @@
-"""``slamcli aggregate``: mean, std, 95 % CI and n per configuration of a finished sweep (like ``evo_res``)."""
+"""``slamcli aggregate``: mean, std, 95 % CI and n per configuration of a finished sweep (like ``evo_res``), or
+its leaderboard over the datasets (``--leaderboard``)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ def aggregate_command(
     confidence: Annotated[float, typer.Option(help="Confidence level of the t interval.")] = 0.95,
     baseline: Annotated[str | None, typer.Option(
         help="Paired differences against this configuration only (as printed, e.g. 'ekf, gate_prob=0.9'; "
-             "with --leaderboard a solver label); default: every pair.")] = None,
+             "with --leaderboard a solver configuration, e.g. 'odometry'); default: every pair.")] = None,
     leaderboard: Annotated[bool, typer.Option(
         "--leaderboard", help="One row per solver label, one column group per dataset (ATE vs its reference, "
                               "landmark RMSE, solve time), paired differences against --baseline (a solver "

@@ -19,6 +19,10 @@ configurations A and B are compared on the datasets both solved (matched on ``da
     paired t test    t = d̄ / (s_d / √n), two-sided p from Student t with n − 1 dof  (scipy.stats.ttest_rel)
     Wilcoxon signed-rank on the d_i ≠ 0: W = min(R⁺, R⁻), two-sided p, exact for small n (scipy.stats.wilcoxon)
 
+**Leaderboard** (:func:`leaderboard`, :func:`leaderboard_dir`): one row per solver configuration, per
+dataset the ATE against its reference (truth or GPS), the matched landmark RMSE and the solve time, each cell
+the summary above plus the paired difference against a baseline configuration on that dataset's runs.
+
 Column types are kept (:func:`typed_frame`, :func:`read_table`): an integer sweep parameter that some
 solvers do not have is a nullable ``Int64`` column (``10`` and ``<NA>``), never ``10.0``.
 """
@@ -552,7 +556,8 @@ def reference_ate(df):
 
 
 def leaderboard(df, baseline: str | None = None, confidence: float = 0.95):
-    """Tidy leaderboard of completed runs: one row per (solver label, dataset ``data``, metric of
+    """Tidy leaderboard of completed runs: one row per (solver configuration — its label and its own swept
+    ``solver.<label>.*`` values —, dataset — ``data`` and the swept ``scenario.*`` values —, metric of
     :data:`LEADERBOARD_METRICS` with a value on that dataset) with :func:`summarise`'s columns and, against
     the ``baseline`` label, the paired difference label − baseline on that dataset's runs (:func:`paired`:
     ``n_pairs, mean_diff, diff_ci_low, diff_ci_high, p_t, p_wilcoxon``; NaN for the baseline itself, where
@@ -564,10 +569,12 @@ def leaderboard(df, baseline: str | None = None, confidence: float = 0.95):
     for col in ("label", "data"):
         if col not in df.columns:
             raise ConfigError(f"a leaderboard needs the results column {col!r} (written by every sweep)")
-    df = df.assign(ate_reference_m=reference_ate(df))
+    df = df.assign(ate_reference_m=reference_ate(df), label=_named(df, "label", "solver."),
+                   data=_named(df, "data", "scenario."))
     labels = list(dict.fromkeys(df["label"]))
     if baseline is not None and baseline not in labels:
-        raise ConfigError(f"--baseline {baseline!r} is not a solver label; choose one of {', '.join(labels)}")
+        raise ConfigError(f"--baseline {baseline!r} is not a solver configuration; choose one of "
+                          f"{', '.join(labels)}")
     rows = []
     for data, g in df.groupby("data", sort=False):
         metrics = [m for m in LEADERBOARD_METRICS if m in g.columns and g[m].astype(float).notna().any()]
@@ -589,6 +596,23 @@ def leaderboard(df, baseline: str | None = None, confidence: float = 0.95):
     out["n"] = out["n"].astype("Int64")
     out["n_pairs"] = out["n_pairs"].astype("Int64")
     return out
+
+
+def _named(df, col: str, prefix: str):
+    """``col`` with the sweep axes of ``prefix`` that apply to a row appended as ``name=value``: a solver
+    configuration ``ekf, gate_prob=0.9`` (its own ``solver.<label>.*`` axes), a dataset ``loop, n_steps=50``
+    (the ``scenario.*`` axes)."""
+    from slamcli.metrics.registry import column_label
+
+    axes = [c for c in df.columns if c.startswith(prefix)]
+    if not axes:
+        return df[col].astype(str)
+
+    def name(row) -> str:
+        own = [c for c in axes if prefix == "scenario." or c.startswith(f"solver.{row['label']}.")]
+        return ", ".join([str(row[col]), *(f"{column_label(c)}={cell_text(row[c])}" for c in own
+                                          if cell_text(row[c]) != "—")])
+    return df.apply(name, axis=1)
 
 
 def _first(g, col: str) -> str:
