@@ -11,7 +11,6 @@ lists are enumerated by brute force from the documented order.
 from __future__ import annotations
 
 import math
-import shutil
 from importlib import metadata
 from pathlib import Path
 
@@ -37,17 +36,11 @@ CLOSE = 1e-9
 
 
 @pytest.fixture()
-def shared(tmp_path, monkeypatch):
+def shared(shared_datasets):
     """A shared datasets folder with the MRCLAM (robot 1), car-park and Victoria Park excerpts under their
     registry folders, and an empty data folder for the import cache; every other recording is absent."""
-    root = tmp_path / "shared"
-    shutil.copytree(DATA / "mrclam_excerpt", root / "mrclam_dataset7")
-    shutil.copytree(DATA / "carpark_excerpt", root / "acfr_carpark")
-    shutil.copytree(DATA / "victoria_park_excerpt", root / "victoria_park")
-    monkeypatch.setenv(reg.ENV_SHARED, str(root))
-    monkeypatch.setenv(reg.ENV_DATA_DIR, str(tmp_path / "cache"))
-    monkeypatch.delenv(reg.ENV_REGISTRY, raising=False)
-    return tmp_path
+    return shared_datasets({"mrclam_dataset7": "mrclam_excerpt", "acfr_carpark": "carpark_excerpt",
+                            "victoria_park": "victoria_park_excerpt"})
 
 
 # -- absent recordings -------------------------------------------------------------------------------------
