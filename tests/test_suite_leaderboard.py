@@ -196,16 +196,16 @@ def test_plugin_on_the_suite_then_leaderboard(shared, mine_plugin, monkeypatch):
 # -- the leaderboard renderer ------------------------------------------------------------------------------
 
 
-RESULTS_CSV = """run_id,label,data,reference,dataset_id,replicate,status,ate_rmse_m,gps_ate_aligned_rmse_m,lm_rmse_matched_m,solve_time_s
-r1,A,sim,truth,d1,0,completed,1.0,,0.1,1.0
-r2,B,sim,truth,d1,0,completed,1.5,,0.3,2.0
-r3,A,sim,truth,d2,1,completed,2.0,,0.2,1.0
-r4,B,sim,truth,d2,1,completed,2.0,,0.3,2.0
-r5,A,sim,truth,d3,2,completed,3.0,,0.3,1.0
-r6,B,sim,truth,d3,2,completed,4.0,,0.3,2.0
-r7,A,park,gps,p1,0,completed,,3.0,,0.5
-r8,B,park,gps,p1,0,completed,,2.0,,0.25
-r9,B,park,gps,p2,1,failed,,99.0,,99.0
+RESULTS_CSV = """run_id,label,data,reference,dataset_id,replicate,status,ate_rmse_m,gps_ate_aligned_rmse_m,lm_rmse_matched_m,survey_lm_rmse_m,solve_time_s
+r1,A,sim,truth,d1,0,completed,1.0,,0.1,,1.0
+r2,B,sim,truth,d1,0,completed,1.5,,0.3,,2.0
+r3,A,sim,truth,d2,1,completed,2.0,,0.2,,1.0
+r4,B,sim,truth,d2,1,completed,2.0,,0.3,,2.0
+r5,A,sim,truth,d3,2,completed,3.0,,0.3,,1.0
+r6,B,sim,truth,d3,2,completed,4.0,,0.3,,2.0
+r7,A,park,gps,p1,0,completed,,3.0,,0.4,0.5
+r8,B,park,gps,p1,0,completed,,2.0,,0.7,0.25
+r9,B,park,gps,p2,1,failed,,99.0,,99.0,99.0
 """
 #: Student t 0.975 quantile with 2 degrees of freedom (closed form, module docstring)
 T975_2 = 0.95 * math.sqrt(2 / (1 - 0.95**2))
@@ -227,14 +227,17 @@ def test_leaderboard_of_a_hand_written_results_table(tmp_path):
     p = 1 - math.sqrt(3) / math.sqrt(5)
     assert abs(b["p_t"] - p) < CLOSE
     assert math.isnan(a["mean_diff"])  # the baseline itself
-    # landmark error exists on sim only; the failed park run is left out; the park's ATE is its GPS ATE
-    assert ("A", "park", "lm_rmse_matched_m") not in board.index
+    # the failed park run is left out; the park's ATE is its GPS ATE, its landmark error the survey's; no
+    # dataset has a matched-landmark count, so that metric has no rows
     park = board.loc[("B", "park", "ate_reference_m")]
     assert park["n"] == 1 and park["mean"] == 2.0 and park["mean_diff"] == -1.0 and math.isnan(park["p_t"])
+    assert abs(board.loc[("B", "park", "lm_reference_m"), "mean_diff"] - 0.3) < CLOSE
+    assert abs(board.loc[("B", "sim", "lm_reference_m"), "mean_diff"] - 0.1) < CLOSE
+    assert "lm_reference_matched" not in set(board.index.get_level_values("metric"))
 
     md = (tmp_path / "leaderboard.md").read_text().splitlines()
-    assert md[0] == ("| solver | sim: ATE vs reference (m) | sim: matched landmark RMSE (m) | sim: solve time (s) "
-                     "| park: ATE vs reference (m) | park: solve time (s) |")
+    assert md[0] == ("| solver | sim: ATE vs reference (m) | sim: landmark RMSE vs reference (m) | sim: solve time (s) "
+                     "| park: ATE vs reference (m) | park: landmark RMSE vs reference (m) | park: solve time (s) |")
     # precision: sim ATE's smallest half-width 2.48 → 1 decimal; the park's means only → 3 significant digits
     # of 2.0 → 2 decimals; both lower ends of the sim ATE intervals fall below 0 (clipped, *)
     cells = md[2].split(" | ")
@@ -242,7 +245,7 @@ def test_leaderboard_of_a_hand_written_results_table(tmp_path):
     cells = md[3].split(" | ")
     assert cells[1] == f"2.5 ± 3.3* (Δ +0.5, p {p:.3f})" and cells[4] == "2.00† (Δ -1.00, p —)"
     assert cells[3] == "2.00 ± 0.00 (Δ +1.00, p —)"  # equal differences: the t test is undefined
-    assert "\\multicolumn{3}{c}{sim} & \\multicolumn{2}{c}{park}" in (tmp_path / "leaderboard.tex").read_text()
+    assert "\\multicolumn{3}{c}{sim} & \\multicolumn{3}{c}{park}" in (tmp_path / "leaderboard.tex").read_text()
     assert res.stdout.startswith(md[0])
 
 

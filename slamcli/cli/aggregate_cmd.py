@@ -30,9 +30,9 @@ def aggregate_command(
         help="Paired differences against this configuration only (as printed, e.g. 'ekf, gate_prob=0.9'; "
              "with --leaderboard a solver configuration, e.g. 'odometry'); default: every pair.")] = None,
     leaderboard: Annotated[bool, typer.Option(
-        "--leaderboard", help="One row per solver label, one column group per dataset (ATE vs its reference, "
-                              "landmark RMSE, solve time), paired differences against --baseline (a solver "
-                              "label): leaderboard.{csv,md,tex}.")] = False,
+        "--leaderboard", help="One row per solver configuration, one column group per dataset (ATE vs its "
+                              "reference, landmark RMSE, solve time), paired differences against --baseline: "
+                              "leaderboard.{csv,md,tex}.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing; just write the files.")] = False,
 ) -> None:
     """Summarise completed runs per configuration, and paired differences between configurations on the same
@@ -45,7 +45,7 @@ def aggregate_command(
             raise ConfigError(f"--confidence: must be in (0, 1), got {confidence}")
         if leaderboard:
             if by or metric:
-                raise ConfigError("--leaderboard: its rows are the solver labels and its metrics fixed; "
+                raise ConfigError("--leaderboard: its rows are the solver configurations and its metrics fixed; "
                                   "drop --by/--metric")
             _leaderboard(exp_dir, out_dir, confidence, baseline, quiet)
             return

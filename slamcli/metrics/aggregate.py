@@ -531,24 +531,30 @@ def compare_groups(exp_dir: str | Path, metric: str, by: str | Sequence[str] = "
 
 
 # ------------------------------------------------------------------------------------------------ leaderboard
-#: leaderboard metrics: the trajectory error against each dataset's reference (:func:`reference_ate`), the
-#: matched landmark RMSE (datasets with true landmarks) and the solver's wall time
-LEADERBOARD_METRICS = ("ate_reference_m", "lm_rmse_matched_m", "solve_time_s")
-#: which ATE column is the trajectory error against a dataset's reference (``reference`` column)
-REFERENCE_ATE = {"truth": "ate_rmse_m", "gps": "gps_ate_aligned_rmse_m"}
+#: leaderboard metrics per dataset, each against the dataset's reference (:data:`REFERENCE_COLUMNS`), and the
+#: solver's wall time
+LEADERBOARD_METRICS = ("ate_reference_m", "lm_reference_m", "lm_reference_matched", "solve_time_s")
+#: ``derived column: {reference kind: results column}``: where ``reference`` is ``truth``, the ATE against the
+#: true poses and the landmarks matched to the true ones; where it is ``gps``, the ATE against the GPS fixes
+#: after SE(2) alignment and the landmarks matched to the surveyed ones (when the dataset has a survey)
+REFERENCE_COLUMNS = {
+    "ate_reference_m": {"truth": "ate_rmse_m", "gps": "gps_ate_aligned_rmse_m"},
+    "lm_reference_m": {"truth": "lm_rmse_matched_m", "gps": "survey_lm_rmse_m"},
+    "lm_reference_matched": {"truth": "lm_n_matched", "gps": "survey_lm_matched"},
+}
 LEADERBOARD_COLUMNS = ("label", "data", "reference", "metric", *SUMMARY_COLUMNS, "baseline", "n_pairs",
                        "mean_diff", "diff_ci_low", "diff_ci_high", "p_t", "p_wilcoxon")
 
 
-def reference_ate(df):
-    """Per run, the ATE RMSE against its dataset's reference, m: ``ate_rmse_m`` where ``reference`` is
-    ``truth``, ``gps_ate_aligned_rmse_m`` (after SE(2) alignment) where it is ``gps``, NaN otherwise."""
+def by_reference(df, columns: dict[str, str]):
+    """Per run, the value of ``columns[reference]`` (``reference`` is the run's dataset reference kind,
+    :data:`REFERENCE_COLUMNS`), as float; NaN where that column is absent or the kind is not listed."""
     import numpy as np
     import pandas as pd
 
     out = pd.Series(np.nan, index=df.index, dtype=float)
     ref = df["reference"] if "reference" in df.columns else pd.Series("truth", index=df.index)
-    for kind, col in REFERENCE_ATE.items():
+    for kind, col in columns.items():
         if col in df.columns:
             pick = (ref == kind).fillna(False).to_numpy(bool)
             out[pick] = df.loc[pick, col].astype(float)
@@ -569,7 +575,8 @@ def leaderboard(df, baseline: str | None = None, confidence: float = 0.95):
     for col in ("label", "data"):
         if col not in df.columns:
             raise ConfigError(f"a leaderboard needs the results column {col!r} (written by every sweep)")
-    df = df.assign(ate_reference_m=reference_ate(df), label=_named(df, "label", "solver."),
+    df = df.assign(**{k: by_reference(df, cols) for k, cols in REFERENCE_COLUMNS.items()},
+                   label=_named(df, "label", "solver."),
                    data=_named(df, "data", "scenario."))
     labels = list(dict.fromkeys(df["label"]))
     if baseline is not None and baseline not in labels:
