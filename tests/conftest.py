@@ -25,3 +25,25 @@ def pytest_runtest_makereport(item, call):
     if report.longrepr is not None and _utf8(str(report.longrepr)) != str(report.longrepr):
         report.longrepr = _utf8(str(report.longrepr))
     report.sections = [(title, _utf8(text)) for title, text in report.sections]
+
+
+@pytest.fixture()
+def shared_datasets(tmp_path, monkeypatch):
+    """``lay_out({registry folder: tests/data excerpt})``: a shared datasets folder ``tmp_path/shared``
+    (``$SLAMCLI_DATASETS``) holding copies of those excerpts under the registry's folder names, an empty data
+    folder ``tmp_path/cache`` for the import cache, and no user registry; returns ``tmp_path``."""
+    import shutil
+    from pathlib import Path
+
+    from slamcli.datasets import registry as reg
+
+    def lay_out(folders: dict[str, str]):
+        root = tmp_path / "shared"
+        for folder, excerpt in folders.items():
+            shutil.copytree(Path(__file__).parent / "data" / excerpt, root / folder)
+        monkeypatch.setenv(reg.ENV_SHARED, str(root))
+        monkeypatch.setenv(reg.ENV_DATA_DIR, str(tmp_path / "cache"))
+        monkeypatch.delenv(reg.ENV_REGISTRY, raising=False)
+        return tmp_path
+
+    return lay_out

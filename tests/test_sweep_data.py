@@ -36,16 +36,10 @@ ODOMETRY = '[[solver]]\nmethod = "odometry"\n'
 
 
 @pytest.fixture()
-def shared(tmp_path, monkeypatch):
+def shared(shared_datasets):
     """A shared datasets folder holding the MRCLAM and car-park excerpts as mrclam7 and acfr-carpark, and an
     empty data folder for the import cache."""
-    root = tmp_path / "shared"
-    shutil.copytree(DATA / "mrclam_excerpt", root / "mrclam_dataset7")
-    shutil.copytree(DATA / "carpark_excerpt", root / "acfr_carpark")
-    monkeypatch.setenv(reg.ENV_SHARED, str(root))
-    monkeypatch.setenv(reg.ENV_DATA_DIR, str(tmp_path / "cache"))
-    monkeypatch.delenv(reg.ENV_REGISTRY, raising=False)
-    return tmp_path
+    return shared_datasets({"mrclam_dataset7": "mrclam_excerpt", "acfr_carpark": "carpark_excerpt"})
 
 
 @pytest.fixture()

@@ -1,4 +1,5 @@
-"""``slamcli aggregate``: mean, std, 95 % CI and n per configuration of a finished sweep (like ``evo_res``)."""
+"""``slamcli aggregate``: mean, std, 95 % CI and n per configuration of a finished sweep (like ``evo_res``), or
+its leaderboard over the datasets (``--leaderboard``)."""
 
 from __future__ import annotations
 
@@ -26,17 +27,28 @@ def aggregate_command(
         "-o", "--out-dir", help="Where aggregate.{csv,md,tex} go; default: the sweep folder.")] = None,
     confidence: Annotated[float, typer.Option(help="Confidence level of the t interval.")] = 0.95,
     baseline: Annotated[str | None, typer.Option(
-        help="Paired differences against this configuration only (as printed, e.g. 'ekf, gate_prob=0.9'); "
-             "default: every pair.")] = None,
+        help="Paired differences against this configuration only (as printed, e.g. 'ekf, gate_prob=0.9'; "
+             "with --leaderboard a solver configuration, e.g. 'odometry'); default: every pair.")] = None,
+    leaderboard: Annotated[bool, typer.Option(
+        "--leaderboard", help="One row per solver configuration, one column group per dataset (ATE vs its "
+                              "reference, landmark RMSE, solve time), paired differences against --baseline: "
+                              "leaderboard.{csv,md,tex}.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing; just write the files.")] = False,
 ) -> None:
     """Summarise completed runs per configuration, and paired differences between configurations on the same
-    datasets: CSV (tidy), Markdown and LaTeX (siunitx) tables."""
+    datasets: CSV (tidy), Markdown and LaTeX (siunitx) tables; or a leaderboard of the solvers over the
+    datasets (--leaderboard)."""
     with handle_errors():
         from slamcli.errors import ConfigError
 
         if not 0 < confidence < 1:
             raise ConfigError(f"--confidence: must be in (0, 1), got {confidence}")
+        if leaderboard:
+            if by or metric:
+                raise ConfigError("--leaderboard: its rows are the solver configurations and its metrics fixed; "
+                                  "drop --by/--metric")
+            _leaderboard(exp_dir, out_dir, confidence, baseline, quiet)
+            return
         from slamcli.metrics.aggregate import aggregate_dir
 
         check_output(out_dir if out_dir is not None else exp_dir, folder=True,
@@ -47,6 +59,22 @@ def aggregate_command(
             raise ConfigError(f"{exp_dir / 'results.csv'}: not a slamcli results table (no column {exc})") from None
         if not quiet:
             _print(a, exp_dir.name, confidence)
+
+
+def _leaderboard(exp_dir: Path, out_dir: Path | None, confidence: float, baseline: str | None,
+                 quiet: bool) -> None:
+    """Write the leaderboard files and print its Markdown table."""
+    from slamcli.errors import ConfigError
+    from slamcli.metrics.aggregate import leaderboard_dir
+
+    check_output(out_dir if out_dir is not None else exp_dir, folder=True, inputs=[exp_dir / "results.csv"])
+    try:
+        a = leaderboard_dir(exp_dir, baseline, out_dir, confidence)
+    except KeyError as exc:
+        raise ConfigError(f"{exp_dir / 'results.csv'}: not a slamcli results table (no column {exc})") from None
+    if not quiet:
+        typer.echo(a["markdown"], nl=False)
+        typer.echo(f"wrote {', '.join(str(p) for p in a['paths'].values())}")
 
 
 def _table(title: str, columns: list[tuple[str, str]]):

@@ -36,7 +36,8 @@ def sweep_command(
         help=f"Experiment: a shipped name ({_shipped_names()}; see --list) or a TOML file.", show_default=False)] = None,
     overrides: Annotated[list[str] | None, typer.Argument(
         help="Overrides key=value (fixed) or key=v1,v2 (a grid axis), validated like the file: "
-             "solver.ekf.gate_prob=0.9,0.99 replicates=20 scenario.n_steps=200 data=mrclam7,loop.",
+             "solver.ekf.gate_prob=0.9,0.99 replicates=20 scenario.n_steps=200 data=mrclam7,loop; "
+             "solver=ekf,graph keeps those [[solver]] labels, +solver=mine adds a registered solver.",
         show_default=False)] = None,
     list_names: Annotated[bool, typer.Option("--list", help="List the shipped experiments and exit.")] = False,
     workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
@@ -72,6 +73,8 @@ def sweep_command(
         if overrides:
             cfg = apply_overrides(cfg, overrides, RegistryResolver().known_keys)
         expansion = expand(cfg)
+        for line in expansion.skipped:  # [sweep] absent = "skip": one line per recording left out
+            echo_stderr(line)
         if dry_run:
             _print_dry_run(expansion, out)
             return

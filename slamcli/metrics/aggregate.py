@@ -19,6 +19,10 @@ configurations A and B are compared on the datasets both solved (matched on ``da
     paired t test    t = d̄ / (s_d / √n), two-sided p from Student t with n − 1 dof  (scipy.stats.ttest_rel)
     Wilcoxon signed-rank on the d_i ≠ 0: W = min(R⁺, R⁻), two-sided p, exact for small n (scipy.stats.wilcoxon)
 
+**Leaderboard** (:func:`leaderboard`, :func:`leaderboard_dir`): one row per solver configuration, per
+dataset the ATE against its reference (truth or GPS), the matched landmark RMSE and the solve time, each cell
+the summary above plus the paired difference against a baseline configuration on that dataset's runs.
+
 Column types are kept (:func:`typed_frame`, :func:`read_table`): an integer sweep parameter that some
 solvers do not have is a nullable ``Int64`` column (``10`` and ``<NA>``), never ``10.0``.
 """
@@ -396,16 +400,24 @@ def to_markdown(header, rows, note: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def to_latex(header, rows, caption: str = "") -> str:
+def to_latex(header, rows, caption: str = "", groups: Sequence[tuple[str, int]] = ()) -> str:
     """A ``booktabs`` tabular of cells already in LaTeX (``\\usepackage{booktabs,siunitx}``; numbers as
-    ``\\num{m \\pm h}``, units as ``\\si{...}``)."""
+    ``\\num{m \\pm h}``, units as ``\\si{...}``). ``groups``: ``(name, width)`` column groups over the
+    header after its first column (a ``\\multicolumn`` row with ``\\cmidrule`` under each group)."""
     from slamcli.metrics.registry import tex_escape
 
     out = [r"\begin{table}", r"\centering"]
     if caption:
         out.append(r"\caption{" + tex_escape(caption) + "}")
-    out += [r"\begin{tabular}{" + "l" * len(header) + "}", r"\toprule", " & ".join(header) + r" \\",
-            r"\midrule"]
+    out += [r"\begin{tabular}{" + "l" * len(header) + "}", r"\toprule"]
+    if groups:
+        spans, rules, col = [""], [], 2
+        for name, width in groups:
+            spans.append(r"\multicolumn{" + f"{width}" + "}{c}{" + tex_escape(name) + "}")
+            rules.append(r"\cmidrule(lr){" + f"{col}-{col + width - 1}" + "}")
+            col += width
+        out += [" & ".join(spans) + r" \\", " ".join(rules)]
+    out += [" & ".join(header) + r" \\", r"\midrule"]
     out += [" & ".join(r) + r" \\" for r in rows]
     out += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
     return "\n".join(out) + "\n"
@@ -516,3 +528,164 @@ def compare_groups(exp_dir: str | Path, metric: str, by: str | Sequence[str] = "
     df = read_table(exp_dir)
     ok, n_excluded = completed(df)
     return groups_of(ok, metric, by, n_excluded=n_excluded)
+
+
+# ------------------------------------------------------------------------------------------------ leaderboard
+#: leaderboard metrics per dataset, each against the dataset's reference (:data:`REFERENCE_COLUMNS`), and the
+#: solver's wall time
+LEADERBOARD_METRICS = ("ate_reference_m", "lm_reference_m", "lm_reference_matched", "solve_time_s")
+#: ``derived column: {reference kind: results column}``: where ``reference`` is ``truth``, the ATE against the
+#: true poses and the landmarks matched to the true ones; where it is ``gps``, the ATE against the GPS fixes
+#: after SE(2) alignment and the landmarks matched to the surveyed ones (when the dataset has a survey)
+REFERENCE_COLUMNS = {
+    "ate_reference_m": {"truth": "ate_rmse_m", "gps": "gps_ate_aligned_rmse_m"},
+    "lm_reference_m": {"truth": "lm_rmse_matched_m", "gps": "survey_lm_rmse_m"},
+    "lm_reference_matched": {"truth": "lm_n_matched", "gps": "survey_lm_matched"},
+}
+LEADERBOARD_COLUMNS = ("label", "data", "reference", "metric", *SUMMARY_COLUMNS, "baseline", "n_pairs",
+                       "mean_diff", "diff_ci_low", "diff_ci_high", "p_t", "p_wilcoxon")
+
+
+def by_reference(df, columns: dict[str, str]):
+    """Per run, the value of ``columns[reference]`` (``reference`` is the run's dataset reference kind,
+    :data:`REFERENCE_COLUMNS`), as float; NaN where that column is absent or the kind is not listed."""
+    import numpy as np
+    import pandas as pd
+
+    out = pd.Series(np.nan, index=df.index, dtype=float)
+    ref = df["reference"] if "reference" in df.columns else pd.Series("truth", index=df.index)
+    for kind, col in columns.items():
+        if col in df.columns:
+            pick = (ref == kind).fillna(False).to_numpy(bool)
+            out[pick] = df.loc[pick, col].astype(float)
+    return out
+
+
+def leaderboard(df, baseline: str | None = None, confidence: float = 0.95):
+    """Tidy leaderboard of completed runs: one row per (solver configuration — its label and its own swept
+    ``solver.<label>.*`` values —, dataset — ``data`` and the swept ``scenario.*`` values —, metric of
+    :data:`LEADERBOARD_METRICS` with a value on that dataset) with :func:`summarise`'s columns and, against
+    the ``baseline`` label, the paired difference label − baseline on that dataset's runs (:func:`paired`:
+    ``n_pairs, mean_diff, diff_ci_low, diff_ci_high, p_t, p_wilcoxon``; NaN for the baseline itself, where
+    the baseline did not run, or without a baseline). Labels and datasets keep their order in ``df``."""
+    import pandas as pd
+
+    from slamcli.metrics.registry import metric_info
+
+    for col in ("label", "data"):
+        if col not in df.columns:
+            raise ConfigError(f"a leaderboard needs the results column {col!r} (written by every sweep)")
+    df = df.assign(**{k: by_reference(df, cols) for k, cols in REFERENCE_COLUMNS.items()},
+                   label=_named(df, "label", "solver."),
+                   data=_named(df, "data", "scenario."))
+    labels = list(dict.fromkeys(df["label"]))
+    if baseline is not None and baseline not in labels:
+        raise ConfigError(f"--baseline {baseline!r} is not a solver configuration; choose one of "
+                          f"{', '.join(labels)}")
+    rows = []
+    for data, g in df.groupby("data", sort=False):
+        metrics = [m for m in LEADERBOARD_METRICS if m in g.columns and g[m].astype(float).notna().any()]
+        pairs = None
+        if baseline is not None and baseline in set(g["label"]):
+            pairs = paired(g, ["label"], metrics, confidence, baseline)[0].set_index(["a", "metric"])
+        for label, gl in g.groupby("label", sort=False):
+            for m in metrics:
+                row = {"label": label, "data": data, "reference": _first(gl, "reference"), "metric": m,
+                       **summarise(gl[m].astype(float).to_numpy(), confidence, metric_info(m).nonnegative),
+                       "baseline": baseline or ""}
+                d = pairs.loc[(label, m)] if pairs is not None and (label, m) in pairs.index else None
+                row.update(n_pairs=int(d["n"]) if d is not None else 0,
+                           **{k: float(d[src]) if d is not None else float("nan") for k, src in (
+                               ("mean_diff", "mean_diff"), ("diff_ci_low", "ci_low"), ("diff_ci_high", "ci_high"),
+                               ("p_t", "p_t"), ("p_wilcoxon", "p_wilcoxon"))})
+                rows.append(row)
+    out = pd.DataFrame(rows, columns=list(LEADERBOARD_COLUMNS))
+    out["n"] = out["n"].astype("Int64")
+    out["n_pairs"] = out["n_pairs"].astype("Int64")
+    return out
+
+
+def _named(df, col: str, prefix: str):
+    """``col`` with the sweep axes of ``prefix`` that apply to a row appended as ``name=value``: a solver
+    configuration ``ekf, gate_prob=0.9`` (its own ``solver.<label>.*`` axes), a dataset ``loop, n_steps=50``
+    (the ``scenario.*`` axes)."""
+    from slamcli.metrics.registry import column_label
+
+    axes = [c for c in df.columns if c.startswith(prefix)]
+    if not axes:
+        return df[col].astype(str)
+
+    def name(row) -> str:
+        own = [c for c in axes if prefix == "scenario." or c.startswith(f"solver.{row['label']}.")]
+        return ", ".join([str(row[col]), *(f"{column_label(c)}={cell_text(row[c])}" for c in own
+                                          if cell_text(row[c]) != "—")])
+    return df.apply(name, axis=1)
+
+
+def _first(g, col: str) -> str:
+    return str(g[col].iloc[0]) if col in g.columns and len(g) and g[col].iloc[0] is not None else ""
+
+
+def leaderboard_rows(board, tex: bool = False) -> tuple[list[tuple[str, int]], list[str], list[list[str]]]:
+    """Column groups ``[(dataset, width)]``, header and rows of the wide leaderboard: one row per solver
+    label, per dataset one column per metric. A cell is ``mean ± CI half-width`` (one precision per column,
+    :func:`decimals`; flags as in :func:`wide`), followed for a non-baseline label by ``Δ`` = its paired mean
+    difference from the baseline and the paired t test's p (``—`` when undefined, e.g. one recording)."""
+    from slamcli.metrics.registry import metric_info, tex_escape
+
+    esc = tex_escape if tex else (lambda s: s)
+    labels = list(dict.fromkeys(board["label"]))
+    groups, header, columns = [], ["solver"], []
+    for data, g in board.groupby("data", sort=False):
+        metrics = list(dict.fromkeys(g["metric"]))
+        groups.append((str(data), len(metrics)))
+        for m in metrics:
+            info = metric_info(m)
+            header.append(info.tex_label if tex else f"{data}: {info.label}")
+            sub = g[g["metric"] == m]
+            prec = decimals([_half(r["mean"], r["ci_high"]) for _, r in sub.iterrows()], sub["mean"])
+            columns.append({r["label"]: _board_cell(r, prec, tex) for _, r in sub.iterrows()})
+    rows = [[esc(str(label)), *(col.get(label, "--" if tex else "—") for col in columns)] for label in labels]
+    return groups, header, rows
+
+
+def _board_cell(r, prec: int, tex: bool) -> str:
+    """One leaderboard cell (see :func:`leaderboard_rows`)."""
+    from slamcli.metrics.registry import tex_escape
+
+    cell = format_cell(r["mean"], r["ci_high"], prec, _flag(r, "ci_clipped"), _flag(r, "few"), tex)
+    if r["baseline"] and r["label"] == r["baseline"]:
+        return cell + " (baseline)"
+    if r["mean_diff"] != r["mean_diff"]:
+        return cell
+    delta = f"Δ {r['mean_diff']:+.{prec}f}, p {p_text(r['p_t'])}"
+    return cell + f" ({tex_escape(delta) if tex else delta})"
+
+
+def leaderboard_dir(exp_dir: str | Path, baseline: str | None = None, out_dir: str | Path | None = None,
+                    confidence: float = 0.95) -> dict[str, Any]:
+    """The leaderboard (:func:`leaderboard`) of ``exp_dir/results.csv``'s completed runs, written as
+    ``leaderboard.csv`` (tidy), ``leaderboard.md`` and ``leaderboard.tex`` into ``out_dir`` (default
+    ``exp_dir``), all or none. Returns ``{"board", "markdown", "n_runs", "n_excluded", "paths"}``."""
+    from slamcli.io.atomic import atomic_files
+
+    exp_dir = Path(exp_dir)
+    df = read_table(exp_dir)
+    ok, n_excluded = completed(df)
+    board = leaderboard(ok, baseline, confidence)
+    note = (f"{len(ok)} completed runs of {len(df)}; {n_excluded} failed or unfinished run(s) excluded. "
+            "ATE vs reference: against the true poses (truth) or the GPS fixes after SE(2) alignment (gps). "
+            + _notes(confidence)
+            + (f" Δ: paired mean difference from {baseline} on the same datasets, p: paired t test (Wilcoxon in "
+               "leaderboard.csv)." if baseline else ""))
+    groups, header, rows = leaderboard_rows(board)
+    md = to_markdown(header, rows, note)
+    tgroups, theader, trows = leaderboard_rows(board, tex=True)
+    tex = to_latex(theader, trows, f"{exp_dir.name} leaderboard: {note}", groups=tgroups)
+    out = Path(out_dir) if out_dir is not None else exp_dir
+    paths = {"csv": out / "leaderboard.csv", "md": out / "leaderboard.md", "tex": out / "leaderboard.tex"}
+    with atomic_files(list(paths.values())) as (csv, md_path, tex_path):
+        board.to_csv(csv, index=False)
+        md_path.write_text(md, encoding="utf-8")
+        tex_path.write_text(tex, encoding="utf-8")
+    return {"board": board, "markdown": md, "n_runs": len(df), "n_excluded": n_excluded, "paths": paths}

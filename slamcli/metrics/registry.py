@@ -99,6 +99,9 @@ _METRICS = [
     _m("n_iterations", "iterations"),
     _m("final_cost", "final cost"),
     _m("solve_time_s", "solve time", "s"),
+    _m("ate_reference_m", "ATE vs reference", "m"),
+    _m("lm_reference_m", "landmark RMSE vs reference", "m"),
+    _m("lm_reference_matched", "landmarks matched"),
     _m("wall_time_s", "wall time", "s"),
     _m("metric.wall_time_s", "solver wall time", "s"),
     # occupancy grids (paper 001)

@@ -32,6 +32,7 @@ An experiment file::
     replicates = 50                   # int N (= 0..N-1), a list of ints, or "range(a, b[, step])"
     grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
     zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
+    absent = "skip"                   # optional: skip a recording not on this machine (default "fail")
 
     [quick]                           # optional fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
@@ -66,7 +67,9 @@ TOP_KEYS = ("experiment", "scenario", "data", "solver", "evaluate", "sweep", "qu
 EXPERIMENT_KEYS = ("name", "description", "root_seed")
 SCENARIO_KEYS = ("name", "parameters")
 SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
-SWEEP_KEYS = ("grid", "zip", "replicates", "seed")
+SWEEP_KEYS = ("grid", "zip", "replicates", "seed", "absent")
+#: what a sweep does with a registered recording that is not on this machine: stop before any run, or skip it
+ABSENT_CHOICES = ("fail", "skip")
 #: the keys that say what a [[data]] entry is (exactly one per entry)
 DATA_KINDS = ("scenario", "recording", "graph", "file")
 NAMESPACES = ("scenario", "solver", "evaluate")
@@ -129,11 +132,14 @@ class SweepSpec:
     grid : tuple of (key, values)          cartesian axes in file order.
     zips : tuple of tuple of (key, values) zipped groups; each group's lists have one common length.
     replicates : tuple of int              replicate ids.
+    absent : str                           a registered recording or graph that is not on this machine:
+                                           ``fail`` (before any run) or ``skip`` (one line per recording).
     """
 
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()
     zips: tuple[tuple[tuple[str, tuple[Any, ...]], ...], ...] = ()
     replicates: tuple[int, ...] = (0,)
+    absent: str = "fail"
 
 
 @dataclass(frozen=True)
@@ -607,7 +613,10 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         dup = sorted({k for k in all_keys if all_keys.count(k) > 1})
         if dup:
             raise c.fail("[sweep]", f"key {dup[0]!r} is swept more than once")
-        sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates)
+        absent = c.string(sw.get("absent", "fail"), "sweep.absent")
+        if absent not in ABSENT_CHOICES:
+            raise c.fail("sweep.absent", f"{absent!r} is not one of {', '.join(ABSENT_CHOICES)}")
+        sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates, absent=absent)
 
     quick: dict[str, Any] = {}
     if "quick" in raw:
@@ -727,12 +736,15 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     ``key=value`` fixes a sweep key (``scenario.<dotted key>``, ``solver.<label>.<param>``, ``evaluate.<opt>``;
     an axis of that key is dropped); ``key=v1,v2,...`` makes it a grid axis (replacing the file's values of that
     axis; a new axis varies fastest, except ``data``, which stays the slowest as when it is not swept);
-    ``data=label`` keeps one ``[[data]]`` entry; ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
+    ``data=label`` keeps one ``[[data]]`` entry; ``solver=a,b`` keeps those ``[[solver]]`` labels and
+    ``+solver=m`` adds registered solver ``m`` with its defaults (label ``m``; its parameters then take
+    ``solver.m.<param>`` overrides); ``replicates=N`` (or a list / ``range(a, b)``) sets the replicates. Errors are one line
     ``"<file> (command line): <key>: ..."`` with the TOML checks' "did you mean".
     """
     import dataclasses
 
     c = _Checker(f"{cfg.source} (command line)", tuple(d.label for d in cfg.data))
+    cfg, items = _select_solvers(cfg, c, items)
     labels = {s.label for s in cfg.solvers}
     fixed: dict[str, Any] = {}
     axes: dict[str, tuple[Any, ...]] = {}
@@ -771,3 +783,41 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     first = [("data", axes.pop("data"))] if "data" in axes and "data" not in [k for k, _ in out.sweep.grid] else []
     grid = first + [(k, axes.pop(k) if k in axes else v) for k, v in out.sweep.grid] + list(axes.items())
     return dataclasses.replace(out, sweep=dataclasses.replace(out.sweep, grid=tuple(grid)))
+
+
+def _select_solvers(cfg: ExperimentConfig, c: _Checker, items: list[str]) -> tuple[ExperimentConfig, list[str]]:
+    """Apply ``solver=LABELS`` (keep those ``[[solver]]`` labels, in file order) and ``+solver=METHODS`` (add
+    each registered method with its default parameters, labelled by its name; the method is checked when the
+    sweep is resolved); the other items are returned untouched."""
+    import dataclasses
+
+    solvers, rest = list(cfg.solvers), []
+    for item in items:
+        key, _, text = item.partition("=")
+        key, names = key.strip(), [n.strip() for n in text.split(",") if n.strip()]
+        if key not in ("solver", "+solver"):
+            rest.append(item)
+            continue
+        if not names:
+            raise c.fail(key, "give one or more names, e.g. solver=ekf,graph or +solver=mine")
+        labels = [s.label for s in solvers]
+        for n in names:
+            if key == "solver" and n not in labels:
+                raise c.fail(key, f"no [[solver]] labelled {n!r}{did_you_mean(n, labels)} (labels: "
+                                  f"{', '.join(labels)}; +solver={n} adds a registered solver)")
+            if key == "+solver" and (n in labels or not _NAME_RE.match(n) or "." in n):
+                raise c.fail(key, f"{n!r} is already a [[solver]] label" if n in labels else
+                             f"{n!r} is not a solver name (letters, digits, '_', '-')")
+        if key == "solver":
+            solvers = [s for s in solvers if s.label in names]
+        else:
+            solvers += [SolverSpec(label=n, method=n) for n in names]
+    kept = {f"solver.{s.label}." for s in solvers}
+
+    def live(k: str) -> bool:  # a solver.<label>.* key of a configuration left out applies to nothing
+        return not k.startswith("solver.") or any(k.startswith(p) for p in kept)
+
+    sweep = dataclasses.replace(cfg.sweep, grid=tuple((k, v) for k, v in cfg.sweep.grid if live(k)),
+                                zips=tuple(g2 for g in cfg.sweep.zips if (g2 := tuple(kv for kv in g if live(kv[0])))))
+    return dataclasses.replace(cfg, solvers=tuple(solvers), sweep=sweep,
+                               quick={k: v for k, v in cfg.quick.items() if live(k)}), rest

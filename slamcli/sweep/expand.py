@@ -247,8 +247,19 @@ def _locate(entry: DataSpec, where: str) -> tuple[str, Path]:
                           f"recording = {entry.name!r}")
     try:
         return importer, registry.locate(entry.name)
+    except registry.DatasetMissingError as exc:
+        raise AbsentDataError(f"{key}: {exc}", str(exc)) from None
     except DatasetImportError as exc:
         raise ConfigError(f"{key}: {exc}") from None
+
+
+class AbsentDataError(ConfigError):
+    """A registered recording or graph that is not on this machine; ``reason`` is the registry's one line
+    (naming the fetch / add command) without the TOML key."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class LiteralResolver:
@@ -380,6 +391,7 @@ class Expansion:
     experiment: ExperimentConfig
     runs: tuple[RunSpec, ...]
     axes: tuple[str, ...]  # swept keys, grid then zip order
+    skipped: tuple[str, ...] = ()  # one line per absent recording left out ([sweep] absent = "skip")
 
     @property
     def datasets(self) -> tuple[DatasetSpec, ...]:
@@ -439,14 +451,24 @@ def sweep_points(cfg: ExperimentConfig) -> list[dict[str, Any]]:
     return points
 
 
-def _resolve_data(cfg: ExperimentConfig, resolver: Resolver, used: set[str]) -> dict[str, dict[str, Any]]:
-    """``{label: resolver.data(...)}`` for every entry of ``used`` that is not simulated, before anything else
-    is resolved (a missing recording fails the sweep before any run starts)."""
-    out = {}
+def _resolve_data(cfg: ExperimentConfig, resolver: Resolver,
+                  used: set[str]) -> tuple[dict[str, dict[str, Any]], tuple[str, ...]]:
+    """``({label: resolver.data(...)}, skip lines)`` for every entry of ``used`` that is not simulated, before
+    anything else is resolved. A recording that is not on this machine fails the sweep before any run starts,
+    or with ``[sweep] absent = "skip"`` leaves its entries out: one line per recording naming its entries and
+    the command that gets it."""
+    out: dict[str, dict[str, Any]] = {}
+    absent: dict[str, tuple[str, list[str]]] = {}  # recording name -> (reason, labels of its entries)
     for d in cfg.data:
         if not d.simulated and d.label in used:
-            out[d.label] = resolver.data(d, f"{cfg.source}: {d.where}")
-    return out
+            try:
+                out[d.label] = resolver.data(d, f"{cfg.source}: {d.where}")
+            except AbsentDataError as exc:
+                if cfg.sweep.absent != "skip":
+                    raise
+                absent.setdefault(d.name, (exc.reason, []))[1].append(d.label)
+    lines = tuple(f"skipped {', '.join(labels)}: {reason}" for reason, labels in absent.values())
+    return out, lines
 
 
 def _datasets(cfg: ExperimentConfig, entry: DataSpec, scen_over: dict[str, Any], resolved: dict[str, Any],
@@ -481,7 +503,12 @@ def expand(
         check_keys(cfg, resolver.known_keys)
     vers = run_versions if run_versions is not None else versions()
     points = sweep_points(cfg)
-    imported = _resolve_data(cfg, resolver, {p["data"] for p in points})
+    imported, skipped = _resolve_data(cfg, resolver, {p["data"] for p in points})
+    if skipped:
+        points = [p for p in points if cfg.entry(p["data"]).simulated or p["data"] in imported]
+        if not points:
+            raise ConfigError(f"{cfg.source}: [[data]]: none of the experiment's datasets is on this machine ("
+                              + "; ".join(skipped) + ")")
     axes = _swept(cfg)
     scen_cache: dict[str, dict[str, Any]] = {}
     solver_cache: dict[str, dict[str, Any]] = {}
@@ -522,7 +549,7 @@ def expand(
                 rid = content_hash(spec.config())
                 if rid not in runs:
                     runs[rid] = dataclasses.replace(spec, run_id=rid)
-    return Expansion(experiment=cfg, runs=tuple(runs.values()), axes=axes)
+    return Expansion(experiment=cfg, runs=tuple(runs.values()), axes=axes, skipped=skipped)
 
 
 def _applies(key: str, label: str, entry: DataSpec, axes: tuple[str, ...]) -> bool:
