@@ -1,4 +1,6 @@
-"""Suite-wide pytest hooks: what a test reports is sent between pytest-xdist's processes as UTF-8, and the
+"""Suite-wide pytest hooks and shared fixtures.
+
+The hooks: what a test reports is sent between pytest-xdist's processes as UTF-8, and the
 bad-input tests make file names that are not UTF-8 (legal on Linux, ``\\udcXX`` in Python strings); a report or
 warning naming one would otherwise end the whole run with an internal error. Such bytes are shown escaped."""
 
