@@ -53,6 +53,13 @@ RC = {
 }
 
 
+def series_colours(n: int) -> list[str]:
+    """``n`` colours for series of one kind (robots of a team, solvers of an overlay): the :data:`CYCLE`
+    without :data:`EST_LANDMARK` (kept for landmark markers), repeated when ``n`` exceeds it."""
+    free = [c for c in CYCLE if c != EST_LANDMARK]
+    return [free[k % len(free)] for k in range(n)]
+
+
 def prop_cycle():
     """The colour cycle as a matplotlib ``cycler`` (for ``ax.set_prop_cycle``)."""
     from cycler import cycler
