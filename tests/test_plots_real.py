@@ -96,7 +96,7 @@ def test_a_diverging_baseline_is_clipped_and_said(vp):
         fig.draw_without_rendering()
         limits.append(ax.dataLim.bounds)  # the view follows it, widened by the equal aspect
         notes = [t.get_text() for t in ax.get_legend().get_texts()]
-        assert ("Odometry clipped at the axes" in notes) == (odometry is not None)
+        assert ("Odometry clipped" in notes) == (odometry is not None)
         assert _contains(ax, est) and not _contains(ax, drift)
     np.testing.assert_allclose(limits[0], limits[1])  # the baseline does not move the axes at all
 
@@ -219,4 +219,28 @@ def test_api_takes_one_axes_and_names_what_it_expects(vp):
         sc.plot.compare(str(vp), ax=list(axes))
     ax = sc.plot.map([str(vp / "ekf.h5"), str(vp / "graph.h5")], ax=axes[0], labels=["EKF", "Graph"])
     assert ax is axes[0] and {"EKF", "Graph"} <= {ln.get_label() for ln in ax.lines}
+    plt.close(fig)
+
+
+def test_api_pose_errors_fill_one_axes_with_three_panels():
+    """A result without an iteration trace: its x, y, θ error panels take the slot of the one Axes given."""
+    import dataclasses
+
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    from test_cli_evaluate import make_dataset, make_result
+
+    import slamcli as sc
+
+    ds = make_dataset()
+    res = dataclasses.replace(make_result(ds, "unused.h5"), trace=None)
+    fig, (left, right) = plt.subplots(1, 2, layout="constrained")
+    axes = sc.plot.errors(res, ds, ax=right)
+    assert len(axes) == 3 and right not in fig.axes and left in fig.axes
+    assert all(a.get_position().x0 >= left.get_position().x1 for a in axes)  # in the right-hand slot
+    np.testing.assert_allclose(axes[0].lines[0].get_ydata(), res.poses_xyt[:, 0] - ds.truth.poses_xyt[:, 0])
+    with pytest.raises(TypeError, match=r"slamcli.plot.errors: ax must be one matplotlib Axes .* or a sequence of 3"):
+        sc.plot.errors(res, ds, ax=[left])
     plt.close(fig)

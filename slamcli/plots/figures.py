@@ -26,7 +26,7 @@ def map_context(dataset) -> dict:
 def _note(ctx) -> str | None:
     if ctx["true_path_xy"] is not None:
         return None
-    return "No ground truth in dataset" if ctx["ref_xy"] is None else "GPS positions only (no true map)"
+    return "No ground truth in dataset" if ctx["ref_xy"] is None else "GPS only, no true map"
 
 
 def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None,

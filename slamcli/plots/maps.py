@@ -71,10 +71,16 @@ def plot_map(ax, true_landmarks_xy=None, est_landmarks_xy=None, true_path_xy=Non
     return _finish_map(ax, title, [legend_note, *clipped])
 
 
+#: an overlay's first estimate is drawn this much wider (share of the line width) than its last, so paths that
+#: coincide stay visible under one another
+OVERLAY_WIDEN = 1.0
+
+
 def plot_overlay(ax, estimates, true_landmarks_xy=None, true_path_xy=None, odometry_path_xy=None, ref_xy=None,
                  pose_robot=None, title: str | None = None, legend_note: str | None = None):
     """Several estimates of one dataset in one figure (``evo_traj`` style), one colour of the style's cycle
-    each, named by their label in the legend, over the reference drawn once.
+    each (the first widest, :data:`OVERLAY_WIDEN`), named by their label in the legend, over the reference
+    drawn once.
 
     Parameters
     ----------
@@ -85,15 +91,17 @@ def plot_overlay(ax, estimates, true_landmarks_xy=None, true_path_xy=None, odome
     """
     _draw_reference(ax, true_path_xy, odometry_path_xy, ref_xy, pose_robot)
     _draw_true_landmarks(ax, true_landmarks_xy)
-    for (label, path_xy, lm_xy), colour in zip(estimates, style.series_colours(len(estimates))):
+    n = len(estimates)
+    for j, ((label, path_xy, lm_xy), colour) in enumerate(zip(estimates, style.series_colours(n))):
         path_xy = np.asarray(path_xy, float)
+        lw = style.LINE_PT * (1.0 + OVERLAY_WIDEN * (n - 1 - j) / max(n - 1, 1))  # later, thinner lines on top
         for k, seg in enumerate(_segments(path_xy, pose_robot)):
-            ax.plot(*seg.T, "-", color=colour, lw=style.LINE_PT, label=label if k == 0 else None)
+            ax.plot(*seg.T, "-", color=colour, lw=lw, label=label if k == 0 else None)
         if lm_xy is not None and len(lm_xy):
             ax.plot(*np.asarray(lm_xy).T, "*", color=colour, ms=landmark_marker_pt(len(lm_xy)), mew=0,
                     ls="none", alpha=0.8, zorder=1.5)
     if estimates:
-        ax.plot([], [], "*", color="0.3", ms=5, ls="none", label="Estimated locations (colour of the estimate)")
+        ax.plot([], [], "*", color="0.3", ms=5, ls="none", label="Landmarks (by colour)")
     mark_ends(ax, estimates[0][1] if estimates else true_path_xy, pose_robot)
     primary = [np.asarray(e[1], float) for e in estimates]
     primary += [a for a in (true_path_xy, ref_xy, true_landmarks_xy) if a is not None]
@@ -119,7 +127,7 @@ def _draw_reference(ax, true_path_xy, odometry_path_xy, ref_xy, pose_robot):
         for k, seg in enumerate(_segments(np.asarray(xy, float), pose_robot)):
             ax.plot(*seg.T, fmt, color=colour, lw=lw, label=name if k == 0 else None)
     if ref_xy is not None and len(ref_xy):
-        ax.plot(*np.asarray(ref_xy, float).T, ".", color=style.TRUTH, ms=1.5, mew=0, ls="none", zorder=1.8,
+        ax.plot(*np.asarray(ref_xy, float).T, ".", color=style.TRUTH, ms=2.0, mew=0, ls="none", zorder=1.8,
                 label="GPS reference")
 
 
@@ -223,11 +231,11 @@ def set_map_limits(ax, primary, landmarks=(), baselines=None) -> list[str]:
         xy = _finite(xy)
         return int(np.sum((xy[:, 0] < x0) | (xy[:, 0] > x1) | (xy[:, 1] < y0) | (xy[:, 1] > y1)))
 
-    notes = [f"{name} clipped at the axes" for name, xy in (baselines or {}).items()
+    notes = [f"{name} clipped" for name, xy in (baselines or {}).items()
              if xy is not None and outside(xy)]
     n_out = sum(outside(xy) for xy in landmarks)
     if n_out:
-        notes.append(f"{n_out} estimated landmark(s) outside the axes")
+        notes.append(f"{n_out} landmarks clipped")
     return notes
 
 
