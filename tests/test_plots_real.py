@@ -244,3 +244,29 @@ def test_api_pose_errors_fill_one_axes_with_three_panels():
     with pytest.raises(TypeError, match=r"slamcli.plot.errors: ax must be one matplotlib Axes .* or a sequence of 3"):
         sc.plot.errors(res, ds, ax=[left])
     plt.close(fig)
+
+
+def test_hybrid_map_limits_follow_the_observed_grid_not_the_odometry():
+    """A 40 × 60 grid of 0.5 m cells at (-10, -5) observed only in rows 4..9, columns 10..29: corners by hand
+    (x: -10 + 10·0.5 = -5 to -10 + 30·0.5 = 5; y: -5 + 4·0.5 = -3 to -5 + 10·0.5 = 0); odometry drifting to
+    -240 m leaves the limits alone."""
+    from types import SimpleNamespace
+
+    from slamcli.plots.grids import draw_grid, observed_corners_xy
+    from slamcli.plots.maps import plot_map
+
+    observed = np.zeros((40, 60), np.int32)
+    observed[4:10, 10:30] = 3
+    grid = SimpleNamespace(prob=np.full((40, 60), 0.5), origin_xy=(-10.0, -5.0), resolution=0.5, observed=observed,
+                           snapshots=None)
+    corners = observed_corners_xy(grid)
+    np.testing.assert_allclose(corners, [[-5.0, -3.0], [5.0, 0.0]])
+    path = np.column_stack([np.linspace(-4, 4, 30), np.full(30, -1.5)])
+    drift = np.column_stack([np.linspace(-4, 60, 30), np.linspace(-1.5, -240, 30)])
+    fig, ax = new_figure(3.5, 3.6)
+    draw_grid(ax, grid, label="frequentist grid", colorbar=True)
+    plot_map(ax, None, None, None, drift, path, extent_xy=corners)
+    fig.draw_without_rendering()
+    assert _contains(ax, corners) and not _contains(ax, drift)
+    assert max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim())) < 3 * np.ptp(corners[:, 0])
+    assert texts_outside(fig) == []

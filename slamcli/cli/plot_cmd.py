@@ -167,7 +167,7 @@ def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.e
         from slamcli.plots.grids import draw_grid
 
         name = "frequentist" if "frequentist" in res.grids else next(iter(res.grids))
-        draw_grid(ax, res.grids[name], label=f"occupancy ({name})", colorbar=True)
+        draw_grid(ax, res.grids[name], label=f"{name} grid", colorbar=True)  # short: the legend fits 2 columns
     extent = observed_corners_xy(res.grids[name]) if res.grids else None
     draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every, title=title, label=label, extent_xy=extent)
     if ds.truth is None or ds.truth.position_reference_only:
