@@ -270,3 +270,25 @@ def test_hybrid_map_limits_follow_the_observed_grid_not_the_odometry():
     assert _contains(ax, corners) and not _contains(ax, drift)
     assert max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim())) < 3 * np.ptp(corners[:, 0])
     assert texts_outside(fig) == []
+
+
+def test_nees_log_axis_keeps_every_value_and_names_one_run():
+    from slamcli.plots.curves import plot_nees
+    from slamcli.plots.figures import nees_title
+
+    anees = np.r_[np.full(98, 3.0), 1e-4, 800.0]  # one near-zero step, one far above the band
+    fig, ax = new_figure(3.5, 2.6)
+    plot_nees(ax, np.arange(100), anees, 0.22, 9.35, 3, 1, title=nees_title(1))
+    lo, hi = ax.get_ylim()
+    assert lo < anees.min() and anees.max() < hi
+    assert ax.get_title() == "Pose NEES of one run" and nees_title(50) == "Pose NEES over 50 runs"
+
+
+def test_ellipses_draw_above_the_markers_or_say_why_not(vp, team, tmp_path, captured):
+    _cli("plot", "map", vp / "ekf.h5", "--ellipses", "-q", "-o", tmp_path / "e.png")
+    ax = captured[0].axes[0]
+    stars = _line(ax, "Estimated locations")
+    assert len(ax.patches) == len(read_result(vp / "ekf.h5").landmarks_xy)
+    assert all(p.get_zorder() > stars.get_zorder() for p in ax.patches)
+    r = _cli("plot", "map", team / "graph.h5", "--ellipses", "-o", tmp_path / "t.png")
+    assert "stores no covariances" in r.output

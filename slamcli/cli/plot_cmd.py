@@ -172,6 +172,8 @@ def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.e
     draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every, title=title, label=label, extent_xy=extent)
     if ds.truth is None or ds.truth.position_reference_only:
         echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
+    if ellipses and res.landmark_cov is None and res.pose_cov is None:
+        echo(f"note: {result_path} stores no covariances (solver {res.solver!r}); no ellipses drawn")
 
 
 def _overlay(ax, result_paths, data_paths, check, title, echo, labels=None):

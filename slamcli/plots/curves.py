@@ -73,8 +73,8 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
               log: bool = True):
     """Average NEES per step against the two-sided 95 % χ² band ``[lower, upper]`` (E[NEES] = d).
 
-    ``log`` (default): logarithmic y axis whose limits always include the band, so an inconsistent filter
-    (NEES in the hundreds) and the band are both visible.
+    ``log`` (default): logarithmic y axis whose limits include the band and every positive value, so an
+    inconsistent filter (NEES in the hundreds), a near-zero step and the band are all visible.
     """
     ax.axhspan(lower, upper, color=style.BAND, alpha=0.2, lw=0,
                label=f"95% χ² band [{lower:.2f}, {upper:.2f}] (N={n_runs})")
@@ -89,7 +89,7 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
     finite = a[np.isfinite(a) & (a > 0)] if log else a[np.isfinite(a)]
     if log:
         ax.set_yscale("log")
-        lo = min(lower / 2, float(np.percentile(finite, 1)) / 1.5) if finite.size else lower / 2
+        lo = min(lower / 2, float(np.min(finite)) / 1.5) if finite.size else lower / 2  # every value shows
         hi = max(upper * 2, float(np.max(finite)) * 1.5) if finite.size else upper * 2
         ax.set_ylim(lo, hi)
     else:

@@ -148,7 +148,12 @@ def draw_nees(ax, average, *, log: bool = True, title: str | None = None, label:
 
     a = average
     return plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
-                     label=label, title=title or f"Pose NEES over {a.n_runs} runs", log=log)
+                     label=label, title=title or nees_title(a.n_runs), log=log)
+
+
+def nees_title(n_runs: int) -> str:
+    """Default NEES title: "Pose NEES over N runs", or "Pose NEES of one run" (no Monte-Carlo average)."""
+    return "Pose NEES of one run" if n_runs == 1 else f"Pose NEES over {n_runs} runs"
 
 
 def draw_compare(ax, groups, *, labels=None, title: str | None = None, log: bool = False):
