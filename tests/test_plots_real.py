@@ -292,3 +292,33 @@ def test_ellipses_draw_above_the_markers_or_say_why_not(vp, team, tmp_path, capt
     assert all(p.get_zorder() > stars.get_zorder() for p in ax.patches)
     r = _cli("plot", "map", team / "graph.h5", "--ellipses", "-o", tmp_path / "t.png")
     assert "stores no covariances" in r.output
+
+
+def test_crowded_box_names_do_not_overlap():
+    """Twenty pose boxes 0.1 m apart at one column: names that would touch are hidden, the rest are disjoint
+    in rendered pixels."""
+    from slamcli.plots.boxes import plot_boxes
+
+    poses = np.column_stack([np.linspace(0, 2, 20), np.zeros(20), np.zeros(20)])
+    w = np.array([0.04, 0.04, 0.05])
+    fig, ax = new_figure(3.5, 3.6)
+    plot_boxes(ax, poses - w, poses + w, np.array([[1.0, 1.0]]), np.array([[1.3, 1.2]]), wedge_radius=0.2)
+    names = [t for t in ax.texts if t.get_text()[:1] in "rl"]
+    shown = [t for t in names if t.get_visible()]
+    assert shown[0].get_text() == "r1" and 1 < len(shown) < len(names)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    fig.set_layout_engine("none")
+    ax.xaxis.label.set_visible(False)
+
+    def render(only):
+        for t in names:
+            t.set_visible(t is only)
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    base = render(None)
+    masks = [np.any(render(t) != base, axis=-1) for t in shown]
+    assert not any(np.any(a & b) for i, a in enumerate(masks) for b in masks[i + 1:])
