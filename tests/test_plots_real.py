@@ -155,25 +155,29 @@ def _sweep(d):
     typed_frame(rows).to_csv(d / "results.csv", index=False)
 
 
-def _label_masks(fig, ax):
-    """Pixels (boolean image) of each x tick label alone, rendered by Agg: an overlap test independent of
-    any bounding-box geometry."""
+def _text_masks(fig, ax, texts):
+    """Pixels (boolean image) of each text of ``texts`` alone, rendered by Agg with the layout frozen: an
+    overlap test independent of any bounding-box geometry."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
-    fig.set_layout_engine("none")  # keep the laid-out axes where they are while labels are hidden
+    fig.set_layout_engine("none")  # keep the laid-out axes where they are while texts are hidden
     ax.xaxis.label.set_visible(False)  # it moves with the tick labels' extents
-    labels = ax.get_xticklabels()
+    shown = [t for t in texts if t.get_visible()]
 
     def render(visible):
-        for t in labels:
+        for t in texts:
             t.set_visible(t is visible)
         canvas.draw()
         return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
     base = render(None)
-    return [np.any(render(t) != base, axis=-1) for t in labels]
+    return [np.any(render(t) != base, axis=-1) for t in shown]
+
+
+def _label_masks(fig, ax):
+    return _text_masks(fig, ax, ax.get_xticklabels())
 
 
 @pytest.mark.parametrize("log", [False, True])
@@ -306,19 +310,6 @@ def test_crowded_box_names_do_not_overlap():
     names = [t for t in ax.texts if t.get_text()[:1] in "rl"]
     shown = [t for t in names if t.get_visible()]
     assert shown[0].get_text() == "r1" and 1 < len(shown) < len(names)
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    canvas = FigureCanvasAgg(fig)
-    canvas.draw()
-    fig.set_layout_engine("none")
-    ax.xaxis.label.set_visible(False)
-
-    def render(only):
-        for t in names:
-            t.set_visible(t is only)
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
-
-    base = render(None)
-    masks = [np.any(render(t) != base, axis=-1) for t in shown]
+    masks = _text_masks(fig, ax, names)
+    assert len(masks) == len(shown) and all(m.any() for m in masks)
     assert not any(np.any(a & b) for i, a in enumerate(masks) for b in masks[i + 1:])
