@@ -190,6 +190,11 @@ def test_compare_tick_labels_do_not_touch_and_log_axis(tmp_path, captured, log):
     fig = captured[0]
     ax = fig.axes[0]
     assert ax.get_yscale() == ("log" if log else "linear")
+    if log:  # plain decimal labels at 1-2-5 steps, no mathtext "6×10⁻¹" minor labels
+        assert all(t.get_text() == "" for t in ax.yaxis.get_minorticklabels())
+        values = [float(t.get_text()) for t in ax.get_yticklabels() if t.get_text()]
+        lo, hi = ax.get_ylim()
+        assert len([v for v in values if lo <= v <= hi]) >= 3
     assert texts_outside(fig) == []
     assert not tick_labels_overlap(ax)
     masks = _label_masks(fig, ax)

@@ -174,7 +174,12 @@ def plot_compare(ax, labels, values, ylabel: str, xlabel: str = "", title: str |
     if xlabel:
         ax.set_xlabel(xlabel)
     if log:
+        from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+
         ax.set_yscale("log")
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))  # 0.1, 0.2, 0.5, 1, ...: labelled
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
     elif nonnegative:
         ax.set_ylim(bottom=0)
     style.apply_style(ax.figure)  # measure at the sizes the figure is saved with

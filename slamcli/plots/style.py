@@ -89,7 +89,7 @@ def apply_style(fig) -> None:
         for t in (ax.title, getattr(ax, "_left_title", None), getattr(ax, "_right_title", None)):
             if t is not None:
                 t.set_wrap(True)  # a long --title breaks into lines instead of leaving a one-column figure
-        ax.tick_params(labelsize=SMALL_PT)
+        ax.tick_params(which="both", labelsize=SMALL_PT)  # minor labels of a short log axis too
         for t in (*ax.get_xticklabels(), *ax.get_yticklabels()):
             t.set_fontfamily("sans-serif")
         for axis in (ax.xaxis, ax.yaxis):
