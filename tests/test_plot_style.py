@@ -283,7 +283,7 @@ def _fig_boxes():
 
 
 def _fig_grid():
-    from slamcli.plots.grids import draw_grid
+    from slamcli.plots.grids import draw_grid, observed_corners_xy
     from slamcli.plots.maps import plot_map
 
     fig, ax = new_figure(*COLUMN)
@@ -291,10 +291,10 @@ def _fig_grid():
     prob = np.full((40, 60), 0.5)
     prob[(np.abs(xx - 30) < 25) & (np.abs(yy - 20) < 15)] = 0.1
     prob[(np.abs(xx - 30) == 25) | (np.abs(yy - 20) == 15)] = 0.95
-    grid = SimpleNamespace(prob=prob, origin_xy=(-1.0, -1.0), resolution=0.25, snapshots=None)
+    grid = SimpleNamespace(prob=prob, origin_xy=(-1.0, -1.0), resolution=0.25, snapshots=None, observed=None)
     draw_grid(ax, grid, label="occupancy (frequentist)", colorbar=True)
     path = np.column_stack([np.linspace(2, 12, 20), 4 + np.sin(np.linspace(0, 3, 20))])
-    plot_map(ax, None, None, None, None, path, title="hybrid")
+    plot_map(ax, None, None, None, None, path, title="hybrid", extent_xy=observed_corners_xy(grid))
     return fig
 
 

@@ -98,7 +98,7 @@ def test_plot_cli_kinds(runs, tmp_path, kind, ext):
 def test_plot_cli_errors(runs, tmp_path):
     r = runner.invoke(app, ["plot", "bogus", str(runs[0]), "-o", str(tmp_path / "x.png")])
     assert r.exit_code == 1 and "unknown plot kind" in r.output
-    r = runner.invoke(app, ["plot", "map", *map(str, runs), "-o", str(tmp_path / "x.png")])
+    r = runner.invoke(app, ["plot", "errors", *map(str, runs), "-o", str(tmp_path / "x.png")])
     assert r.exit_code == 1 and "exactly one" in r.output
     # NEES from results without covariances: "not available", no image
     ds = make_dataset()

@@ -22,8 +22,8 @@ _POSE_ERRORS_HEIGHT = 4.2
 def plot_command(
     kind: Annotated[str, typer.Argument(help="map | errors | nees | mapchange | compare | boxes")],
     results: Annotated[list[Path], typer.Argument(
-        help="Result file(s): nees takes N Monte-Carlo runs, mapchange overlays several, map/errors take "
-             "one; compare takes a sweep folder.")],
+        help="Result file(s): nees takes N Monte-Carlo runs, mapchange and map overlay several (map: results "
+             "of one dataset, one colour each), errors takes one; compare takes a sweep folder.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Image file: .png, .pdf or .svg.")],
     data: Annotated[list[Path] | None, typer.Option(
         "--data", "-d", help="Dataset file per result (repeat); default: recorded in each result.")] = None,
@@ -37,10 +37,11 @@ def plot_command(
         help="compare: group by these columns, a comma list as in aggregate (solver = label), "
              "e.g. solver,gate_prob.")] = "solver",
     label: Annotated[list[str] | None, typer.Option(
-        "--label", help="Legend name (repeat): one per result for mapchange, of the estimate for map, "
+        "--label", help="Legend name (repeat): one per result for mapchange and map, "
                         "of the curve for nees, one per group for compare. Default: solver names.")] = None,
     linear: Annotated[bool, typer.Option(
         "--linear", help="nees/mapchange: linear y axis instead of logarithmic.")] = False,
+    log: Annotated[bool, typer.Option("--log", help="compare: logarithmic y axis.")] = False,
     dpi: Annotated[int, typer.Option(help="Raster resolution (PNG).")] = 200,
     size: Annotated[str | None, typer.Option(
         help="Figure size WIDTHxHEIGHT in inches, e.g. 3.5x2.6, or column (3.5x2.6) / page (7.16x3.2). "
@@ -65,7 +66,7 @@ def plot_command(
             fail(f"--pose-ellipse-every: must be >= 0 (0 = none), got {pose_ellipse_every}")
         if data and len(data) != len(results):
             fail(f"got {len(results)} result(s) but {len(data)} --data file(s); give one per result or none")
-        if kind in ("map", "errors", "compare", "boxes") and len(results) != 1:
+        if kind in ("errors", "compare", "boxes") and len(results) != 1:
             what = "sweep folder" if kind == "compare" else "result"
             fail(f"plot {kind} takes exactly one {what}, got {len(results)}")
         # a sweep folder (plot compare) is read through its results.csv: figures beside it may be re-drawn
@@ -81,13 +82,15 @@ def plot_command(
             fig = _errors(results[0], data_paths[0], check, title, (w, h), sigma, echo, sized=size is not None)
         else:
             fig, ax = new_figure(w, h)
-            if kind == "map":
+            if kind == "map" and len(results) > 1:
+                _overlay(ax, results, data_paths, check, title, echo, labels)
+            elif kind == "map":
                 _map(ax, results[0], data_paths[0], check, ellipses, pose_ellipse_every, title, echo,
                      label=labels[0] if labels else None)
             elif kind == "mapchange":
                 _mapchange(ax, results, title, log=not linear, labels=labels)
             elif kind == "compare":
-                _compare(ax, results[0], metric, by, title, echo, labels=labels)
+                _compare(ax, results[0], metric, by, title, echo, labels=labels, log=log)
             elif kind == "boxes":
                 _boxes(ax, results[0], data_paths[0], check, hypothesis, title)
             else:
@@ -126,9 +129,10 @@ def _check_labels(kind: str, labels: list[str] | None, n_results: int) -> list[s
         _check_title(lab, "--label")
     if kind in ("errors", "boxes"):
         fail(f"--label: plot {kind} has no legend name to set")
-    if kind == "mapchange" and len(labels) != n_results:
+    overlay = kind == "mapchange" or kind == "map" and n_results > 1
+    if overlay and len(labels) != n_results:
         fail(f"--label: got {len(labels)} label(s) for {n_results} result(s); give one per result")
-    if kind in ("map", "nees") and len(labels) != 1:
+    if kind in ("map", "nees") and not overlay and len(labels) != 1:
         fail(f"--label: plot {kind} draws one estimate; give one --label, got {len(labels)}")
     return labels
 
@@ -155,6 +159,7 @@ def _check_title(title: str | None, option: str = "--title") -> None:
 def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.echo, label=None):
     from slamcli.api.evaluate import load_result_and_dataset
     from slamcli.plots.figures import draw_map
+    from slamcli.plots.grids import observed_corners_xy
 
     # real recordings and imported graphs have no ground truth: then estimate and odometry only
     res, ds, data_path = load_result_and_dataset(result_path, data_path, check_hash=check, require_truth=False)
@@ -162,10 +167,32 @@ def _map(ax, result_path, data_path, check, ellipses, every, title, echo=typer.e
         from slamcli.plots.grids import draw_grid
 
         name = "frequentist" if "frequentist" in res.grids else next(iter(res.grids))
-        draw_grid(ax, res.grids[name], label=f"occupancy ({name})", colorbar=True)
-    draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every, title=title, label=label)
+        draw_grid(ax, res.grids[name], label=f"{name} grid", colorbar=True)  # short: the legend fits 2 columns
+    extent = observed_corners_xy(res.grids[name]) if res.grids else None
+    draw_map(ax, res, ds, ellipses=ellipses, pose_ellipse_every=every, title=title, label=label, extent_xy=extent)
     if ds.truth is None or ds.truth.position_reference_only:
         echo(f"note: {data_path} has no ground truth; drew the estimate and odometry only")
+    if ellipses and res.landmark_cov is None and res.pose_cov is None:
+        echo(f"note: {result_path} stores no covariances (solver {res.solver!r}); no ellipses drawn")
+
+
+def _overlay(ax, result_paths, data_paths, check, title, echo, labels=None):
+    """Several results of one dataset in one map; the dataset is the first result's (or the first --data)."""
+    from slamcli.api.evaluate import load_result_and_dataset
+    from slamcli.errors import SlamcliError
+    from slamcli.io import read_result
+    from slamcli.plots.figures import draw_overlay
+
+    res0, ds, data_path = load_result_and_dataset(result_paths[0], data_paths[0], check_hash=check,
+                                                  require_truth=False)
+    results = [res0, *(read_result(rp) for rp in result_paths[1:])]
+    for rp, r in zip(result_paths[1:], results[1:]):
+        if len(r.poses_xyt) != ds.inputs.n_poses:
+            raise SlamcliError(f"{rp}: {len(r.poses_xyt)} poses but {data_path} has {ds.inputs.n_poses}; "
+                               "plot map overlays results of the same dataset")
+    draw_overlay(ax, results, ds, labels, title=title)
+    if ds.truth is None or ds.truth.position_reference_only:
+        echo(f"note: {data_path} has no ground truth; drew the estimates and odometry only")
 
 
 def _errors(result_path, data_path, check, title, size, n_sigma, echo, sized=False):
@@ -222,7 +249,9 @@ def _nees(ax, result_paths, data_paths, check, title, echo, log=True, label=None
          f"{100 * a.fraction_inside:.1f}% of {n_finite} steps inside the 95% band [{a.lower:.2f}, {a.upper:.2f}]")
 
 
-def _compare(ax, exp_dir, metric, by, title, echo, labels=None):
+def _compare(ax, exp_dir, metric, by, title, echo, labels=None, log=False):
+    import numpy as np
+
     from slamcli.errors import SlamcliError
     from slamcli.metrics.aggregate import compare_groups
     from slamcli.plots.figures import draw_compare
@@ -233,7 +262,9 @@ def _compare(ax, exp_dir, metric, by, title, echo, labels=None):
     if labels and len(labels) != len(g.labels):
         raise SlamcliError(f"--label: got {len(labels)} label(s) for {len(g.labels)} group(s) "
                            f"({'; '.join(g.labels)}); give one per group")
-    draw_compare(ax, g, labels=labels, title=title)
+    if log and any(np.any(np.asarray(v, float) <= 0) for v in g.values):
+        raise SlamcliError(f"--log: {g.metric} has values <= 0, which a logarithmic axis cannot show")
+    draw_compare(ax, g, labels=labels, title=title, log=log)
     echo(f"{sum(len(v) for v in g.values)} runs in {len(g.labels)} groups; {g.n_excluded} failed run(s) excluded")
 
 

@@ -23,6 +23,7 @@ def plot_boxes(ax, pose_lo, pose_hi, landmark_lo, landmark_hi, true_poses_xyt=No
     from matplotlib.patches import Rectangle, Wedge
 
     pose_lo, pose_hi = np.asarray(pose_lo, float), np.asarray(pose_hi, float)
+    names = []
     for k, (lo, hi) in enumerate(zip(pose_lo, pose_hi)):
         ax.add_patch(Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fill=False, ec=color, lw=style.THIN_PT,
                                label=(label or "pose boxes") if k == 0 else None))
@@ -32,12 +33,12 @@ def plot_boxes(ax, pose_lo, pose_hi, landmark_lo, landmark_hi, true_poses_xyt=No
             t1, t2 = (0.0, 360.0) if span >= 360 else (np.degrees(lo[2]), np.degrees(hi[2]))
             ax.add_patch(Wedge(tuple(c), wedge_radius, t1, t2, fc=color, alpha=0.25, ec="none",
                                label="heading interval θ" if k == 0 else None))
-        ax.annotate(f"r{k + 1}", c, fontsize=style.SMALL_PT - 1, ha="center", va="center")
+        names.append(ax.annotate(f"r{k + 1}", c, fontsize=style.SMALL_PT - 1, ha="center", va="center"))
     landmark_lo, landmark_hi = np.asarray(landmark_lo, float), np.asarray(landmark_hi, float)
     for j, (lo, hi) in enumerate(zip(landmark_lo, landmark_hi)):
         ax.add_patch(Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fill=True, fc=landmark_color,
                                alpha=0.3, ec=landmark_color, lw=style.THIN_PT, label="landmark boxes" if j == 0 else None))
-        ax.annotate(f"l{j + 1}", 0.5 * (lo + hi), fontsize=style.SMALL_PT - 1, ha="center", va="bottom")
+        names.append(ax.annotate(f"l{j + 1}", 0.5 * (lo + hi), fontsize=style.SMALL_PT - 1, ha="center", va="bottom"))
     if true_poses_xyt is not None:
         tp = np.asarray(true_poses_xyt, float)
         ax.plot(tp[:, 0], tp[:, 1], ".-", color=style.TRUTH, lw=style.THIN_PT, ms=3, label="True trajectory")
@@ -59,3 +60,20 @@ def plot_boxes(ax, pose_lo, pose_hi, landmark_lo, landmark_hi, true_poses_xyt=No
     if title:
         ax.set_title(title)
     legend_below(ax, ncol=2)
+    hide_crowded(ax, names)
+
+
+def hide_crowded(ax, texts) -> int:
+    """Hide each text of ``texts`` whose extent, measured after a draw at the style's sizes, overlaps one
+    kept before it (greedy, in order: r1, r2, ..., then l1, ...); returns how many were hidden."""
+    style.apply_style(ax.figure)
+    ax.figure.draw_without_rendering()
+    kept, hidden = [], 0
+    for t in texts:
+        box = t.get_window_extent()
+        if any(box.overlaps(k) for k in kept):
+            t.set_visible(False)
+            hidden += 1
+        else:
+            kept.append(box)
+    return hidden

@@ -73,8 +73,8 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
               log: bool = True):
     """Average NEES per step against the two-sided 95 % χ² band ``[lower, upper]`` (E[NEES] = d).
 
-    ``log`` (default): logarithmic y axis whose limits always include the band, so an inconsistent filter
-    (NEES in the hundreds) and the band are both visible.
+    ``log`` (default): logarithmic y axis whose limits include the band and every positive value, so an
+    inconsistent filter (NEES in the hundreds), a near-zero step and the band are all visible.
     """
     ax.axhspan(lower, upper, color=style.BAND, alpha=0.2, lw=0,
                label=f"95% χ² band [{lower:.2f}, {upper:.2f}] (N={n_runs})")
@@ -89,7 +89,7 @@ def plot_nees(ax, steps, anees, lower: float, upper: float, dof: int, n_runs: in
     finite = a[np.isfinite(a) & (a > 0)] if log else a[np.isfinite(a)]
     if log:
         ax.set_yscale("log")
-        lo = min(lower / 2, float(np.percentile(finite, 1)) / 1.5) if finite.size else lower / 2
+        lo = min(lower / 2, float(np.min(finite)) / 1.5) if finite.size else lower / 2  # every value shows
         hi = max(upper * 2, float(np.max(finite)) * 1.5) if finite.size else upper * 2
         ax.set_ylim(lo, hi)
     else:
@@ -143,16 +143,18 @@ def plot_pose_errors(axes, steps, err_xyt, sigma_xyt=None, n_sigma: float = 3.0,
 
 
 def plot_compare(ax, labels, values, ylabel: str, xlabel: str = "", title: str | None = None,
-                 nonnegative: bool = False):
+                 nonnegative: bool = False, log: bool = False):
     """Box plot per group with every run drawn on top (strip plot; points spread evenly across the box
     width, no random jitter), e.g. ATE per solver over the replicates of a sweep. Boxes: median and
-    quartiles, whiskers to the furthest run within 1.5 IQR. Group labels that would collide are slanted.
+    quartiles, whiskers to the furthest run within 1.5 IQR. Group labels that would collide are slanted,
+    and set upright when slanted ones still touch (:func:`tick_labels_overlap`, measured after a draw).
 
     Parameters
     ----------
     labels : list of str (G,)          values : list of (n_g,) arrays.
     ylabel, xlabel : axis labels (names and units from :mod:`slamcli.metrics.registry`).
-    nonnegative : the metric cannot be negative: the y axis starts at 0.
+    nonnegative : the metric cannot be negative: the y axis starts at 0 (unless ``log``).
+    log : logarithmic y axis (values must be > 0).
     """
     pos = np.arange(1, len(labels) + 1)
     ax.boxplot([np.asarray(v, float) for v in values], positions=pos, widths=0.5, showfliers=False,
@@ -171,9 +173,39 @@ def plot_compare(ax, labels, values, ylabel: str, xlabel: str = "", title: str |
     ax.set_ylabel(ylabel)
     if xlabel:
         ax.set_xlabel(xlabel)
-    if nonnegative:
+    if log:
+        from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+
+        ax.set_yscale("log")
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))  # 0.1, 0.2, 0.5, 1, ...: labelled
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    elif nonnegative:
         ax.set_ylim(bottom=0)
-    ax.grid(True, axis="y", **style.GRID)
+    style.apply_style(ax.figure)  # measure at the sizes the figure is saved with
+    if tick_labels_overlap(ax):
+        ax.set_xticks(pos, [f"{lab} (n={len(v)})" for lab, v in zip(labels, values)], rotation=90, ha="center",
+                      rotation_mode="default")
+    ax.grid(True, axis="y", which="both" if log else "major", **style.GRID)
     if title:
         ax.set_title(title)
     return ax
+
+
+def tick_labels_overlap(ax) -> bool:
+    """Do two neighbouring x tick labels of ``ax`` touch on the canvas, measured after a draw of the figure?
+    Upright labels: their window extents intersect. Labels rotated by θ (all alike): the gap between the
+    parallel text lines, ``Δx·sin θ`` for anchors ``Δx`` pixels apart, is less than a line's height."""
+    ax.figure.draw_without_rendering()
+    ticks = [(x, t) for x, t in zip(ax.get_xticks(), ax.get_xticklabels()) if t.get_visible() and t.get_text()]
+    for (xa, a), (xb, b) in zip(ticks, ticks[1:]):
+        theta = np.radians(a.get_rotation() % 180.0)
+        if abs(np.sin(theta)) < 1e-9:
+            if a.get_window_extent().overlaps(b.get_window_extent()):
+                return True
+            continue
+        dx_px = abs(ax.transData.transform((xb, 0.0))[0] - ax.transData.transform((xa, 0.0))[0])
+        line_px = 1.2 * a.get_fontsize() * ax.figure.dpi / 72.0
+        if dx_px * abs(np.sin(theta)) < line_px:
+            return True
+    return False

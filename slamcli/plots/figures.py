@@ -9,21 +9,57 @@ from __future__ import annotations
 import numpy as np
 
 
+def map_context(dataset) -> dict:
+    """The reference arrays of a map figure from a dataset: true landmarks and path (None for a GPS-only
+    truth), the odometry, the GPS fixes ``ref_xy`` and, for a multi-robot dataset, the robot index of each
+    stacked pose and the robots' names."""
+    truth, team = dataset.truth, dataset.inputs.robots
+    full = truth is not None and not truth.position_reference_only
+    return {"true_landmarks_xy": truth.landmarks_xy if full else None,
+            "true_path_xy": truth.poses_xyt[:, :2] if full else None,
+            "odometry_path_xy": dataset.inputs.odometry_xyt[:, :2],
+            "ref_xy": truth.ref_xy if truth is not None else None,
+            "pose_robot": np.asarray(team.pose_robot) if team is not None else None,
+            "robot_names": [f"Robot {int(n)}" for n in team.robot_number] if team is not None else None}
+
+
+def _note(ctx) -> str | None:
+    if ctx["true_path_xy"] is not None:
+        return None
+    return "No ground truth in dataset" if ctx["ref_xy"] is None else "GPS only, no true map"
+
+
 def draw_map(ax, result, dataset, *, ellipses: bool = False, pose_ellipse_every: int = 0, title: str | None = None,
-             label: str | None = None):
-    """Paper-style map of ``result`` over ``dataset`` (truth drawn when the dataset has it); ``label`` names
-    the estimate in the legend; the title defaults to the solver's name."""
+             label: str | None = None, extent_xy=None):
+    """Paper-style map of ``result`` over ``dataset`` (truth or GPS reference drawn when the dataset has it,
+    one colour per robot of a team); ``label`` names the estimate in the legend; the title defaults to the
+    solver's name; ``extent_xy`` ``(n, 2)``: more points the axes must show (an occupancy grid's observed part)."""
     from slamcli.plots.maps import plot_map
 
-    truth = dataset.truth
-    if truth is not None and truth.position_reference_only:  # GPS only: no true map or poses to draw
-        truth = None
-    return plot_map(ax, truth.landmarks_xy if truth else None, result.landmarks_xy,
-                    truth.poses_xyt[:, :2] if truth else None, dataset.inputs.odometry_xyt[:, :2],
+    ctx = map_context(dataset)
+    return plot_map(ax, ctx["true_landmarks_xy"], result.landmarks_xy, ctx["true_path_xy"], ctx["odometry_path_xy"],
                     result.poses_xyt[:, :2], landmark_cov=result.landmark_cov if ellipses else None,
                     pose_cov=result.pose_cov if ellipses else None, ellipse_every=pose_ellipse_every,
-                    title=title if title is not None else result.solver,
-                    legend_note=None if truth else "No ground truth in dataset", label=label)
+                    title=title if title is not None else result.solver, legend_note=_note(ctx), label=label,
+                    ref_xy=ctx["ref_xy"], pose_robot=ctx["pose_robot"], robot_names=ctx["robot_names"], extent_xy=extent_xy)
+
+
+def draw_overlay(ax, results, dataset, labels=None, *, title: str | None = None):
+    """Several results of one dataset in one map (``evo_traj`` style): one colour each, legend names from
+    :func:`curve_labels`, the dataset's truth / GPS / odometry drawn once. ValueError when a result's pose
+    count differs from the dataset's."""
+    from slamcli.plots.maps import plot_overlay
+
+    ctx = map_context(dataset)
+    n = dataset.inputs.n_poses
+    for r in results:
+        if len(r.poses_xyt) != n:
+            raise ValueError(f"a {r.solver} result has {len(r.poses_xyt)} poses but the dataset {n}; "
+                             "overlay results of the same dataset")
+    names = curve_labels([r.solver for r in results], labels)
+    est = [(name, r.poses_xyt[:, :2], r.landmarks_xy) for name, r in zip(names, results)]
+    return plot_overlay(ax, est, ctx["true_landmarks_xy"], ctx["true_path_xy"], ctx["odometry_path_xy"],
+                        ctx["ref_xy"], ctx["pose_robot"], title=title, legend_note=_note(ctx))
 
 
 def draw_landmark_errors(ax, result, dataset, title: str | None = None):
@@ -112,13 +148,18 @@ def draw_nees(ax, average, *, log: bool = True, title: str | None = None, label:
 
     a = average
     return plot_nees(ax, np.arange(len(a.anees)), a.anees, a.lower, a.upper, a.dof, a.n_runs, a.fraction_inside,
-                     label=label, title=title or f"Pose NEES over {a.n_runs} runs", log=log)
+                     label=label, title=title or nees_title(a.n_runs), log=log)
 
 
-def draw_compare(ax, groups, *, labels=None, title: str | None = None):
+def nees_title(n_runs: int) -> str:
+    """Default NEES title: "Pose NEES over N runs", or "Pose NEES of one run" (no Monte-Carlo average)."""
+    return "Pose NEES of one run" if n_runs == 1 else f"Pose NEES over {n_runs} runs"
+
+
+def draw_compare(ax, groups, *, labels=None, title: str | None = None, log: bool = False):
     """Box + strip plot of a :class:`~slamcli.metrics.aggregate.CompareGroups`: the metric's name and unit
     on the y axis and the grouping columns' names on the x axis (:mod:`slamcli.metrics.registry`);
-    ``labels`` renames the groups (one per group). ``slamcli plot compare`` and the reproduce report's
+    ``labels`` renames the groups (one per group); ``log``: logarithmic y axis. ``slamcli plot compare`` and the reproduce report's
     compare figure both draw through this function."""
     from slamcli.metrics.registry import column_label, metric_info
     from slamcli.plots.curves import plot_compare
@@ -126,4 +167,5 @@ def draw_compare(ax, groups, *, labels=None, title: str | None = None):
     names = curve_labels(groups.labels, labels)
     info = metric_info(groups.metric)
     xlabel = ", ".join(column_label(c) for c in groups.by)
-    return plot_compare(ax, names, groups.values, info.label, xlabel, title=title, nonnegative=info.nonnegative)
+    return plot_compare(ax, names, groups.values, info.label, xlabel, title=title, nonnegative=info.nonnegative,
+                        log=log)

@@ -29,6 +29,18 @@ def draw_grid(ax, grid, snapshot: int | None = None, unobserved_alpha: float = 1
     return im
 
 
+def observed_corners_xy(grid) -> np.ndarray:
+    """``(2, 2)`` lower-left and upper-right corners (m) of the cells of ``grid`` observed at least once
+    (of the whole grid when it records no counts, or nothing was observed)."""
+    H, W = grid.prob.shape
+    rows, cols = (np.nonzero(np.asarray(grid.observed) > 0) if grid.observed is not None else ((), ()))
+    if not len(rows):
+        rows, cols = np.array([0, H - 1]), np.array([0, W - 1])
+    o, res = np.asarray(grid.origin_xy, float), float(grid.resolution)
+    return np.array([[o[0] + cols.min() * res, o[1] + rows.min() * res],
+                     [o[0] + (cols.max() + 1) * res, o[1] + (rows.max() + 1) * res]])
+
+
 def draw_walls(ax, walls_xyxy, **kw):
     """Wall segments ``(W, 4)`` as thin lines (the true map, subfigure (a))."""
     w = np.asarray(walls_xyxy, float).reshape(-1, 4)

@@ -53,6 +53,13 @@ RC = {
 }
 
 
+def series_colours(n: int) -> list[str]:
+    """``n`` colours for series of one kind (robots of a team, solvers of an overlay): the :data:`CYCLE`
+    without :data:`EST_LANDMARK` (kept for landmark markers), repeated when ``n`` exceeds it."""
+    free = [c for c in CYCLE if c != EST_LANDMARK]
+    return [free[k % len(free)] for k in range(n)]
+
+
 def prop_cycle():
     """The colour cycle as a matplotlib ``cycler`` (for ``ax.set_prop_cycle``)."""
     from cycler import cycler
@@ -82,7 +89,7 @@ def apply_style(fig) -> None:
         for t in (ax.title, getattr(ax, "_left_title", None), getattr(ax, "_right_title", None)):
             if t is not None:
                 t.set_wrap(True)  # a long --title breaks into lines instead of leaving a one-column figure
-        ax.tick_params(labelsize=SMALL_PT)
+        ax.tick_params(which="both", labelsize=SMALL_PT)  # minor labels of a short log axis too
         for t in (*ax.get_xticklabels(), *ax.get_yticklabels()):
             t.set_fontfamily("sans-serif")
         for axis in (ax.xaxis, ax.yaxis):
