@@ -210,8 +210,8 @@ class CholmodFactor:
 
 
 def spd_factor(H: sp.spmatrix) -> CholmodFactor | None:
-    """The simplicial ``LDLᵀ`` of a sparse symmetric ``H`` (callable: ``F(b) = H⁻¹b``), or None when ``H`` is
-    not positive definite (a pivot ≤ 0)."""
+    """CHOLMOD's factor of a sparse symmetric ``H`` (``mode="auto"``; callable: ``F(b) = H⁻¹b``), or None when
+    ``H`` is not positive definite (a pivot ≤ 0)."""
     lo = lower_csc(H)
     F = CholmodFactor(lo)
     return F if F.refactor(lo.data) else None
