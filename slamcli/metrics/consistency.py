@@ -29,7 +29,7 @@ def chi2_ppf(q, dof):
 
     Equal to ``scipy.stats.chi2.ppf(q, dof)`` (``tests/test_metrics_lazy_imports.py``) without importing
     ``scipy.stats``, which costs ≈ 0.4-1 s and most of ``slamcli.metrics``' import in every sweep worker and
-    ``evaluate`` (issue 25 item 6).
+    ``evaluate``.
     """
     return 2.0 * gammaincinv(0.5 * np.asarray(dof, float), np.asarray(q, float))
 

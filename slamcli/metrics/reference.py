@@ -1,4 +1,4 @@
-"""Metrics for real recordings without full ground truth (issue 14).
+"""Metrics for real recordings without full ground truth.
 
 * :func:`ate_vs_position_reference` — ATE of an estimated trajectory against a time-stamped position-only
   reference (GPS). The estimate is interpolated linearly at each reference time inside its span (the

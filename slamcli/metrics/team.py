@@ -1,4 +1,4 @@
-"""Per-robot trajectory metrics of a multi-robot result (:class:`slamcli.types.RobotTeam`, issue 14 item 7).
+"""Per-robot trajectory metrics of a multi-robot result (:class:`slamcli.types.RobotTeam`).
 
 The stacked poses of a team are cut per robot: ATE (unaligned, and SE(2)-aligned per robot) and the
 dead-reckoning ATE of each robot, and the RPE over pairs that stay within one robot — a pair from the last pose

@@ -39,7 +39,7 @@ gain ratio (GTSAM's "model fidelity") ``ϱ = (F(x) − F(x ⊞ h)) / (L(0) − L
 else ``λ ← 10 λ``; when λ would exceed 1e5 the optimiser gives up as converged. Marquardt's
 ``D = diag(H)`` and Nielsen's schedule (Madsen, Nielsen & Tingleff, *Methods for non-linear least squares
 problems*, 2004, §3.2: ``λ ← λ · max(1/3, 1 − (2ϱ − 1)³)``, ``λ ← λν, ν ← 2ν``; Ceres's strategy) are
-options. They were the former default and stalled on long real chains (Victoria Park, issue 10): the
+options. They were the former default and stalled on long real chains (Victoria Park): the
 diagonal of a pose block is the chain's own stiffness there, so ``λ·diag(H)`` pins every pose and the soft
 modes that bend the whole chain stay out of reach unless λ ≪ 1e-6. Powell's dogleg (``method="dogleg"``)
 is GTSAM's ``DoglegOptimizer`` (:func:`_dogleg_iteration`). With ``NlsProblem.se2_poses`` the SE(2) poses

@@ -176,8 +176,8 @@ def marginals_chain_border(
     forward ``S_0 = D_0, S_i = D_i − E_{i−1}ᵀ S_{i−1}⁻¹ E_{i−1}``; backward ``Σ_n = S_n⁻¹,
     Σ_i = S_i⁻¹ + G_i Σ_{i+1} G_iᵀ, G_i = S_i⁻¹ E_i`` (``D_i``, ``E_i = A_{i,i+1}`` blocks).
 
-    Memory ``O(n · batch_size + m²)`` — no dense ``n × m`` block (issue 17: 100k poses × 1923 landmarks
-    would need 8.6 GiB per such block); time ``O(n m (k + nnz(B)/n) + m³)``. ``poses=False`` skips the
+    Memory ``O(n · batch_size + m²)`` — no dense ``n × m`` block (100k poses × 1923 landmarks would need
+    8.6 GiB per such block); time ``O(n m (k + nnz(B)/n) + m³)``. ``poses=False`` skips the
     pose marginals (only ``Σ_CC`` is wanted, e.g. for the correspondence test).
 
     Returns
