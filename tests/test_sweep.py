@@ -378,3 +378,18 @@ def test_progress_lines_count_finished_runs_and_a_resume_reports_only_skips(tmp_
     again: list[str] = []
     run_sweep(exp, tmp_path, pipeline=FakePipeline(), progress=progress_lines("sweep fake", again.append))
     assert len(again) == 1 and again[0].startswith("sweep fake: 100% (6/6 runs; 0 done, 0 failed, 6 skipped)")
+
+
+def test_local_pool_workers_spawned_on_demand_inherit_one_blas_thread(monkeypatch):
+    """The pool spawns workers at submit time, after it is built: they must still see one BLAS thread (a
+    worker with the machine's default thread count gives other numbers than a one-thread Dask worker)."""
+    import os
+
+    from slamcli.sweep.runner import make_executor
+
+    for key in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(key, raising=False)
+    with make_executor("local", 2) as ex:
+        seen = [ex.submit(os.getenv, "OPENBLAS_NUM_THREADS").result(timeout=120) for _ in range(2)]
+    assert seen == ["1", "1"]
+    assert os.getenv("OPENBLAS_NUM_THREADS") is None  # the coordinator's own environment is given back

@@ -166,3 +166,144 @@ def test_dask_sweep_with_relative_out_keeps_results_survives_a_killed_worker_and
     np.testing.assert_array_equal(dask_table[numeric].to_numpy(float), serial_table[numeric].to_numpy(float))
     text_cols = [c for c in compared if c not in numeric]
     pd.testing.assert_frame_equal(dask_table[text_cols], serial_table[text_cols])
+
+
+# -- one experiment file over recordings and a simulation: -j 2 with a kill, then the same file on Dask -----
+
+MIXED = """
+[experiment]
+name = "real-mixed"
+root_seed = 11
+{robots}
+[[data]]
+recording = "victoria-park"
+duration = 300
+label = "victoria-park-300s"
+
+[[data]]
+recording = "acfr-carpark"
+
+[[data]]
+scenario = "loop"
+[data.parameters]
+n_steps = 600
+
+[[solver]]
+method = "ekf"
+[solver.params]
+association = "auto"
+
+[[solver]]
+method = "graph"
+[solver.params]
+association = "auto"
+
+[[solver]]
+method = "isam"
+[solver.params]
+association = "auto"
+
+[[solver]]
+method = "icm"
+label = "icm-real"
+[solver.params]
+preset = "real"
+
+[sweep]
+replicates = 2
+""".format(robots="".join(f'\n[[data]]\nrecording = "mrclam7"\nrobot = {r}\nlabel = "mrclam7-r{r}"\n'
+                          for r in range(1, 6)))
+#: 5 MRCLAM robots + Victoria Park + car park (one replicate each) + loop × 2 replicates, times 4 solvers
+MIXED_RUNS = (5 + 1 + 1 + 2) * 4
+
+
+def _kill_sweep_after_first_run(sweep: subprocess.Popen, exp_dir: Path) -> None:
+    """SIGKILL the whole sweep (its process group: the client and its pool) once a run has finished."""
+    deadline = time.monotonic() + SWEEP_TIMEOUT_S
+    while time.monotonic() < deadline and sweep.poll() is None:
+        if exp_dir.is_dir() and any((p / "status.json").is_file() for p in exp_dir.iterdir() if p.is_dir()):
+            os.killpg(sweep.pid, signal.SIGKILL)
+            sweep.wait(timeout=30)
+            return
+        time.sleep(0.05)
+    raise AssertionError("the sweep ended before it could be killed mid-run")
+
+
+def _numbers_equal(a_csv: Path, b_csv: Path) -> None:
+    a = pd.read_csv(a_csv).set_index("run_id").sort_index()
+    b = pd.read_csv(b_csv).set_index("run_id").sort_index()
+    assert list(a.index) == list(b.index) and set(a["status"]) == {"completed"}
+    compared = [c for c in b.columns if c not in VOLATILE]
+    numeric = [c for c in compared if pd.api.types.is_numeric_dtype(b[c])]
+    np.testing.assert_array_equal(a[numeric].to_numpy(float), b[numeric].to_numpy(float))
+    text_cols = [c for c in compared if c not in numeric]
+    pd.testing.assert_frame_equal(a[text_cols], b[text_cols])
+
+
+@pytest.mark.slow
+def test_recordings_and_a_simulation_in_one_file_local_kill_resume_leaderboard_then_dask(tmp_path,
+                                                                                       shared_datasets):
+    shared_datasets({"mrclam_dataset7": "mrclam_team_excerpt", "acfr_carpark": "carpark_excerpt",
+                     "victoria_park": "victoria_park_excerpt"})
+    local = tmp_path / "local"
+    local.mkdir()
+    (local / "exp.toml").write_text(MIXED)
+    exp_dir = local / "res" / "real-mixed"
+
+    cmd = [sys.executable, "-m", "slamcli", "sweep", "exp.toml", "-o", "res", "--quiet", "-j", "2"]
+    sweep = subprocess.Popen(cmd, cwd=local, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    _kill_sweep_after_first_run(sweep, exp_dir)
+    rc, text = _sweep(local, "-j", "2")
+    assert rc == 0, text
+    done, failed, skipped, total = _counts(text)
+    assert (failed, total) == (0, MIXED_RUNS) and skipped >= 1 and done + skipped == MIXED_RUNS, text
+    table = pd.read_csv(exp_dir / "results.csv")
+    # each run names its dataset and the reference it is scored against (truth, GPS or the survey)
+    by_data = table.groupby("data")["reference"].first().to_dict()
+    assert set(by_data) == {f"mrclam7-r{r}" for r in range(1, 6)} | {"victoria-park-300s", "acfr-carpark", "loop"}
+    assert by_data["loop"] == "truth" and by_data["mrclam7-r1"] == "truth" and by_data["victoria-park-300s"] == "gps"
+
+    res = subprocess.run([sys.executable, "-m", "slamcli", "aggregate", "res/real-mixed", "--leaderboard",
+                          "--baseline", "graph"], cwd=local, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    board = pd.read_csv(exp_dir / "leaderboard.csv")
+    ate = board[board["metric"] == "ate_reference_m"]
+    assert set(ate["label"]) == {"ekf", "graph", "isam", "icm-real"}
+    assert set(ate["data"]) == set(by_data)
+    # the paired test against graph is defined where there are replicates (the simulation: 2 pairs)
+    loop = ate[(ate["data"] == "loop") & (ate["label"] != "graph")]
+    assert (loop["n_pairs"] == 2).all() and loop["mean_diff"].notna().all()
+    assert ate[ate["label"] == "graph"]["mean_diff"].isna().all()
+
+    # the same file, unchanged, on a dask scheduler with two workers: the same numbers run for run
+    remote = tmp_path / "remote"
+    remote.mkdir()
+    (remote / "exp.toml").write_text(MIXED)
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    procs: list[subprocess.Popen] = []
+    try:
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+             "--no-dashboard"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_port(port, procs[0])
+        for _ in range(2):
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "dask", "worker", address, "--nthreads", "1", "--host", "127.0.0.1",
+                 "--no-dashboard"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_workers(address, 2)
+        rc, text = _sweep(remote, "--executor", "dask", "--scheduler", address)
+        assert rc == 0 and _counts(text) == (MIXED_RUNS, 0, 0, MIXED_RUNS), text
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout=30)
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    _numbers_equal(remote / "res" / "real-mixed" / "results.csv", exp_dir / "results.csv")

@@ -556,9 +556,8 @@ class LocalPool:
     def _start(self) -> None:
         import multiprocessing
 
-        with _single_threaded_blas():
-            self.ex = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=start_worker, initargs=(os.getpid(),))
+        self.ex = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=start_worker, initargs=(os.getpid(),))
         self._procs = {}
 
     def submit(self, fn: Callable[..., Any], /, *args: Any) -> cf.Future:
@@ -626,17 +625,20 @@ def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
         if workers == 1:
             yield None
             return
-        ex = LocalPool(workers)
-        try:
-            yield ex
-        except BaseException:
-            # Ctrl-C (or an error) in the coordinator: the runs already handed to a worker's pipe cannot be
-            # cancelled and would run to the end while shutdown waits for them; stop the workers instead
-            # (their unfinished runs leave only hidden temporary directories, cleared by the next resume)
-            ex.terminate()
-            raise
-        finally:
-            ex.shutdown(wait=True, cancel_futures=True)
+        # the pool spawns its workers on demand (at submit, again after a rebuild): the one-thread BLAS
+        # environment they inherit must last the pool's whole life, not only its construction
+        with _single_threaded_blas():
+            ex = LocalPool(workers)
+            try:
+                yield ex
+            except BaseException:
+                # Ctrl-C (or an error) in the coordinator: the runs already handed to a worker's pipe cannot be
+                # cancelled and would run to the end while shutdown waits for them; stop the workers instead
+                # (their unfinished runs leave only hidden temporary directories, cleared by the next resume)
+                ex.terminate()
+                raise
+            finally:
+                ex.shutdown(wait=True, cancel_futures=True)
         return
     try:
         from dask.distributed import Client, LocalCluster
