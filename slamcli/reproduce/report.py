@@ -1129,13 +1129,18 @@ def verdict_summary(sections: list[Section]) -> list[str]:
     return lines
 
 
-def _external_section(key: str, target: str, out: Path, quick: bool, log) -> Section:
+def _external_section(key: str, target: str, out: Path, quick: bool, log, run=None) -> Section:
     """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)`` with
-    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title)."""
+    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title). A function
+    with a keyword ``run`` also gets ``run`` (:meth:`Reproduction.run`: its experiments run through the sweep
+    engine like paper 000's)."""
     import importlib
+    import inspect
 
     mod_name, _, fn_name = target.partition(":")
-    markdown, ok = getattr(importlib.import_module(mod_name), fn_name or "run_section")(out / key, quick, log)
+    fn = getattr(importlib.import_module(mod_name), fn_name or "run_section")
+    extra = {"run": run} if run is not None and "run" in inspect.signature(fn).parameters else {}
+    markdown, ok = fn(out / key, quick, log, **extra)
     head, _, body = str(markdown).partition("\n")
     sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
     sec.add(body.strip())
@@ -1176,7 +1181,7 @@ def reproduce(
             continue
         try:
             if ":" in target:
-                sec = _external_section(key, target, rep.out, quick, log)
+                sec = _external_section(key, target, rep.out, quick, log, rep.run)
             else:
                 sec = getattr(rep, target)()
         except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run
