@@ -497,6 +497,9 @@ def render(outcomes: dict, out: Path, quick: bool, source: str = "") -> tuple[li
     rows: dict[str, list[dict] | None] = {"vp": None, "mr": None, "cp": None}
     ok = True
     for key, o in outcomes.items():
+        for label, why in o.missing.items():
+            ok = False
+            lines += ["", f"> **Not run on {TITLES[key]}: `{label}`** — {why}."]
         try:
             records = sweep_records(o.exp_dir)
             params = experiment_params(o.cfg)
