@@ -154,3 +154,20 @@ def test_multi_robot_renderer_reads_the_team_run_files(tmp_path):
                          for n in range(1, 6)]
     assert m["seconds"] == pytest.approx({"graph_joint": 0.5, "graph_solo": 0.5, "icm_joint": 0.5, "icm_solo": 0.5})
     assert (tmp_path / "real_multi_ate.csv").is_file()
+
+
+def test_excerpt_registry_points_the_registry_at_the_excerpts_and_restores_it(tmp_path, monkeypatch):
+    import os
+
+    from slamcli.datasets import registry
+
+    monkeypatch.setenv(registry.ENV_SHARED, "/nowhere")
+    monkeypatch.setenv(registry.ENV_REGISTRY, str(tmp_path / "reg.toml"))
+    monkeypatch.delenv(registry.ENV_DATA_DIR, raising=False)
+    with pr.excerpt_registry(tmp_path / "q", {"acfr_carpark": "carpark_excerpt"}) as source:
+        how, where = registry.where("acfr-carpark")
+        assert where.resolve() == (Path(__file__).parent / "data" / "carpark_excerpt").resolve()
+        assert how == "$SLAMCLI_DATASETS" and registry.data_dir() == tmp_path / "q" / "cache"
+    assert source == "the excerpts shipped in `tests/data` (`tests/data/carpark_excerpt`)"
+    assert os.environ[registry.ENV_SHARED] == "/nowhere" and registry.ENV_DATA_DIR not in os.environ
+    assert os.environ[registry.ENV_REGISTRY] == str(tmp_path / "reg.toml")

@@ -74,19 +74,13 @@ def excerpt_registry(folder: Path, links: dict[str, str]) -> Iterator[str]:
         if link.is_symlink():
             link.unlink()
         link.symlink_to(repo_root() / "tests" / "data" / excerpt, target_is_directory=True)
-    keys = (registry.ENV_SHARED, registry.ENV_DATA_DIR, registry.ENV_REGISTRY)
-    saved = {k: os.environ.get(k) for k in keys}
-    os.environ[registry.ENV_SHARED], os.environ[registry.ENV_DATA_DIR] = str(shared), str(Path(folder) / "cache")
-    os.environ.pop(registry.ENV_REGISTRY, None)
-    try:
+    from unittest import mock  # patch.dict: the environment as it was on exit, whatever happened inside
+
+    with mock.patch.dict(os.environ, {registry.ENV_SHARED: str(shared),
+                                      registry.ENV_DATA_DIR: str(Path(folder) / "cache")}):
+        os.environ.pop(registry.ENV_REGISTRY, None)
         yield ("the excerpts shipped in `tests/data` ("
                + ", ".join(f"`tests/data/{e}`" for e in links.values()) + ")")
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 def quick_data(out: Path, quick: bool, links: dict[str, str]):
