@@ -171,3 +171,22 @@ def test_excerpt_registry_points_the_registry_at_the_excerpts_and_restores_it(tm
     assert source == "the excerpts shipped in `tests/data` (`tests/data/carpark_excerpt`)"
     assert os.environ[registry.ENV_SHARED] == "/nowhere" and registry.ENV_DATA_DIR not in os.environ
     assert os.environ[registry.ENV_REGISTRY] == str(tmp_path / "reg.toml")
+
+
+def test_multi_robot_section_runs_through_the_sweep_and_resumes(tmp_path):
+    """``reproduce --section real-multi --quick``: the runs are the sweep's (results.csv under runs/), the report
+    has one row per robot, and a second reproduce into the same folder runs nothing again."""
+    import pandas as pd
+
+    from slamcli.reproduce.report import reproduce
+
+    log: list[str] = []
+    assert not reproduce(tmp_path, quick=True, workers=1, only=["real-multi"], log=log.append).failed
+    runs = pd.read_csv(tmp_path / "runs" / "real-multi" / "results.csv")
+    assert len(runs) == 2 * 6 and set(runs["status"]) == {"completed"}  # graph and icm: team + five solo
+    report = (tmp_path / "REPORT.md").read_text(encoding="utf-8")
+    assert [line.split(" | ")[0] for line in report.splitlines() if line[:3] in {f"| {n}" for n in range(1, 6)}] \
+        == [f"| {n}" for n in range(1, 6)]
+    log.clear()
+    assert not reproduce(tmp_path, quick=True, workers=1, only=["real-multi"], log=log.append).failed
+    assert any("0 done, 0 failed, 12 skipped" in line for line in log)
