@@ -173,6 +173,7 @@ def test_excerpt_registry_points_the_registry_at_the_excerpts_and_restores_it(tm
     assert os.environ[registry.ENV_REGISTRY] == str(tmp_path / "reg.toml")
 
 
+@pytest.mark.slow
 def test_multi_robot_section_runs_through_the_sweep_and_resumes(tmp_path):
     """``reproduce --section real-multi --quick``: the runs are the sweep's (results.csv under runs/), the report
     has one row per robot, and a second reproduce into the same folder runs nothing again."""
