@@ -2,8 +2,9 @@
 
 Experiment files give a recording's import options this way (``robot = 3``, ``all-robots = true``,
 ``duration = 300``, ``range-std = 0.1``), plus ``solo = N`` beside ``robots``/``all-robots``: robot N of the
-multi-robot import alone on the team's time grid (the file ``--solo-dir`` writes as ``robotN.h5``); :func:`check_options` validates names and types (one line, "did you
-mean"), :func:`import_recording` runs the importer. :data:`IMPORTER_VERSION` enters the content key of cached
+multi-robot import alone on the team's time grid (the file ``--solo-dir`` writes as ``robotN.h5``).
+:func:`check_options` validates names and types (one line, "did you mean"), :func:`import_recording` runs the
+importer. :data:`IMPORTER_VERSION` enters the content key of cached
 imports: raise it whenever an importer's output for the same input changes.
 """
 
