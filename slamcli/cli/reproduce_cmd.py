@@ -7,8 +7,8 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, check_output, choice, fail, handle_errors, stderr_console
-from slamcli.cli.sweep_cmd import EXECUTORS
+from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console
+from slamcli.cli.sweep_cmd import ExecutorOption, SchedulerOption
 
 
 @app.command("reproduce")
@@ -29,12 +29,8 @@ def reproduce_command(
         list[str] | None, typer.Option("--section", help="Run only this report section (repeatable), e.g. fig5.")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress messages.")] = False,
-    executor: Annotated[choice("Executor", EXECUTORS), typer.Option(
-        "--executor", help="Where the sections' sweeps run: local (a process pool) or dask (--scheduler).")] = "local",
-    scheduler: Annotated[
-        str | None,
-        typer.Option("--scheduler", help="Existing Dask scheduler (tcp://host:8786); default: a LocalCluster."),
-    ] = None,
+    executor: ExecutorOption = "local",
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Run the paper experiments (Figs. 5, 6, 7, 9, post-processing, solver comparison, Monte-Carlo NEES) and
     write REPORT.md; exits 1 with a summary when any section fails."""
