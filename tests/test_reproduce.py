@@ -277,3 +277,26 @@ def test_icm_figure_claims_are_judged_on_the_paper_configurations_only():
                              close_rel=0.1, figure="Fig. 7", paper_labels={"icm-S0"})
     assert close.claims[0].what.startswith("ICM converges close to its initialisation (Fig. 7")
     assert close.claims[0].verdict == "not reproduced" and "0.616 → 0.807 m" in close.claims[0].numbers
+
+
+def test_scheduler_without_dask_is_one_line_before_any_section(tmp_path):
+    res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(tmp_path / "out"), "--section", "real-multi",
+                                   "--scheduler", "tcp://127.0.0.1:1"])
+    assert res.exit_code == 1 and "--scheduler: only meaningful with --executor dask" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_reproduce_section_runs_its_sweep_on_a_dask_cluster(tmp_path):
+    """``--executor dask`` (a throw-away LocalCluster): the multi-robot section's runs go through Dask and give
+    the same table as the same section run in this process."""
+    import re
+
+    tables = []
+    for name, extra in (("dask", ["--executor", "dask", "-j", "2"]), ("local", ["-j", "1"])):
+        res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(tmp_path / name), "--section",
+                                       "real-multi", "--quiet", *extra])
+        assert res.exit_code == 0, res.output
+        text = (tmp_path / name / "REPORT.md").read_text()
+        tables.append(re.findall(r"^\| [1-5] \|.*$", text, re.M))
+    assert len(tables[0]) == 5 and tables[0] == tables[1]

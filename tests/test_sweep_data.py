@@ -340,3 +340,34 @@ def test_scenario_entries_are_checked_like_the_scenario_table(shared, entry, mes
     exp = _experiment(shared, f'[[data]]\nrecording = "mrclam7"\n\n[[data]]\n{entry}\n\n')
     with pytest.raises(ConfigError, match=message):
         expand(load_experiment(exp))
+
+
+def test_solo_option_is_one_robot_of_the_team_import_on_its_time_grid(tmp_path, monkeypatch):
+    from slamcli.datasets.mrclam import import_mrclam_team
+    from slamcli.datasets.team import solo_dataset
+    from slamcli.io import read_dataset
+
+    shutil.copytree(DATA / "mrclam_team_excerpt", tmp_path / "shared" / "mrclam_dataset7")
+    monkeypatch.setenv(reg.ENV_SHARED, str(tmp_path / "shared"))
+    monkeypatch.setenv(reg.ENV_DATA_DIR, str(tmp_path / "cache"))
+    monkeypatch.delenv(reg.ENV_REGISTRY, raising=False)
+    exp = tmp_path / "exp.toml"
+    exp.write_text(HEAD + '[[data]]\nrecording = "mrclam7"\nall-robots = true\nsolo = 3\n\n' + ODOMETRY)
+    assert _sweep(exp, tmp_path / "out").ok
+    ds_id = pd.read_csv(tmp_path / "out" / "real" / "results.csv")["dataset_id"][0]
+    swept = read_dataset(tmp_path / "out" / "real" / "datasets" / f"{ds_id}.h5")
+    team = import_mrclam_team(DATA / "mrclam_team_excerpt", [1, 2, 3, 4, 5])
+    direct = solo_dataset(team, 2)  # robot number 3 is the third robot of the team
+    assert swept.inputs.robots is None
+    assert np.array_equal(swept.inputs.odometry_xyt, direct.inputs.odometry_xyt)
+    assert np.array_equal(swept.truth.poses_xyt, direct.truth.poses_xyt)
+    assert len(swept.inputs.odometry_xyt) == len(team.inputs.odometry_xyt) // 5  # the team's time grid
+
+    exp.write_text(HEAD + '[[data]]\nrecording = "mrclam7"\nall-robots = true\nsolo = 7\n\n' + ODOMETRY)
+    assert not _sweep(exp, tmp_path / "out7").ok  # not an imported robot: the import fails, no run
+
+
+def test_solo_option_needs_a_team_import(shared):
+    exp = _experiment(shared, '[[data]]\nrecording = "mrclam7"\nsolo = 2\n\n')
+    with pytest.raises(ConfigError, match=r"data\[0\]\.solo: needs a multi-robot import"):
+        expand(load_experiment(exp))

@@ -118,9 +118,13 @@ def test_cli_config_errors_are_one_line(tmp_path):
     assert res.exit_code == 2 and "--executor" in res.output and "'local', 'dask'" in res.output
 
 
-def test_experiment_files_in_repo_validate():
-    """Every shipped experiment file parses and expands against the registered solvers and scenarios."""
+def test_experiment_files_in_repo_validate(shared_datasets):
+    """Every shipped experiment file parses and expands against the registered solvers and scenarios (the
+    recordings they name: the excerpts of tests/data laid out as the shared datasets folder)."""
     from slamcli.solvers import registry
+
+    shared_datasets({"victoria_park": "victoria_park_excerpt", "acfr_carpark": "carpark_excerpt",
+                     "mrclam_dataset7": "mrclam_team_excerpt"})
 
     files = sorted((Path(__file__).resolve().parents[1] / "experiments").glob("*.toml"))
     assert files, "experiments/ holds no experiment files"

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console
+from slamcli.cli.sweep_cmd import ExecutorOption, SchedulerOption
 
 
 @app.command("reproduce")
@@ -28,6 +29,8 @@ def reproduce_command(
         list[str] | None, typer.Option("--section", help="Run only this report section (repeatable), e.g. fig5.")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress messages.")] = False,
+    executor: ExecutorOption = "local",
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Run the paper experiments (Figs. 5, 6, 7, 9, post-processing, solver comparison, Monte-Carlo NEES) and
     write REPORT.md; exits 1 with a summary when any section fails."""
@@ -36,6 +39,8 @@ def reproduce_command(
 
         if workers is not None and workers < 1:
             fail(f"--workers: must be >= 1, got {workers}")
+        if scheduler and str(executor) != "dask":
+            fail("--scheduler: only meaningful with --executor dask")
         check_output(out, folder=True, option="--out", inputs=[experiments])
         con = stderr_console()
         if experiments is not None and not experiments.is_dir():
@@ -43,6 +48,7 @@ def reproduce_command(
         result = reproduce(
             out, quick=quick, workers=workers, experiments_dir=experiments,
             log=(lambda s: None) if quiet else (lambda s: con.print(s, markup=False)), only=section or None,
+            executor=str(executor), scheduler=scheduler,
         )
         con.print(result.summary(), markup=False, soft_wrap=True)  # the count stays one line, the last
         if not result.ok:

@@ -22,6 +22,11 @@ from slamcli.cli.app import (
 
 #: the sweep executors (slamcli.sweep.runner.make_executor)
 EXECUTORS = ("local", "dask")
+#: the options of the commands that run sweeps (sweep, reproduce): where the runs go
+ExecutorOption = Annotated[choice("Executor", EXECUTORS), typer.Option(
+    "--executor", help="local: a process pool (spawn); dask: a Dask cluster (--scheduler).")]
+SchedulerOption = Annotated[str | None, typer.Option(
+    "--scheduler", help="Existing Dask scheduler (tcp://host:8786); default: a LocalCluster.")]
 
 
 def _shipped_names() -> str:
@@ -41,12 +46,8 @@ def sweep_command(
         show_default=False)] = None,
     list_names: Annotated[bool, typer.Option("--list", help="List the shipped experiments and exit.")] = False,
     workers: Annotated[int, typer.Option("--workers", "-j", help="Parallel workers (1 = in this process).")] = 1,
-    executor: Annotated[choice("Executor", EXECUTORS), typer.Option(
-        "--executor", help="local: a process pool (spawn); dask: a Dask cluster (--scheduler).")] = "local",
-    scheduler: Annotated[
-        str | None,
-        typer.Option("--scheduler", help="Existing Dask scheduler (tcp://host:8786); default: a LocalCluster."),
-    ] = None,
+    executor: ExecutorOption = "local",
+    scheduler: SchedulerOption = None,
     resume: Annotated[bool, typer.Option("--resume/--no-resume", help="Skip runs completed on disk.")] = True,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="List the runs and what is done; run nothing.")] = False,
     quick: Annotated[bool, typer.Option("--quick", help="Apply the file's [quick] table (few seeds).")] = False,

@@ -1,8 +1,10 @@
 """Importer options named as the ``slamcli import <importer>`` flags without their dashes → one importer call.
 
 Experiment files give a recording's import options this way (``robot = 3``, ``all-robots = true``,
-``duration = 300``, ``range-std = 0.1``); :func:`check_options` validates names and types (one line, "did you
-mean"), :func:`import_recording` runs the importer. :data:`IMPORTER_VERSION` enters the content key of cached
+``duration = 300``, ``range-std = 0.1``), plus ``solo = N`` beside ``robots``/``all-robots``: robot N of the
+multi-robot import alone on the team's time grid (the file ``--solo-dir`` writes as ``robotN.h5``).
+:func:`check_options` validates names and types (one line, "did you mean"), :func:`import_recording` runs the
+importer. :data:`IMPORTER_VERSION` enters the content key of cached
 imports: raise it whenever an importer's output for the same input changes.
 """
 
@@ -24,7 +26,8 @@ _CAR: dict[str, Any] = {"max-range": float, **_NOISE, "v-std": float | None, "st
 OPTIONS: dict[str, dict[str, Any]] = {
     "mrclam": {"robot": int, "robots": tuple[int, ...] | None, "all-robots": bool, "dt": float, "start": float,
                "duration": float | None, "non-landmark": Literal["drop", "clutter"], "control-delay": float,
-               "max-range": float, **_NOISE, "v-std": float | None, "omega-std": float | None, "no-truth": bool},
+               "max-range": float, **_NOISE, "v-std": float | None, "omega-std": float | None, "no-truth": bool,
+               "solo": int | None},
     "victoria-park": {"start": float, "duration": float | None, **_CAR},
     "carpark": _CAR,
     "g2o": {"dt": float, "forward": Literal["auto", "x", "y", "-x", "-y"], **_NOISE, "max-poses": int | None},
@@ -45,6 +48,9 @@ def check_options(importer: str, options: dict[str, Any], where: str) -> dict[st
             raise ConfigError(f"{where}.{key}: not an option of `slamcli import {importer}`{hint} "
                               f"(options: {', '.join(known)})")
         out[key] = _coerce(value, known[key], f"{where}.{key}")
+    if importer == "mrclam" and out.get("solo") is not None and out.get("robots") is None \
+            and not out.get("all-robots"):
+        raise ConfigError(f"{where}.solo: needs a multi-robot import (robots = [...] or all-robots = true)")
     if importer == "mrclam" and (out.get("robots") is not None or out.get("all-robots")):
         team = "robots" if out.get("robots") is not None else "all-robots"
         clash = [k for k in ("robot", "no-truth", "non-landmark") if k in out]
@@ -88,7 +94,19 @@ def _import_mrclam(path: str | Path, o: dict[str, Any]):
 
     dt = o.pop("dt", 0.1)
     noise = noise_from_options(dt, *(o.pop(k, None) for k in ("range_std", "bearing_std", "v_std", "omega_std")))
-    robots, all_robots = o.pop("robots", None), o.pop("all_robots", False)
+    robots, all_robots, solo = o.pop("robots", None), o.pop("all_robots", False), o.pop("solo", None)
     if robots is None and not all_robots:
         return import_mrclam(path, o.pop("robot", 1), dt=dt, noise=noise, **o)
-    return import_mrclam_team(path, robot_numbers(path, robots, all_robots), dt=dt, noise=noise, **o)
+    team = import_mrclam_team(path, robot_numbers(path, robots, all_robots), dt=dt, noise=noise, **o)
+    return team if solo is None else _solo(team, solo)
+
+
+def _solo(team, number: int):
+    """Robot ``number`` of a multi-robot import alone, on the team's time grid (``--solo-dir``'s robotN.h5)."""
+    from slamcli.datasets import DatasetImportError
+    from slamcli.datasets.team import solo_dataset
+
+    numbers = [int(n) for n in team.inputs.robots.robot_number]
+    if number not in numbers:
+        raise DatasetImportError(f"solo = {number}: not one of the imported robots {numbers}")
+    return solo_dataset(team, numbers.index(number))

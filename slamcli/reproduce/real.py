@@ -1,179 +1,179 @@
-"""Real-data section of ``make reproduce`` (issue 14 item 8): every solver on recordings nobody here made.
+"""Real-data section of ``make reproduce``: every solver on recordings nobody here made, run by the sweep engine.
 
-* **Victoria Park** (car, laser at (3.78, 0.50) m, tree trunks, unknown association): every registered solver;
-  GPS ATE after SE(2) alignment (the run's start frame is not the GPS frame), map size, wall time; a map
-  figure per solver. The full section uses the first :data:`VP_PREFIX_S` seconds of the run: on the shared
-  2-core machine the EKF took 174 s for them (407 landmarks), and its update cost grows with the square of the
-  map, so the whole 1549 s run is left to ``slamcli solve`` by hand.
+The runs are the shipped experiments ``real-victoria-park``, ``real-mrclam`` and ``real-carpark``
+(``experiments/*.toml``, each runnable alone with ``slamcli sweep NAME``); this module runs them through
+:meth:`slamcli.reproduce.report.Reproduction.run` (resumable, ``-j N``) and renders the section from what the
+sweeps wrote — ``results.csv``, each run's ``config.json``, ``result.h5`` and ``dataset.h5`` — never solving.
+
+* **Victoria Park** (car, laser at (3.78, 0.50) m, tree trunks, unknown association): GPS ATE after SE(2)
+  alignment (the run's start frame is not the GPS frame), map size, wall time; a map figure per solver. The
+  full section uses the first 300 s of the run (the EKF's update cost grows with the square of the map).
 * **MRCLAM Dataset 7**: each of the five robots solo with its barcode ids (ATE against the motion-capture
   truth — the start pose is known, so unaligned — and the landmark error against the surveyed landmarks:
   matched RMSE after optimal assignment within 1 m). The joint multi-robot run is another section.
-* **ACFR car park**: every solver; GPS ATE (aligned), beacons found of the 15 surveyed ones (matched within 2 m
-  after the trajectory's alignment) and their RMSE.
+* **ACFR car park**: GPS ATE (aligned), beacons found of the 15 surveyed ones (matched within 2 m after the
+  trajectory's alignment) and their RMSE.
 
 ICM runs three ways on every recording — its paper defaults, the information weights and ``preset=real`` — and
-the section ends with one computed verdict per ``preset=real`` goal of issue 22 (:func:`icm_verdicts`). The whole
-Victoria Park run is not in the section (the EKF's cost); measured by hand on 2026-12-02 with ``slamcli solve
-vp.h5 -m icm -p preset=real`` then ``slamcli evaluate``: GPS ATE 2.75 m (goal ≤ 3 m), 918 labels, 19 s of CPU,
-32 s wall on the shared machine (goal < 10 min); the paper's init in its place gave 4.99 m.
+the section ends with one computed verdict per ``preset=real`` goal (:func:`icm_verdicts`). Solvers that do not
+support a recording refuse in one line (``cuik`` needs error bounds, ``hybrid`` walls and DDMR controls); the
+table shows that line. Quick mode (the experiments' ``[quick]`` tables) reads the excerpts shipped in
+``tests/data`` when they are there (:func:`excerpt_registry`): Victoria Park's first 20 s, 150 car-park scans,
+45 s of MRCLAM robot 1.
 
-Solvers that do not support a recording refuse in one line (``cuik`` needs error bounds, ``hybrid`` walls and
-DDMR controls); the table shows that line. Quick mode runs the excerpts shipped in ``tests/data`` (Victoria Park
-first :data:`VP_QUICK_S` s, 150 car-park scans, 45 s of MRCLAM robot 1) and a cheaper configuration of the
-slow solvers.
-
-Data: the registered recordings ``victoria-park``, ``mrclam7`` and ``acfr-carpark``
-(:func:`slamcli.datasets.registry.locate`: ``slamcli datasets add NAME DIR`` or ``slamcli datasets fetch NAME``);
-a missing one makes the section "not run" with the fetch command. Every outcome sentence is computed from the
-numbers of the run.
+Data: the registered recordings ``victoria-park``, ``mrclam7`` and ``acfr-carpark`` (``slamcli datasets add
+NAME DIR`` or ``slamcli datasets fetch NAME``); a missing one is one line naming that command. Every outcome
+sentence is computed from the numbers of the run.
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+import os
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from slamcli.types import LogFn
 
-#: Victoria Park prefix of the full section, s (documented in the report)
-VP_PREFIX_S = 300.0
-#: Victoria Park prefix in quick mode (from the 60 s excerpt), s
-VP_QUICK_S = 20.0
-MRCLAM_ROBOTS = (1, 2, 3, 4, 5)
-
-#: solver parameters per recording ("unknown" = no ids, "known" = barcode ids); solvers not listed run with
-#: their defaults
-PARAMS_UNKNOWN = {
-    "ekf": {"association": "ml"},
-    "fastslam": {"association": "ml", "n_particles": 30},
-    "graph": {},
-    "icm": {},  # the paper's defaults (Algorithm 2); the other ICM settings are extra rows
-    "odometry": {"nn_threshold": 1.5},
-}
-PARAMS_KNOWN = {
-    "ekf": {"association": "known"},
-    "fastslam": {"association": "known", "n_particles": 30},
-    "graph": {"association": "reported", "robust": "huber"},
-    "icm": {"correspondences": "reported"},
-    "odometry": {},
-}
-#: ICM beside its paper defaults on every recording (issue 22): the information weights (the setting the report
-#: used to recommend) and the documented real-data setting ``preset=real``; ``(row label, params)``
-ICM_EXTRA = [("icm (information weights)", {"weights": "information", "max_sweeps": 30}),
-             ("icm (preset=real)", {"preset": "real"})]
-ICM_PRESET_ROW = "icm (preset=real)"
-#: issue 22's "Done when" for preset=real: Victoria Park first 300 s and car park GPS ATE (m), beacons, and
-#: the MRCLAM solo margin over graph (fraction)
+#: the section's experiments (shipped experiment files), in report order
+EXPERIMENTS = {"vp": "real-victoria-park.toml", "mr": "real-mrclam.toml", "cp": "real-carpark.toml"}
+#: table row names of the experiments' solver labels that are not a solver's own name
+ROW_NAMES = {"graph-incremental": "graph (incremental)", "icm-info": "icm (information weights)",
+             "icm-real": "icm (preset=real)"}
+ICM_PRESET_ROW = ROW_NAMES["icm-real"]
+#: the ``preset=real`` goals: Victoria Park first 300 s and car park GPS ATE (m), beacons, and the MRCLAM solo
+#: margin over graph (fraction)
 GOAL_VP300_M, GOAL_CP_M, GOAL_MRCLAM_MARGIN = 1.4, 0.45, 0.10
-QUICK_OVERRIDES = {"fastslam": {"n_particles": 10}, "icm": {"max_sweeps": 5}}
-QUICK_ICM_EXTRA_OVERRIDES = {"max_sweeps": 5}
-#: extra rows on the recordings without ids: ``(row label, solver, params)``. ``graph``'s default builds its
-#: nearest-neighbour association once, from the dead-reckoned path; ``init=incremental`` associates window by
-#: window against the current estimate (issue 10; not the default because it re-solves the whole chain per
-#: window)
-EXTRA_UNKNOWN = [("graph (incremental)", "graph", {"init": "incremental", "robust": "cauchy"})]
+#: registry folder (``$SLAMCLI_DATASETS`` layout) → excerpt in ``tests/data`` read in quick mode
+EXCERPTS = {"victoria_park": "victoria_park_excerpt", "acfr_carpark": "carpark_excerpt",
+            "mrclam_dataset7": "mrclam_excerpt"}
 
 
 def repo_root() -> Path:
     return Path(__file__).resolve().parents[2]
 
 
-#: the registry names of the section's recordings (slamcli datasets)
-RECORDINGS = {"vp": "victoria-park", "cp": "acfr-carpark", "mr": "mrclam7"}
-
-
-def recording_dirs() -> tuple[dict[str, Path], str]:
-    """``({"vp"|"cp"|"mr": folder}, how they were found)`` from the dataset registry; raises
-    :class:`~slamcli.datasets.registry.DatasetMissingError` (one line naming the fetch command)."""
+@contextlib.contextmanager
+def excerpt_registry(folder: Path, links: dict[str, str]) -> Iterator[str]:
+    """While inside: the dataset registry finds its recordings only in ``folder``, which holds a link per
+    registry folder to the excerpt of ``tests/data`` named in ``links``, and keeps its import cache there
+    (``$SLAMCLI_DATASETS`` and ``$SLAMCLI_DATA_DIR`` set, ``$SLAMCLI_DATASET_REGISTRY`` unset, restored on exit).
+    Yields the sentence naming the data for the report."""
     from slamcli.datasets import registry
 
-    found = {key: registry.where(name) for key, name in RECORDINGS.items()}
-    missing = [RECORDINGS[k] for k, v in found.items() if v is None]
-    if missing:
-        raise registry.DatasetMissingError(
-            f"not on this machine: {', '.join(missing)}; run "
-            + "; ".join(f"`slamcli datasets fetch {n}`" for n in missing)
-            + " (or `slamcli datasets add NAME DIR`)")
-    how = ", ".join(f"`{RECORDINGS[k]}` ({v[0]})" for k, v in found.items())
-    return {k: v[1] for k, v in found.items()}, how
+    shared = Path(folder) / "shared"
+    shared.mkdir(parents=True, exist_ok=True)
+    for name, excerpt in links.items():
+        link = shared / name
+        if link.is_symlink():
+            link.unlink()
+        link.symlink_to(repo_root() / "tests" / "data" / excerpt, target_is_directory=True)
+    from unittest import mock  # patch.dict: the environment as it was on exit, whatever happened inside
+
+    with mock.patch.dict(os.environ, {registry.ENV_SHARED: str(shared),
+                                      registry.ENV_DATA_DIR: str(Path(folder) / "cache")}):
+        os.environ.pop(registry.ENV_REGISTRY, None)
+        yield ("the excerpts shipped in `tests/data` ("
+               + ", ".join(f"`tests/data/{e}`" for e in links.values()) + ")")
 
 
-def _solver_names() -> list[str]:
-    from slamcli.solvers import registry
-
-    return sorted(registry.names())
-
-
-def _preset_text() -> str:
-    from slamcli.solvers.icm.presets import expansion_text
-
-    return expansion_text("real")
-
-
-def _params(name: str, known: bool, quick: bool) -> dict:
-    p = dict((PARAMS_KNOWN if known else PARAMS_UNKNOWN).get(name, {}))
-    if quick:
-        p.update(QUICK_OVERRIDES.get(name, {}))
-    return p
-
-
-def _icm_extra(params: dict, known: bool, quick: bool) -> dict:
-    """An extra ICM row's parameters: its own, the recording's correspondences, the quick-mode sweep cap."""
-    p = ({"correspondences": "reported"} if known else {}) | dict(params)
-    if quick:
-        p.update(QUICK_ICM_EXTRA_OVERRIDES)
-    return p
-
-
-def _run(inputs, name: str, params: dict):
-    """``(result, None)`` or ``(None, one-line reason)``; the solver's own wall time is in the result."""
-    from slamcli.api.solve import solve_dataset
-    from slamcli.errors import SlamcliError
-
-    try:
-        return solve_dataset(inputs, name, params), None
-    except SlamcliError as exc:
-        return None, (str(exc).splitlines() or [""])[0]
-
-
-def _gps_metrics(result, dataset) -> dict:
-    from slamcli.api.evaluate import evaluate_without_truth
-
-    return dict(evaluate_without_truth(result, dataset).scalars)
+def quick_data(out: Path, quick: bool, links: dict[str, str]):
+    """The context the section's sweeps run in: :func:`excerpt_registry` in quick mode in a checkout, else the
+    registry as it is (yielding the sentence that names the data)."""
+    if quick and all((repo_root() / "tests" / "data" / e).is_dir() for e in links.values()):
+        return excerpt_registry(out / "quick-recordings", links)
+    return contextlib.nullcontext("the registered recordings of `slamcli datasets`")
 
 
 def _fmt(v, nd=2) -> str:
     return "—" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
 
 
-def _param_text(p: dict) -> str:
-    return ", ".join(f"{k}={v}" for k, v in p.items()) or "defaults"
+def param_text(params: dict) -> str:
+    """``k=v, ...`` of a configuration's parameters as the experiment file gives them, or ``defaults``."""
+    return ", ".join(f"{k}={v}" for k, v in params.items()) or "defaults"
+
+
+def refusal(error: str) -> str:
+    """The first line of a failed run's error without the exception's class and the dataset path that the sweep
+    puts in front (``SolverError: <run>/dataset.h5: solver 'x' ...`` → ``solver 'x' ...``)."""
+    line = (str(error).splitlines() or [""])[0]
+    head, sep, rest = line.partition(": ")
+    if sep and head.isidentifier():
+        line = rest
+    head, sep, rest = line.partition(": ")
+    return rest if sep and head.endswith(".h5") else line
 
 
 # ----------------------------------------------------------------------------------------------------------
-# the three recordings
+# rows from a finished sweep (results.csv and the run folders)
 # ----------------------------------------------------------------------------------------------------------
-def _gps_rows(dataset, quick: bool, progress, label: str) -> list[dict]:
+def _num(v) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _int(v) -> int | None:
+    f = _num(v)
+    return None if f is None else int(round(f))
+
+
+def _wall(rec: dict) -> float | None:
+    """The solver's own wall time (the result's), else the sweep's solve time, s."""
+    return _num(rec.get("metric.wall_time_s", rec.get("solve_time_s")))
+
+
+def sweep_records(exp_dir: Path) -> list[dict]:
+    """The rows of ``exp_dir/results.csv`` (path columns joined onto ``exp_dir``), in the sweep's order."""
+    from slamcli.sweep.runner import load_results
+
+    return load_results(exp_dir).to_dict("records")
+
+
+def _base_row(rec: dict, params: dict[str, str]) -> dict[str, Any]:
+    label = str(rec["label"])
+    failed = rec["status"] != "completed"
+    return {"solver": ROW_NAMES.get(label, label), "label": label, "params": params.get(label, "defaults"),
+            "refused": refusal(rec.get("error") or "failed") if failed else None, "run_dir": Path(rec["path"])}
+
+
+def gps_rows(records: list[dict], params: dict[str, str]) -> list[dict]:
+    """One row per run on a GPS-referenced recording: status, aligned GPS ATE, map size, wall time, surveyed
+    landmarks found and their RMSE (``None`` where the recording has no survey); ``refused`` = the one line of
+    a failed run."""
     rows = []
-    names = _solver_names()
-    runs = [(name, name, _params(name, False, quick)) for name in names]
-    runs += [(lab, name, dict(p)) for lab, name, p in EXTRA_UNKNOWN if name in names]
-    runs += [(lab, "icm", _icm_extra(p, False, quick)) for lab, p in ICM_EXTRA if "icm" in names]
-    for row_label, name, params in runs:
-        if progress:
-            progress(f"real: {label}: {row_label}")
-        res, why = _run(dataset.inputs, name, params)
-        row = {"solver": row_label, "params": _param_text(params), "refused": why, "result": res}
-        if res is not None:
-            m = _gps_metrics(res, dataset)
-            row.update(status=m.get("status"), gps_ate=m.get("gps_ate_aligned_rmse_m"),
-                       odo_gps_ate=m.get("odometry_gps_ate_aligned_rmse_m"), n_lm=int(len(res.landmarks_xy)),
-                       wall_s=float(res.wall_time_s), n_gps=m.get("gps_n_matched"),
-                       survey_matched=m.get("survey_lm_matched"), survey_rmse=m.get("survey_lm_rmse_m"),
-                       align=_alignment(res, dataset))
+    for rec in records:
+        row = _base_row(rec, params)
+        if not row["refused"]:
+            row.update(status=rec["solver_status"], gps_ate=_num(rec.get("gps_ate_aligned_rmse_m")),
+                       odo_gps_ate=_num(rec.get("odometry_gps_ate_aligned_rmse_m")),
+                       n_lm=_int(rec.get("n_landmarks_est")), wall_s=_wall(rec), n_gps=_int(rec.get("gps_n_matched")),
+                       survey_matched=_int(rec.get("survey_lm_matched")), survey_rmse=_num(rec.get("survey_lm_rmse_m")))
+        rows.append(row)
+    return rows
+
+
+def mrclam_rows(records: list[dict]) -> list[dict]:
+    """One row per solo MRCLAM run: the robot (its ``config.json``'s import options), status, ATE and dead
+    reckoning's, landmarks matched / true, matched landmark RMSE, wall time."""
+    rows = []
+    for rec in records:
+        row = _base_row(rec, {})
+        row["robot"] = int(import_options(row["run_dir"]).get("robot", 1))
+        if not row["refused"]:
+            row.update(status=rec["solver_status"], ate=_num(rec.get("ate_rmse_m")),
+                       odo_ate=_num(rec.get("odometry_ate_rmse_m")), lm_rmse=_num(rec.get("lm_rmse_matched_m")),
+                       lm_matched=_int(rec.get("lm_n_matched")), n_true=_int(rec.get("lm_n_true")),
+                       n_lm=_int(rec.get("lm_n_est")), wall_s=_wall(rec))
         rows.append(row)
     return rows
 
@@ -190,46 +190,22 @@ def _alignment(result, dataset):
     return g["gps_alignment"]
 
 
-def _mrclam_rows(directory: Path, quick: bool, progress) -> list[dict]:
-    from slamcli.datasets.mrclam import import_mrclam
-    from slamcli.metrics.summary import EvaluationParams, evaluate_result
-
-    rows = []
-    robots = (1,) if quick else MRCLAM_ROBOTS
-    names = [n for n in _solver_names() if n in PARAMS_KNOWN]
-    for robot in robots:
-        ds = import_mrclam(directory, robot)  # quick: the excerpt is 45 s of robot 1
-        runs = [(name, name, _params(name, True, quick)) for name in names]
-        runs += [(lab, "icm", _icm_extra(p, True, quick)) for lab, p in ICM_EXTRA if "icm" in names]
-        for label, name, params in runs:
-            if progress:
-                progress(f"real: MRCLAM robot {robot}: {label}")
-            res, why = _run(ds.inputs, name, params)
-            row = {"robot": robot, "solver": label, "params": _param_text(params), "refused": why}
-            if res is not None:
-                s = evaluate_result(res, ds.truth, ds.inputs.odometry_xyt, EvaluationParams(cutoff_m=1.0)).scalars
-                row.update(status=s["status"], ate=s["ate_rmse_m"], odo_ate=s.get("odometry_ate_rmse_m"),
-                           lm_rmse=s["lm_rmse_matched_m"], lm_matched=s["lm_n_matched"], n_true=s["lm_n_true"],
-                           n_lm=s["lm_n_est"], wall_s=float(res.wall_time_s))
-            rows.append(row)
-    return rows
-
-
 # ----------------------------------------------------------------------------------------------------------
 # figures
 # ----------------------------------------------------------------------------------------------------------
 def _map_figure(rows, dataset, path: Path, title: str) -> Path | None:
-    """One panel per solver that ran: its path and landmarks moved into the GPS frame by its own alignment,
-    the GPS fixes (grey) and, for the car park, the surveyed beacons (squares)."""
+    """One panel per solver that ran: its path and landmarks (read from the run's ``result.h5``) moved into the
+    GPS frame by its own alignment, the GPS fixes (grey) and, for the car park, the surveyed beacons (squares)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from slamcli.io import read_result
     from slamcli.models.observation import sensor_pose
     from slamcli.plots import save_figure
 
-    ran = [r for r in rows if r.get("result") is not None and r.get("align") is not None]
+    ran = [(r, read_result(r["run_dir"] / "result.h5")) for r in rows if not r["refused"]]
     if not ran:
         return None
     n = len(ran)
@@ -238,9 +214,8 @@ def _map_figure(rows, dataset, path: Path, title: str) -> Path | None:
     fig, axes = plt.subplots(rws, cols, figsize=(4.2 * cols, 3.8 * rws), squeeze=False)
     tr = dataset.truth
     off = np.zeros(2) if tr.ref_offset_xy is None else np.asarray(tr.ref_offset_xy, float)
-    for ax, r in zip(axes.ravel(), ran):
-        R, t = r["align"]
-        res = r["result"]
+    for ax, (r, res) in zip(axes.ravel(), ran):
+        R, t = _alignment(res, dataset)
         p = sensor_pose(res.poses_xyt, off)[:, :2] @ R.T + t
         lm = np.asarray(res.landmarks_xy, float).reshape(-1, 2) @ R.T + t
         ax.plot(tr.ref_xy[:, 0], tr.ref_xy[:, 1], ".", color="0.6", ms=2, label="GPS")
@@ -385,100 +360,156 @@ def icm_verdicts(vp_rows, cp_rows, mr_rows, vp_label: str) -> list[str]:
     return out
 
 
-def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
-    """Run the three recordings into ``out_dir``; return the markdown (figure paths relative to the report's
-    folder, ``out_dir``'s parent) and whether every recording could be run."""
-    from slamcli.datasets.carpark import import_carpark
-    from slamcli.datasets.victoria_park import import_victoria_park
+def _preset_text() -> str:
+    from slamcli.solvers.icm.presets import expansion_text  # the preset's documented expansion (text only)
 
+    return expansion_text("real")
+
+
+def experiment_params(cfg) -> dict[str, str]:
+    """``{solver label: parameter text}`` of an experiment (its ``[[solver]]`` parameters as written, after
+    ``[quick]``), the table's "parameters" column."""
+    return {s.label: param_text(s.params) for s in cfg.solvers}
+
+
+def _dataset_of(records: list[dict]):
+    """The dataset the runs of one recording solved (the sweep's ``dataset.h5`` of its first run)."""
+    from slamcli.io import read_dataset
+
+    return read_dataset(Path(records[0]["path"]) / "dataset.h5")
+
+
+def import_options(run_dir: Path) -> dict:
+    """The import options of the recording a run solved (its ``config.json``), e.g. ``{"duration": 300.0}``."""
+    cfg = json.loads((Path(run_dir) / "config.json").read_text(encoding="utf-8"))
+    return dict(cfg["dataset"].get("options", {}))
+
+
+def _duration_text(run_dir: Path) -> str:
+    """``"first 300 s"`` style length of a recording imported with ``duration``, else ``"whole run"``."""
+    dur = import_options(run_dir).get("duration")
+    return f"first {float(dur):g} s" if dur is not None else "whole run"
+
+
+def render_vp(records: list[dict], params: dict[str, str], out: Path) -> tuple[list[str], list[dict]]:
+    """Victoria Park's subsection from its sweep's rows (markdown lines, table rows)."""
+    vp = _dataset_of(records)
+    dur_txt = _duration_text(Path(records[0]["path"]))
+    rows = gps_rows(records, params)
+    lines = ["", "### Victoria Park", "",
+             f"{dur_txt.capitalize()} of the run ({vp.inputs.n_poses - 1} steps of {vp.inputs.dt:g} s, "
+             f"{len(vp.inputs.observations)} tree detections without ids, {len(vp.truth.ref_xy)} GPS fixes). GPS ATE: "
+             "positions of the laser point against GPS after an SE(2) alignment (the run's own frame is not the GPS "
+             "frame); map size: landmarks in the estimate (no true map exists).", ""]
+    lines += _gps_table(rows, False)
+    lines += [""] + _gps_sentences(rows, f"the {dur_txt} of Victoria Park")
+    fig = _map_figure(rows, vp, out / "victoria_park_maps", f"Victoria Park, {dur_txt}")
+    if fig is not None:
+        lines += ["", f"![Victoria Park maps]({out.name}/{fig.name})"]
+    return lines, rows
+
+
+def render_mrclam(records: list[dict]) -> tuple[list[str], list[dict]]:
+    """MRCLAM's solo subsection from its sweep's rows."""
+    rows = mrclam_rows(records)
+    robots = sorted({r["robot"] for r in rows})
+    lines = ["", "### MRCLAM Dataset 7, each robot solo", "",
+             f"Robot(s) {', '.join(map(str, robots))}, each solved alone. Barcode ids as reported ids; ATE against "
+             "the motion-capture truth (unaligned: the start pose is known); landmark RMSE of the estimates matched "
+             "to the surveyed landmarks within 1 m.", ""]
+    return lines + _mrclam_table(rows) + [""] + _mrclam_sentences(rows), rows
+
+
+def render_cp(records: list[dict], params: dict[str, str], out: Path) -> tuple[list[str], list[dict]]:
+    """The car park's subsection from its sweep's rows."""
+    cp = _dataset_of(records)
+    rows = gps_rows(records, params)
+    n_s = len(cp.truth.landmarks_xy)
+    for r in rows:
+        r["n_survey"] = n_s
+    lines = ["", "### ACFR car park", "",
+             f"{cp.inputs.n_poses - 1} steps, {len(cp.inputs.observations)} beacon detections, "
+             f"{n_s} surveyed beacons. Beacons found: estimated landmarks moved into the GPS frame by the "
+             "trajectory's alignment and matched to the surveyed beacons within 2 m (optimal assignment).", ""]
+    lines += _gps_table(rows, True, n_s)
+    lines += [""] + _gps_sentences(rows, "the car park")
+    found = [r for r in rows if not r["refused"] and r["survey_matched"] is not None]
+    if found:
+        b = max(found, key=lambda r: (r["survey_matched"], -(r["survey_rmse"] or 1e9)))
+        lines.append(f"Most beacons found: `{b['solver']}`, {b['survey_matched']} of {n_s} "
+                     f"(RMSE {_fmt(b['survey_rmse'])} m).")
+    fig = _map_figure(rows, cp, out / "carpark_maps", "ACFR car park")
+    if fig is not None:
+        lines += ["", f"![Car park maps]({out.name}/{fig.name})"]
+    return lines, rows
+
+
+TITLES = {"vp": "Victoria Park", "mr": "MRCLAM", "cp": "Car park"}
+
+
+def default_runner(out_dir: Path, quick: bool, progress: LogFn | None) -> Callable:
+    """``Reproduction.run`` of a report in ``out_dir``'s parent (the section called on its own)."""
+    from slamcli.reproduce.report import Reproduction, default_experiments_dir
+
+    return Reproduction(Path(out_dir).parent, quick=quick, workers=1, experiments_dir=default_experiments_dir(),
+                        log=progress or (lambda s: None)).run
+
+
+def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None, *,
+                run: Callable | None = None) -> tuple[str, bool]:
+    """Run the three experiments (``run(file)`` → :class:`~slamcli.reproduce.report.SweepOutcome`, by default a
+    :class:`~slamcli.reproduce.report.Reproduction`'s) and render the section into ``out_dir``; return the
+    markdown (figure paths relative to the report's folder, ``out_dir``'s parent) and whether every recording
+    ran."""
     t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rel = out.name
-    excerpts = repo_root() / "tests" / "data"
-    if quick and (excerpts / "victoria_park_excerpt").is_dir():
-        vp_dir, cp_dir, mr_dir = (excerpts / "victoria_park_excerpt", excerpts / "carpark_excerpt",
-                                  excerpts / "mrclam_excerpt")
-        source = "the excerpts shipped in `tests/data` (`tests/data/victoria_park_excerpt`, `tests/data/carpark_excerpt`, `tests/data/mrclam_excerpt`)"
-    else:
-        from slamcli.datasets.registry import DatasetMissingError
-
-        try:
-            dirs, how = recording_dirs()
-        except DatasetMissingError as exc:
-            return ("## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)\n\n> **Not run**: "
-                    f"{exc}.", False)
-        vp_dir, cp_dir, mr_dir = dirs["vp"], dirs["cp"], dirs["mr"]
-        source = f"the public recordings {how} of `slamcli datasets`"
+    run = run or default_runner(out, quick, progress)
+    outcomes, ok, failed = {}, True, []
+    with quick_data(out, quick, EXCERPTS) as source:
+        for key, file in EXPERIMENTS.items():
+            try:
+                outcomes[key] = run(file)
+            except Exception as exc:  # noqa: BLE001 - one recording's failure is reported, the others still run
+                ok = False
+                failed.append(f"> **{TITLES[key]} not run**: {(str(exc).splitlines() or [''])[0]}")
+    md, rows, ok2 = render(outcomes, out, quick, source)
     lines = ["## Real recordings (Victoria Park, MRCLAM Dataset 7, ACFR car park)", "",
-             f"Data: {source}. Every solver registered runs with the parameters listed; a solver that cannot "
-             "run a recording refuses in one line, shown in the table. Implementation: `slamcli/reproduce/real.py`."]
+             f"Data: {source}. Every built-in solver runs with the parameters listed; a solver that cannot "
+             "run a recording refuses in one line, shown in the table. Experiments: "
+             + ", ".join(f"`experiments/{f}`" for f in EXPERIMENTS.values())
+             + " (`slamcli sweep NAME`); renderer: `slamcli/reproduce/real.py`."]
+    lines += ["", *failed] if failed else []
+    lines += md + ["", f"Section time: {time.perf_counter() - t0:.0f} s."]
+    return "\n".join(lines), ok and ok2
+
+
+def render(outcomes: dict, out: Path, quick: bool, source: str = "") -> tuple[list[str], dict, bool]:
+    """The section's subsections and verdicts from finished sweeps (``{"vp"|"mr"|"cp": SweepOutcome}``;
+    reads ``outcome.exp_dir`` and the parameters of ``outcome.cfg`` only); ``(lines, rows per key, ok)``."""
+    lines: list[str] = []
+    rows: dict[str, list[dict] | None] = {"vp": None, "mr": None, "cp": None}
     ok = True
-    vp_rows = cp_rows = mr_rows = None
-
-    # --- Victoria Park ------------------------------------------------------------------------------------
-    dur = VP_QUICK_S if quick else VP_PREFIX_S
-    try:
-        vp = import_victoria_park(vp_dir, duration=dur)
-        n_det = len(vp.inputs.observations)
-        vp_rows = _gps_rows(vp, quick, progress, "Victoria Park")
-        lines += ["", "### Victoria Park", "",
-                  f"First {dur:g} s of the run ({vp.inputs.n_poses - 1} steps of {vp.inputs.dt:g} s, {n_det} tree "
-                  f"detections without ids, {vp.metadata['n_gps_fixes']} GPS fixes). GPS ATE: positions of the "
-                  "laser point against GPS after an SE(2) alignment (the run's own frame is not the GPS frame); "
-                  "map size: landmarks in the estimate (no true map exists).", ""]
-        lines += _gps_table(vp_rows, False)
-        lines += [""] + _gps_sentences(vp_rows, f"the first {dur:g} s of Victoria Park")
-        fig = _map_figure(vp_rows, vp, out / "victoria_park_maps", f"Victoria Park, first {dur:g} s")
-        if fig is not None:
-            lines += ["", f"![Victoria Park maps]({rel}/{fig.name})"]
-    except Exception as exc:  # noqa: BLE001 - the recording's failure is reported, the others still run
-        ok = False
-        lines += ["", f"> **Victoria Park failed**: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"]
-
-    # --- MRCLAM Dataset 7 ---------------------------------------------------------------------------------
-    try:
-        mr_rows = _mrclam_rows(mr_dir, quick, progress)
-        lines += ["", "### MRCLAM Dataset 7, each robot solo", "",
-                  ("Robot 1, 45 s excerpt. " if quick else "All five robots, whole run, each solved alone. ")
-                  + "Barcode ids as reported ids; ATE against the motion-capture truth (unaligned: the start pose "
-                  "is known); landmark RMSE of the estimates matched to the surveyed landmarks within 1 m.", ""]
-        lines += _mrclam_table(mr_rows)
-        lines += [""] + _mrclam_sentences(mr_rows)
-    except Exception as exc:  # noqa: BLE001
-        ok = False
-        lines += ["", f"> **MRCLAM failed**: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"]
-
-    # --- ACFR car park ------------------------------------------------------------------------------------
-    try:
-        cp = import_carpark(cp_dir)
-        cp_rows = _gps_rows(cp, quick, progress, "car park")
-        n_s = len(cp.truth.landmarks_xy)
-        for r in cp_rows:
-            r["n_survey"] = n_s
-        lines += ["", "### ACFR car park", "",
-                  f"{cp.inputs.n_poses - 1} steps, {len(cp.inputs.observations)} beacon detections, "
-                  f"{n_s} surveyed beacons. Beacons found: estimated landmarks moved into the GPS frame by the "
-                  "trajectory's alignment and matched to the surveyed beacons within 2 m (optimal assignment).", ""]
-        lines += _gps_table(cp_rows, True, n_s)
-        lines += [""] + _gps_sentences(cp_rows, "the car park")
-        found = [r for r in cp_rows if not r["refused"] and r["survey_matched"] is not None]
-        if found:
-            b = max(found, key=lambda r: (r["survey_matched"], -(r["survey_rmse"] or 1e9)))
-            lines.append(f"Most beacons found: `{b['solver']}`, {b['survey_matched']} of {n_s} "
-                         f"(RMSE {_fmt(b['survey_rmse'])} m).")
-        fig = _map_figure(cp_rows, cp, out / "carpark_maps", "ACFR car park")
-        if fig is not None:
-            lines += ["", f"![Car park maps]({rel}/{fig.name})"]
-    except Exception as exc:  # noqa: BLE001
-        ok = False
-        lines += ["", f"> **Car park failed**: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"]
-
-    lines += ["", "### ICM on real recordings: `preset=real` against its goals (issue 22)", "",
+    for key, o in outcomes.items():
+        for label, why in o.missing.items():
+            ok = False
+            lines += ["", f"> **Not run on {TITLES[key]}: `{label}`** — {why}."]
+        try:
+            records = sweep_records(o.exp_dir)
+            params = experiment_params(o.cfg)
+            part, rows[key] = (render_vp(records, params, out) if key == "vp" else render_mrclam(records)
+                               if key == "mr" else render_cp(records, params, out))
+            lines += part
+        except Exception as exc:  # noqa: BLE001 - the recording's failure is reported, the others still render
+            ok = False
+            lines += ["", f"> **{TITLES[key]} failed**: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"]
+    vp_label = "Victoria Park"
+    if rows["vp"]:
+        vp_label = f"the {_duration_text(rows['vp'][0]['run_dir'])} of Victoria Park"
+    lines += ["", "### ICM on real recordings: `preset=real` against its goals", "",
               "ICM runs three ways on every recording: the paper's defaults (row `icm`), the information weights "
               "and `preset=real` (" + _preset_text() + "). Each verdict is computed from the rows above."
               + (" Quick mode: the rows are the excerpts, the goals are the full recordings' (indicative only)."
                  if quick else ""), ""]
-    lines += ["- " + v for v in icm_verdicts(vp_rows, cp_rows, mr_rows, f"the first {dur:g} s of Victoria Park")]
-    lines += ["", f"Section time: {time.perf_counter() - t0:.0f} s."]
-    return "\n".join(lines), ok
+    lines += ["- " + v for v in icm_verdicts(rows["vp"], rows["cp"], rows["mr"], vp_label)]
+    return lines, rows, ok

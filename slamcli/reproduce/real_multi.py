@@ -1,15 +1,18 @@
 """``make reproduce`` section "real-multi": MRCLAM Dataset 7, five robots solved jointly vs each robot alone.
 
-One multi-robot dataset (``slamcli import mrclam DIR --all-robots``: one time base, shared landmarks, inter-robot
-range-bearing readings) is solved jointly with ``graph`` (robust=auto → Cauchy on the sensor-reported barcodes)
-and ``icm`` (``preset=real``: on data with ids, reported correspondences, information weights, joint Gauss-Newton
-steps in every sweep); every robot is also solved alone on the same time
-grid (:func:`slamcli.datasets.team.solo_dataset`). The table gives each robot's unaligned ATE against the motion
-capture: dead reckoning, solo and joint for both solvers. Every outcome sentence is computed from those numbers.
+The runs are the shipped experiment ``real-multi`` (``experiments/real-multi.toml``, runnable alone with
+``slamcli sweep real-multi``): one multi-robot dataset (``all-robots = true``: one time base, shared landmarks,
+inter-robot range-bearing readings) solved jointly with ``graph`` (robust=auto → Cauchy on the sensor-reported
+barcodes) and ``icm`` (``preset=real``: on data with ids, reported correspondences, information weights, joint
+Gauss-Newton steps in every sweep), and every robot alone on the same time grid (``solo = N``). This module runs it
+through :meth:`slamcli.reproduce.report.Reproduction.run` and renders the section from the sweep's files only
+(:func:`measure`): each robot's unaligned ATE against the motion capture for dead reckoning, solo and joint. Every
+outcome sentence is computed from those numbers.
 
-Full mode: the whole common window of the five robots (891 s at dt = 0.1 s). Quick mode: the first
-:data:`QUICK_DURATION_S` seconds and :data:`QUICK_ICM_SWEEPS` ICM sweeps (< 30 s). The dataset folder is
-the registered recording ``mrclam7`` (``slamcli datasets add mrclam7 DIR`` or ``slamcli datasets fetch mrclam7``).
+Full mode: the whole common window of the five robots (891 s at dt = 0.1 s), 50 ICM sweeps at most. Quick mode:
+10 ICM sweeps, and in a checkout the 30 s five-robot excerpt of ``tests/data`` in place of the recording. The
+dataset folder is the registered recording ``mrclam7`` (``slamcli datasets add mrclam7 DIR`` or ``slamcli
+datasets fetch mrclam7``).
 """
 
 from __future__ import annotations
@@ -21,21 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
-QUICK_DURATION_S = 30.0
-QUICK_ICM_SWEEPS = 10
-FULL_ICM_SWEEPS = 50
+from slamcli.reproduce.real import default_runner, import_options, quick_data, refusal, sweep_records
+
+EXPERIMENT = "real-multi.toml"
+#: the label of the joint (all-robots) entry of the experiment; the others are the solo entries
+TEAM_LABEL = "mrclam7-team"
+#: quick mode in a checkout: the registry's mrclam7 is the 30 s five-robot excerpt of tests/data
+EXCERPTS = {"mrclam_dataset7": "mrclam_team_excerpt"}
 #: a change of the ATE smaller than this fraction counts as "no change" in the outcome sentences
 SAME_FRACTION = 0.02
-#: issue 22's goal for team ICM: converged before its sweep cap, mean joint ATE within this fraction of graph's
+#: the goal for team ICM: converged before its sweep cap, mean joint ATE within this fraction of graph's
 GOAL_TEAM_MARGIN = 0.10
-
-
-def dataset_dir() -> Path:
-    """The folder of the registered recording ``mrclam7``; :class:`~slamcli.datasets.registry.DatasetMissingError`
-    (one line naming the fetch command) when it is not on this machine."""
-    from slamcli.datasets.registry import locate
-
-    return locate("mrclam7")
 
 
 def _ate(est: np.ndarray, true: np.ndarray) -> float:
@@ -44,54 +43,50 @@ def _ate(est: np.ndarray, true: np.ndarray) -> float:
     return float(ate(est, true)["ate_rmse_m"])
 
 
-def measure(directory: Path, *, duration: float | None, icm_sweeps: int,
-            progress: Callable[[str], None] | None = None) -> dict:
-    """Import the five robots, solve jointly and solo with graph and icm.
+def measure(exp_dir: Path) -> dict:
+    """The section's numbers from the finished sweep in ``exp_dir``: ``results.csv`` (the solo runs' ATE, the
+    statuses and solve times), the joint runs' ``result.h5`` (each robot's slice of the stacked poses) and the
+    team's ``dataset.h5`` (dead reckoning, truth, the import's accounting).
 
     Returns
     -------
     dict with ``rows`` (one dict per robot: robot, odometry, graph_solo, graph_joint, icm_solo, icm_joint — ATE
     in m), ``readings`` (kept inter-robot readings), ``robot_rows`` (the import's accounting), ``duration_s``,
-    ``status`` (solver → statuses), ``seconds`` (wall time per solver and mode).
+    ``status`` (solver → statuses; ``<solver>_joint`` → the joint run's), ``seconds`` (solve time per solver and
+    mode, s), ``failed`` (one line per failed run).
     """
-    from slamcli.api.solve import solve_dataset
-    from slamcli.datasets.mrclam import import_mrclam_team
-    from slamcli.datasets.team import solo_dataset
+    from slamcli.io import read_dataset, read_result
 
-    log = progress or (lambda s: None)
-    ds = import_mrclam_team(directory, [1, 2, 3, 4, 5], duration=duration)
-    team = ds.inputs.robots
+    records = sweep_records(exp_dir)
+    team_runs = [r for r in records if r["data"] == TEAM_LABEL]
+    ds = read_dataset(Path(team_runs[0]["path"]) / "dataset.h5")
+    team, truth = ds.inputs.robots, ds.truth.poses_xyt
     fp = team.first_pose
-    log(f"real-multi: imported {ds.inputs.n_poses} poses, {len(team.range_m)} inter-robot readings")
-    params = {
-        "graph": {"covariance": False},
-        "icm": {"preset": "real", "max_sweeps": icm_sweeps, "trace_poses_every": 0},
-    }
-    rows = [{"robot": int(n), "odometry": _ate(ds.inputs.odometry_xyt[fp[r]:fp[r + 1]],
-                                               ds.truth.poses_xyt[fp[r]:fp[r + 1]])}
-            for r, n in enumerate(team.robot_number)]
+    numbers = [int(n) for n in team.robot_number]
+    rows = [{"robot": n, "odometry": _ate(ds.inputs.odometry_xyt[fp[r]:fp[r + 1]], truth[fp[r]:fp[r + 1]])}
+            for r, n in enumerate(numbers)]
     status: dict[str, list[str]] = {}
     seconds: dict[str, float] = {}
-    for method, p in params.items():
-        t0 = time.perf_counter()
-        joint = solve_dataset(ds.inputs, method, p)
-        seconds[f"{method}_joint"] = time.perf_counter() - t0
-        status.setdefault(method, []).append(joint.status.value)
-        status[f"{method}_joint"] = [joint.status.value]
-        log(f"real-multi: {method} joint done ({joint.status.value})")
-        t0 = time.perf_counter()
-        for r in range(team.n_robots):
-            solo = solo_dataset(ds, r)
-            res = solve_dataset(solo.inputs, method, p)
-            status[method].append(res.status.value)
-            true = ds.truth.poses_xyt[fp[r]:fp[r + 1]]
-            rows[r][f"{method}_solo"] = _ate(res.poses_xyt, true)
-            rows[r][f"{method}_joint"] = _ate(joint.poses_xyt[fp[r]:fp[r + 1]], true)
-        seconds[f"{method}_solo"] = time.perf_counter() - t0
-        log(f"real-multi: {method} solo done")
+    failed = []
+    for rec in team_runs + [r for r in records if r["data"] != TEAM_LABEL]:
+        method, joint = str(rec["label"]), rec["data"] == TEAM_LABEL
+        mode = "joint" if joint else "solo"
+        if rec["status"] != "completed":
+            failed.append(f"{method} {rec['data']}: {refusal(rec.get('error') or 'failed')}")
+            continue
+        status.setdefault(method, []).append(str(rec["solver_status"]))
+        if joint:
+            status[f"{method}_joint"] = [str(rec["solver_status"])]
+        seconds[f"{method}_{mode}"] = seconds.get(f"{method}_{mode}", 0.0) + float(rec["solve_time_s"])
+        if joint:
+            poses = read_result(Path(rec["path"]) / "result.h5").poses_xyt
+            for r in range(team.n_robots):
+                rows[r][f"{method}_joint"] = _ate(poses[fp[r]:fp[r + 1]], truth[fp[r]:fp[r + 1]])
+        else:
+            rows[numbers.index(int(import_options(rec["path"])["solo"]))][f"{method}_solo"] = float(rec["ate_rmse_m"])
     return {"rows": rows, "readings": int(len(team.range_m)), "robot_rows": ds.metadata["robot_rows"],
             "duration_s": float(ds.metadata["scenario_params"]["duration_s"]), "status": status,
-            "seconds": seconds}
+            "seconds": dict(sorted(seconds.items())), "failed": failed}
 
 
 def outcome_sentences(rows: list[dict], same: float = SAME_FRACTION) -> list[str]:
@@ -130,28 +125,40 @@ def team_icm_verdict(rows: list[dict], icm_joint_status: str, margin: float = GO
             + ("" if conv else " (it stopped at its sweep cap)") + ("" if close else " (ATE too high)") + ".")
 
 
-def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | None = None) -> tuple[str, bool]:
-    """The section's markdown and whether it ran; writes ``real_multi_ate.csv`` under ``out_dir``."""
+def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | None = None, *,
+                run: Callable | None = None) -> tuple[str, bool]:
+    """Run the experiment (``run(file)`` → :class:`~slamcli.reproduce.report.SweepOutcome`, by default a
+    :class:`~slamcli.reproduce.report.Reproduction`'s) and render the section; writes ``real_multi_ate.csv``
+    under ``out_dir``. Returns the markdown and whether every run completed."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     md = ["## Real data: MRCLAM Dataset 7, five robots jointly vs each alone (`graph`, `icm`)", ""]
-    from slamcli.datasets.registry import DatasetMissingError
-
-    excerpt = Path(__file__).resolve().parents[2] / "tests" / "data" / "mrclam_team_excerpt"
-    try:  # quick mode in a checkout: the 30 s team excerpt shipped with the tests (as the real section does)
-        d = excerpt if quick and excerpt.is_dir() else dataset_dir()
-    except DatasetMissingError as exc:
-        md.append(f"> **Section failed**: {exc}.")
-        return "\n".join(md), False
+    run = run or default_runner(out_dir, quick, progress)
     t0 = time.perf_counter()
     try:
-        m = measure(d, duration=QUICK_DURATION_S if quick and d != excerpt else None,
-                    icm_sweeps=QUICK_ICM_SWEEPS if quick else FULL_ICM_SWEEPS, progress=progress)
+        with quick_data(out_dir, quick, EXCERPTS) as source:
+            outcome = run(EXPERIMENT)
+        if outcome.missing:
+            raise RuntimeError("not run: " + "; ".join(f"{k} ({v})" for k, v in outcome.missing.items()))
+        m = measure(outcome.exp_dir)
+        md += render(m, quick, source, outcome.cfg.solver("icm").params.get("max_sweeps"), out_dir)
     except Exception as exc:  # noqa: BLE001 - a failed section is reported, never a traceback
-        md.append(f"> **Section failed**: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+        md.append(f"> **Section failed**: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}")
         return "\n".join(md), False
+    md.append(f"Section {time.perf_counter() - t0:.1f} s. Table: `real_multi_ate.csv`. Experiment: "
+              "`experiments/real-multi.toml` (`slamcli sweep real-multi`).")
+    ok = not m["failed"] and all(s != "failed" for v in m["status"].values() for s in v)
+    return "\n".join(md) + "\n", ok
+
+
+def render(m: dict, quick: bool, source: str, icm_sweeps, out_dir: Path) -> list[str]:
+    """The section's markdown from :func:`measure`'s numbers (without the closing timing); writes
+    ``real_multi_ate.csv`` into ``out_dir``."""
     rows = m["rows"]
-    with open(out_dir / "real_multi_ate.csv", "w", newline="") as fh:
+    md = [f"> **Run failed**: {line}" for line in m["failed"]]
+    if m["failed"]:
+        return md
+    with open(Path(out_dir) / "real_multi_ate.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -162,11 +169,8 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
         f"whose barcode is a robot's ({rr['dropped_outside_time_base']} outside the common time base). Start poses "
         "from the motion capture (one world frame); ATE unaligned, against the motion capture. graph: robust=auto "
         "(Cauchy on the barcodes); icm: preset=real (reported correspondences, information weights, joint "
-        "Gauss-Newton steps), "
-        f"{QUICK_ICM_SWEEPS if quick else FULL_ICM_SWEEPS} sweeps at most. Solo = the same robot's data alone on the "
-        "same time grid. Data: "
-        + ("`tests/data/mrclam_team_excerpt` (the first 29.8 s of Dataset 7, all five robots)." if d == excerpt
-           else "the registered recording `mrclam7` (`slamcli datasets`)."),
+        f"Gauss-Newton steps), {icm_sweeps} sweeps at most. Solo = the same robot's data alone on the same time "
+        f"grid. Data: {source}.",
         "",
         "| robot | dead reckoning [m] | graph solo [m] | graph joint [m] | icm solo [m] | icm joint [m] |",
         "|---:|---:|---:|---:|---:|---:|",
@@ -178,8 +182,6 @@ def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | No
     md += ["", *[f"- {s}" for s in outcome_sentences(rows)], f"- {team_icm_verdict(rows, icm_joint)}", ""]
     st = {k: sorted(set(v)) for k, v in m["status"].items() if not k.endswith("_joint")}
     statuses = ", ".join(f"{k}: {'/'.join(v)}" for k, v in st.items())
-    md.append(f"Solver statuses: {statuses}; wall time "
-              + ", ".join(f"{k} {v:.1f} s" for k, v in m["seconds"].items())
-              + f"; section {time.perf_counter() - t0:.1f} s. Table: `real_multi_ate.csv`.")
-    ok = all(s != "failed" for v in m["status"].values() for s in v)
-    return "\n".join(md) + "\n", ok
+    md.append(f"Solver statuses: {statuses}; solve time "
+              + ", ".join(f"{k} {v:.1f} s" for k, v in m["seconds"].items()) + ".")
+    return md

@@ -183,7 +183,8 @@ class Reproduction:
     """Runs the sections and assembles the report."""
 
     def __init__(self, out_dir: Path, *, quick: bool, workers: int, experiments_dir: Path,
-                 log: LogFn) -> None:
+                 log: LogFn, executor: str = "local", scheduler: str | None = None) -> None:
+        self.executor, self.scheduler = executor, scheduler  # run_sweep's: local pool or Dask (scheduler address)
         self.out = Path(out_dir)
         self.runs_dir = self.out / "runs"
         self.fig_dir = self.out / "figures"
@@ -240,7 +241,8 @@ class Reproduction:
             return SweepOutcome(cfg, None, None, pd.DataFrame(), self.runs_dir / cfg.name, missing)
         expansion = expand(cfg)
         self.log(f"{cfg.name}: {len(expansion.runs)} runs")
-        summary = run_sweep(expansion, self.runs_dir, workers=self.workers, progress=progress_lines(cfg.name, self.log))
+        summary = run_sweep(expansion, self.runs_dir, workers=self.workers, executor=self.executor,
+                            scheduler=self.scheduler, progress=progress_lines(cfg.name, self.log))
         table = load_results(summary.exp_dir)  # path columns joined onto the sweep folder
         return SweepOutcome(cfg, expansion, summary, table, summary.exp_dir, missing)
 
@@ -1129,13 +1131,18 @@ def verdict_summary(sections: list[Section]) -> list[str]:
     return lines
 
 
-def _external_section(key: str, target: str, out: Path, quick: bool, log) -> Section:
+def _external_section(key: str, target: str, out: Path, quick: bool, log, run=None) -> Section:
     """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)`` with
-    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title)."""
+    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title). A function
+    with a keyword ``run`` also gets ``run`` (:meth:`Reproduction.run`: its experiments run through the sweep
+    engine like paper 000's)."""
     import importlib
+    import inspect
 
     mod_name, _, fn_name = target.partition(":")
-    markdown, ok = getattr(importlib.import_module(mod_name), fn_name or "run_section")(out / key, quick, log)
+    fn = getattr(importlib.import_module(mod_name), fn_name or "run_section")
+    extra = {"run": run} if run is not None and "run" in inspect.signature(fn).parameters else {}
+    markdown, ok = fn(out / key, quick, log, **extra)
     head, _, body = str(markdown).partition("\n")
     sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
     sec.add(body.strip())
@@ -1152,9 +1159,12 @@ def reproduce(
     experiments_dir: str | Path | None = None,
     log: LogFn = lambda s: None,
     only: list[str] | None = None,
+    executor: str = "local",
+    scheduler: str | None = None,
 ) -> ReproduceOutcome:
     """Run the sections of :data:`SECTIONS` (or the keys in ``only``), write figures and ``REPORT.md`` into
-    ``out_dir``; returns the report path and the failed sections."""
+    ``out_dir``; returns the report path and the failed sections. ``executor``/``scheduler``: where the sweeps
+    of the sections run (:func:`slamcli.sweep.runner.make_executor`)."""
     from slamcli.io import atomic_path
     from slamcli.sweep.runner import git_revision
 
@@ -1163,7 +1173,7 @@ def reproduce(
         workers = 1 if quick else max(1, min(2, os.cpu_count() or 1))
     rep = Reproduction(Path(out_dir), quick=quick, workers=workers,
                        experiments_dir=Path(experiments_dir) if experiments_dir else default_experiments_dir(),
-                       log=log)
+                       log=log, executor=executor, scheduler=scheduler)
     rep.out.mkdir(parents=True, exist_ok=True)
     keys = [k for k, _ in SECTIONS]
     if only:
@@ -1176,7 +1186,7 @@ def reproduce(
             continue
         try:
             if ":" in target:
-                sec = _external_section(key, target, rep.out, quick, log)
+                sec = _external_section(key, target, rep.out, quick, log, rep.run)
             else:
                 sec = getattr(rep, target)()
         except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run
