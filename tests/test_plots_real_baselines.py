@@ -21,10 +21,8 @@ import matplotlib.style
 import numpy as np
 import pytest
 from test_plot_style import DETERMINISTIC_RC, assert_matches_baseline, texts_outside
-from test_plots_real import team, vp  # noqa: F401  (module fixtures: the solved excerpts)
-from typer.testing import CliRunner
+from test_plots_real import _cli, team, vp  # noqa: F401  (module fixtures: the solved excerpts)
 
-from slamcli.cli import app
 from slamcli.io import read_dataset, read_result
 
 matplotlib.use("Agg")
@@ -33,13 +31,6 @@ ROBOTS = (1, 2, 3, 4, 5)
 SOLVERS = ("odometry", "ekf", "graph")
 #: m: ATE values as drawn (float64 through results.csv) against the ones recomputed here
 ATE_TOL = 1e-9
-runner = CliRunner()
-
-
-def _cli(*args):
-    r = runner.invoke(app, [*map(str, args)])
-    assert r.exit_code == 0, r.output
-    return r
 
 
 @pytest.fixture(scope="module")
