@@ -10,7 +10,8 @@ optimum to :data:`ROUND_TRIP_TOL` — only the order of float sums differs. Both
 (pose, landmark) pair into one mean measurement on the original dataset (a different objective when the EKF
 gave a pose two sightings of one landmark). The independent reference is GTSAM:
 ``readG2o`` of the exported file plus the same prior on x_0 (σ = 1e-4), optimised by its Levenberg-Marquardt,
-equal to ours to :data:`GTSAM_TOL` (its own stopping rule, not ours).
+equal to ours to :data:`GTSAM_TOL` (its own stopping rule, not ours). On a real excerpt (MRCLAM robot 5, one
+row per pose-landmark pair) the round trip holds with the graph solver's defaults.
 
 Counting: for every format of ``slamcli export`` the file is parsed here (evo's readers for TUM/KITTI, pandas
 for CSV, line tags for g2o/GTSAM) and what it holds is counted against the result: poses, landmarks and
@@ -79,6 +80,24 @@ def test_gtsam_export_import_solve_equals_solving_the_original(cluttered):  # no
     err[:, 2] = np.angle(np.exp(1j * err[:, 2]))
     assert np.max(np.abs(err)) < GTSAM_TOL
     assert orig.extra["final_cost"] == pytest.approx(graph.error(out), rel=GTSAM_TOL)
+
+
+def test_round_trip_on_a_real_excerpt_with_default_parameters(tmp_path):
+    """MRCLAM robot 5 (tests/data excerpt, point sensor): the same round trip with the graph solver's defaults
+    (robust kernel ``auto``, grouped returns) equals solving the original dataset."""
+    data = Path(__file__).parent / "data" / "mrclam_team_excerpt"
+    _invoke(["import", "mrclam", data, "--robot", "5", "-q", "-o", tmp_path / "d.h5"])
+    _invoke(["solve", tmp_path / "d.h5", "-m", "ekf", "-q", "-o", tmp_path / "ekf.h5"])
+    _invoke(["export", tmp_path / "ekf.h5", "--format", "gtsam", "-q", "-o", tmp_path / "ekf.txt"])
+    _invoke(["import", "g2o", tmp_path / "ekf.txt", "-q", "-o", tmp_path / "back.h5"])
+    common = ["-m", "graph", "-p", "init_from=init", "--init", tmp_path / "ekf.h5", "-p", "covariance=false", "-q"]
+    _invoke(["solve", tmp_path / "back.h5", *common, "-p", "association=reported", "-o", tmp_path / "b.h5"])
+    _invoke(["solve", tmp_path / "d.h5", *common, "-p", "association=init", "-o", tmp_path / "o.h5"])
+    back, orig = read_result(tmp_path / "b.h5"), read_result(tmp_path / "o.h5")
+    assert orig.status.value == back.status.value == "converged"
+    assert np.max(np.abs(orig.poses_xyt - read_result(tmp_path / "ekf.h5").poses_xyt)) > 1e-3
+    np.testing.assert_allclose(back.poses_xyt, orig.poses_xyt, rtol=0, atol=ROUND_TRIP_TOL)
+    assert back.extra["final_cost"] == pytest.approx(orig.extra["final_cost"], rel=COST_RTOL)
 
 
 def _count_file(fmt: str, path: Path) -> dict:
