@@ -315,10 +315,16 @@ def _draw(make, path):
 
 @pytest.mark.parametrize("name", sorted(FIGURES))
 def test_figure_matches_baseline_image(name, tmp_path):
-    from matplotlib.testing.compare import compare_images
-
     actual, outside = _draw(FIGURES[name], tmp_path / f"{name}.png")
     assert outside == [], name
+    assert_matches_baseline(actual, name)
+
+
+def assert_matches_baseline(actual: Path, name: str) -> None:
+    """``actual`` (a PNG) equals ``baseline_images/<name>.png`` to :data:`IMAGE_TOL` (module docstring: the
+    matplotlib version check and ``SLAMCLI_UPDATE_BASELINES``)."""
+    from matplotlib.testing.compare import compare_images
+
     expected = BASELINES / f"{name}.png"
     if os.environ.get("SLAMCLI_UPDATE_BASELINES"):
         BASELINES.mkdir(exist_ok=True)
