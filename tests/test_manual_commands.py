@@ -8,7 +8,9 @@ do for a user. What a page states the test does differently is done here and onl
 
 * real recordings: the Intel excerpt is copied in as ``intel-excerpt.g2o``;
 * Dask: ``tcp://HOST:8786`` is the address of a scheduler with one worker started here on 127.0.0.1;
-* the plugin: the page's ``mypkg/mine.py`` and the entry point of its ``pyproject.toml`` are written as the
+* a page's ``<!-- test-variant: COMMAND => SHORTER -->`` line: SHORTER runs in place of COMMAND (the page says
+  so in its text);
+* the plugin (its page and the suite's): the plugin page's ``mypkg/mine.py`` and the entry point of its ``pyproject.toml`` are written as the
   installed metadata ``pip install`` would write, on ``sys.path``.
 """
 
@@ -29,11 +31,13 @@ DATA = Path(__file__).parent / "data"
 #: the pages whose commands a reader runs, in reading order
 PAGES = ["README.md", "docs/tutorials/first-experiment.md", "docs/tutorials/real-recordings.md",
          "docs/tutorials/sweeps.md", "docs/tutorials/dask.md", "docs/tutorials/plugin.md",
-         "docs/tutorials/reproduce.md"]
+         "docs/tutorials/reproduce.md", "docs/suite.md"]
 #: registry folder → excerpt in tests/data (the recordings the pages name)
 RECORDINGS = {"victoria_park": "victoria_park_excerpt", "acfr_carpark": "carpark_excerpt",
               "mrclam_dataset7": "mrclam_excerpt"}
 SCHEDULER_PLACEHOLDER = "tcp://HOST:8786"
+VARIANT = re.compile(r"^<!-- test-variant: (.+?) => (.+?) -->$", re.M)
+PLUGIN_PAGE = "docs/tutorials/plugin.md"
 FENCE = re.compile(r"^```(\w+)([^\n]*)\n(.*?)^```", re.M | re.S)
 
 
@@ -48,6 +52,11 @@ def commands(page: str) -> list[str]:
             for line in body.splitlines() if line.startswith("$ ")]
 
 
+def variants(page: str) -> dict[str, str]:
+    """``command → shorter command the test runs`` from the page's test-variant comments."""
+    return dict(VARIANT.findall((ROOT / page).read_text()))
+
+
 def outputs(args: list[str]) -> list[str]:
     """The files a command names with ``-o`` / ``--out`` / ``--output``."""
     return [args[i + 1] for i, a in enumerate(args[:-1]) if a in ("-o", "--out", "--output")]
@@ -58,6 +67,7 @@ def test_every_console_line_is_a_slamcli_command(page):
     cmds = commands(page)
     assert cmds, f"{page}: no console block"
     assert all(c.startswith("slamcli ") for c in cmds), [c for c in cmds if not c.startswith("slamcli ")]
+    assert set(variants(page)) <= set(cmds), set(variants(page)) - set(cmds)  # no variant of a gone command
 
 
 def _plugin(page: str, folder: Path) -> None:
@@ -97,7 +107,7 @@ def scheduler():
     """A Dask scheduler with one single-threaded worker process on 127.0.0.1; its address."""
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         yield cluster.scheduler_address
 
 
@@ -115,13 +125,15 @@ def test_page_commands_run(page, shared_datasets, tmp_path, monkeypatch, request
         shutil.copy(DATA / "intel_excerpt.g2o", work / "intel-excerpt.g2o")
     if page.endswith("dask.md"):
         replace[SCHEDULER_PLACEHOLDER] = request.getfixturevalue("scheduler")
-    if page.endswith("plugin.md"):
-        _plugin(page, tmp_path / "site-packages")
+    if page in (PLUGIN_PAGE, "docs/suite.md"):
+        _plugin(PLUGIN_PAGE, tmp_path / "site-packages")
         monkeypatch.syspath_prepend(str(tmp_path / "site-packages"))
         _clear_solver_caches()
         request.addfinalizer(_forget_plugin)
     runner = CliRunner()
+    shorter = variants(page)
     for cmd in commands(page):
+        cmd = shorter.get(cmd, cmd)
         for old, new in replace.items():
             cmd = cmd.replace(old, new)
         args = shlex.split(cmd)[1:]
