@@ -34,7 +34,7 @@ docs-serve:  ## preview the documentation site at http://127.0.0.1:8000
 	$(BIN)/mkdocs serve
 
 lint:
-	$(BIN)/ruff check slamcli tests benchmarks
+	$(BIN)/ruff check slamcli tests benchmarks docs
 
 clean-results:
 	rm -rf results/*/
