@@ -3,10 +3,10 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: install test bench reproduce reproduce-quick lint clean-results
+.PHONY: install test bench reproduce reproduce-quick lint clean-results docs docs-serve
 
 # every extra the tests use; CHOLMOD comes with the core dependencies (CVXOPT's wheel), no system package
-EXTRAS := test,gtsam,dask,parquet,dev,interval,fast
+EXTRAS := test,gtsam,dask,parquet,dev,interval,fast,docs
 PIP ?= $(BIN)/pip
 
 install:  ## create the venv and install slamcli with every extra the tests use
@@ -27,8 +27,14 @@ reproduce:  ## regenerate the papers' figures and results/reproduce/REPORT.md
 reproduce-quick:  ## a few seeds and short runs, for a smoke check of the whole pipeline
 	$(BIN)/slamcli reproduce --quick --out results/reproduce-quick
 
+docs:  ## build the documentation site into site/ (strict: any warning fails)
+	$(BIN)/mkdocs build --strict
+
+docs-serve:  ## preview the documentation site at http://127.0.0.1:8000
+	$(BIN)/mkdocs serve
+
 lint:
-	$(BIN)/ruff check slamcli tests benchmarks
+	$(BIN)/ruff check slamcli tests benchmarks docs
 
 clean-results:
 	rm -rf results/*/

@@ -46,7 +46,7 @@ def _extras(lines: list[str]) -> set[str]:
     return set(re.search(r'"\.\[([^\]]*)\]"', line).group(1).split(","))
 
 
-EXTRAS = {"test", "gtsam", "dask", "parquet", "dev", "interval", "fast"}
+EXTRAS = {"test", "gtsam", "dask", "parquet", "dev", "interval", "fast", "docs"}
 
 
 def test_install_names_no_package_manager(tmp_path):
