@@ -209,3 +209,20 @@ grid = { "solver.ekf.provisional_min_hits" = [2, 3] }
         if not pd.isna(row["solver.ekf.provisional_min_hits"]):
             sel = sel[sel["solver.ekf.provisional_min_hits"] == row["solver.ekf.provisional_min_hits"]]
         assert row["n"] == 2 and row["mean"] == pytest.approx(sum(sel.ate_rmse_m) / 2, rel=1e-12)
+
+
+def test_default_metrics_leave_out_one_no_run_recorded(tmp_path):
+    """Solvers without covariances leave the NEES columns empty (text notes beside them, so the column may
+    come back as text): the default metrics skip an empty column, an explicitly named one summarises to n = 0,
+    and a column of text is still refused by name."""
+    from slamcli.metrics.aggregate import aggregate
+
+    rows = [{"run_id": f"r{k}", "label": "odometry", "status": "completed", "ate_rmse_m": 1.0 + k,
+             "pose_nees_mean": None, "pose_nees_note": "not available"} for k in range(2)]
+    df = pd.DataFrame(rows).astype({"pose_nees_mean": object})
+    table, _, metrics = aggregate(df)
+    assert "ate_rmse_m" in metrics and "pose_nees_mean" not in metrics
+    table, _, _ = aggregate(df, metrics=["pose_nees_mean"])
+    assert table["n"].tolist() == [0]
+    with pytest.raises(ConfigError, match="metric 'pose_nees_note' is not numeric"):
+        aggregate(df, metrics=["pose_nees_note"])

@@ -162,9 +162,11 @@ def _columns(df, by, metrics) -> tuple[list[str], list[str]]:
         ["label", *(["data"] if several else []), *(a for a in sweep_axes(df) if a != "data")]
     if metrics:
         metric_cols = [resolve_column(m, df.columns, "metric") for m in metrics]
-    else:
-        metric_cols = [m for m in DEFAULT_METRICS if m in df.columns]
+    else:  # a default metric no run recorded (e.g. NEES of solvers without covariances) is left out
+        metric_cols = [m for m in DEFAULT_METRICS if m in df.columns and df[m].notna().any()]
     for m in metric_cols:
+        if df[m].isna().all():
+            continue  # an empty column of any dtype: its summary is n = 0
         if not pd.api.types.is_numeric_dtype(df[m]) or pd.api.types.is_bool_dtype(df[m]):
             raise ConfigError(f"metric {m!r} is not numeric")
     return by_cols, metric_cols
