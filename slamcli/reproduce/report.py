@@ -1074,7 +1074,7 @@ SECTIONS: list[tuple[str, str]] = [
     ("compare", "compare_section"),
     ("nees", "nees_section"),
     ("paper001", "slamcli.reproduce.paper001:run_section"),
-    ("paper004", "slamcli.reproduce.paper004:run_section"),
+    ("paper004", "slamcli.reproduce.paper004:section"),
     ("real", "slamcli.reproduce.real:run_section"),
     ("real-multi", "slamcli.reproduce.real_multi:run_section"),
     ("paper001-map4", "slamcli.reproduce.paper001:run_section_map4"),
@@ -1129,13 +1129,19 @@ def verdict_summary(sections: list[Section]) -> list[str]:
     return lines
 
 
-def _external_section(key: str, target: str, out: Path, quick: bool, log) -> Section:
+def _external_section(key: str, target: str, out: Path, quick: bool, log, rep: Reproduction | None = None) -> Section:
     """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)`` with
-    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title)."""
+    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title). A function
+    whose first parameter is ``rep`` is a sweep-driven section: ``function(rep) -> Section``, running its
+    experiments with ``rep.run`` (resumable, ``-j N``) and rendering them from the sweep folders."""
     import importlib
+    import inspect
 
     mod_name, _, fn_name = target.partition(":")
-    markdown, ok = getattr(importlib.import_module(mod_name), fn_name or "run_section")(out / key, quick, log)
+    fn = getattr(importlib.import_module(mod_name), fn_name or "run_section")
+    if rep is not None and next(iter(inspect.signature(fn).parameters), "") == "rep":
+        return fn(rep)
+    markdown, ok = fn(out / key, quick, log)
     head, _, body = str(markdown).partition("\n")
     sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
     sec.add(body.strip())
@@ -1176,7 +1182,7 @@ def reproduce(
             continue
         try:
             if ":" in target:
-                sec = _external_section(key, target, rep.out, quick, log)
+                sec = _external_section(key, target, rep.out, quick, log, rep)
             else:
                 sec = getattr(rep, target)()
         except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run
