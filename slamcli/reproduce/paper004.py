@@ -396,7 +396,7 @@ def _tightness(md: list[str], checks: dict, exact, runs: SweepRuns, quick: bool)
     free = {} if quick else inner_hull(exact, LANDMARK_COORDS, n_starts=1, maxiter=maxiter, closest=False)
     (base, tight), (t_base, t_tight) = ((box_vs_hull(runs.result(k).hypotheses, 0, exact.truth.obs_landmark, hull)
                                          for k in ("full", "hull")),
-                                        (float(runs.one(k)["solve_time_s"]) for k in ("full", "hull")))
+                                        (float(runs.one(k)["solve_cpu_s"]) for k in ("full", "hull")))
     checks["truth_inside_table1"] = all(runs.one(k)["set_soundness"] == 1.0 for k in ("full", "hull"))
     tw = table1_widths()
     rows = []
@@ -420,10 +420,9 @@ def _tightness(md: list[str], checks: dict, exact, runs: SweepRuns, quick: bool)
            "Taylor remainder, chord cuts for the closest-landmark constraint — each variable minimised and "
            "maximised with HiGHS and the bound made rigorous by interval arithmetic on the dual) and the hull pass "
            f"(`hull_leaves={HULL_LP_LEAVES[not quick]}`, `hull_lp`: a branch and bound on each end of every landmark "
-           "coordinate, bisecting pose variables, every leaf bounded by the LP). Times on a loaded shared "
-           f"machine: inner bound {t_inner:.1f} s CPU per coordinate; solve {t_base:.1f} s without, {t_tight:.1f} s "
-           f"with the LP and hull pass ({t_tight / len(hull):.1f} s per coordinate; solve wall time, "
-           "`results.csv`).", "",
+           "coordinate, bisecting pose variables, every leaf bounded by the LP). CPU time on a loaded shared "
+           f"machine: inner bound {t_inner:.1f} s per coordinate; solve {t_base:.1f} s without, {t_tight:.1f} s "
+           f"with the LP and hull pass ({t_tight / len(hull):.1f} s per coordinate).", "",
            _md(["coordinate", "inner hull (m)", "inner, no closest-landmark constraint (m)", "paper 004 (m)",
                 "full + 3B + bisection (m)", "/ inner", "+ LP + LP hull pass (m)", "/ inner",
                 "contains both extremes"], rows), ""]
@@ -449,7 +448,7 @@ def _unknown_tightness(md: list[str], checks: dict, unknown: SweepRuns, tight_ru
         hull = inner_hull(ds, LANDMARK_COORDS, n_starts=1, maxiter=100)
         ratios = []
         for runs, label in ((unknown, "unknown"), (tight_runs, "tight")):
-            cpu.append(float(runs.one(label, replicate=seed)["solve_time_s"]))
+            cpu.append(float(runs.one(label, replicate=seed)["solve_cpu_s"]))
             r = runs.result(label, replicate=seed)
             h = sets.true_hypothesis(r.hypotheses, ds.truth.obs_landmark)
             bh = box_vs_hull(r.hypotheses, h, ds.truth.obs_landmark, hull)
@@ -464,8 +463,8 @@ def _unknown_tightness(md: list[str], checks: dict, unknown: SweepRuns, tight_ru
     checks["soundness_lp"] = sound == len(rows)
     md += ["Unknown correspondence (noisy seeds, types only): box / inner hull of the true hypothesis per landmark "
            "coordinate (l1 x, l1 y, …, l4 y), with the scenario default operators and with the LP contractor + "
-           f"LP-bounded hull pass (`lp_rounds=2, hull_lp, hull_leaves={UNKNOWN_HULL_LP_LEAVES}`; solve wall time "
-           f"{np.mean(cpu[1::2]):.1f} s against {np.mean(cpu[0::2]):.2f} s). Hypotheses and rank: the "
+           f"LP-bounded hull pass (`lp_rounds=2, hull_lp, hull_leaves={UNKNOWN_HULL_LP_LEAVES}`; CPU "
+           f"{np.mean(cpu[1::2]):.1f} s per solve against {np.mean(cpu[0::2]):.2f} s). Hypotheses and rank: the "
            "second run.", "",
            _md(["seed", "hypotheses", "true one's rank", "default: box / inner", "worst", "+ LP + hull: box / inner",
                 "worst"], rows), "",
