@@ -98,3 +98,28 @@ def test_wrong_bounds_counts_empty_boxes_as_caught_and_other_failures_as_unexpec
     assert wb["n"] == 2 and wb["unexpected"] == 1
     assert wb["loop"] == {"paper": 0, "full": 2, "full+3B": 1} and wb["loop_caught_seeds"] == [1]
     assert all(v["caught"] == 0 for v in wb["all"].values())
+
+
+def test_section_runs_through_the_sweep_hook_and_reports_a_missing_solver(tmp_path):
+    # `reproduce --section paper004` reaches paper004.section(rep) (the sweep-driven hook of report.py): with
+    # every experiment naming an unregistered solver, nothing runs, each is reported, and the exit is non-zero
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+    from slamcli.experiments import path
+    from slamcli.reproduce.paper004 import EXPERIMENTS
+
+    exp_dir = tmp_path / "experiments"
+    exp_dir.mkdir()
+    for name in EXPERIMENTS:
+        text = (path() / f"{name}.toml").read_text()
+        (exp_dir / f"{name}.toml").write_text(text.replace('method = "cuik"', 'method = "not-a-solver"')
+                                              .replace('method = "graph"', 'method = "not-a-solver"'))
+    res = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(tmp_path / "out"), "--experiments",
+                                   str(exp_dir), "--section", "paper004", "--quiet"])
+    assert res.exit_code == 1 and "paper004" in res.output
+    report = (tmp_path / "out" / "REPORT.md").read_text()
+    assert "## Paper 004: CuikSLAM with unknown correspondence (interval boxes, `cuik`) — FAILED" in report
+    assert report.count("> **Not run: `") == sum(
+        (path() / f"{n}.toml").read_text().count("[[solver]]") for n in EXPERIMENTS)
+    assert not (tmp_path / "out" / "runs").exists() or not any((tmp_path / "out" / "runs").rglob("result.h5"))

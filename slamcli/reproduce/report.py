@@ -27,7 +27,9 @@ non-zero with a summary.
 Other papers' sections hook in with one line in :data:`SECTIONS`: ``("key", "module:function")`` where
 ``function(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool)`` writes its own figures under
 ``out_dir`` and returns its markdown (starting with its own ``## `` heading) and whether it succeeded;
-``progress`` is a :data:`slamcli.types.LogFn` (one-line messages).
+``progress`` is a :data:`slamcli.types.LogFn` (one-line messages). A function whose first parameter is ``rep``
+is a sweep-driven section instead: ``function(rep: Reproduction) -> Section`` runs its shipped experiments with
+:meth:`Reproduction.run` (resumable, ``-j N``) and renders them from the sweep folders alone.
 """
 
 from __future__ import annotations
