@@ -267,3 +267,24 @@ def test_files_and_cli_round_trip(tmp_path):
     assert m["set_soundness"] == 1.0 and m["set_true_correspondence_survived"] is True
     assert m["set_n_hypotheses"] == len(direct.hypotheses)
     assert (tmp_path / "b.png").stat().st_size > 10_000
+
+
+def test_loop_closure_error_scenario_parameter_puts_exactly_k_bounds_on_the_loop_closing_sightings():
+    # the sweep's way to ask for the wrong-bound data: honest readings except the sightings of l1 after pose 0,
+    # whose range and bearing errors are exactly 5 declared half-widths (closed form against the truth)
+    honest = simulate_scenario("cuik-room", 1)
+    bad = simulate_scenario("cuik-room", 1, {"bounded.loop_closure_error": 5.0})
+    obs, nb, tr = bad.inputs.observations, bad.inputs.noise_bounds, bad.truth
+    rows = loop_closure_rows(bad)
+    other = np.setdiff1d(np.arange(len(obs)), rows)
+    np.testing.assert_array_equal(obs.range_m[other], honest.inputs.observations.range_m[other])
+    np.testing.assert_array_equal(obs.bearing_rad[other], honest.inputs.observations.bearing_rad[other])
+    d = tr.landmarks_xy[tr.obs_landmark[rows]] - tr.poses_xyt[obs.step[rows], :2]
+    true_b = np.arctan2(d[:, 1], d[:, 0]) - tr.poses_xyt[obs.step[rows], 2]
+    np.testing.assert_allclose(np.abs(obs.range_m[rows] - np.hypot(d[:, 0], d[:, 1])), 5 * nb.range_half_width,
+                               rtol=1e-9)
+    np.testing.assert_allclose(np.abs(obs.bearing_rad[rows] - true_b), 5 * nb.bearing_half_width, rtol=1e-9)
+    # the same readings as the harness's corruption of the honest data (seeded signs)
+    ref = corrupt_loop_closure(honest, 5.0, np.random.default_rng(1)).observations
+    np.testing.assert_array_equal(obs.range_m, ref.range_m)
+    np.testing.assert_array_equal(obs.bearing_rad, ref.bearing_rad)

@@ -179,6 +179,18 @@ def test_seeds_follow_default_rng_list_form_and_are_shared_across_solvers():
     assert solver_seed(0, 7, 1) != solver_seed(0, 7, 0)
 
 
+def test_dataset_seeds_replicate_uses_the_replicate_id_as_simulator_seed(tmp_path):
+    raw = {"experiment": {"name": "named-seeds", "root_seed": 7}, "scenario": {"name": "fake"},
+           "solver": [{"method": "a"}, {"method": "b"}],
+           "sweep": {"replicates": [0, 5], "dataset_seeds": "replicate"}}
+    exp = _expand(parse_experiment(raw, source="named-seeds.toml"))
+    assert sorted({(r.replicate, r.dataset.seed) for r in exp.runs}) == [(0, 0), (5, 5)]
+    assert {r.seed for r in exp.runs if r.replicate == 5} == {solver_seed(5, 7)}  # solver seeds still derived
+    raw["sweep"]["dataset_seeds"] = "fixed"
+    with pytest.raises(ConfigError, match=r"named-seeds.toml: sweep.dataset_seeds: 'fixed' is not one of"):
+        parse_experiment(raw, source="named-seeds.toml")
+
+
 def test_run_id_is_a_content_hash_of_the_resolved_config():
     exp = _expand(fake_experiment(replicates=1))
     r = exp.runs[0]
@@ -212,11 +224,12 @@ def test_sweep_writes_artefacts_tables_and_shares_datasets(tmp_path):
         assert cfg["run_id"] == r.run_id and content_hash({k: v for k, v in cfg.items()
                                                            if k not in ("run_id", "point")}) == r.run_id
         st = json.loads((d / "status.json").read_text())
-        assert st["status"] == "completed" and st["run_id"] == r.run_id and {"git", "host", "wall_time_s"} <= set(st)
+        assert st["status"] == "completed" and st["run_id"] == r.run_id and {"git", "host", "wall_time_s", "solve_cpu_s"} <= set(st)
         assert os.path.samefile(d / "dataset.h5", exp_dir / "datasets" / f"{r.dataset.dataset_id}.h5")
     # paired comparison: b with gain 2 is exactly twice a's signal on the same dataset (up to the 1e-3 solver noise)
     tidy = pd.read_csv(exp_dir / "results.csv")
     assert len(tidy) == 9 and set(tidy["status"]) == {"completed"}
+    assert (tidy["solve_cpu_s"] >= 0).all()  # the worker's CPU time of each solve, beside its wall time
     for rep in range(3):
         va = tidy[(tidy.label == "a") & (tidy.replicate == rep)]["value"].item()
         vb = tidy[(tidy.label == "b") & (tidy.replicate == rep) & (tidy["solver.b.gain"] == 2.0)]["value"].item()

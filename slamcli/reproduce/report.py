@@ -27,7 +27,9 @@ non-zero with a summary.
 Other papers' sections hook in with one line in :data:`SECTIONS`: ``("key", "module:function")`` where
 ``function(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool)`` writes its own figures under
 ``out_dir`` and returns its markdown (starting with its own ``## `` heading) and whether it succeeded;
-``progress`` is a :data:`slamcli.types.LogFn` (one-line messages).
+``progress`` is a :data:`slamcli.types.LogFn` (one-line messages). A function whose first parameter is ``rep``
+is a sweep-driven section instead: ``function(rep: Reproduction) -> Section`` runs its shipped experiments with
+:meth:`Reproduction.run` (resumable, ``-j N``) and renders them from the sweep folders alone.
 """
 
 from __future__ import annotations
@@ -1076,7 +1078,7 @@ SECTIONS: list[tuple[str, str]] = [
     ("compare", "compare_section"),
     ("nees", "nees_section"),
     ("paper001", "slamcli.reproduce.paper001:run_section"),
-    ("paper004", "slamcli.reproduce.paper004:run_section"),
+    ("paper004", "slamcli.reproduce.paper004:section"),
     ("real", "slamcli.reproduce.real:run_section"),
     ("real-multi", "slamcli.reproduce.real_multi:run_section"),
     ("paper001-map4", "slamcli.reproduce.paper001:run_section_map4"),
@@ -1131,17 +1133,21 @@ def verdict_summary(sections: list[Section]) -> list[str]:
     return lines
 
 
-def _external_section(key: str, target: str, out: Path, quick: bool, log, run=None) -> Section:
+def _external_section(key: str, target: str, out: Path, quick: bool, log, rep: Reproduction | None = None) -> Section:
     """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)`` with
     ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title). A function
-    with a keyword ``run`` also gets ``run`` (:meth:`Reproduction.run`: its experiments run through the sweep
-    engine like paper 000's)."""
+    whose first parameter is ``rep`` is a sweep-driven section: ``function(rep) -> Section``, running its
+    experiments with ``rep.run`` and rendering them from the sweep folders; a function with a keyword ``run``
+    also gets :meth:`Reproduction.run` (its experiments run through the sweep engine like paper 000's)."""
     import importlib
     import inspect
 
     mod_name, _, fn_name = target.partition(":")
     fn = getattr(importlib.import_module(mod_name), fn_name or "run_section")
-    extra = {"run": run} if run is not None and "run" in inspect.signature(fn).parameters else {}
+    params = inspect.signature(fn).parameters
+    if rep is not None and next(iter(params), "") == "rep":
+        return fn(rep)
+    extra = {"run": rep.run} if rep is not None and "run" in params else {}
     markdown, ok = fn(out / key, quick, log, **extra)
     head, _, body = str(markdown).partition("\n")
     sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
@@ -1186,7 +1192,7 @@ def reproduce(
             continue
         try:
             if ":" in target:
-                sec = _external_section(key, target, rep.out, quick, log, rep.run)
+                sec = _external_section(key, target, rep.out, quick, log, rep)
             else:
                 sec = getattr(rep, target)()
         except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run

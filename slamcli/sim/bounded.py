@@ -99,6 +99,19 @@ def closest_visible(pose_xyt: np.ndarray, landmarks_xy: np.ndarray, min_range: f
     return idx.astype(np.int64)
 
 
+def _loop_closure_readings(poses, landmarks, obs, obs_lm, err_r: float, err_b: float, rng: np.random.Generator):
+    """``(range_m, bearing_rad)`` with the loop-closing sightings (the first-seen landmark seen after pose 0)
+    replaced by the true reading ± exactly ``err_r`` (m) / ``err_b`` (rad), random signs from ``rng``."""
+    rows = np.flatnonzero((obs_lm == obs_lm[0]) & (np.asarray(obs.step) > 0))
+    P = poses[obs.step[rows]]
+    d = landmarks[obs_lm[rows]] - P[:, :2]
+    sr, sb = rng.choice([-1.0, 1.0], size=(2, len(rows)))
+    rng_m, brg = obs.range_m.copy(), obs.bearing_rad.copy()
+    rng_m[rows] = np.hypot(d[:, 0], d[:, 1]) + sr * err_r
+    brg[rows] = np.arctan2(d[:, 1], d[:, 0]) - P[:, 2] + sb * err_b
+    return rng_m, brg
+
+
 def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None = None) -> Dataset:
     """Simulate one bounded-noise turn-and-move run (see the module docstring); ``Dataset`` like ``simulate``."""
     b = cfg.bounded
@@ -143,7 +156,11 @@ def simulate_bounded(cfg: ScenarioConfig, seed: int, progress: ProgressFn | None
     # ``sensor.report_ids``: the sensor also reports each landmark's identity (Porta's setting, paper 004 §1)
     obs = Observations.from_rows(np.asarray(rows_step, np.int64), np.asarray(rows_z, float).reshape(-1, 2), T + 1,
                                  reported_id=obs_lm.copy() if cfg.sensor.report_ids else None)
-    obs = Observations(step=obs.step, range_m=obs.range_m, bearing_rad=obs.bearing_rad, sensor=obs.sensor,
+    rng_m, brg = obs.range_m, obs.bearing_rad
+    if b.loop_closure_error > 0 and len(obs_lm):
+        rng_m, brg = _loop_closure_readings(poses, landmarks, obs, obs_lm, h_r * b.loop_closure_error,
+                                            h_b * b.loop_closure_error, np.random.default_rng(seed))
+    obs = Observations(step=obs.step, range_m=rng_m, bearing_rad=brg, sensor=obs.sensor,
                        reported_id=obs.reported_id, offsets=obs.offsets, landmark_type=types[obs_lm])
 
     scale = float(b.declared_scale)

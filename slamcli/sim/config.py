@@ -371,6 +371,10 @@ class BoundedConfig:
     declared_separation : float       map prior declared in the dataset (``NoiseBounds.min_separation``), m:
                                       distinct landmarks are at least this far apart; 0 = none declared.
                                       The simulator does not enforce it (a wrong declaration is a test case).
+    loop_closure_error : float        0 = off; else the sightings of the first-seen landmark after pose 0 (the
+                                      room's loop closure) get errors of exactly this many declared half-widths
+                                      in range and bearing, signs drawn from ``default_rng(seed)`` — a bound
+                                      too small for those readings only (paper 004's wrong-bound test).
     """
 
     enabled: bool = False
@@ -383,6 +387,7 @@ class BoundedConfig:
     declared_scale: float = 1.0
     exact_readings: bool = False
     declared_separation: float = 0.0
+    loop_closure_error: float = 0.0
 
     def __post_init__(self) -> None:
         _check(min(self.odometry_d, self.odometry_turn_deg, self.range, self.bearing_deg) >= 0,
@@ -390,6 +395,7 @@ class BoundedConfig:
         _check(all(t >= 0 for t in self.landmark_types), "bounded.landmark_types must be >= 0")
         _check(self.declared_scale > 0, "bounded.declared_scale must be > 0")
         _check(self.declared_separation >= 0, "bounded.declared_separation must be >= 0")
+        _check(self.loop_closure_error >= 0, "bounded.loop_closure_error must be >= 0")
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ An experiment file::
     grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
     zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
     absent = "skip"                   # optional: skip a recording not on this machine (default "fail")
+    dataset_seeds = "replicate"       # optional: simulator seed = replicate id (default "derived")
 
     [quick]                           # optional fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
@@ -67,9 +68,12 @@ TOP_KEYS = ("experiment", "scenario", "data", "solver", "evaluate", "sweep", "qu
 EXPERIMENT_KEYS = ("name", "description", "root_seed")
 SCENARIO_KEYS = ("name", "parameters")
 SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
-SWEEP_KEYS = ("grid", "zip", "replicates", "seed", "absent")
+SWEEP_KEYS = ("grid", "zip", "replicates", "seed", "absent", "dataset_seeds")
 #: what a sweep does with a registered recording that is not on this machine: stop before any run, or skip it
 ABSENT_CHOICES = ("fail", "skip")
+#: a simulated dataset's seed: derived from (replicate, root_seed), or the replicate id itself (a reproduction
+#: whose source names its seeds 0..N-1)
+DATASET_SEED_CHOICES = ("derived", "replicate")
 #: the keys that say what a [[data]] entry is (exactly one per entry)
 DATA_KINDS = ("scenario", "recording", "graph", "file")
 NAMESPACES = ("scenario", "solver", "evaluate")
@@ -134,12 +138,15 @@ class SweepSpec:
     replicates : tuple of int              replicate ids.
     absent : str                           a registered recording or graph that is not on this machine:
                                            ``fail`` (before any run) or ``skip`` (one line per recording).
+    dataset_seeds : str                    ``derived`` (:func:`slamcli.sweep.expand.dataset_seed`) or
+                                           ``replicate`` (the simulator seed is the replicate id).
     """
 
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()
     zips: tuple[tuple[tuple[str, tuple[Any, ...]], ...], ...] = ()
     replicates: tuple[int, ...] = (0,)
     absent: str = "fail"
+    dataset_seeds: str = "derived"
 
 
 @dataclass(frozen=True)
@@ -616,7 +623,11 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         absent = c.string(sw.get("absent", "fail"), "sweep.absent")
         if absent not in ABSENT_CHOICES:
             raise c.fail("sweep.absent", f"{absent!r} is not one of {', '.join(ABSENT_CHOICES)}")
-        sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates, absent=absent)
+        seeds = c.string(sw.get("dataset_seeds", "derived"), "sweep.dataset_seeds")
+        if seeds not in DATASET_SEED_CHOICES:
+            raise c.fail("sweep.dataset_seeds", f"{seeds!r} is not one of {', '.join(DATASET_SEED_CHOICES)}")
+        sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates, absent=absent,
+                          dataset_seeds=seeds)
 
     quick: dict[str, Any] = {}
     if "quick" in raw:

@@ -481,7 +481,7 @@ def _datasets(cfg: ExperimentConfig, entry: DataSpec, scen_over: dict[str, Any],
         return [dataclasses.replace(ds, dataset_id=content_hash({"dataset": ds.config(), "versions": vers}))]
     out = []
     for rep in cfg.sweep.replicates:
-        seed = dataset_seed(rep, cfg.root_seed)
+        seed = rep if cfg.sweep.dataset_seeds == "replicate" else dataset_seed(rep, cfg.root_seed)
         ds = DatasetSpec(dataset_id="", scenario=entry.name, overrides=_canonical(scen_over), resolved=resolved,
                          replicate=rep, seed=seed, label=entry.label)
         out.append(dataclasses.replace(ds, dataset_id=content_hash({"dataset": ds.config(), "versions": vers})))
