@@ -636,7 +636,7 @@ def predict(x, P, pose_pred, F, motion_cov):
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
-    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
+    Q = motion_cov  # Q: process noise in pose coordinates inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     predict_inplace(x, P, pose_pred, F, Q)
@@ -645,7 +645,7 @@ def predict(x, P, pose_pred, F, motion_cov):
 
 def predict_inplace(x, P, pose_pred, F, motion_cov) -> None:
     """:func:`predict` written into ``x (n,)`` and ``P (n, n)`` (touches 3 rows and 3 columns: O(n))."""
-    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
+    Q = motion_cov  # Q: process noise in pose coordinates inside the kernel
     x[:3] = pose_pred
     x[2] = _wrap(x[2])
     P[:3, :] = F @ P[:3, :]
@@ -665,7 +665,7 @@ def update(x, P, z, j, obs_cov):
     -------
     x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
     """
-    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
+    R = obs_cov  # R: the measurement covariance inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     y, S = update_inplace(x, P, z, j, R)
@@ -705,7 +705,7 @@ def update_inplace(x, P, z, j, obs_cov):
     -------
     y : ndarray (2,) innovation, S : ndarray (2, 2) innovation covariance.
     """
-    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
+    R = obs_cov  # R: the measurement covariance inside the kernel
     k = 3 + 2 * j
     y, Hs = _innovation_and_jacobian(x[0], x[1], x[2], x[k], x[k + 1], float(z[0]), float(z[1]))
     U = P[:, :3] @ Hs[:, :3].T  # (n, 2) = P Hᵀ, pose columns ...
