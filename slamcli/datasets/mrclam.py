@@ -731,7 +731,7 @@ def residual_noise(dataset: Dataset) -> dict[str, float]:
 
 
 # --------------------------------------------------------------------------------------------------------
-# multi-robot import (issue 14 item 7)
+# multi-robot import
 # --------------------------------------------------------------------------------------------------------
 def robot_rows(
     raw: MrclamRaw, team_numbers: list[int], t_ref: float, start: float, dt: float, T: int

@@ -202,7 +202,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 
 
 def _write_motion_model(g, go, inp: SlamInputs) -> None:
-    """Motion-model tag, car geometry, sensor mount and per-observation object size (issue 14)."""
+    """Motion-model tag, car geometry, sensor mount and per-observation object size."""
     g.attrs["motion_model"] = str(inp.motion_model)
     if inp.motion_source != "controls":  # written only when set, so older files read back unchanged
         g.attrs["motion_source"] = str(inp.motion_source)
@@ -347,7 +347,7 @@ def _read_constraints(r: Reader, n_poses: int, n_obs: int) -> PoseConstraints | 
     return PoseConstraints(between_ij=np.stack([bi, bj], axis=1), between_xyt=xyt, between_info=info,
                            odometry_info=odo_info, observation_info=obs_info, observation_model=model)
 def _write_robots(g, team: RobotTeam) -> None:
-    """``/inputs/robots`` and ``/inputs/robot_observations`` (multi-robot datasets, issue 14 item 7)."""
+    """``/inputs/robots`` and ``/inputs/robot_observations`` (multi-robot datasets)."""
     gr = g.create_group("robots")
     gr.attrs["doc"] = ("multi-robot layout (slamcli.types.RobotTeam): poses of all robots stacked robot-major on "
                        "one common time grid; the odometry chain never crosses from one robot to the next")

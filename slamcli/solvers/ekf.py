@@ -297,10 +297,10 @@ class EkfSlam(BaseSolver):
             frame += hi > lo
             # Rows of landmarks not yet in the state (known: a new id; ml: no plausible state landmark) wait until
             # the step's re-observations are fused: they are appended to ``dets`` and visited after the first
-            # pass, so h⁻¹ is linearised at the updated pose, not the predicted one (with σ_ω Δt ≈ 0.18 rad of
-            # heading noise per step, a landmark initialised 40 m away from the predicted pose is metres off
-            # the tangent line its linearised P_mx assumes; measured on hybrid-map4, issue 15). In the second
-            # pass a second row of a new id / ml match updates the landmark the first one created.
+            # pass, so h⁻¹ is linearised at the updated pose, not the predicted one (a far landmark initialised
+            # from a pose with large heading noise is metres off the tangent line its linearised P_mx assumes;
+            # benchmarks/results/design_notes.md). In the second pass a second row of a new id / ml match
+            # updates the landmark the first one created.
             dets = group_detections(z_all, sensor, rid, lo, hi, st.x[:3], group=p.group_returns,
                                     association=p.association, group_dist=p.group_dist,
                                     range_offset=p.range_offset)
@@ -523,7 +523,7 @@ def _landmark_blocks(st: _GrowingState):
 
 def _chi2_2dof_ppf(q: float) -> float:
     """χ²(2) quantile in closed form: ``F(x) = 1 − exp(−x/2)``, so ``F⁻¹(q) = −2 ln(1 − q)`` (0.99 → 9.21);
-    no ``scipy.stats`` import in the filter (≈ 0.4-1 s, issue 25)."""
+    no ``scipy.stats`` import in the filter (its import cost: benchmarks/results/design_notes.md)."""
     return -2.0 * math.log1p(-q)
 
 
@@ -726,7 +726,7 @@ def _rank2_downdate(P, V) -> None:
     numpy's ``P −= V @ Vᵀ`` with its temporary.
     """
     if P.flags.c_contiguous:
-        from scipy.linalg.blas import dgemm  # lazy: scipy.linalg costs ≈ 0.1-1 s to import (issue 25)
+        from scipy.linalg.blas import dgemm  # lazy: scipy.linalg is slow to import
 
         dgemm(-1.0, V, V, 1.0, P.T, trans_b=1, overwrite_c=1)
     else:

@@ -183,7 +183,7 @@ class GraphSlam(BaseSolver):
         """
         t_start = time.perf_counter()
         p = self.params
-        if p.surface:  # the declared landmark radius (issue 22)
+        if p.surface:  # the declared landmark radius
             from slamcli.solvers.surface import mean_offset_inputs
 
             inputs = mean_offset_inputs(inputs, "graph")

@@ -1,4 +1,4 @@
-"""Null matching behind a gate (``outlier_prob > 0``, beyond the paper; issue 22 item 1).
+"""Null matching behind a gate (``outlier_prob > 0``, beyond the paper).
 
 A real sensor reports some sightings far from where its own id puts them (MRCLAM: barcodes read off the wrong
 landmark or another robot's tag, range outliers). Under the paper's quadratic Φ one such sighting drags its pose

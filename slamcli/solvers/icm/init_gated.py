@@ -1,4 +1,4 @@
-"""Gated on-line initialisation of ICM-SLAM (``init="gated"``, beyond the paper; issue 22 item 3).
+"""Gated on-line initialisation of ICM-SLAM (``init="gated"``, beyond the paper).
 
 Algorithm 2's step 1 matches a sighting to the nearest map point within a fixed Euclidean radius ϑ and moves
 the pose with fixed weights R, S, Q. On a long real run the drift outgrows ϑ, so every revisited landmark
