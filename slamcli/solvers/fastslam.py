@@ -1,60 +1,25 @@
 """FastSLAM 1.0 and 2.0: a Rao-Blackwellised particle filter over robot poses with one 2×2 EKF per landmark
-per particle (paper 002 §14.3-14.5, Algorithm 1; paper 003 "FastSLAM" slides; Montemerlo et al. 2002/2003).
+per particle (paper 002 §14.3-14.5; Montemerlo et al. 2002/2003), vectorised over particles: poses
+``x (P, 3)``, landmark means ``mu (P, C, 2)``, covariances ``sig (P, C, 2, 2)``, counters and existence flags
+``(P, C)`` (``C`` slots). Letters as in filterpy: ``Q`` motion (process) noise, ``R`` measurement noise,
+``S_n = H_m Σ H_mᵀ + R`` the innovation covariance of landmark n (Thrun's book calls them R, Q and Q_n).
 
-Posterior factorisation (paper 002, eq. 14.4)::
-
-    p(x_{1:t}, m | z_{1:t}, u_{1:t}, c_{1:t}) = p(x_{1:t} | z, u, c) · Π_n p(m_n | x_{1:t}, z, c)
-
-Each particle ``k`` carries a pose ``x^[k]`` and, for every landmark ``n``, a Gaussian ``(μ_n^[k], Σ_n^[k])``
-(eq. 14.17). Everything is vectorised over particles: poses ``x (P, 3)``, landmark means ``mu (P, C, 2)``,
-covariances ``sig (P, C, 2, 2)``, support counters ``count (P, C)`` and existence flags ``exists (P, C)``
-(``C`` = slot capacity). The only Python loops are over time steps and over the observations of one step.
-
-One step ``t`` (pose ``t-1`` → ``t``, observations ``z_{t,1..n}``):
-
-**FastSLAM 1.0** (paper 002 §14.4.1)
-  1. sample ``x_t^[k] ~ p(x_t | x_{t-1}^[k], u_t)`` (eq. 14.18; commanded controls + ``motion_std`` or
-     odometry increments + ``odometry_std``);
-  2. per observation: landmark EKF update (eqs. 14.21-14.24) and importance weight
-     ``w ∝ N(z; ẑ, S_n)``, ``S_n = H_m Σ H_mᵀ + R`` (eqs. 14.28-14.29); unseen landmarks are initialised
-     with the inverse model ``μ = h⁻¹(x, z)``, ``Σ = M_z R M_zᵀ``.
-
-**FastSLAM 2.0** (Montemerlo et al., IJCAI 2003; Thrun et al., *Probabilistic Robotics* §13.4)
-  1. Gaussian prior ``N(x̂, Q)``: ``x̂ = g(x_{t-1}^[k], u_t)``, ``Q = G_u M G_uᵀ`` (or ``J Σ_odo Jᵀ``);
-  2. per observation associated with an already-mapped landmark, a Kalman update of the *pose* proposal::
-
-         S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + R,   K = Σ_x H_xᵀ S⁻¹
-         x̂ ← x̂ + K (z − h(x̂, μ)),             Σ_x ← Σ_x − K S Kᵀ   (= (Σ_x⁻¹ + H_xᵀ S_n⁻¹ H_x)⁻¹)
-
-     (the Kalman form also works for the rank-2 DDMR motion noise, whose ``Q`` has no inverse), and the
-     importance weight is multiplied by the linearised predictive likelihood ``N(z; h(x̂, μ), S)`` — the ratio
-     target / proposal, ``p(z_t | x_{t-1}^[k], u_t, m^[k])``, of the improved proposal. Several observations
-     of one step are folded in sequentially, each linearised at the current proposal mean;
-  3. SAMPLE ``x_t^[k] ~ N(x̂, Σ_x)`` (not its mean), then update the landmark EKFs at the sampled pose as in 1.0,
-     reusing the proposal's linearisation (``H_m``, ``Σ H_mᵀ``, ``H_m Σ H_mᵀ + R``) with the innovation moved
-     to the sampled pose to first order, ``ν(x_t) = ν(x̂) − H_x (x_t − x̂)`` (:func:`_shift_terms`; exact
-     recomputation when a landmark is seen twice in one step or only some particles update it).
-
-**Correspondences** (§14.4.2): ``association="known"`` uses ``observations.reported_id`` (a sensor-reported
-identity; the caller may have filled it from ground truth with ``--oracle-association``, which the result
-file records); ``"ml"`` is per-particle maximum likelihood (eq. 14.30): the landmark maximising the
-predictive likelihood, or a new landmark when no likelihood reaches ``p0`` (the new-landmark weight is
-``p0``). Optional removal of unsupported landmarks by negative evidence: a counter starts at 1, gains 1 when
-the landmark is observed and loses 1 when it is predicted inside the sensor's range/field of view but not
-observed; the landmark is dropped when the counter falls below 0 (Thrun et al. Table 13.4).
-
-**Resampling** when ``ESS = 1/Σw² < resample_threshold · P`` (systematic by default), by fancy indexing so
-every particle owns its landmark arrays (no shared mutable state between copies). The last step is never
-resampled, so the final weights still rank the particles.
-
-**Output.** ``poses_xyt``: weighted mean per step (circular mean heading) or the best final particle's path
-(traced back through the resampling ancestry). ``pose_cov (T+1, 3, 3)``: weighted moment-matched covariance
-of the particle poses about the weighted mean, full 3×3 (EVALUATION-METHOD §A2). Landmarks: with known
-association the weighted moment-matched mixture ``μ̄ = Σ w μ``, ``Σ̄ = Σ w [Σ + (μ − μ̄)(μ − μ̄)ᵀ]``
-over particles; with ML association particles do not share landmark identities, so the best particle's map
-and its own EKF covariances are returned. ``assoc``: the best particle's association of every observation.
-``extra["mean_nis"]``: mean normalised innovation squared over all particle updates (χ²(2) ⇒ ≈ 2; 1.0: the
-landmark update at the sampled pose, 2.0: the predictive innovation of the proposal).
+* **1.0**: sample ``x_t ~ p(x_t | x_{t-1}, u_t)`` (eq. 14.18; controls + ``motion_std`` or odometry +
+  ``odometry_std``), then per observation the landmark EKF update (eqs. 14.21-14.24) and the weight
+  ``N(z; ẑ, S_n)``; unseen landmarks start at ``μ = h⁻¹(x, z)``, ``Σ = M_z R M_zᵀ``.
+* **2.0** (Probabilistic Robotics §13.4): prior ``N(x̂, Q)``, ``Q = G_u M G_uᵀ`` (or ``J Σ_odo Jᵀ``); each
+  observation of a mapped landmark refines the pose proposal by a Kalman update
+  ``S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + R``, ``K = Σ_x H_xᵀ S⁻¹`` and multiplies the weight by ``N(z; h(x̂, μ), S)``;
+  the pose is then sampled from ``N(x̂, Σ_x)`` and the landmark EKFs updated there, reusing the proposal's
+  linearisation shifted to first order (:func:`_shift_terms`).
+* **Correspondences** (§14.4.2): ``association="known"`` uses ``observations.reported_id``; ``"ml"`` is
+  per-particle maximum likelihood (eq. 14.30) with a new landmark below ``p0``; optional negative evidence
+  drops landmarks predicted in view but not seen (Table 13.4).
+* **Resampling** when ``ESS = 1/Σw² < resample_threshold · P`` (systematic by default); never at the last step.
+* **Output**: poses as the weighted mean per step (circular heading) or the best particle's traced-back path;
+  ``pose_cov`` the weighted moment-matched covariance; landmarks as the moment-matched mixture over particles
+  (known association) or the best particle's map (ml); ``assoc`` the best particle's;
+  ``extra["mean_nis"]`` the mean NIS over all particle updates (χ²(2) ⇒ ≈ 2).
 """
 
 from __future__ import annotations
