@@ -29,8 +29,8 @@ def app_for(argv: list[str]):
     ``argv`` starts with anything else (an option, an unknown or mistyped name, nothing).
 
     typer turns every registered command into a click command (signature, type hints, parameters) before it
-    parses anything: ≈ 20 ms CPU for all of them, of which the one command run needs a twentieth. Every
-    command parses, helps and fails the same either way (``tests/test_cli_startup.py``).
+    parses anything, which costs CPU for every command although one is run. Every command parses, helps and
+    fails the same either way (``tests/test_cli_startup.py``).
     """
     import copy
 

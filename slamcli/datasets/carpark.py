@@ -70,8 +70,8 @@ def _get(m: dict, key: str, path: Path) -> np.ndarray:
     return a
 
 
-#: bound on the bytes the variables of one .mat file hold once inflated: 20× the published recording's
-#: 3.6 MB (0.45 M float64 values); loadmat then holds at most this much
+#: bound on the bytes the variables of one .mat file hold once inflated: about 20× the published recording's
+#: size; loadmat then holds at most this much
 MAX_MAT_BYTES = 80 << 20
 #: a MAT 5 data element whose payload is one zlib stream
 _MI_COMPRESSED = 15

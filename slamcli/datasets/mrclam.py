@@ -43,13 +43,8 @@ from slamcli.numerics import TIME_EPS_S
 from slamcli.params import check_allocation
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
-#: Standard deviations a solver may assume for MRCLAM, measured with :func:`residual_noise` against the
-#: motion-capture truth on Dataset 7 (each of the five robots over its whole run, dt = 0.1 s; robust
-#: σ = 1.4826·MAD): range σ 0.066-0.18 m (robot 1: 0.066 with a median bias of +0.045 m; robots 2 and 4:
-#: 0.18), bearing σ 0.006-0.019 rad, error of the step-averaged controls σ_v 0.009-0.015 m/s and σ_ω
-#: 0.034-0.070 rad/s. The defaults sit at the upper end of those ranges (range slightly below the worst
-#: robot). Measured at dt = 0.02 s the control σ look larger (σ_v 0.026, σ_ω 0.12 for robot 1) because
-#: differencing the motion capture over 20 ms amplifies its own noise; the defaults do not depend on dt.
+#: Standard deviations a solver may assume for MRCLAM: the upper end of what :func:`residual_noise` finds
+#: against the motion-capture truth of the five robots (chosen by measurement: benchmarks/results/design_notes.md).
 DEFAULT_RANGE_STD = 0.15
 DEFAULT_BEARING_STD = 0.02
 DEFAULT_MOTION_STD = (0.015, 0.07)

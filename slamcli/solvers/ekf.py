@@ -180,7 +180,7 @@ class _GrowingState:
 
     The in-place kernels (:func:`predict_inplace`, :func:`update_inplace`, ...) run on the padded pair
     ``xa (nₐ,)``, ``Pa (nₐ, nₐ)`` with ``nₐ ≥ n``: ``Pa`` is C-contiguous (numpy's in-place rank-k update on a
-    strided ``[:n, :n]`` window of a larger square buffer costs about twice as much, measured) and its
+    strided ``[:n, :n]`` window of a larger square buffer is slower) and its
     rows/columns beyond ``n`` are exactly zero, which every kernel keeps exactly zero (their rows of
     ``P Hᵀ`` are 0), so the padding changes no number. ``x`` and ``P`` are the active ``[:n]`` views.
 

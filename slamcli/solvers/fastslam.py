@@ -47,8 +47,8 @@ from slamcli.types import SlamInputs, SolverResult, Status
 LOG_2PI = math.log(2.0 * math.pi)
 CHI2_2DOF_9999 = 18.420680743952367  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
 #: Batched kernels work on (P, k) arrays of at most this many float64 (64 KB): larger temporaries leave
-#: glibc's heap for mmap, and their page faults cost more than the batching saves (measured: 280 KB
-#: temporaries made the batched 1.0 update 1.5× slower than row by row at P = 1000).
+#: glibc's heap for mmap, and their page faults cost more than the batching saves
+#: (chosen by measurement: benchmarks/results/design_notes.md).
 BATCH_ELEMENTS = 8192
 
 
@@ -238,8 +238,8 @@ class ParticleSet:
 
     def store(self, idx: tuple, mx, my, a, b, c) -> None:
         """Write landmark means ``(mx, my)`` and covariances ``[[a, b], [b, c]]`` at the slot index tuple ``idx``
-        (``(particles, slots)``: any numpy index of the first two axes), component by component (measured:
-        stacking the components first and writing once costs twice as much)."""
+        (``(particles, slots)``: any numpy index of the first two axes), component by component (cheaper than
+        stacking the components first and writing once)."""
         self.mu[idx + (0,)], self.mu[idx + (1,)] = mx, my
         self.sig[idx + (0, 0)], self.sig[idx + (1, 1)] = a, c
         self.sig[idx + (0, 1)] = self.sig[idx + (1, 0)] = b
@@ -261,7 +261,7 @@ class ParticleSet:
 
 # ---------------------------------------------------------------------------------------------------------
 # Component-wise kernels. Every quantity is an array over particles (and, for ML candidates, landmarks);
-# explicit 2×2 / 3×3 algebra on component arrays is ~10× faster than np.matmul on stacks of tiny matrices.
+# explicit 2×2 / 3×3 algebra on component arrays is much faster than np.matmul on stacks of tiny matrices.
 # ---------------------------------------------------------------------------------------------------------
 @dataclasses.dataclass
 class _ObsTerms:
@@ -1020,7 +1020,7 @@ class _Run:
         """Landmark EKFs of the distinct mapped ``slots (k,)`` with measurements ``z (k, 2)`` in every particle
         at once, on ``(P, k)`` component arrays; adds ``Σ_k log N(ν; 0, S_n)`` to the log-weights."""
         R, x = self._R, ps.x
-        # np.take gathers whole slots (3× faster than ``mu[:, slots]`` here, measured at P = 1000, k = 2 and 8)
+        # np.take gathers whole slots (faster than ``mu[:, slots]`` here)
         comps = _components(np.take(ps.mu, slots, axis=1), np.take(ps.sig, slots, axis=1))  # (P, k) each
         o = _obs_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], *comps, z[:, 0], z[:, 1], R[0, 0], R[1, 1])
         mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)

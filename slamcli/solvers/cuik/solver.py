@@ -148,8 +148,8 @@ class CuikSlam(BaseSolver):
     #: cross-solver comparisons on Gaussian data leave it out (it has its own reproduce section, paper 004)
     needs_noise_bounds: ClassVar[bool] = True
     #: what to run instead on data without bounds (both refusals say it: ``slamcli solve`` up front, ``solve``
-    #: called directly in its FAILED result). Not ``loop`` with ``bounded.enabled=true``: 500 steps and 12
-    #: landmarks of unknown correspondence did not finish in 300 s (measured), cuik-room takes 0.3 s.
+    #: called directly in its FAILED result). Not ``loop`` with ``bounded.enabled=true``: its 12 landmarks of
+    #: unknown correspondence over 500 steps branch far too much (benchmarks/results/design_notes.md).
     noise_bounds_hint: ClassVar[str] = ("cuik is set-membership SLAM (paper 004) for bounded-noise worlds: "
                                         "slamcli simulate -s cuik-room -o room.h5, then solve room.h5")
 

@@ -128,8 +128,8 @@ def check_covariance_blocks(cov: np.ndarray, what: str) -> None:
 
 def _leading_minors_positive(sym: np.ndarray) -> bool:
     """Whether every symmetric block of ``sym (B, k, k)`` is positive definite by Sylvester's criterion (all
-    leading principal minors > 0), in closed form for ``k ≤ 3`` (a few elementwise operations: on 1000 pose
-    blocks ≈ 5× cheaper than a batched Cholesky), by a batched Cholesky otherwise. False means "not shown":
+    leading principal minors > 0), in closed form for ``k ≤ 3`` (a few elementwise operations, cheaper than a
+    batched Cholesky), by a batched Cholesky otherwise. False means "not shown":
     the caller decides with eigenvalues."""
     k = sym.shape[1]
     if k > 3:

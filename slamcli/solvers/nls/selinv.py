@@ -296,9 +296,9 @@ def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.n
 def _unit_lower_inverse(blocks: np.ndarray) -> np.ndarray:
     """Inverses of unit lower triangular ``(B, w, w)`` blocks: row by row forward substitution batched over
     the blocks (``w − 1`` einsums; a third of the flops of a general inverse and none of its per-matrix
-    LAPACK overhead: 1000 blocks of 12 × 12, 1.6 vs 5.2 ms), the blocked inverse
-    (:func:`_unit_lower_inverse_blocked`) from :data:`TRTRI_MIN_WIDTH` on or when the blocks are fewer than
-    about 0.6 (w − 1) (City10000's separators of 27-96 columns: a few calls instead of ≈ 700 einsums)."""
+    LAPACK overhead), the blocked inverse (:func:`_unit_lower_inverse_blocked`) from :data:`TRTRI_MIN_WIDTH`
+    on or when the blocks are fewer than about 0.6 (w − 1) (chosen by measurement:
+    benchmarks/results/design_notes.md)."""
     B, w, _ = blocks.shape
     if w >= TRTRI_MIN_WIDTH or 5 * B < 3 * (w - 1):  # few wide blocks: matrix products beat w − 1 einsums
         return _unit_lower_inverse_blocked(blocks)
@@ -314,9 +314,8 @@ def _unit_lower_inverse_blocked(blocks: np.ndarray) -> np.ndarray:
     """Inverses of lower triangular ``(B, w, w)`` blocks by the 2 × 2 block formula, recursively,
     ``[[A, 0], [C, D]]⁻¹ = [[A⁻¹, 0], [−D⁻¹ C A⁻¹, D⁻¹]]``;
     leaves of at most :data:`TRI_LEAF_WIDTH` columns by numpy's batched LU inverse (its rounding-level upper
-    triangle dropped). Matrix products only: LAPACK's ``trtri`` would cost ``import scipy.linalg`` (≈ 220 M
-    instructions, the largest single import of a default pose-graph solve) for the same few tenths of a ms
-    (288 × 288: 0.8 vs 1.0 ms; 27 × 27: 10 vs 30 µs)."""
+    triangle dropped). Matrix products only: LAPACK's ``trtri`` would cost ``import scipy.linalg`` for no
+    gain (measured: benchmarks/results/design_notes.md)."""
     B, w, _ = blocks.shape
     if w <= TRI_LEAF_WIDTH:
         return np.tril(np.linalg.inv(blocks))
