@@ -8,13 +8,13 @@ K GPS) is minimised node by node:
    already-mapped labels; new labels when nothing lies within ϑ; map points as running means (eq. 17), then
    the map update of §4 and the ς filter. ``init="kinematic"``: poses from g(x, u) only (Fig. 6).
 2. **ICM sweeps** (step 2, eqs. 12-15), visit order c_0, c_1, x_1, …, c_T, x_T, m: all matchings in one
-   KD-tree query, each pose to the mode of its conditional (eq. 6, a few Gauss-Newton steps with halving),
+   KD-tree query, each pose to the mode of its conditional (eq. (6), a few Gauss-Newton steps with halving),
    then the map step (eq. 17 + label fusion within ϑ + the ς filter).
 
-Choices beyond Algorithm 2 as printed (the reasons and measurements: benchmarks/results/design_notes.md):
-new labels when nothing lies within ϑ; up to 10 fusion passes; running-mean map points in the init;
-per-return matching; ``pose_iters`` Gauss-Newton steps per pose; ς = 1 by default (paper 500); the
-``monotone`` guard on fusion and filtering; an early stop (``energy_rtol`` and an optimality test);
+Deliberate deviations from Algorithm 2 as printed (reasons and measurements: benchmarks/results/design_notes.md):
+new label when nothing lies within ϑ; up to 10 fusion passes; running-mean map points in the init;
+per-return matching; ``pose_iters`` Gauss-Newton steps per pose; ς defaults to 1 (paper 500); the
+``monotone`` guard on fusion and filtering; a stopping rule (``energy_rtol`` and an optimality test);
 ``polish="nls"`` (all poses and the map to the optimum under the current matchings, :mod:`.polish`);
 ``filtered="drop"`` (observations of filtered points leave the model; ``"rematch"`` is eq. 13).
 Further options, default off: ``schedule="parallel"`` (odd/even pose classes), ``accelerate="joint"``,
