@@ -173,8 +173,8 @@ def scan_log_likelihood(rb: RayBatch, P_seg: np.ndarray, max_range: float, eps: 
 
         p(r | s, P) = (1−ε) Π_{i: b_i ≤ r−m} (1 − P_i) · Σ_{j: b_j > r−m} P_j f_j(r) + ε/r_max
 
-    Without it a pose from which the beams clip fewer wall cells before their readings is preferred (on
-    hybrid-map1 the true pose lost to a sigma point 0.3 m off, under a near-exact map)."""
+    Without it a pose from which the beams clip fewer wall cells before their readings is preferred
+    (benchmarks/results/design_notes.md)."""
     rs = rb.segs
     if free_margin <= 0:
         _, pi, miss = ray_products(P_seg, rs)
