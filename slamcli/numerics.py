@@ -1,4 +1,4 @@
-"""Named tolerances (issue 21: "named tolerances" instead of bare literals), each with the quantity it guards.
+"""Named tolerances instead of bare literals, each with the quantity it guards.
 
 Values are those the code used as literals before; naming them changes no result.
 """

@@ -261,32 +261,25 @@ class SlamInputs:
     ----------
     dt : float                       sampling period, s.
     timestamps : ndarray (T+1,)      time of each pose, s.
-    x0 : ndarray (3,)                known start pose (paper 000 §3 assumes it is known; it fixes the gauge).
+    x0 : ndarray (3,)                known start pose (paper 000 §3; it fixes the gauge).
     controls : ndarray (T, 2)        commanded [v, ω] applied from pose t to pose t+1.
     odometry_xyt : ndarray (T+1, 3)  encoder dead-reckoning poses (their increments are the odometry data).
-    observations : Observations
-    noise : NoiseSpec
+    observations : Observations;  noise : NoiseSpec
     max_range : float                sensor max range, m (inf when unlimited).
-    gps_step : ndarray (G,) int64    optional GPS fixes: pose index ...
-    gps_xy : ndarray (G, 2)          ... and position, m.
+    gps_step, gps_xy : ndarray (G,) int64, (G, 2)   optional GPS fixes: pose index and position, m.
     gps_std : float                  σ of a GPS fix, m.
-    motion_model : str               "ddmr" (controls = [v, ω]) or "ackermann" (controls = [v_e, α]: speed at
-                                     the rear-left encoder and steering, see slamcli.models.ackermann; then
-                                     ``noise.motion_std`` = [σ_v m/s, σ_α rad]). Old files read as "ddmr".
+    motion_model : str               "ddmr" (controls = [v, ω]) or "ackermann" (controls = [v_e, α], encoder speed
+                                     and steering, ``noise.motion_std`` = [σ_v m/s, σ_α rad]; slamcli.models.ackermann).
     vehicle : AckermannParams | None car geometry, required with motion_model="ackermann".
     sensor_offset_xy : ndarray (2,)  sensor mount (a, b) in the body frame, m (zeros = at the body origin).
     constraints : PoseConstraints | None  per-edge information and pose-pose (loop-closure) constraints.
-    reported_id_source : str         where ``observations.reported_id`` comes from: ``"sensor"`` (a real sensor
-                                     that can misread an id, e.g. MRCLAM's barcodes), ``"file"`` (a graph
-                                     file's data association), ``"unknown"`` (default; the simulator's ids).
+    reported_id_source : str         origin of ``observations.reported_id``: ``"sensor"`` (may misread),
+                                     ``"file"`` (a graph file's association) or ``"unknown"`` (default).
     noise_bounds : NoiseBounds | None  guaranteed error bounds (bounded-noise datasets only).
     robots : RobotTeam | None        multi-robot layout (stacked poses, inter-robot readings); None = one robot.
-    motion_source : str              what the dataset's motion data is: ``"controls"`` (default; commanded
-                                     controls, the odometry a separate encoder log — the simulator) or
-                                     ``"odometry"`` (measured SE(2) increments: a graph file's odometry edges;
-                                     ``controls`` are derived from them and lose a part, the sideways step).
-                                     Solvers' ``motion_input="auto"`` follows it. MRCLAM stays ``controls``:
-                                     its odometry is the integral of its velocity log, no more.
+    motion_source : str              ``"controls"`` (default; commanded controls, odometry a separate log) or
+                                     ``"odometry"`` (measured SE(2) increments, ``controls`` derived from them);
+                                     solvers' ``motion_input="auto"`` follows it.
     """
 
     dt: float
@@ -525,14 +518,11 @@ class SolverResult:
     wall_time_s : float
     dataset_hash : str                 content hash of the input dataset (filled in by the caller).
     hypotheses : BoxHypotheses | None  set-membership solvers: every surviving hypothesis with its boxes.
-    extra : dict                       small solver-specific scalars/strings, e.g.
-                                       ``{"used_truth_association": True}``; JSON-serialisable and
-                                       deterministic (same inputs + seed ⇒ same extra). No timings here.
-    timings : dict[str, float]         every solver-specific wall-clock measurement, seconds or ms as the
-                                       key says (e.g. ICM ``init_s``, ``s_per_sweep``). Together with
-                                       ``wall_time_s`` and ``trace.time_s`` these are the only
+    extra : dict                       small JSON-serialisable, deterministic solver-specific values (no timings).
+    timings : dict[str, float]         solver-specific wall-clock measurements (unit in the key, e.g. ICM
+                                       ``init_s``); with ``wall_time_s`` and ``trace.time_s`` the only
                                        non-deterministic numbers of a result (docs/schema.md "Timings").
-    grids : dict[str, OccupancyGrid]   occupancy maps by name (``hybrid``: "frequentist", "logodds");
+    grids : dict[str, OccupancyGrid]   occupancy maps by name (``hybrid``: "frequentist", "logodds"),
                                        written as the optional ``/grids`` group.
     """
 

@@ -66,6 +66,82 @@ def test_greedy_nn_seeded_labels_and_buffer_growth():
     assert greedy_nearest_neighbour(many, 1.0).tolist() == list(range(100))
 
 
+def brute_force_greedy_nn(points, threshold, labels, steps):
+    """The labelling rule written out row by row in plain Python floats (the reference for the vectorised
+    solver): gate against the previous step's running means, then cluster the rest of the step in row order."""
+    thr2 = threshold * threshold
+    out = [int(v) for v in labels]
+    sums: dict[int, list[float]] = {}
+    for i, lab in enumerate(out):
+        if lab >= 0:
+            s = sums.setdefault(lab, [0.0, 0.0, 0.0])
+            s[0] += points[i][0]
+            s[1] += points[i][1]
+            s[2] += 1.0
+    next_id = max(out) + 1 if max(out, default=-1) >= 0 else 0
+    todo = [i for i in range(len(out)) if out[i] < 0]
+    by_step: dict[int, list[int]] = {}
+    for i in todo:
+        by_step.setdefault(int(steps[i]), []).append(i)
+
+    def nearest(p, ids):
+        best, best_d2 = -1, np.inf
+        for k in ids:  # ascending ids: a tie keeps the lower one
+            mx, my = sums[k][0] / sums[k][2], sums[k][1] / sums[k][2]
+            d2 = (p[0] - mx) * (p[0] - mx) + (p[1] - my) * (p[1] - my)
+            if d2 < best_d2:
+                best, best_d2 = k, d2
+        return best if best_d2 <= thr2 else -1
+
+    for step in sorted(by_step):
+        before = sorted(sums)
+        gated = {i: nearest(points[i], before) for i in by_step[step]}
+        created: list[int] = []
+        for i in by_step[step]:
+            if gated[i] < 0:
+                k = nearest(points[i], created)
+                if k < 0:
+                    k, next_id = next_id, next_id + 1
+                    created.append(k)
+                    sums[k] = [0.0, 0.0, 0.0]
+                out[i] = k
+                sums[k][0] += points[i][0]
+                sums[k][1] += points[i][1]
+                sums[k][2] += 1.0
+        for i, k in gated.items():
+            if k >= 0:
+                out[i] = k
+                sums[k][0] += points[i][0]
+                sums[k][1] += points[i][1]
+                sums[k][2] += 1.0
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_greedy_nn_equals_the_row_by_row_rule_on_random_crowded_steps(seed):
+    # crowded steps (up to hundreds of rows), repeated points, tight and spread clusters and seeded ids: every
+    # path of the vectorised labelling (gating equal rows once, parts split by gaps, one-cluster parts)
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(200, 700))
+    centres = rng.uniform(0.0, [5.0, 20.0, 60.0][seed % 3], (int(rng.integers(3, 40)), 2))
+    pts = centres[rng.integers(0, len(centres), n)] + rng.normal(0.0, [0.02, 0.3, 0.7][seed % 3], (n, 2))
+    pts[rng.random(n) < 0.3] = pts[0]  # repeated rows
+    steps = np.sort(rng.integers(0, [1, 4, 30][seed % 3], n))
+    labels = np.where(rng.random(n) < 0.1 * (seed % 2), rng.integers(0, 6, n), -1)
+    threshold = [0.5, 1.0, 2.0][seed // 2]
+    got = greedy_nearest_neighbour(pts, threshold, labels, steps)
+    assert got.tolist() == brute_force_greedy_nn(pts.tolist(), threshold, labels, steps)
+
+
+def test_greedy_nn_of_many_equal_rows_per_step():
+    # the shape of a small compressed file declaring millions of observations: equal rows in every step
+    # (its speed is measured by python -m benchmarks.faults, not timed here)
+    steps = np.repeat(np.arange(40), 20_000)
+    pts = np.column_stack([steps * 3.0, np.zeros(steps.size)])
+    got = greedy_nearest_neighbour(pts, 1.0, steps=steps)
+    np.testing.assert_array_equal(got, steps)
+
+
 def test_compact_drops_rare_labels_and_renumbers_by_first_sighting():
     assert compact(np.array([5, 2, 5, -1, 9, 2, 5]), 1).tolist() == [0, 1, 0, -1, 2, 1, 0]
     assert compact(np.array([5, 2, 5, -1, 9, 2, 5]), 2).tolist() == [0, 1, 0, -1, -1, 1, 0]

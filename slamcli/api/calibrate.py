@@ -85,7 +85,7 @@ def nis_for_motion_scale(inputs: SlamInputs, scale: float, **ekf_params) -> tupl
     """Mean NIS and update count of the EKF (``association=ml`` unless given) with ``motion_std_scale = scale``."""
     from slamcli.api.solve import solve_dataset
 
-    # the EKF defaults before issue 24 item 7, spelled out: a calibration must not move with the solver's defaults
+    # the EKF's earlier defaults, spelled out: a calibration must not move with the solver's defaults
     params = {"association": "ml", "provisional": False, "group_returns": False, "new_landmark_prob": 0.9999,
               **ekf_params, "motion_std_scale": float(scale)}
     res = solve_dataset(inputs, "ekf", params)

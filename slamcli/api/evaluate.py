@@ -283,7 +283,7 @@ def monte_carlo_nees_files(result_paths, data_paths=None, *, confidence: float =
 
 
 # ------------------------------------------------------------------------------------------------------
-# real recordings: no ground truth, or a position-only reference (issue 14)
+# real recordings: no ground truth, or a position-only reference
 # ------------------------------------------------------------------------------------------------------
 def evaluate_without_truth(result, dataset):
     """Metrics of a result whose dataset has no true poses/landmarks: the solver's own final cost, NIS with

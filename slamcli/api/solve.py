@@ -122,13 +122,13 @@ def solve_dataset(
 
     solver = make_solver(method, params)
     check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics
-    check_multi_robot(solver, method, inputs)  # multi-robot data: graph / icm only (issue 14 item 7)
+    check_multi_robot(solver, method, inputs)  # multi-robot data: graph / icm only
     if getattr(solver, "needs_noise_bounds", False) and inputs.noise_bounds is None:
         hint = getattr(solver, "noise_bounds_hint", "simulate with bounded.enabled=true")
         raise SolverError(f"solver {method!r} needs guaranteed error bounds (inputs/noise_bounds), which this "
                           f"dataset does not declare; {hint}")
     offset = np.asarray(inputs.sensor_offset_xy, float).reshape(2).copy()
-    solver_inputs = to_sensor_frame(inputs)  # the sensor mounting offset, for every solver (issue 14)
+    solver_inputs = to_sensor_frame(inputs)  # the sensor mounting offset, for every solver
     if init is not None and offset.any():
         from slamcli.models.observation import sensor_pose
 

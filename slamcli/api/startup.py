@@ -23,8 +23,8 @@ import sys
 from types import ModuleType
 
 #: ``numpy.__all__`` submodules that ``from numpy import *`` executes and that a default graph solve never uses
-#: (measured: with every lazily loaded submodule deferred, a solve touches only ``numpy.random``, ``numpy.fft``
-#: and ``numpy.typing``, which SciPy imports itself)
+#: (with every lazily loaded submodule deferred, a solve touches only ``numpy.random``, ``numpy.fft`` and
+#: ``numpy.typing``, which SciPy imports itself)
 UNUSED_NUMPY_SUBMODULES = ("char", "core", "ctypeslib", "f2py", "ma", "polynomial", "rec", "strings", "testing")
 
 
@@ -96,7 +96,7 @@ class _Loaded:
 
 
 class _AfterNumpy:
-    """A meta path finder (duck-typed: ``importlib.abc`` costs ≈ 10 ms to import) that finds nothing itself: on
+    """A meta path finder (duck-typed: ``importlib.abc`` is slow to import) that finds nothing itself: on
     the import of ``numpy`` it removes itself, lets the other finders locate NumPy, and wraps the loader so that
     :func:`_register_lazy` runs right after NumPy's ``__init__``."""
 

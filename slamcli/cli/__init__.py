@@ -29,8 +29,8 @@ def app_for(argv: list[str]):
     ``argv`` starts with anything else (an option, an unknown or mistyped name, nothing).
 
     typer turns every registered command into a click command (signature, type hints, parameters) before it
-    parses anything: ≈ 20 ms CPU for all of them, of which the one command run needs a twentieth. Every
-    command parses, helps and fails the same either way (``tests/test_cli_startup.py``).
+    parses anything, which costs CPU for every command although one is run. Every command parses, helps and
+    fails the same either way (``tests/test_cli_startup.py``).
     """
     import copy
 
@@ -52,10 +52,10 @@ def main() -> None:
     """The ``slamcli`` console script and ``python -m slamcli``.
 
     A command first imports numpy/SciPy/h5py/typer: tens of thousands of objects that live as long as the
-    process, which CPython's default collector threshold (700 net allocations) walks ~100 times before any
-    work starts — ≈ 3 % of the instructions of a 1k-pose ``solve`` (valgrind, issue 25 item 1). The young
-    generation is collected every :data:`GC_THRESHOLD0` net allocations instead; the older generations keep
-    their ratios, so cyclic garbage is still collected (the library API leaves the threshold alone).
+    process, which CPython's default collector threshold (700 net allocations) walks many times before any
+    work starts. The young generation is collected every :data:`GC_THRESHOLD0` net allocations instead
+    (chosen by measurement: benchmarks/results/design_notes.md); the older generations keep their ratios, so
+    cyclic garbage is still collected (the library API leaves the threshold alone).
     NumPy submodules that ``import scipy.sparse`` would execute and no command uses (``numpy.f2py``,
     ``numpy.testing``, …) are registered as lazily executed modules first
     (:func:`slamcli.api.startup.defer_unused_numpy_submodules`).

@@ -35,7 +35,7 @@ _ROWS = [
     ("map error per cell: frequentist / log-odds", ("grid_frequentist_mean_abs_error", "grid_logodds_mean_abs_error")),
     ("total map error: frequentist / log-odds", ("grid_frequentist_total_abs_error", "grid_logodds_total_abs_error")),
     ("cell accuracy at 0.5: frequentist / log-odds", ("grid_frequentist_accuracy", "grid_logodds_accuracy")),
-    # no ground truth / GPS reference (issue 14)
+    # no ground truth / GPS reference
     ("GPS ATE RMSE (SE(2)-aligned)", "gps_ate_aligned_rmse_m"),
     ("GPS ATE RMSE (unaligned)", "gps_ate_rmse_m"),
     ("GPS ATE RMSE, glitches kept (al. / unal.)", ("gps_ate_aligned_raw_rmse_m", "gps_ate_raw_rmse_m")),

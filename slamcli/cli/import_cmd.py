@@ -24,7 +24,7 @@ app.add_typer(import_app, name="import")
 
 def _import_mrclam_team(directory: Path, robots: str | None, all_robots: bool, solo_dir: Path | None, out: Path,
                         quiet: bool, *, no_truth: bool, non_landmark: str, force: bool, **kw) -> None:
-    """``import mrclam --robots`` / ``--all-robots``: one multi-robot dataset (issue 14 item 7)."""
+    """``import mrclam --robots`` / ``--all-robots``: one multi-robot dataset."""
     import os
 
     from slamcli.datasets.mrclam import import_mrclam_team

@@ -1,40 +1,21 @@
 """ACFR car-park importer (the Victoria Park utility car in a car park with 15 retro-reflective beacons).
 
-Files (MATLAB v5, read with ``scipy.io.loadmat``; see the dataset's PROVENANCE.txt):
+Files (MATLAB v5, read with ``scipy.io.loadmat``; see the dataset's PROVENANCE.txt): ``data_set.mat`` with
+``Velocity``/``Steering``/``Time_VS`` (40 Hz encoder speed and steering), ``Laser``/``Intensity``/``TimeLaser``
+(361 beams over 0..180°, 90° ahead; 81.91 m = no return) and ``GPSLon``/``GPSLat``/``TimeGPS`` (already a
+local metric frame); ``beac_juan3.mat`` with ``estbeac (15, 2)``, the surveyed beacons in the GPS frame.
 
-* ``data_set.mat``: ``Velocity``/``Steering``/``Time_VS`` (40 Hz, speed at the rear-left encoder, steering),
-  ``Laser``/``Intensity``/``TimeLaser`` (361 beams over 0..180°, 0.5° apart, 90° straight ahead; 81.91 m =
-  no return), ``GPSLon``/``GPSLat``/``TimeGPS`` (GPS already in a local metric frame: x = GPSLon, y = GPSLat).
-* ``beac_juan3.mat``: ``estbeac (15, 2)``: surveyed beacon positions in the GPS frame.
+* **Poses** at the ``Time_VS`` stamps (uniform dt), controls ``[v_e, α]`` held per step, ``motion_model =
+  "ackermann"`` with the Victoria Park geometry and laser mount; ``x0 = 0`` (evaluation aligns SE(2));
+  odometry = the integrated car model.
+* **Beacons** (:func:`extract_beacons`): a beam is a beacon return when ``Intensity ≥ INTENSITY_THRESHOLD``
+  (any non-zero reflectivity; values are multiples of 2¹³) and it has a return; consecutive such beams whose
+  ranges differ by ≤ 0.5 m form one beacon, observed at their mean range and mean angle (``b = angle − π/2``).
+  Each scan goes to the nearest pose (timing error ≤ dt/2).
+* **Truth**: the surveyed beacons as landmark truth (no association), GPS as a position-only reference.
 
-Conversion
-----------
-* Poses at the ``Time_VS`` stamps (uniform dt), controls ``[v_e, α]`` held per step, ``motion_model =
-  "ackermann"`` with the Victoria Park geometry (same vehicle), laser at (3.78, 0.50) m; ``x0 = [0, 0, 0]``
-  (the heading in the GPS frame is not known, so evaluation aligns SE(2)); odometry = the integrated car model.
-* **Beacons** (:func:`extract_beacons`): the laser's reflectivity is quantised in multiples of 8192 (2¹³;
-  values 0, 8192, 16384, 24576, 32768 occur); a beam is a beacon return when ``Intensity ≥
-  INTENSITY_THRESHOLD = 8192`` (any non-zero reflectivity) and it has a return (range < 81.9 m).
-  Consecutive such beams (index gap ≤ 1) whose ranges differ by ≤ 0.5 m form one beacon; its observation is
-  the mean range and the mean beam angle (bearing ``b = angle − π/2``). Tested against beacons counted by
-  hand in five scans. Each scan goes to the nearest pose (timing error ≤ dt/2).
-* **Truth**: the surveyed beacons as landmark truth (no association), GPS as a position-only path reference.
-
-Noise
------
-Defaults σ_v 0.5 m/s, σ_α 3°, σ_r 0.1 m, σ_b 0.5°. Measured on the whole run (procedure:
-:mod:`slamcli.api.calibrate`; EKF ``association=ml``; 15 beacons exist):
-
-1. **Scan-to-scan residuals** of the same beacon (783 pairs): robust σ_r = 0.0104 m, σ_b = 0.0026 rad.
-2. **EKF NIS** (95 % band ≈ [1.86, 2.15] for ~800 updates) and the map it gives, with the scan-to-scan σ
-   times c and the control σ times k: defaults NIS 0.67; (c, k) = (1, 0.5): **2.02, inside the band, but
-   110 landmarks and GPS ATE 1.10 m**; (1, 1): 1.61, 72 landmarks, 0.77 m; (1, 2): 1.18, 73, 0.23 m;
-   (2, 1): 1.29, 35, 0.46 m; (4, 2): 0.55, 20, 0.15 m. Dead reckoning: 2.04 m.
-3. Residuals of a converged ``graph`` against its own map: robust σ_r = 0.049 m, σ_b = 0.0049 rad.
-
-As on Victoria Park the NIS band is reached only by noise so small that the gate turns view-dependent beacon
-errors into new landmarks (the NIS counts accepted associations only), so the conservative defaults stay;
-``slamcli import carpark --range-std … --bearing-std … --v-std … --steer-std …`` sets other values.
+Noise defaults σ_v 0.5 m/s, σ_α 3°, σ_r 0.1 m, σ_b 0.5° are conservative on purpose (chosen by measurement:
+benchmarks/results/design_notes.md); ``--range-std``, ``--bearing-std``, ``--v-std``, ``--steer-std`` set others.
 """
 
 from __future__ import annotations
@@ -89,8 +70,8 @@ def _get(m: dict, key: str, path: Path) -> np.ndarray:
     return a
 
 
-#: bound on the bytes the variables of one .mat file hold once inflated: 20× the published recording's
-#: 3.6 MB (0.45 M float64 values); loadmat then holds at most this much
+#: bound on the bytes the variables of one .mat file hold once inflated: about 20× the published recording's
+#: size; loadmat then holds at most this much
 MAX_MAT_BYTES = 80 << 20
 #: a MAT 5 data element whose payload is one zlib stream
 _MI_COMPRESSED = 15

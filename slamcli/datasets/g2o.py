@@ -1,74 +1,27 @@
 """Pose-graph and landmark-graph files (g2o, GTSAM text, TORO) → slamcli, losslessly.
 
-Public benchmarks distributed this way: the DLR-Spatial-Cognition landmark graph (``dlr.g2o``), GTSAM's
-``victoria_park.txt`` and the pose-graph benchmarks with loop closures (Intel, MIT, CSAIL, Manhattan M3500,
-City10000, KITTI 00; ``shared/datasets/pose_graphs``). A graph file carries the *measurements* of a run, with
-no time and usually no ground truth, so the import gives solver inputs only (``has_truth = false``): every
-solver runs on it; ``evaluate`` needs ground truth and says so.
+For the public graph benchmarks (DLR, GTSAM's ``victoria_park.txt``, Intel, MIT, CSAIL, M3500, City10000,
+KITTI 00). A graph file carries measurements only (no time, usually no truth): ``has_truth = false``.
 
-Lines understood (anything else is an error naming the line; ``#`` comments and blank lines are skipped). The
-matrices are described as the default convention ``auto`` reads them (each tag as the tool that defined it);
-``convention = "g2o" | "toro" | "gtsam" | "isam"`` reads every tag as that tool does (order of the six numbers,
-information / covariance / square-root information, landmark id space: :mod:`slamcli.datasets.graph_conventions`):
+Lines understood (anything else is an error naming the line; ``#`` comments and blank lines skipped), each tag
+read as the tool that defined it, or every tag as one tool with ``convention = "g2o" | "toro" | "gtsam" |
+"isam"`` (:mod:`slamcli.datasets.graph_conventions`): ``VERTEX_SE2``/``VERTEX2`` (only the first pose's guess
+is used, as ``x0``), ``VERTEX_XY`` (ignored), ``EDGE_SE2`` (3×3 information, g2o order), ``EDGE2`` (TORO
+order), ``ODOMETRY`` (3×3 covariance), ``EDGE_SE2_XY``/``LANDMARK2`` (2×2 information), ``LANDMARK`` (2×2
+covariance), ``BR i l b r σ_b σ_r`` (bearing-range) and ``EQUIV a b`` (b merged into the smaller id).
 
-===========================================  ===================================================================
-``VERTEX_SE2 id x y θ`` / ``VERTEX2``        initial pose guess; only the first pose's is used (as ``x0``)
-``VERTEX_XY id x y``                         initial landmark guess (not used: solvers initialise themselves)
-``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22      relative pose of j in i's frame; 3×3 *information*, upper
-I23 I33``                                    triangle row by row (g2o order)
-``EDGE2 i j dx dy dθ I_ff I_fs I_ss I_rr     the same in TORO's order (forward f, sideways s, rotation r):
-I_fr I_sr``                                  ``[[ff, fs, fr], [fs, ss, sr], [fr, sr, rr]]`` (as GTSAM's TORO
-                                             noise format)
-``ODOMETRY i j dx dy dθ C11 C12 C13 C22      the same with a 3×3 *covariance* (GTSAM's "COV" layout, the one
-C23 C33``                                    its loader detects for victoria_park.txt)
-``EDGE_SE2_XY i l dx dy I11 I12 I22``        landmark l seen from pose i at (dx, dy) in pose i's frame;
-                                             2×2 information
-``LANDMARK2 i l dx dy I11 I12 I22``          the same (older tag, read as EDGE_SE2_XY)
-``LANDMARK i l dx dy C11 C12 C22``           the same with a 2×2 covariance (GTSAM)
-``BR i l b r σ_b σ_r``                       GTSAM bearing-range sighting: bearing (rad), range (m) and their σ
-``EQUIV a b``                                poses a and b are one pose (TORO): b is merged into the smaller id;
-                                             an edge between merged poses is a constant of the cost, dropped and
-                                             reported (``metadata["equiv_dropped_cost"]``)
-===========================================  ===================================================================
-
-Conversion
-----------
-* **Pose order** – pose ids are the ids used by pose-pose edges, in ascending order; pose ``p_k`` becomes step
-  ``k`` (pose ids: those of the pose vertices and of the pose-pose edges). The first edge (file order) from
-  ``p_k`` to ``p_{k+1}`` (else one from ``p_{k+1}`` to ``p_k``, inverted exactly) is the odometry of step ``k`` (every public benchmark numbers its poses along the
-  trajectory). Any graph imports: where that edge is missing the step is completed from the initial estimate
-  (vertices, or a spanning tree) with a near-zero information, and each further disconnected component gets
-  one prior (:func:`_chain`); the import says so in one line (``metadata["import_note"]``).
-* **Loop closures** – every other pose-pose edge (any two poses, either direction, duplicates too) becomes a
-  between-factor of ``inputs.constraints`` (``/inputs/constraints`` in the schema) with its own measurement
-  and information matrix. ``max_poses = N`` keeps the first N poses and the edges and sightings among them.
-* **Body axes** – slamcli's body frame has x forward (bearing 0 straight ahead). Some files drive along
-  another axis (``dlr.g2o`` along −y). With ``forward = "auto"`` the axis with the largest summed odometry
-  translation (with its sign) is taken as forward; the body frame is rotated by φ (0, ±π/2, π) so that it
-  points forward: increments and between measurements become ``(R(−φ)·[dx, dy], dθ)``, landmark offsets
-  ``R(−φ)·[dx, dy]``, poses ``θ + φ``, information matrices ``R₃ Λ R₃ᵀ`` with ``R₃ = blkdiag(R(−φ), 1)``
-  (the SE(2) error transforms as ``e' = R₃ e``, so every factor's cost is unchanged: exact).
-* **Odometry** – ``odometry_xyt`` chains the converted increments from ``x0`` (the first pose's vertex,
-  converted, or the origin); ``controls = [d_x/dt, d_θ/dt]`` per step (the DDMR model has no lateral
-  velocity, so d_y is only in the odometry; ``motion_source = "odometry"`` tells the solvers to propagate with
-  the increments). ``dt`` is nominal (default 1 s): a graph carries no time.
-* **Observations** – ``range = ‖[dx, dy]‖``, ``bearing = atan2(dy, dx)`` in the converted body frame;
-  ``reported_id`` = landmark index (landmark ids in ascending order), because the file's data association
-  is part of the data. Rows keep the file order within a step.
-* **Noise, lossless** – every edge keeps its information matrix in ``inputs.constraints``: odometry
-  ``odometry_info (T, 3, 3)``, sightings ``observation_info (N, 2, 2)`` in the file's own model (``xy`` for
-  EDGE_SE2_XY / LANDMARK / LANDMARK2: residual ``R(θ)ᵀ(m − p) − z``; ``range_bearing`` for BR). The ``graph``
-  solver uses them (``edge_info = true``, default), so its cost is the file's cost. A file mixing xy and BR
-  sightings is refused (one model per file).
-* **Noise, summary** – for solvers that take one σ per quantity (schema v1 ``NoiseSpec``) the per-edge
-  matrices are also summarised by their median: ``odometry_std`` = median √diag of the increment
-  covariances (converted axes), ``motion_std`` = ``[σ_x, σ_θ]/dt``, range/bearing σ = median of the
-  first-order polar propagation ``J P Jᵀ, J = [[x/r, y/r], [−y/r², x/r²]]`` of each landmark covariance P
-  (BR: the median σ's). The spread is in the metadata. (GTSAM's own loader reads a ``LANDMARK`` covariance
-  ``c·I`` differently: σ_r = √c, σ_b = √(c/10), i.e. "the covariance describes the uncertainty at 10 m"; for
-  victoria_park.txt that is 0.63 m and 0.2 rad, against our 0.63 m and a median 0.05 rad. Pass
-  ``range_std``/``bearing_std`` to choose other values, or ``convention = "gtsam"`` to read the sightings
-  as GTSAM does: bearing-range rows with those σ's.)
+* **Poses**: ids in ascending order become steps; the first edge p_k → p_{k+1} (or its exact inverse) is step
+  k's odometry; missing steps are completed from the initial estimate with near-zero information and each
+  further component gets one prior (:func:`_chain`, reported in ``metadata["import_note"]``).
+* **Loop closures**: every other pose-pose edge becomes a between factor of ``inputs.constraints``.
+* **Body axes**: ``forward = "auto"`` rotates the body frame by φ ∈ {0, ±π/2, π} onto the axis of largest
+  summed translation; measurements and information matrices are rotated with it (every cost unchanged).
+* **Odometry / controls**: chained from ``x0``; ``controls = [d_x/dt, d_θ/dt]`` with a nominal ``dt``;
+  ``motion_source = "odometry"``.
+* **Observations**: range and bearing of ``[dx, dy]``; ``reported_id`` = landmark index.
+* **Noise**: every edge keeps its information matrix (``odometry_info``, ``observation_info`` in the file's
+  model, ``xy`` or ``range_bearing``; a file mixing both is refused); ``NoiseSpec`` holds their medians for
+  solvers with one σ per quantity (GTSAM reads ``LANDMARK`` σ differently: benchmarks/results/design_notes.md).
 """
 
 from __future__ import annotations

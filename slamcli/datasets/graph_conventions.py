@@ -1,35 +1,24 @@
 """How the numbers after a graph file's measurement are read: one *convention* per file.
 
-Graph files of different tools share tags but not the meaning of the numbers after the measurement
-(``EDGE2 i j dx dy dθ a b c d e f`` is TORO information in a TORO file, g2o-ordered square-root information
-in an iSAM file and a covariance for GTSAM's ``load2D``). A convention fixes, for every tag:
+Tools share tags but not the meaning of the numbers (``EDGE2 i j dx dy dθ a b c d e f`` is TORO information
+in a TORO file, g2o-ordered square-root information in an iSAM file, a covariance for GTSAM's ``load2D``).
+A convention fixes, per tag, the **order** of a 3×3 symmetric matrix's six numbers (g2o's upper triangle
+``[a11 a12 a13 a22 a23 a33]`` or TORO's ``[ff fs ss rr fr sr]``), what the matrix **is** (information ``Λ``,
+covariance ``Σ = Λ⁻¹`` or square-root information ``R`` with ``Λ = RᵀR``), and whether landmark ids share
+the pose **id space**:
 
-* the **order** of the six numbers of a 3×3 symmetric matrix over ``(x, y, θ)``: g2o's upper triangle row
-  by row ``[a11 a12 a13 a22 a23 a33]``, or TORO's ``[ff fs ss rr fr sr]`` (forward f, sideways s,
-  rotation r);
-* what the matrix **is**: information ``Λ``, covariance ``Σ = Λ⁻¹``, or the upper-triangular square-root
-  information ``R`` (same upper triangle, zeros below) with ``Λ = RᵀR`` (iSAM);
-* whether landmark ids share one **id space** with pose ids (g2o, TORO: a landmark id equal to a pose id
-  names the same vertex, so it is refused) or have their own (GTSAM keys them ``L(id)``, iSAM keeps two
-  counters).
-
-==========  ==========================================  =======================================  ==========
-convention  pose-pose edges (EDGE_SE2, EDGE2,           landmark xy sightings (EDGE_SE2_XY,       landmark
-            ODOMETRY)                                   LANDMARK2, LANDMARK)                      ids
-==========  ==========================================  =======================================  ==========
-g2o         information, g2o order (GTSAM's readG2o)    information                              shared
-toro        information, TORO order                     information                              shared
-gtsam       covariance; order from the zero pattern as  ``LANDMARK`` as GTSAM's ``load2D``: a    own space
-            ``load2D``'s AUTO: ``[a 0 b c 0 0]`` TORO,   bearing-range factor, σ_r = √c,
-            ``[a 0 0 b 0 c]`` g2o; anything else is      σ_b = √(c/10) for a covariance ``c·I``
-            refused (GTSAM cannot tell)                  (other tags: refused, GTSAM skips them)
-isam        square-root information, g2o order          square-root information                  own space
-auto        per tag, as the tool that defined it:       EDGE_SE2_XY, LANDMARK2 information;      own space
-            EDGE_SE2 g2o information, EDGE2 TORO        LANDMARK covariance                      when the
-            information, ODOMETRY g2o covariance                                                  sightings
-                                                                                                  are
-                                                                                                  LANDMARK/BR
-==========  ==========================================  =======================================  ==========
+==========  ============================================  ==============================  ==========
+convention  pose-pose edges (EDGE_SE2, EDGE2, ODOMETRY)    landmark xy sightings           landmark ids
+==========  ============================================  ==============================  ==========
+g2o         information, g2o order (GTSAM's readG2o)      information                     shared
+toro        information, TORO order                       information                     shared
+gtsam       covariance, order from the zero pattern as    ``LANDMARK`` as ``load2D``:     own space
+            ``load2D``'s AUTO (else refused)              bearing-range, σ_r = √c,
+                                                          σ_b = √(c/10); others refused
+isam        square-root information, g2o order            square-root information         own space
+auto        per tag as its tool: EDGE_SE2 g2o info,       EDGE_SE2_XY, LANDMARK2 info;    own space for
+            EDGE2 TORO info, ODOMETRY g2o covariance      LANDMARK covariance             LANDMARK/BR
+==========  ============================================  ==============================  ==========
 
 ``BR i l b r σ_b σ_r`` (bearing, range and their σ) means the same in every convention.
 """

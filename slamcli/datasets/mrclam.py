@@ -1,54 +1,27 @@
 """UTIAS MRCLAM importer: one robot of a Multi-Robot Cooperative Localization and Mapping dataset → slamcli.
 
-Source: K. Y. K. Leung, Y. Halpern, T. D. Barfoot, H. H. T. Liu, "The UTIAS multi-robot cooperative
-localization and mapping dataset", IJRR 30(8), 2011. Five iRobot Create robots (differential drive) with a
-monocular camera that reads cylindrical barcoded landmarks (15 of them) and the barcodes worn by the other
-robots; a 10-camera motion-capture system gives ground truth for robots and landmarks.
+Source: Leung, Halpern, Barfoot & Liu, IJRR 30(8), 2011: five differential-drive robots whose cameras read
+15 barcoded landmarks and each other, with motion-capture truth. Files read (``#`` comment lines, whitespace
+separated, Unix seconds): ``Barcodes.dat`` (subject, barcode), ``Landmark_Groundtruth.dat`` (subject, x, y,
+σ_x, σ_y), ``RobotN_Odometry.dat`` (time, v, ω; ~100 Hz with gaps and duplicate stamps),
+``RobotN_Measurement.dat`` (time, barcode, range, bearing) and ``RobotN_Groundtruth.dat`` (time, x, y, θ).
 
-Files read from the dataset directory (all start with ``#`` comment lines; whitespace separated; Unix s):
+On the fixed-rate schema (pose k at ``t_k = t_start + k·dt``):
 
-=============================  =================================================================
-``Barcodes.dat``               subject #, barcode #   (subjects 1-5 robots, 6-20 landmarks)
-``Landmark_Groundtruth.dat``   subject #, x [m], y [m], σ_x [m], σ_y [m]
-``RobotN_Odometry.dat``        time, v [m/s], ω [rad/s]   (~100 Hz velocity log, gaps, duplicate stamps)
-``RobotN_Measurement.dat``     time, BARCODE, range [m], bearing [rad]   (the header says "Subject #")
-``RobotN_Groundtruth.dat``     time, x [m], y [m], θ [rad]   (~60 Hz motion capture)
-=============================  =================================================================
+* **Controls**: the velocity log as a zero-order hold, averaged over each step,
+  ``u_k = (F(t_{k+1}) − F(t_k)) / dt`` with ``F`` its running integral (:func:`zoh_average`); the odometry is
+  their dead reckoning (MRCLAM's "odometry" is this velocity log).
+* **Measurements**: each row to the nearest step (timing error ≤ dt/2, the largest in
+  ``metadata["max_timing_error_s"]``); landmark subjects become indices ``0..L-1`` and ``reported_id`` (the
+  barcode is a sensor-reported identity); barcode misreads are −1 in ``truth.obs_landmark``; rows seeing a
+  robot or an unknown barcode are dropped (``non_landmark="drop"``) or kept as clutter.
+* **Stamp order**: isolated out-of-order rows are sorted into place and equal stamps keep the last row (listed
+  in ``metadata["stamp_repairs"]``); disorder a local sort cannot explain is refused.
+* **Start and truth**: ``x0`` is the truth at ``t_start``; true poses are the motion capture interpolated at
+  ``t_k`` (heading on the circle); landmarks from ``Landmark_Groundtruth.dat``.
 
-Conversion to the fixed-rate schema (``dt``; pose k at time ``t_k = t_start + k·dt``, k = 0..T)
------------------------------------------------------------------------------------------------------
-* **Controls** – the velocity log is a zero-order hold: row i holds ``u(t) = u_i`` for
-  ``t ∈ [τ_i, τ_{i+1})`` (of duplicate stamps the latest row wins, gaps hold the last row). The control of
-  step k is its time average over the step::
-
-      u_k = (1/dt) ∫_{t_k}^{t_{k+1}} u(s) ds = (F(t_{k+1}) − F(t_k)) / dt,   F(t) = F(τ_i) + u_i (t − τ_i)
-
-  with ``F`` the running integral at the row stamps (:func:`zoh_average`).
-* **Odometry** – MRCLAM's "odometry" IS this velocity log, so ``odometry_xyt`` is the dead-reckoning
-  ``slamcli.models.motion.integrate(x0, controls, dt)`` (its increments are the odometry data, eq. 16).
-* **Measurements** – each row goes to the nearest pose step ``k = round((t − t_start)/dt)``; rows whose
-  nearest step is outside ``0..T`` are left out. The timing error is therefore at most ``dt/2`` (recorded
-  as ``metadata["max_timing_error_s"]`` together with the largest error that actually occurred). Barcodes
-  map to subjects through ``Barcodes.dat``; landmark subjects (those in ``Landmark_Groundtruth.dat``,
-  6..20) become landmark index ``0..L-1`` in subject order. ``reported_id`` is that index: the barcode IS an
-  identity reported by the sensor, a measurement solvers may use (``association=known``); ``truth.obs_landmark``
-  is the same index except for barcode misreads (``misread_gate``), which are −1 there. Rows that see
-  another robot or an unknown barcode are not landmark observations: ``non_landmark="drop"`` (default)
-  leaves them out, ``"clutter"`` keeps them with ``reported_id = −1`` and ``truth.obs_landmark = −1``.
-* **Stamp order** – rows are taken in time order: an isolated out-of-order row (a swapped pair, a row a few
-  places early or late) is put in place by a stable sort, and equal stamps keep the last row; both are counted
-  and their file lines listed in ``metadata["stamp_repairs"]`` (file name → counts and lines). Disorder that a
-  local sort cannot explain (a row far from its place, many rows out of order) is refused with its count.
-* **Start pose** – ``x0`` is the ground truth at ``t_start`` (the known start pose of paper 000 §3).
-* **Truth** – poses are the motion-capture track interpolated at ``t_k``: x, y linearly, the heading on
-  the circle (``θ_i + w·angle_diff(θ_{i+1}, θ_i)``). Landmarks come from ``Landmark_Groundtruth.dat``.
-
-Time axis: ``timestamps`` are seconds since ``t_ref = max(first odometry stamp + control_delay, first
-ground-truth stamp)``, the first moment both the controls and the start pose are known (Unix time in
-``metadata["time_origin_unix_s"]``). ``start`` and ``duration`` are measured on that axis.
-
-Noise (``NoiseSpec``) defaults: see :func:`default_noise` and :func:`residual_noise`, which measures them
-from a dataset against its ground truth.
+``timestamps`` count from ``t_ref = max(first odometry stamp + control_delay, first truth stamp)`` (Unix time
+in ``metadata["time_origin_unix_s"]``). Noise defaults: :func:`default_noise`, :func:`residual_noise`.
 """
 
 from __future__ import annotations
@@ -70,13 +43,8 @@ from slamcli.numerics import TIME_EPS_S
 from slamcli.params import check_allocation
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
 
-#: Standard deviations a solver may assume for MRCLAM, measured with :func:`residual_noise` against the
-#: motion-capture truth on Dataset 7 (each of the five robots over its whole run, dt = 0.1 s; robust
-#: σ = 1.4826·MAD): range σ 0.066-0.18 m (robot 1: 0.066 with a median bias of +0.045 m; robots 2 and 4:
-#: 0.18), bearing σ 0.006-0.019 rad, error of the step-averaged controls σ_v 0.009-0.015 m/s and σ_ω
-#: 0.034-0.070 rad/s. The defaults sit at the upper end of those ranges (range slightly below the worst
-#: robot). Measured at dt = 0.02 s the control σ look larger (σ_v 0.026, σ_ω 0.12 for robot 1) because
-#: differencing the motion capture over 20 ms amplifies its own noise; the defaults do not depend on dt.
+#: Standard deviations a solver may assume for MRCLAM: the upper end of what :func:`residual_noise` finds
+#: against the motion-capture truth of the five robots (chosen by measurement: benchmarks/results/design_notes.md).
 DEFAULT_RANGE_STD = 0.15
 DEFAULT_BEARING_STD = 0.02
 DEFAULT_MOTION_STD = (0.015, 0.07)
@@ -609,25 +577,17 @@ def import_mrclam(
     robot : robot number N (1-based).
     dt : sampling period of the output, s (> 0).
     start : seconds after ``t_ref`` (first moment with both odometry and ground truth) where pose 0 lies.
-    duration : length of the window, s; ``None`` = up to the end of the shorter of odometry/ground truth.
-        ``T = floor(duration/dt)`` steps.
-    non_landmark : what to do with rows that see a robot or an unknown barcode: ``"drop"`` or ``"clutter"``
-        (kept with ``reported_id = −1``, ``truth.obs_landmark = −1``).
+    duration : length of the window, s (``T = floor(duration/dt)``); ``None`` = to the end of the shorter log.
+    non_landmark : rows that see a robot or an unknown barcode: ``"drop"`` or ``"clutter"`` (``reported_id = −1``).
     noise : NoiseSpec to store; default :func:`default_noise` ``(dt)``.
-    max_range : sensor max range to store, m (``inf`` = no limit; the MRCLAM camera has no published one).
-    control_delay : s added to every odometry stamp before resampling (velocity row i then acts from
-        ``τ_i + control_delay``). Default 0 = the log as recorded. On Dataset 7 the motion capture lags the
-        velocity log: the per-step ω residual against the truth is smallest for a delay of 0.15-0.2 s on all
-        five robots (robot 1: RMS 0.156 → 0.105 rad/s), while dead-reckoning ATE changes by < 5 %.
-    misread_gate : rad. A landmark row whose bearing differs by more than this from the bearing of its
-        barcode's landmark seen from the motion-capture pose at the row's own time is a barcode misread: its
-        ``truth.obs_landmark`` is −1 (its ``reported_id`` stays what the sensor reported). On Dataset 7 the
-        bearing residuals of all 16 067 landmark rows are < 0.12 rad except 8 rows > 2 rad (robots 3 and 5),
-        whose ranges are also off by 3.1-5.9 m; ``inf`` turns the check off.
-    no_truth : for copies without the Groundtruth files: ``t_ref`` is the first odometry stamp, ``x0 = [0, 0,
-        0]`` (the robot's own start frame), ``truth = None``; landmarks are the barcode subjects ≥ 6.
-    time_origin_unix : Unix time to use as ``t_ref`` instead of this robot's own (the common time base of a
-        multi-robot import, :func:`import_mrclam_team`); must not lie before this robot's own ``t_ref``.
+    max_range : sensor max range to store, m (``inf`` = no limit).
+    control_delay : s added to every odometry stamp before resampling; 0 = the log as recorded (the lag seen on
+        Dataset 7: benchmarks/results/design_notes.md).
+    misread_gate : rad; a landmark row whose bearing differs by more than this from its barcode's landmark seen
+        from the motion-capture pose is a misread (``truth.obs_landmark = −1``); ``inf`` turns the check off.
+    no_truth : for copies without the Groundtruth files: ``t_ref`` = first odometry stamp, ``x0 = 0``, no truth.
+    time_origin_unix : Unix time to use as ``t_ref`` (the common base of :func:`import_mrclam_team`); not before
+        this robot's own ``t_ref``.
     raw : the already parsed files of this robot (:func:`load_mrclam`), to avoid parsing them twice.
 
     Raises
@@ -731,7 +691,7 @@ def residual_noise(dataset: Dataset) -> dict[str, float]:
 
 
 # --------------------------------------------------------------------------------------------------------
-# multi-robot import (issue 14 item 7)
+# multi-robot import
 # --------------------------------------------------------------------------------------------------------
 def robot_rows(
     raw: MrclamRaw, team_numbers: list[int], t_ref: float, start: float, dt: float, T: int

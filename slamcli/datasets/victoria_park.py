@@ -1,91 +1,25 @@
 """Sydney Victoria Park importer (ACFR utility car, SICK laser, tree trunks as landmarks) → slamcli dataset.
 
-Source: J. Guivant, E. Nebot, "Optimization of the simultaneous localization and map-building algorithm for
-real-time implementation", IEEE T-RA 17(3), 2001; the ASCII conversion shipped with K. Leung's RFS-SLAM
-(``data/VictoriaPark``). Files read from the directory (whitespace separated, seconds since the start):
+Source: Guivant & Nebot, IEEE T-RA 17(3), 2001; the ASCII conversion shipped with K. Leung's RFS-SLAM
+(``data/VictoriaPark``). Files read (whitespace separated, seconds since the start): ``inputs.dat`` (time,
+rear-left encoder speed v_e [m/s], steering α [rad]; 40 Hz, uniform), ``measurements.dat`` (time, range [m],
+bearing [rad] in the laser frame, 0..π with π/2 ahead, trunk diameter [m]; no identities) and ``gps.dat``
+(time, x [m], y [m]; position only, gaps up to 58 s).
 
-=====================  =======================================================================================
-``inputs.dat``         time, speed at the rear-left encoder v_e [m/s], steering α [rad]   (40 Hz, uniform)
-``measurements.dat``   time, range [m], bearing [rad] in the laser frame (0..π, π/2 straight ahead),
-                       trunk diameter [m] — the output of the original tree detector; no identities
-``gps.dat``            time, x [m], y [m]   (position only, gaps up to 58 s)
-=====================  =======================================================================================
+* **Poses** at the input stamps (uniform ``dt``, zero-order hold); ``controls = [v_e, α]`` with
+  ``motion_model = "ackermann"`` and :data:`slamcli.models.ackermann.VICTORIA_PARK`; body frame = rear-axle
+  centre, laser at ``sensor_offset_xy``; ``x0 = 0`` (the GPS frame's heading is unknown, so GPS ATE is
+  SE(2)-aligned); ``odometry_xyt`` integrates the car model (:func:`slamcli.models.ackermann.integrate_ackermann`).
+* **Measurements**: a scan goes to the nearest pose, ``k = round((t − t_0)/dt)`` (the largest timing error is
+  in ``metadata["max_timing_error_s"]``); bearing ``b = b_laser − π/2``; ``reported_id = −1``; the trunk
+  diameter per row in ``observations.diameter_m`` (ranges behave as centre ranges, so no offset is added).
+* **Reference**: GPS fixes as a position-only truth of the laser point (``GroundTruth.ref_time_s/ref_xy``,
+  ``ref_offset_xy``); no true poses, landmarks or association exist.
 
-Conversion
-----------
-* **Poses** sit at the input stamps (uniform ``dt`` = 0.025 s); step k holds input row k from ``t_k`` to
-  ``t_{k+1}`` (zero-order hold, the log's own samples, no resampling). ``controls`` stay ``[v_e, α]`` with
-  ``motion_model = "ackermann"`` and the Victoria Park geometry (L = 2.83 m, H = 0.76 m,
-  :data:`slamcli.models.ackermann.VICTORIA_PARK`).
-* **Body frame** = rear-axle centre; the laser sits at ``sensor_offset_xy = (3.78, 0.50)`` m.
-  ``x0 = [0, 0, 0]`` (the run's own frame: the GPS frame's heading is not known, so GPS ATE is reported
-  SE(2)-aligned). ``odometry_xyt`` is the car model integrated from ``x0`` through the controls
-  (:func:`slamcli.models.ackermann.integrate_ackermann`).
-* **Measurements**: a scan goes to the nearest pose, ``k = round((t − t_0)/dt)`` (timing error ≤ dt/2 =
-  12.5 ms, the largest that occurred in ``metadata["max_timing_error_s"]``). Bearing ``b = b_laser − π/2``.
-  ``reported_id = −1`` (unknown correspondence); the trunk diameter is kept per row in
-  ``observations.diameter_m``. Whether the detector's ranges are to the trunk surface or its centre is not
-  stated with the data; measured, they behave as centre ranges: the EKF with ``-p surface=true`` (the
-  declared-size offset added) ends the first 300 s at GPS ATE 1.449 m against 1.428 m without, and its mean
-  NIS rises from 0.59 to 0.70, so no solver adds an offset by default.
-* **Reference**: GPS fixes as a position-only truth (``GroundTruth.ref_time_s/ref_xy``) of the laser point (``ref_offset_xy``); no true poses,
-  landmarks or association exist.
-
-Noise
------
-The defaults (σ_v 0.5 m/s, σ_α 3°, σ_r 0.5 m, σ_b 0.5°) are deliberately conservative; the measurements behind
-that choice (procedure: :mod:`slamcli.api.calibrate`; first 120 s of the run, EKF ``association=ml``):
-
-1. **Scan-to-scan residuals** of the same trunk in consecutive scans (4002 pairs): robust σ_r = 0.034 m,
-   σ_b = 0.0024 rad — the detector's noise at a fixed viewpoint, 15× / 3.6× below the defaults.
-2. **EKF NIS** (χ²₂, 95 % band ≈ [1.94, 2.06] for ~4400 updates): 0.50 with the defaults (174 landmarks,
-   GPS ATE 1.02 m aligned); 2.42 with the scan-to-scan σ (controls ×1; ×2 gives 2.39: the NIS hardly depends on
-   the controls); 1.82 with it ×2; **2.02 with it ×1.8 (σ_r = 0.061 m, σ_b = 0.0043 rad): inside the band,
-   but 348 landmarks and GPS ATE 1.59 m** — worse than the defaults.
-3. Residuals of a converged ``graph`` (nearest-neighbour association) against its own map: robust
-   σ_r = 0.39 m, σ_b = 0.010 rad — the view-dependent trunk error (range to the surface, partial trunks) and
-   association ambiguity that consecutive scans do not see.
-4. **Variance-component estimation** at the batch optimum of ``isam``'s association — the GPS is used
-   nowhere (``benchmarks/bench_vp_noise.py``, results ``benchmarks/results/vp_noise.{csv,md}``): ``graph``'s
-   factors (per-step odometry between factors and range-bearing factors in the laser frame, no kernel), per
-   group the variance factor ``r_g = Σ whitened residual² / redundancy``, redundancy ``n_g − tr(J_g H⁻¹ J_gᵀ)``
-   exact (:mod:`slamcli.solvers.nls.variance`), σ_g scaled by √r_g and re-solved until every ``|r_g − 1| < 0.002``.
-   With the defaults the full run gives r = 0.30 (odometry x), 13.3 (lateral), 0.46 (heading), 0.126 (range),
-   0.325 (bearing); the calibrated σ are odometry (0.0053 m, 0.0128 m, 0.00137 rad) per step, σ_r 0.159 m,
-   σ_b 0.0051 rad — ×0.43 / ×2.55 / ×0.68 / ×0.32 / ×0.58 the defaults (first 300 s: ×0.38 / ×2.72 / ×0.83 /
-   ×0.27 / ×0.50; full run on the association the calibrated noise gives with a wide gate: σ_r 0.124 m, the
-   rest within 4 %). The odometry rows carry little of the redundancy (ρ/n = 0.022 / 0.040 / 0.077 against
-   0.96 / 0.84 for range / bearing): the shortcut ``ρ ≈ n (1 − unknowns/observations)`` gives variance factors
-   2.7 / 2.4 for range / bearing at the calibrated σ. Checked on this very problem (measurements drawn
-   with the calibrated σ around the estimate, same association, seeded; VCE from the defaults again): it
-   recovers range, bearing and heading σ within 1.4 % (≤ 0.6 sd), the low-redundancy x and lateral σ up to
-   7-8 % low (full x 0.93, 300 s lateral 0.92) — the calibrated odometry x / lateral σ may be that much
-   larger, which changes none of the factors' directions. The lateral σ is 2.5× what the heading σ alone makes at
-   the laser's 3.78 m lever arm (0.0052 m): sideways slip of the laser point that the car model does not have,
-   so no (σ_v, σ_α) pair reproduces it. VCE takes the residuals as white; slip and encoder errors are
-   correlated along the 40 Hz steps, so the per-step odometry σ describe the model as used, not the sensor.
-
-Why the defaults stay: by VCE they are *not* a calibrated model of the optimum's residuals (item 4), but they
-also set the association gate, and no solver has a separate gate σ. With the calibrated noise ``isam``'s χ²
-gate (``gate_prob`` 0.999) rejects re-observations and each rejected detection starts a landmark: full run
-2307 landmarks and GPS ATE 8.46 m against 1154 and 1.590 m with the defaults (first 300 s: 621, 2.31 m
-against 390, 1.394 m). Only a wider gate (``-p gate_prob=0.999999999``) brings it back: 1239, 1.476 m
-(300 s: 400, 1.390 m); with the calibrated laser σ alone, the part the import options set, 1.556 / 1.384 m.
-The EKF on the first 300 s goes from 1.428 m (402 landmarks, mean NIS 0.59) to 1.642 m (620, NIS 1.40) with
-the calibrated laser σ, to 2.530 m (708) with the controls mapped too (σ_v 0.214 m/s from the x σ, σ_α 2.2°
-from the heading σ at 4 m/s), and to 1.434 m (449, NIS 2.34) with the calibrated laser σ and a wide gate
-(``gate_prob`` 0.999999999, ``new_landmark_prob`` 0.9999999999); ``graph``'s default (association from the
-dead-reckoned path) stays at ~21 m (21.3 / 21.0 / 22.2 m). The EKF's mean NIS (item 2) is likewise taken over
-the *accepted* associations only: the filter looks consistent while the map doubles. With unknown association
-on these trunks the conservative noise is the better default. ``slamcli import victoria-park --range-std
-0.061 --bearing-std 0.0043`` gives the NIS-calibrated variant, ``--range-std 0.159 --bearing-std 0.0051`` the
-VCE-calibrated laser σ (the per-step odometry σ of item 4 are not an import option).
-
-The split — wide noise for the association, calibrated noise for the estimate — is what ``isam -p noise=vce``
-does by itself (:mod:`slamcli.solvers.isam`): the on-line pass with these defaults, then the VCE of item 4 on
-its own association and the batch optimum under the σ it finds (GPS unused). Full run: σ ×0.44 / ×2.55 /
-×0.68 / ×0.32 / ×0.58 (4 re-weightings to 5 %), GPS ATE 1.452 m (2.512 m with the glitch), 25.7× real time
-(``benchmarks/bench_isam.py``).
+Noise defaults (σ_v 0.5 m/s, σ_α 3°, σ_r 0.5 m, σ_b 0.5°) are deliberately conservative: they also set the
+association gate, and calibrated values split trees into many landmarks (chosen by measurement:
+benchmarks/results/design_notes.md, benchmarks/results/vp_noise.md; procedure: :mod:`slamcli.api.calibrate`).
+``--range-std``/``--bearing-std`` choose others; ``isam -p noise=vce`` calibrates after associating.
 """
 
 from __future__ import annotations

@@ -211,7 +211,7 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes | memoryview) -> Pat
             try:
                 while view.nbytes:  # os.write may write less than asked (a signal, a pipe)
                     view = view[os.write(fd, view):]
-                # no fsync: 10 ms per file on this project's CI disk (×1000s of writes in the tests); ext4
+                # no fsync: slow per file (thousands of writes in the tests, benchmarks/results/design_notes.md); ext4
                 # reserves blocks at write(), so a full disk fails here, and it flushes a file renamed over
                 # another (auto_da_alloc)
             finally:

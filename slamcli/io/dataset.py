@@ -2,31 +2,23 @@
 
 Layout (``T`` steps, ``T+1`` poses, ``N`` observations, ``L`` true landmarks, ``G`` GPS fixes)::
 
-    /                      @schema="slamcli.dataset" @schema_version=1 @dt @seed @scenario
-                           @scenario_params_json @sensor_json @robot_json @metadata_json
-                           @slamcli_version @created_utc @has_truth
+    /                      @schema @schema_version=1 @dt @seed @scenario @scenario_params_json @sensor_json
+                           @robot_json @metadata_json @slamcli_version @created_utc @has_truth
     /inputs/               what a solver may see (SlamInputs)
         timestamps (T+1,)  x0 (3,)  controls (T,2)  odometry_xyt (T+1,3)  max_range ()
         observations/      step range_m bearing_rad sensor reported_id (N,)   offsets (T+2,)
+                           [landmark_type (N,)] [diameter_m (N,)]
         noise/             motion_std (2,) odometry_std (3,) range_std () bearing_std ()
-        noise_bounds/      (bounded-noise data only) @odometry_model [@closest_only @min_range
-                           @min_separation] odometry_half_width (2,)
-                           range_half_width () bearing_half_width ()
-        observations/landmark_type (N,)   (only when the sensor reports type labels)
-        gps_step (G,) gps_xy (G,2) gps_std ()          (only when G > 0)
-        @motion_model ("ddmr" default | "ackermann")   vehicle/ wheelbase_m encoder_offset_m  (ackermann)
-        @motion_source ("controls" default, absent | "odometry": the motion data are measured increments)
-        sensor_offset_xy (2,)  (only when non-zero)    observations/diameter_m (N,) (only when reported)
-        constraints/       optional per-edge information (PoseConstraints): between_i between_j (B,)
-                           between_xyt (B,3) between_info (B,3,3) [odometry_info (T,3,3)]
-                           [observation_info (N,2,2) @model]
-        robots/            (multi-robot data only, RobotTeam) pose_robot (P,) robot_number (R,) x0_xyt (R,3);
-                           poses are stacked robot-major, timestamps repeat per robot (strictly increasing
-                           within each robot)
-        robot_observations/ (multi-robot only) observer_pose observed_pose range_m bearing_rad (K,)
-    /truth/                simulator ground truth, read by metrics only (GroundTruth)
+        noise_bounds/      (bounded-noise data) @odometry_model ... odometry_half_width (2,) range/bearing
+        gps_step (G,) gps_xy (G,2) gps_std ()                     (only when G > 0)
+        @motion_model (ddmr | ackermann, + vehicle/)  @motion_source (controls | odometry)
+        sensor_offset_xy (2,)                                     (only when non-zero)
+        constraints/       per-edge information (PoseConstraints): between_i between_j (B,) between_xyt
+                           (B,3) between_info (B,3,3) [odometry_info (T,3,3)] [observation_info (N,2,2)]
+        robots/, robot_observations/                              (multi-robot data, RobotTeam)
+    /truth/                ground truth, read by metrics only (GroundTruth)
         poses_xyt (T+1,3)  landmarks_xy (L,2)  obs_landmark (N,)  (-1 = clutter)
-        or, with @kind="position_reference" (a real recording's GPS): ref_time_s (G,) ref_xy (G,2) only
+        or @kind="position_reference" (a real recording's GPS): ref_time_s (G,) ref_xy (G,2)
 """
 
 from __future__ import annotations
@@ -202,7 +194,7 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 
 
 def _write_motion_model(g, go, inp: SlamInputs) -> None:
-    """Motion-model tag, car geometry, sensor mount and per-observation object size (issue 14)."""
+    """Motion-model tag, car geometry, sensor mount and per-observation object size."""
     g.attrs["motion_model"] = str(inp.motion_model)
     if inp.motion_source != "controls":  # written only when set, so older files read back unchanged
         g.attrs["motion_source"] = str(inp.motion_source)
@@ -347,7 +339,7 @@ def _read_constraints(r: Reader, n_poses: int, n_obs: int) -> PoseConstraints | 
     return PoseConstraints(between_ij=np.stack([bi, bj], axis=1), between_xyt=xyt, between_info=info,
                            odometry_info=odo_info, observation_info=obs_info, observation_model=model)
 def _write_robots(g, team: RobotTeam) -> None:
-    """``/inputs/robots`` and ``/inputs/robot_observations`` (multi-robot datasets, issue 14 item 7)."""
+    """``/inputs/robots`` and ``/inputs/robot_observations`` (multi-robot datasets)."""
     gr = g.create_group("robots")
     gr.attrs["doc"] = ("multi-robot layout (slamcli.types.RobotTeam): poses of all robots stacked robot-major on "
                        "one common time grid; the odometry chain never crosses from one robot to the next")

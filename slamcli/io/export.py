@@ -1,56 +1,26 @@
-"""Trajectory and graph files of the wider SLAM ecosystem: TUM, KITTI, g2o and a tidy CSV.
+"""Trajectory and graph files of the wider SLAM ecosystem: TUM, KITTI, g2o, GTSAM text and a tidy CSV.
 
 Writers (all atomic: temporary name in the destination directory, then ``os.replace``):
 
-=========  ==============================================================================================
-TUM        ``timestamp x y z qx qy qz qw`` per pose (Sturm et al. 2012, the format ``evo`` reads). A planar
-           pose ``[x, y, θ]`` is lifted to SE(3) as ``t = (x, y, 0)``, ``q = (0, 0, sin(θ/2), cos(θ/2))``
-           (rotation θ about the world z axis, Hamilton convention, ``qw ≥ 0`` not enforced).
-KITTI      12 numbers per pose: the first three rows of the 4×4 pose matrix, row-major,
-           ``[R | t]`` with ``R = Rz(θ)``, ``t = (x, y, 0)``. (KITTI's own ground truth is in the camera
-           frame, y down; ours is the world frame, z up. One pose per line, no time stamps.)
-g2o        ``VERTEX_SE2 i x y θ`` (poses, ids ``0..T``), ``VERTEX_XY j x y`` (landmarks, ids ``T+1+l``),
-           ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (the odometry chain ``t → t+1`` first, then
-           every loop closure / between-factor ``i → j`` of the dataset; information matrix upper triangle
-           row by row) and ``EDGE_SE2_XY i j dx dy I11 I12 I22`` (landmark seen from pose i, in pose i's
-           frame). g2o and ``slamcli import g2o`` load it all; GTSAM's ``readG2o`` skips the
-           ``EDGE_SE2_XY`` lines (the export then warns in one line). Every sighting is written: one that
-           no landmark holds (unassociated, clutter) becomes a landmark of its own, ids after the others,
-           placed where it was seen, so its edge adds nothing to the cost.
-GTSAM      GTSAM's own 2-D text format, which ``gtsam.readG2o(path, False)`` reads completely (so does
-           ``gtsam.load2D`` with ``noiseFormat=NoiseFormatG2O``; its default AUTO takes the EDGE_SE2 numbers
-           for a covariance): the
-           same ``VERTEX_SE2`` / ``EDGE_SE2`` lines, landmarks as ``VERTEX_XY T+1+l x y`` (GTSAM key
-           ``L(T+1+l)``: landmark ids never collide with pose ids, so g2o-style readers load it too) and
-           each sighting (unassociated ones as for g2o) as ``BR i l bearing range σ_b σ_r`` (a ``BearingRangeFactor2D``
-           with diagonal noise). Exact for range-bearing data with one σ each (simulated data); per-row
-           information is carried by its diagonal: ``σ = sqrt(diag Σ_rb)``, where an ``xy`` row's
-           ``Σ_rb = J⁻¹ Σ_xy J⁻ᵀ`` (first order, ``J`` below); a dropped correlation is warned about.
-CSV        tidy table ``kind, index, t_s, x_m, y_m, theta_rad`` (+ covariance columns when present);
-           ``kind`` is ``pose`` or ``landmark``.
-=========  ==============================================================================================
+* **TUM** ``timestamp x y z qx qy qz qw`` (what ``evo`` reads): ``[x, y, θ]`` lifted to ``t = (x, y, 0)``,
+  ``q = (0, 0, sin(θ/2), cos(θ/2))``.
+* **KITTI** 12 numbers per pose, the rows of ``[Rz(θ) | (x, y, 0)]`` (world frame, z up; no time stamps).
+* **g2o** ``VERTEX_SE2`` (poses ``0..T``), ``VERTEX_XY`` (landmarks ``T+1+l``), ``EDGE_SE2`` (odometry chain,
+  then every between factor) and ``EDGE_SE2_XY`` (sightings; an unassociated one becomes a landmark of its own,
+  placed where seen, so it adds nothing to the cost). GTSAM's ``readG2o`` skips ``EDGE_SE2_XY`` (warned).
+* **GTSAM** the same vertices and edges with each sighting as ``BR i l bearing range σ_b σ_r``
+  (``gtsam.readG2o(path, False)`` reads it all); exact for range-bearing data with one σ each, otherwise the
+  diagonal of ``Σ_rb`` (a dropped correlation is warned about).
+* **CSV** ``kind, index, t_s, x_m, y_m, theta_rad`` (+ covariance columns), ``kind`` = pose / landmark.
 
-The g2o file is the factor graph ``slamcli.solvers.graph`` optimises (its prior on pose 0 aside), so a
-result exported and read back (GTSAM's ``readG2o``, ``slamcli import g2o``) has the solver's cost:
+The g2o file is the factor graph ``slamcli.solvers.graph`` optimises (its prior on pose 0 aside), so a result
+read back has the solver's cost: per-edge information of a lossless import is written as is (a
+``range_bearing`` row's through the propagation below); with one σ per quantity the odometry information is
+``diag(1/odometry_std²)`` and a sighting's ``Λ = (J diag(σ_r², σ_b²) Jᵀ)⁻¹``,
+``J = [[cos b, −r sin b], [sin b, r cos b]]`` (first order for the landmark edges).
 
-* **Per-edge information** (``inputs.constraints``, lossless graph imports; used by ``graph`` with
-  ``edge_info = true``): odometry edge t carries ``odometry_info[t]``, loop closure k ``between_ij[k]``,
-  ``between_xyt[k]`` and ``between_info[k]``, sighting row n ``observation_info[n]``. Written exactly when
-  ``observation_model = "xy"`` (the g2o model); a ``range_bearing`` row's ``Λ_rb`` goes through the
-  first-order propagation below with ``Σ_rb = Λ_rb⁻¹``. A result solved with ``edge_info = false`` is
-  exported with the σ's below (its loop closures keep their own information, as in the solver).
-* **One σ per quantity** (simulated data, schema v1 ``NoiseSpec``): odometry ``Λ = diag(1/odometry_std²)``;
-  observations are range-bearing with ``Σ_rb = diag(σ_r², σ_b²)``, which g2o's Cartesian ``EDGE_SE2_XY``
-  can only carry to first order: ``z_xy = r [cos b, sin b]``,
-  ``J = ∂z_xy/∂(r, b) = [[cos b, −r sin b], [sin b, r cos b]]``, ``Σ_xy = J Σ_rb Jᵀ`` and ``Λ = Σ_xy⁻¹``
-  (exact for the odometry edges, linearised for the landmark edges).
-
-Ids: poses are steps ``0..T`` of the dataset (an imported file's pose ids are renumbered in ascending order,
-its body frame is slamcli's x-forward frame, see :mod:`slamcli.datasets.g2o`).
-
-Readers: :func:`read_tum` and :func:`read_kitti` return planar poses (yaw of the 3-D rotation; ``z`` and
-roll/pitch are dropped). Every error is a one-line :class:`~slamcli.errors.SchemaError` naming the file
-and line.
+Readers :func:`read_tum` and :func:`read_kitti` return planar poses (yaw of the rotation); every error is a
+one-line :class:`~slamcli.errors.SchemaError` naming the file and line.
 """
 
 from __future__ import annotations

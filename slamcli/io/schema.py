@@ -27,11 +27,11 @@ RESULT_SCHEMA = "slamcli.result"
 SCHEMA_VERSION = 1
 
 #: compression for every non-scalar, non-empty dataset: portable gzip + byte shuffle. Level 1, chosen by
-#: measurement (docs/schema.md "Compression"; benchmarks/bench_scale.py): on a 100k-pose dataset it writes
-#: ≈ 16 % faster than level 4 for a 2 % larger file; lzf would write 2× faster still but only h5py reads it.
+#: measurement (docs/schema.md "Compression"; benchmarks/results/design_notes.md); lzf is faster but only
+#: h5py reads it.
 #: Files written with any level (v1 used 4) read the same: HDF5 records the filter per dataset.
 GZIP_LEVEL = 1
-#: chunk length along the first (time / row) axis (4 k rows read slower, 64 k gained nothing: measured)
+#: chunk length along the first (time / row) axis (chosen by measurement: benchmarks/results/design_notes.md)
 CHUNK_ROWS = 16384
 #: the h5py filter arguments of every compressed dataset (the one place they are set)
 COMPRESSION: dict[str, Any] = {"compression": "gzip", "compression_opts": GZIP_LEVEL, "shuffle": True,

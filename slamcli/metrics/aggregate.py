@@ -1,30 +1,24 @@
 """Summaries of a finished sweep, like ``evo_res``: mean, standard deviation, 95 % confidence interval and n
 per configuration, over completed runs only.
 
-For the ``n`` values ``x_1..x_n`` of one metric in one configuration (NaN values are not counted)::
+For the ``n`` non-NaN values ``x_1..x_n`` of one metric in one configuration::
 
-    mean  x̄ = (1/n) Σ x_i
-    std   s = sqrt( Σ (x_i − x̄)² / (n − 1) )                (sample standard deviation, ddof = 1)
-    CI    x̄ ± t_{0.975, n−1} · s / √n                        (Student t, two-sided 95 %; NaN for n < 2)
+    mean  x̄ = (1/n) Σ x_i,   std  s = sqrt( Σ (x_i − x̄)² / (n − 1) ),   CI  x̄ ± t_{0.975, n−1} · s / √n
 
-For a metric that cannot be negative (:attr:`~slamcli.metrics.registry.MetricInfo.nonnegative`) a lower end
-below 0 is clipped to 0 and flagged (``ci_clipped``); every n < 3 is flagged (``few``): with 2 runs the t
-interval is ± 12.7 standard errors.
+A lower CI end below 0 of a nonnegative metric is clipped and flagged (``ci_clipped``); n < 3 is flagged
+(``few``; with 2 runs the interval is ± 12.7 standard errors).
 
-**Paired differences** (:func:`paired`): every solver of a replicate sees the same dataset, so two
-configurations A and B are compared on the datasets both solved (matched on ``dataset_id``, else on
-``replicate`` and the scenario axes). With ``d_i = a_i − b_i`` over those n datasets::
+**Paired differences** (:func:`paired`): configurations A and B compared on the datasets both solved (matched
+on ``dataset_id``, else on ``replicate`` and the scenario axes), ``d_i = a_i − b_i``: mean, std and CI of
+``d``, the paired t test (``scipy.stats.ttest_rel``) and the Wilcoxon signed-rank test
+(``scipy.stats.wilcoxon``, exact for small n).
 
-    mean difference  d̄,   std s_d (ddof = 1),   CI  d̄ ± t_{0.975, n−1} · s_d / √n
-    paired t test    t = d̄ / (s_d / √n), two-sided p from Student t with n − 1 dof  (scipy.stats.ttest_rel)
-    Wilcoxon signed-rank on the d_i ≠ 0: W = min(R⁺, R⁻), two-sided p, exact for small n (scipy.stats.wilcoxon)
-
-**Leaderboard** (:func:`leaderboard`, :func:`leaderboard_dir`): one row per solver configuration, per
-dataset the ATE against its reference (truth or GPS), the matched landmark RMSE and the solve time, each cell
-the summary above plus the paired difference against a baseline configuration on that dataset's runs.
+**Leaderboard** (:func:`leaderboard`, :func:`leaderboard_dir`): one row per solver configuration; per dataset
+the ATE against its reference, the matched landmark RMSE and the solve time, each with its paired difference
+against a baseline configuration.
 
 Column types are kept (:func:`typed_frame`, :func:`read_table`): an integer sweep parameter that some
-solvers do not have is a nullable ``Int64`` column (``10`` and ``<NA>``), never ``10.0``.
+solvers lack is a nullable ``Int64`` column, never ``10.0``.
 """
 
 from __future__ import annotations

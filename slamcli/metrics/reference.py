@@ -1,35 +1,22 @@
 """Metrics for real recordings without full ground truth.
 
-* :func:`ate_vs_position_reference` — ATE of an estimated trajectory against a time-stamped position-only
-  reference (GPS). The estimate is interpolated linearly at each reference time inside its span (the
-  estimate is dense — 40 Hz on Victoria Park — and the reference sparse); references outside the span are not
-  used. Errors are positions only::
-
-      e_i = p̂(t_i) − g_i,    ATE = sqrt(mean_i ‖e_i‖²)
-
-  reported unaligned and after the least-squares SE(2) alignment of the estimate onto the reference (2-D
-  Kabsch/Umeyama without scale: ``R, t = argmin Σ‖R p̂_i + t − g_i‖²``), which removes an unknown map frame
-  (a real run's start heading in the GPS frame is not known). The caller passes the positions of the body
-  point the reference refers to (``GroundTruth.ref_offset_xy``, e.g. the GPS antenna).
-  Fixes that are physically impossible given the reference alone are left out (:func:`glitches`; the count
-  and times are reported, and the ATE over every fix is kept as ``gps_ate_*_raw_*``).
-* :func:`glitches` — the glitch gate: an interior fix ``i`` is a glitch when it is farther from *both*
-  neighbouring fixes than a body moving at ``max_speed_mps`` could get in the time between them plus a
-  position tolerance ``glitch_tol_m`` for the receiver's noise, while those two neighbours agree with each
-  other under the same bound::
+* :func:`ate_vs_position_reference` — ATE against a time-stamped position-only reference (GPS): the estimate
+  (dense) is interpolated linearly at each reference time inside its span, ``e_i = p̂(t_i) − g_i``,
+  ``ATE = sqrt(mean_i ‖e_i‖²)``, reported unaligned and after the least-squares SE(2) alignment onto the
+  reference (2-D Kabsch/Umeyama without scale; a real run's start heading in the GPS frame is unknown). The
+  caller passes the positions of the body point the reference refers to (``GroundTruth.ref_offset_xy``).
+  Glitch fixes are left out (count and times reported; the ATE over every fix is kept as ``gps_ate_*_raw_*``).
+* :func:`glitches` — an interior fix is a glitch when it is farther from *both* neighbours than a body at
+  ``max_speed_mps`` could get in the time between them plus ``glitch_tol_m``, while those neighbours agree
+  with each other under the same bound::
 
       ‖g_i − g_{i±1}‖ > v_max·|t_i − t_{i±1}| + tol  (both),   ‖g_{i+1} − g_{i−1}‖ ≤ v_max·(t_{i+1} − t_{i−1}) + tol
 
-  Defaults 20 m/s and 5 m (stated in the output like the gap threshold). The second condition keeps a
-  consistent track at any speed: a fast run is not gated, only a single fix that jumps away and back. It
-  uses the reference only — never the estimate. End fixes (one neighbour) and runs of several consecutive
-  bad fixes are not gated. On Victoria Park it rejects exactly one fix, 1223.3 s (141 m from the fix 2.2 s
-  before, 125 m from the fix 4.4 s after, which are 18 m apart), for any ``max_speed_mps`` in 10-20 and
-  ``glitch_tol_m`` in 3-30; none on the car park.
+  It uses the reference only, never the estimate; end fixes and runs of bad fixes are not gated (what it
+  rejects on the recordings: benchmarks/results/design_notes.md).
 * :func:`gaps` — the intervals without reference fixes longer than ``gap_s`` (stated with every ATE).
 * :func:`trajectory_against` — ATE and landmark distances of one result against another (``evaluate
-  --against``): same pose count required; landmarks matched by optimal assignment (``linear_sum_assignment``)
-  with a cut-off.
+  --against``): same pose count; landmarks matched by optimal assignment with a cut-off.
 * :func:`nis_summary` — average normalised innovation squared with its two-sided χ² band.
 """
 

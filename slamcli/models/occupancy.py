@@ -1,30 +1,25 @@
-"""Occupancy-grid geometry and the discretised range-sensor model of paper 001 (§III, eqs. 32-34).
+"""Occupancy-grid geometry and the discretised range-sensor model of paper 001 (§III, eqs. 32-34), shared by
+the simulator (true grid) and the ``hybrid`` solver (cells a beam crosses, what it would read).
 
-Shared by the simulator (rasterising walls into the true grid) and the ``hybrid`` solver (which cells a beam
-crosses, what it would read under a map estimate).
+Grid: cell ``(row, col)`` covers ``[x0 + col·res, x0 + (col+1)·res) × [y0 + row·res, …)``; flat index
+``row·W + col``; arrays ``(H, W)`` (row = y).
 
-Grid convention: cell ``(row, col)`` covers ``[x0 + col·res, x0 + (col+1)·res) × [y0 + row·res, …)``; the
-flat index is ``row·W + col``; arrays are ``(H, W)`` (row = y).
+Ray model: a beam crosses cells ``j = 0, 1, …`` over range intervals ``[a_j, b_j)``; if cell ``j`` is the
+*first occupied* one, the reading is a wall uniform in that interval plus Gaussian noise σ (eq. 32)::
 
-Ray model (one beam from a pose): the beam crosses cells ``j = 0, 1, …`` in order, cell ``j`` over the
-range interval ``[a_j, b_j)``. If cell ``j`` is the *first occupied* cell, the reading is the wall position
-``R*`` somewhere in that interval (uniform; a thin wall inside a cell) plus Gaussian noise of σ — the
-discretised form of eq. (32), so that
-
-    f_j(r)  = p(r | first occupied = j) = [Φ((r − a_j)/σ) − Φ((r − b_j)/σ)] / (b_j − a_j)
+    f_j(r)  = [Φ((r − a_j)/σ) − Φ((r − b_j)/σ)] / (b_j − a_j)
     Γ_kj    = P(q̂_k = O | first occupied = j) = ∫_{a_k}^{b_k} f_j(r) dr
             = σ/L_j · [G((b_k−a_j)/σ) − G((b_k−b_j)/σ) − G((a_k−a_j)/σ) + G((a_k−b_j)/σ)],
-              G(u) = u Φ(u) + φ(u)  (so G' = Φ),  L_j = b_j − a_j,
+              G(u) = u Φ(u) + φ(u),  L_j = b_j − a_j
     π_j     = P_j Π_{i<j} (1 − P_i)          (independent cells, eq. 1)
 
-and eqs. (33)-(34) (law of total probability over the first occupied cell) become, for an observed cell k,
+and eqs. (33)-(34) become, for an observed cell k (``U_k = Π_{i<k}(1 − P_i)``)::
 
-    P(q̂_k=O | q_k=O) = Σ_{j<k} Γ_kj π_j + Γ_kk U_k,                         U_k = Π_{i<k}(1 − P_i)
+    P(q̂_k=O | q_k=O) = Σ_{j<k} Γ_kj π_j + Γ_kk U_k
     P(q̂_k=O | q_k=E) = Σ_{j<k} Γ_kj π_j + Σ_{j>k} Γ_kj P_j U_k Π_{k<i<j}(1 − P_i)
 
-Γ_kj is negligible once the cells between k and j span more than a few σ; the sums run over the band
-``|k − j| ≤ band`` with ``band`` from :func:`band_for` (between two crossings of the same grid-line family a
-ray travels ≥ res, so ``band`` segments span ≥ (⌈(band+1)/2⌉ − 1)·res ≥ 6σ).
+The sums run over the band ``|k − j| ≤ band`` of :func:`band_for` (the cells beyond span ≥ 6σ, where Γ_kj is
+negligible).
 """
 
 from __future__ import annotations

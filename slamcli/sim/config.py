@@ -242,34 +242,28 @@ class SensorConfig:
     """Range-bearing sensor (sensor index 0).
 
     ``kind = "point"``: every landmark inside ``[min_range, max_range]`` and the field of view gives one
-    observation ``[r + n_r, wrap(b + n_b)]`` (range clipped to [0, max_range]) of its centre with probability ``detection_prob``.
-
-    ``kind = "laser"``: ``n_beams`` beams evenly over ``fov_deg`` (181 over 180° like the SICK LMS of paper
-    000 §5); each beam returns the nearest intersection with the landmark discs (``world.landmark_radius``),
-    so a landmark gives several returns on adjacent beams. A beam misses with probability
-    ``1 − detection_prob``. Range noise ``range_std``; the bearing is the beam angle plus ``bearing_std`` noise.
-    Preprocessing as in paper 000 §5: ``drop_max_range`` removes beams without a hit (otherwise they are
-    reported at ``max_range`` with truth id −1); ``drop_isolated`` removes a return unless a neighbouring beam
-    has a return within ``isolation_gap`` m in range.
+    observation ``[r + n_r, wrap(b + n_b)]`` of its centre (range clipped to [0, max_range]) with probability
+    ``detection_prob``. ``kind = "laser"``: ``n_beams`` beams over ``fov_deg``, each returning the nearest
+    intersection with the landmark discs (``world.landmark_radius``) or missing with probability
+    ``1 − detection_prob``; bearing = beam angle + noise. Preprocessing as in paper 000 §5: ``drop_max_range``
+    removes beams without a hit (else reported at ``max_range``, truth id −1); ``drop_isolated`` removes a return
+    without a neighbouring return within ``isolation_gap`` m in range.
 
     Attributes
     ----------
     kind : "point" | "laser"
-    max_range : float        m.
-    min_range : float        m.
-    fov_deg : float          field of view centred straight ahead, degrees (360 = all round).
-    range_std : float        m.
-    bearing_std : float      rad.
-    detection_prob : float   probability that a visible landmark (point) / a hitting beam (laser) is reported.
-    report_ids : bool        the sensor reports the landmark identity (``Observations.reported_id``).
-    period_steps : int       scan every this many poses (pose 0 is scanned).
-    n_beams : int            laser beams.
-    drop_max_range : bool    laser preprocessing.
-    drop_isolated : bool     laser preprocessing.
-    isolation_gap : float    laser: neighbouring-return range difference still called "similar", m.
-    report_size : bool       laser: declare the size of what the beams hit — every return carries
-                             ``observations.diameter_m = 2 · world.landmark_radius`` (clutter too), the radius a
-                             surface-aware model reads (``-p surface=true``); off = no size declared.
+    max_range, min_range : float   m.
+    fov_deg : float                field of view centred straight ahead, degrees (360 = all round).
+    range_std : float              m.
+    bearing_std : float            rad.
+    detection_prob : float         probability that a visible landmark (point) / a hitting beam (laser) is reported.
+    report_ids : bool              the sensor reports the landmark identity (``Observations.reported_id``).
+    period_steps : int             scan every this many poses (pose 0 is scanned).
+    n_beams : int                  laser beams.
+    drop_max_range, drop_isolated : bool   laser preprocessing.
+    isolation_gap : float          laser: largest range difference of "similar" neighbouring returns, m.
+    report_size : bool             laser: every return carries ``observations.diameter_m = 2 · landmark_radius``
+                                   (what ``-p surface=true`` reads); off = no size declared.
     """
 
     kind: Literal["point", "laser"] = "point"
@@ -347,34 +341,26 @@ class GpsConfig:
 class BoundedConfig:
     """Bounded-error "turn and move" runs for set-membership SLAM (paper 004 §6; off by default).
 
-    When ``enabled`` the robot does not use the tracking controller: from each waypoint of ``path`` it turns
-    in place towards the next one and drives straight to it, one pose per waypoint (``n_steps`` legs). Every
-    error is *uniform* within its ± bound, and the bounds are written into the dataset
-    (``inputs/noise_bounds``) so a solver reads them. Odometry reports ``d̃ = d + u_d``, ``α̃ = α + u_α``
-    (``|u_d| ≤ odometry_d``, ``|u_α| ≤ odometry_turn_deg``); the point sensor (``sensor.max_range``,
-    ``sensor.fov_deg``) reports ``r + u_r``, ``b + u_b`` and each landmark's type label, never its identity.
+    When ``enabled`` the robot turns in place towards each next waypoint of ``path`` and drives straight to it,
+    one pose per waypoint. Every error is *uniform* within its ± bound, and the bounds are written into the
+    dataset (``inputs/noise_bounds``). Odometry reports ``d̃ = d + u_d``, ``α̃ = α + u_α``; the point sensor
+    reports ``r + u_r``, ``b + u_b`` and each landmark's type label, never its identity.
 
     Attributes
     ----------
     enabled : bool                    use the turn-and-move robot with bounded noise.
     odometry_d : float                half-width of the distance error, m (paper 004: 0.25).
     odometry_turn_deg : float         half-width of the turn error, degrees (paper 004: 5).
-    range : float                     half-width of the range error, m (paper 004: 10× smaller, 0.025).
+    range : float                     half-width of the range error, m (paper 004: 0.025).
     bearing_deg : float               half-width of the bearing error, degrees (0.5).
     closest_only : bool               the sensor reports only the closest visible landmark (paper 004 §6).
-    landmark_types : tuple of int     type label per landmark in world order (e.g. 0 = door, 1 = corridor);
-                                      empty = all type 0.
-    declared_scale : float            the bounds written into the dataset are ``declared_scale ×`` the true
-                                      ones (< 1 = a deliberately wrong, too small declaration, for tests).
-    exact_readings : bool             every error is zero while the bounds are still declared — paper 004 §6
-                                      simulated exact readings (its Table 1 l1 box is centred on the truth).
-    declared_separation : float       map prior declared in the dataset (``NoiseBounds.min_separation``), m:
-                                      distinct landmarks are at least this far apart; 0 = none declared.
-                                      The simulator does not enforce it (a wrong declaration is a test case).
-    loop_closure_error : float        0 = off; else the sightings of the first-seen landmark after pose 0 (the
-                                      room's loop closure) get errors of exactly this many declared half-widths
-                                      in range and bearing, signs drawn from ``default_rng(seed)`` — a bound
-                                      too small for those readings only (paper 004's wrong-bound test).
+    landmark_types : tuple of int     type label per landmark in world order; empty = all type 0.
+    declared_scale : float            declared bounds = ``declared_scale ×`` the true ones (< 1: too small, for tests).
+    exact_readings : bool             every error zero while the bounds are still declared (paper 004 §6).
+    declared_separation : float       declared minimum distance between landmarks
+                                      (``NoiseBounds.min_separation``), m; 0 = none; not enforced.
+    loop_closure_error : float        0 = off; else the room's loop-closure sightings (first-seen landmark after
+                                      pose 0) err by this many declared half-widths (paper 004's wrong bound).
     """
 
     enabled: bool = False
@@ -402,11 +388,10 @@ class BoundedConfig:
 class WallsConfig:
     """Wall world and ray-casting scan of paper 001 §III (off unless ``layout`` is set; see ``sim.walls``).
 
-    With ``layout = "ladder"`` the world is an outer ``width × height`` rectangle holding
-    ``block_rows × block_cols`` blocks separated by corridors of width ``corridor``; the robot follows the
-    corridor centre lines; the sensor (``sensor.*``: range/bearing σ, max range, beams, field of view) gives
-    (1) range-bearing observations of the features with their identity (sensor index 0) and (2) a ray-cast
-    scan of ``sensor.n_beams`` beams against the walls (sensor index 1, max-range readings kept).
+    With ``layout = "ladder"`` an outer ``width × height`` rectangle holds ``block_rows × block_cols`` blocks
+    separated by corridors of width ``corridor``; the robot follows the corridor centre lines; the sensor gives
+    range-bearing observations of the features with their identity (sensor 0) and a ray-cast scan of
+    ``sensor.n_beams`` beams against the walls (sensor 1, max-range readings kept).
 
     Attributes
     ----------
@@ -415,20 +400,15 @@ class WallsConfig:
     block_rows, block_cols : int
     corridor : float            corridor width, m.
     features : "corners" | "corners+mid" | "posts"
-        corners of every wall rectangle; plus the mid-point of every wall segment and, on the outer walls,
-        the point opposite the mid-point of every corridor stretch between crossings
-        (``walls.corridor_wall_midpoints``); or point landmarks
-        (posts a quarter corridor width off the centre lines, ``post_spacing`` apart; Map 3 variant).
+        wall-rectangle corners; plus wall mid-points and the outer-wall points opposite every corridor stretch
+        (``walls.corridor_wall_midpoints``); or posts a quarter corridor off the centre lines (Map 3 variant).
     post_spacing : float        m.
     resolution : float          cell side of the true occupancy grid, m.
     grid_margin : float         grid extends this far beyond the walls, m.
-    laps : int                  laps of the route; > 0 sets the run length (``n_steps`` is then ignored:
-                                the run ends when the robot is back at the start for the ``laps``-th time).
+    laps : int                  laps of the route; > 0 sets the run length (``n_steps`` is then ignored).
     max_cells : int             refuse grids with more cells (memory guard).
-    wrong_id_prob : float       probability that a feature row reports the id of another feature (drawn
-                                uniformly among the others) instead of its own — a data-association fault;
-                                the truth keeps the row's real feature. Clutter (``clutter.rate``) adds false
-                                feature rows with id −1.
+    wrong_id_prob : float       probability that a feature row reports another feature's id (a data-association
+                                fault; the truth keeps the real one). Clutter adds false rows with id −1.
     """
 
     layout: Literal["none", "ladder"] = "none"

@@ -1,30 +1,20 @@
 """Named scenarios. Each factory returns a :class:`ScenarioConfig`; ``resolve_scenario`` applies overrides.
 
-How they approximate paper 000 (whose simulations used MobileSim with a Pioneer P3-DX and its SICK laser,
-and whose experiment used a Pioneer 3-AT with an outdoor SICK laser):
+How they approximate paper 000 (MobileSim with a Pioneer P3-DX and its SICK laser; outdoors a Pioneer 3-AT):
 
 * ``loop`` — not from the paper: a small, fast world for tests (12 random landmarks in 20 m × 14 m, one
   rectangular lap plus a bit, 500 steps, point sensor of 8 m range over 180°).
-* ``paper-sim1`` — Simulations 1 (Figs. 4-5): a ≈50 m × 40 m area with 7 rows of 9 landmarks (5 m apart,
-  slightly jittered), an irregular lawn-mower path along three lanes between rows (waypoints every 5 m,
-  jittered by 0.5 m), Δt = 0.1 s, a 181-beam laser over 180° at full range. MobileSim simulates the
-  Pioneer's SICK LMS-200 with ≈30 m range; landmarks are 0.25 m-radius posts (assumed), so a post gives
-  several returns on adjacent 1° beams up to ≈28 m and the full-range laser really sees far, coarsely
-  resolved landmarks (the source of the poor initial maps of Fig. 5(a)). The 0.25 m radius is kept after
-  ``benchmarks/bench_icm_study.py``: the paper calls ς = 500 "small since there are multiple observations for
-  each landmark at each sampling period", which needs posts wide enough for several 1° beams at range — with
-  0.10 m posts only 35 of the 63 landmarks reach 500 returns, with 0.05 m none; smaller posts would also not
-  bring paper-exact ICM to the paper's 0.148 m (0.21 m at 0.10 m). Returns lie on the post surface, π/4 · ρ
-  short of the centre on average (ICM/EKF ``range_offset`` re-centre them). Odometry noise is small (the paper: "odometry error in MobileSim is almost negligible
-  over short distances"). Max-range and isolated returns are dropped as in the paper; a little clutter
-  (0.2 false returns per scan) stands in for MobileSim's sensing errors. 3250 steps cover the ≈155 m path at
-  0.5 m/s (the robot stops at the last waypoint near step 3150 and keeps scanning).
+* ``paper-sim1`` — Simulations 1 (Figs. 4-5): ≈50 m × 40 m with 7 rows of 9 jittered landmarks 5 m apart, an
+  irregular lawn-mower path along three lanes (jittered waypoints every 5 m), Δt = 0.1 s, a 181-beam laser
+  over 180° at full range (≈30 m, the simulated SICK LMS-200). Landmarks are 0.25 m-radius posts (assumed;
+  chosen by measurement: benchmarks/results/design_notes.md), so a post gives several returns on adjacent
+  beams and far posts are coarsely resolved (the poor initial maps of Fig. 5(a)); returns lie on the post
+  surface (``range_offset`` re-centres them). Small odometry noise, max-range and isolated returns dropped,
+  0.2 clutter returns per scan; 3250 steps cover the ≈155 m path at 0.5 m/s.
 * ``paper-sim2`` — Simulation 2 (Fig. 7): ``paper-sim1`` with a 10 m laser.
-* ``octagon`` — the outdoor experiment of §6 (Figs. 8-9): 8 cones on a regular octagon of radius 7.12 m, a cone
-  at its centre and two static people (teleoperator and videographer; positions assumed, the paper gives
-  none), 11 points; the robot circles the octagon on a jittered ≈10.5 m-radius path for 183 s at Δt = 0.1 s
-  (1830 steps) with an outdoor laser (30 m, 181 beams over 180°), noisier skid-steer odometry with a small
-  turn bias, and more clutter (grass, uneven ground).
+* ``octagon`` — the outdoor experiment of §6 (Figs. 8-9): 8 cones on an octagon of radius 7.12 m, one at its
+  centre and two static people (positions assumed), circled on a jittered ≈10.5 m path for 1830 steps of 0.1 s
+  with a 30 m outdoor laser, noisier skid-steer odometry with a small turn bias and more clutter.
 """
 
 from __future__ import annotations
@@ -91,33 +81,14 @@ def _paper_sim(max_range: float, name: str) -> ScenarioConfig:
 
 def _paper_sim_mobilesim() -> ScenarioConfig:
     """``paper-sim1-mobilesim``: ``paper-sim1`` with the robot base, laser and odometry of MobileSim's Pioneer
-    P3-DX model, as documented by its model file — decided from the documentation before ICM was run on it.
+    P3-DX model as documented by its model files (sources: benchmarks/results/design_notes.md).
 
-    Sources (MobileSim is built on the Player/Stage library and loads its robot models from a Stage include
-    file that "agrees with Aria's parameter files"):
-
-    * MobileSim README (github.com/srmq/MobileSim): "based on the Stage library"; "Laser range sensor (SICK
-      LMS-200) model"; "Robot odometry pose estimation (with cumulative error)".
-    * PioneerRobotModels.world.inc of AMRISim, MobileSim's maintained successor (github.com/reedhedges/AMRISim):
-      base ``pioneer``: ``accel [0.3 0 1.74]``, ``decel [0.6 0 1.74]`` (m/s², rad/s²), ``odom_error [0.0075
-      0.0075 0.0075]`` (m per m, rad per rad; in the default ``random_init`` mode one error is drawn per robot
-      at start-up within that range and added per metre travelled — a constant scale error, not white noise);
-      ``p3dx``: ``max_speed [1.0 0 1.74]``; ``sicklms200``: ``samples 181``, ``fov 180``, ``range_max
-      32.767``, ``noise 0.005`` ("uniform random number ... in [-0.005, 0.005] meters") and
-      ``reading_angle_error 0.0007`` (uniform in [-0.0007, 0.0007] rad).
-    * SICK LMS5xx operating instructions ("the distance-dependent spacing between the measured points is the
-      tangent of the angular resolution × distance"): at 1° a post at 30 m is sampled every 0.52 m, so a
-      0.5 m-wide post gives one return or none — the coarse far returns are kept (181 beams over 180°).
-
-    Mapped onto our simulator: executed velocities ramp with ``accel_max = (0.3, 1.74)`` and ``decel_max =
-    (0.6, 1.74)`` (the command the solvers see is the controller's, the motion lags it); no actuation noise
-    beyond a 1 mm/s, 1 mrad/s floor (Stage executes the ramped command exactly; the floor keeps every
-    solver's motion covariance positive); odometry with the documented constant error at its bound,
-    ``scale_bias = turn_bias = 0.0075`` (one admissible ``random_init`` draw, fixed so runs are comparable)
-    and the small white noise of ``paper-sim1``; laser range σ = 0.005/√3 m and bearing σ = 0.0007/√3 rad
-    (the standard deviations of the documented uniform errors), 32 m range. Not documented and therefore
-    unchanged from ``paper-sim1``: the world (rows of 0.25 m-radius posts), the path, the 0.5 m/s cruise
-    speed and the clutter. ``benchmarks/bench_icm_init.py`` measures each change alone and together.
+    Mapped onto the simulator: executed velocities ramp with ``accel_max = (0.3, 1.74)`` and ``decel_max =
+    (0.6, 1.74)`` (the solvers see the commanded velocities; the motion lags them); no actuation noise beyond a
+    1 mm/s, 1 mrad/s floor (keeps every motion covariance positive); odometry with the documented constant error
+    at its bound, ``scale_bias = turn_bias = 0.0075``, plus ``paper-sim1``'s small white noise; laser range
+    σ = 0.005/√3 m and bearing σ = 0.0007/√3 rad (the documented uniform errors), 32 m range. The world, path,
+    cruise speed and clutter stay those of ``paper-sim1``.
     """
     base = _paper_sim(32.0, "paper-sim1-mobilesim")
     return apply_overrides(base, {

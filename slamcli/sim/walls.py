@@ -61,10 +61,9 @@ def corridor_wall_midpoints(width: float, height: float, rows: int, cols: int, c
     between two adjacent crossings ("mid-points of corridors", paper 001 §III).
 
     A block wall's mid-point faces the same spot, but the outer walls are single segments as long as the
-    world (1 km on Map 4), whose one mid-point leaves stretches of the boundary corridors with a single
-    feature within 40 m (issue 15: 443 of Map 4's 14 400 steps, where one range-bearing pair cannot fix the
-    heading that σ_ω Δt = 0.18 rad of wheel noise loses every step). On Map 1 these points are exactly the
-    outer walls' mid-points.
+    world, whose one mid-point leaves stretches of the boundary corridors with a single feature in range,
+    where one range-bearing pair cannot fix the heading that wheel noise loses every step (how often:
+    benchmarks/results/design_notes.md). On Map 1 these points are exactly the outer walls' mid-points.
 
         x = 0 and x = width:   y = (s_r + s_{r+1}) / 2,   s_r = w/2 + r (b_h + w)   (street centre lines)
         y = 0 and y = height:  x = (a_c + a_{c+1}) / 2,   a_c = w/2 + c (b_w + w)   (avenue centre lines)

@@ -104,10 +104,10 @@ class BaseSolver:
 def _distribution_version(module_root: str) -> str:
     """Version of the installed distribution providing ``module_root``, falling back to slamcli's.
 
-    Cached: ``packages_distributions()`` scans every installed package (~0.3 s per call), so the usual case
-    (the distribution is named like its top-level module) is looked up by name first. slamcli's own solvers
-    read ``slamcli.__version__``, which is the distribution's version (pyproject.toml takes it from there), and
-    no metadata at all (≈ 5 ms CPU on every solve, issue 25 item 1).
+    Cached: ``packages_distributions()`` scans every installed package, so the usual case (the distribution is
+    named like its top-level module) is looked up by name first. slamcli's own solvers read
+    ``slamcli.__version__``, which is the distribution's version (pyproject.toml takes it from there), and no
+    metadata at all (cost: benchmarks/results/design_notes.md).
     """
     import slamcli
 

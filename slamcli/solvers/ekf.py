@@ -1,38 +1,26 @@
 # pylint: disable=invalid-name
 """EKF-SLAM: extended Kalman filter over the joint state ``[pose, landmarks]``.
 
-The filter alternates the textbook predict → update cycle (Thrun et al., *Probabilistic Robotics*, ch. 10;
-paper 003 "EKF-SLAM"; paper 002 §14.7 for unknown correspondences):
+The textbook predict → update cycle (Probabilistic Robotics ch. 10; paper 003; paper 002 §14.7 for unknown
+correspondences), with filterpy's letters: ``Q`` process (motion) noise, ``R`` measurement noise, ``S`` the
+innovation covariance.
 
-* state ``x = [x_r (3,), m_1 (2,), ..., m_L (2,)]`` of length ``n = 3 + 2L``, covariance ``P (n, n)``;
-  both live in preallocated, zero-padded buffers (``P`` C-contiguous) that every step updates in place; the
-  state grows by two entries whenever a landmark is added (O(n) into the padding, an O(n²) re-layout only
-  every L/32 landmarks);
-* **predict** touches only the pose rows/columns (O(n)); the motion is either the DDMR model driven by the
-  commanded controls with actuation noise ``NoiseSpec.motion_std`` (``motion_input="controls"``), or the
-  composition with the encoder odometry increment with ``NoiseSpec.odometry_std``
-  (``motion_input="odometry"``);
-* **update** with one range-bearing observation touches pose + one landmark columns of ``H`` (sparse), so
-  one update is O(n²): one in-place symmetric rank-2 correction ``P −= V Vᵀ`` of the preallocated ``P``,
-  which equals the Joseph form ``P = (I−KH)P(I−KH)ᵀ + KRKᵀ`` for the gain ``K = P Hᵀ S⁻¹`` (derivation at
-  :func:`update_inplace`); no copy of ``P`` per update or step; observations of one step are applied
-  sequentially;
-* **association**: ``known`` uses the sensor-reported ids (``observations.reported_id``); ``ml`` is
-  maximum-likelihood (nearest neighbour in Mahalanobis distance of the innovation) with a χ² gate, new
-  landmark creation beyond a second χ² threshold and an optional provisional list (paper 002 §14.1: wait
-  several sightings before a landmark enters the state, against "fake" landmarks). Paper 002 Fig. 14.5 takes
-  the argmax of the likelihood ``det(2πS)^-½ exp(−½ d²)``; we take the smallest ``d²`` (the usual gated
-  nearest neighbour) so that the gate and the choice use the same statistic;
-* optional GPS position fixes (linear update ``H = [I₂ 0]``);
-* optional **stabilising noise** (paper 001 §III: the sensor noise assumed by the EKF is "pumped up by a
-  factor of approximately 10 ... to maintain consistency"): ``obs_std_scale`` multiplies σ_r, σ_b,
-  ``motion_std_scale`` the process noise σ's, and ``stabilising_pose_std`` adds a per-step pose noise.
+* state ``x = [x_r (3,), m_1 (2,), ..., m_L (2,)]``, ``n = 3 + 2L``, covariance ``P (n, n)``, in preallocated
+  zero-padded buffers updated in place (the state grows by two entries per new landmark);
+* **predict** touches only the pose rows/columns (O(n)): the DDMR model driven by the controls with
+  ``NoiseSpec.motion_std`` (``motion_input="controls"``) or the composition with the odometry increment with
+  ``NoiseSpec.odometry_std`` (``motion_input="odometry"``);
+* **update** with one range-bearing observation is O(n²): the rank-2 correction ``P −= V Vᵀ``, equal to the
+  Joseph form for the gain ``K = P Hᵀ S⁻¹`` (:func:`update_inplace`); a step's observations in sequence;
+* **association**: ``known`` uses ``observations.reported_id``; ``ml`` is the gated nearest neighbour in
+  Mahalanobis distance (smallest ``d²``, so gate and choice use one statistic), a new landmark beyond a second
+  χ² threshold, and an optional provisional list (paper 002 §14.1);
+* optional GPS position fixes (linear update ``H = [I₂ 0]``) and **stabilising noise** (paper 001 §III):
+  ``obs_std_scale``, ``motion_std_scale`` and ``stabilising_pose_std``.
 
-The numerical core is a set of functions under the class: in-place kernels the filter runs
-(:func:`predict_inplace`, :func:`update_inplace`, :func:`update_position_inplace`) with pure twins that copy
-first and return new arrays (:func:`predict`, :func:`update`, :func:`update_position`), and
-:func:`landmark_init`, :func:`innovation_stats`; the class is a thin driver and the functions are tested
-against hand-written Kalman algebra.
+The numerical core is module functions: in-place kernels (:func:`predict_inplace`, :func:`update_inplace`,
+:func:`update_position_inplace`), pure twins that copy first (:func:`predict`, :func:`update`,
+:func:`update_position`), :func:`landmark_init` and :func:`innovation_stats`; the class is a thin driver.
 """
 
 from __future__ import annotations
@@ -192,7 +180,7 @@ class _GrowingState:
 
     The in-place kernels (:func:`predict_inplace`, :func:`update_inplace`, ...) run on the padded pair
     ``xa (nₐ,)``, ``Pa (nₐ, nₐ)`` with ``nₐ ≥ n``: ``Pa`` is C-contiguous (numpy's in-place rank-k update on a
-    strided ``[:n, :n]`` window of a larger square buffer costs about twice as much, measured) and its
+    strided ``[:n, :n]`` window of a larger square buffer is slower) and its
     rows/columns beyond ``n`` are exactly zero, which every kernel keeps exactly zero (their rows of
     ``P Hᵀ`` are 0), so the padding changes no number. ``x`` and ``P`` are the active ``[:n]`` views.
 
@@ -297,10 +285,10 @@ class EkfSlam(BaseSolver):
             frame += hi > lo
             # Rows of landmarks not yet in the state (known: a new id; ml: no plausible state landmark) wait until
             # the step's re-observations are fused: they are appended to ``dets`` and visited after the first
-            # pass, so h⁻¹ is linearised at the updated pose, not the predicted one (with σ_ω Δt ≈ 0.18 rad of
-            # heading noise per step, a landmark initialised 40 m away from the predicted pose is metres off
-            # the tangent line its linearised P_mx assumes; measured on hybrid-map4, issue 15). In the second
-            # pass a second row of a new id / ml match updates the landmark the first one created.
+            # pass, so h⁻¹ is linearised at the updated pose, not the predicted one (a far landmark initialised
+            # from a pose with large heading noise is metres off the tangent line its linearised P_mx assumes;
+            # benchmarks/results/design_notes.md). In the second pass a second row of a new id / ml match
+            # updates the landmark the first one created.
             dets = group_detections(z_all, sensor, rid, lo, hi, st.x[:3], group=p.group_returns,
                                     association=p.association, group_dist=p.group_dist,
                                     range_offset=p.range_offset)
@@ -523,7 +511,7 @@ def _landmark_blocks(st: _GrowingState):
 
 def _chi2_2dof_ppf(q: float) -> float:
     """χ²(2) quantile in closed form: ``F(x) = 1 − exp(−x/2)``, so ``F⁻¹(q) = −2 ln(1 − q)`` (0.99 → 9.21);
-    no ``scipy.stats`` import in the filter (≈ 0.4-1 s, issue 25)."""
+    no ``scipy.stats`` import in the filter (its import cost: benchmarks/results/design_notes.md)."""
     return -2.0 * math.log1p(-q)
 
 
@@ -636,7 +624,7 @@ def predict(x, P, pose_pred, F, motion_cov):
     -------
     x, P : ndarray (n,), ndarray (n, n)  new arrays.
     """
-    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
+    Q = motion_cov  # Q: process noise in pose coordinates inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     predict_inplace(x, P, pose_pred, F, Q)
@@ -645,7 +633,7 @@ def predict(x, P, pose_pred, F, motion_cov):
 
 def predict_inplace(x, P, pose_pred, F, motion_cov) -> None:
     """:func:`predict` written into ``x (n,)`` and ``P (n, n)`` (touches 3 rows and 3 columns: O(n))."""
-    Q = motion_cov  # Q: process noise in pose coordinates (Thrun's R) inside the kernel
+    Q = motion_cov  # Q: process noise in pose coordinates inside the kernel
     x[:3] = pose_pred
     x[2] = _wrap(x[2])
     P[:3, :] = F @ P[:3, :]
@@ -665,7 +653,7 @@ def update(x, P, z, j, obs_cov):
     -------
     x : ndarray (n,), P : ndarray (n, n) (new arrays), y : ndarray (2,) innovation, S : ndarray (2, 2).
     """
-    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
+    R = obs_cov  # R: the measurement covariance inside the kernel
     x = np.array(x, float, copy=True)
     P = np.array(P, float, copy=True)
     y, S = update_inplace(x, P, z, j, R)
@@ -679,22 +667,14 @@ def update_inplace(x, P, z, j, obs_cov):
 
         ẑ = h(x_r, m_j),   y = z ⊖ ẑ               (bearing wrapped)
         H = [H_r, 0 … 0, H_m, 0 … 0]  (2, n)     nonzero only in the pose and landmark-j columns
-        U = P Hᵀ  (n, 2)                          (5 columns of P: O(n))
-        S = H P Hᵀ + R = H U + R
-        K = U S⁻¹                                 (closed-form 2×2 inverse)
+        U = P Hᵀ  (n, 2),   S = H U + R,   K = U S⁻¹   (closed-form 2×2 inverse)
         x = x + K y
         P = (I − KH) P (I − KH)ᵀ + K R Kᵀ          (Joseph form)
-          = P − K Uᵀ − U Kᵀ + K S Kᵀ               (expanded, P symmetric)
-          = P − U S⁻¹ Uᵀ = P − V Vᵀ,   V = U L⁻ᵀ,  S = L Lᵀ     (for the gain K = U S⁻¹)
+          = P − U S⁻¹ Uᵀ = P − V Vᵀ,   V = U L⁻ᵀ,  S = L Lᵀ     (for the gain K = U S⁻¹, P symmetric)
 
-    The last line is one rank-2 update of the preallocated ``P`` in place: no (n, n) copy of ``P`` is made.
-    It equals the textbook Joseph form to round-off (``tests/test_ekf_inplace.py`` checks 1e-10 on random
-    problems); the Joseph form's extra robustness concerns a gain that is not ``U S⁻¹``, which never
-    occurs here. ``P −= V Vᵀ`` is one BLAS ``dgemm`` with ``beta = 1`` written straight into ``P``
-    (:func:`_rank2_downdate`): one read and one write of ``P``, no (n, n) temporary (a temporary of 32 MB
-    at n ≈ 2000 costs more in page faults than the arithmetic, issue 25); ``gemm`` leaves an asymmetry at
-    the level of round-off (≈ 1e-16 relative per update); the solver symmetrises the covariance blocks it
-    reports.
+    The last line is one in-place BLAS ``dgemm`` (``beta = 1``, :func:`_rank2_downdate`): one read and one
+    write of ``P``, no (n, n) temporary. It equals the Joseph form to round-off (``tests/test_ekf_inplace.py``);
+    ``gemm`` leaves a round-off asymmetry, so the solver symmetrises the covariance blocks it reports.
 
     Parameters
     ----------
@@ -705,7 +685,7 @@ def update_inplace(x, P, z, j, obs_cov):
     -------
     y : ndarray (2,) innovation, S : ndarray (2, 2) innovation covariance.
     """
-    R = obs_cov  # R: the measurement covariance (Thrun's letter) inside the kernel
+    R = obs_cov  # R: the measurement covariance inside the kernel
     k = 3 + 2 * j
     y, Hs = _innovation_and_jacobian(x[0], x[1], x[2], x[k], x[k + 1], float(z[0]), float(z[1]))
     U = P[:, :3] @ Hs[:, :3].T  # (n, 2) = P Hᵀ, pose columns ...
@@ -726,7 +706,7 @@ def _rank2_downdate(P, V) -> None:
     numpy's ``P −= V @ Vᵀ`` with its temporary.
     """
     if P.flags.c_contiguous:
-        from scipy.linalg.blas import dgemm  # lazy: scipy.linalg costs ≈ 0.1-1 s to import (issue 25)
+        from scipy.linalg.blas import dgemm  # lazy: scipy.linalg is slow to import
 
         dgemm(-1.0, V, V, 1.0, P.T, trans_b=1, overwrite_c=1)
     else:

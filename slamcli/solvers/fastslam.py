@@ -1,60 +1,25 @@
 """FastSLAM 1.0 and 2.0: a Rao-Blackwellised particle filter over robot poses with one 2×2 EKF per landmark
-per particle (paper 002 §14.3-14.5, Algorithm 1; paper 003 "FastSLAM" slides; Montemerlo et al. 2002/2003).
+per particle (paper 002 §14.3-14.5; Montemerlo et al. 2002/2003), vectorised over particles: poses
+``x (P, 3)``, landmark means ``mu (P, C, 2)``, covariances ``sig (P, C, 2, 2)``, counters and existence flags
+``(P, C)`` (``C`` slots). Letters as in filterpy: ``Q`` motion (process) noise, ``R`` measurement noise,
+``S_n = H_m Σ H_mᵀ + R`` the innovation covariance of landmark n (Thrun's book calls them R, Q and Q_n).
 
-Posterior factorisation (paper 002, eq. 14.4)::
-
-    p(x_{1:t}, m | z_{1:t}, u_{1:t}, c_{1:t}) = p(x_{1:t} | z, u, c) · Π_n p(m_n | x_{1:t}, z, c)
-
-Each particle ``k`` carries a pose ``x^[k]`` and, for every landmark ``n``, a Gaussian ``(μ_n^[k], Σ_n^[k])``
-(eq. 14.17). Everything is vectorised over particles: poses ``x (P, 3)``, landmark means ``mu (P, C, 2)``,
-covariances ``sig (P, C, 2, 2)``, support counters ``count (P, C)`` and existence flags ``exists (P, C)``
-(``C`` = slot capacity). The only Python loops are over time steps and over the observations of one step.
-
-One step ``t`` (pose ``t-1`` → ``t``, observations ``z_{t,1..n}``):
-
-**FastSLAM 1.0** (paper 002 §14.4.1)
-  1. sample ``x_t^[k] ~ p(x_t | x_{t-1}^[k], u_t)`` (eq. 14.18; commanded controls + ``motion_std`` or
-     odometry increments + ``odometry_std``);
-  2. per observation: landmark EKF update (eqs. 14.21-14.24) and importance weight
-     ``w ∝ N(z; ẑ, Q_n)``, ``Q_n = H_m Σ H_mᵀ + Q`` (eqs. 14.28-14.29); unseen landmarks are initialised
-     with the inverse model ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ``.
-
-**FastSLAM 2.0** (Montemerlo et al., IJCAI 2003; Thrun et al., *Probabilistic Robotics* §13.4)
-  1. Gaussian prior ``N(x̂, R)``: ``x̂ = g(x_{t-1}^[k], u_t)``, ``R = G_u M G_uᵀ`` (or ``J Σ_odo Jᵀ``);
-  2. per observation associated with an already-mapped landmark, a Kalman update of the *pose* proposal::
-
-         S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + Q,   K = Σ_x H_xᵀ S⁻¹
-         x̂ ← x̂ + K (z − h(x̂, μ)),             Σ_x ← Σ_x − K S Kᵀ   (= (Σ_x⁻¹ + H_xᵀ Q_n⁻¹ H_x)⁻¹)
-
-     (the Kalman form also works for the rank-2 DDMR motion noise, whose ``R`` has no inverse), and the
-     importance weight is multiplied by the linearised predictive likelihood ``N(z; h(x̂, μ), S)`` — the ratio
-     target / proposal, ``p(z_t | x_{t-1}^[k], u_t, m^[k])``, of the improved proposal. Several observations
-     of one step are folded in sequentially, each linearised at the current proposal mean;
-  3. SAMPLE ``x_t^[k] ~ N(x̂, Σ_x)`` (not its mean), then update the landmark EKFs at the sampled pose as in 1.0,
-     reusing the proposal's linearisation (``H_m``, ``Σ H_mᵀ``, ``H_m Σ H_mᵀ + Q``) with the innovation moved
-     to the sampled pose to first order, ``ν(x_t) = ν(x̂) − H_x (x_t − x̂)`` (:func:`_shift_terms`; exact
-     recomputation when a landmark is seen twice in one step or only some particles update it).
-
-**Correspondences** (§14.4.2): ``association="known"`` uses ``observations.reported_id`` (a sensor-reported
-identity; the caller may have filled it from ground truth with ``--oracle-association``, which the result
-file records); ``"ml"`` is per-particle maximum likelihood (eq. 14.30): the landmark maximising the
-predictive likelihood, or a new landmark when no likelihood reaches ``p0`` (the new-landmark weight is
-``p0``). Optional removal of unsupported landmarks by negative evidence: a counter starts at 1, gains 1 when
-the landmark is observed and loses 1 when it is predicted inside the sensor's range/field of view but not
-observed; the landmark is dropped when the counter falls below 0 (Thrun et al. Table 13.4).
-
-**Resampling** when ``ESS = 1/Σw² < resample_threshold · P`` (systematic by default), by fancy indexing so
-every particle owns its landmark arrays (no shared mutable state between copies). The last step is never
-resampled, so the final weights still rank the particles.
-
-**Output.** ``poses_xyt``: weighted mean per step (circular mean heading) or the best final particle's path
-(traced back through the resampling ancestry). ``pose_cov (T+1, 3, 3)``: weighted moment-matched covariance
-of the particle poses about the weighted mean, full 3×3 (EVALUATION-METHOD §A2). Landmarks: with known
-association the weighted moment-matched mixture ``μ̄ = Σ w μ``, ``Σ̄ = Σ w [Σ + (μ − μ̄)(μ − μ̄)ᵀ]``
-over particles; with ML association particles do not share landmark identities, so the best particle's map
-and its own EKF covariances are returned. ``assoc``: the best particle's association of every observation.
-``extra["mean_nis"]``: mean normalised innovation squared over all particle updates (χ²(2) ⇒ ≈ 2; 1.0: the
-landmark update at the sampled pose, 2.0: the predictive innovation of the proposal).
+* **1.0**: sample ``x_t ~ p(x_t | x_{t-1}, u_t)`` (eq. 14.18; controls + ``motion_std`` or odometry +
+  ``odometry_std``), then per observation the landmark EKF update (eqs. 14.21-14.24) and the weight
+  ``N(z; ẑ, S_n)``; unseen landmarks start at ``μ = h⁻¹(x, z)``, ``Σ = M_z R M_zᵀ``.
+* **2.0** (Probabilistic Robotics §13.4): prior ``N(x̂, Q)``, ``Q = G_u M G_uᵀ`` (or ``J Σ_odo Jᵀ``); each
+  observation of a mapped landmark refines the pose proposal by a Kalman update
+  ``S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + R``, ``K = Σ_x H_xᵀ S⁻¹`` and multiplies the weight by ``N(z; h(x̂, μ), S)``;
+  the pose is then sampled from ``N(x̂, Σ_x)`` and the landmark EKFs updated there, reusing the proposal's
+  linearisation shifted to first order (:func:`_shift_terms`).
+* **Correspondences** (§14.4.2): ``association="known"`` uses ``observations.reported_id``; ``"ml"`` is
+  per-particle maximum likelihood (eq. 14.30) with a new landmark below ``p0``; optional negative evidence
+  drops landmarks predicted in view but not seen (Table 13.4).
+* **Resampling** when ``ESS = 1/Σw² < resample_threshold · P`` (systematic by default); never at the last step.
+* **Output**: poses as the weighted mean per step (circular heading) or the best particle's traced-back path;
+  ``pose_cov`` the weighted moment-matched covariance; landmarks as the moment-matched mixture over particles
+  (known association) or the best particle's map (ml); ``assoc`` the best particle's;
+  ``extra["mean_nis"]`` the mean NIS over all particle updates (χ²(2) ⇒ ≈ 2).
 """
 
 from __future__ import annotations
@@ -82,8 +47,8 @@ from slamcli.types import SlamInputs, SolverResult, Status
 LOG_2PI = math.log(2.0 * math.pi)
 CHI2_2DOF_9999 = 18.420680743952367  # scipy.stats.chi2.ppf(0.9999, 2) = −2 ln(1e−4)
 #: Batched kernels work on (P, k) arrays of at most this many float64 (64 KB): larger temporaries leave
-#: glibc's heap for mmap, and their page faults cost more than the batching saves (measured: 280 KB
-#: temporaries made the batched 1.0 update 1.5× slower than row by row at P = 1000).
+#: glibc's heap for mmap, and their page faults cost more than the batching saves
+#: (chosen by measurement: benchmarks/results/design_notes.md).
 BATCH_ELEMENTS = 8192
 
 
@@ -120,7 +85,7 @@ class FastSlamParams:
         Reported path: weighted mean per step, or the best final particle's path.
     p0 : float | None
         ML association: new-landmark likelihood (a density in measurement space). ``None`` = the Gaussian
-        density of the sensor noise ``Q`` at Mahalanobis² = χ²₂(0.9999) = 18.42.
+        density of the sensor noise ``R`` at Mahalanobis² = χ²₂(0.9999) = 18.42.
     remove_unsupported : bool
         ML association: drop landmarks by negative evidence inside the sensor's range / field of view.
     fov_rad : float
@@ -273,8 +238,8 @@ class ParticleSet:
 
     def store(self, idx: tuple, mx, my, a, b, c) -> None:
         """Write landmark means ``(mx, my)`` and covariances ``[[a, b], [b, c]]`` at the slot index tuple ``idx``
-        (``(particles, slots)``: any numpy index of the first two axes), component by component (measured:
-        stacking the components first and writing once costs twice as much)."""
+        (``(particles, slots)``: any numpy index of the first two axes), component by component (cheaper than
+        stacking the components first and writing once)."""
         self.mu[idx + (0,)], self.mu[idx + (1,)] = mx, my
         self.sig[idx + (0, 0)], self.sig[idx + (1, 1)] = a, c
         self.sig[idx + (0, 1)] = self.sig[idx + (1, 0)] = b
@@ -296,7 +261,7 @@ class ParticleSet:
 
 # ---------------------------------------------------------------------------------------------------------
 # Component-wise kernels. Every quantity is an array over particles (and, for ML candidates, landmarks);
-# explicit 2×2 / 3×3 algebra on component arrays is ~10× faster than np.matmul on stacks of tiny matrices.
+# explicit 2×2 / 3×3 algebra on component arrays is much faster than np.matmul on stacks of tiny matrices.
 # ---------------------------------------------------------------------------------------------------------
 @dataclasses.dataclass
 class _ObsTerms:
@@ -304,7 +269,7 @@ class _ObsTerms:
 
     ``ν = z − h(x, m)`` (bearing wrapped), ``H_m = [[h11, h12], [h21, h22]] = ∂h/∂m`` (``H_x[:, :2] = −H_m``,
     ``H_x[1, 2] = −1``, see :func:`slamcli.models.observation.range_bearing_jacobians`), ``P = Σ H_mᵀ`` and
-    ``S = H_m Σ H_mᵀ + Q`` (eq. 14.29; symmetric, ``S12 = S21``).
+    ``S = H_m Σ H_mᵀ + R`` (eq. 14.29; symmetric, ``S12 = S21``).
     """
 
     nu_r: np.ndarray
@@ -398,7 +363,7 @@ def _ekf_terms(o: _ObsTerms, mx, my, a, b, c, with_ll: bool = True):
 def _proposal_terms(o: _ObsTerms, Sx):
     """FastSLAM 2.0 pose-proposal terms for pose covariance ``Sx (3, 3, ...)``.
 
-    ``U = Σ_x H_xᵀ (3, 2, ...)`` and the predictive covariance ``S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + Q``.
+    ``U = Σ_x H_xᵀ (3, 2, ...)`` and the predictive covariance ``S = H_x Σ_x H_xᵀ + H_m Σ_m H_mᵀ + R``.
     Returns ``(U, S11, S12, S22)``.
     """
     U = np.empty((3, 2) + np.broadcast_shapes(Sx.shape[2:], o.h11.shape))
@@ -413,7 +378,7 @@ def _proposal_terms(o: _ObsTerms, Sx):
 def _shift_terms(o: _ObsTerms, dx: np.ndarray) -> _ObsTerms:
     """Terms of :func:`_obs_terms` moved from the linearisation pose ``x_lin`` to ``x = x_lin + dx``
     (``dx (P, 3)``, heading difference wrapped here) to first order: ``ν(x) = ν(x_lin) − H_x dx`` with
-    ``H_x = [[−h11, −h12, 0], [−h21, −h22, −1]]``; ``H_m``, ``Σ H_mᵀ`` and ``H_m Σ H_mᵀ + Q`` are kept.
+    ``H_x = [[−h11, −h12, 0], [−h21, −h22, −1]]``; ``H_m``, ``Σ H_mᵀ`` and ``H_m Σ H_mᵀ + R`` are kept.
 
     FastSLAM 2.0 samples ``x`` from a proposal whose spread is ~σ of the measurement, so the neglected
     second-order terms (``|dx|² / r``) are far below the sensor noise; the landmark update then costs no
@@ -439,27 +404,27 @@ def landmark_ekf_update(x, mu, sig, z, obs_cov):
     mu : ndarray (..., 2)     landmark means before the update.
     sig : ndarray (..., 2, 2) landmark covariances before the update (symmetric).
     z : ndarray (2,)          measurement [range, bearing].
-    obs_cov : ndarray (2, 2)  measurement noise covariance (diagonal; ``Q`` in the kernels, Thrun's letter).
+    obs_cov : ndarray (2, 2)  measurement noise covariance (diagonal; ``R`` in the kernels).
 
     Returns
     -------
     mu_new : ndarray (..., 2)       ``μ + K ν``, ``ν = z − h(x, μ)`` with the bearing wrapped.
     sig_new : ndarray (..., 2, 2)   ``(I − K H) Σ``.
-    log_lik : ndarray (...)         ``log N(ν; 0, H Σ Hᵀ + Q)`` — the FastSLAM 1.0 importance weight.
+    log_lik : ndarray (...)         ``log N(ν; 0, H Σ Hᵀ + R)`` — the FastSLAM 1.0 importance weight.
     """
-    Q = obs_cov  # Q: the measurement covariance (Thrun's letter; R is the motion covariance in this module)
+    R = obs_cov  # R: the measurement covariance (Q: the motion covariance)
     x = np.asarray(x, float)
     mu = np.asarray(mu, float)
     sig = np.asarray(sig, float)
     comps = _components(mu, sig)
-    o = _obs_terms(x[..., 0], x[..., 1], x[..., 2], *comps, z[0], z[1], Q[0, 0], Q[1, 1])
+    o = _obs_terms(x[..., 0], x[..., 1], x[..., 2], *comps, z[0], z[1], R[0, 0], R[1, 1])
     mx, my, a, b, c, ll, _ = _ekf_terms(o, *comps)
     sig_new = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
     return np.stack([mx, my], -1), sig_new, ll
 
 
 def _init_terms(x, y, th, zr, zb, qr, qb):
-    """Landmark initialisation ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` as components ``(mx, my, a, b, c)``;
+    """Landmark initialisation ``μ = h⁻¹(x, z)``, ``Σ = M_z R M_zᵀ`` as components ``(mx, my, a, b, c)``;
     ``M_z = [[cos φ, −r sin φ], [sin φ, r cos φ]]``, ``φ = θ + b`` (the pose is given within a particle)."""
     phi = th + zb
     cp, sp = np.cos(phi), np.sin(phi)
@@ -475,11 +440,11 @@ def _init_terms(x, y, th, zr, zb, qr, qb):
 
 def init_landmark(x, z, obs_cov):
     """Initialise landmark Gaussians from poses ``x (..., 3)`` and one measurement ``z (2,)``:
-    ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` with ``Q = obs_cov (2, 2)``. Returns ``mu (..., 2)``,
+    ``μ = h⁻¹(x, z)``, ``Σ = M_z R M_zᵀ`` with ``R = obs_cov (2, 2)``. Returns ``mu (..., 2)``,
     ``sig (..., 2, 2)``."""
-    Q = obs_cov  # Q: the measurement covariance (Thrun's letter)
+    R = obs_cov  # R: the measurement covariance
     x = np.asarray(x, float)
-    mx, my, a, b, c = _init_terms(x[..., 0], x[..., 1], x[..., 2], z[0], z[1], Q[0, 0], Q[1, 1])
+    mx, my, a, b, c = _init_terms(x[..., 0], x[..., 1], x[..., 2], z[0], z[1], R[0, 0], R[1, 1])
     return np.stack([mx, my], -1), np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
 
 
@@ -511,9 +476,9 @@ def sample_pose(mean: np.ndarray, Sx: np.ndarray, rng: np.random.Generator) -> n
     return out
 
 
-def _predict_controls(x, u, dt, std_v, std_w, R):
+def _predict_controls(x, u, dt, std_v, std_w, Q):
     """FastSLAM 2.0 prior from the controls in one pass: ``x̂ = g(x, u)`` (:func:`ddmr_step`, Euler DDMR) and
-    ``R = G_u diag(σ_v², σ_ω²) G_uᵀ`` written into the nonzero entries of the buffer ``R (3, 3, P)`` (its
+    ``Q = G_u diag(σ_v², σ_ω²) G_uᵀ`` written into the nonzero entries of the buffer ``Q (3, 3, P)`` (its
     other entries must be 0); ``cos θ``, ``sin θ`` computed once for both."""
     th = x[:, 2]
     c, s = np.cos(th), np.sin(th)
@@ -523,33 +488,33 @@ def _predict_controls(x, u, dt, std_v, std_w, R):
     x_hat[:, 1] = x[:, 1] + dv * s
     x_hat[:, 2] = wrap_angle(th + dt * u[1])
     kv = (dt * std_v) ** 2
-    np.multiply(c * c, kv, out=R[0, 0])
-    np.multiply(s * s, kv, out=R[1, 1])
-    np.multiply(c * s, kv, out=R[0, 1])
-    R[1, 0] = R[0, 1]
-    R[2, 2] = (dt * std_w) ** 2
-    return x_hat, R
+    np.multiply(c * c, kv, out=Q[0, 0])
+    np.multiply(s * s, kv, out=Q[1, 1])
+    np.multiply(c * s, kv, out=Q[0, 1])
+    Q[1, 0] = Q[0, 1]
+    Q[2, 2] = (dt * std_w) ** 2
+    return x_hat, Q
 
 
-def _predict_ackermann(x, u, dt, vehicle, M_std, version, rng, R):
+def _predict_ackermann(x, u, dt, vehicle, M_std, version, rng, Q):
     """Ackermann prior (:mod:`slamcli.models.ackermann`): 1.0 samples ``g(x, u + ε)``, ε ~ N(0, diag(M_std²));
-    2.0 returns ``x̂ = g(x, u)`` and ``R = G_u diag(M_std²) G_uᵀ`` as ``(3, 3, P)`` in the buffer ``R``."""
+    2.0 returns ``x̂ = g(x, u)`` and ``Q = G_u diag(M_std²) G_uᵀ`` as ``(3, 3, P)`` in the buffer ``Q``."""
     P = x.shape[0]
     if version == 1:
         return ackermann_step(x, u + M_std * rng.standard_normal((P, 2)), dt, vehicle), None
     _, G_u = ackermann_jacobians(x, u, dt, vehicle)  # (P, 3, 2)
-    R[...] = np.einsum("pij,j,pkj->ikp", G_u, np.square(M_std), G_u)
-    return ackermann_step(x, u, dt, vehicle), R
+    Q[...] = np.einsum("pij,j,pkj->ikp", G_u, np.square(M_std), G_u)
+    return ackermann_step(x, u, dt, vehicle), Q
 
 
 def _motion_cov_odometry(th, std):
-    """``R = J diag(σ_x², σ_y², σ_θ²) Jᵀ`` as ``(3, 3, P)``, ``J = ∂(x ⊕ d)/∂d = blkdiag(R(θ), 1)``."""
+    """``Q = J diag(σ_x², σ_y², σ_θ²) Jᵀ`` as ``(3, 3, P)``, ``J = ∂(x ⊕ d)/∂d = blkdiag(R(θ), 1)``."""
     c, s = np.cos(th), np.sin(th)
     vx, vy = std[0] ** 2, std[1] ** 2
-    R = np.zeros((3, 3, th.shape[0]))
-    R[0, 0], R[1, 1], R[2, 2] = c * c * vx + s * s * vy, s * s * vx + c * c * vy, std[2] ** 2
-    R[0, 1] = R[1, 0] = c * s * (vx - vy)
-    return R
+    Q = np.zeros((3, 3, th.shape[0]))
+    Q[0, 0], Q[1, 1], Q[2, 2] = c * c * vx + s * s * vy, s * s * vx + c * c * vy, std[2] ** 2
+    Q[0, 1] = Q[1, 0] = c * s * (vx - vy)
+    return Q
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -615,7 +580,7 @@ class _Setup:
     slot_of_obs : ndarray (N,) | None   known association: landmark slot of every row (−1 = no id).
     capacity : int                initial landmark slots.
     log_p0 : float                ML new-landmark log-likelihood.
-    obs_cov : ndarray (2, 2)      measurement covariance (``Q`` in the kernels, Thrun's letter).
+    obs_cov : ndarray (2, 2)      measurement covariance (``R`` in the kernels).
     motion_std : ndarray (2,) | (3,)  scaled σ of the controls or of the odometry increment.
     increments : ndarray (T, 3) | None  odometry increments (``motion_source="odometry"``).
     rho : ndarray (N,) | None     declared landmark radius per row when the size gate applies (``ml``,
@@ -719,7 +684,7 @@ class _Run:
     def __init__(self, setup: _Setup, inputs: SlamInputs, rng: np.random.Generator) -> None:
         p = setup.p
         self.setup, self.p, self.inputs, self.rng = setup, p, inputs, rng
-        self._Q = setup.obs_cov  # Q: the measurement covariance in the kernels' (Thrun's) letters
+        self._R = setup.obs_cov  # R: the measurement covariance in the kernels
         self._log_p0 = setup.log_p0
         self.known = p.association == "known"
         T1, P, N = inputs.n_poses, p.n_particles, len(inputs.observations)
@@ -740,7 +705,7 @@ class _Run:
         # size gate, which could unmap one, is ML-only); with ML association per particle (N, P), filled step by
         # step (pre-resampling; traced back through ``anc`` for the best particle).
         self.assoc_hist = setup.slot_of_obs.astype(np.int32) if self.known else np.full((N, P), -1, np.int32)
-        self.R_buf = np.zeros((3, 3, P))  # 2.0 motion covariance, rewritten each step (the proposal copies it)
+        self.Q_buf = np.zeros((3, 3, P))  # 2.0 motion covariance, rewritten each step (the proposal copies it)
         self.n_updates = self.n_resample = 0
         self.ess_sum = self._nis_sum = 0.0
         self._nis_n = 0
@@ -750,7 +715,7 @@ class _Run:
 
     # ---- one step --------------------------------------------------------------------------------------
     def _prior(self, t: int):
-        """Proposal prior of step ``t``: sampled poses (1.0, ``R = None``) or ``x̂`` and ``R (3, 3, P)`` (2.0)."""
+        """Proposal prior of step ``t``: sampled poses (1.0, ``Q = None``) or ``x̂`` and ``Q (3, 3, P)`` (2.0)."""
         ps, p, inputs, rng, M_std = self.ps, self.p, self.inputs, self.rng, self.setup.motion_std
         P = ps.n_particles
         if t == 0:
@@ -758,10 +723,10 @@ class _Run:
         if p.motion_source == "controls":
             u = inputs.controls[t - 1]
             if inputs.motion_model == "ackermann":  # car model of the tracked point, u = [v_e, α]
-                return _predict_ackermann(ps.x, u, inputs.dt, inputs.vehicle, M_std, p.version, rng, self.R_buf)
+                return _predict_ackermann(ps.x, u, inputs.dt, inputs.vehicle, M_std, p.version, rng, self.Q_buf)
             if p.version == 1:  # eq. 14.18: x_t ~ p(x_t | x_{t-1}, u_t) with u + ε, ε ~ N(0, M)
                 return ddmr_step(ps.x, u + M_std * rng.standard_normal((P, 2)), inputs.dt), None
-            return _predict_controls(ps.x, u, inputs.dt, M_std[0], M_std[1], self.R_buf)
+            return _predict_controls(ps.x, u, inputs.dt, M_std[0], M_std[1], self.Q_buf)
         d = self.setup.increments[t - 1]
         if p.version == 1:  # x_t = x_{t-1} ⊕ (d + ε), ε ~ N(0, diag(odometry_std²))
             return se2.compose(ps.x, d + M_std * rng.standard_normal((P, 3))), None
@@ -771,15 +736,15 @@ class _Run:
         """Prior → measurement (1.0 / 2.0) → negative evidence → estimate → resampling, for step ``t``."""
         p, inputs = self.p, self.inputs
         z_all, slot_of_obs, groups = self._detections(t)
-        x_hat, R = self._prior(t)
+        x_hat, Q = self._prior(t)
         rows = range(len(z_all))  # detection k: measurement z_all[k], observation rows groups[k]
         # NaN from unused slots of particles that start a new landmark is masked out with np.where.
         with np.errstate(divide="ignore", invalid="ignore"):
-            if R is None:  # FastSLAM 1.0, or step 0 (x0 known)
+            if Q is None:  # FastSLAM 1.0, or step 0 (x0 known)
                 self.ps.x = x_hat
                 step_slots, _ = self._measure_v1(self.ps, z_all, rows, slot_of_obs)
             else:
-                step_slots, step_new, lin = self._proposal_v2(self.ps, x_hat, R, z_all, rows, slot_of_obs, self.rng)
+                step_slots, step_new, lin = self._proposal_v2(self.ps, x_hat, Q, z_all, rows, slot_of_obs, self.rng)
                 # ---- landmark EKFs at the sampled pose ----------------------------------------------------
                 for i, n in enumerate(rows):
                     if step_slots[i] is not None:
@@ -899,18 +864,18 @@ class _Run:
         return (np.arange(ps.n_particles), slots)
 
     def _gather_terms(self, ps: ParticleSet, idx, x, z):
-        Q = self._Q
+        R = self._R
         comps = _components(ps.mu[idx], ps.sig[idx])
-        o = _obs_terms(x[:, 0], x[:, 1], x[:, 2], *comps, z[0], z[1], Q[0, 0], Q[1, 1])
+        o = _obs_terms(x[:, 0], x[:, 1], x[:, 2], *comps, z[0], z[1], R[0, 0], R[1, 1])
         return o, comps
 
     def _ml_candidates(self, ps: ParticleSet, x, Sx, z):
         """Per-particle log-likelihood ``(P, C)`` of measurement ``z`` for every live landmark (eq. 14.30),
-        with predictive covariance ``H_m Σ H_mᵀ + Q`` (+ ``H_x Σ_x H_xᵀ`` for the 2.0 proposal)."""
+        with predictive covariance ``H_m Σ H_mᵀ + R`` (+ ``H_x Σ_x H_xᵀ`` for the 2.0 proposal)."""
         live = ps.exists
-        Q = self._Q
+        R = self._R
         xb = x[:, None, :]
-        o = _obs_terms(xb[..., 0], xb[..., 1], xb[..., 2], *_components(ps.mu, ps.sig), z[0], z[1], Q[0, 0], Q[1, 1])
+        o = _obs_terms(xb[..., 0], xb[..., 1], xb[..., 2], *_components(ps.mu, ps.sig), z[0], z[1], R[0, 0], R[1, 1])
         S11, S12, S22 = o.S11, o.S12, o.S22
         if Sx is not None:
             _, S11, S12, S22 = _proposal_terms(o, Sx[..., None])
@@ -971,12 +936,12 @@ class _Run:
         self, ps: ParticleSet, slots, new, z, *, weight: bool, terms: _ObsTerms | None = None
     ):
         """EKF-update existing landmarks / initialise new ones in ``slots``; optionally add the 1.0 weight
-        ``log N(ν; 0, Q_n)`` (eq. 14.28) of the updated particles. ``terms``: the linearisation at the poses
+        ``log N(ν; 0, S_n)`` (eq. 14.28) of the updated particles. ``terms``: the linearisation at the poses
         ``ps.x`` when the caller already has it (FastSLAM 2.0, :func:`_shift_terms`; then ``new`` is all
         False)."""
         idx = self._index(ps, slots)
         x = ps.x
-        Q = self._Q
+        R = self._R
         any_new = bool(new.any())
         if terms is not None:
             comps = _components(ps.mu[idx], ps.sig[idx])
@@ -990,7 +955,7 @@ class _Run:
         else:
             mx = my = a = b = c = ll = None
         if any_new:
-            init = _init_terms(x[:, 0], x[:, 1], x[:, 2], z[0], z[1], Q[0, 0], Q[1, 1])
+            init = _init_terms(x[:, 0], x[:, 1], x[:, 2], z[0], z[1], R[0, 0], R[1, 1])
             if mx is None:
                 mx, my, a, b, c = init
             else:
@@ -1022,7 +987,7 @@ class _Run:
         """FastSLAM 1.0 with known association, batched over particles AND the landmarks of the step.
 
         Given the sampled poses, rows of distinct landmarks are independent (each updates its own 2×2 EKF,
-        eqs. 14.22-14.24, and adds its own ``log N(ν; 0, Q_n)`` to the weight, eq. 14.28), so all of them are
+        eqs. 14.22-14.24, and adds its own ``log N(ν; 0, S_n)`` to the weight, eq. 14.28), so all of them are
         one update on ``(P, k)`` component arrays. A landmark seen again in the same step goes to the next
         round (rows in order), as in the row-by-row filter. Every particle has mapped the same landmarks (the
         ids are shared; nothing removes a landmark under known association), so particle 0's ``exists`` splits
@@ -1053,11 +1018,11 @@ class _Run:
 
     def _update_known(self, ps: ParticleSet, slots: np.ndarray, z: np.ndarray) -> None:
         """Landmark EKFs of the distinct mapped ``slots (k,)`` with measurements ``z (k, 2)`` in every particle
-        at once, on ``(P, k)`` component arrays; adds ``Σ_k log N(ν; 0, Q_n)`` to the log-weights."""
-        Q, x = self._Q, ps.x
-        # np.take gathers whole slots (3× faster than ``mu[:, slots]`` here, measured at P = 1000, k = 2 and 8)
+        at once, on ``(P, k)`` component arrays; adds ``Σ_k log N(ν; 0, S_n)`` to the log-weights."""
+        R, x = self._R, ps.x
+        # np.take gathers whole slots (faster than ``mu[:, slots]`` here)
         comps = _components(np.take(ps.mu, slots, axis=1), np.take(ps.sig, slots, axis=1))  # (P, k) each
-        o = _obs_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], *comps, z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+        o = _obs_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], *comps, z[:, 0], z[:, 1], R[0, 0], R[1, 1])
         mx, my, a, b, c, ll, nis = _ekf_terms(o, *comps)
         self._nis_sum += float(np.sum(nis))  # 1.0: NIS of the measurement update (pose given)
         self._nis_n += nis.size
@@ -1065,9 +1030,9 @@ class _Run:
         ps.log_w += _row_sums(ll)
 
     def _init_known(self, ps: ParticleSet, slots: np.ndarray, z: np.ndarray) -> None:
-        """First sighting of ``slots (k,)``: ``μ = h⁻¹(x, z)``, ``Σ = M_z Q M_zᵀ`` in every particle."""
-        Q, x = self._Q, ps.x
-        mx, my, a, b, c = _init_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], z[:, 0], z[:, 1], Q[0, 0], Q[1, 1])
+        """First sighting of ``slots (k,)``: ``μ = h⁻¹(x, z)``, ``Σ = M_z R M_zᵀ`` in every particle."""
+        R, x = self._R, ps.x
+        mx, my, a, b, c = _init_terms(x[:, None, 0], x[:, None, 1], x[:, None, 2], z[:, 0], z[:, 1], R[0, 0], R[1, 1])
         ps.store((slice(None), slots), mx, my, a, b, c)
         ps.exists[:, slots] = True
 
@@ -1078,7 +1043,7 @@ class _Run:
         ar = np.arange(P)
         x_hat = x_hat.copy()
         Sx = Sx.copy()
-        Q = self._Q
+        R = self._R
         slots_l, new_l = [], []
         # lin[i] = (x_lin (P, 3), terms at x_lin) when row i's landmark EKF can reuse the proposal's
         # linearisation (every particle updates an existing landmark no earlier row of this step touched).
@@ -1133,7 +1098,7 @@ class _Run:
                 sel = ar[new]
                 sn = np.broadcast_to(np.asarray(slots), (P,))[new]
                 xs = x_hat[new]
-                mx, my, a, b, c = _init_terms(xs[:, 0], xs[:, 1], xs[:, 2], z[0], z[1], Q[0, 0], Q[1, 1])
+                mx, my, a, b, c = _init_terms(xs[:, 0], xs[:, 1], xs[:, 2], z[0], z[1], R[0, 0], R[1, 1])
                 ps.store((sel, sn), mx, my, a, b, c)
                 ps.exists[sel, sn] = True
                 born_now[sel, sn] = True

@@ -117,27 +117,14 @@ def associate_nearest_neighbour(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Incremental gated nearest-neighbour association on fixed poses.
 
-    Every observation gives ``m̂ = h⁻¹(x_t, z)`` with covariance ``C = M_z Σ_z M_zᵀ + σ_e² I`` (``M_z`` the
-    Jacobian of the inverse observation, ``σ_e = extra_std`` absorbs pose drift). Landmark ``j`` keeps an
-    information-fused estimate ``(μ_j, P_j)``. Observation ``k`` may join landmark ``j`` if
-
-        d²_kj = (m̂_k − μ_j)ᵀ (C_k + P_j)⁻¹ (m̂_k − μ_j) ≤ χ²₂(gate_prob)
-
-    and takes the closest admissible one (greedy over the pairs of one time step, each landmark at most
-    once); otherwise it creates a new landmark. With ``segment_dist > 0`` the unit of association is a
-    detection (:func:`segment_returns`): its mean inverse observation, with one return's covariance. Fusion: ``P⁺ = (P⁻¹ + C⁻¹)⁻¹, μ⁺ = P⁺(P⁻¹μ + C⁻¹m̂)``.
-
-    Drift (``odometry_std`` given): landmark estimates live in the frame of the dead-reckoned poses, which
-    drifts. Before landmark ``j`` (last updated at pose ``a``) is compared with an observation at pose ``t``,
-    its covariance is inflated by the odometry drift accumulated between ``a`` and ``t``, mapped to the
-    landmark: ``P_j ← P_j + M Σ_rel(a, t) Mᵀ`` with ``M = [I₂, J(μ_j − p_t)]`` (``J`` = 90° rotation) and
-
-        Σ_rel(a, t) = Σ_{k=a}^{t−1} G_k Q G_kᵀ ,   G_k = [[R(θ_k), J(p_t − p_{k+1})], [0, 1]] ,
-        Q = diag(odometry_std²)
-
-    (the world-frame covariance of ``x_t`` given ``x_a`` under dead reckoning), evaluated in O(1) per pair
-    from prefix sums. Revisited landmarks after a long loop then gate with the loop's drift instead of
-    spawning duplicates, while continuously tracked landmarks keep tight gates.
+    Every observation gives ``m̂ = h⁻¹(x_t, z)`` with covariance ``C = M_z Σ_z M_zᵀ + σ_e² I``; landmark ``j`` keeps
+    an information-fused estimate ``(μ_j, P_j)``, ``P⁺ = (P⁻¹ + C⁻¹)⁻¹, μ⁺ = P⁺(P⁻¹μ + C⁻¹m̂)``. Observation ``k``
+    joins the closest landmark with ``d²_kj = (m̂_k − μ_j)ᵀ (C_k + P_j)⁻¹ (m̂_k − μ_j) ≤ χ²₂(gate_prob)`` (greedy over
+    the pairs of one step, each landmark at most once), else creates one. With ``segment_dist > 0`` the unit is a
+    detection (:func:`segment_returns`). With ``odometry_std`` the gate of landmark ``j`` (last updated at pose
+    ``a``) grows by the dead-reckoning drift to pose ``t``: ``P_j ← P_j + M Σ_rel(a, t) Mᵀ``,
+    ``M = [I₂, J(μ_j − p_t)]`` (``J`` the 90° rotation), ``Σ_rel = Σ_{k=a}^{t−1} G_k Q G_kᵀ``,
+    ``G_k = [[R(θ_k), J(p_t − p_{k+1})], [0, 1]]``, ``Q = diag(odometry_std²)``, O(1) per pair from prefix sums.
 
     Parameters
     ----------
@@ -145,17 +132,14 @@ def associate_nearest_neighbour(
     obs : Observations (N rows)
     obs_cov : ndarray (2, 2)       covariance of ``[range, bearing]``.
     gate_prob : float              χ² gate probability.
-    extra_std : float              σ_e, m.
+    extra_std : float              σ_e, m (absorbs pose drift).
     odometry_std : ndarray (3,) or None   per-step odometry σ for the drift model (None = no drift).
-    segment_dist : float           rows of one pose that are adjacent in bearing (≤ 0.1 rad apart) and
-                                   whose inverse observations are closer than this (m) form one detection (a
-                                   laser hitting one post returns several surface points); 0 = every row is
-                                   its own detection.
+    segment_dist : float           rows of one pose adjacent in bearing whose inverse observations are closer than
+                                   this (m) form one detection; 0 = every row is its own detection.
 
     Returns
     -------
-    assoc : ndarray (N,) int64
-    landmarks_xy : ndarray (L, 2)  fused estimates.
+    assoc : ndarray (N,) int64;  landmarks_xy : ndarray (L, 2) fused estimates.
     """
     thr = gate_threshold(gate_prob)
     poses = np.asarray(poses_xyt, float)

@@ -68,6 +68,15 @@ def dead_reckoning(x0: np.ndarray, odometry_xyt: np.ndarray) -> np.ndarray:
     return se2.compose(np.asarray(x0, float), se2.between(odo[0], odo))
 
 
+#: rows of a step's new landmarks clustered one by one below this count (the exact sequential definition)
+_SEQUENTIAL_BELOW = 8
+#: entries of one (rows, landmarks) distance block in the gate against the previous step's landmarks
+_BLOCK_ENTRIES = 1 << 22
+#: rows of one step from which equal rows are gated once
+_DEDUPLICATE_FROM = 64
+_EPS = float(np.finfo(float).eps)
+
+
 def greedy_nearest_neighbour(
     points_xy: np.ndarray,
     threshold: float,
@@ -79,9 +88,9 @@ def greedy_nearest_neighbour(
 
     Rows are processed one time step at a time. Each row of a step joins the nearest landmark as it stood at the
     end of the previous step (running mean of its points) if that is within ``threshold``. The remaining rows of
-    the step are clustered greedily in row order: each joins the nearest landmark created earlier in the same
-    step within ``threshold``, or creates a new one. Without ``steps`` every row is its own step (purely
-    sequential greedy NN).
+    the step are clustered greedily in row order (:func:`leader_clusters`): each joins the nearest landmark
+    created earlier in the same step within ``threshold``, or creates a new one. Without ``steps`` every row is
+    its own step (purely sequential greedy NN).
 
     Parameters
     ----------
@@ -100,9 +109,8 @@ def greedy_nearest_neighbour(
     out = np.full(N, -1, np.int64) if labels is None else np.asarray(labels, np.int64).copy()
     seeded = out >= 0
     K = int(out[seeded].max()) + 1 if seeded.any() else 0
-    cap = max(16, 2 * K)
-    sums = np.zeros((cap, 2))
-    counts = np.zeros(cap)
+    sums = np.zeros((max(16, 2 * K), 2))
+    counts = np.zeros(sums.shape[0])
     if K:
         np.add.at(sums, out[seeded], pts[seeded])
         counts[:K] = np.bincount(out[seeded], minlength=K)
@@ -115,41 +123,122 @@ def greedy_nearest_neighbour(
         bounds = np.concatenate([[0], np.flatnonzero(np.diff(st)) + 1, [todo.size]])
     for g in range(bounds.size - 1):
         rows = todo[bounds[g] : bounds[g + 1]]
-        P = pts[rows]
-        matched = np.zeros(rows.size, bool)
-        if K:
-            live = counts[:K] > 0
-            means = sums[:K] / np.where(live, counts[:K], 1.0)[:, None]
-            d2 = ((P[:, None, :] - means[None, :, :]) ** 2).sum(-1)  # (g, K)
-            d2[:, ~live] = np.inf
-            j = np.argmin(d2, axis=1)
-            matched = d2[np.arange(rows.size), j] <= thr2
-            out[rows[matched]] = j[matched]
-        first_new = K
-        for i in rows[~matched]:  # rows outside every gate: greedy among this step's new landmarks
-            best = -1
-            if K > first_new:
-                nm = sums[first_new:K] / counts[first_new:K, None]
-                d2n = ((nm - pts[i]) ** 2).sum(axis=1)
-                k = int(np.argmin(d2n))
-                if d2n[k] <= thr2:
-                    best = first_new + k
-            if best < 0:
-                if K == cap:  # grow the buffers geometrically
-                    cap *= 2
-                    sums = np.concatenate([sums, np.zeros_like(sums)])
-                    counts = np.concatenate([counts, np.zeros_like(counts)])
-                best = K
-                K += 1
-            out[i] = best
-            sums[best] += pts[i]
-            counts[best] += 1.0
-        if matched.any():
-            np.add.at(sums, out[rows[matched]], P[matched])
-            np.add.at(counts, out[rows[matched]], 1.0)
+        matched = _gate_previous(pts[rows], sums[:K], counts[:K], thr2) if K else np.full(rows.size, -1)
+        new = rows[matched < 0]
+        if new.size:
+            local = leader_clusters(pts[new], threshold)
+            n_new = int(local.max()) + 1
+            if K + n_new > sums.shape[0]:  # grow the buffers geometrically
+                cap = max(2 * sums.shape[0], K + n_new)
+                sums = np.concatenate([sums, np.zeros((cap - sums.shape[0], 2))])
+                counts = np.concatenate([counts, np.zeros(cap - counts.shape[0])])
+            out[new] = K + local
+            np.add.at(sums, out[new], pts[new])  # in row order, as a row-by-row running sum adds them
+            np.add.at(counts, out[new], 1.0)
+            K += n_new
+        hit = matched >= 0
+        if hit.any():
+            out[rows[hit]] = matched[hit]
+            np.add.at(sums, matched[hit], pts[rows[hit]])
+            np.add.at(counts, matched[hit], 1.0)
         if progress is not None and g % 256 == 0:
             progress(int(bounds[g]), int(todo.size))
     return out
+
+
+def _gate_previous(P: np.ndarray, sums: np.ndarray, counts: np.ndarray, thr2: float) -> np.ndarray:
+    """``(g,)`` index of the nearest live landmark (mean ``sums / counts``) within ``√thr2`` of each row of
+    ``P (g, 2)``, −1 where none is; ties go to the lowest index. Equal rows are gated once; blocks of rows
+    bound the distance matrix."""
+    if P.shape[0] >= _DEDUPLICATE_FROM:
+        order = np.lexsort((P[:, 1], P[:, 0]))
+        Ps = P[order]
+        first = np.r_[True, (Ps[1:] != Ps[:-1]).any(axis=1)]  # NaN rows stay apart; ±0 gate alike
+        if not first.all():
+            inverse = np.empty(P.shape[0], np.int64)
+            inverse[order] = np.cumsum(first) - 1
+            return _gate_previous(Ps[first], sums, counts, thr2)[inverse]
+    live = counts > 0
+    means = sums / np.where(live, counts, 1.0)[:, None]
+    out = np.full(P.shape[0], -1, np.int64)
+    block = max(1, _BLOCK_ENTRIES // max(1, means.shape[0]))
+    for a in range(0, P.shape[0], block):
+        d2 = ((P[a : a + block, None, :] - means[None, :, :]) ** 2).sum(-1)  # (b, K)
+        d2[:, ~live] = np.inf
+        j = np.argmin(d2, axis=1)
+        ok = d2[np.arange(j.size), j] <= thr2
+        out[a : a + block][ok] = j[ok]
+    return out
+
+
+def leader_clusters(P: np.ndarray, threshold: float) -> np.ndarray:
+    """Sequential leader clustering of ``P (n, 2)``: in row order, each row joins the cluster whose running mean
+    is nearest within ``threshold`` (lowest index on ties) or starts a new one. ``(n,)`` labels, numbered by
+    first row.
+
+    Computed part by part: a cluster's mean stays within ``threshold`` of its latest member, so a row can only
+    join a cluster with a member within ``2·threshold``; gaps wider than that along x or y (plus a rounding
+    margin) split the rows into independent parts. A part whose bounding box fits inside ``threshold`` is one
+    cluster; any other part runs the sequential definition (:func:`_leader_sequential`).
+    """
+    n = P.shape[0]
+    if n < _SEQUENTIAL_BELOW or not np.isfinite(P).all():
+        return _leader_sequential(P, threshold * threshold)
+    slack = 8.0 * n * _EPS * (float(np.abs(P).max()) + threshold)  # bound on the rounding of running means
+    gap = 2.0 * threshold * (1 + 1e-9) + slack
+    part = np.zeros(n, np.int64)
+    for _ in range(2):  # x, y, x, y: later rounds split what the first ones joined
+        part = _split_by_gaps(P[:, 1], _split_by_gaps(P[:, 0], part, gap), gap)
+    n_parts = int(part.max()) + 1
+    order = np.argsort(part, kind="stable")
+    starts = np.flatnonzero(np.r_[True, part[order][1:] != part[order][:-1]])
+    lo, hi = np.minimum.reduceat(P[order], starts), np.maximum.reduceat(P[order], starts)
+    diag = np.hypot(*(hi - lo).T) * (1 + 1e-12)
+    tight = diag + slack < threshold * (1 - 1e-9)
+    lab = np.zeros(n, np.int64)  # label inside the part
+    for p in np.flatnonzero(~tight):
+        rows = order[starts[p] : (starts[p + 1] if p + 1 < starts.size else n)]
+        lab[rows] = _leader_sequential(P[rows], threshold * threshold)
+    n_lab = np.bincount(part, minlength=n_parts)  # upper bound on clusters per part
+    code = np.concatenate([[0], np.cumsum(n_lab)[:-1]])[part] + lab
+    first = np.full(int(n_lab.sum()), n, np.int64)
+    np.minimum.at(first, code, np.arange(n))
+    used = np.flatnonzero(first < n)
+    rank = np.empty(first.size, np.int64)
+    rank[used[np.argsort(first[used])]] = np.arange(used.size)
+    return rank[code]
+
+
+def _split_by_gaps(v: np.ndarray, part: np.ndarray, gap: float) -> np.ndarray:
+    """Refine the partition ``part (n,)``: inside each part, sorted values ``v`` further apart than ``gap``
+    start a new part. Parts are renumbered ``0..``."""
+    order = np.lexsort((v, part))
+    vs, ps = v[order], part[order]
+    start = np.r_[True, (ps[1:] != ps[:-1]) | (np.diff(vs) > gap)]
+    out = np.empty_like(part)
+    out[order] = np.cumsum(start) - 1
+    return out
+
+
+def _leader_sequential(P: np.ndarray, thr2: float) -> np.ndarray:
+    """The row-by-row definition behind :func:`leader_clusters` (``thr2``: the squared gate)."""
+    lab = np.empty(P.shape[0], np.int64)
+    sums = np.zeros((P.shape[0], 2))
+    counts = np.zeros(P.shape[0])
+    k = 0
+    for i in range(P.shape[0]):
+        best = -1
+        if k:
+            d2 = ((sums[:k] / counts[:k, None] - P[i]) ** 2).sum(axis=1)
+            j = int(np.argmin(d2))
+            if d2[j] <= thr2:
+                best = j
+        if best < 0:
+            best, k = k, k + 1
+        lab[i] = best
+        sums[best] += P[i]
+        counts[best] += 1.0
+    return lab
 
 
 def compact(assoc: np.ndarray, min_support: int) -> np.ndarray:

@@ -7,24 +7,19 @@ Order (deterministic, independent of execution order)::
             for solver in [[solver]] tables (file order):
                 RunSpec
 
-A point's ``solver.<label>.*`` axes only apply to the solver with that label, its ``scenario.*`` axes only to
-simulated entries; elsewhere they are irrelevant, so those runs resolve to the same configuration and are
-de-duplicated by their run id (the first occurrence is kept). Each run records only the axis values that
-apply to it (``RunSpec.point``).
+A point's ``solver.<label>.*`` axes apply only to that solver, its ``scenario.*`` axes only to simulated
+entries; runs that resolve to the same configuration are de-duplicated by run id (first kept), and each run
+records only the axis values that apply to it (``RunSpec.point``).
 
-Seeds (EVALUATION-METHOD.md B5; NumPy's list form, varying id first, never ``root + i``)::
+Seeds (NumPy's list form, varying id first, never ``root + i``)::
 
     dataset seed = default_rng([STREAM_SIMULATION, replicate, root_seed]).integers(2**63 - 1)
     solver seed  = default_rng([STREAM_SOLVER + solver.seed, replicate, root_seed]).integers(2**63 - 1)
 
-The dataset seed does not depend on the solver, so every solver of a replicate sees the *same* dataset
-(common random numbers; one dataset file per (scenario config, replicate), shared by all its runs). An
-imported dataset's id is a content hash of the importer, its version and options and the source's sha256
-(:meth:`DatasetSpec.config`), which also names its import cache file (:mod:`slamcli.api.recordings`).
-
-Run id = the first 12 hex digits of SHA-256 over the canonical JSON (sorted keys, no whitespace, floats by
-``repr``) of the fully resolved run configuration, which includes the slamcli and file-schema versions.
-Output paths are not part of it.
+so every solver of a replicate sees the *same* dataset (common random numbers). An imported dataset's id is
+a content hash of importer, version, options and the source's sha256 (:meth:`DatasetSpec.config`). Run id =
+the first 12 hex digits of SHA-256 over the canonical JSON of the fully resolved run configuration (slamcli
+and schema versions included, output paths not).
 """
 
 from __future__ import annotations

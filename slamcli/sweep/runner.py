@@ -2,57 +2,26 @@
 
 On disk (``results/<experiment>/``)::
 
-    datasets/<dataset_id>.h5       one simulated dataset per (scenario config, replicate), or one imported
-                                   recording / graph / dataset file (a hard link into the import cache,
-                                   :mod:`slamcli.api.recordings`), shared by its runs; ``<dataset_id>.json``
-                                   beside it records its sha256 and reference (truth, gps or none)
-    <run_id>/config.json           the resolved run configuration (+ run id, dataset id, sweep point)
-    <run_id>/dataset.h5            hard link to datasets/<dataset_id>.h5 (a copy where links are impossible)
-    <run_id>/result.h5             solver result
-    <run_id>/metrics.json          scalar metrics (plus whatever tidy CSVs the evaluation writes)
-    <run_id>/status.json           {"status": "completed" | "failed", "solver_status", "error", "traceback",
-                                    times, host}
-    <run_id>/run.log               log of the run
-    manifest.csv                   one row per run of the expansion: ids, labels, dataset (``data``,
-                                   ``data_kind``, ``reference``), sweep point, status
-    results.csv / results.parquet  the tidy table: manifest columns + every scalar metric, one row per run
+    datasets/<dataset_id>.h5 (+ .json)  one dataset per (scenario config, replicate) or imported file, shared
+                                        by its runs; the JSON records its sha256 and reference
+    <run_id>/config.json, dataset.h5    resolved run configuration; hard link to the shared dataset
+    <run_id>/result.h5, metrics.json    solver result; scalar metrics (+ tidy CSVs of the evaluation)
+    <run_id>/status.json, run.log       completed | failed, solver status, error, times, host, sha256s
+    manifest.csv, results.csv/.parquet  one row per run: ids, labels, dataset, sweep point, status, metrics
 
-Atomicity: a run is built in a hidden temporary directory ``.<run_id>.tmp-<pid>-<rand>/`` and renamed onto
-``<run_id>/`` only when ``status.json`` (written last) is in place, so an interrupted sweep (Ctrl-C,
-``kill -9``) leaves either nothing or a complete run directory; datasets are written under a temporary name
-and ``os.replace``-d. Leftover temporary entries are removed when the next sweep of the experiment starts.
-
-Solver status: a result whose status is ``failed`` (or ``diverged``) makes the run *failed*, with the solver's
-message in ``status.json["error"]``; it is not evaluated, so its numbers never reach ``results.csv`` and the
-sweep exits non-zero. Every other status (``converged``, ``max_iterations``, ``completed``) is recorded as
-``solver_status`` in ``status.json``, the manifest and the results table.
-
-Locking: a sweep holds an exclusive lock (``filelock``) on ``<experiment>/.sweep.lock`` for its whole duration; a
-second sweep on the same folder is refused with one line naming the holder's pid (the lock dies with its process).
-
-Worker hygiene: every pool worker polls its parent and exits when the coordinator is gone (``kill -9``), so no
-orphan keeps starting queued runs. A worker that dies during a run fails only that run; the pool is rebuilt
-and the other in-flight runs are resubmitted.
-
-Dataset cache: ``datasets/<dataset_id>.json`` records the SHA-256 of the dataset file written for that id;
-a cached file whose bytes no longer match (swapped, truncated) is simulated again instead of being reused.
-
-Paths: the results folder and every file-valued run option (``[evaluate] against``) are made absolute in the
-coordinator before any task is built, so a worker whose working directory is not the coordinator's (a Dask
-worker started elsewhere) writes and reads exactly where a ``-j 1`` sweep would.
-
-Resume: a run is skipped when ``<run_id>/status.json`` says ``completed`` for the same run id, every
-artefact exists, the sha256 it records of every file a later step reads (config, dataset, result, metrics)
-matches, and the shared ``datasets/<dataset_id>.h5`` its result records still holds the same bytes. Failed
-and missing runs, and runs whose status records no hashes (an older slamcli), are (re)done.
-``resume=False`` redoes everything.
-
-Parallel execution has two phases: each shared dataset is simulated once (one task per dataset, written under
-a temporary name and renamed), and as soon as it exists its runs are submitted one task each, so the runs of
-one dataset spread over every worker. Workers never share an open HDF5 file: each task opens its own files
-(the dataset read-only, its result under a temporary directory); the local pool uses the ``spawn`` start
-method (EVALUATION-METHOD.md B7). The coordinator opens no HDF5 file; it only reads the small JSON files to
-build the tables.
+* **Atomic**: a run is built in ``.<run_id>.tmp-<pid>-<rand>/`` and renamed once ``status.json`` (written last)
+  is in place; datasets are written under a temporary name and ``os.replace``-d; leftovers are removed by the
+  next sweep.
+* **Fail-soft**: a ``failed``/``diverged`` result fails its run (not evaluated, sweep exits non-zero); other
+  solver statuses are recorded as ``solver_status``. A worker that dies fails only its run.
+* **Locked**: one sweep per folder (``filelock`` on ``.sweep.lock``); a second one is refused naming the pid.
+  Workers exit when the coordinator is gone.
+* **Resumable**: a run is skipped when its status says ``completed``, every artefact exists and every sha256
+  it records (config, dataset, result, metrics, shared dataset) still matches; otherwise (or without hashes)
+  it is redone. A cached dataset whose bytes changed is simulated again.
+* **Parallel**: each shared dataset is made once, then its runs are submitted one task each; paths are made
+  absolute in the coordinator; workers never share an open HDF5 file (``spawn`` start method); the
+  coordinator reads only the JSON files.
 """
 
 from __future__ import annotations

@@ -1,31 +1,24 @@
 """Narrowing operators (contractors) for the edges of a kinematic graph, built from codac primitives.
 
-A *box* is a Python list of :class:`codac.Interval` (outward-rounded interval arithmetic); a contractor
-holds the indices of its variables in the box and narrows them in place. Each operator satisfies paper 004
-Def. 4.1: contractance ``f(X) ⊆ X``, correctness ``X ∩ ρ ⊆ f(X)`` and — because :meth:`Contractor.contract`
-iterates its own steps to a local fixpoint with tolerance ``tol`` — idempotence up to ``tol``.
+A *box* is a list of :class:`codac.Interval` (outward-rounded); a contractor narrows its variables in place
+and satisfies paper 004 Def. 4.1: ``f(X) ⊆ X``, ``X ∩ ρ ⊆ f(X)`` and idempotence up to ``tol``
+(:meth:`Contractor.contract` iterates to a local fixpoint).
 
-Edges (our heading convention: θ from +x, counter-clockwise; paper 004 Fig. 2 uses x₂−x₁ = d·sin θ,
-y₂−y₁ = d·cos θ, converted once in ``slamcli.sim.bounded.heading_from_paper004``):
+Edges (θ from +x, counter-clockwise; paper 004 Fig. 2's convention is converted once in
+``slamcli.sim.bounded.heading_from_paper004``):
 
-* odometry, turn then move (``NoiseBounds.odometry_model = "turn_move"``), measured ``(d̃, α̃)`` with
-  half-widths ``(h_d, h_α)``::
+* odometry, turn then move (``odometry_model = "turn_move"``), measured ``(d̃, α̃)``, half-widths ``(h_d, h_α)``::
 
-      θ_{t+1} − θ_t ∈ A = [α̃ ± h_α]
-      (x_{t+1} − x_t, y_{t+1} − y_t) = d·(cos θ_{t+1}, sin θ_{t+1}),   d ∈ D = [d̃ ± h_d] ∩ [0, ∞)
+      θ_{t+1} − θ_t ∈ [α̃ ± h_α],   (x_{t+1} − x_t, y_{t+1} − y_t) = d·(cos θ_{t+1}, sin θ_{t+1}),
+      d ∈ [d̃ ± h_d] ∩ [0, ∞)
 
-* observation of landmark j from pose t, measured ``(r̃, b̃)`` with half-widths ``(h_r, h_b)``::
+* observation of landmark j from pose t, measured ``(r̃, b̃)``, half-widths ``(h_r, h_b)``::
 
-      φ = θ_t + b,  b ∈ B = [b̃ ± h_b]
-      (l_x − x_t, l_y − y_t) = r·(cos φ, sin φ),   r ∈ R = [r̃ ± h_r] ∩ [0, ∞)
+      (l_x − x_t, l_y − y_t) = r·(cos φ, sin φ),   φ = θ_t + b,  b ∈ [b̃ ± h_b],  r ∈ [r̃ ± h_r] ∩ [0, ∞)
 
-The polar relation is codac's ``CtcPolar`` (2π-periodic in the angle, so headings stay unwrapped in the
-boxes); differences and sums are narrowed forward with interval arithmetic and backward with
-``SubOp.bwd``/``AddOp.bwd``.
-
-``narrow_theta=False`` is paper 004's operator set ("no narrowing of θ's were used", §6): headings come only
-from the odometry turn chain and are read, never narrowed, by the polar relations. ``narrow_theta=True``
-(the full set) lets the polar relations narrow φ and hence θ.
+The polar relation is codac's ``CtcPolar`` (2π-periodic, so headings stay unwrapped); sums and differences
+are narrowed forward and backward (``SubOp.bwd``/``AddOp.bwd``). ``narrow_theta=False`` is paper 004's set
+(§6: headings only from the turn chain, never narrowed by the polar relations); ``True`` lets them narrow θ.
 """
 
 from __future__ import annotations

@@ -1,29 +1,19 @@
 """An affine-relaxation (LP) contractor on the whole constraint system of one kinematic graph.
 
-The per-edge narrowing operators of :mod:`~slamcli.solvers.cuik.contractors` each see one constraint, so the
-coupling of the poses through the whole loop is lost (the dependency problem of chaotic iteration). Here every
-edge is replaced over the current box by linear inequalities that enclose it, and each target variable is
-minimised / maximised over all of them at once with HiGHS (``scipy.optimize.linprog``):
+The per-edge operators of :mod:`~slamcli.solvers.cuik.contractors` each see one constraint and lose the
+coupling around the loop. Here every edge is enclosed over the current box by linear inequalities, and each
+target variable is minimised / maximised over all of them at once with HiGHS (``scipy.optimize.linprog``):
 
-* every polar relation ``(u, v) = ρ·(cos φ, sin φ)`` (an odometry leg, a range-bearing observation, the
-  local-frame cycle of a landmark seen from two consecutive poses) is written, for a few expansion points
-  ``(ρ_c, φ_c)`` of the box, as ``u − a_ρ·ρ − a_φ·φ ∈ [h]`` (and the same for ``v``), where ``[h]`` encloses
-  ``ρ cos φ − a_ρ ρ − a_φ φ`` over the box by a second-order Taylor form evaluated in interval arithmetic (the
-  Lagrange remainder with an interval Hessian) — so the inequality holds at every point of the box that
-  satisfies the relation, whatever float coefficients ``a`` are used;
-* the turn chain ``θ_{t+1} − θ_t − α_t = 0`` and the offsets ``φ − θ ∈ B`` are linear already;
-* the closest-landmark negative information ``‖l_m − p_t‖ ≥ r`` (reverse convex) gives a cut when the disc
-  ``‖δ‖ < r`` holds whole corners of the box of ``δ = l_m − p_t``: the polygon of those corners and the two
-  points where the circle leaves the box is inside the disc, so the half-plane beyond its chord is valid.
+* a polar relation ``(u, v) = ρ·(cos φ, sin φ)`` (odometry leg, observation, local landmark cycle) becomes,
+  at a few expansion points, ``u − a_ρ·ρ − a_φ·φ ∈ [h]`` (and for ``v``), ``[h]`` a second-order Taylor
+  enclosure with an interval Hessian — valid for any float coefficients ``a``;
+* the turn chain and the offsets ``φ − θ ∈ B`` are linear already;
+* the closest-landmark information ``‖l_m − p_t‖ ≥ r`` gives a chord cut where the disc holds box corners.
 
-The LP's optimum is a float; the bound used is not. For the dual multipliers ``y ≤ 0`` HiGHS returns (any
-``y ≤ 0`` would do), weak duality gives ``cᵀz ≥ yᵀb + min_{z ∈ box} (c − Aᵀy)ᵀz`` for every ``z`` with
-``Az ≤ b``; that right-hand side is evaluated in outward-rounded interval arithmetic (Neumaier & Shcherbina's
-safe bound), so the contraction is rigorous. An infeasible relaxation refutes the box only through the same
-bound on a phase-one LP (``min s`` with every row relaxed by ``s``) being > 0.
-
-Call inside :func:`~slamcli.solvers.cuik.contractors.interval_rounding`; HiGHS itself runs in the ordinary
-rounding mode (its result is only a guess that the interval bound makes safe).
+Rigour: the bound used is Neumaier & Shcherbina's safe dual bound ``cᵀz ≥ yᵀb + min_{z ∈ box} (c − Aᵀy)ᵀz``
+for HiGHS's multipliers ``y ≤ 0``, evaluated in outward-rounded interval arithmetic; an infeasible
+relaxation refutes the box only through the same bound on a phase-one LP being > 0. Call inside
+:func:`~slamcli.solvers.cuik.contractors.interval_rounding`; HiGHS runs in the ordinary rounding mode.
 """
 
 from __future__ import annotations

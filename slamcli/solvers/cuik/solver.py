@@ -1,35 +1,24 @@
 """CuikSLAM with unknown correspondence (paper 004): interval constraint propagation over many kinematic
 graphs.
 
-Variables are boxes for every pose ``(x, y, θ)``, every odometry leg ``(d, α)`` and landmark ``(x, y)``; pose 0
-is the known start. Poses are
-added one at a time: the odometry edge t−1 → t is added to every live hypothesis and propagated; then each
-observation of pose t branches every hypothesis over the landmarks of the reported type plus "a new landmark"
-(§5), each branch is propagated to a fixpoint (§4, :func:`~slamcli.solvers.cuik.propagate.propagate`) and
-discarded when a box becomes empty; hypotheses equal up to relabelling are merged; at most
-``max_hypotheses`` stay alive (status ``truncated`` when the cap removed some — then the surviving set is no
-longer guaranteed to contain the true correspondence).
+Variables are boxes for every pose ``(x, y, θ)``, odometry leg ``(d, α)`` and landmark ``(x, y)``; pose 0 is
+the known start. Poses are added one at a time: the odometry edge is added to every live hypothesis and
+propagated; each observation branches every hypothesis over the landmarks of the reported type plus "a new
+landmark" (§5); each branch is propagated to a fixpoint (§4, :func:`~slamcli.solvers.cuik.propagate.propagate`)
+and discarded when a box empties; hypotheses equal up to relabelling are merged; at most ``max_hypotheses``
+stay alive (status ``truncated`` when the cap removed some — then the true correspondence may be lost).
 
-The data must carry guaranteed bounds (``SlamInputs.noise_bounds``, written by the simulator's bounded-noise
-option): the solver reads the bounds, never the truth. Everything is sound under those bounds: if the errors
-really lie within them, the true poses and landmarks are inside the boxes of the true correspondence, which
-is never discarded (unless the cap bites).
+The data must carry guaranteed bounds (``SlamInputs.noise_bounds``); the solver never reads the truth. If
+the errors lie within the bounds, the true poses and landmarks are inside the boxes of the true
+correspondence, which is never discarded (unless the cap bites).
 
-Output: every surviving hypothesis with its association and lower/upper boxes (``SolverResult.hypotheses``);
-the point estimate (``poses_xyt``, ``landmarks_xy``, ``assoc``) is the box midpoint of the first hypothesis
-in the ``rank`` order (default: fewest landmarks, then largest box volume).
-
-Pruning beyond the paper's empty boxes (each sound under a declaration the data carry):
-
-* the closest-landmark sensor (``NoiseBounds.closest_only``, paper 004 §6 "it does notice the closest
-  landmark"): from a pose that reported a landmark at ``r``, no other landmark of any type lies in
-  ``[r_min, r)``; from a pose that reported nothing, none lies in ``[r_min, r_max]`` (``OutsideBand``);
-* a declared landmark separation (``NoiseBounds.min_separation``, a map prior, not stated by the paper):
-  distinct labels are at least that far apart, in the world frame (``Separated``) and, for labels seen from
-  consecutive poses, in the frame of the first pose (``SeparatedLocal``) where the boxes do not wrap.
-
-Without the separation prior nothing sound can discard a hypothesis that splits one landmark into several
-labels: twin landmarks at one spot produce exactly the same readings (ties allowed by the sensor model).
+Output: every surviving hypothesis with its association and boxes (``SolverResult.hypotheses``); the point
+estimate is the box midpoint of the first hypothesis in ``rank`` order (default: fewest landmarks, then
+largest volume). Pruning beyond empty boxes, each sound under a declaration the data carry: the
+closest-landmark sensor (``NoiseBounds.closest_only``: no other landmark nearer than a reported one,
+``OutsideBand``) and a declared landmark separation (``NoiseBounds.min_separation``: ``Separated``,
+``SeparatedLocal``). Without the separation prior nothing sound can discard a hypothesis that splits one
+landmark into twins at one spot.
 """
 
 from __future__ import annotations
@@ -159,8 +148,8 @@ class CuikSlam(BaseSolver):
     #: cross-solver comparisons on Gaussian data leave it out (it has its own reproduce section, paper 004)
     needs_noise_bounds: ClassVar[bool] = True
     #: what to run instead on data without bounds (both refusals say it: ``slamcli solve`` up front, ``solve``
-    #: called directly in its FAILED result). Not ``loop`` with ``bounded.enabled=true``: 500 steps and 12
-    #: landmarks of unknown correspondence did not finish in 300 s (measured), cuik-room takes 0.3 s.
+    #: called directly in its FAILED result). Not ``loop`` with ``bounded.enabled=true``: its 12 landmarks of
+    #: unknown correspondence over 500 steps branch far too much (benchmarks/results/design_notes.md).
     noise_bounds_hint: ClassVar[str] = ("cuik is set-membership SLAM (paper 004) for bounded-noise worlds: "
                                         "slamcli simulate -s cuik-room -o room.h5, then solve room.h5")
 

@@ -1,30 +1,21 @@
 """Global-optimality certificate of a planar pose-graph estimate (SE-Sync's Lagrangian dual).
 
-Objective. SE-Sync (Rosen, Carlone, Bandeira & Leonard, IJRR 2019) and Carlone et al. (TRO 2016) pose
-planar pose-graph optimisation with isotropic noise as::
+SE-Sync (Rosen et al., IJRR 2019) poses planar pose-graph optimisation with isotropic noise as::
 
     F(t, R) = Σ_e κ_e ‖R_j − R_i R̃_e‖²_F + τ_e ‖t_j − t_i − R_i t̃_e‖²        R_i ∈ SO(2), t_i ∈ ℝ²
 
-Conversion from a g2o / GTSAM edge with information ``Λ_e`` over ``[x, y, θ]`` (SE-Sync's reader, the
-isotropic fit that minimises the information divergence): ``κ_e = Λ_e[θ, θ]`` and
-``τ_e = 2 / tr((Λ_e[xy, xy])⁻¹)``. ``F`` is not GTSAM's ``½ Σ Log(·)ᵀ Λ Log(·)`` (chordal rotation
-distance, isotropic translation weight), so the certificate is for ``F``: the LM estimate is refined to a
-stationary point of ``F`` by Gauss-Newton (:func:`refine_sesync`) and that point is certified.
+with ``κ_e = Λ_e[θ, θ]`` and ``τ_e = 2 / tr((Λ_e[xy, xy])⁻¹)`` from an edge's information ``Λ_e``. ``F`` is not
+GTSAM's cost, so the LM estimate is first refined to a stationary point of ``F`` (:func:`refine_sesync`).
 
-Certificate. With ``X = [t_1 … t_n | R_1 … R_n] ∈ ℝ^{2×3n}``, ``F = tr(X M Xᵀ)`` for the sparse
-``M = Σ_e κ_e A_e A_eᵀ + τ_e a_e a_eᵀ`` (``A_e = E_{R_j} − E_{R_i} R̃_e``, ``a_e = e_{t_j} − e_{t_i} −
-E_{R_i} t̃_e``; ``E`` the column selectors). At a stationary point the Lagrange multipliers of
-``R_iᵀR_i = I`` are ``Λ_i = Sym((M Xᵀ)_{R_i} R_i)`` and::
+With ``X = [t_1 … t_n | R_1 … R_n]`` and ``F = tr(X M Xᵀ)`` for the sparse connection Laplacian ``M``, the
+multipliers of ``R_iᵀR_i = I`` are ``Λ_i = Sym((M Xᵀ)_{R_i} R_i)`` and::
 
     S = M − blkdiag(0_t, Λ_1, …, Λ_n)  ⪰ 0   ⟹   X is a global minimiser of F        (weak duality)
 
-with ``F(X) − tr(Λ)`` the duality gap (0 at a stationary point, ``S Xᵀ = 0``). ``S`` always has the
-gauge null space (the two rows of X and the common translation), so ``λ_min(S) = 0`` at best; the test is
-a sparse Cholesky of ``S + η I`` with ``η = ETA_REL · max diag(S)`` (:data:`ETA_REL`), i.e.
-``λ_min(S) ≥ −η``. ``λ_min`` is reported by inverse iteration with that factorisation when certified, else
-from a Lanczos run (``scipy.sparse.linalg.eigsh``); when those do not converge, by bisection on Sylvester's
-inertia (``S − σI`` has a Cholesky factor iff ``σ < λ_min``), which brackets it to :data:`INERTIA_REL_TOL`.
-An estimate the test cannot be made for (non-finite poses or weights) is "not certified" with that reason.
+``S`` always has the gauge null space, so the test is a sparse Cholesky of ``S + η I``,
+``η = ETA_REL · max diag(S)`` (:data:`ETA_REL`), i.e. ``λ_min(S) ≥ −η``. ``λ_min`` is reported by inverse
+iteration (certified), else Lanczos (``eigsh``), else bisection on Sylvester's inertia to
+:data:`INERTIA_REL_TOL`. Non-finite poses or weights give "not certified" with that reason.
 """
 
 from __future__ import annotations
@@ -305,8 +296,7 @@ def _refine(poses_xyt, edges: _Edges, workspace=None):
     """:func:`refine_sesync`'s point ``(n, 3)`` for the :class:`_Edges` ``edges``, with its assembler and linear
     solver (whose sparsity pattern and symbolic analysis the certificate matrix reuses,
     :func:`_certificate_matrix`). ``workspace``: an earlier optimisation's ``(Assembler, linear solver)`` on the
-    same graph (``NlsResult.workspace``), whose pattern and CHOLMOD analysis are reused when they hold F's
-    (City10000: 45 ms of assembly set-up and AMD saved)."""
+    same graph (``NlsResult.workspace``), whose pattern and CHOLMOD analysis are reused when they hold F's."""
     x = np.array(poses_xyt, float, copy=True)
     n = x.shape[0]
     problem = _sesync_problem(n, edges)

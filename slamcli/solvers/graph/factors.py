@@ -155,7 +155,7 @@ def bearing_range_error(x, m, z):
 
     As in GTSAM (``Rot2::relativeBearing``), a landmark within 1e-5 m of the pose has bearing ``b̂ = 0`` and a
     zero bearing Jacobian: the bearing is undefined there, and a solution that put a landmark on a pose
-    (misread ids, a stalled optimisation) must have the cost GTSAM recomputes for it (issue 10, item 4).
+    (misread ids, a stalled optimisation) must have the cost GTSAM recomputes for it.
 
     Parameters
     ----------
@@ -254,7 +254,7 @@ def robot_range_bearing_error(x_i, x_j, z):
 
     ``e = [‖p_j − p_i‖ − r,  wrap(atan2(p_j − p_i) − θ_i − b)]`` — :func:`bearing_range_error` with the
     landmark replaced by the position of another pose; the heading of ``x_j`` does not enter, so the last
-    column of ``J_j`` is zero. (Multi-robot MRCLAM, issue 14 item 7.)
+    column of ``J_j`` is zero (multi-robot MRCLAM).
 
     Parameters
     ----------

@@ -42,8 +42,8 @@ from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 def chi2_cdf(x: float, k: int) -> float:
     """χ² distribution function with ``k ≥ 1`` (integer) degrees of freedom: the regularised lower incomplete
     gamma ``P(k/2, x/2)``, from ``P(1/2, y) = erf(√y)``, ``P(1, y) = 1 − e^{−y}`` and the recurrence
-    ``P(a+1, y) = P(a, y) − yᵃ e^{−y} / Γ(a+1)`` (closed forms: no scipy.stats / scipy.special import, which
-    costs ≈ 1 s of start-up per solve)."""
+    ``P(a+1, y) = P(a, y) − yᵃ e^{−y} / Γ(a+1)`` (closed forms: no scipy.stats / scipy.special import, a
+    start-up cost of every solve)."""
     if x <= 0.0:
         return 0.0
     y = 0.5 * x
@@ -183,7 +183,7 @@ class GraphSlam(BaseSolver):
         """
         t_start = time.perf_counter()
         p = self.params
-        if p.surface:  # the declared landmark radius (issue 22)
+        if p.surface:  # the declared landmark radius
             from slamcli.solvers.surface import mean_offset_inputs
 
             inputs = mean_offset_inputs(inputs, "graph")
@@ -496,9 +496,8 @@ def _stalled(run: _Run) -> bool:
 
 
 #: Our own (nearest-neighbour) association is flagged when more than this fraction of the sightings lie outside
-#: the 99 % χ² gate at the estimate — ten times the 1 % a right association and noise model give. Measured
-#: (defaults, fraction over the gate): paper-sim1 0.4 %, paper-sim2 1.1 %, loop 0.7 %; ACFR car park 11.7 %
-#: (11 of 15 beacons matched, GPS ATE 1.79 m), Victoria Park first 300 s 57 % (21.3 m), full 94 % (83 m).
+#: the 99 % χ² gate at the estimate — ten times the 1 % a right association and noise model give (chosen by
+#: measurement: benchmarks/results/design_notes.md).
 ASSOCIATION_SUSPECT_FRAC = 0.10
 
 

@@ -1,27 +1,17 @@
 """The frequentist part of hybrid SLAM (paper 001 §II.A-B): estimator E2 (eq. 20) on an occupancy grid, and the
 Bayesian log-odds baseline of §II.D (eq. 24) fed with the belief mean.
 
-One scan ``z`` (B beams) from a belief ``b(s)`` represented by weighted pose samples ``s_1..s_S``:
+One scan ``z`` (B beams) from a belief ``b(s)`` of weighted pose samples ``s_1..s_S``:
 
-* every (sample, beam) ray is traversed through the grid (:func:`slamcli.models.occupancy.traverse`) up to
-  its reading (+ a band for the sensor model) or to the max range;
-* the scan likelihood under the current map ``p(z | s, P) = Π_b p(r_b | s, P)`` with
-  ``p(r | s, P) = (1−ε) Σ_j π_j f_j(r) + ε/r_max`` (a max-range reading: ``(1−ε) Π_j(1−P_j) + ε``), the
-  forward model of eq. (15) with the estimate P in place of P* and a small outlier floor ε — in the solver
-  with thin walls (:func:`scan_log_likelihood` with ``free_margin``; the plain model is biased toward poses
-  whose beams clip fewer wall cells);
-* sample weights ``w_s ∝ p(z | s, P) b(s)`` (eq. 14);
-* the indicator ``1(q̂_i = O / s, z)``: the cell holding the reading is observed occupied, the cells the beam
-  crossed before it (each for at least ``min_traversal`` m) are observed empty; a max-range beam sees every
-  crossed cell empty;
-* ``c_i = Σ w_s 1(q̂_i = O / s, z) / W_i`` and ``A_i = Σ w_s A_i(s) / W_i`` over the (sample, beam) pairs that
-  observe cell i (``W_i`` = their total weight), with ``A_i(s)`` from eqs. (33)-(34) along the ray;
-* E2 (eq. 20 in the 2-state form of eq. 13):
-  ``P_i ← Π_[0,1]{ P_i + γ_i · min(1, W_i) · (c_i − P(q̂=O|O) P_i − P(q̂=O|E)(1 − P_i)) }`` with
-  ``γ = a·n^(−α)`` (n = the cell's own clock — +min(1, W_i) per update with ``clock``, else +1 — or the
-  global step with ``step_clock = "global"``);
-* the set B_i of eq. (51): a cell is updated only from beliefs whose mean lies within ``max_cell_dist``
-  (40 m in the paper) of the cell centre.
+* every (sample, beam) ray is traversed through the grid (:func:`slamcli.models.occupancy.traverse`);
+* scan likelihood ``p(z | s, P) = Π_b p(r_b | s, P)``, ``p(r | s, P) = (1−ε) Σ_j π_j f_j(r) + ε/r_max`` (max
+  range: ``(1−ε) Π_j(1−P_j) + ε``), eq. (15) with the estimate P and an outlier floor ε (thin walls in the
+  solver, :func:`scan_log_likelihood` with ``free_margin``); sample weights ``w_s ∝ p(z | s, P) b(s)`` (eq. 14);
+* the reading's cell is observed occupied, the cells crossed before it (≥ ``min_traversal`` m) empty;
+* ``c_i = Σ w_s 1(q̂_i = O / s, z) / W_i`` and ``A_i = Σ w_s A_i(s) / W_i`` over the pairs observing cell i;
+* E2: ``P_i ← Π_[0,1]{ P_i + γ_i · min(1, W_i) · (c_i − P(q̂=O|O) P_i − P(q̂=O|E)(1 − P_i)) }``,
+  ``γ = a·n^(−α)`` (n the cell's own clock, or the global step with ``step_clock = "global"``);
+* the set B_i of eq. (51): a cell is updated only from beliefs whose mean lies within ``max_cell_dist``.
 
 Only the cells the scan crosses are touched, so the cost per step does not depend on the map size.
 """
@@ -183,8 +173,8 @@ def scan_log_likelihood(rb: RayBatch, P_seg: np.ndarray, max_range: float, eps: 
 
         p(r | s, P) = (1−ε) Π_{i: b_i ≤ r−m} (1 − P_i) · Σ_{j: b_j > r−m} P_j f_j(r) + ε/r_max
 
-    Without it a pose from which the beams clip fewer wall cells before their readings is preferred (on
-    hybrid-map1 the true pose lost to a sigma point 0.3 m off, under a near-exact map)."""
+    Without it a pose from which the beams clip fewer wall cells before their readings is preferred
+    (benchmarks/results/design_notes.md)."""
     rs = rb.segs
     if free_margin <= 0:
         _, pi, miss = ray_products(P_seg, rs)

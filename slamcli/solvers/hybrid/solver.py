@@ -299,7 +299,7 @@ class HybridSlam(BaseSolver):
         assoc_mode = p.association
         if assoc_mode == "auto":
             assoc_mode = "known" if np.any(f_inputs.observations.reported_id >= 0) else "ml"
-        # the EKF defaults before issue 24 item 7 (provisional list, grouped returns, new-landmark threshold),
+        # the EKF's earlier defaults (provisional list, grouped returns, new-landmark threshold),
         # spelled out so that hybrid's results do not move with the ekf solver's defaults
         ekf = EkfSlam(EkfParams(association=assoc_mode, motion_input="controls", obs_std_scale=p.stabilising_scale,
                                 motion_std_scale=p.motion_std_scale, use_gps=False, provisional=False, size_gate=False,

@@ -980,8 +980,8 @@ def laplace_covariances(prob: Problem, W: Weights, poses, landmarks, labels, *, 
 # compiled copies of the scalar kernels (optional extra ``fast``: numba)
 # ------------------------------------------------------------------------------------------------------------
 #: poses from which :func:`sweep_poses_sequential` and the on-line init run the compiled kernels: loading them
-#: (numba's import and its on-disk cache) costs ≈0.4 s CPU, about 7 Python sweeps of 1000 poses; the results
-#: are the same floats either way
+#: (numba's import and its on-disk cache) costs about as much as a few Python sweeps of this many poses
+#: (benchmarks/results/design_notes.md); the results are the same floats either way
 JIT_MIN_POSES = 1000
 #: set to 1 to keep the pure-Python kernels even when numba is installed
 NO_JIT_ENV = "SLAMCLI_NO_JIT"

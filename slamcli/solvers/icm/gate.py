@@ -1,9 +1,8 @@
-"""Null matching behind a gate (``outlier_prob > 0``, beyond the paper; issue 22 item 1).
+"""Null matching behind a gate (``outlier_prob > 0``, beyond the paper).
 
 A real sensor reports some sightings far from where its own id puts them (MRCLAM: barcodes read off the wrong
 landmark or another robot's tag, range outliers). Under the paper's quadratic Φ one such sighting drags its pose
-and map point by its whole residual, and a chain of them bends the path: `graph` without a robust kernel ends at
-1.62 m ATE on MRCLAM Dataset 7 robot 1 against 0.22-0.27 m with one.
+and map point by its whole residual, and a chain of them bends the path (how far: benchmarks/results/design_notes.md).
 
 The ICM answer is one more value of the matching node: ``c_{t,i} = ∅`` (no map point) at a constant cost τ_i.
 The observation potential becomes the truncated quadratic ::

@@ -1,29 +1,20 @@
-"""Gated on-line initialisation of ICM-SLAM (``init="gated"``, beyond the paper; issue 22 item 3).
+"""Gated on-line initialisation of ICM-SLAM (``init="gated"``, beyond the paper).
 
-Algorithm 2's step 1 matches a sighting to the nearest map point within a fixed Euclidean radius ϑ and moves
-the pose with fixed weights R, S, Q. On a long real run the drift outgrows ϑ, so every revisited landmark
-becomes a new label, and with information weights the pose hardly moves towards a sighting at all. Here the
-pose carries a propagated covariance, and both the gate and the gain follow it:
+Algorithm 2's step 1 matches a sighting within a fixed radius ϑ and moves the pose with fixed weights; on a
+long real run the drift outgrows ϑ. Here the pose carries a propagated covariance that sets gate and gain:
 
-* **prediction** — ``x̂_t = g(x_{t-1}, u_{t-1})`` (the energy's own motion term, :class:`energy.Problem`) and
-  ``P̂_t = F P_{t-1} Fᵀ + G_u Σ_u G_uᵀ`` with ``F = ∂g/∂x`` and the actuation noise ``Σ_u = diag(motion_std²)``
-  of the dataset's noise model (car model: :func:`slamcli.models.ackermann.ackermann_jacobians`);
-* **gate** — a sighting's map point ``p = h⁻¹(x̂, z)`` against label ``j``: innovation ``ν = p − m_j`` with
-  ``S = J P̂ Jᵀ + Σ_z + C_j + Σ_z/n_j``, ``J = ∂h⁻¹/∂x = [I | R'(θ) v]``, ``Σ_z`` the world-frame covariance of
-  ``h⁻¹`` (``σ_r`` along the beam, ``r σ_b`` across it) and ``C_j = J P Jᵀ`` frozen at the label's first sight
-  (the map point is as uncertain as the pose it was seen from). Matched when ``νᵀ S⁻¹ ν ≤ χ²₂(gate_prob)``;
-  a new label when the smallest distance exceeds ``χ²₂(birth_prob)`` (the birth test); in between the sighting
-  stays unlabelled (``-1``, re-matched by the sweeps). One label per sighting and scan, nearest first;
-* **gain** — the pose moves by the information-form (Gauss-Newton) update of the prior ``N(x̂, P̂)`` and the
-  matched sightings, each of covariance ``Σ_z + C_j + Σ_z/n_j`` (two iterations, re-linearised), and
-  ``P = (P̂⁻¹ + Σ Jᵀ S_j⁻¹ J)⁻¹``. Landmark errors shared by many sightings are not independent, so ``P``'s
-  position block is kept no smaller than the smallest ``C_j`` it was localised on (else ``P`` would shrink
-  towards 0 while the robot stays among the same trees, and the gate would close again before the loop);
-* **map points** — running means of ``h⁻¹(x_t, z)`` as in the paper's init (eq. 17), so the rest of ICM is
-  unchanged.
+* **prediction** ``x̂_t = g(x_{t-1}, u_{t-1})``, ``P̂_t = F P_{t-1} Fᵀ + G_u Σ_u G_uᵀ``, ``Σ_u = diag(motion_std²)``
+  (car model: :func:`slamcli.models.ackermann.ackermann_jacobians`);
+* **gate** for ``p = h⁻¹(x̂, z)`` against label ``j``: ``ν = p − m_j``, ``S = J P̂ Jᵀ + Σ_z + C_j + Σ_z/n_j``,
+  ``J = ∂h⁻¹/∂x``, ``Σ_z`` the world-frame covariance of ``h⁻¹``, ``C_j = J P Jᵀ`` frozen at the label's first
+  sight; matched when ``νᵀ S⁻¹ ν ≤ χ²₂(gate_prob)``, a new label beyond ``χ²₂(birth_prob)``, unlabelled (−1)
+  in between; one label per sighting and scan, nearest first;
+* **gain**: the information-form update of ``N(x̂, P̂)`` with the matched sightings (two re-linearised
+  iterations), ``P = (P̂⁻¹ + Σ Jᵀ S_j⁻¹ J)⁻¹``, its position block kept no smaller than the smallest ``C_j``
+  (sightings of one landmark are not independent);
+* **map points**: running means of ``h⁻¹(x_t, z)`` (eq. 17), so the rest of ICM is unchanged.
 
-Sightings are compared with the labels through a KD-tree (``scipy.spatial.cKDTree``) over the map points,
-rebuilt every :data:`REBUILD_EVERY` new labels; labels born since the last rebuild are checked directly.
+Labels are searched with a ``scipy.spatial.cKDTree`` rebuilt every :data:`REBUILD_EVERY` new labels.
 """
 
 from __future__ import annotations

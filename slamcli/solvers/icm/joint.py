@@ -1,4 +1,4 @@
-"""Joint Gauss-Newton refinement of ICM-SLAM (``joint_iters > 1``, beyond the paper; issue 22 item 3).
+"""Joint Gauss-Newton refinement of ICM-SLAM (``joint_iters > 1``, beyond the paper).
 
 Gauss-Seidel sweeps move a pose only as far as its two neighbours let it: on a 12,000-pose chain thirty sweeps
 move no pose more than a few centimetres, so a loop closure found by the matchings never reaches the middle of

@@ -1,4 +1,4 @@
-"""Label merge of ICM-SLAM (``merge=true``, beyond the paper; issue 22 item 3).
+"""Label merge of ICM-SLAM (``merge=true``, beyond the paper).
 
 The paper's Φ_m fuses labels whose map points lie within a fixed radius ϑ and has no cost per landmark, so a
 map split into duplicates has a lower energy than the true one (each duplicate fits its own sightings). Two

@@ -1,110 +1,26 @@
 """ICM-SLAM: SLAM as a Markov random field solved by iterated conditional modes (paper 000, Algorithm 2).
 
 Nodes: the poses x_1..x_T (x_0 known), the matchings c_0..c_T of every observation to a map label, and the map
-m. The Gibbs energy (eq. 5, see :mod:`slamcli.solvers.icm.energy`) is minimised node by node:
+m. The Gibbs energy (eq. 5, :mod:`slamcli.solvers.icm.energy`; weights R motion, S odometry, Q observations,
+K GPS) is minimised node by node:
 
-1. **On-line initialisation** (Algorithm 2 step 1, eqs. 9-11): at each time t the matchings come from the
-   nearest map point to h⁻¹(g(x_{t-1}, u_{t-1}), z_{t,i}) (a new label when none lies within ϑ), then x_t
-   minimises the time-t terms — motion t (R), odometry t (S) and the observations of already-mapped labels
-   (Q) — by a few Gauss-Newton steps; map points are created when first seen and kept as running means
-   (eq. 17). The init ends with the three-step map update of §4 and the ς filter. ``init="kinematic"`` is
-   the paper's "very bad initialisation" (Fig. 6): poses from g(x, u) only.
-2. **ICM sweeps** (step 2, eqs. 12-15) with the visit scheme c_0, c_1, x_1, …, c_T, x_T, m. Since c_t
-   depends only on x_t^{(n-1)} and m^{(n-1)}, visiting every c_t just before x_t is the same as matching all
-   observations first (one KD-tree query); x_t then moves to the mode of its 3-D conditional (eq. 14, a few
-   Gauss-Newton steps with step halving); the map step is eq. (17) + label fusion within ϑ + the ς filter.
+1. **On-line initialisation** (step 1, eqs. 9-11): each x_t from motion, odometry and the observations of
+   already-mapped labels; new labels when nothing lies within ϑ; map points as running means (eq. 17), then
+   the map update of §4 and the ς filter. ``init="kinematic"``: poses from g(x, u) only (Fig. 6).
+2. **ICM sweeps** (step 2, eqs. 12-15), visit order c_0, c_1, x_1, …, c_T, x_T, m: all matchings in one
+   KD-tree query, each pose to the mode of its conditional (eq. (6), a few Gauss-Newton steps with halving),
+   then the map step (eq. 17 + label fusion within ϑ + the ς filter).
 
-Deliberate deviations from the paper (Algorithm 2 as printed), each an option or a documented choice:
-
-* **new label when nothing lies within ϑ** — eqs. (9)-(10) give the nearest existing label; the paper's own
-  text creates labels for objects seen for the first time, and the on-line init does so when no map point
-  lies within ϑ.
-* **up to 10 fusion passes** — the paper's three-step map procedure makes one regrouping pass; regrouping
-  can leave two points closer than ϑ (infeasible under Φ_m), so it is repeated (≤ 10, almost always 1).
-* **running-mean map points in the init** — Algorithm 2 step 1 freezes a map point m⁽⁰⁾ at the first sight
-  of its landmark; the on-line init here keeps each point as the running mean of every sighting so far (eq. 17
-  applied causally), which both matches later sightings against a better point and gives a better initial map
-  (the audit of issue 22 measured a mean landmark error of 0.213 m with running means against 0.329 m with the
-  frozen first sightings, after step 1 on ``paper-sim1``).
-* **per-return matching** — the paper groups the returns of one scan into objects before matching; here every
-  return is matched on its own to the nearest map point (one KD-tree query per sweep, eqs. 12-13), so the
-  returns of one post may go to different labels until fusion joins them.
-* **3 Gauss-Newton steps per pose** (``pose_iters``) — eq. (14) asks for the mode of each pose conditional; a
-  sweep takes a fixed number of Gauss-Newton steps with step halving instead of minimising to convergence
-  (the next sweep continues from there, so the fixed point is the same; it is reached in more sweeps).
-* **eq. (6) where the printed eq. (14) drops a term** — the pose conditional keeps every potential that
-  involves x_t (the motion and odometry terms of step t+1 too), as eq. (6) prescribes.
-* **ς defaults to 1** (paper: 500) — ς counts laser returns per landmark and must be scaled to the data
-  (the paper's 500 fits its laser with many returns per post; a point sensor sees a landmark a few dozen
-  times). The paper experiments in ``slamcli/experiments/`` set ς = 500.
-* **the monotone guard** (``monotone=True``, default) — the map step always applies eq. (17) (the exact
-  conditional mode of m for the current matchings); label fusion and the ς filter are applied only when
-  the energy after them, over the same observations, does not exceed the energy at the start of the sweep.
-  ``monotone=False`` is the paper's unguarded procedure. ``extra["map_step_parts"]`` records, per sweep,
-  which parts ran (``eq17``, ``fusion``, ``filter``, or ``rejected`` when the guard kept the eq.-17 map).
-* **stopping rule** — the paper runs a fixed number of iterations (30 / 100); here the run stops early
-  (status ``converged``) when one sweep lowers the energy by a non-negative relative amount ≤
-  ``energy_rtol``, over the same observations, *and* the estimate is at the optimum of its energy for its
-  matchings: with ``polish="none"`` the Gauss-Newton step to that optimum is at most ``opt_step_tol`` and
-  the decrease it predicts at most ``opt_rtol`` · H (:func:`slamcli.solvers.icm.polish.optimality`), with
-  ``polish="nls"`` the sweep's polish lowered the energy by at most ``energy_rtol``. An energy *increase*
-  (possible with ``monotone=False``) never stops the run. ``extra["energy_increases"]`` counts every rise
-  of the recorded trace (with ``surface=true`` the offsets refreshed at the start of a sweep change the
-  energy itself, so the trace can rise while each sweep lowers the energy of its own offsets);
-  ``extra["energy_increases_same_terms"]`` counts the sweeps that raised the energy over the same terms.
-* **polish="nls" is the default** (beyond the paper; ``polish="none"`` is Algorithm 2's Gauss-Seidel alone)
-  — when a sweep lowers the energy by a relative amount ≤ ``polish_rtol`` (and after the last sweep), all
-  poses and the map move at once to the optimum of the energy under the current matchings
-  (:mod:`slamcli.solvers.icm.polish`, the project's least-squares engine); the next sweep re-matches from
-  there. Gauss-Seidel sweeps stall on a long chain far from that optimum (``loop`` with known
-  correspondences: 100 sweeps end 0.03-0.9 % above it, poses up to 0.3 m away); with the polish the same
-  runs converge in 6-13 sweeps to within 1e-12 of it. The optimum is not always nearer the truth than a
-  stalled sweep (paper-sim1 seed 0: ATE 0.331 m at the optimum, 0.301 m after 100 Gauss-Seidel sweeps;
-  the octagon of Fig. 9 with R = Q = S = I, ς = 500, seeds 0-2: mean landmark error 0.18-0.23 m at the
-  optimum under the matchings of 100 sweeps, 0.10-0.11 m at those sweeps' stalled estimate, 0.31-0.39 m
-  away): that is a property of the energy. ``extra`` records ``polishes`` (per polish: sweep, LM iterations,
-  energies, ``distance_to_optimum_m`` / ``_rad``: how far it moved the estimate), and at the end
-  ``gradient_norm`` (‖∇H‖₂ over poses and map, fixed matchings), ``newton_step_max`` and ``optimum_gap``.
-
-Observations of map points removed by the ς filter: ``filtered="rematch"`` (the paper's eq. 13) matches them
-again to the nearest remaining map point in the next sweep — they stay in the energy; ``filtered="drop"``
-(default) takes them out of the model for good (fewer terms: the energy falls without any optimisation, so
-energies are compared over the observations in the model at the start of each sweep).
-
-* **filtered="drop" is the default** — a deviation from eq. 13, chosen by measurement on the octagon (Fig. 9,
-  R = Q = S = I, ς = 500, 100 sweeps, seeds 0-2; the two columns of the Fig. 9 section of ``slamcli
-  reproduce``): re-matching the returns of the removed points (clutter, rarely seen objects) to the nearest
-  remaining cone puts the energy after the init at 31,000-93,000 and takes the map from 0.11-0.12 m to
-  0.41-0.73 m mean landmark error (ATE 0.7-2.3 m); dropping them leaves the energy at 115-126 and takes the map
-  from 0.11-0.12 m to 0.10-0.11 m (ATE 0.16-0.17 m), the map change per sweep falling from 4.9-6.1 mm in sweep
-  1 to 0.07-0.11 mm in sweep 100. With ς = 1 (the default) nothing is removed and the two are the same.
-
-Beyond the paper (separate options, default off):
-
-* ``schedule="parallel"`` — the coding scheme odd poses / even poses: each class is conditionally independent
-  given the other, the map and the matchings, so a class is updated at once, vectorised.
-* ``accelerate="joint"`` — every ``accelerate_every`` sweeps, one joint Gauss-Newton step over all poses and the
-  map with the current matchings, accepted only if it lowers the same energy (backtracking).
-* ``weights="information"`` — R, S, Q (and K) from the dataset's noise model (inverse covariances,
-  :func:`slamcli.solvers.icm.energy.information_weights`) instead of the design matrices given.
-* ``range_offset`` — added to every range before h⁻¹: a laser measures a post's surface, not its centre; the
-  bias of the paper-exact inverse observation pulls map points towards the robot and drags the poses with them
-  (``benchmarks/bench_icm_study.py``).
-
-For long real runs (issue 22; separate options, default off, bundled as ``preset="real"``,
-:mod:`slamcli.solvers.icm.presets`):
-
-* ``init="gated"`` — the on-line init gates a sighting with a χ² test on a propagated pose covariance, and the
-  pose's gain follows that covariance (:mod:`slamcli.solvers.icm.init_gated`, KD-tree search of the map);
-* ``joint_iters`` — with ``accelerate="joint"``, Gauss-Newton steps until the step or the decrease is negligible
-  (:mod:`slamcli.solvers.icm.joint`);
-* ``merge`` — χ² label merge after each map step, never across labels seen in one scan; ``label_cost`` adds
-  λ per landmark to the reported energy (:mod:`slamcli.solvers.icm.merge`);
-* ``outlier_sigma`` — with reported ids, a null matching at a constant cost for sightings more than k σ from their
-  id's map point (a truncated quadratic; :mod:`slamcli.solvers.icm.gate`).
-
-The GPS potential of §4 (``K``, ``use_gps``) is in the energy whenever the dataset has GPS fixes (the paper
-writes it down, then leaves it out of its experiments; ``use_gps=false`` or ``K=0`` drops it).
+Deliberate deviations from Algorithm 2 as printed (reasons and measurements: benchmarks/results/design_notes.md):
+new label when nothing lies within ϑ; up to 10 fusion passes; running-mean map points in the init;
+per-return matching; ``pose_iters`` Gauss-Newton steps per pose; ς defaults to 1 (paper 500); the
+``monotone`` guard on fusion and filtering; a stopping rule (``energy_rtol`` and an optimality test);
+``polish="nls"`` (all poses and the map to the optimum under the current matchings, :mod:`.polish`);
+``filtered="drop"`` (observations of filtered points leave the model; ``"rematch"`` is eq. 13).
+Further options, default off: ``schedule="parallel"`` (odd/even pose classes), ``accelerate="joint"``,
+``weights="information"``, ``range_offset``, and for long real runs (``preset="real"``) ``init="gated"``
+(:mod:`.init_gated`), ``joint_iters`` (:mod:`.joint`), ``merge`` / ``label_cost`` (:mod:`.merge`) and
+``outlier_sigma`` (:mod:`.gate`). The GPS potential of §4 is used whenever the dataset has fixes.
 """
 
 from __future__ import annotations

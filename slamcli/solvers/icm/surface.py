@@ -1,30 +1,20 @@
 """Surface-aware observations for ICM-SLAM (beyond paper 000): laser returns hit the surface of a disc landmark.
 
-The paper's inverse observation h⁻¹(x, z) = p + r·u (u = [cos(θ + b), sin(θ + b)]) puts every return on the
-landmark's centre. A beam that meets a disc of radius ρ at lateral offset s from its centre stops
-q = √(ρ² − s²) short of the centre's foot on the beam (:mod:`slamcli.models.observation`, surface model), so the
-paper-exact map points lie π/4 · ρ nearer the robot than the centres on average and drag the poses with them.
+The paper's h⁻¹(x, z) = p + r·u (u = [cos(θ + b), sin(θ + b)]) puts every return on the centre; a beam meeting
+a disc of radius ρ at lateral offset s stops q = √(ρ² − s²) short (:mod:`slamcli.models.observation`), so the
+paper-exact map points lie π/4 · ρ nearer the robot on average and drag the poses with them.
 
-``surface=true`` (``IcmParams.surface``) replaces each range r_i by r_i + δ_i before h⁻¹:
+``surface=true`` replaces each range r_i by r_i + δ_i before h⁻¹: δ_i = π/4 · ρ_i in the on-line init (no map
+yet); before each sweep's c-step δ_i = √(ρ_i² − s_i²) from the current pose and the label's map point (π/4 · ρ_i
+without a label), held fixed during the sweep so it minimises an energy of the paper's form (eq. 5).
+ρ_i = diameter_m / 2 as the dataset declares it (``inputs/observations/diameter_m``).
 
-* on-line init (no map yet): δ_i = π/4 · ρ_i, the mean offset over a post swept by evenly spaced beams;
-* each ICM sweep, before the c-step: δ_i = q_i(x_t, m_{c_i}) = √(ρ_i² − s_i²) from the current pose and map
-  point of the return's label (π/4 · ρ_i for a return without a label) — the surface model's inverse along the
-  beam, its lateral offset taken from the current estimate. The offsets are held fixed during the sweep, so the
-  sweep minimises an energy of the paper's form (eq. 5) and the stopping rule compares energies of the same
-  offsets (the energy at the start of a sweep is recomputed after the refresh).
-
-ρ_i = diameter_m / 2 is the radius the dataset declares (``inputs/observations/diameter_m``; the simulator's
-laser scenarios with ``sensor.report_size`` write it). ``range_bias="estimate"`` adds one more node, a common
-range bias b added to every range, visited before the c-step: its conditional mode given x, m, c is closed form,
+``range_bias="estimate"`` adds a node, a common range bias b, visited before the c-step, in closed form::
 
     b* = Σ_i u_iᵀ Q (m_{c_i} − p_i − (r_i + δ_i) u_i) / Σ_i u_iᵀ Q u_i        (labelled returns i)
 
-— without a declared radius it estimates the whole surface offset (as graph's ``estimate_range_bias``).
-Measured on ``paper-sim1`` seed 0 (S = 0, ς = 500, filtered = rematch, 100 sweeps): b reaches 0.194 m
-(π/4 · 0.25 = 0.196 m), yet the map ends at 0.257 m (paper-exact 0.309 m, ``surface=true`` 0.032 m): the init has already placed the map
-with the biased ranges, and the sweeps move it little afterwards; the declared radius, which enters the init,
-is the better switch.
+Without a declared radius it estimates the whole surface offset, but the init has then already placed the
+map with biased ranges (measured: benchmarks/results/design_notes.md).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Multi-robot ICM-SLAM (issue 14 item 7): the same Gibbs energy, one more potential, robot by robot.
+"""Multi-robot ICM-SLAM: the same Gibbs energy, one more potential, robot by robot.
 
 For a :class:`slamcli.types.RobotTeam` the energy is the sum of every robot's own chain (motion R, odometry S),
 the landmark observations of all robots against ONE shared map (Q), and one potential per inter-robot reading

@@ -128,8 +128,8 @@ def check_covariance_blocks(cov: np.ndarray, what: str) -> None:
 
 def _leading_minors_positive(sym: np.ndarray) -> bool:
     """Whether every symmetric block of ``sym (B, k, k)`` is positive definite by Sylvester's criterion (all
-    leading principal minors > 0), in closed form for ``k ≤ 3`` (a few elementwise operations: on 1000 pose
-    blocks ≈ 5× cheaper than a batched Cholesky), by a batched Cholesky otherwise. False means "not shown":
+    leading principal minors > 0), in closed form for ``k ≤ 3`` (a few elementwise operations, cheaper than a
+    batched Cholesky), by a batched Cholesky otherwise. False means "not shown":
     the caller decides with eigenvalues."""
     k = sym.shape[1]
     if k > 3:
@@ -161,24 +161,17 @@ def marginals_chain_border(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Marginal covariances for a "chain + border" information matrix (pose chain + landmarks).
 
-    ``H = [[A, B], [Bᵀ, C]]`` where ``A`` (``n_chain`` blocks of size ``k``, e.g. SE(2) poses) is block
-    tridiagonal — true whenever pose-pose factors only link consecutive poses (odometry, motion) or are
-    unary (prior, GPS) — and the border (landmarks, ``m`` columns, ``B`` sparse) is arbitrary. With the
-    banded Cholesky ``A = UᵀU`` and the Cholesky ``S = RᵀR`` of the border Schur complement::
+    ``H = [[A, B], [Bᵀ, C]]`` with ``A`` block tridiagonal (``n_chain`` blocks of size ``k``: pose-pose factors
+    only between consecutive poses, or unary) and an arbitrary sparse border ``B`` (``m`` columns). With the
+    banded Cholesky ``A = UᵀU`` and ``S = RᵀR``::
 
-        S = C − Bᵀ A⁻¹ B           (m × m, assembled from column batches of A⁻¹ B)      Σ_CC = S⁻¹
-        Σ_ii = (A⁻¹)_ii + Z_i Z_iᵀ ,   Z = A⁻¹ B R⁻¹   (so that W Σ_CC Wᵀ = Z Zᵀ for W = A⁻¹ B)
+        S = C − Bᵀ A⁻¹ B           (m × m, from column batches of A⁻¹ B)      Σ_CC = S⁻¹
+        Σ_ii = (A⁻¹)_ii + Z_i Z_iᵀ ,   Z = A⁻¹ B R⁻¹
 
-    ``Z`` (like ``W``) is a dense ``n × m`` matrix and is never formed: its columns are computed
-    ``batch_size`` at a time (``B R⁻¹[:, batch]`` is sparse × dense, ``R⁻¹`` is upper triangular so only
-    its leading rows enter) and only the ``k × k`` diagonal blocks ``Z_i Z_iᵀ`` are accumulated. The
-    diagonal blocks of ``A⁻¹`` come from the block-tridiagonal (Rauch-Tung-Striebel-type) recursion —
-    forward ``S_0 = D_0, S_i = D_i − E_{i−1}ᵀ S_{i−1}⁻¹ E_{i−1}``; backward ``Σ_n = S_n⁻¹,
-    Σ_i = S_i⁻¹ + G_i Σ_{i+1} G_iᵀ, G_i = S_i⁻¹ E_i`` (``D_i``, ``E_i = A_{i,i+1}`` blocks).
-
-    Memory ``O(n · batch_size + m²)`` — no dense ``n × m`` block (100k poses × 1923 landmarks would need
-    8.6 GiB per such block); time ``O(n m (k + nnz(B)/n) + m³)``. ``poses=False`` skips the
-    pose marginals (only ``Σ_CC`` is wanted, e.g. for the correspondence test).
+    ``Z`` is never formed: its columns come ``batch_size`` at a time and only the ``k × k`` blocks ``Z_i Z_iᵀ``
+    are accumulated; the blocks of ``A⁻¹`` come from the block-tridiagonal (RTS-type) recursion. Memory
+    ``O(n · batch_size + m²)`` (no dense ``n × m`` block), time ``O(n m (k + nnz(B)/n) + m³)``. ``poses=False``
+    skips the pose marginals (only ``Σ_CC``).
 
     Returns
     -------

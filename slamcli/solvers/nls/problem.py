@@ -241,23 +241,16 @@ class NlsResult:
     iterations : int             accepted steps ``K`` (``len(cost_trace) − 1``).
     cost_trace : ndarray (K+1,)  cost at the start and after every accepted step.
     time_trace : ndarray (K+1,)  wall time of each accepted step (0 for the start), s.
-    information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` in world coordinates (also with
-                                 the body pose chart) — for :func:`marginal_covariances`. Built on first
-                                 access (a property over ``information_fn``): a solve whose caller needs no
-                                 covariances never assembles the full symmetric matrix nor rotates it out of
-                                 the body chart.
+    information : csc_matrix (D, D)  ``H = JᵀΛJ`` (IRLS-weighted) at ``x`` in world coordinates, built on first
+                                 access (a property over ``information_fn``) — for :func:`marginal_covariances`.
     linear_solves : int          linear systems solved (accepted + rejected steps + GN damping retries).
-    notes : tuple[str, ...]      numerical fallbacks that were taken (SuperLU instead of CHOLMOD or the
-                                 banded Cholesky, damped Gauss-Newton steps); empty when none were needed.
-    linear_solver : str          the linear solver used (``cholmod``, ``superlu`` or ``chain``).
-    workspace : tuple or None    ``(Assembler, linear solver)`` of the run: their sparsity pattern and
-                                 symbolic analysis serve a follow-up problem on the same factor graph
-                                 (``Assembler(problem, like=...)``, e.g. the pose-graph certificate).
-    information_lower : ndarray (lo_nnz,) or None   the lower-triangle data of ``H`` at ``x`` on the pattern of
-                                 ``workspace``'s assembler, in the optimiser's pose chart ``information_chart``
-                                 (``"body"``: GTSAM's Pose2 chart, not rotated) — what the marginals factor
-                                 directly (:func:`slamcli.solvers.nls.marginals.result_marginals`), without the
-                                 full symmetric ``information``.
+    notes : tuple[str, ...]      numerical fallbacks taken (SuperLU instead of CHOLMOD or the banded Cholesky,
+                                 damped Gauss-Newton steps); empty when none were needed.
+    linear_solver : str          ``cholmod``, ``superlu`` or ``chain``.
+    workspace : tuple or None    ``(Assembler, linear solver)`` of the run, reusable for a follow-up problem on
+                                 the same factor graph (``Assembler(problem, like=...)``).
+    information_lower : ndarray (lo_nnz,) or None   lower-triangle data of ``H`` on ``workspace``'s pattern, in
+                                 the pose chart ``information_chart`` — what the marginals factor directly.
     information_chart : "body" | "world"   the pose chart of ``information_lower``.
     """
 

@@ -1,41 +1,25 @@
 """Selected inverse of a sparse symmetric positive definite matrix (Takahashi / Erisman–Tinney recurrence).
 
-Marginal covariances of a Gaussian with information (precision) matrix ``H`` are blocks of ``Σ = H⁻¹``.
-With the fill-reducing permutation ``P`` and the sparse factorisation ``P H Pᵀ = L D Lᵀ`` (``L`` unit lower
-triangular), every entry of ``Σ̃ = (P H Pᵀ)⁻¹`` on the sparsity pattern of ``L`` follows from ``L``, ``D``
-and entries of ``Σ̃`` *further down and right* on that same pattern — Takahashi, Fagan & Chen (1973),
-Erisman & Tinney (1975)::
+Marginal covariances are blocks of ``Σ = H⁻¹``. With the fill-reducing permutation ``P`` and
+``P H Pᵀ = L D Lᵀ`` (``L`` unit lower triangular), every entry of ``Σ̃ = (P H Pᵀ)⁻¹`` on the pattern of ``L``
+follows from ``L``, ``D`` and entries of ``Σ̃`` further down and right (Takahashi et al. 1973)::
 
-    Σ̃ L = L⁻ᵀ D⁻¹            (upper triangular; its diagonal is D⁻¹)
+    column j, pattern R = {i > j : L_ij ≠ 0}:   Σ̃_{R,j} = − Σ̃_{R,R} L_{R,j},   Σ̃_jj = 1/d_j − L_{R,j}ᵀ Σ̃_{R,j}
 
-    column j, off-diagonal pattern R = {i > j : L_ij ≠ 0}:
-        Σ̃_{R,j} = − Σ̃_{R,R} L_{R,j}
-        Σ̃_jj    = 1/d_j − L_{R,j}ᵀ Σ̃_{R,j}
+The pattern is chordal, so ``Σ̃_{R,R}`` is known when column ``j`` is reached; memory ``O(nnz(L))``, work
+that of the factorisation. Here the recurrence runs on (relaxed, :func:`_amalgamate`) *supernodes*
+``J = j0..j1`` sharing one row set ``R``, as dense block products::
 
-Because the pattern of ``L`` is chordal, ``R ∪ {j}`` is a clique of it, so ``Σ̃_{R,R}`` only needs entries
-that were computed before (columns ``> j``). Nothing outside the pattern is ever formed: memory
-``O(nnz(L))``, work ``O(Σ_j |R_j|²)`` — the cost of the factorisation itself.
+    Y = L_{R,J} L_{J,J}⁻¹,   Σ̃_{R,J} = − Σ̃_{R,R} Y,   Σ̃_{J,J} = L_{J,J}⁻ᵀ D_J⁻¹ L_{J,J}⁻¹ − Yᵀ Σ̃_{R,J}
 
-This module runs the recurrence on *supernodes* (runs of columns ``J = j0..j1`` whose pattern is a dense
-lower triangle plus one shared row set ``R``; relaxed: neighbouring fundamental supernodes of a chain of the
-elimination tree are merged, with explicit zeros, :func:`_amalgamate`), a block version of the same identity::
+Supernodes of one level of the elimination tree are independent: the recurrence runs level by level from the
+root, each level batched into a few buckets padded to one shape (:class:`_Schedule`), so the Python
+overhead is per bucket. A child's ``Σ̃_{R,R}`` is a gather from its parent's front ``Σ̃_{J∪R, J∪R}``
+(SelInv's relative indices); only two levels of fronts are alive at once.
 
-    Y      = L_{R,J} L_{J,J}⁻¹                                            (|R| × |J|)
-    Σ̃_{R,J} = − Σ̃_{R,R} Y
-    Σ̃_{J,J} = L_{J,J}⁻ᵀ D_J⁻¹ L_{J,J}⁻¹ − Yᵀ Σ̃_{R,J}
-
-so the work is dense matrix products (BLAS). A supernode needs only its ancestors in the elimination tree of
-the supernodes, so all supernodes of one *level* (depth in that tree) are independent: the recurrence runs
-level by level from the root, batching the supernodes of a level into a few buckets padded to one shape
-(:class:`_Schedule`) — one batched product per bucket, so the Python overhead is per bucket, not per
-supernode (intel: 627 supernodes, 32 levels, 43 buckets; City10000: 3934, 30, 298). Each supernode leaves its dense *front*
-``Σ̃_{J∪R, J∪R}`` for its children, whose ``Σ̃_{R,R}`` is a gather from the parent's front (``R`` of a child
-lies in ``J ∪ R`` of its parent: SelInv's "relative indices"); only two levels of fronts are alive at once.
-
-The factorisation is CHOLMOD's (:mod:`slamcli.solvers.nls.cholmod`): its fill-reducing ordering (AMD)
-and its factor as ``L D Lᵀ`` — with the LM's own symbolic analysis when the caller
-has it (:func:`factor_ldl`'s ``analysis``), so that only the numeric factorisation at the estimate is paid.
-Shapes: ``H (n, n)`` sparse; ``index_blocks (B, k)`` integer columns of ``H``.
+The factor is CHOLMOD's ``L D Lᵀ`` with its AMD ordering (:mod:`slamcli.solvers.nls.cholmod`), reusing the
+LM's symbolic analysis when given (:func:`factor_ldl`'s ``analysis``). Shapes: ``H (n, n)`` sparse;
+``index_blocks (B, k)`` integer columns of ``H``.
 """
 
 from __future__ import annotations
@@ -312,9 +296,9 @@ def _lower_entries(factor: LdlFactor, sets: list[np.ndarray], tri: list) -> np.n
 def _unit_lower_inverse(blocks: np.ndarray) -> np.ndarray:
     """Inverses of unit lower triangular ``(B, w, w)`` blocks: row by row forward substitution batched over
     the blocks (``w − 1`` einsums; a third of the flops of a general inverse and none of its per-matrix
-    LAPACK overhead: 1000 blocks of 12 × 12, 1.6 vs 5.2 ms), the blocked inverse
-    (:func:`_unit_lower_inverse_blocked`) from :data:`TRTRI_MIN_WIDTH` on or when the blocks are fewer than
-    about 0.6 (w − 1) (City10000's separators of 27-96 columns: a few calls instead of ≈ 700 einsums)."""
+    LAPACK overhead), the blocked inverse (:func:`_unit_lower_inverse_blocked`) from :data:`TRTRI_MIN_WIDTH`
+    on or when the blocks are fewer than about 0.6 (w − 1) (chosen by measurement:
+    benchmarks/results/design_notes.md)."""
     B, w, _ = blocks.shape
     if w >= TRTRI_MIN_WIDTH or 5 * B < 3 * (w - 1):  # few wide blocks: matrix products beat w − 1 einsums
         return _unit_lower_inverse_blocked(blocks)
@@ -330,9 +314,8 @@ def _unit_lower_inverse_blocked(blocks: np.ndarray) -> np.ndarray:
     """Inverses of lower triangular ``(B, w, w)`` blocks by the 2 × 2 block formula, recursively,
     ``[[A, 0], [C, D]]⁻¹ = [[A⁻¹, 0], [−D⁻¹ C A⁻¹, D⁻¹]]``;
     leaves of at most :data:`TRI_LEAF_WIDTH` columns by numpy's batched LU inverse (its rounding-level upper
-    triangle dropped). Matrix products only: LAPACK's ``trtri`` would cost ``import scipy.linalg`` (≈ 220 M
-    instructions, the largest single import of a default pose-graph solve) for the same few tenths of a ms
-    (288 × 288: 0.8 vs 1.0 ms; 27 × 27: 10 vs 30 µs)."""
+    triangle dropped). Matrix products only: LAPACK's ``trtri`` would cost ``import scipy.linalg`` for no
+    gain (measured: benchmarks/results/design_notes.md)."""
     B, w, _ = blocks.shape
     if w <= TRI_LEAF_WIDTH:
         return np.tril(np.linalg.inv(blocks))
