@@ -113,11 +113,8 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     raise ConfigError(f"{where}: unsupported parameter type {tp!r}")
 
 
-def build_params(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param") -> Any:
-    """Instantiate ``params_cls`` with overrides (``{"k": v}`` or ``["k=v", ...]``), validating keys and types.
-
-    Raises :class:`ConfigError` naming the key, the expected type and the known keys.
-    """
+def given_values(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param") -> dict[str, Any]:
+    """The typed values of the keys given (``{"k": v}`` or ``["k=v", ...]``), validated against ``params_cls``."""
     if isinstance(overrides, list):
         pairs: dict[str, Any] = {}
         for text in overrides:
@@ -134,8 +131,20 @@ def build_params(params_cls: type, overrides: dict[str, Any] | list[str], *, whe
             known = ", ".join(sorted(fields)) or "none"
             raise ConfigError(f"{where}: unknown parameter {key!r} for {params_cls.__name__}; known: {known}")
         kwargs[key] = _coerce(value, hints[key], f"{where} {key}")
+    return kwargs
+
+
+def build_params(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param",
+                 inputs: Any = None) -> Any:
+    """Instantiate ``params_cls`` with overrides (``{"k": v}`` or ``["k=v", ...]``), validating keys and types.
+
+    A class with a ``resolve(given, inputs)`` classmethod (a preset) is built by it from the keys given, so a
+    preset fills only what was left unset. Raises :class:`ConfigError` naming the key and the known keys.
+    """
+    given = given_values(params_cls, overrides, where=where)
+    resolve = getattr(params_cls, "resolve", None)
     try:
-        return params_cls(**kwargs)
+        return resolve(given, inputs) if resolve is not None else params_cls(**given)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{where}: {exc}") from None
 

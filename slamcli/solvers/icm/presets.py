@@ -29,16 +29,15 @@ chosen by measurement (``slamcli reproduce --section real``, the real-data secti
   ``graph``'s Cauchy kernel (``robust=cauchy``) 0.152 m. Without ids (Victoria Park, car park) the identity weights stay:
   with the nearest-point matching the information weights ended at 0.83 m on the car park against 0.44 m.
 
-A preset sets each of its keys that is still at its paper default; a key given explicitly with another value
-wins (``-p preset=real -p weights=information``). A key set explicitly to its paper default cannot be told
-apart from an unset one and takes the preset's value. Weight matrices given explicitly (``R``, ``S``, ``Q`` or
-``K`` away from their defaults) keep ``weights=design``: the data rule's ``weights=information``, which would
-replace them by the dataset's noise model, is then not applied, and the result says so
-(:func:`weights_note`).
+A preset is a named constructor (``IcmParams.real(**given)``), resolved once before the solver runs
+(:func:`resolve`): it fills only the keys the user left unset — a key given explicitly keeps its value, whatever
+that value is. With sensor-reported ids the :data:`WITH_IDS` rule fills more unset keys; weight matrices given
+explicitly (``R``, ``S``, ``Q`` or ``K``) keep ``weights=design`` and the result says so (:func:`weights_note`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 #: preset name -> the parameters it sets (``slamcli solvers icm`` lists them)
@@ -58,8 +57,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-#: preset name -> what it sets in addition when the dataset has sensor-reported ids (applied at solve time,
-#: :func:`apply_data_rule`; the same "still at its paper default" rule)
+#: preset name -> what it sets in addition when the dataset has sensor-reported ids (resolved with the dataset
+#: before the solve, :func:`resolve`; only keys left unset)
 WITH_IDS: dict[str, dict[str, Any]] = {
     "paper": {},
     "real": {"correspondences": "reported", "init": "online", "weights": "information", "outlier_sigma": 7.0,
@@ -78,43 +77,33 @@ def expansion_text(name: str) -> str:
     return text + (f"; with sensor-reported ids also {_kv(WITH_IDS[name])}" if WITH_IDS[name] else "")
 
 
-def apply_data_rule(params, defaults: dict[str, Any], has_ids: bool) -> dict[str, Any]:
-    """The field values ``params`` takes from its preset's data rule: with ``has_ids``, each :data:`WITH_IDS`
-    key whose current value equals its paper default ``defaults[key]`` or the value the preset itself gave it;
-    nothing otherwise."""
-    if not has_ids:
-        return {}
-    base = defaults | PRESETS[params.preset]
-    out = {k: v for k, v in WITH_IDS[params.preset].items() if getattr(params, k) == base[k]}
-    if explicit_weights(params, defaults) and out.get("weights") == "information":
-        del out["weights"]  # the user's R, S, Q, K win over the dataset's noise model
-    return out
-
-
 #: the design weight matrices that ``weights=information`` replaces
 WEIGHT_KEYS = ("R", "S", "Q", "K")
 
 
-def explicit_weights(params, defaults: dict[str, Any]) -> list[str]:
-    """The design weight matrices ``params`` holds away from their paper defaults (given explicitly)."""
-    return [k for k in WEIGHT_KEYS if getattr(params, k) != defaults[k]]
-
-
-def weights_note(params, defaults: dict[str, Any], has_ids: bool) -> str:
-    """One line when the preset's data rule would have set ``weights=information`` but explicit weight matrices
-    kept ``weights=design``; ``""`` otherwise."""
-    given = explicit_weights(params, defaults)
-    if not (has_ids and given and WITH_IDS[params.preset].get("weights") == "information"
-            and params.weights == "design"):
-        return ""
-    return (f"preset={params.preset}: weights=information not applied, {', '.join(given)} given explicitly "
-            "(weights=design uses them)")
-
-
-def apply_preset(params, defaults: dict[str, Any]) -> dict[str, Any]:
-    """The field values ``params`` takes from its preset: each preset key whose current value equals its paper
-    default ``defaults[key]``. Raises ValueError for an unknown preset name."""
-    name = params.preset
+def check_name(name: str) -> None:
+    """Raise ValueError (one line) for an unknown preset name."""
     if name not in PRESETS:
         raise ValueError(f"preset must be one of {', '.join(PRESETS)}, got {name!r}")
-    return {k: v for k, v in PRESETS[name].items() if getattr(params, k) == defaults[k]}
+
+
+def resolve(name: str, given: Mapping[str, Any], has_ids: bool) -> dict[str, Any]:
+    """The keyword arguments of the resolved parameters: preset ``name``'s values (and, with ``has_ids``, its
+    :data:`WITH_IDS` rule over them) for every key not in ``given``, then ``given`` itself."""
+    check_name(name)
+    filled = dict(PRESETS[name])
+    if has_ids:
+        rule = dict(WITH_IDS[name])
+        if any(k in given for k in WEIGHT_KEYS) and rule.get("weights") == "information":
+            del rule["weights"]  # the user's R, S, Q, K win over the dataset's noise model
+        filled |= rule
+    return {k: v for k, v in filled.items() if k not in given} | dict(given) | {"preset": name}
+
+
+def weights_note(name: str, given: Mapping[str, Any], has_ids: bool) -> str:
+    """One line when the preset's data rule would have set ``weights=information`` but explicit weight matrices
+    kept ``weights=design``; ``""`` otherwise."""
+    keys = [k for k in WEIGHT_KEYS if k in given]
+    if not (has_ids and keys and "weights" not in given and WITH_IDS[name].get("weights") == "information"):
+        return ""
+    return f"preset={name}: weights=information not applied, {', '.join(keys)} given explicitly (weights=design uses them)"

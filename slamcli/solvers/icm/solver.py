@@ -119,7 +119,7 @@ import numpy as np
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import resolve_motion_input
 from slamcli.solvers.icm import energy as en
-from slamcli.solvers.icm import gate
+from slamcli.solvers.icm import gate, presets
 from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm import surface as surf
 from slamcli.solvers.icm.common import online_init, reported_labels, stop_decision
@@ -127,7 +127,6 @@ from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
 from slamcli.solvers.icm.polish import optimality, polish
-from slamcli.solvers.icm.presets import apply_data_rule, apply_preset, explicit_weights, weights_note
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -182,8 +181,7 @@ class IcmParams:
                                  birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
                                  init=online, weights=information, outlier_sigma=7, max_sweeps=30,
                                  team_range_weights=true, team_odometry_only=true
-                                 (each key still at its paper default takes the preset's value; other explicit
-                                 values win).
+                                 (built by ``IcmParams.real(**given)``: keys given explicitly keep their values).
     outlier_sigma : float        k > 0: an observation with a reported id whose residual exceeds k σ of the noise
                                  model takes the null matching at a constant cost (truncated quadratic,
                                  :mod:`slamcli.solvers.icm.gate`); 0 = the paper's quadratic (default). Only with
@@ -293,11 +291,9 @@ class IcmParams:
     opt_rtol: float = 1e-8
 
     def __post_init__(self) -> None:
-        defaults = {f.name: f.default for f in dataclasses.fields(self)}
-        for key, value in apply_preset(self, defaults).items():
-            object.__setattr__(self, key, value)
+        presets.check_name(self.preset)
         en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
-        given = explicit_weights(self, defaults)
+        given = [k for k in presets.WEIGHT_KEYS if getattr(self, k) != _DEFAULTS[k]]
         if self.weights == "information" and given:
             raise ValueError(f"{', '.join(given)} given with weights=information, which takes R, S, Q, K from the "
                              "dataset's noise model: drop them or use weights=design")
@@ -333,21 +329,33 @@ class IcmParams:
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
 
-    def weights_note(self, inputs: SlamInputs) -> str:
-        """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
-        return weights_note(self, {f.name: f.default for f in dataclasses.fields(self)}, _has_ids(inputs))
+    @classmethod
+    def paper(cls, **given) -> IcmParams:
+        """Algorithm 2 as the paper runs it: the field defaults, ``given`` over them."""
+        return cls.resolve({**given, "preset": "paper"})
 
-    def for_data(self, inputs: SlamInputs) -> IcmParams:
-        """These parameters with the preset's rule for the dataset applied (``preset=real`` on data with
-        sensor-reported ids: :data:`slamcli.solvers.icm.presets.WITH_IDS`); ``self`` when nothing changes."""
-        defaults = {f.name: f.default for f in dataclasses.fields(self)}
-        changes = apply_data_rule(self, defaults, _has_ids(inputs))
-        if not changes:
-            return self
-        out = dataclasses.replace(self)  # a copy; the rule's values are set after __post_init__, which would
-        for key, value in changes.items():  # otherwise hand a key back to the preset (init=online is the default)
-            object.__setattr__(out, key, value)
-        return out
+    @classmethod
+    def real(cls, **given) -> IcmParams:
+        """The setting for real recordings (:data:`slamcli.solvers.icm.presets.PRESETS`), ``given`` over it."""
+        return cls.resolve({**given, "preset": "real"})
+
+    @classmethod
+    def resolve(cls, given: dict, inputs: SlamInputs | None = None) -> IcmParams:
+        """The parameters for the keys ``given`` explicitly: the preset named by ``given["preset"]`` fills the
+        keys left unset, with its sensor-reported-ids rule when ``inputs`` carry ids."""
+        name = given.get("preset", "paper")
+        return cls(**presets.resolve(name, given, inputs is not None and _has_ids(inputs)))
+
+    def given(self) -> dict:
+        """The keys of these parameters away from their preset's values, with ``preset`` (what a caller that
+        passes an instance is taken to have given)."""
+        base = _DEFAULTS | presets.PRESETS[self.preset]
+        return {k: getattr(self, k) for k in _DEFAULTS if getattr(self, k) != base[k]} | {"preset": self.preset}
+
+    @classmethod
+    def resolve_note(cls, given: dict, inputs: SlamInputs) -> str:
+        """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
+        return presets.weights_note(given.get("preset", "paper"), given, _has_ids(inputs))
 
     def design_weights(self) -> en.Weights:
         """R, S, Q, K as given (``weights="design"``)."""
@@ -356,6 +364,9 @@ class IcmParams:
     def weights_for(self, inputs: SlamInputs) -> en.Weights:
         """The weights a solve uses: the design matrices, or the dataset's information matrices."""
         return en.information_weights(inputs) if self.weights == "information" else self.design_weights()
+
+
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(IcmParams)}
 
 
 def _has_ids(inputs: SlamInputs) -> bool:
@@ -430,6 +441,8 @@ class IcmSlam(BaseSolver):
     motion_models = ("ddmr", "ackermann")
     #: multi-robot datasets: one more potential per inter-robot reading (slamcli.solvers.icm.team)
     multi_robot = True
+    #: one line from resolving the parameters with the dataset (:meth:`IcmParams.resolve_note`), set by the api
+    config_note = ""
 
     def solve(
         self,
@@ -439,9 +452,6 @@ class IcmSlam(BaseSolver):
         rng: np.random.Generator,
         progress: ProgressFn | None = None,
     ) -> SolverResult:
-        resolved = self.params.for_data(inputs)
-        if resolved is not self.params:  # the preset's rule for this dataset (presets.WITH_IDS)
-            return type(self)(resolved).solve(inputs, init=init, rng=rng, progress=progress)
         if inputs.robots is not None:
             return self._solve_team(inputs, init, progress)
         t_start = time.perf_counter()
@@ -458,8 +468,8 @@ class IcmSlam(BaseSolver):
                        "motion_input": resolve_motion_input(p.motion_input, inputs),
                        "weights_used": {"R": list(W.R), "S": list(W.S), "Q": list(W.Q), "K": W.K},
                        "gps_fixes_used": int(prob.gps_step.size), "filtered": p.filtered}
-        if p.weights_note(inputs):
-            extra["preset_note"] = p.weights_note(inputs)
+        if self.config_note:
+            extra["preset_note"] = self.config_note
         rematch = p.filtered == "rematch" and not reported
         # null matching behind a gate (outlier_sigma > 0, reported ids only): τ_i per observation, or None
         tau = (gate.null_costs(prob, W, inputs.noise.range_std, inputs.noise.bearing_std, p.outlier_sigma)
