@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 from slamcli.errors import ConfigError
 from slamcli.numerics import MAX_INPUT_MAGNITUDE
-from slamcli.params import _coerce
+from slamcli.params import convert, known_text
 
 
 def _check(cond: bool, message: str) -> None:
@@ -521,14 +521,14 @@ def apply_overrides(cfg: ScenarioConfig, overrides: dict[str, Any] | None, *, wh
         sec, _, leaf = key.rpartition(".")
         if sec:
             if sec not in _SECTIONS or leaf not in {f.name for f in dataclasses.fields(getattr(cfg, sec))}:
-                raise ConfigError(f"{where}: unknown key {key!r}; known: {', '.join(known_keys(cfg))}")
+                raise ConfigError(f"{where}: unknown key {key!r}{known_text(key, known_keys(cfg))}")
             hints = typing.get_type_hints(type(getattr(cfg, sec)))
-            per_section.setdefault(sec, {})[leaf] = _coerce(value, hints[leaf], f"{where} {key}")
+            per_section.setdefault(sec, {})[leaf] = convert(value, hints[leaf], f"{where} {key}")
         else:
             if leaf not in ("dt", "n_steps"):
-                raise ConfigError(f"{where}: unknown key {key!r}; known: {', '.join(known_keys(cfg))}")
+                raise ConfigError(f"{where}: unknown key {key!r}{known_text(key, known_keys(cfg))}")
             hints = typing.get_type_hints(ScenarioConfig)
-            top[leaf] = _coerce(value, hints[leaf], f"{where} {key}")
+            top[leaf] = convert(value, hints[leaf], f"{where} {key}")
     try:
         changes: dict[str, Any] = dict(top)
         for sec, vals in per_section.items():

@@ -59,6 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from slamcli.errors import ConfigError
+from slamcli.params import did_you_mean
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 _RANGE_RE = re.compile(r"^\s*range\(\s*(-?\d+)\s*(?:,\s*(-?\d+)\s*)?(?:,\s*(-?\d+)\s*)?\)\s*$")
@@ -199,14 +200,6 @@ def _type_name(v: Any) -> str:
     )
 
 
-def did_you_mean(key: str, known, prefix: str = "") -> str:
-    """``"; did you mean 'x'?"`` for the closest known names (:func:`difflib.get_close_matches`), else ``""``."""
-    import difflib
-
-    close = difflib.get_close_matches(key, list(known), n=2, cutoff=0.6)
-    return f"; did you mean {' or '.join(repr(prefix + c) for c in close)}?" if close else ""
-
-
 def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     """Check every key of ``cfg`` against the real scenario / solver / evaluate key sets, naming the TOML key.
 
@@ -217,7 +210,7 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     sweep axis) whose type does not fit its key raises ``"<file>: <TOML key>: expected ..."``. Checks that
     involve several keys together stay with the resolution.
     """
-    from slamcli.params import _coerce
+    from slamcli.params import convert
     from slamcli.sim.scenarios import SCENARIOS
 
     c = _Checker(cfg.source)
@@ -233,7 +226,7 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     def typed(values: tuple, tp: Any, toml_key: str) -> None:
         for v in values:
             try:
-                _coerce(v, tp, "\0")
+                convert(v, tp, "\0")
             except ConfigError as exc:
                 raise c.fail(toml_key, str(exc).split("\0", 1)[-1].lstrip(": ")) from None
 

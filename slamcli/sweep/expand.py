@@ -230,7 +230,7 @@ def _locate(entry: DataSpec, where: str) -> tuple[str, Path]:
     """``(importer, import path)`` of a recording or graph entry; one-line ConfigError when the name is not
     registered, is read by another importer, or is not on this machine."""
     from slamcli.datasets import DatasetImportError, registry
-    from slamcli.sweep.config import did_you_mean
+    from slamcli.params import did_you_mean
 
     key = f"{where}.{entry.kind}"
     if entry.path:
