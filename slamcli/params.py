@@ -168,58 +168,23 @@ def describe_params(params_cls: type) -> list[tuple[str, str, str]]:
         else:
             default = "required"
         tp = hints[f.name]
-        tname = getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+        generic = typing.get_origin(tp) is not None
+        tname = (None if generic else getattr(tp, "__name__", None)) or str(tp).replace("typing.", "")
         out.append((f.name, tname, str(default.value if isinstance(default, enum.Enum) else default)))
     return out
 
 
+def param(default: Any, doc: str) -> Any:
+    """A dataclass field with default ``default`` and its documentation (``metadata["doc"]``, what
+    ``slamcli solvers NAME`` shows)."""
+    return dataclasses.field(default=default, metadata={"doc": doc})
+
+
 def param_docs(params_cls: type) -> dict[str, tuple[str, str]]:
-    """Per-field descriptions parsed from the ``Attributes`` section of a Params class docstring (the one
-    source of parameter documentation). Two layouts are understood (numpydoc)::
-
-        name : type                      name : type     description on the same line
-            description ...                              continued, indented deeper
-
-    Several names may share one entry (``R, S, Q : tuple of float``). Returns ``{name: (type as written,
-    description)}`` with whitespace collapsed; fields without an entry are absent.
-    """
-    import inspect
-    import re
-
-    doc = inspect.cleandoc(params_cls.__doc__ or "")
-    lines = doc.splitlines()
-    try:
-        start = next(i for i, ln in enumerate(lines[:-1])
-                     if ln.strip() == "Attributes" and set(lines[i + 1].strip()) == {"-"}) + 2
-    except StopIteration:
-        return {}
-    head = re.compile(r"^(?P<names>[A-Za-z_][\w]*(?:\s*,\s*[A-Za-z_][\w]*)*)\s+:\s+(?P<rest>.*)$")
-    entries: list[tuple[list[str], str, list[str]]] = []
-    base = None
-    for ln in lines[start:]:
-        if not ln.strip():
-            continue
-        indent = len(ln) - len(ln.lstrip())
-        if base is None:
-            base = indent
-        if indent < base:
-            break
-        m = head.match(ln.strip()) if indent == base else None
-        if m:
-            rest = m.group("rest").strip()
-            tp, _, text = (p.strip() for p in re.split(r"(\s{2,})", rest, maxsplit=1)) if re.search(
-                r"\s{2,}", rest) else (rest, "", "")
-            entries.append(([n.strip() for n in m.group("names").split(",")], tp, [text] if text else []))
-        elif entries:
-            if indent == base and set(ln.strip()) == {"-"}:
-                break  # next numpydoc section
-            entries[-1][2].append(ln.strip())
-    out: dict[str, tuple[str, str]] = {}
-    for names, tp, text in entries:
-        desc = " ".join(" ".join(text).split())
-        for n in names:
-            out[n] = (tp, desc)
-    return out
+    """``{field: (type, documentation)}`` of ``params_cls``, from each field's ``metadata["doc"]``; fields
+    without one are absent."""
+    types_ = {n: t for n, t, _d in describe_params(params_cls)}
+    return {f.name: (types_[f.name], f.metadata["doc"]) for f in dataclasses.fields(params_cls) if "doc" in f.metadata}
 
 
 def allowed_values(tp: Any) -> list[str]:

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from slamcli.params import param_docs
 from slamcli.sim import simulate_scenario
 from slamcli.solvers.icm import IcmParams
 from slamcli.solvers.icm import energy as en
@@ -174,7 +175,7 @@ def test_preset_real_expansion_and_overrides():
     defaults = {f.name: f.default for f in dataclasses.fields(IcmParams)}
     assert all(getattr(base, k) == defaults[k] for k in defaults)
     # the parameter doc lists the same expansion as the preset table
-    doc = " ".join(IcmParams.__doc__.split())
+    doc = " ".join(param_docs(IcmParams)["preset"][1].split())
     assert expansion_text("real") in doc
 
 

@@ -91,6 +91,12 @@ under the estimated σ on ``loop`` and the Victoria Park excerpt (1e-6, tests). 
 For comparison, ``ekf -p association=ml`` on the same full run: 6.68 (7.00 with the glitch), 1415 landmarks.
 """
 
-from slamcli.solvers.isam.params import IsamParams  # noqa: F401
-from slamcli.solvers.isam.smoother import IncrementalSmoother  # noqa: F401
-from slamcli.solvers.isam.solver import IsamSlam, per_step_slope  # noqa: F401
+from slamcli.solvers.lazy import lazy_exports
+
+_EXPORTS = {
+    "IsamParams": "slamcli.solvers.isam.params",
+    "IncrementalSmoother": "slamcli.solvers.isam.smoother",
+    "IsamSlam": "slamcli.solvers.isam.solver",
+    "per_step_slope": "slamcli.solvers.isam.solver",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
