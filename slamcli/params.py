@@ -103,14 +103,15 @@ def _error_text(exc: Exception, value: Any, tp: Any) -> str:
     return text
 
 
-def convert(value: Any, tp: Any, where: str) -> Any:
+def convert(value: Any, tp: Any, where: str, *, strict: bool = False) -> Any:
     """``value`` (a string from the command line, or a TOML/JSON/Python value) as type ``tp``; one-line
-    :class:`ConfigError` ``"<where>: expected …, got …"`` otherwise."""
+    :class:`ConfigError` ``"<where>: expected …, got …"`` otherwise. ``strict``: a typed value (a TOML
+    table's own keys) must already have the type — no string is read as a number."""
     import msgspec
 
-    raw = _notation(value, tp, where)
+    raw = value if strict else _notation(value, tp, where)
     try:
-        out = msgspec.convert(raw, type=tp, strict=False)
+        out = msgspec.convert(raw, type=tp, strict=strict)
     except msgspec.ValidationError as exc:
         raise ConfigError(f"{where}: {_error_text(exc, value, tp)}") from None
     if _has_nan(out):

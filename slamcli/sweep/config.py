@@ -56,7 +56,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from slamcli.errors import ConfigError
 from slamcli.params import did_you_mean
@@ -65,12 +65,6 @@ _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 _RANGE_RE = re.compile(r"^\s*range\(\s*(-?\d+)\s*(?:,\s*(-?\d+)\s*)?(?:,\s*(-?\d+)\s*)?\)\s*$")
 
 TOP_KEYS = ("experiment", "scenario", "data", "solver", "evaluate", "sweep", "quick")
-EXPERIMENT_KEYS = ("name", "description", "root_seed")
-SCENARIO_KEYS = ("name", "parameters")
-SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
-SWEEP_KEYS = ("grid", "zip", "replicates", "seed", "absent")
-#: what a sweep does with a registered recording that is not on this machine: stop before any run, or skip it
-ABSENT_CHOICES = ("fail", "skip")
 #: the keys that say what a [[data]] entry is (exactly one per entry)
 DATA_KINDS = ("scenario", "recording", "graph", "file")
 NAMESPACES = ("scenario", "solver", "evaluate")
@@ -122,6 +116,87 @@ class DataSpec:
     @property
     def simulated(self) -> bool:
         return self.kind == "scenario"
+
+
+@dataclass(frozen=True)
+class ExperimentTable:
+    """The ``[experiment]`` table."""
+
+    name: str
+    description: str = ""
+    root_seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not _NAME_RE.match(self.name):
+            raise ValueError(f"name: {self.name!r} must start with a letter/digit and use only letters, digits, "
+                             "'.', '_', '-'")
+        if self.root_seed < 0:
+            raise ValueError(f"root_seed: must be >= 0, got {self.root_seed}")
+
+
+@dataclass(frozen=True)
+class ScenarioTable:
+    """The ``[scenario]`` shorthand of one simulated ``[[data]]`` entry."""
+
+    name: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SolverTable:
+    """One ``[[solver]]`` table as written (``label`` "" = the method)."""
+
+    method: str
+    label: str = ""
+    params: dict[str, Any] = field(default_factory=dict)
+    seed: int = 0
+    oracle_association: bool = False
+
+    def __post_init__(self) -> None:
+        label = self.label or self.method
+        if not _NAME_RE.match(label) or "." in label:
+            raise ValueError(f"label: {label!r} must use only letters, digits, '_', '-' (no dots)")
+        if self.seed < 0:
+            raise ValueError(f"seed: must be >= 0, got {self.seed}")
+
+
+@dataclass(frozen=True)
+class SweepTable:
+    """The ``[sweep]`` table as written (the axes are checked by :func:`parse_experiment`)."""
+
+    grid: dict[str, Any] = field(default_factory=dict)
+    zip: dict[str, Any] | list[dict[str, Any]] = field(default_factory=dict)
+    replicates: Any = None
+    seed: Any = None
+    absent: Literal["fail", "skip"] = "fail"
+
+
+def typed_table(cls: type, raw: Any, where: str, source: str) -> Any:
+    """The TOML table ``raw`` at ``where`` as dataclass ``cls`` through the schema (:func:`slamcli.params.convert`,
+    strict: TOML values are typed); one line ``"<source>: <where>.<key>: ..."`` for an unknown key (with "did
+    you mean"), a missing one, a value of the wrong type or one ``cls`` refuses."""
+    import dataclasses
+    import typing
+
+    from slamcli.params import convert
+
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: {where}: expected a table, got {_type_name(raw)}")
+    fields = dataclasses.fields(cls)
+    allowed = tuple(f.name for f in fields)
+    for k in raw:
+        if k not in allowed:
+            raise ConfigError(f"{source}: {where}.{k}: unknown key{did_you_mean(k, allowed)} "
+                              f"(allowed: {', '.join(allowed)})")
+    for f in fields:
+        if f.name not in raw and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ConfigError(f"{source}: {where}.{f.name}: missing")
+    hints = typing.get_type_hints(cls)
+    kwargs = {k: convert(v, hints[k], f"{source}: {where}.{k}", strict=True) for k, v in raw.items()}
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {where}.{exc}") from None
 
 
 @dataclass(frozen=True)
@@ -355,11 +430,6 @@ class _Checker:
             raise self.fail(key, f"must be >= 0, got {value}")
         return value
 
-    def boolean(self, value: Any, key: str) -> bool:
-        if not isinstance(value, bool):
-            raise self.fail(key, f"expected a boolean, got {_type_name(value)}")
-        return value
-
     def values(self, value: Any, key: str) -> tuple[Any, ...]:
         """A sweep axis: a non-empty array, or a ``"range(...)"`` string."""
         if isinstance(value, str):
@@ -477,12 +547,8 @@ def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...],
     if "scenario" in raw and "data" in raw:
         raise c.fail("[scenario]", "give either one [scenario] table or [[data]] entries, not both")
     if "scenario" in raw:
-        scen = c.table(raw["scenario"], "[scenario]")
-        c.known(scen, SCENARIO_KEYS, "scenario")
-        if "name" not in scen:
-            raise c.fail("scenario.name", "missing")
-        name = c.string(scen["name"], "scenario.name")
-        params = flatten(c.table(scen.get("parameters", {}), "scenario.parameters"))
+        scen = typed_table(ScenarioTable, raw["scenario"], "scenario", c.source)
+        name, params = scen.name, flatten(scen.parameters)
         return (DataSpec(label=name, kind="scenario", name=name, where="scenario"),), params
     out: list[DataSpec] = []
     for i, d in enumerate(c.tables(raw, "data", " (or one [scenario] table)")):
@@ -531,13 +597,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
 
     if "experiment" not in raw:
         raise c.fail("[experiment]", "missing table")
-    exp = c.table(raw["experiment"], "[experiment]")
-    c.known(exp, EXPERIMENT_KEYS, "experiment")
-    if "name" not in exp:
-        raise c.fail("experiment.name", "missing")
-    name = c.name(exp["name"], "experiment.name")
-    description = c.string(exp.get("description", ""), "experiment.description")
-    root_seed = c.nonneg_int(exp.get("root_seed", 0), "experiment.root_seed")
+    exp = typed_table(ExperimentTable, raw["experiment"], "experiment", source)
 
     data, scenario_params = _parse_data(c, raw)
     c.data_labels = tuple(d.label for d in data)
@@ -546,26 +606,13 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
     labels: set[str] = set()
     for i, s in enumerate(c.tables(raw, "solver")):
         where = f"solver[{i}]"
-        c.known(s, SOLVER_KEYS, where)
-        if "method" not in s:
-            raise c.fail(f"{where}.method", "missing")
-        method = c.string(s["method"], f"{where}.method")
-        label = c.string(s.get("label", method), f"{where}.label")
-        if not _NAME_RE.match(label) or "." in label:
-            raise c.fail(f"{where}.label", f"{label!r} must use only letters, digits, '_', '-' (no dots)")
+        t = typed_table(SolverTable, s, where, source)
+        label = t.label or t.method
         if label in labels:
             raise c.fail(f"{where}.label", f"duplicate label {label!r}; give each [[solver]] a unique label")
         labels.add(label)
-        params = c.table(s.get("params", {}), f"{where}.params")
-        solvers.append(
-            SolverSpec(
-                label=label,
-                method=method,
-                params=dict(params),
-                seed=c.nonneg_int(s.get("seed", 0), f"{where}.seed"),
-                oracle_association=c.boolean(s.get("oracle_association", False), f"{where}.oracle_association"),
-            )
-        )
+        solvers.append(SolverSpec(label=label, method=t.method, params=dict(t.params), seed=t.seed,
+                                  oracle_association=t.oracle_association))
 
     evaluate = dict(c.table(raw.get("evaluate", {}), "[evaluate]"))
     if "against" in evaluate:  # a result file: resolved here, and it must stay beside the experiment
@@ -573,8 +620,8 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
 
     sweep = SweepSpec()
     if "sweep" in raw:
-        sw = c.table(raw["sweep"], "[sweep]")
-        c.known(sw, SWEEP_KEYS, "sweep")
+        sw = raw["sweep"]
+        typed_table(SweepTable, sw, "sweep", source)
         if "replicates" in sw and "seed" in sw:
             raise c.fail("sweep.seed", "give either sweep.replicates or sweep.seed, not both")
         rep_key = "replicates" if "replicates" in sw else "seed"
@@ -606,9 +653,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         dup = sorted({k for k in all_keys if all_keys.count(k) > 1})
         if dup:
             raise c.fail("[sweep]", f"key {dup[0]!r} is swept more than once")
-        absent = c.string(sw.get("absent", "fail"), "sweep.absent")
-        if absent not in ABSENT_CHOICES:
-            raise c.fail("sweep.absent", f"{absent!r} is not one of {', '.join(ABSENT_CHOICES)}")
+        absent = sw.get("absent", "fail")
         sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates, absent=absent)
 
     quick: dict[str, Any] = {}
@@ -624,15 +669,15 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
                 quick[k] = v
 
     return ExperimentConfig(
-        name=name,
+        name=exp.name,
         source=source,
         data=data,
         scenario_params=scenario_params,
         solvers=tuple(solvers),
         evaluate=evaluate,
         sweep=sweep,
-        root_seed=root_seed,
-        description=description,
+        root_seed=exp.root_seed,
+        description=exp.description,
         quick=quick,
     )
 
