@@ -101,3 +101,34 @@ def test_explicit_value_wins_over_a_preset_in_the_schema():
 
     p = build_params(IcmParams, ["preset=real", "accelerate=none"])
     assert p.accelerate == "none" and p.merge is True  # given kept; unset filled by the preset
+
+
+EVALUATE = """
+[experiment]
+name = "ev"
+[scenario]
+name = "loop"
+[[solver]]
+method = "odometry"
+[evaluate]
+{body}
+"""
+
+
+def _runs(tmp_path, body: str):
+    path = tmp_path / "ev.toml"
+    path.write_text(EVALUATE.format(body=body))
+    return expand(load_experiment(path)).runs
+
+
+def test_evaluate_cutoff_m_is_the_schema_name_and_cutoff_its_old_spelling(tmp_path):
+    old, new = _runs(tmp_path, "cutoff = 2.0"), _runs(tmp_path, "cutoff_m = 2.0")
+    assert [r.run_id for r in old] == [r.run_id for r in new]  # one option, one run id
+    assert all(r.evaluate["cutoff"] == 2.0 for r in new)
+    with pytest.raises(ConfigError, match=r"cutoff_m and cutoff \(its old spelling\) both given") as info:
+        _runs(tmp_path, "cutoff = 2.0\ncutoff_m = 2.0")
+    assert "\n" not in str(info.value)
+    with pytest.raises(ConfigError, match=r"cutoff_m: .*must be") as info:
+        _runs(tmp_path, "cutoff_m = -1.0")
+    with pytest.raises(ConfigError, match=r"evaluate.cutof_m: unknown option 'cutof_m'; did you mean 'cutoff_m'"):
+        _runs(tmp_path, "cutof_m = 1.0")
