@@ -1,52 +1,26 @@
 """Experiment files: TOML (stdlib :mod:`tomllib`) → validated, frozen :class:`ExperimentConfig`.
 
-An experiment file::
+An experiment file (the full reference is ``docs/experiments.md``)::
 
-    [experiment]
-    name = "ekf-vs-odometry"          # results/<name>/...; letters, digits, '.', '_', '-'
-    description = "..."               # optional
-    root_seed = 0                     # optional, int >= 0 (default 0)
-
-    [[data]]                          # one table per dataset (or one [scenario] table, the shorthand)
-    scenario = "loop"                 # a registered simulator scenario ...
-    [data.parameters]                 # ... with dotted keys of the simulator config
-    "sensor.max_range" = 10.0
-
-    # more [[data]] tables may name: recording = "mrclam7" (a registered recording, `slamcli datasets list`)
-    # with its importer's options named as the CLI flags without dashes (robot = 3, range-std = 0.1);
-    # graph = "dlr" (a registered graph or a path); file = "runs/day1.h5" (an existing dataset). Paths are
-    # relative to this file and stay inside its folder. label = "..." (any entry): its name in results.csv.
-
-    [[solver]]                        # one table per solver configuration
-    method = "ekf"                    # registered solver name (entry point)
-    label = "ekf"                     # optional, unique per file (default: method)
-    seed = 0                          # optional, extra solver stream id (default 0)
-    oracle_association = false        # optional: hand the solver the true association (recorded)
-    [solver.params]                   # optional, validated against the solver's Params dataclass
-    gate_prob = 0.99                  # (`slamcli solvers ekf` documents every parameter)
-
-    [evaluate]                        # optional keyword options for slamcli.api.evaluate.evaluate_files
-    cutoff = 1.0
-
-    [sweep]                           # optional; without it the experiment is one point
-    replicates = 50                   # int N (= 0..N-1), a list of ints, or "range(a, b[, step])"
+    [experiment]                      # ExperimentTable: name, description, root_seed
+    name = "ekf-vs-odometry"
+    [[data]]                          # scenario = "loop" (+ [data.parameters]), recording = "mrclam7" (+ its
+    scenario = "loop"                 # importer's options), graph = "dlr" or a path, file = "runs/day1.h5"
+    [[solver]]                        # SolverTable: method, label, seed, oracle_association, [solver.params]
+    method = "ekf"
+    [evaluate]                        # slamcli.api.evaluate.EvaluateOptions
+    cutoff_m = 1.0
+    [sweep]                           # SweepTable: replicates, grid, zip, absent
+    replicates = 50
     grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
-    zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
-    absent = "skip"                   # optional: skip a recording not on this machine (default "fail")
-
-    [quick]                           # optional fixed overrides for `reproduce --quick` / `sweep --quick`
+    [quick]                           # fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
-    "scenario.n_steps" = 150
 
-Sweep keys live in three namespaces: ``scenario.<dotted simulator key>`` (every simulated entry),
-``solver.<label>.<param>`` and ``evaluate.<option>``, plus the key ``data`` whose values are entry labels
-(without a ``data`` axis every entry is used, as the slowest axis). ``grid`` is a cartesian product (first key
-varies slowest); ``zip`` holds equal-length lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
-``seed``) are the Monte-Carlo replicate ids that feed the seed derivation of :mod:`slamcli.sweep.expand`.
-
-Every error is one line naming the file and the TOML key (``ConfigError``); an unknown key gets a "did you
-mean" (:func:`check_keys`, run by :func:`slamcli.sweep.expand.expand` against the real scenario, solver and
-evaluation keys). The full reference is ``docs/experiments.md``.
+Sweep keys live in three namespaces: ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
+``evaluate.<option>``, plus ``data`` (entry labels). The tables are typed dataclasses converted through the
+configuration schema (:func:`typed_table`, :mod:`slamcli.params`); every error is one line naming the file and
+the TOML key, an unknown key with "did you mean" (:func:`check_keys` checks scenario, solver and evaluation
+keys against the real ones).
 """
 
 from __future__ import annotations

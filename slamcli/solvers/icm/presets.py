@@ -1,33 +1,8 @@
-"""Named settings of ICM-SLAM (``-p preset=NAME``; issue 22 item 3).
+"""Named settings of ICM-SLAM (``-p preset=NAME``): the value tables :data:`PRESETS` and :data:`WITH_IDS`.
 
-``paper`` (the default) is Algorithm 2 as the paper runs it (with the deviations listed in
-:mod:`slamcli.solvers.icm.solver`). ``real`` is the one setting documented for real recordings; its values were
-chosen by measurement (``slamcli reproduce --section real``, the real-data section of the report):
-
-* ``accelerate=joint, accelerate_every=1, joint_iters=20`` — joint Gauss-Newton steps in every sweep until the
-  step or the decrease is negligible: Gauss-Seidel sweeps alone leave a long chain where the init put it;
-* ``max_sweeps=5`` — with the joint steps the energy test stops the run after 2-3 sweeps on the recordings;
-* ``merge=true`` — the χ² label merge after each map step (:mod:`slamcli.solvers.icm.merge`);
-* ``init=gated, gate_prob=0.9999, birth_prob=0.999999`` — the on-line init whose χ² gate follows a propagated pose
-  covariance (:mod:`slamcli.solvers.icm.init_gated`), with a wide gate: GPS ATE on the car park 0.073 m (paper
-  init 0.443 m; gate 0.99 / birth 0.9999: 1.007 m), on the whole Victoria Park run 2.75 m in 19 s of CPU (paper
-  init 4.99 m), first 300 s of it 1.396 m (paper init 1.390 m);
-* ``weights=design`` (R = Q = I) — on the car park the information weights ended at 0.83 m GPS ATE against
-  0.44 m with the identity weights (paper init, joint steps); see the report for every recording.
-
-* **with sensor-reported ids** (MRCLAM's barcodes; :data:`WITH_IDS`) — ``correspondences=reported, init=online,
-  weights=information, outlier_sigma=7, max_sweeps=30``: the ids are used (the init has no association to
-  gate: the paper's on-line init with the ids; the gated one ended robot 1 at 1.05 m), the energy is the MAP energy of the
-  dataset's noise model (the same factors as ``graph``'s), and a sighting more than 7 σ from its id's map point
-  takes the null matching (:mod:`slamcli.solvers.icm.gate`), the ICM counterpart of ``graph``'s robust kernel.
-  Measured on MRCLAM Dataset 7, robots 1-5 solo (ATE, m): identity weights 0.73 / 0.70 / 1.43 / 0.65 / 3.80,
-  information weights 1.04 / 0.37 / 0.28 / 0.36 / 0.22 (robot 1 follows misread barcodes, as ``graph`` without
-  a kernel does: 1.62 m), information weights + the 7 σ null matching 0.26 / 0.37 / 0.30 / 0.39 / 0.18 against
-  ``graph``'s 0.27 / 0.41 / 0.31 / 0.46 / 0.16. On a team (multi-robot solves only; a one-robot solve ignores
-  them) also ``team_range_weights=true, team_odometry_only=true``: MRCLAM Dataset 7, five robots, mean ATE
-  0.136 m → 0.124 m (7 sweeps; ``graph`` 0.115 m) — range weights alone 0.130 m, the odometry alone 0.136 m,
-  ``graph``'s Cauchy kernel (``robust=cauchy``) 0.152 m. Without ids (Victoria Park, car park) the identity weights stay:
-  with the nearest-point matching the information weights ended at 0.83 m on the car park against 0.44 m.
+``paper`` (the default) is Algorithm 2 as the paper runs it; ``real`` is the setting for real recordings, with
+more values when the dataset carries sensor-reported ids (:data:`WITH_IDS`). Why each value was chosen, with the
+measurements: ``benchmarks/results/icm_presets.md``.
 
 A preset is a named constructor (``IcmParams.real(**given)``), resolved once before the solver runs
 (:func:`resolve`): it fills only the keys the user left unset — a key given explicitly keeps its value, whatever
