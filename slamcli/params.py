@@ -25,7 +25,7 @@ _BOOL_WORDS = {"1": True, "true": True, "yes": True, "on": True, "0": False, "fa
                "off": False}
 #: how an error line names the type msgspec expected
 _TYPE_WORDS = {"int": "an integer", "float": "a number", "bool": "a boolean (true/false)", "str": "a string",
-               "array": "a list", "null": "none"}
+               "array": "a list", "object": "a table", "null": "none"}
 
 
 def split_override(text: str, where: str = "--param") -> tuple[str, str]:

@@ -1,6 +1,6 @@
 """Experiment files: TOML (stdlib :mod:`tomllib`) → validated, frozen :class:`ExperimentConfig`.
 
-An experiment file (the full reference is ``docs/experiments.md``)::
+An experiment file::
 
     [experiment]                      # ExperimentTable: name, description, root_seed
     name = "ekf-vs-odometry"
@@ -13,10 +13,11 @@ An experiment file (the full reference is ``docs/experiments.md``)::
     [sweep]                           # SweepTable: replicates, grid, zip, absent
     replicates = 50
     grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
+    zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
     [quick]                           # fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
 
-Sweep keys live in three namespaces: ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
+Sweep keys live in three namespaces (the full reference is ``docs/experiments.md``): ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
 ``evaluate.<option>``, plus ``data`` (entry labels). The tables are typed dataclasses converted through the
 configuration schema (:func:`typed_table`, :mod:`slamcli.params`); every error is one line naming the file and
 the TOML key, an unknown key with "did you mean" (:func:`check_keys` checks scenario, solver and evaluation
@@ -262,7 +263,7 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     from slamcli.params import convert
     from slamcli.sim.scenarios import SCENARIOS
 
-    c = _Checker(cfg.source)
+    c = _Rules(cfg.source)
     scenarios: dict[str, Any] = {}  # scenario name -> its known keys, for every simulated entry
     for d in cfg.data:
         if d.simulated and d.name not in SCENARIOS:
@@ -347,13 +348,23 @@ def parse_range(text: str) -> list[int] | None:
     return list(r)
 
 
-class _Checker:
+class _Rules:
+    """The experiment-file rules no type expresses (sweep axes, replicate lists, data labels, paths inside the
+    experiment's folder), each failing with one line ``"<source>: <key>: ..."``; the types themselves go
+    through the schema (:meth:`typed`)."""
+
     def __init__(self, source: str, data_labels: tuple[str, ...] = ()) -> None:
         self.source = source
         self.data_labels = data_labels  # labels of the [[data]] entries (for the data axis)
 
     def fail(self, key: str, message: str) -> ConfigError:
         return ConfigError(f"{self.source}: {key}: {message}")
+
+    def typed(self, value: Any, tp: Any, key: str) -> Any:
+        """``value`` at TOML key ``key`` as type ``tp`` (:func:`slamcli.params.convert`, strict)."""
+        from slamcli.params import convert
+
+        return convert(value, tp, f"{self.source}: {key}", strict=True)
 
     def tables(self, raw: dict[str, Any], key: str, alternative: str = "") -> list[dict[str, Any]]:
         """The ``[[key]]`` tables of ``raw``: present, an array of tables, at least one."""
@@ -364,11 +375,6 @@ class _Checker:
             raise self.fail(key, f"expected [[{key}]] tables (an array of tables)")
         if not value:
             raise self.fail(f"[[{key}]]", f"empty: give at least one [[{key}]] table")
-        return value
-
-    def table(self, value: Any, key: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(key, f"expected a table, got {_type_name(value)}")
         return value
 
     def known(self, table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
@@ -386,23 +392,11 @@ class _Checker:
                                  "experiment, or register it: `slamcli datasets add`)")
         return str(p)
 
-    def string(self, value: Any, key: str) -> str:
-        if not isinstance(value, str):
-            raise self.fail(key, f"expected a string, got {_type_name(value)}")
-        return value
-
     def name(self, value: Any, key: str) -> str:
-        s = self.string(value, key)
+        s = self.typed(value, str, key)
         if not _NAME_RE.match(s):
             raise self.fail(key, f"{s!r} must start with a letter/digit and use only letters, digits, '.', '_', '-'")
         return s
-
-    def nonneg_int(self, value: Any, key: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"expected an integer, got {_type_name(value)}")
-        if value < 0:
-            raise self.fail(key, f"must be >= 0, got {value}")
-        return value
 
     def values(self, value: Any, key: str) -> tuple[Any, ...]:
         """A sweep axis: a non-empty array, or a ``"range(...)"`` string."""
@@ -430,8 +424,8 @@ class _Checker:
                 raise self.fail(key, f"{value} replicates, above the limit of {MAX_AXIS_VALUES}")
             return tuple(range(value))
         vals = self.values(value, key)
-        for v in vals:
-            self.nonneg_int(v, key)
+        if min(self.typed(list(vals), list[int], key)) < 0:
+            raise self.fail(key, f"must be >= 0, got {min(vals)}")
         if len(set(vals)) != len(vals):
             raise self.fail(key, "replicate ids must be unique")
         return tuple(vals)
@@ -515,7 +509,7 @@ def _depth(v: Any) -> int:
     return best
 
 
-def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...], dict[str, Any]]:
+def _parse_data(c: _Rules, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...], dict[str, Any]]:
     """The dataset entries and the experiment-wide scenario parameters: ``[scenario]`` is one simulated entry
     whose parameters apply as ``scenario.*`` keys; ``[[data]]`` entries carry their own."""
     if "scenario" in raw and "data" in raw:
@@ -534,14 +528,14 @@ def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...],
     return tuple(out), {}
 
 
-def _data_entry(c: _Checker, d: dict[str, Any], where: str) -> DataSpec:
+def _data_entry(c: _Rules, d: dict[str, Any], where: str) -> DataSpec:
     """One ``[[data]]`` table (see the module docstring)."""
     kinds = [k for k in DATA_KINDS if k in d]
     if len(kinds) != 1:
         raise c.fail(where, f"give exactly one of {', '.join(DATA_KINDS)}"
                             + (f" (got {', '.join(kinds)})" if kinds else ""))
     kind = kinds[0]
-    name = c.string(d[kind], f"{where}.{kind}")
+    name = c.typed(d[kind], str, f"{where}.{kind}")
     if not name:
         raise c.fail(f"{where}.{kind}", "empty")
     rest = {k: v for k, v in d.items() if k not in (kind, "label")}
@@ -554,7 +548,7 @@ def _data_entry(c: _Checker, d: dict[str, Any], where: str) -> DataSpec:
         path = c.inside(name, f"{where}.{kind}")
     default = Path(name).stem if path else name
     label = c.name(d.get("label", default), f"{where}.label")
-    params = flatten(c.table(rest.pop("parameters", {}), f"{where}.parameters")) if kind == "scenario" else {}
+    params = flatten(c.typed(rest.pop("parameters", {}), dict, f"{where}.parameters")) if kind == "scenario" else {}
     return DataSpec(label=label, kind=kind, name=name, where=where, path=path, parameters=params,
                     options=rest if kind in ("recording", "graph") else {})
 
@@ -566,7 +560,7 @@ def looks_like_path(name: str) -> bool:
 
 def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> ExperimentConfig:
     """Validate the parsed TOML document ``raw`` (see the module docstring for the schema)."""
-    c = _Checker(source)
+    c = _Rules(source)
     c.known(raw, TOP_KEYS, "")
 
     if "experiment" not in raw:
@@ -588,9 +582,9 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         solvers.append(SolverSpec(label=label, method=t.method, params=dict(t.params), seed=t.seed,
                                   oracle_association=t.oracle_association))
 
-    evaluate = dict(c.table(raw.get("evaluate", {}), "[evaluate]"))
+    evaluate = dict(c.typed(raw.get("evaluate", {}), dict, "[evaluate]"))
     if "against" in evaluate:  # a result file: resolved here, and it must stay beside the experiment
-        evaluate["against"] = c.inside(c.string(evaluate["against"], "evaluate.against"), "evaluate.against")
+        evaluate["against"] = c.inside(c.typed(evaluate["against"], str, "evaluate.against"), "evaluate.against")
 
     sweep = SweepSpec()
     if "sweep" in raw:
@@ -600,7 +594,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
             raise c.fail("sweep.seed", "give either sweep.replicates or sweep.seed, not both")
         rep_key = "replicates" if "replicates" in sw else "seed"
         replicates = c.replicates(sw[rep_key], f"sweep.{rep_key}") if rep_key in sw else (0,)
-        grid_raw = c.table(sw.get("grid", {}), "sweep.grid")
+        grid_raw = c.typed(sw.get("grid", {}), dict, "sweep.grid")
         if "grid" in sw and not grid_raw:
             raise c.fail("sweep.grid", "empty grid: give at least one key = [values]")
         grid_raw = flatten(grid_raw)
@@ -612,7 +606,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
             groups = sw["zip"] if isinstance(sw["zip"], list) else [sw["zip"]]
             for gi, g in enumerate(groups):
                 where = "sweep.zip" if not isinstance(sw["zip"], list) else f"sweep.zip[{gi}]"
-                g = flatten(c.table(g, where))
+                g = flatten(c.typed(g, dict, where))
                 if not g:
                     raise c.fail(where, "empty zip group: give at least one key = [values]")
                 group = []
@@ -632,7 +626,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
 
     quick: dict[str, Any] = {}
     if "quick" in raw:
-        q = flatten(c.table(raw["quick"], "[quick]"))
+        q = flatten(c.typed(raw["quick"], dict, "[quick]"))
         for k, v in q.items():
             if k in ("replicates", "seed"):
                 quick["replicates"] = c.replicates(v, f"quick.{k}")
@@ -755,7 +749,7 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     """
     import dataclasses
 
-    c = _Checker(f"{cfg.source} (command line)", tuple(d.label for d in cfg.data))
+    c = _Rules(f"{cfg.source} (command line)", tuple(d.label for d in cfg.data))
     cfg, items = _select_solvers(cfg, c, items)
     labels = {s.label for s in cfg.solvers}
     fixed: dict[str, Any] = {}
@@ -797,7 +791,7 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     return dataclasses.replace(out, sweep=dataclasses.replace(out.sweep, grid=tuple(grid)))
 
 
-def _select_solvers(cfg: ExperimentConfig, c: _Checker, items: list[str]) -> tuple[ExperimentConfig, list[str]]:
+def _select_solvers(cfg: ExperimentConfig, c: _Rules, items: list[str]) -> tuple[ExperimentConfig, list[str]]:
     """Apply ``solver=LABELS`` (keep those ``[[solver]]`` labels, in file order) and ``+solver=METHODS`` (add
     each registered method with its default parameters, labelled by its name; the method is checked when the
     sweep is resolved); the other items are returned untouched."""
