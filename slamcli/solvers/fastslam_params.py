@@ -1,15 +1,13 @@
-"""Parameters of ``--method fastslam`` (FastSlamParams), importable without numpy (``slamcli solvers fastslam`` reads them)."""
+"""``--method fastslam``: :class:`FastSlamParams`, importable without numpy (``slamcli solvers fastslam`` reads it)."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 from slamcli.params import param
 
-if TYPE_CHECKING:
-    pass
 
 @dataclasses.dataclass(frozen=True)
 class FastSlamParams:

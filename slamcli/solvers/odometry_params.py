@@ -1,14 +1,11 @@
-"""Parameters of ``--method odometry`` (OdometryParams), importable without numpy (``slamcli solvers odometry`` reads them)."""
+"""``--method odometry``: :class:`OdometryParams`, importable without numpy (``slamcli solvers odometry`` reads it)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from slamcli.params import param
 
-if TYPE_CHECKING:
-    pass
 
 @dataclass(frozen=True)
 class OdometryParams:

@@ -1,14 +1,12 @@
-"""Parameters of ``--method cuik`` (CuikParams), importable without numpy (``slamcli solvers cuik`` reads them)."""
+"""``--method cuik``: :class:`CuikParams`, importable without numpy (``slamcli solvers cuik`` reads it)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 from slamcli.params import param
 
-if TYPE_CHECKING:
-    pass
 
 @dataclass(frozen=True)
 class CuikParams:

@@ -1,15 +1,13 @@
-"""Parameters of ``--method hybrid`` (HybridParams), importable without numpy (``slamcli solvers hybrid`` reads them)."""
+"""``--method hybrid``: :class:`HybridParams`, importable without numpy (``slamcli solvers hybrid`` reads it)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 from slamcli.params import param
 
-if TYPE_CHECKING:
-    pass
 
 @dataclass(frozen=True)
 class HybridParams:

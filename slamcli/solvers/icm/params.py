@@ -1,4 +1,4 @@
-"""Parameters of ``--method icm`` (IcmParams), importable without numpy (``slamcli solvers icm`` reads them)."""
+"""``--method icm``: :class:`IcmParams`, importable without numpy (``slamcli solvers icm`` reads it)."""
 
 from __future__ import annotations
 
