@@ -132,3 +132,11 @@ def test_evaluate_cutoff_m_is_the_schema_name_and_cutoff_its_old_spelling(tmp_pa
         _runs(tmp_path, "cutoff_m = -1.0")
     with pytest.raises(ConfigError, match=r"evaluate.cutof_m: unknown option 'cutof_m'; did you mean 'cutoff_m'"):
         _runs(tmp_path, "cutof_m = 1.0")
+
+
+def test_a_conflict_between_given_keys_is_one_line_even_at_default_values():
+    from slamcli.solvers.icm import IcmParams
+
+    with pytest.raises(ConfigError, match=r"R given with weights=information") as info:
+        build_params(IcmParams, ["preset=real", "weights=information", "R=1"])  # R=1 is R's default
+    assert "\n" not in str(info.value)

@@ -66,6 +66,10 @@ def resolve(name: str, given: Mapping[str, Any], has_ids: bool) -> dict[str, Any
     """The keyword arguments of the resolved parameters: preset ``name``'s values (and, with ``has_ids``, its
     :data:`WITH_IDS` rule over them) for every key not in ``given``, then ``given`` itself."""
     check_name(name)
+    conflict = [k for k in WEIGHT_KEYS if k in given] if given.get("weights") == "information" else []
+    if conflict:  # also when a value equals its default: given is given
+        raise ValueError(f"{', '.join(conflict)} given with weights=information, which takes R, S, Q, K from the "
+                         "dataset's noise model: drop them or use weights=design")
     filled = dict(PRESETS[name])
     if has_ids:
         rule = dict(WITH_IDS[name])
