@@ -1,8 +1,11 @@
-"""Parse ``key=value`` overrides into frozen parameter dataclasses, with one-line errors.
+"""One configuration schema: frozen dataclasses converted from mappings by :func:`from_mapping`.
 
-Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]``, ``enum.Enum`` subclasses,
-``tuple[float, ...]`` / ``tuple[int, ...]`` (written ``1,2,3`` or ``[1, 2, 3]``), nested tuples
-(JSON ``[[1,0],[0,1]]``) and ``X | None`` of those (``none`` gives None).
+Solver parameters, scenario overrides, importer options and experiment files all convert their values here:
+``msgspec.convert(value, type=T, strict=False)`` does the typing (int, float, bool, str, ``Literal``, enums,
+tuples, nested tuples, ``X | None``); :func:`convert` first reads the command-line notations (``1,2,3`` or
+``[1, 2, 3]`` for a tuple, ``none``, ``yes``/``no``/``on``/``off``, an enum member's name) and refuses NaN.
+Every error is one :class:`ConfigError` line naming where the value came from and the key, with "did you
+mean" for an unknown key. A field's documentation is its ``metadata["doc"]`` (:func:`param_docs`).
 """
 
 from __future__ import annotations
@@ -11,11 +14,18 @@ import dataclasses
 import enum
 import json
 import math
+import re
 import types
 import typing
 from typing import Any, Literal
 
 from slamcli.errors import ConfigError
+
+_BOOL_WORDS = {"1": True, "true": True, "yes": True, "on": True, "0": False, "false": False, "no": False,
+               "off": False}
+#: how an error line names the type msgspec expected
+_TYPE_WORDS = {"int": "an integer", "float": "a number", "bool": "a boolean (true/false)", "str": "a string",
+               "array": "a list", "object": "a table", "null": "none"}
 
 
 def split_override(text: str, where: str = "--param") -> tuple[str, str]:
@@ -28,114 +38,121 @@ def split_override(text: str, where: str = "--param") -> tuple[str, str]:
     return key, value.strip()
 
 
-def _coerce(value: Any, tp: Any, where: str) -> Any:
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
+def did_you_mean(key: str, known, prefix: str = "") -> str:
+    """``"; did you mean 'x'?"`` for the closest known names (:func:`difflib.get_close_matches`), else ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(key, list(known), n=2, cutoff=0.6)
+    return f"; did you mean {' or '.join(repr(prefix + c) for c in close)}?" if close else ""
+
+
+def known_text(key: str, known) -> str:
+    """What follows "unknown key 'k'" in an error line: a "did you mean" when a known name is close, then
+    the known names (``"; did you mean 'x'? (known: a, b)"`` or ``"; known: a, b"``)."""
+    listing = ", ".join(known) or "none"
+    hint = did_you_mean(key, known)
+    return f"{hint} (known: {listing})" if hint else f"; known: {listing}"
+
+
+def _notation(value: Any, tp: Any, where: str) -> Any:
+    """``value`` with the command-line notations of type ``tp`` read (see the module docstring)."""
+    if not isinstance(value, str):
+        return value
+    s, origin, args = value.strip(), typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
-        non_none = [a for a in args if a is not type(None)]
-        if isinstance(value, str) and value.lower() in ("none", "null") and len(non_none) < len(args):
+        if type(None) in args and s.lower() in ("none", "null"):
             return None
-        if value is None and len(non_none) < len(args):
-            return None
-        errors = []
-        for a in non_none:
-            try:
-                return _coerce(value, a, where)
-            except ConfigError as exc:
-                errors.append(str(exc))
-        raise ConfigError(errors[0] if errors else f"{where}: cannot parse {value!r}")
-    if origin is Literal:
         for a in args:
-            if str(a) == str(value):
-                return a
-        raise ConfigError(f"{where}: {value!r} is not one of {', '.join(map(str, args))}")
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        for member in tp:
-            if str(member.value) == str(value) or member.name == str(value):
-                return member
-        raise ConfigError(f"{where}: {value!r} is not one of {', '.join(str(m.value) for m in tp)}")
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        s = str(value).lower()
-        if s in ("1", "true", "yes", "on"):
-            return True
-        if s in ("0", "false", "no", "off"):
-            return False
-        raise ConfigError(f"{where}: expected a boolean (true/false), got {value!r}")
-    if tp is int:
-        if isinstance(value, bool):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
-        if isinstance(value, int):
-            return value
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
-        try:
-            return int(str(value))
-        except ValueError:
-            pass
-        try:  # 1e8: an integer written in exponent notation (exact up to 2^53)
-            f = float(str(value))
-        except ValueError:
-            f = math.nan
-        if math.isfinite(f) and f.is_integer() and abs(f) <= 2**53:
-            return int(f)
-        raise ConfigError(f"{where}: expected an integer, got {value!r}")
-    if tp is float:
-        if isinstance(value, bool):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
-        try:
-            out = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: expected a number, got {value!r}") from None
-        if math.isnan(out):
-            raise ConfigError(f"{where}: NaN is not allowed")
-        return out
-    if tp is str:
-        return str(value)
+            out = _notation(value, a, where)
+            if out is not value:
+                return out
+        return value
+    if tp is bool and s.lower() in _BOOL_WORDS:
+        return _BOOL_WORDS[s.lower()]
     if origin is tuple:
-        if isinstance(value, str):
-            s = value.strip()
-            if s.startswith("["):
-                try:
-                    value = json.loads(s)
-                except json.JSONDecodeError:
-                    raise ConfigError(f"{where}: cannot parse {value!r} as a list") from None
-            else:
-                value = [v for v in s.split(",") if v.strip()]
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(v, args[0], where) for v in value)
-        if len(args) != len(value):
-            raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
-        return tuple(_coerce(v, a, where) for v, a in zip(value, args))
-    raise ConfigError(f"{where}: unsupported parameter type {tp!r}")
+        if not s.startswith("["):
+            return [v for v in s.split(",") if v.strip()]
+        try:
+            return json.loads(s)
+        except json.JSONDecodeError:
+            raise ConfigError(f"{where}: cannot parse {value!r} as a list") from None
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return next((m.value for m in tp if m.name == s), value)
+    return value
 
 
-def build_params(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param") -> Any:
-    """Instantiate ``params_cls`` with overrides (``{"k": v}`` or ``["k=v", ...]``), validating keys and types.
+def _has_nan(value: Any) -> bool:
+    if isinstance(value, float):
+        return math.isnan(value)
+    return isinstance(value, tuple) and any(_has_nan(v) for v in value)
 
-    Raises :class:`ConfigError` naming the key, the expected type and the known keys.
-    """
+
+def _error_text(exc: Exception, value: Any, tp: Any) -> str:
+    """msgspec's error as one line of our wording: ``expected an integer, got '1.5'``."""
+    allowed = allowed_values(tp)
+    if allowed and "true" not in allowed and not isinstance(value, (list, tuple)):  # a Literal or an enum
+        return f"{value!r} is not one of {', '.join(allowed)}{did_you_mean(str(value), allowed)}"
+    text = str(exc).split(" - at `", 1)[0]
+    m = re.fullmatch(r"Expected `array` of length (\d+), got (\d+)", text)
+    if m:
+        return f"expected {m[1]} values, got {m[2]}"
+    m = re.fullmatch(r"Expected `([^`]+)`, got `[^`]+`", text)
+    if m:
+        words = " or ".join(_TYPE_WORDS.get(t.strip(), t.strip()) for t in m[1].split("|"))
+        return f"expected {words}, got {value!r}"
+    return text
+
+
+def convert(value: Any, tp: Any, where: str, *, strict: bool = False) -> Any:
+    """``value`` (a string from the command line, or a TOML/JSON/Python value) as type ``tp``; one-line
+    :class:`ConfigError` ``"<where>: expected …, got …"`` otherwise. ``strict``: a typed value (a TOML
+    table's own keys) must already have the type — no string is read as a number."""
+    import msgspec
+
+    raw = value if strict else _notation(value, tp, where)
+    try:
+        out = msgspec.convert(raw, type=tp, strict=strict)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"{where}: {_error_text(exc, value, tp)}") from None
+    if _has_nan(out):
+        raise ConfigError(f"{where}: NaN is not allowed")
+    return out
+
+
+def from_mapping(cls: type, mapping: dict[str, Any], *, where: str, what: str = "parameter") -> dict[str, Any]:
+    """The typed keyword arguments of dataclass ``cls`` for ``mapping`` (keys checked, with "did you mean")."""
+    fields = {f.name for f in dataclasses.fields(cls) if f.init}
+    unknown = next((k for k in mapping if k not in fields), None)
+    if unknown is not None:
+        raise ConfigError(f"{where}: unknown {what} {unknown!r} for {cls.__name__}{known_text(unknown, sorted(fields))}")
+    # the annotations are evaluated only when there is something to convert: for a class with string
+    # annotations (``from __future__ import annotations``) that costs about a millisecond per call
+    hints = typing.get_type_hints(cls) if mapping else {}
+    return {k: convert(v, hints[k], f"{where} {k}") for k, v in mapping.items()}
+
+
+def given_values(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param") -> dict[str, Any]:
+    """The typed values of the keys given (``{"k": v}`` or ``["k=v", ...]``), validated against ``params_cls``."""
     if isinstance(overrides, list):
         pairs: dict[str, Any] = {}
         for text in overrides:
             k, v = split_override(text, where)
             pairs[k] = v
         overrides = pairs
-    # the annotations are evaluated only to coerce overrides: for a Params class with string annotations
-    # (``from __future__ import annotations``) that is ≈ 1-2 ms per call, paid twice by every default solve
-    hints = typing.get_type_hints(params_cls) if overrides else {}
-    fields = {f.name: f for f in dataclasses.fields(params_cls)}
-    kwargs = {}
-    for key, value in overrides.items():
-        if key not in fields:
-            known = ", ".join(sorted(fields)) or "none"
-            raise ConfigError(f"{where}: unknown parameter {key!r} for {params_cls.__name__}; known: {known}")
-        kwargs[key] = _coerce(value, hints[key], f"{where} {key}")
+    return from_mapping(params_cls, overrides, where=where)
+
+
+def build_params(params_cls: type, overrides: dict[str, Any] | list[str], *, where: str = "--param",
+                 inputs: Any = None) -> Any:
+    """Instantiate ``params_cls`` with overrides (``{"k": v}`` or ``["k=v", ...]``), validating keys and types.
+
+    A class with a ``resolve(given, inputs)`` classmethod (a preset) is built by it from the keys given, so a
+    preset fills only what was left unset. Raises :class:`ConfigError` naming the key and the known keys.
+    """
+    given = given_values(params_cls, overrides, where=where)
+    resolve = getattr(params_cls, "resolve", None)
     try:
-        return params_cls(**kwargs)
+        return resolve(given, inputs) if resolve is not None else params_cls(**given)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{where}: {exc}") from None
 
@@ -152,58 +169,23 @@ def describe_params(params_cls: type) -> list[tuple[str, str, str]]:
         else:
             default = "required"
         tp = hints[f.name]
-        tname = getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+        generic = typing.get_origin(tp) is not None
+        tname = (None if generic else getattr(tp, "__name__", None)) or str(tp).replace("typing.", "")
         out.append((f.name, tname, str(default.value if isinstance(default, enum.Enum) else default)))
     return out
 
 
+def param(default: Any, doc: str) -> Any:
+    """A dataclass field with default ``default`` and its documentation (``metadata["doc"]``, what
+    ``slamcli solvers NAME`` shows)."""
+    return dataclasses.field(default=default, metadata={"doc": doc})
+
+
 def param_docs(params_cls: type) -> dict[str, tuple[str, str]]:
-    """Per-field descriptions parsed from the ``Attributes`` section of a Params class docstring (the one
-    source of parameter documentation). Two layouts are understood (numpydoc)::
-
-        name : type                      name : type     description on the same line
-            description ...                              continued, indented deeper
-
-    Several names may share one entry (``R, S, Q : tuple of float``). Returns ``{name: (type as written,
-    description)}`` with whitespace collapsed; fields without an entry are absent.
-    """
-    import inspect
-    import re
-
-    doc = inspect.cleandoc(params_cls.__doc__ or "")
-    lines = doc.splitlines()
-    try:
-        start = next(i for i, ln in enumerate(lines[:-1])
-                     if ln.strip() == "Attributes" and set(lines[i + 1].strip()) == {"-"}) + 2
-    except StopIteration:
-        return {}
-    head = re.compile(r"^(?P<names>[A-Za-z_][\w]*(?:\s*,\s*[A-Za-z_][\w]*)*)\s+:\s+(?P<rest>.*)$")
-    entries: list[tuple[list[str], str, list[str]]] = []
-    base = None
-    for ln in lines[start:]:
-        if not ln.strip():
-            continue
-        indent = len(ln) - len(ln.lstrip())
-        if base is None:
-            base = indent
-        if indent < base:
-            break
-        m = head.match(ln.strip()) if indent == base else None
-        if m:
-            rest = m.group("rest").strip()
-            tp, _, text = (p.strip() for p in re.split(r"(\s{2,})", rest, maxsplit=1)) if re.search(
-                r"\s{2,}", rest) else (rest, "", "")
-            entries.append(([n.strip() for n in m.group("names").split(",")], tp, [text] if text else []))
-        elif entries:
-            if indent == base and set(ln.strip()) == {"-"}:
-                break  # next numpydoc section
-            entries[-1][2].append(ln.strip())
-    out: dict[str, tuple[str, str]] = {}
-    for names, tp, text in entries:
-        desc = " ".join(" ".join(text).split())
-        for n in names:
-            out[n] = (tp, desc)
-    return out
+    """``{field: (type, documentation)}`` of ``params_cls``, from each field's ``metadata["doc"]``; fields
+    without one are absent."""
+    types_ = {n: t for n, t, _d in describe_params(params_cls)}
+    return {f.name: (types_[f.name], f.metadata["doc"]) for f in dataclasses.fields(params_cls) if "doc" in f.metadata}
 
 
 def allowed_values(tp: Any) -> list[str]:

@@ -107,9 +107,6 @@ def pose_graph(tmp_path_factory) -> Path:
 
 def _check_solve_path(present: list[str]) -> None:
     assert not set(present) & set(NOT_ON_SOLVE_PATH + OTHER_SOLVERS), present
-    # a built-in solver is found in registry.BUILTIN and reports slamcli.__version__: no metadata is read
-    # (importlib.metadata itself is imported by SciPy's numpy.testing on this path, so only the scan is checked)
-    assert "<entry points scanned>" not in present, present
     # what the installed linear solver needs: CHOLMOD factorises and selinv inverts its triangular blocks with
     # numpy, so neither SuperLU nor the dense LAPACK wrappers (≈ 220 M instructions) load; SuperLU without it
     if nls.cholmod_available():
@@ -150,9 +147,8 @@ def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_grap
     assert out.exists()
     _check_solve_path(present)
     assert "rich" not in present  # -q prints nothing
-    # SciPy's ``from numpy import *`` bound numpy.f2py, numpy.testing, … without executing them; nothing else
-    # on this path imports importlib.metadata
-    assert not set(present) & {*NUMPY_UNUSED_DEPENDENCIES, "importlib.metadata"}, present
+    # SciPy's ``from numpy import *`` bound numpy.f2py, numpy.testing, … without executing them
+    assert not set(present) & set(NUMPY_UNUSED_DEPENDENCIES), present
     assert "<lazy modules>" in present
 
 
@@ -226,28 +222,28 @@ def test_help_through_main_imports_no_numpy():
     assert out.returncode == 0, out.stderr
 
 
-def test_built_in_solve_without_scipy_reads_no_distribution_metadata(pose_graph, tmp_path):
+def test_built_in_solve_without_scipy_finds_the_solver_in_the_metadata(pose_graph, tmp_path):
     # odometry imports no SciPy, so nothing else brings importlib.metadata in: the registry (entry-point scan)
     # and the result's solver_version (importlib.metadata.version) would be the only ones
     out = tmp_path / "r.h5"
     present = _modules_after(_cli_solve(pose_graph, "odometry", out))
     assert out.exists()
-    assert "importlib.metadata" not in present and "<entry points scanned>" not in present, present
+    # the solver is found in the package metadata (the one table of solvers): one entry-point scan
+    assert "<entry points scanned>" in present, present
 
 
-def test_built_in_table_is_the_installed_entry_points():
-    # registry.BUILTIN repeats pyproject's [project.entry-points."slamcli.solvers"]; the installed metadata is the
-    # independent reference
+def test_the_installed_entry_points_are_pyprojects():
+    # the package metadata is the one table of solvers; pyproject.toml is the independent reference
+    import tomllib
     from importlib import metadata
 
-    import slamcli
     from slamcli.solvers import registry
 
+    declared = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())["project"][
+        "entry-points"][registry.GROUP]
     ours = {ep.name: ep.value for ep in metadata.entry_points(group=registry.GROUP) if ep.dist.name == "slamcli"}
-    assert ours == registry.BUILTIN
-    assert metadata.version("slamcli") == slamcli.__version__  # what built-in solvers report without metadata
-    for name in registry.BUILTIN:
-        assert registry.load(name) is metadata.EntryPoint(name, registry.BUILTIN[name], registry.GROUP).load()
+    assert ours == declared
+    assert {i.name: i.target for i in registry.available() if i.package == "slamcli"} == declared
 
 
 PLUGIN = """
@@ -293,14 +289,13 @@ def test_a_plugin_installed_with_entry_points_is_found_and_cannot_replace_a_buil
         listed = {i.name: i for i in registry.available()}
         assert (listed["toy"].package, listed["toy"].version, listed["toy"].target) == (
             "toyplug", "2.5", "toyplug:ToySolver")
-        assert listed["graph"].target == registry.BUILTIN["graph"]
+        assert listed["graph"].target == "slamcli.solvers.graph.solver:GraphSlam"
         assert registry.describe("toy") == [("k", "int", "3")]
         with pytest.raises(PluginError, match=r"unknown solver 'nope'; available solvers: .*graph.*toy"):
             registry.load("nope")
     finally:
         registry._scan_entry_points.cache_clear()
         _distribution_version.cache_clear()
-        registry._module_source.cache_clear()
         sys.modules.pop("toyplug", None)
 
 

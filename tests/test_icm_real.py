@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from slamcli.params import param_docs
 from slamcli.sim import simulate_scenario
 from slamcli.solvers.icm import IcmParams
 from slamcli.solvers.icm import energy as en
@@ -160,17 +161,21 @@ def test_joint_refine_reaches_a_stationary_point():
 
 
 def test_preset_real_expansion_and_overrides():
-    p = IcmParams(preset="real")
+    p = IcmParams.real()
     for k, v in PRESETS["real"].items():
         assert getattr(p, k) == v
-    assert IcmParams(preset="real", weights="information").weights == "information"
-    assert IcmParams(preset="real", max_sweeps=9).max_sweeps == 9
+    assert p.preset == "real" and IcmParams.paper() == IcmParams()
+    assert IcmParams.real(weights="information").weights == "information"
+    assert IcmParams.real(max_sweeps=9).max_sweeps == 9
+    # a key given explicitly keeps its value even when that value is the paper default
+    assert IcmParams.real(accelerate="none").accelerate == "none"
+    assert IcmParams.real(merge=False, init="online").merge is False
     # the paper default stays the default
     base = IcmParams()
     defaults = {f.name: f.default for f in dataclasses.fields(IcmParams)}
     assert all(getattr(base, k) == defaults[k] for k in defaults)
     # the parameter doc lists the same expansion as the preset table
-    doc = " ".join(IcmParams.__doc__.split())
+    doc = " ".join(param_docs(IcmParams)["preset"][1].split())
     assert expansion_text("real") in doc
 
 
@@ -251,16 +256,16 @@ def test_outlier_gate_nulls_the_misreads_and_reaches_the_clean_optimum(seed):
 
 def test_preset_real_rule_for_data_with_ids():
     inp, _ = _loop_with_ids_and_outliers(0, 0)
-    p = IcmParams(preset="real")
-    q = p.for_data(inp)
+    q = IcmParams.resolve({"preset": "real"}, inp)
     assert (q.correspondences, q.weights, q.outlier_sigma, q.max_sweeps, q.init) == (
         "reported", "information", 7.0, 30, "online")
-    assert q.for_data(inp) is q  # the rule is applied once
     assert q.merge and q.accelerate == "joint"  # the rest of the preset is kept
-    # without ids nothing changes; an explicit value wins; the paper default ignores the rule
+    # without ids nothing changes; an explicit value wins, also one equal to the preset's or the paper's value
     no_ids = dataclasses.replace(inp, observations=dataclasses.replace(
         inp.observations, reported_id=np.full(len(inp.observations.range_m), -1, np.int64)))
-    assert p.for_data(no_ids) is p
-    assert IcmParams(preset="real", max_sweeps=9).for_data(inp).max_sweeps == 9
-    assert IcmParams(preset="real", outlier_sigma=3.0).for_data(inp).outlier_sigma == 3.0
-    assert IcmParams().for_data(inp) == IcmParams()
+    assert IcmParams.resolve({"preset": "real"}, no_ids) == IcmParams.real()
+    assert IcmParams.resolve({"preset": "real", "max_sweeps": 9}, inp).max_sweeps == 9
+    assert IcmParams.resolve({"preset": "real", "outlier_sigma": 3.0}, inp).outlier_sigma == 3.0
+    assert IcmParams.resolve({"preset": "real", "init": "gated"}, inp).init == "gated"
+    assert IcmParams.resolve({"preset": "real", "max_sweeps": 100}, inp).max_sweeps == 100
+    assert IcmParams.resolve({}, inp) == IcmParams()

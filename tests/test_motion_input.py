@@ -154,6 +154,34 @@ def test_icm_preset_keeps_explicit_weights_and_says_so(sideways):
     assert plain.extra["weights"] == "information" and "preset_note" not in plain.extra
 
 
+def test_icm_preset_keeps_a_value_given_equal_to_the_paper_default(sideways, tmp_path):
+    """``-p preset=real -p accelerate=none``: the given value is the paper default and still wins over the
+    preset, through the API and the command line; what was left unset still comes from the preset and its
+    rule for data with ids."""
+    from typer.testing import CliRunner
+
+    from slamcli.cli import app
+    from slamcli.io import read_result
+    from slamcli.solvers.icm.presets import PRESETS, WITH_IDS
+    from slamcli.types import Dataset
+
+    inputs, _ = sideways
+    given = {"preset": "real", "accelerate": "none", "max_sweeps": 3}
+    res = solve_dataset(inputs, "icm", given)
+    assert PRESETS["real"]["accelerate"] != "none" and res.extra["accelerate"] == "none"
+    assert res.params["accelerate"] == "none" and res.params["max_sweeps"] == 3
+    assert res.params["merge"] == PRESETS["real"]["merge"]  # unset: from the preset
+    assert res.params["correspondences"] == WITH_IDS["real"]["correspondences"]  # unset: the ids rule
+    data = write_dataset(tmp_path / "odo.h5", Dataset(inputs=inputs, truth=None, metadata={}))
+    out = tmp_path / "icm.h5"
+    args = ["solve", str(data), "-m", "icm", "-o", str(out)] + [x for k, v in given.items() for x in ("-p", f"{k}={v}")]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    cli = read_result(out)
+    assert cli.params["accelerate"] == "none" and cli.extra["accelerate"] == "none"
+    assert cli.params["correspondences"] == "reported"
+
+
 def test_icm_explicit_weights_with_information_weights_is_one_line_error(sideways):
     inputs, _ = sideways
     with pytest.raises(ConfigError) as exc:

@@ -46,7 +46,7 @@ def test_cli_simulate_writes_file_equal_to_library_run(tmp_path):
     "args, message",
     [
         (["--set", "sensor.max_range=far"], "error: --set sensor.max_range: expected a number, got 'far'"),
-        (["--set", "sensor.nope=1"], "error: --set: unknown key 'sensor.nope'; known: dt, n_steps"),
+        (["--set", "sensor.nope=1"], "error: --set: unknown key 'sensor.nope'; did you mean 'sensor.kind'"),
         (["--set", "nokeyvalue"], "error: --set: expected key=value"),
         (["--set", "sensor.detection_prob=2"], "detection_prob must be in [0, 1]"),
         (["--seed", "-3"], "error: --seed: must be in [0, 2^63)"),

@@ -221,7 +221,7 @@ def test_noise_spec_timestamps_and_metadata():
 
 
 def test_config_errors_are_one_line_and_helpful():
-    with pytest.raises(ConfigError, match=r"unknown key 'sensor\.nope'; known: dt, n_steps, world\.layout"):
+    with pytest.raises(ConfigError, match=r"unknown key 'sensor\.nope'; did you mean .*\(known: dt, n_steps, world\.layout"):
         resolve_scenario("loop", {"sensor.nope": 1})
     with pytest.raises(ConfigError, match=r"unknown key 'bogus'"):
         resolve_scenario("loop", {"bogus": 1})

@@ -98,7 +98,7 @@ def test_load_good_file(tmp_path):
     "edit, expected",
     [
         (("[experiment]", "[experiment]\ncolour = 1"), r"exp.toml: experiment.colour: unknown key"),
-        (("root_seed = 3", 'root_seed = "3"'), r"exp.toml: experiment.root_seed: expected an integer, got string"),
+        (("root_seed = 3", 'root_seed = "3"'), r"exp.toml: experiment.root_seed: expected an integer, got '3'"),
         (('name = "demo"', 'name = "a b"'), r"exp.toml: experiment.name: 'a b' must start"),
         (("gate = 9.21\n", "gate = 9.21\n[[solver]]\nmethod = 5\n"), r"solver\[1\].method: expected a string"),
         (('method = "odometry"', 'method = "ekf"'), r"solver\[1\].label: duplicate label 'ekf'"),

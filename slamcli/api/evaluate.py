@@ -17,7 +17,9 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 from slamcli.errors import SlamcliError
 
@@ -36,6 +38,51 @@ def _own_folder(out: Path) -> bool:
     entries = list(out.iterdir())
     return any(e.name == EVALUATION_MARKER for e in entries) and all(
         e.name in (*OUTPUT_FILES, EVALUATION_MARKER) and e.is_file() and not e.is_symlink() for e in entries)
+
+
+@dataclass(frozen=True)
+class EvaluateOptions:
+    """An experiment's ``[evaluate]`` table: the options of :class:`slamcli.metrics.summary.EvaluationParams`
+    (``cutoff_m``; ``cutoff``, :func:`evaluate_files`' keyword, is accepted as its old spelling) and ``against``."""
+
+    cutoff_m: float = 1.0
+    ospa_order: float = 2.0
+    near_path_m: float | None = None
+    rpe_delta: float = 1.0
+    rpe_unit: str = "steps"
+    against: str | None = None
+
+    def __post_init__(self) -> None:
+        try:
+            check_evaluation_options(cutoff=self.cutoff_m, ospa_order=self.ospa_order, near_path_m=self.near_path_m,
+                                     rpe_delta=self.rpe_delta, rpe_unit=self.rpe_unit)
+        except SlamcliError as exc:
+            raise ValueError(str(exc).replace("cutoff:", "cutoff_m:", 1)) from None
+
+    @staticmethod
+    def names() -> list[str]:
+        """The keys an ``[evaluate]`` table may hold (both spellings of the cut-off)."""
+        return sorted([f.name for f in fields(EvaluateOptions)] + ["cutoff"])
+
+    @classmethod
+    def keywords(cls, options: dict[str, Any], where: str) -> dict[str, Any]:
+        """``options`` checked through the schema, as :func:`evaluate_files`' keywords with every default
+        filled; the values as written are kept (they enter the run ids)."""
+        from slamcli.errors import ConfigError
+        from slamcli.params import from_mapping
+
+        opts = dict(options)
+        if "cutoff" in opts:
+            if "cutoff_m" in opts:
+                raise ConfigError(f"{where}: cutoff_m and cutoff (its old spelling) both given; keep cutoff_m")
+            opts["cutoff_m"] = opts.pop("cutoff")
+        try:
+            cls(**from_mapping(cls, opts, where=where, what="option"))
+        except ValueError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        written = {("cutoff" if k == "cutoff_m" else k): v for k, v in opts.items()}
+        defaults = {("cutoff" if f.name == "cutoff_m" else f.name): f.default for f in fields(cls)}
+        return defaults | written
 
 
 def check_evaluation_options(*, cutoff: float = 1.0, ospa_order: float = 2.0, near_path_m: float | None = None,

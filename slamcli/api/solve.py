@@ -43,23 +43,35 @@ def dataset_relpath(data_path: str | os.PathLike, result_path: str | os.PathLike
     return Path(rel).as_posix()
 
 
-def make_solver(method: str, params: Any = None):
+def make_solver(method: str, params: Any = None, inputs: SlamInputs | None = None):
     """Instantiate the solver registered as ``method``.
 
     ``params`` is a Params instance, a dict ``{"key": value}`` or a list of ``"key=value"`` strings; keys and
     types are validated against the solver's frozen Params dataclass (one-line ConfigError listing the
-    known keys). Unknown/broken plugins raise PluginError listing the available names.
+    known keys). A Params class with presets (``resolve``) is resolved once here, with ``inputs`` when given
+    (the preset's rule for the dataset). Unknown/broken plugins raise PluginError listing the available names.
     """
-    from slamcli.params import build_params
+    from slamcli.params import build_params, given_values
     from slamcli.solvers import registry
 
     cls = registry.load(method)
+    where = f"--param ({method})"
     if params is None:
         params = {}
-    if not isinstance(params, cls.Params):
-        params = build_params(cls.Params, params, where=f"--param ({method})")
+    resolve = getattr(cls.Params, "resolve", None)
+    if isinstance(params, cls.Params):
+        given = params.given() if resolve is not None and inputs is not None else None
+        if given is not None:
+            params = resolve(given, inputs)
+    else:
+        given = given_values(cls.Params, params, where=where)
+        params = build_params(cls.Params, given, where=where, inputs=inputs)
     _check_finite_params(params, method)
-    return cls(params)
+    solver = cls(params)
+    note = getattr(cls.Params, "resolve_note", None)
+    if given is not None and note is not None and inputs is not None:
+        solver.config_note = note(given, inputs)
+    return solver
 
 
 def _check_finite_params(params: Any, method: str) -> None:
@@ -120,7 +132,7 @@ def solve_dataset(
         to_sensor_frame,
     )
 
-    solver = make_solver(method, params)
+    solver = make_solver(method, params, inputs)
     check_motion_model(solver, method, inputs)  # one line instead of running the wrong kinematics
     check_multi_robot(solver, method, inputs)  # multi-robot data: graph / icm only
     if getattr(solver, "needs_noise_bounds", False) and inputs.noise_bounds is None:

@@ -10,7 +10,6 @@ imports: raise it whenever an importer's output for the same input changes.
 
 from __future__ import annotations
 
-import difflib
 import re
 from pathlib import Path
 from typing import Any, Literal
@@ -37,17 +36,15 @@ OPTIONS: dict[str, dict[str, Any]] = {
 def check_options(importer: str, options: dict[str, Any], where: str) -> dict[str, Any]:
     """``options`` (flag names) coerced to their types, keyed by the flag name; one-line ConfigError
     ``"<where>.<flag>: ..."`` for an unknown option (with "did you mean") or a value of the wrong type."""
-    from slamcli.params import _coerce
+    from slamcli.params import convert, did_you_mean
 
     known = OPTIONS[importer]
     out = {}
     for key, value in options.items():
         if key not in known:
-            close = difflib.get_close_matches(key, list(known), n=2, cutoff=0.6)
-            hint = f"; did you mean {' or '.join(map(repr, close))}?" if close else ""
-            raise ConfigError(f"{where}.{key}: not an option of `slamcli import {importer}`{hint} "
+            raise ConfigError(f"{where}.{key}: not an option of `slamcli import {importer}`{did_you_mean(key, known)} "
                               f"(options: {', '.join(known)})")
-        out[key] = _coerce(value, known[key], f"{where}.{key}")
+        out[key] = convert(value, known[key], f"{where}.{key}")
     if importer == "mrclam" and out.get("solo") is not None and out.get("robots") is None \
             and not out.get("all-robots"):
         raise ConfigError(f"{where}.solo: needs a multi-robot import (robots = [...] or all-robots = true)")

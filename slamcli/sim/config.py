@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 from slamcli.errors import ConfigError
 from slamcli.numerics import MAX_INPUT_MAGNITUDE
-from slamcli.params import _coerce
+from slamcli.params import convert, known_text, param
 
 
 def _check(cond: bool, message: str) -> None:
@@ -52,46 +52,33 @@ def _check_finite(obj: Any) -> None:
 class WorldConfig:
     """Landmark layout (drawn from the *world* random stream).
 
-    Attributes
-    ----------
-    layout : "rows" | "random" | "octagon" | "none"
-        ``rows``: ``n_rows`` rows at ``y = row_y0 + k·row_spacing``, landmarks every ``col_spacing`` m from
-        ``x_min`` to ``x_max`` (paper 000, Fig. 4/5 setting). ``random``: ``n_landmarks`` uniform in the box
-        ``[x_min, x_max] × [y_min, y_max]``, at least ``min_separation`` apart and ``path_clearance`` from the
-        waypoint polyline. ``octagon``: 8 points on a regular octagon of circumradius ``octagon_radius``
-        centred at the origin plus its centre (paper 000 §6). ``none``: only ``extra_landmarks``.
-    x_min, x_max, y_min, y_max : float   box of the layout, m.
-    n_rows : int                         rows of the ``rows`` layout.
-    row_y0, row_spacing : float          y of the first row and spacing between rows, m.
-    col_spacing : float                  spacing along a row, m.
-    n_landmarks : int                    count for the ``random`` layout.
-    min_separation : float               minimum landmark-landmark distance (``random``), m.
-    path_clearance : float               minimum landmark-path distance (``random``), m.
-    jitter : float                       σ of a Gaussian perturbation added to every generated position, m.
-    octagon_radius : float               circumradius of the octagon, m (paper 000 §6: 7.12 m).
-    extra_landmarks : tuple of float     additional fixed points ``x1,y1,x2,y2,...`` (m), appended last.
-    landmark_radius : float              radius of the disc a laser beam hits (cone, pole, person), m.
-    seed : int                           seed of the world stream (landmarks and path jitter); −1 = the run's
-                                         seed. Fix it for Monte-Carlo runs over one map (NEES averages).
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    layout: Literal["rows", "random", "octagon", "none"] = "rows"
-    x_min: float = 5.0
-    x_max: float = 45.0
-    y_min: float = 5.0
-    y_max: float = 35.0
-    n_rows: int = 7
-    row_y0: float = 5.0
-    row_spacing: float = 5.0
-    col_spacing: float = 5.0
-    n_landmarks: int = 12
-    min_separation: float = 2.0
-    path_clearance: float = 1.0
-    jitter: float = 0.0
-    octagon_radius: float = 7.12
-    extra_landmarks: tuple[float, ...] = ()
-    landmark_radius: float = 0.15
-    seed: int = -1
+    layout: Literal["rows", "random", "octagon", "none"] = param("rows",
+        "`rows`: `n_rows` rows at `y = row_y0 + k·row_spacing`, landmarks every `col_spacing` m from "
+        "`x_min` to `x_max` (paper 000, Fig. 4/5 setting). `random`: `n_landmarks` uniform in the box "
+        "`[x_min, x_max] × [y_min, y_max]`, at least `min_separation` apart and `path_clearance` from the "
+        "waypoint polyline. `octagon`: 8 points on a regular octagon of circumradius `octagon_radius` "
+        "centred at the origin plus its centre (paper 000 §6). `none`: only `extra_landmarks`.")
+    x_min: float = param(5.0, "box of the layout, m.")
+    x_max: float = param(45.0, "box of the layout, m.")
+    y_min: float = param(5.0, "box of the layout, m.")
+    y_max: float = param(35.0, "box of the layout, m.")
+    n_rows: int = param(7, "rows of the `rows` layout.")
+    row_y0: float = param(5.0, "y of the first row and spacing between rows, m.")
+    row_spacing: float = param(5.0, "y of the first row and spacing between rows, m.")
+    col_spacing: float = param(5.0, "spacing along a row, m.")
+    n_landmarks: int = param(12, "count for the `random` layout.")
+    min_separation: float = param(2.0, "minimum landmark-landmark distance (`random`), m.")
+    path_clearance: float = param(1.0, "minimum landmark-path distance (`random`), m.")
+    jitter: float = param(0.0, "σ of a Gaussian perturbation added to every generated position, m.")
+    octagon_radius: float = param(7.12, "circumradius of the octagon, m (paper 000 §6: 7.12 m).")
+    extra_landmarks: tuple[float, ...] = param((), "additional fixed points `x1,y1,x2,y2,...` (m), "
+                                                   "appended last.")
+    landmark_radius: float = param(0.15, "radius of the disc a laser beam hits (cone, pole, person), m.")
+    seed: int = param(-1, "seed of the world stream (landmarks and path jitter); −1 = the run's seed. Fix "
+                          "it for Monte-Carlo runs over one map (NEES averages).")
 
     def __post_init__(self) -> None:
         _check(self.x_max > self.x_min and self.y_max > self.y_min, "world: need x_min < x_max and y_min < y_max")
@@ -118,34 +105,26 @@ class WorldConfig:
 class PathConfig:
     """Waypoints the robot's tracking controller follows.
 
-    Attributes
-    ----------
-    kind : "rect" | "serpentine" | "ellipse" | "explicit"
-        ``rect``: the corners of ``[x_min, x_max] × [y_min, y_max]`` counter-clockwise from ``(x_min, y_min)``.
-        ``serpentine``: lanes at the y values ``lanes`` driven alternately left→right and right→left between
-        ``x_min`` and ``x_max`` (a lawn-mower path among rows of landmarks). ``ellipse``: ``n_points`` points
-        on the ellipse inscribed in the box, counter-clockwise. ``explicit``: ``waypoints``.
-    x_min, x_max, y_min, y_max : float   box of the path, m.
-    lanes : tuple of float               lane y values for ``serpentine``, m.
-    n_points : int                       points on the ellipse.
-    spacing : float                      straight edges are subdivided into waypoints about this far apart
-                                         (m; 0 = corners only); with ``jitter`` this makes the path irregular.
-    jitter : float                       σ of a Gaussian perturbation of every waypoint (world stream), m.
-    waypoints : tuple of float           ``x1,y1,x2,y2,...`` for ``explicit``, m.
-    cyclic : bool                        start over at the first waypoint after the last one (else stop).
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    kind: Literal["rect", "serpentine", "ellipse", "explicit"] = "rect"
-    x_min: float = 0.0
-    x_max: float = 10.0
-    y_min: float = 0.0
-    y_max: float = 10.0
-    lanes: tuple[float, ...] = ()
-    n_points: int = 16
-    spacing: float = 0.0
-    jitter: float = 0.0
-    waypoints: tuple[float, ...] = ()
-    cyclic: bool = True
+    kind: Literal["rect", "serpentine", "ellipse", "explicit"] = param("rect",
+        "`rect`: the corners of `[x_min, x_max] × [y_min, y_max]` counter-clockwise from `(x_min, "
+        "y_min)`. `serpentine`: lanes at the y values `lanes` driven alternately left→right and "
+        "right→left between `x_min` and `x_max` (a lawn-mower path among rows of landmarks). `ellipse`: "
+        "`n_points` points on the ellipse inscribed in the box, counter-clockwise. `explicit`: "
+        "`waypoints`.")
+    x_min: float = param(0.0, "box of the path, m.")
+    x_max: float = param(10.0, "box of the path, m.")
+    y_min: float = param(0.0, "box of the path, m.")
+    y_max: float = param(10.0, "box of the path, m.")
+    lanes: tuple[float, ...] = param((), "lane y values for `serpentine`, m.")
+    n_points: int = param(16, "points on the ellipse.")
+    spacing: float = param(0.0, "straight edges are subdivided into waypoints about this far apart (m; 0 "
+                                "= corners only); with `jitter` this makes the path irregular.")
+    jitter: float = param(0.0, "σ of a Gaussian perturbation of every waypoint (world stream), m.")
+    waypoints: tuple[float, ...] = param((), "`x1,y1,x2,y2,...` for `explicit`, m.")
+    cyclic: bool = param(True, "start over at the first waypoint after the last one (else stop).")
 
     def __post_init__(self) -> None:
         _check(self.x_max > self.x_min and self.y_max > self.y_min, "path: need x_min < x_max and y_min < y_max")
@@ -181,27 +160,20 @@ class RobotConfig:
     velocity moves towards ``u_t + n_t`` by at most ``accel·dt`` per step when speeding up and ``decel·dt``
     when slowing down, from rest at t = 0, so the executed motion lags the command the solvers see.
 
-    Attributes
-    ----------
-    start : tuple of float      ``x, y, θ`` of the start pose (m, m, rad); empty = first waypoint, facing the
-                                second one.
-    v_max : float               cruise speed, m/s.
-    w_max : float               maximum turn rate, rad/s.
-    k_heading : float           heading gain, 1/s.
-    waypoint_tol : float        waypoint switching radius, m.
-    actuation_std : (σ_v, σ_ω)  actuation noise on the commanded controls (m/s, rad/s).
-    accel_max : (a_v, a_ω)      acceleration limits of the executed velocities (m/s², rad/s²); 0 = none.
-    decel_max : (d_v, d_ω)      deceleration limits (m/s², rad/s²); 0 = none.
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    start: tuple[float, ...] = ()
-    v_max: float = 0.5
-    w_max: float = 0.8
-    k_heading: float = 1.5
-    waypoint_tol: float = 0.5
-    actuation_std: tuple[float, float] = (0.02, 0.02)
-    accel_max: tuple[float, float] = (0.0, 0.0)
-    decel_max: tuple[float, float] = (0.0, 0.0)
+    start: tuple[float, ...] = param((), "`x, y, θ` of the start pose (m, m, rad); empty = first "
+                                         "waypoint, facing the second one.")
+    v_max: float = param(0.5, "cruise speed, m/s.")
+    w_max: float = param(0.8, "maximum turn rate, rad/s.")
+    k_heading: float = param(1.5, "heading gain, 1/s.")
+    waypoint_tol: float = param(0.5, "waypoint switching radius, m.")
+    actuation_std: tuple[float, float] = param((0.02, 0.02),
+        "actuation noise on the commanded controls (m/s, rad/s).")
+    accel_max: tuple[float, float] = param((0.0, 0.0), "acceleration limits of the executed velocities "
+                                                       "(m/s², rad/s²); 0 = none.")
+    decel_max: tuple[float, float] = param((0.0, 0.0), "deceleration limits (m/s², rad/s²); 0 = none.")
 
     def __post_init__(self) -> None:
         _check(len(self.start) in (0, 3), "robot.start must be empty or x,y,theta")
@@ -220,16 +192,13 @@ class OdometryConfig:
     ``d̃_t = [(1+scale_bias) d_x, (1+scale_bias) d_y, (1+turn_bias) d_θ] + n_t,  n_t ~ N(0, diag(std²))``,
     chained from the true start pose.
 
-    Attributes
-    ----------
-    std : (σ_x, σ_y, σ_θ)   per-step noise of the increment (m, m, rad).
-    scale_bias : float      relative wheel-distance scale error (0.01 = odometry reads 1 % long).
-    turn_bias : float       relative heading-increment scale error.
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    std: tuple[float, float, float] = (0.002, 0.002, 0.002)
-    scale_bias: float = 0.0
-    turn_bias: float = 0.0
+    std: tuple[float, float, float] = param((0.002, 0.002, 0.002),
+        "per-step noise of the increment (m, m, rad).")
+    scale_bias: float = param(0.0, "relative wheel-distance scale error (0.01 = odometry reads 1 % long).")
+    turn_bias: float = param(0.0, "relative heading-increment scale error.")
 
     def __post_init__(self) -> None:
         _check(all(s >= 0 for s in self.std), "odometry.std must be >= 0")
@@ -249,37 +218,28 @@ class SensorConfig:
     removes beams without a hit (else reported at ``max_range``, truth id −1); ``drop_isolated`` removes a return
     without a neighbouring return within ``isolation_gap`` m in range.
 
-    Attributes
-    ----------
-    kind : "point" | "laser"
-    max_range, min_range : float   m.
-    fov_deg : float                field of view centred straight ahead, degrees (360 = all round).
-    range_std : float              m.
-    bearing_std : float            rad.
-    detection_prob : float         probability that a visible landmark (point) / a hitting beam (laser) is reported.
-    report_ids : bool              the sensor reports the landmark identity (``Observations.reported_id``).
-    period_steps : int             scan every this many poses (pose 0 is scanned).
-    n_beams : int                  laser beams.
-    drop_max_range, drop_isolated : bool   laser preprocessing.
-    isolation_gap : float          laser: largest range difference of "similar" neighbouring returns, m.
-    report_size : bool             laser: every return carries ``observations.diameter_m = 2 · landmark_radius``
-                                   (what ``-p surface=true`` reads); off = no size declared.
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
     kind: Literal["point", "laser"] = "point"
-    max_range: float = 8.0
-    min_range: float = 0.1
-    fov_deg: float = 180.0
-    range_std: float = 0.05
-    bearing_std: float = 0.01
-    detection_prob: float = 1.0
-    report_ids: bool = False
-    period_steps: int = 1
-    n_beams: int = 181
-    drop_max_range: bool = True
-    drop_isolated: bool = True
-    isolation_gap: float = 0.5
-    report_size: bool = False
+    max_range: float = param(8.0, "m.")
+    min_range: float = param(0.1, "m.")
+    fov_deg: float = param(180.0, "field of view centred straight ahead, degrees (360 = all round).")
+    range_std: float = param(0.05, "m.")
+    bearing_std: float = param(0.01, "rad.")
+    detection_prob: float = param(1.0, "probability that a visible landmark (point) / a hitting beam "
+                                       "(laser) is reported.")
+    report_ids: bool = param(False, "the sensor reports the landmark identity (`Observations.reported_id`).")
+    period_steps: int = param(1, "scan every this many poses (pose 0 is scanned).")
+    n_beams: int = param(181, "laser beams.")
+    drop_max_range: bool = param(True, "laser preprocessing.")
+    drop_isolated: bool = param(True, "laser preprocessing.")
+    isolation_gap: float = param(0.5, "laser: neighbouring-return range difference still called "
+                                      '"similar", m.')
+    report_size: bool = param(False, "laser: declare the size of what the beams hit — every return "
+                                     "carries `observations.diameter_m = 2 · world.landmark_radius` "
+                                     "(clutter too), the radius a surface-aware model reads (`-p "
+                                     "surface=true`); off = no size declared.")
 
     def __post_init__(self) -> None:
         _check(self.max_range > 0 and math.isfinite(self.max_range), "sensor.max_range must be a finite number > 0")
@@ -302,14 +262,13 @@ class SensorConfig:
 class ClutterConfig:
     """False returns (truth id −1), drawn from the *clutter* stream.
 
-    Attributes
-    ----------
-    rate : float   mean number of false returns per scan (Poisson), uniform in range ``[min_range, max_range]``
-                   and bearing over the field of view. For the laser they replace the reading of a random beam
-                   when nearer than its true return, so ``drop_isolated`` removes most of them (paper 000 §5).
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    rate: float = 0.0
+    rate: float = param(0.0, "mean number of false returns per scan (Poisson), uniform in range "
+                             "`[min_range, max_range]` and bearing over the field of view. For the laser "
+                             "they replace the reading of a random beam when nearer than its true return, "
+                             "so `drop_isolated` removes most of them (paper 000 §5).")
 
     def __post_init__(self) -> None:
         _check(self.rate >= 0, "clutter.rate must be >= 0")
@@ -320,16 +279,12 @@ class ClutterConfig:
 class GpsConfig:
     """Optional position fixes ``p_t + n, n ~ N(0, std² I)`` every ``period_steps`` poses (off by default).
 
-    Attributes
-    ----------
-    enabled : bool
-    period_steps : int
-    std : float      m.
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
     enabled: bool = False
     period_steps: int = 10
-    std: float = 1.0
+    std: float = param(1.0, "m.")
 
     def __post_init__(self) -> None:
         _check(self.period_steps >= 1, "gps.period_steps must be >= 1")
@@ -346,34 +301,31 @@ class BoundedConfig:
     dataset (``inputs/noise_bounds``). Odometry reports ``d̃ = d + u_d``, ``α̃ = α + u_α``; the point sensor
     reports ``r + u_r``, ``b + u_b`` and each landmark's type label, never its identity.
 
-    Attributes
-    ----------
-    enabled : bool                    use the turn-and-move robot with bounded noise.
-    odometry_d : float                half-width of the distance error, m (paper 004: 0.25).
-    odometry_turn_deg : float         half-width of the turn error, degrees (paper 004: 5).
-    range : float                     half-width of the range error, m (paper 004: 0.025).
-    bearing_deg : float               half-width of the bearing error, degrees (0.5).
-    closest_only : bool               the sensor reports only the closest visible landmark (paper 004 §6).
-    landmark_types : tuple of int     type label per landmark in world order; empty = all type 0.
-    declared_scale : float            declared bounds = ``declared_scale ×`` the true ones (< 1: too small, for tests).
-    exact_readings : bool             every error zero while the bounds are still declared (paper 004 §6).
-    declared_separation : float       declared minimum distance between landmarks
-                                      (``NoiseBounds.min_separation``), m; 0 = none; not enforced.
-    loop_closure_error : float        0 = off; else the room's loop-closure sightings (first-seen landmark after
-                                      pose 0) err by this many declared half-widths (paper 004's wrong bound).
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    enabled: bool = False
-    odometry_d: float = 0.25
-    odometry_turn_deg: float = 5.0
-    range: float = 0.025
-    bearing_deg: float = 0.5
-    closest_only: bool = True
-    landmark_types: tuple[int, ...] = ()
-    declared_scale: float = 1.0
-    exact_readings: bool = False
-    declared_separation: float = 0.0
-    loop_closure_error: float = 0.0
+    enabled: bool = param(False, "use the turn-and-move robot with bounded noise.")
+    odometry_d: float = param(0.25, "half-width of the distance error, m (paper 004: 0.25).")
+    odometry_turn_deg: float = param(5.0, "half-width of the turn error, degrees (paper 004: 5).")
+    range: float = param(0.025, "half-width of the range error, m (paper 004: 10× smaller, 0.025).")
+    bearing_deg: float = param(0.5, "half-width of the bearing error, degrees (0.5).")
+    closest_only: bool = param(True, "the sensor reports only the closest visible landmark (paper 004 §6).")
+    landmark_types: tuple[int, ...] = param((), "type label per landmark in world order (e.g. 0 = door, 1 "
+                                                "= corridor); empty = all type 0.")
+    declared_scale: float = param(1.0, "the bounds written into the dataset are `declared_scale ×` the "
+                                       "true ones (< 1 = a deliberately wrong, too small declaration, for "
+                                       "tests).")
+    exact_readings: bool = param(False, "every error is zero while the bounds are still declared — paper "
+                                        "004 §6 simulated exact readings (its Table 1 l1 box is centred "
+                                        "on the truth).")
+    declared_separation: float = param(0.0, "map prior declared in the dataset "
+                                            "(`NoiseBounds.min_separation`), m: distinct landmarks are at "
+                                            "least this far apart; 0 = none declared. The simulator does "
+                                            "not enforce it (a wrong declaration is a test case).")
+    loop_closure_error: float = param(0.0, "0 = off; else the room's loop-closure sightings (first-seen "
+                                           "landmark after pose 0) get errors of exactly this many declared "
+                                           "half-widths in range and bearing, signs from `default_rng(seed)` "
+                                           "(paper 004's wrong-bound test).")
 
     def __post_init__(self) -> None:
         _check(min(self.odometry_d, self.odometry_turn_deg, self.range, self.bearing_deg) >= 0,
@@ -393,37 +345,30 @@ class WallsConfig:
     range-bearing observations of the features with their identity (sensor 0) and a ray-cast scan of
     ``sensor.n_beams`` beams against the walls (sensor 1, max-range readings kept).
 
-    Attributes
-    ----------
-    layout : "none" | "ladder"
-    width, height : float       outer rectangle, m.
-    block_rows, block_cols : int
-    corridor : float            corridor width, m.
-    features : "corners" | "corners+mid" | "posts"
-        wall-rectangle corners; plus wall mid-points and the outer-wall points opposite every corridor stretch
-        (``walls.corridor_wall_midpoints``); or posts a quarter corridor off the centre lines (Map 3 variant).
-    post_spacing : float        m.
-    resolution : float          cell side of the true occupancy grid, m.
-    grid_margin : float         grid extends this far beyond the walls, m.
-    laps : int                  laps of the route; > 0 sets the run length (``n_steps`` is then ignored).
-    max_cells : int             refuse grids with more cells (memory guard).
-    wrong_id_prob : float       probability that a feature row reports another feature's id (a data-association
-                                fault; the truth keeps the real one). Clutter adds false rows with id −1.
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
     layout: Literal["none", "ladder"] = "none"
-    width: float = 100.0
-    height: float = 100.0
+    width: float = param(100.0, "outer rectangle, m.")
+    height: float = param(100.0, "outer rectangle, m.")
     block_rows: int = 1
     block_cols: int = 1
-    corridor: float = 10.0
-    features: Literal["corners", "corners+mid", "posts"] = "corners+mid"
-    post_spacing: float = 20.0
-    resolution: float = 0.5
-    grid_margin: float = 2.0
-    laps: int = 3
-    max_cells: int = 50_000_000
-    wrong_id_prob: float = 0.0
+    corridor: float = param(10.0, "corridor width, m.")
+    features: Literal["corners", "corners+mid", "posts"] = param("corners+mid",
+        "corners of every wall rectangle; plus the mid-point of every wall segment and, on the outer "
+        "walls, the point opposite the mid-point of every corridor stretch between crossings "
+        "(`walls.corridor_wall_midpoints`); or point landmarks (posts a quarter corridor width off the "
+        "centre lines, `post_spacing` apart; Map 3 variant).")
+    post_spacing: float = param(20.0, "m.")
+    resolution: float = param(0.5, "cell side of the true occupancy grid, m.")
+    grid_margin: float = param(2.0, "grid extends this far beyond the walls, m.")
+    laps: int = param(3, "laps of the route; > 0 sets the run length (`n_steps` is then ignored: the run "
+                         "ends when the robot is back at the start for the `laps`-th time).")
+    max_cells: int = param(50_000_000, "refuse grids with more cells (memory guard).")
+    wrong_id_prob: float = param(0.0, "probability that a feature row reports the id of another feature "
+                                      "(drawn uniformly among the others) instead of its own — a "
+                                      "data-association fault; the truth keeps the row's real feature. "
+                                      "Clutter (`clutter.rate`) adds false feature rows with id −1.")
 
     def __post_init__(self) -> None:
         _check(0.0 <= self.wrong_id_prob <= 1.0, "walls.wrong_id_prob must be in [0, 1]")
@@ -446,17 +391,12 @@ class WallsConfig:
 class ScenarioConfig:
     """Everything that defines a simulated run (with the seed).
 
-    Attributes
-    ----------
-    name : str          scenario name (for metadata).
-    dt : float          sampling period Δt, s (paper 000: 0.1 s).
-    n_steps : int       number of controls T; the run has T+1 poses and lasts ``T·dt`` s.
-    world, path, robot, odometry, sensor, clutter, gps, bounded : sub-configurations.
+    Each field's documentation is its ``metadata["doc"]``.
     """
 
-    name: str = "custom"
-    dt: float = 0.1
-    n_steps: int = 500
+    name: str = param("custom", "scenario name (for metadata).")
+    dt: float = param(0.1, "sampling period Δt, s (paper 000: 0.1 s).")
+    n_steps: int = param(500, "number of controls T; the run has T+1 poses and lasts `T·dt` s.")
     world: WorldConfig = field(default_factory=WorldConfig)
     path: PathConfig = field(default_factory=PathConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
@@ -507,14 +447,14 @@ def apply_overrides(cfg: ScenarioConfig, overrides: dict[str, Any] | None, *, wh
         sec, _, leaf = key.rpartition(".")
         if sec:
             if sec not in _SECTIONS or leaf not in {f.name for f in dataclasses.fields(getattr(cfg, sec))}:
-                raise ConfigError(f"{where}: unknown key {key!r}; known: {', '.join(known_keys(cfg))}")
+                raise ConfigError(f"{where}: unknown key {key!r}{known_text(key, known_keys(cfg))}")
             hints = typing.get_type_hints(type(getattr(cfg, sec)))
-            per_section.setdefault(sec, {})[leaf] = _coerce(value, hints[leaf], f"{where} {key}")
+            per_section.setdefault(sec, {})[leaf] = convert(value, hints[leaf], f"{where} {key}")
         else:
             if leaf not in ("dt", "n_steps"):
-                raise ConfigError(f"{where}: unknown key {key!r}; known: {', '.join(known_keys(cfg))}")
+                raise ConfigError(f"{where}: unknown key {key!r}{known_text(key, known_keys(cfg))}")
             hints = typing.get_type_hints(ScenarioConfig)
-            top[leaf] = _coerce(value, hints[leaf], f"{where} {key}")
+            top[leaf] = convert(value, hints[leaf], f"{where} {key}")
     try:
         changes: dict[str, Any] = dict(top)
         for sec, vals in per_section.items():

@@ -26,7 +26,6 @@ Labels seen by fewer than ``min_support`` rows are dropped (their rows get −1)
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,32 +33,8 @@ from slamcli.models import se2
 from slamcli.models.observation import inverse_range_bearing
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import compact_labels
+from slamcli.solvers.odometry_params import OdometryParams
 from slamcli.types import SlamInputs, SolverResult, Status
-
-
-@dataclass(frozen=True)
-class OdometryParams:
-    """Parameters of :class:`OdometrySolver`.
-
-    Attributes
-    ----------
-    use_reported_ids : bool, default True
-        Label rows by their sensor-reported id when they have one (``reported_id ≥ 0``).
-    nn_threshold : float, default 1.0
-        Greedy nearest-neighbour gate in metres (landmark space) for rows without a reported id.
-    min_support : int, default 1
-        Minimum number of rows a label needs to be kept as a landmark (2 or more drops single-shot clutter).
-    """
-
-    use_reported_ids: bool = True
-    nn_threshold: float = 1.0
-    min_support: int = 1
-
-    def __post_init__(self) -> None:
-        if not self.nn_threshold > 0:
-            raise ValueError(f"nn_threshold must be > 0, got {self.nn_threshold}")
-        if self.min_support < 1:
-            raise ValueError(f"min_support must be >= 1, got {self.min_support}")
 
 
 def dead_reckoning(x0: np.ndarray, odometry_xyt: np.ndarray) -> np.ndarray:

@@ -2,52 +2,28 @@
 
 An experiment file::
 
-    [experiment]
-    name = "ekf-vs-odometry"          # results/<name>/...; letters, digits, '.', '_', '-'
-    description = "..."               # optional
-    root_seed = 0                     # optional, int >= 0 (default 0)
-
-    [[data]]                          # one table per dataset (or one [scenario] table, the shorthand)
-    scenario = "loop"                 # a registered simulator scenario ...
-    [data.parameters]                 # ... with dotted keys of the simulator config
-    "sensor.max_range" = 10.0
-
-    # more [[data]] tables may name: recording = "mrclam7" (a registered recording, `slamcli datasets list`)
-    # with its importer's options named as the CLI flags without dashes (robot = 3, range-std = 0.1);
-    # graph = "dlr" (a registered graph or a path); file = "runs/day1.h5" (an existing dataset). Paths are
-    # relative to this file and stay inside its folder. label = "..." (any entry): its name in results.csv.
-
-    [[solver]]                        # one table per solver configuration
-    method = "ekf"                    # registered solver name (entry point)
-    label = "ekf"                     # optional, unique per file (default: method)
-    seed = 0                          # optional, extra solver stream id (default 0)
-    oracle_association = false        # optional: hand the solver the true association (recorded)
-    [solver.params]                   # optional, validated against the solver's Params dataclass
-    gate_prob = 0.99                  # (`slamcli solvers ekf` documents every parameter)
-
-    [evaluate]                        # optional keyword options for slamcli.api.evaluate.evaluate_files
-    cutoff = 1.0
-
-    [sweep]                           # optional; without it the experiment is one point
-    replicates = 50                   # int N (= 0..N-1), a list of ints, or "range(a, b[, step])"
+    [experiment]                      # ExperimentTable: name, description, root_seed
+    name = "ekf-vs-odometry"
+    [[data]]                          # scenario = "loop" (+ [data.parameters]), recording = "mrclam7" (+ its
+    scenario = "loop"                 # importer's options), graph = "dlr" or a path, file = "runs/day1.h5"
+    [[solver]]                        # SolverTable: method, label, seed, oracle_association, [solver.params]
+    method = "ekf"
+    [evaluate]                        # slamcli.api.evaluate.EvaluateOptions
+    cutoff_m = 1.0
+    [sweep]                           # SweepTable: replicates, grid, zip, absent
+    replicates = 50
     grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
     zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
     absent = "skip"                   # optional: skip a recording not on this machine (default "fail")
     dataset_seeds = "replicate"       # optional: simulator seed = replicate id (default "derived")
-
-    [quick]                           # optional fixed overrides for `reproduce --quick` / `sweep --quick`
+    [quick]                           # fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
-    "scenario.n_steps" = 150
 
-Sweep keys live in three namespaces: ``scenario.<dotted simulator key>`` (every simulated entry),
-``solver.<label>.<param>`` and ``evaluate.<option>``, plus the key ``data`` whose values are entry labels
-(without a ``data`` axis every entry is used, as the slowest axis). ``grid`` is a cartesian product (first key
-varies slowest); ``zip`` holds equal-length lists advanced together; several zip groups may be given as ``[[sweep.zip]]`` tables. ``replicates`` (alias
-``seed``) are the Monte-Carlo replicate ids that feed the seed derivation of :mod:`slamcli.sweep.expand`.
-
-Every error is one line naming the file and the TOML key (``ConfigError``); an unknown key gets a "did you
-mean" (:func:`check_keys`, run by :func:`slamcli.sweep.expand.expand` against the real scenario, solver and
-evaluation keys). The full reference is ``docs/experiments.md``.
+Sweep keys live in three namespaces (the full reference is ``docs/experiments.md``): ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
+``evaluate.<option>``, plus ``data`` (entry labels). The tables are typed dataclasses converted through the
+configuration schema (:func:`typed_table`, :mod:`slamcli.params`); every error is one line naming the file and
+the TOML key, an unknown key with "did you mean" (:func:`check_keys` checks scenario, solver and evaluation
+keys against the real ones).
 """
 
 from __future__ import annotations
@@ -57,23 +33,15 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from slamcli.errors import ConfigError
+from slamcli.params import did_you_mean
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 _RANGE_RE = re.compile(r"^\s*range\(\s*(-?\d+)\s*(?:,\s*(-?\d+)\s*)?(?:,\s*(-?\d+)\s*)?\)\s*$")
 
 TOP_KEYS = ("experiment", "scenario", "data", "solver", "evaluate", "sweep", "quick")
-EXPERIMENT_KEYS = ("name", "description", "root_seed")
-SCENARIO_KEYS = ("name", "parameters")
-SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
-SWEEP_KEYS = ("grid", "zip", "replicates", "seed", "absent", "dataset_seeds")
-#: what a sweep does with a registered recording that is not on this machine: stop before any run, or skip it
-ABSENT_CHOICES = ("fail", "skip")
-#: a simulated dataset's seed: derived from (replicate, root_seed), or the replicate id itself (a reproduction
-#: whose source names its seeds 0..N-1)
-DATASET_SEED_CHOICES = ("derived", "replicate")
 #: the keys that say what a [[data]] entry is (exactly one per entry)
 DATA_KINDS = ("scenario", "recording", "graph", "file")
 NAMESPACES = ("scenario", "solver", "evaluate")
@@ -125,6 +93,88 @@ class DataSpec:
     @property
     def simulated(self) -> bool:
         return self.kind == "scenario"
+
+
+@dataclass(frozen=True)
+class ExperimentTable:
+    """The ``[experiment]`` table."""
+
+    name: str
+    description: str = ""
+    root_seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not _NAME_RE.match(self.name):
+            raise ValueError(f"name: {self.name!r} must start with a letter/digit and use only letters, digits, "
+                             "'.', '_', '-'")
+        if self.root_seed < 0:
+            raise ValueError(f"root_seed: must be >= 0, got {self.root_seed}")
+
+
+@dataclass(frozen=True)
+class ScenarioTable:
+    """The ``[scenario]`` shorthand of one simulated ``[[data]]`` entry."""
+
+    name: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SolverTable:
+    """One ``[[solver]]`` table as written (``label`` "" = the method)."""
+
+    method: str
+    label: str = ""
+    params: dict[str, Any] = field(default_factory=dict)
+    seed: int = 0
+    oracle_association: bool = False
+
+    def __post_init__(self) -> None:
+        label = self.label or self.method
+        if not _NAME_RE.match(label) or "." in label:
+            raise ValueError(f"label: {label!r} must use only letters, digits, '_', '-' (no dots)")
+        if self.seed < 0:
+            raise ValueError(f"seed: must be >= 0, got {self.seed}")
+
+
+@dataclass(frozen=True)
+class SweepTable:
+    """The ``[sweep]`` table as written (the axes are checked by :func:`parse_experiment`)."""
+
+    grid: dict[str, Any] = field(default_factory=dict)
+    zip: dict[str, Any] | list[dict[str, Any]] = field(default_factory=dict)
+    replicates: Any = None
+    seed: Any = None
+    absent: Literal["fail", "skip"] = "fail"
+    dataset_seeds: Literal["derived", "replicate"] = "derived"
+
+
+def typed_table(cls: type, raw: Any, where: str, source: str) -> Any:
+    """The TOML table ``raw`` at ``where`` as dataclass ``cls`` through the schema (:func:`slamcli.params.convert`,
+    strict: TOML values are typed); one line ``"<source>: <where>.<key>: ..."`` for an unknown key (with "did
+    you mean"), a missing one, a value of the wrong type or one ``cls`` refuses."""
+    import dataclasses
+    import typing
+
+    from slamcli.params import convert
+
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: {where}: expected a table, got {_type_name(raw)}")
+    fields = dataclasses.fields(cls)
+    allowed = tuple(f.name for f in fields)
+    for k in raw:
+        if k not in allowed:
+            raise ConfigError(f"{source}: {where}.{k}: unknown key{did_you_mean(k, allowed)} "
+                              f"(allowed: {', '.join(allowed)})")
+    for f in fields:
+        if f.name not in raw and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ConfigError(f"{source}: {where}.{f.name}: missing")
+    hints = typing.get_type_hints(cls)
+    kwargs = {k: convert(v, hints[k], f"{source}: {where}.{k}", strict=True) for k, v in raw.items()}
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {where}.{exc}") from None
 
 
 @dataclass(frozen=True)
@@ -206,14 +256,6 @@ def _type_name(v: Any) -> str:
     )
 
 
-def did_you_mean(key: str, known, prefix: str = "") -> str:
-    """``"; did you mean 'x'?"`` for the closest known names (:func:`difflib.get_close_matches`), else ``""``."""
-    import difflib
-
-    close = difflib.get_close_matches(key, list(known), n=2, cutoff=0.6)
-    return f"; did you mean {' or '.join(repr(prefix + c) for c in close)}?" if close else ""
-
-
 def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     """Check every key of ``cfg`` against the real scenario / solver / evaluate key sets, naming the TOML key.
 
@@ -224,10 +266,10 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     sweep axis) whose type does not fit its key raises ``"<file>: <TOML key>: expected ..."``. Checks that
     involve several keys together stay with the resolution.
     """
-    from slamcli.params import _coerce
+    from slamcli.params import convert
     from slamcli.sim.scenarios import SCENARIOS
 
-    c = _Checker(cfg.source)
+    c = _Rules(cfg.source)
     scenarios: dict[str, Any] = {}  # scenario name -> its known keys, for every simulated entry
     for d in cfg.data:
         if d.simulated and d.name not in SCENARIOS:
@@ -240,7 +282,7 @@ def check_keys(cfg: ExperimentConfig, known: Callable[[str, str], Any]) -> None:
     def typed(values: tuple, tp: Any, toml_key: str) -> None:
         for v in values:
             try:
-                _coerce(v, tp, "\0")
+                convert(v, tp, "\0")
             except ConfigError as exc:
                 raise c.fail(toml_key, str(exc).split("\0", 1)[-1].lstrip(": ")) from None
 
@@ -312,13 +354,23 @@ def parse_range(text: str) -> list[int] | None:
     return list(r)
 
 
-class _Checker:
+class _Rules:
+    """The experiment-file rules no type expresses (sweep axes, replicate lists, data labels, paths inside the
+    experiment's folder), each failing with one line ``"<source>: <key>: ..."``; the types themselves go
+    through the schema (:meth:`typed`)."""
+
     def __init__(self, source: str, data_labels: tuple[str, ...] = ()) -> None:
         self.source = source
         self.data_labels = data_labels  # labels of the [[data]] entries (for the data axis)
 
     def fail(self, key: str, message: str) -> ConfigError:
         return ConfigError(f"{self.source}: {key}: {message}")
+
+    def typed(self, value: Any, tp: Any, key: str) -> Any:
+        """``value`` at TOML key ``key`` as type ``tp`` (:func:`slamcli.params.convert`, strict)."""
+        from slamcli.params import convert
+
+        return convert(value, tp, f"{self.source}: {key}", strict=True)
 
     def tables(self, raw: dict[str, Any], key: str, alternative: str = "") -> list[dict[str, Any]]:
         """The ``[[key]]`` tables of ``raw``: present, an array of tables, at least one."""
@@ -329,11 +381,6 @@ class _Checker:
             raise self.fail(key, f"expected [[{key}]] tables (an array of tables)")
         if not value:
             raise self.fail(f"[[{key}]]", f"empty: give at least one [[{key}]] table")
-        return value
-
-    def table(self, value: Any, key: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(key, f"expected a table, got {_type_name(value)}")
         return value
 
     def known(self, table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
@@ -351,28 +398,11 @@ class _Checker:
                                  "experiment, or register it: `slamcli datasets add`)")
         return str(p)
 
-    def string(self, value: Any, key: str) -> str:
-        if not isinstance(value, str):
-            raise self.fail(key, f"expected a string, got {_type_name(value)}")
-        return value
-
     def name(self, value: Any, key: str) -> str:
-        s = self.string(value, key)
+        s = self.typed(value, str, key)
         if not _NAME_RE.match(s):
             raise self.fail(key, f"{s!r} must start with a letter/digit and use only letters, digits, '.', '_', '-'")
         return s
-
-    def nonneg_int(self, value: Any, key: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"expected an integer, got {_type_name(value)}")
-        if value < 0:
-            raise self.fail(key, f"must be >= 0, got {value}")
-        return value
-
-    def boolean(self, value: Any, key: str) -> bool:
-        if not isinstance(value, bool):
-            raise self.fail(key, f"expected a boolean, got {_type_name(value)}")
-        return value
 
     def values(self, value: Any, key: str) -> tuple[Any, ...]:
         """A sweep axis: a non-empty array, or a ``"range(...)"`` string."""
@@ -400,8 +430,8 @@ class _Checker:
                 raise self.fail(key, f"{value} replicates, above the limit of {MAX_AXIS_VALUES}")
             return tuple(range(value))
         vals = self.values(value, key)
-        for v in vals:
-            self.nonneg_int(v, key)
+        if min(self.typed(list(vals), list[int], key)) < 0:
+            raise self.fail(key, f"must be >= 0, got {min(vals)}")
         if len(set(vals)) != len(vals):
             raise self.fail(key, "replicate ids must be unique")
         return tuple(vals)
@@ -485,18 +515,14 @@ def _depth(v: Any) -> int:
     return best
 
 
-def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...], dict[str, Any]]:
+def _parse_data(c: _Rules, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...], dict[str, Any]]:
     """The dataset entries and the experiment-wide scenario parameters: ``[scenario]`` is one simulated entry
     whose parameters apply as ``scenario.*`` keys; ``[[data]]`` entries carry their own."""
     if "scenario" in raw and "data" in raw:
         raise c.fail("[scenario]", "give either one [scenario] table or [[data]] entries, not both")
     if "scenario" in raw:
-        scen = c.table(raw["scenario"], "[scenario]")
-        c.known(scen, SCENARIO_KEYS, "scenario")
-        if "name" not in scen:
-            raise c.fail("scenario.name", "missing")
-        name = c.string(scen["name"], "scenario.name")
-        params = flatten(c.table(scen.get("parameters", {}), "scenario.parameters"))
+        scen = typed_table(ScenarioTable, raw["scenario"], "scenario", c.source)
+        name, params = scen.name, flatten(scen.parameters)
         return (DataSpec(label=name, kind="scenario", name=name, where="scenario"),), params
     out: list[DataSpec] = []
     for i, d in enumerate(c.tables(raw, "data", " (or one [scenario] table)")):
@@ -508,14 +534,14 @@ def _parse_data(c: _Checker, raw: dict[str, Any]) -> tuple[tuple[DataSpec, ...],
     return tuple(out), {}
 
 
-def _data_entry(c: _Checker, d: dict[str, Any], where: str) -> DataSpec:
+def _data_entry(c: _Rules, d: dict[str, Any], where: str) -> DataSpec:
     """One ``[[data]]`` table (see the module docstring)."""
     kinds = [k for k in DATA_KINDS if k in d]
     if len(kinds) != 1:
         raise c.fail(where, f"give exactly one of {', '.join(DATA_KINDS)}"
                             + (f" (got {', '.join(kinds)})" if kinds else ""))
     kind = kinds[0]
-    name = c.string(d[kind], f"{where}.{kind}")
+    name = c.typed(d[kind], str, f"{where}.{kind}")
     if not name:
         raise c.fail(f"{where}.{kind}", "empty")
     rest = {k: v for k, v in d.items() if k not in (kind, "label")}
@@ -528,7 +554,7 @@ def _data_entry(c: _Checker, d: dict[str, Any], where: str) -> DataSpec:
         path = c.inside(name, f"{where}.{kind}")
     default = Path(name).stem if path else name
     label = c.name(d.get("label", default), f"{where}.label")
-    params = flatten(c.table(rest.pop("parameters", {}), f"{where}.parameters")) if kind == "scenario" else {}
+    params = flatten(c.typed(rest.pop("parameters", {}), dict, f"{where}.parameters")) if kind == "scenario" else {}
     return DataSpec(label=label, kind=kind, name=name, where=where, path=path, parameters=params,
                     options=rest if kind in ("recording", "graph") else {})
 
@@ -540,18 +566,12 @@ def looks_like_path(name: str) -> bool:
 
 def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> ExperimentConfig:
     """Validate the parsed TOML document ``raw`` (see the module docstring for the schema)."""
-    c = _Checker(source)
+    c = _Rules(source)
     c.known(raw, TOP_KEYS, "")
 
     if "experiment" not in raw:
         raise c.fail("[experiment]", "missing table")
-    exp = c.table(raw["experiment"], "[experiment]")
-    c.known(exp, EXPERIMENT_KEYS, "experiment")
-    if "name" not in exp:
-        raise c.fail("experiment.name", "missing")
-    name = c.name(exp["name"], "experiment.name")
-    description = c.string(exp.get("description", ""), "experiment.description")
-    root_seed = c.nonneg_int(exp.get("root_seed", 0), "experiment.root_seed")
+    exp = typed_table(ExperimentTable, raw["experiment"], "experiment", source)
 
     data, scenario_params = _parse_data(c, raw)
     c.data_labels = tuple(d.label for d in data)
@@ -560,40 +580,27 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
     labels: set[str] = set()
     for i, s in enumerate(c.tables(raw, "solver")):
         where = f"solver[{i}]"
-        c.known(s, SOLVER_KEYS, where)
-        if "method" not in s:
-            raise c.fail(f"{where}.method", "missing")
-        method = c.string(s["method"], f"{where}.method")
-        label = c.string(s.get("label", method), f"{where}.label")
-        if not _NAME_RE.match(label) or "." in label:
-            raise c.fail(f"{where}.label", f"{label!r} must use only letters, digits, '_', '-' (no dots)")
+        t = typed_table(SolverTable, s, where, source)
+        label = t.label or t.method
         if label in labels:
             raise c.fail(f"{where}.label", f"duplicate label {label!r}; give each [[solver]] a unique label")
         labels.add(label)
-        params = c.table(s.get("params", {}), f"{where}.params")
-        solvers.append(
-            SolverSpec(
-                label=label,
-                method=method,
-                params=dict(params),
-                seed=c.nonneg_int(s.get("seed", 0), f"{where}.seed"),
-                oracle_association=c.boolean(s.get("oracle_association", False), f"{where}.oracle_association"),
-            )
-        )
+        solvers.append(SolverSpec(label=label, method=t.method, params=dict(t.params), seed=t.seed,
+                                  oracle_association=t.oracle_association))
 
-    evaluate = dict(c.table(raw.get("evaluate", {}), "[evaluate]"))
+    evaluate = dict(c.typed(raw.get("evaluate", {}), dict, "[evaluate]"))
     if "against" in evaluate:  # a result file: resolved here, and it must stay beside the experiment
-        evaluate["against"] = c.inside(c.string(evaluate["against"], "evaluate.against"), "evaluate.against")
+        evaluate["against"] = c.inside(c.typed(evaluate["against"], str, "evaluate.against"), "evaluate.against")
 
     sweep = SweepSpec()
     if "sweep" in raw:
-        sw = c.table(raw["sweep"], "[sweep]")
-        c.known(sw, SWEEP_KEYS, "sweep")
+        sw = raw["sweep"]
+        typed_table(SweepTable, sw, "sweep", source)
         if "replicates" in sw and "seed" in sw:
             raise c.fail("sweep.seed", "give either sweep.replicates or sweep.seed, not both")
         rep_key = "replicates" if "replicates" in sw else "seed"
         replicates = c.replicates(sw[rep_key], f"sweep.{rep_key}") if rep_key in sw else (0,)
-        grid_raw = c.table(sw.get("grid", {}), "sweep.grid")
+        grid_raw = c.typed(sw.get("grid", {}), dict, "sweep.grid")
         if "grid" in sw and not grid_raw:
             raise c.fail("sweep.grid", "empty grid: give at least one key = [values]")
         grid_raw = flatten(grid_raw)
@@ -605,7 +612,7 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
             groups = sw["zip"] if isinstance(sw["zip"], list) else [sw["zip"]]
             for gi, g in enumerate(groups):
                 where = "sweep.zip" if not isinstance(sw["zip"], list) else f"sweep.zip[{gi}]"
-                g = flatten(c.table(g, where))
+                g = flatten(c.typed(g, dict, where))
                 if not g:
                     raise c.fail(where, "empty zip group: give at least one key = [values]")
                 group = []
@@ -620,18 +627,13 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
         dup = sorted({k for k in all_keys if all_keys.count(k) > 1})
         if dup:
             raise c.fail("[sweep]", f"key {dup[0]!r} is swept more than once")
-        absent = c.string(sw.get("absent", "fail"), "sweep.absent")
-        if absent not in ABSENT_CHOICES:
-            raise c.fail("sweep.absent", f"{absent!r} is not one of {', '.join(ABSENT_CHOICES)}")
-        seeds = c.string(sw.get("dataset_seeds", "derived"), "sweep.dataset_seeds")
-        if seeds not in DATASET_SEED_CHOICES:
-            raise c.fail("sweep.dataset_seeds", f"{seeds!r} is not one of {', '.join(DATASET_SEED_CHOICES)}")
+        absent = sw.get("absent", "fail")
         sweep = SweepSpec(grid=tuple(grid), zips=tuple(zips), replicates=replicates, absent=absent,
-                          dataset_seeds=seeds)
+                          dataset_seeds=sw.get("dataset_seeds", "derived"))
 
     quick: dict[str, Any] = {}
     if "quick" in raw:
-        q = flatten(c.table(raw["quick"], "[quick]"))
+        q = flatten(c.typed(raw["quick"], dict, "[quick]"))
         for k, v in q.items():
             if k in ("replicates", "seed"):
                 quick["replicates"] = c.replicates(v, f"quick.{k}")
@@ -642,15 +644,15 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
                 quick[k] = v
 
     return ExperimentConfig(
-        name=name,
+        name=exp.name,
         source=source,
         data=data,
         scenario_params=scenario_params,
         solvers=tuple(solvers),
         evaluate=evaluate,
         sweep=sweep,
-        root_seed=root_seed,
-        description=description,
+        root_seed=exp.root_seed,
+        description=exp.description,
         quick=quick,
     )
 
@@ -754,7 +756,7 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     """
     import dataclasses
 
-    c = _Checker(f"{cfg.source} (command line)", tuple(d.label for d in cfg.data))
+    c = _Rules(f"{cfg.source} (command line)", tuple(d.label for d in cfg.data))
     cfg, items = _select_solvers(cfg, c, items)
     labels = {s.label for s in cfg.solvers}
     fixed: dict[str, Any] = {}
@@ -796,7 +798,7 @@ def apply_overrides(cfg: ExperimentConfig, items: list[str], known: Callable[[st
     return dataclasses.replace(out, sweep=dataclasses.replace(out.sweep, grid=tuple(grid)))
 
 
-def _select_solvers(cfg: ExperimentConfig, c: _Checker, items: list[str]) -> tuple[ExperimentConfig, list[str]]:
+def _select_solvers(cfg: ExperimentConfig, c: _Rules, items: list[str]) -> tuple[ExperimentConfig, list[str]]:
     """Apply ``solver=LABELS`` (keep those ``[[solver]]`` labels, in file order) and ``+solver=METHODS`` (add
     each registered method with its default parameters, labelled by its name; the method is checked when the
     sweep is resolved); the other items are returned untouched."""

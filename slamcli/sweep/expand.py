@@ -119,7 +119,6 @@ class RegistryResolver:
     def known_keys(self, kind: str, name: str) -> dict[str, Any] | list[str] | None:
         """Known keys for :func:`slamcli.sweep.config.check_keys`: ``{key: type}`` for a scenario or a solver,
         the option names for ``evaluate``; None = unknown solver plugin (reported on resolution)."""
-        import inspect
         import typing
 
         if kind == "scenario":
@@ -140,10 +139,9 @@ class RegistryResolver:
                 return typing.get_type_hints(registry.load(name).Params)
             except SlamcliError:
                 return None
-        from slamcli.api.evaluate import evaluate_files
+        from slamcli.api.evaluate import EvaluateOptions
 
-        internal = {"result_path", "data_path", "out_dir", "check_hash", "return_tables"}
-        return sorted(n for n in inspect.signature(evaluate_files).parameters if n not in internal)
+        return EvaluateOptions.names()
 
     def data(self, entry: DataSpec, where: str) -> dict[str, Any]:
         """A recording, graph or dataset file: where it is and what identifies its content (the importer, its
@@ -193,39 +191,18 @@ class RegistryResolver:
         return _canonical(params_to_dict(p))
 
     def evaluate(self, options: dict[str, Any], where: str) -> dict[str, Any]:
-        """Check ``[evaluate]`` keys and types against ``evaluate_files``' keyword options; fill defaults."""
-        import inspect
+        """``[evaluate]`` checked through its schema (:class:`slamcli.api.evaluate.EvaluateOptions`), defaults
+        filled."""
+        from slamcli.api.evaluate import EvaluateOptions
 
-        from slamcli.api.evaluate import evaluate_files
-
-        internal = {"result_path", "data_path", "out_dir", "check_hash", "return_tables"}
-        sig = {n: p.default for n, p in inspect.signature(evaluate_files).parameters.items() if n not in internal}
-        out = dict(sig)
-        for key, value in options.items():
-            if key not in sig:
-                raise ConfigError(f"{where}: unknown option {key!r}; known: {', '.join(sorted(sig))}")
-            default = sig[key]
-            if isinstance(default, (int, float)) and not isinstance(default, bool) or key.endswith("_m"):
-                if isinstance(value, bool) or not (isinstance(value, (int, float)) or value is None):
-                    raise ConfigError(f"{where}: {key}: expected a number, got {value!r}")
-            elif isinstance(default, str) and not isinstance(value, str):
-                raise ConfigError(f"{where}: {key}: expected a string, got {value!r}")
-            out[key] = value
-        from slamcli.api.evaluate import check_evaluation_options
-
-        try:
-            check_evaluation_options(**{k: v for k, v in out.items() if k in (
-                "cutoff", "ospa_order", "near_path_m", "rpe_delta", "rpe_unit")}, where=where)
-        except SlamcliError as exc:
-            raise ConfigError(str(exc)) from None
-        return _canonical(out)
+        return _canonical(EvaluateOptions.keywords(options, where))
 
 
 def _locate(entry: DataSpec, where: str) -> tuple[str, Path]:
     """``(importer, import path)`` of a recording or graph entry; one-line ConfigError when the name is not
     registered, is read by another importer, or is not on this machine."""
     from slamcli.datasets import DatasetImportError, registry
-    from slamcli.sweep.config import did_you_mean
+    from slamcli.params import did_you_mean
 
     key = f"{where}.{entry.kind}"
     if entry.path:

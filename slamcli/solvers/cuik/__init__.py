@@ -7,6 +7,11 @@ relaxation of the whole graph with rigorous dual bounds), ``hypotheses`` (branch
 relabelling), ``solver``.
 """
 
-from slamcli.solvers.cuik.solver import CuikParams, CuikSlam
+from slamcli.solvers.lazy import lazy_exports
 
+_EXPORTS = {
+    "CuikParams": "slamcli.solvers.cuik.params",
+    "CuikSlam": "slamcli.solvers.cuik.solver",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 __all__ = ["CuikParams", "CuikSlam"]

@@ -21,59 +21,49 @@ optimised in world coordinates ``[x, y, θ]``, so the Laplace marginals are worl
 Pose2 marginals equal ``J Σ_b Jᵀ``, ``J = blkdiag(R(θ), 1)``). The optimiser is :mod:`slamcli.solvers.nls`.
 """
 
-from slamcli.solvers.graph.build import (  # noqa: F401
-    GraphProblem,
-    build_gtsam_problem,
-    landmark_joint_covariance,
-    laplace_marginals,
-    located,
-    pack_state,
-)
-from slamcli.solvers.graph.certify import Certificate, certify_pose_graph  # noqa: F401
-from slamcli.solvers.graph.factors import (  # noqa: F401
-    bearing_range_error,
-    between_error,
-    group_returns,
-    landmark_offset_error,
-    log_jacobian,
-    prior_error,
-    robot_range_bearing_error,
-    sqrt_info_batch,
-    sqrt_info_from_cov,
-    sqrt_of_weight,
-)
-from slamcli.solvers.graph.init import (  # noqa: F401
-    chordal_poses,
-    incremental_initial_poses,
-    initial_poses,
-    nearest_neighbour_association,
-    odometry_initial_poses,
-    pose_graph_edges,
-    robust_initial_poses,
-    spanning_tree_poses,
-)
-from slamcli.solvers.graph.merge import (  # noqa: F401
-    merge_candidates,
-)
-from slamcli.solvers.graph.paper import (  # noqa: F401
-    build_paper_problem,
-    default_paper_weights,
-    optimize_paper_energy,
-    paper_energy,
-)
-from slamcli.solvers.graph.params import (  # noqa: F401
-    GraphParams,
-    resolve_robust,
-)
-from slamcli.solvers.graph.solver import (  # noqa: F401
-    GraphSlam,
-    chi2_outlier_counts,
-)
-from slamcli.solvers.graph.variance import (  # noqa: F401
-    NOISE_GROUPS,
-    NoiseCalibration,
-    calibrate_noise,
-    noise_row_groups,
-    noise_sigmas,
-    noise_with_sigmas,
-)
+from slamcli.solvers.lazy import lazy_exports
+
+_EXPORTS = {
+    "GraphProblem": "slamcli.solvers.graph.build",
+    "build_gtsam_problem": "slamcli.solvers.graph.build",
+    "landmark_joint_covariance": "slamcli.solvers.graph.build",
+    "laplace_marginals": "slamcli.solvers.graph.build",
+    "located": "slamcli.solvers.graph.build",
+    "pack_state": "slamcli.solvers.graph.build",
+    "Certificate": "slamcli.solvers.graph.certify",
+    "certify_pose_graph": "slamcli.solvers.graph.certify",
+    "bearing_range_error": "slamcli.solvers.graph.factors",
+    "between_error": "slamcli.solvers.graph.factors",
+    "group_returns": "slamcli.solvers.graph.factors",
+    "landmark_offset_error": "slamcli.solvers.graph.factors",
+    "log_jacobian": "slamcli.solvers.graph.factors",
+    "prior_error": "slamcli.solvers.graph.factors",
+    "robot_range_bearing_error": "slamcli.solvers.graph.factors",
+    "sqrt_info_batch": "slamcli.solvers.graph.factors",
+    "sqrt_info_from_cov": "slamcli.solvers.graph.factors",
+    "sqrt_of_weight": "slamcli.solvers.graph.factors",
+    "chordal_poses": "slamcli.solvers.graph.init",
+    "incremental_initial_poses": "slamcli.solvers.graph.init",
+    "initial_poses": "slamcli.solvers.graph.init",
+    "nearest_neighbour_association": "slamcli.solvers.graph.init",
+    "odometry_initial_poses": "slamcli.solvers.graph.init",
+    "pose_graph_edges": "slamcli.solvers.graph.init",
+    "robust_initial_poses": "slamcli.solvers.graph.init",
+    "spanning_tree_poses": "slamcli.solvers.graph.init",
+    "merge_candidates": "slamcli.solvers.graph.merge",
+    "build_paper_problem": "slamcli.solvers.graph.paper",
+    "default_paper_weights": "slamcli.solvers.graph.paper",
+    "optimize_paper_energy": "slamcli.solvers.graph.paper",
+    "paper_energy": "slamcli.solvers.graph.paper",
+    "GraphParams": "slamcli.solvers.graph.params",
+    "resolve_robust": "slamcli.solvers.graph.params",
+    "GraphSlam": "slamcli.solvers.graph.solver",
+    "chi2_outlier_counts": "slamcli.solvers.graph.solver",
+    "NOISE_GROUPS": "slamcli.solvers.graph.variance",
+    "NoiseCalibration": "slamcli.solvers.graph.variance",
+    "calibrate_noise": "slamcli.solvers.graph.variance",
+    "noise_row_groups": "slamcli.solvers.graph.variance",
+    "noise_sigmas": "slamcli.solvers.graph.variance",
+    "noise_with_sigmas": "slamcli.solvers.graph.variance",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

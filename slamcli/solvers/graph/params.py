@@ -4,184 +4,160 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-import numpy as np
+from slamcli.params import param
 
-from slamcli.solvers import nls
+if TYPE_CHECKING:  # numpy-free at import: ``slamcli solvers graph`` reads these parameters
+    from slamcli.solvers import nls
 
 
 @dataclass(frozen=True)
 class GraphParams:
     """Parameters of :class:`GraphSlam`.
 
-    Attributes
-    ----------
-    model : "gtsam" | "paper"
-        Factor definitions (module docstring). Default ``"gtsam"``.
-    method : "lm" | "gn" | "dogleg"
-        Levenberg-Marquardt (default, GTSAM's damping schedule), Gauss-Newton, or Powell's dogleg.
-    linear_solver : "auto" | "cholmod" | "superlu" | "chain"
-        Sparse linear solver of the optimiser (:class:`slamcli.solvers.nls.NlsParams`): ``auto`` = CHOLMOD
-        when it imports (CVXOPT, a dependency), else SciPy's SuperLU; ordering computed once per problem.
-    pose_chart : "body" | "world"
-        How the optimiser steps a pose: GTSAM's Pose2 retraction ``x ⊕ Exp(ξ)`` (default; follows GTSAM's
-        path, hence its local minimum on non-convex real data) or additive world coordinates.
-    max_iterations : int
-        Linear-solve budget (default 100).
-    rel_cost_tol : float
-        Stop when an accepted step lowers the cost by less than this fraction (default 1e-12).
-    pred_cost_tol : float
-        LM on a plain pose graph (the certificate's case, :meth:`GraphSlam._is_pose_graph`): stop before a step whose predicted decrease (the Gauss-Newton decrement) is below this fraction of
-        the cost (default 1e-10; 0 = off, :class:`slamcli.solvers.nls.NlsParams`). On the six public pose graphs
-        this saves one to three linearisations per solve and leaves the cost within 1e-10 (relative) of the
-        fully polished one (``benchmarks/bench_posegraph_defaults.py``).
-    step_tol : float
-        Stop when ``‖h‖ ≤ step_tol (‖x‖ + step_tol)`` (default 1e-12).
-    robust : "auto" | "none" | "huber" | "cauchy" | "geman_mcclure"
-        Kernel on the observation, GPS and loop-closure factors (GTSAM's m-estimators,
-        :func:`slamcli.solvers.nls.robust_kernel`). Default ``auto``: ``cauchy`` when the association is ids
-        reported by a real sensor (MRCLAM), else ``none`` (:func:`resolve_robust`); the kernel used is
-        ``extra["robust"]``.
-    huber_k : float
-        Huber threshold on the whitened residual norm (default 1.345, 95 % efficiency under Gaussian noise).
-    cauchy_k : float
-        Cauchy scale (default 2.3849, 95 % efficiency).
-    geman_mcclure_c : float
-        Geman-McClure scale (default 1.0, as in GTSAM's examples).
-    edge_info : bool
-        Use the dataset's per-edge information matrices (``inputs.constraints``: lossless graph imports)
-        for the odometry and observation factors when present, instead of the NoiseSpec σ's (default True).
-    init : "auto" | "odometry" | "chordal" | "spanning_tree" | "robust" | "incremental"
-        Initial poses when ``init_from = "odometry"``. ``auto`` (default, :func:`resolve_init`): ``chordal``
-        for a pose graph with loop closures, else ``odometry``; ``extra["init"]`` says which. Otherwise: the
-        chained odometry, the chordal
-        relaxation of the rotations + linear translations over all pose-pose edges, or composition along a
-        breadth-first spanning tree (:mod:`slamcli.solvers.graph.init`) — these two only differ from the
-        odometry chain when the dataset has between-factors (loop closures) — or ``robust``: the poses of
-        a Cauchy-kernel solve of the same graph started from the odometry chain (:func:`robust_initial_poses`;
-        ``model=gtsam`` only). A few wrong correspondences in a long chain (GTSAM's victoria_park.txt has
-        10 of 3640) drag a Gaussian solve started from the drifted chain into a stall far from its optimum
-        (cost 4.98e5, λ at its bound), while the same Gaussian graph started from the robust estimate
-        converges in 8 iterations to 3164 (``benchmarks/bench_graph_real.py``). ``incremental``: poses of an
-        incremental pass for unknown correspondences (:func:`incremental_initial_poses`): every
-        ``incremental_window`` seconds the sightings so far are associated by gated nearest neighbour on the
-        current estimate and the graph is re-optimised (Cauchy kernel), so each new sighting is compared
-        with the map from poses that drifted only since the last window, not since the start. Measured on
-        the first 300 s of Victoria Park (aligned GPS ATE): default 21.3 m; ``init=incremental
-        robust=cauchy`` 1.38 m with 3 s windows (≈ 15× the default's CPU time), 10.9 m with 10 s windows;
-        ACFR car park, full run: default 1.79 m (11 of 15 beacons matched), incremental + cauchy 0.083 m
-        (15 of 15). Cost: one full-chain solve per window (opt-in for that reason).
-    incremental_window : float
-        Window of ``init=incremental``, s (default 3).
-    outlier_counts : bool
-        Report χ² outlier counts per factor type at the estimate (``extra["chi2_outliers"]``; default True).
-    association : "auto" | "init" | "reported" | "nn"
-        Correspondence source: ``init`` = labels of the ``--init`` result; ``reported`` = sensor identities;
-        ``nn`` = gated nearest neighbour on the initial poses; ``auto`` = init if given, else reported if
-        any row has one, else nn.
-    gate_prob : float
-        χ² gate probability of the nearest-neighbour front end (default 0.999).
-    nn_extra_std : float
-        Extra landmark-space σ (m) added to every inverse observation in the front end (default 0.0).
-    nn_drift : bool
-        Inflate the front end's landmark covariances by the dead-reckoning drift since their last sighting
-        (odometry σ of the NoiseSpec), so revisits after a loop gate correctly (default True).
-    nn_segment_dist : float
-        Returns of one pose that are adjacent in bearing (≤ 0.1 rad) and closer than this (m) are one detection,
-        e.g. the several laser hits on one post (default 0.5; 0 = every row separately).
-    min_obs : int
-        Landmarks with fewer associated observations are dropped (default 1 = keep all).
-    merge_rounds : int
-        With ``nn`` association: after each optimisation, merge landmark pairs that pass the correspondence
-        test of :func:`merge_candidates` (same χ² gate) and re-optimise, at most this many times (default 3;
-        0 = off). Closes loops the incremental front end missed because of dead-reckoning drift.
-    merge_dist : float
-        Never co-observed labels closer than this (m) are merged too (paper 000's ϑ; default 1.0).
-    prior_std : tuple[float, float, float]
-        σ of the prior on x_0 at the known start pose (gauge), ``gtsam`` model (default 1e-4 m, m, rad).
-    use_odometry : bool
-        Odometry between-factors (default True).
-    use_controls : bool
-        Motion between-factors from the commanded controls (default False).
-    motion_lateral_std : float
-        σ of the lateral component of a motion factor (DDMR has none; default 0.01 m).
-    use_gps : bool
-        Position factors for GPS fixes when the dataset has them (default True).
-    group_returns : bool
-        ``gtsam`` model: one bearing-range factor per (pose, landmark) pair at the mean range and
-        circular-mean bearing of its rows (:func:`group_returns`; a laser's several hits on one post).
-        Point sensors have one row per pair, so this changes nothing for them (default True).
-    estimate_range_bias : bool
-        ``gtsam`` model: add one unknown range offset ``b`` to the state, ``r̂ = ‖m − p‖ − b`` (default
-        False). A laser measures the surface of a post, on average ≈ π/4 · radius nearer than its centre;
-        estimating ``b`` recovers the centres. Reported as ``extra["range_bias"]``.
-    surface : bool
-        Beyond the paper: the surface-aware model with the landmark radius ρ the dataset declares
-        (``observations.diameter_m``, :mod:`slamcli.solvers.surface`): every range lengthened by π/4 · ρ, the
-        mean distance from a post's surface hit to its centre (default False; refused when none is declared).
-    paper_R, paper_S, paper_Q : tuple of rows or None
-        Weight matrices of the ``paper`` model (3×3, 3×3, 2×2). ``None`` → R = 0, S = ½ diag(σ_odo)⁻²,
-        Q = ½ σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).
-    init_from : "odometry" | "init"
-        Initial poses: chained odometry increments from x_0 (default) or the ``--init`` result's poses.
-    covariance : bool
-        Compute Laplace marginal covariances (default True).
-    certify : bool
-        Pose graphs (no landmarks, ``model=gtsam``, no kernel, single robot): test global optimality with the
-        SE-Sync Lagrangian-dual certificate (:mod:`slamcli.solvers.graph.certify`) and report it in
-        ``extra["certificate"]`` (default True).
-    restart : "auto" | "off"
-        ``auto`` (default): a pose-graph solve from the odometry (or spanning-tree) start that is not
-        certified is solved again from the chordal relaxation, and the lower cost is kept; a landmark-graph
-        solve that stalls (iteration cap reached with a relative decrease below ``STALL_REL_DECREASE`` over
-        its last ``STALL_WINDOW`` iterations) is solved again from ``init=robust``. A restart runs only when
-        it can help: its start has a lower cost than the estimate, or a ridge of the cost lies between them
-        (another basin, ``BASIN_PROBES``); otherwise the solve stops there. Each is said in
-        ``extra["restart"]`` (``skipped``: why not) and the message.
+    Each field's documentation is its ``metadata["doc"]`` (``slamcli solvers NAME`` shows it).
     """
 
-    model: Literal["gtsam", "paper"] = "gtsam"
-    method: Literal["lm", "gn", "dogleg"] = "lm"
-    linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = "auto"
-    pose_chart: Literal["body", "world"] = "body"
-    max_iterations: int = 100
-    rel_cost_tol: float = 1e-12
-    pred_cost_tol: float = 1e-10
-    step_tol: float = 1e-12
-    robust: Literal["auto", "none", "huber", "cauchy", "geman_mcclure"] = "auto"
-    huber_k: float = 1.345
-    cauchy_k: float = 2.3849
-    geman_mcclure_c: float = 1.0
-    edge_info: bool = True
-    init: Literal["auto", "odometry", "chordal", "spanning_tree", "robust", "incremental"] = "auto"
-    incremental_window: float = 3.0
-    outlier_counts: bool = True
-    association: Literal["auto", "init", "reported", "nn"] = "auto"
-    gate_prob: float = 0.999
-    nn_extra_std: float = 0.0
-    nn_drift: bool = True
-    nn_segment_dist: float = 0.5
-    min_obs: int = 1
-    merge_rounds: int = 3
-    merge_dist: float = 1.0
-    prior_std: tuple[float, float, float] = (1e-4, 1e-4, 1e-4)
-    use_odometry: bool = True
-    use_controls: bool = False
-    motion_lateral_std: float = 0.01
-    use_gps: bool = True
-    group_returns: bool = True
-    estimate_range_bias: bool = False
-    surface: bool = False
-    paper_R: tuple[tuple[float, ...], ...] | None = None
-    paper_S: tuple[tuple[float, ...], ...] | None = None
-    paper_Q: tuple[tuple[float, ...], ...] | None = None
-    init_from: Literal["odometry", "init"] = "odometry"
-    covariance: bool = True
-    certify: bool = True
-    restart: Literal["auto", "off"] = "auto"
+    model: Literal["gtsam", "paper"] = param("gtsam", "Factor definitions (module docstring). Default "
+                                                      '`"gtsam"`.')
+    method: Literal["lm", "gn", "dogleg"] = param("lm", "Levenberg-Marquardt (default, GTSAM's damping "
+                                                        "schedule), Gauss-Newton, or Powell's dogleg.")
+    linear_solver: Literal["auto", "cholmod", "superlu", "chain"] = param("auto",
+        "Sparse linear solver of the optimiser (:class:`slamcli.solvers.nls.NlsParams`): `auto` = CHOLMOD "
+        "when it imports (CVXOPT, a dependency), else SciPy's SuperLU; ordering computed once per "
+        "problem.")
+    pose_chart: Literal["body", "world"] = param("body", "How the optimiser steps a pose: GTSAM's Pose2 "
+                                                         "retraction `x ⊕ Exp(ξ)` (default; follows "
+                                                         "GTSAM's path, hence its local minimum on "
+                                                         "non-convex real data) or additive world "
+                                                         "coordinates.")
+    max_iterations: int = param(100, "Linear-solve budget (default 100).")
+    rel_cost_tol: float = param(1e-12, "Stop when an accepted step lowers the cost by less than this "
+                                       "fraction (default 1e-12).")
+    pred_cost_tol: float = param(1e-10, "LM on a plain pose graph (the certificate's case, "
+                                        ":meth:`GraphSlam._is_pose_graph`): stop before a step whose "
+                                        "predicted decrease (the Gauss-Newton decrement) is below this "
+                                        "fraction of the cost (default 1e-10; 0 = off, "
+                                        ":class:`slamcli.solvers.nls.NlsParams`). On the six public pose "
+                                        "graphs this saves one to three linearisations per solve and "
+                                        "leaves the cost within 1e-10 (relative) of the fully polished "
+                                        "one (`benchmarks/bench_posegraph_defaults.py`).")
+    step_tol: float = param(1e-12, "Stop when `‖h‖ ≤ step_tol (‖x‖ + step_tol)` (default 1e-12).")
+    robust: Literal["auto", "none", "huber", "cauchy", "geman_mcclure"] = param("auto",
+        "Kernel on the observation, GPS and loop-closure factors (GTSAM's m-estimators, "
+        ":func:`slamcli.solvers.nls.robust_kernel`). Default `auto`: `cauchy` when the association is ids "
+        "reported by a real sensor (MRCLAM), else `none` (:func:`resolve_robust`); the kernel used is "
+        '`extra["robust"]`.')
+    huber_k: float = param(1.345, "Huber threshold on the whitened residual norm (default 1.345, 95 % "
+                                  "efficiency under Gaussian noise).")
+    cauchy_k: float = param(2.3849, "Cauchy scale (default 2.3849, 95 % efficiency).")
+    geman_mcclure_c: float = param(1.0, "Geman-McClure scale (default 1.0, as in GTSAM's examples).")
+    edge_info: bool = param(True, "Use the dataset's per-edge information matrices (`inputs.constraints`: "
+                                  "lossless graph imports) for the odometry and observation factors when "
+                                  "present, instead of the NoiseSpec σ's (default True).")
+    init: Literal["auto", "odometry", "chordal", "spanning_tree", "robust", "incremental"] = param("auto",
+        'Initial poses when `init_from = "odometry"`. `auto` (default, :func:`resolve_init`): `chordal` '
+        'for a pose graph with loop closures, else `odometry`; `extra["init"]` says which. Otherwise: the '
+        "chained odometry, the chordal relaxation of the rotations + linear translations over all "
+        "pose-pose edges, or composition along a breadth-first spanning tree "
+        "(:mod:`slamcli.solvers.graph.init`) — these two only differ from the odometry chain when the "
+        "dataset has between-factors (loop closures) — or `robust`: the poses of a Cauchy-kernel solve of "
+        "the same graph started from the odometry chain (:func:`robust_initial_poses`; `model=gtsam` "
+        "only). A few wrong correspondences in a long chain (GTSAM's victoria_park.txt has 10 of 3640) "
+        "drag a Gaussian solve started from the drifted chain into a stall far from its optimum (cost "
+        "4.98e5, λ at its bound), while the same Gaussian graph started from the robust estimate "
+        "converges in 8 iterations to 3164 (`benchmarks/bench_graph_real.py`). `incremental`: poses of an "
+        "incremental pass for unknown correspondences (:func:`incremental_initial_poses`): every "
+        "`incremental_window` seconds the sightings so far are associated by gated nearest neighbour on "
+        "the current estimate and the graph is re-optimised (Cauchy kernel), so each new sighting is "
+        "compared with the map from poses that drifted only since the last window, not since the start. "
+        "Measured on the first 300 s of Victoria Park (aligned GPS ATE): default 21.3 m; "
+        "`init=incremental robust=cauchy` 1.38 m with 3 s windows (≈ 15× the default's CPU time), 10.9 m "
+        "with 10 s windows; ACFR car park, full run: default 1.79 m (11 of 15 beacons matched), "
+        "incremental + cauchy 0.083 m (15 of 15). Cost: one full-chain solve per window (opt-in for that "
+        "reason).")
+    incremental_window: float = param(3.0, "Window of `init=incremental`, s (default 3).")
+    outlier_counts: bool = param(True, "Report χ² outlier counts per factor type at the estimate "
+                                       '(`extra["chi2_outliers"]`; default True).')
+    association: Literal["auto", "init", "reported", "nn"] = param("auto",
+        "Correspondence source: `init` = labels of the `--init` result; `reported` = sensor identities; "
+        "`nn` = gated nearest neighbour on the initial poses; `auto` = init if given, else reported if "
+        "any row has one, else nn.")
+    gate_prob: float = param(0.999, "χ² gate probability of the nearest-neighbour front end (default 0.999).")
+    nn_extra_std: float = param(0.0, "Extra landmark-space σ (m) added to every inverse observation in "
+                                     "the front end (default 0.0).")
+    nn_drift: bool = param(True, "Inflate the front end's landmark covariances by the dead-reckoning "
+                                 "drift since their last sighting (odometry σ of the NoiseSpec), so "
+                                 "revisits after a loop gate correctly (default True).")
+    nn_segment_dist: float = param(0.5, "Returns of one pose that are adjacent in bearing (≤ 0.1 rad) and "
+                                        "closer than this (m) are one detection, e.g. the several laser "
+                                        "hits on one post (default 0.5; 0 = every row separately).")
+    min_obs: int = param(1, "Landmarks with fewer associated observations are dropped (default 1 = keep "
+                            "all).")
+    merge_rounds: int = param(3, "With `nn` association: after each optimisation, merge landmark pairs "
+                                 "that pass the correspondence test of :func:`merge_candidates` (same χ² "
+                                 "gate) and re-optimise, at most this many times (default 3; 0 = off). "
+                                 "Closes loops the incremental front end missed because of dead-reckoning "
+                                 "drift.")
+    merge_dist: float = param(1.0, "Never co-observed labels closer than this (m) are merged too (paper "
+                                   "000's ϑ; default 1.0).")
+    prior_std: tuple[float, float, float] = param((1e-4, 1e-4, 1e-4),
+        "σ of the prior on x_0 at the known start pose (gauge), `gtsam` model (default 1e-4 m, m, rad).")
+    use_odometry: bool = param(True, "Odometry between-factors (default True).")
+    use_controls: bool = param(False, "Motion between-factors from the commanded controls (default False).")
+    motion_lateral_std: float = param(0.01, "σ of the lateral component of a motion factor (DDMR has "
+                                            "none; default 0.01 m).")
+    use_gps: bool = param(True, "Position factors for GPS fixes when the dataset has them (default True).")
+    group_returns: bool = param(True, "`gtsam` model: one bearing-range factor per (pose, landmark) pair "
+                                      "at the mean range and circular-mean bearing of its rows "
+                                      "(:func:`group_returns`; a laser's several hits on one post). Point "
+                                      "sensors have one row per pair, so this changes nothing for them "
+                                      "(default True).")
+    estimate_range_bias: bool = param(False, "`gtsam` model: add one unknown range offset `b` to the "
+                                             "state, `r̂ = ‖m − p‖ − b` (default False). A laser measures "
+                                             "the surface of a post, on average ≈ π/4 · radius nearer "
+                                             "than its centre; estimating `b` recovers the centres. "
+                                             'Reported as `extra["range_bias"]`.')
+    surface: bool = param(False, "Beyond the paper: the surface-aware model with the landmark radius ρ "
+                                 "the dataset declares (`observations.diameter_m`, "
+                                 ":mod:`slamcli.solvers.surface`): every range lengthened by π/4 · ρ, the "
+                                 "mean distance from a post's surface hit to its centre (default False; "
+                                 "refused when none is declared).")
+    paper_R: tuple[tuple[float, ...], ...] | None = param(None,
+        "Weight matrices of the `paper` model (3×3, 3×3, 2×2). `None` → R = 0, S = ½ diag(σ_odo)⁻², Q = ½ "
+        "σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).")
+    paper_S: tuple[tuple[float, ...], ...] | None = param(None,
+        "Weight matrices of the `paper` model (3×3, 3×3, 2×2). `None` → R = 0, S = ½ diag(σ_odo)⁻², Q = ½ "
+        "σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).")
+    paper_Q: tuple[tuple[float, ...], ...] | None = param(None,
+        "Weight matrices of the `paper` model (3×3, 3×3, 2×2). `None` → R = 0, S = ½ diag(σ_odo)⁻², Q = ½ "
+        "σ_r⁻² I (so that E equals the Gaussian negative log-likelihood of the odometry).")
+    init_from: Literal["odometry", "init"] = param("odometry",
+        "Initial poses: chained odometry increments from x_0 (default) or the `--init` result's poses.")
+    covariance: bool = param(True, "Compute Laplace marginal covariances (default True).")
+    certify: bool = param(True, "Pose graphs (no landmarks, `model=gtsam`, no kernel, single robot): test "
+                                "global optimality with the SE-Sync Lagrangian-dual certificate "
+                                "(:mod:`slamcli.solvers.graph.certify`) and report it in "
+                                '`extra["certificate"]` (default True).')
+    restart: Literal["auto", "off"] = param("auto", "`auto` (default): a pose-graph solve from the "
+                                                    "odometry (or spanning-tree) start that is not "
+                                                    "certified is solved again from the chordal "
+                                                    "relaxation, and the lower cost is kept; a "
+                                                    "landmark-graph solve that stalls (iteration cap "
+                                                    "reached with a relative decrease below "
+                                                    "`STALL_REL_DECREASE` over its last `STALL_WINDOW` "
+                                                    "iterations) is solved again from `init=robust`. A "
+                                                    "restart runs only when it can help: its start has a "
+                                                    "lower cost than the estimate, or a ridge of the cost "
+                                                    "lies between them (another basin, `BASIN_PROBES`); "
+                                                    "otherwise the solve stops there. Each is said in "
+                                                    '`extra["restart"]` (`skipped`: why not) and the '
+                                                    "message.")
 
     def __post_init__(self) -> None:
+        import numpy as np  # constructing parameters means solving: numpy is loaded then anyway
+
         if self.max_iterations < 1:
             raise ValueError("max_iterations must be ≥ 1")
         if not self.pred_cost_tol >= 0.0:
@@ -210,6 +186,8 @@ class GraphParams:
                    pose_graph: bool = False) -> nls.NlsParams:
         """The optimiser's parameters: this method, linear solver, chart and budget with kernel ``robust`` of
         scale ``kernel_k`` (and ``rel_cost_tol`` if given); ``pred_cost_tol`` for a ``pose_graph`` only."""
+        from slamcli.solvers import nls
+
         return nls.NlsParams(
             method=self.method,
             linear_solver=self.linear_solver,
@@ -257,6 +235,8 @@ def resolve_robust(robust: str, association: str, id_source: str = "unknown") ->
 
 def uses_gps(params: GraphParams, inputs) -> bool:
     """Whether the graph gets GPS factors: ``use_gps`` and the dataset has fixes."""
+    import numpy as np
+
     return bool(params.use_gps and np.asarray(getattr(inputs, "gps_step", ())).size > 0)
 
 
@@ -278,3 +258,6 @@ def resolve_init(params: GraphParams, inputs) -> str:
     pose_graph = (params.model == "gtsam" and not params.use_controls and inputs.robots is None
                   and not uses_gps(params, inputs) and len(inputs.observations) == 0)
     return "chordal" if has_loops and pose_graph else "odometry"
+
+
+Params = GraphParams

@@ -1,44 +1,18 @@
-"""Named settings of ICM-SLAM (``-p preset=NAME``; issue 22 item 3).
+"""Named settings of ICM-SLAM (``-p preset=NAME``): the value tables :data:`PRESETS` and :data:`WITH_IDS`.
 
-``paper`` (the default) is Algorithm 2 as the paper runs it (with the deviations listed in
-:mod:`slamcli.solvers.icm.solver`). ``real`` is the one setting documented for real recordings; its values were
-chosen by measurement (``slamcli reproduce --section real``, the real-data section of the report):
+``paper`` (the default) is Algorithm 2 as the paper runs it; ``real`` is the setting for real recordings, with
+more values when the dataset carries sensor-reported ids (:data:`WITH_IDS`). Why each value was chosen, with the
+measurements: ``benchmarks/results/icm_presets.md``.
 
-* ``accelerate=joint, accelerate_every=1, joint_iters=20`` — joint Gauss-Newton steps in every sweep until the
-  step or the decrease is negligible: Gauss-Seidel sweeps alone leave a long chain where the init put it;
-* ``max_sweeps=5`` — with the joint steps the energy test stops the run after 2-3 sweeps on the recordings;
-* ``merge=true`` — the χ² label merge after each map step (:mod:`slamcli.solvers.icm.merge`);
-* ``init=gated, gate_prob=0.9999, birth_prob=0.999999`` — the on-line init whose χ² gate follows a propagated pose
-  covariance (:mod:`slamcli.solvers.icm.init_gated`), with a wide gate: GPS ATE on the car park 0.073 m (paper
-  init 0.443 m; gate 0.99 / birth 0.9999: 1.007 m), on the whole Victoria Park run 2.75 m in 19 s of CPU (paper
-  init 4.99 m), first 300 s of it 1.396 m (paper init 1.390 m);
-* ``weights=design`` (R = Q = I) — on the car park the information weights ended at 0.83 m GPS ATE against
-  0.44 m with the identity weights (paper init, joint steps); see the report for every recording.
-
-* **with sensor-reported ids** (MRCLAM's barcodes; :data:`WITH_IDS`) — ``correspondences=reported, init=online,
-  weights=information, outlier_sigma=7, max_sweeps=30``: the ids are used (the init has no association to
-  gate: the paper's on-line init with the ids; the gated one ended robot 1 at 1.05 m), the energy is the MAP energy of the
-  dataset's noise model (the same factors as ``graph``'s), and a sighting more than 7 σ from its id's map point
-  takes the null matching (:mod:`slamcli.solvers.icm.gate`), the ICM counterpart of ``graph``'s robust kernel.
-  Measured on MRCLAM Dataset 7, robots 1-5 solo (ATE, m): identity weights 0.73 / 0.70 / 1.43 / 0.65 / 3.80,
-  information weights 1.04 / 0.37 / 0.28 / 0.36 / 0.22 (robot 1 follows misread barcodes, as ``graph`` without
-  a kernel does: 1.62 m), information weights + the 7 σ null matching 0.26 / 0.37 / 0.30 / 0.39 / 0.18 against
-  ``graph``'s 0.27 / 0.41 / 0.31 / 0.46 / 0.16. On a team (multi-robot solves only; a one-robot solve ignores
-  them) also ``team_range_weights=true, team_odometry_only=true``: MRCLAM Dataset 7, five robots, mean ATE
-  0.136 m → 0.124 m (7 sweeps; ``graph`` 0.115 m) — range weights alone 0.130 m, the odometry alone 0.136 m,
-  ``graph``'s Cauchy kernel (``robust=cauchy``) 0.152 m. Without ids (Victoria Park, car park) the identity weights stay:
-  with the nearest-point matching the information weights ended at 0.83 m on the car park against 0.44 m.
-
-A preset sets each of its keys that is still at its paper default; a key given explicitly with another value
-wins (``-p preset=real -p weights=information``). A key set explicitly to its paper default cannot be told
-apart from an unset one and takes the preset's value. Weight matrices given explicitly (``R``, ``S``, ``Q`` or
-``K`` away from their defaults) keep ``weights=design``: the data rule's ``weights=information``, which would
-replace them by the dataset's noise model, is then not applied, and the result says so
-(:func:`weights_note`).
+A preset is a named constructor (``IcmParams.real(**given)``), resolved once before the solver runs
+(:func:`resolve`): it fills only the keys the user left unset — a key given explicitly keeps its value, whatever
+that value is. With sensor-reported ids the :data:`WITH_IDS` rule fills more unset keys; weight matrices given
+explicitly (``R``, ``S``, ``Q`` or ``K``) keep ``weights=design`` and the result says so (:func:`weights_note`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 #: preset name -> the parameters it sets (``slamcli solvers icm`` lists them)
@@ -58,8 +32,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-#: preset name -> what it sets in addition when the dataset has sensor-reported ids (applied at solve time,
-#: :func:`apply_data_rule`; the same "still at its paper default" rule)
+#: preset name -> what it sets in addition when the dataset has sensor-reported ids (resolved with the dataset
+#: before the solve, :func:`resolve`; only keys left unset)
 WITH_IDS: dict[str, dict[str, Any]] = {
     "paper": {},
     "real": {"correspondences": "reported", "init": "online", "weights": "information", "outlier_sigma": 7.0,
@@ -78,43 +52,37 @@ def expansion_text(name: str) -> str:
     return text + (f"; with sensor-reported ids also {_kv(WITH_IDS[name])}" if WITH_IDS[name] else "")
 
 
-def apply_data_rule(params, defaults: dict[str, Any], has_ids: bool) -> dict[str, Any]:
-    """The field values ``params`` takes from its preset's data rule: with ``has_ids``, each :data:`WITH_IDS`
-    key whose current value equals its paper default ``defaults[key]`` or the value the preset itself gave it;
-    nothing otherwise."""
-    if not has_ids:
-        return {}
-    base = defaults | PRESETS[params.preset]
-    out = {k: v for k, v in WITH_IDS[params.preset].items() if getattr(params, k) == base[k]}
-    if explicit_weights(params, defaults) and out.get("weights") == "information":
-        del out["weights"]  # the user's R, S, Q, K win over the dataset's noise model
-    return out
-
-
 #: the design weight matrices that ``weights=information`` replaces
 WEIGHT_KEYS = ("R", "S", "Q", "K")
 
 
-def explicit_weights(params, defaults: dict[str, Any]) -> list[str]:
-    """The design weight matrices ``params`` holds away from their paper defaults (given explicitly)."""
-    return [k for k in WEIGHT_KEYS if getattr(params, k) != defaults[k]]
-
-
-def weights_note(params, defaults: dict[str, Any], has_ids: bool) -> str:
-    """One line when the preset's data rule would have set ``weights=information`` but explicit weight matrices
-    kept ``weights=design``; ``""`` otherwise."""
-    given = explicit_weights(params, defaults)
-    if not (has_ids and given and WITH_IDS[params.preset].get("weights") == "information"
-            and params.weights == "design"):
-        return ""
-    return (f"preset={params.preset}: weights=information not applied, {', '.join(given)} given explicitly "
-            "(weights=design uses them)")
-
-
-def apply_preset(params, defaults: dict[str, Any]) -> dict[str, Any]:
-    """The field values ``params`` takes from its preset: each preset key whose current value equals its paper
-    default ``defaults[key]``. Raises ValueError for an unknown preset name."""
-    name = params.preset
+def check_name(name: str) -> None:
+    """Raise ValueError (one line) for an unknown preset name."""
     if name not in PRESETS:
         raise ValueError(f"preset must be one of {', '.join(PRESETS)}, got {name!r}")
-    return {k: v for k, v in PRESETS[name].items() if getattr(params, k) == defaults[k]}
+
+
+def resolve(name: str, given: Mapping[str, Any], has_ids: bool) -> dict[str, Any]:
+    """The keyword arguments of the resolved parameters: preset ``name``'s values (and, with ``has_ids``, its
+    :data:`WITH_IDS` rule over them) for every key not in ``given``, then ``given`` itself."""
+    check_name(name)
+    conflict = [k for k in WEIGHT_KEYS if k in given] if given.get("weights") == "information" else []
+    if conflict:  # also when a value equals its default: given is given
+        raise ValueError(f"{', '.join(conflict)} given with weights=information, which takes R, S, Q, K from the "
+                         "dataset's noise model: drop them or use weights=design")
+    filled = dict(PRESETS[name])
+    if has_ids:
+        rule = dict(WITH_IDS[name])
+        if any(k in given for k in WEIGHT_KEYS) and rule.get("weights") == "information":
+            del rule["weights"]  # the user's R, S, Q, K win over the dataset's noise model
+        filled |= rule
+    return {k: v for k, v in filled.items() if k not in given} | dict(given) | {"preset": name}
+
+
+def weights_note(name: str, given: Mapping[str, Any], has_ids: bool) -> str:
+    """One line when the preset's data rule would have set ``weights=information`` but explicit weight matrices
+    kept ``weights=design``; ``""`` otherwise."""
+    keys = [k for k in WEIGHT_KEYS if k in given]
+    if not (has_ids and keys and "weights" not in given and WITH_IDS[name].get("weights") == "information"):
+        return ""
+    return f"preset={name}: weights=information not applied, {', '.join(keys)} given explicitly (weights=design uses them)"

@@ -28,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Literal
 
 import numpy as np
 
@@ -42,242 +41,10 @@ from slamcli.solvers.icm.common import online_init, reported_labels, stop_decisi
 from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
+from slamcli.solvers.icm.params import IcmParams
 from slamcli.solvers.icm.polish import optimality, polish
-from slamcli.solvers.icm.presets import apply_data_rule, apply_preset, explicit_weights, weights_note
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
-
-
-@dataclasses.dataclass(frozen=True)
-class IcmParams:
-    """Parameters of ICM-SLAM (defaults: paper 000 §5, Simulation 1, except ς and the deviations listed in the
-    module docstring).
-
-    Attributes
-    ----------
-    R, S, Q : tuple of float     diagonal weight matrices of the motion (3), odometry (16) and observation
-                                 potentials: one value = scalar × identity, else the full diagonal (3, 3, 2).
-                                 A zero matrix drops its potential. Paper §5: R = Q = I, S = 0; §6: S = I.
-    fusion_radius : float        ϑ, m: labels whose points are closer than ϑ are fused (§4); also the radius
-                                 within which the on-line init matches an existing label.
-    min_observations : int       ς: map points seen fewer times are removed (§4; paper: 500 for its laser data
-                                 with many returns per landmark per scan — scale it to the data; the simulated
-                                 paper-sim1/octagon lasers give 800-3000 returns per landmark, so 500 fits).
-                                 Default 1 keeps every map point (a deviation from the paper's 500, see above).
-    filtered : "rematch" | "drop"  observations of removed map points: matched again to the nearest remaining
-                                 point in the next sweep (paper eq. 13) or out of the model for good (default,
-                                 chosen by measurement, see the module docstring).
-    init : "online" | "kinematic" | "gated"  Algorithm 2 step 1 as written, poses from g(x, u) only (Fig. 6),
-                                 or (beyond the paper) the on-line init whose gate and gain follow a propagated
-                                 pose covariance (:mod:`slamcli.solvers.icm.init_gated`).
-    gate_prob : float            init=gated: χ² probability of the association gate (2 dof; 0.99 → 9.21).
-    birth_prob : float           init=gated: χ² probability of the birth test — a sighting farther than this
-                                 from every label starts a new one (0.9999 → 18.4); in between it stays
-                                 unlabelled until the sweeps re-match it.
-    correspondences : "nearest" | "reported"  nearest-map-point matchings (eqs. 9-13), or fixed labels from the
-                                 sensor-reported ids (known correspondences; no fusion, no filter).
-    max_sweeps : int             maximum number of ICM iterations N.
-    energy_rtol : float          the one stopping rule: stop (``converged``) when a sweep lowers the energy by a
-                                 relative amount in [0, energy_rtol], over the same observations; 0 = never
-                                 stop early (the paper's fixed iteration count).
-    pose_iters : int             Gauss-Newton steps per pose conditional in a sweep (eq. 14).
-    init_pose_iters : int        Gauss-Newton steps of the on-line init (eq. 11).
-    schedule : "sequential" | "parallel"  paper visit order, or odd/even coding scheme (beyond the paper).
-    accelerate : "none" | "joint"  occasional joint Gauss-Newton step (beyond the paper).
-    accelerate_every : int       sweeps between joint steps.
-    joint_iters : int            accelerate=joint: Gauss-Newton steps per joint refinement (1 = one step, as
-                                 before); more steps stop early on ``joint_step_tol`` or a negligible energy
-                                 decrease (:mod:`slamcli.solvers.icm.joint`).
-    joint_step_tol : float       stop the joint refinement when its largest step is below this (m / rad).
-    merge : bool                 beyond the paper: after each map step, merge labels that pass a χ² test and
-                                 were never seen in one scan (:mod:`slamcli.solvers.icm.merge`).
-    merge_prob : float           χ² probability of the merge test (2 dof; 0.999 → 13.8).
-    preset : "paper" | "real"    named setting (:mod:`slamcli.solvers.icm.presets`): "paper" = these defaults;
-                                 "real" = accelerate=joint, accelerate_every=1, joint_iters=20, max_sweeps=5,
-                                 merge=true, weights=design, init=gated, gate_prob=0.9999,
-                                 birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
-                                 init=online, weights=information, outlier_sigma=7, max_sweeps=30,
-                                 team_range_weights=true, team_odometry_only=true
-                                 (each key still at its paper default takes the preset's value; other explicit
-                                 values win).
-    outlier_sigma : float        k > 0: an observation with a reported id whose residual exceeds k σ of the noise
-                                 model takes the null matching at a constant cost (truncated quadratic,
-                                 :mod:`slamcli.solvers.icm.gate`); 0 = the paper's quadratic (default). Only with
-                                 correspondences=reported.
-    robust : "none" | "cauchy"   multi-robot solves only (a one-robot solve ignores it): the observation and
-                                 reading terms under ``graph``'s Cauchy kernel of scale ``cauchy_k`` (whitened
-                                 units; ICM keeps the kernel's weights fixed through a sweep and takes them at
-                                 the new estimate before the next — the half-quadratic form, still monotone;
-                                 the joint steps are IRLS steps). Default "none" (the paper's quadratic).
-                                 MRCLAM Dataset 7 team, preset=real: mean ATE 0.152 m against 0.136 m without.
-    cauchy_k : float             the Cauchy scale (``graph``'s default 2.3849).
-    team_range_weights : bool    multi-robot solves only: each sighting's (and robot reading's) isotropic weight
-                                 from its own range, ``q(r) = 2 / (σ_r² + r² σ_b²)``, instead of one q at the
-                                 median range (weights=information; with design weights the same factors
-                                 ``q(r) / q(r̃)`` of Q); the null cost ``outlier_sigma`` keeps meaning k σ.
-    team_odometry_only : bool    multi-robot solves only: drop the motion potential R when the odometry
-                                 potential is on (on MRCLAM the odometry is the integral of the controls, so
-                                 both count the same motion twice; ``graph`` uses the odometry alone).
-    label_cost : float           λ: cost per landmark added to the reported energy (``extra["energy_label_cost"]``,
-                                 0 = the paper's Φ_m); with weights=information, merging by the χ² test is
-                                 merging when it lowers H + λ·L for λ = χ²₂(merge_prob).
-    monotone : bool              apply label fusion and the ς filter only when they do not raise the energy
-                                 above the sweep's starting energy (eq. 17 always applies); False = the
-                                 paper's unguarded map step.
-    weights : "design" | "information"  R, S, Q, K as given (paper) or from the dataset's noise model.
-    K : float                    GPS weight k (K = k·I, paper §4); used when the dataset has GPS fixes and
-                                 ``use_gps``; needs an isotropic Q (the GPS fix enters the pose conditional
-                                 as a pseudo-observation). 0 drops the GPS potential.
-    use_gps : bool               include the GPS potential when the dataset has fixes.
-    covariance : bool            Laplace marginal covariances at the end (joint Hessian, fixed matchings).
-    range_offset : float         beyond the paper (default 0 = paper-exact): added to every measured range before
-                                 the inverse observation h⁻¹(x, [r + range_offset, b]), m — the same option as
-                                 EKF's. A laser measures the SURFACE of a post of radius ρ: a beam at lateral
-                                 offset s from the centre stops √(ρ² − s²) short of it, π/4 · ρ on average over
-                                 s uniform in [−ρ, ρ], so ``range_offset = π/4 · ρ`` re-centres the returns of
-                                 a post of known radius ρ (use ρ itself for a sensor that returns the nearest
-                                 surface point). See ``benchmarks/bench_icm_study.py``.
-    surface : bool               beyond the paper (default off = paper-exact): the surface-aware observation model
-                                 (:mod:`slamcli.solvers.icm.surface`) with the landmark radius the dataset
-                                 declares (``observations.diameter_m``): per-return offsets √(ρ² − s²) from the
-                                 current estimate, refreshed every sweep.
-    range_bias : "none" | "estimate"  beyond the paper: one more node, a common range bias estimated in every
-                                 sweep (its closed-form conditional mode), with or without ``surface``.
-    motion_input : "auto" | "controls" | "odometry"  what drives the motion potential and the initialisation: the
-                                 controls through g(x, u), or the odometry increments (``x ⊕ d``, the full SE(2)
-                                 step, sideways part included); ``auto`` (default) = the dataset's
-                                 ``motion_source`` (odometry for graph imports). Recorded as
-                                 ``extra["motion_input"]``. Single-robot solves.
-    polish : "none" | "nls"      beyond the paper (default "nls"): the joint optimum of the energy under the
-                                 current matchings when the sweeps stall (module docstring); "none" =
-                                 Gauss-Seidel sweeps only (Algorithm 2). Single-robot solves; the
-                                 multi-robot solve (:mod:`slamcli.solvers.icm.team`) ignores it.
-    polish_rtol : float          polish after a sweep that lowered the energy by a relative amount ≤ this.
-    polish_iters : int           Levenberg-Marquardt iterations per polish at most.
-    opt_step_tol : float         polish="none": a run is ``converged`` only when the Gauss-Newton step to the
-                                 optimum has no component above this (m / rad) …
-    opt_rtol : float             … and the energy decrease it predicts is at most this · H.
-    trace_poses_every : int      record the poses of iteration 0 (the initialisation), of every k-th iteration
-                                 and of the last one in ``result.trace`` (paper Figs 5b-d / 6b / 9b-c draw the
-                                 trajectory after iterations 10, 20, 30, …); 0 = no poses in the trace. Memory:
-                                 24·(T+1) bytes per recorded iteration (paper-sim2, T = 3250, 100 sweeps, k = 1:
-                                 7.8 MB); raise k for very long runs.
-    """
-
-    R: tuple[float, ...] = (1.0,)
-    S: tuple[float, ...] = (0.0,)
-    Q: tuple[float, ...] = (1.0,)
-    fusion_radius: float = 1.0
-    min_observations: int = 1
-    init: Literal["online", "kinematic", "gated"] = "online"
-    correspondences: Literal["nearest", "reported"] = "nearest"
-    max_sweeps: int = 100
-    energy_rtol: float = 1e-6
-    pose_iters: int = 3
-    init_pose_iters: int = 5
-    schedule: Literal["sequential", "parallel"] = "sequential"
-    accelerate: Literal["none", "joint"] = "none"
-    accelerate_every: int = 5
-    monotone: bool = True
-    filtered: Literal["rematch", "drop"] = "drop"
-    weights: Literal["design", "information"] = "design"
-    K: float = 1.0
-    use_gps: bool = True
-    covariance: bool = False
-    range_offset: float = 0.0
-    trace_poses_every: int = 1
-    surface: bool = False
-    range_bias: Literal["none", "estimate"] = "none"
-    gate_prob: float = 0.99
-    birth_prob: float = 0.9999
-    joint_iters: int = 1
-    joint_step_tol: float = 1e-4
-    merge: bool = False
-    merge_prob: float = 0.999
-    label_cost: float = 0.0
-    outlier_sigma: float = 0.0
-    robust: Literal["none", "cauchy"] = "none"
-    cauchy_k: float = 2.3849
-    team_range_weights: bool = False
-    team_odometry_only: bool = False
-    preset: Literal["paper", "real"] = "paper"
-    motion_input: Literal["auto", "controls", "odometry"] = "auto"
-    polish: Literal["none", "nls"] = "nls"
-    polish_rtol: float = 1e-3
-    polish_iters: int = 100
-    opt_step_tol: float = 1e-4
-    opt_rtol: float = 1e-8
-
-    def __post_init__(self) -> None:
-        defaults = {f.name: f.default for f in dataclasses.fields(self)}
-        for key, value in apply_preset(self, defaults).items():
-            object.__setattr__(self, key, value)
-        en.Weights.from_params(self.R, self.S, self.Q, self.K)  # validates lengths and signs
-        given = explicit_weights(self, defaults)
-        if self.weights == "information" and given:
-            raise ValueError(f"{', '.join(given)} given with weights=information, which takes R, S, Q, K from the "
-                             "dataset's noise model: drop them or use weights=design")
-        if not (self.fusion_radius >= 0 and math.isfinite(self.fusion_radius)):
-            raise ValueError(f"fusion_radius must be a finite number >= 0, got {self.fusion_radius}")
-        if self.min_observations < 0:
-            raise ValueError(f"min_observations must be >= 0, got {self.min_observations}")
-        for name in ("max_sweeps", "pose_iters", "init_pose_iters", "accelerate_every", "joint_iters", "polish_iters"):
-            if getattr(self, name) < (0 if name == "max_sweeps" else 1):
-                raise ValueError(
-                    f"{name} must be >= {0 if name == 'max_sweeps' else 1}, got {getattr(self, name)}"
-                )
-        if not (self.energy_rtol >= 0):
-            raise ValueError(f"energy_rtol must be >= 0, got {self.energy_rtol}")
-        if not (self.range_offset >= 0 and math.isfinite(self.range_offset)):
-            raise ValueError(f"range_offset must be a finite number >= 0, got {self.range_offset}")
-        if not (self.outlier_sigma >= 0 and math.isfinite(self.outlier_sigma)):
-            raise ValueError(f"outlier_sigma must be a finite number >= 0 (0 = no null matching), "
-                             f"got {self.outlier_sigma}")
-        if not (self.cauchy_k > 0 and math.isfinite(self.cauchy_k)):
-            raise ValueError(f"cauchy_k must be a finite number > 0, got {self.cauchy_k}")
-        if not (0.0 < self.merge_prob < 1.0):
-            raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
-        if self.polish not in ("none", "nls"):
-            raise ValueError(f"polish must be none or nls, got {self.polish!r}")
-        for name in ("joint_step_tol", "label_cost", "polish_rtol", "opt_step_tol", "opt_rtol"):
-            v = getattr(self, name)
-            if not (v >= 0 and math.isfinite(v)):
-                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
-        if not (0.0 < self.gate_prob <= self.birth_prob < 1.0):
-            raise ValueError(f"need 0 < gate_prob <= birth_prob < 1, got gate_prob={self.gate_prob}, "
-                             f"birth_prob={self.birth_prob}")
-        if self.trace_poses_every < 0:
-            raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
-
-    def weights_note(self, inputs: SlamInputs) -> str:
-        """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
-        return weights_note(self, {f.name: f.default for f in dataclasses.fields(self)}, _has_ids(inputs))
-
-    def for_data(self, inputs: SlamInputs) -> IcmParams:
-        """These parameters with the preset's rule for the dataset applied (``preset=real`` on data with
-        sensor-reported ids: :data:`slamcli.solvers.icm.presets.WITH_IDS`); ``self`` when nothing changes."""
-        defaults = {f.name: f.default for f in dataclasses.fields(self)}
-        changes = apply_data_rule(self, defaults, _has_ids(inputs))
-        if not changes:
-            return self
-        out = dataclasses.replace(self)  # a copy; the rule's values are set after __post_init__, which would
-        for key, value in changes.items():  # otherwise hand a key back to the preset (init=online is the default)
-            object.__setattr__(out, key, value)
-        return out
-
-    def design_weights(self) -> en.Weights:
-        """R, S, Q, K as given (``weights="design"``)."""
-        return en.Weights.from_params(self.R, self.S, self.Q, self.K)
-
-    def weights_for(self, inputs: SlamInputs) -> en.Weights:
-        """The weights a solve uses: the design matrices, or the dataset's information matrices."""
-        return en.information_weights(inputs) if self.weights == "information" else self.design_weights()
-
-
-def _has_ids(inputs: SlamInputs) -> bool:
-    """Whether any observation row carries a sensor-reported id (the presets' data rule)."""
-    rid = inputs.observations.reported_id
-    return bool(len(rid)) and bool(np.any(np.asarray(rid) >= 0))
 
 
 def _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts=None) -> np.ndarray:
@@ -346,6 +113,8 @@ class IcmSlam(BaseSolver):
     motion_models = ("ddmr", "ackermann")
     #: multi-robot datasets: one more potential per inter-robot reading (slamcli.solvers.icm.team)
     multi_robot = True
+    #: one line from resolving the parameters with the dataset (:meth:`IcmParams.resolve_note`), set by the api
+    config_note = ""
 
     def solve(
         self,
@@ -355,9 +124,6 @@ class IcmSlam(BaseSolver):
         rng: np.random.Generator,
         progress: ProgressFn | None = None,
     ) -> SolverResult:
-        resolved = self.params.for_data(inputs)
-        if resolved is not self.params:  # the preset's rule for this dataset (presets.WITH_IDS)
-            return type(self)(resolved).solve(inputs, init=init, rng=rng, progress=progress)
         if inputs.robots is not None:
             return self._solve_team(inputs, init, progress)
         t_start = time.perf_counter()
@@ -374,8 +140,8 @@ class IcmSlam(BaseSolver):
                        "motion_input": resolve_motion_input(p.motion_input, inputs),
                        "weights_used": {"R": list(W.R), "S": list(W.S), "Q": list(W.Q), "K": W.K},
                        "gps_fixes_used": int(prob.gps_step.size), "filtered": p.filtered}
-        if p.weights_note(inputs):
-            extra["preset_note"] = p.weights_note(inputs)
+        if self.config_note:
+            extra["preset_note"] = self.config_note
         rematch = p.filtered == "rematch" and not reported
         # null matching behind a gate (outlier_sigma > 0, reported ids only): τ_i per observation, or None
         tau = (gate.null_costs(prob, W, inputs.noise.range_std, inputs.noise.bearing_std, p.outlier_sigma)

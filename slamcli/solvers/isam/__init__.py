@@ -23,6 +23,12 @@ under the σ found. The scheme (against GTSAM's iSAM2), its defaults and the noi
 measurement: benchmarks/results/isam.md and benchmarks/results/design_notes.md.
 """
 
-from slamcli.solvers.isam.params import IsamParams  # noqa: F401
-from slamcli.solvers.isam.smoother import IncrementalSmoother  # noqa: F401
-from slamcli.solvers.isam.solver import IsamSlam, per_step_slope  # noqa: F401
+from slamcli.solvers.lazy import lazy_exports
+
+_EXPORTS = {
+    "IsamParams": "slamcli.solvers.isam.params",
+    "IncrementalSmoother": "slamcli.solvers.isam.smoother",
+    "IsamSlam": "slamcli.solvers.isam.solver",
+    "per_step_slope": "slamcli.solvers.isam.solver",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
