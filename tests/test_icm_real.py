@@ -256,6 +256,7 @@ def test_preset_real_rule_for_data_with_ids():
     assert (q.correspondences, q.weights, q.outlier_sigma, q.max_sweeps, q.init) == (
         "reported", "information", 7.0, 30, "online")
     assert q.for_data(inp) is q  # the rule is applied once
+    assert q.polish_rtol == 1.0 and q.polish_every_sweep  # every sweep ends at the joint optimum
     assert q.merge and q.accelerate == "joint"  # the rest of the preset is kept
     # without ids nothing changes; an explicit value wins; the paper default ignores the rule
     no_ids = dataclasses.replace(inp, observations=dataclasses.replace(

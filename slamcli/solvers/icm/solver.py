@@ -181,7 +181,7 @@ class IcmParams:
                                  merge=true, weights=design, init=gated, gate_prob=0.9999,
                                  birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
                                  init=online, weights=information, outlier_sigma=7, max_sweeps=30,
-                                 team_range_weights=true, team_odometry_only=true
+                                 polish_rtol=1, team_range_weights=true, team_odometry_only=true
                                  (each key still at its paper default takes the preset's value; other explicit
                                  values win).
     outlier_sigma : float        k > 0: an observation with a reported id whose residual exceeds k σ of the noise
@@ -236,7 +236,9 @@ class IcmParams:
                                  current matchings when the sweeps stall (module docstring); "none" =
                                  Gauss-Seidel sweeps only (Algorithm 2). Single-robot solves; the
                                  multi-robot solve (:mod:`slamcli.solvers.icm.team`) ignores it.
-    polish_rtol : float          polish after a sweep that lowered the energy by a relative amount ≤ this.
+    polish_rtol : float          polish after a sweep that lowered the energy by a relative amount ≤ this; ≥ 1 =
+                                 after every sweep, and then accelerate=joint takes no joint steps in a one-robot
+                                 solve (the polish reaches the optimum those steps approach).
     polish_iters : int           Levenberg-Marquardt iterations per polish at most.
     opt_step_tol : float         polish="none": a run is ``converged`` only when the Gauss-Newton step to the
                                  optimum has no component above this (m / rad) …
@@ -332,6 +334,12 @@ class IcmParams:
                              f"birth_prob={self.birth_prob}")
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
+
+    @property
+    def polish_every_sweep(self) -> bool:
+        """Whether every sweep of a one-robot solve ends with the polish (``polish="nls"``, ``polish_rtol ≥ 1``:
+        a sweep's relative energy decrease never exceeds 1)."""
+        return self.polish == "nls" and self.polish_rtol >= 1.0
 
     def weights_note(self, inputs: SlamInputs) -> str:
         """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
@@ -501,7 +509,7 @@ class IcmSlam(BaseSolver):
                 labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
             elif tau is not None and landmarks.shape[0]:  # c-step with the null value (solvers/icm/gate.py)
                 labels = gate.gate_labels(prob.landmark_points(poses), fixed, landmarks, W.Q, tau)
-            if p.accelerate == "joint" and n % p.accelerate_every == 0:
+            if p.accelerate == "joint" and n % p.accelerate_every == 0 and not p.polish_every_sweep:
                 poses, landmarks = self._joint_step(prob, W, poses, landmarks, labels, n, log)
             # x_1..x_T (eq. 14)
             poses = self._pose_sweep(prob, W, poses, labels, landmarks)
