@@ -16,12 +16,12 @@ chosen by measurement (``slamcli reproduce --section real``, the real-data secti
   0.44 m with the identity weights (paper init, joint steps); see the report for every recording.
 
 * **with sensor-reported ids** (MRCLAM's barcodes; :data:`WITH_IDS`) — ``correspondences=reported, init=online,
-  weights=information, outlier_sigma=7, max_sweeps=30, polish_rtol=1, polish_iters=8``: the ids are used (the init has no association to
+  weights=information, outlier_sigma=7, max_sweeps=30, polish_rtol=1, polish_iters=6``: the ids are used (the init has no association to
   gate: the paper's on-line init with the ids; the gated one ended robot 1 at 1.05 m), the energy is the MAP energy of the
   dataset's noise model (the same factors as ``graph``'s), and a sighting more than 7 σ from its id's map point
   takes the null matching (:mod:`slamcli.solvers.icm.gate`), the ICM counterpart of ``graph``'s robust kernel.
   Every sweep of a one-robot solve ends with the joint polish (``polish_rtol=1``), which then replaces the
-  joint Gauss-Newton steps, and a polish stops after 8 LM iterations: the 7 σ gate re-matches after it, so
+  joint Gauss-Newton steps, and a polish stops after 6 LM iterations: the 7 σ gate re-matches after it, so
   the early polishes need not reach the optimum of matchings about to change; the run still stops only when
   a sweep and its polish move nothing (``benchmarks/results/icm_mrclam.md``).
   Measured on MRCLAM Dataset 7, robots 1-5 solo (ATE, m): identity weights 0.73 / 0.70 / 1.43 / 0.65 / 3.80,
@@ -67,7 +67,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 WITH_IDS: dict[str, dict[str, Any]] = {
     "paper": {},
     "real": {"correspondences": "reported", "init": "online", "weights": "information", "outlier_sigma": 7.0,
-             "max_sweeps": 30, "polish_rtol": 1.0, "polish_iters": 8, "team_range_weights": True,
+             "max_sweeps": 30, "polish_rtol": 1.0, "polish_iters": 6, "team_range_weights": True,
              "team_odometry_only": True},
 }
 

@@ -181,7 +181,7 @@ class IcmParams:
                                  merge=true, weights=design, init=gated, gate_prob=0.9999,
                                  birth_prob=0.999999; with sensor-reported ids also correspondences=reported,
                                  init=online, weights=information, outlier_sigma=7, max_sweeps=30,
-                                 polish_rtol=1, polish_iters=8, team_range_weights=true,
+                                 polish_rtol=1, polish_iters=6, team_range_weights=true,
                                  team_odometry_only=true
                                  (each key still at its paper default takes the preset's value; other explicit
                                  values win).
