@@ -644,7 +644,7 @@ class IcmSlam(BaseSolver):
         if drop > p.polish_rtol and n < p.max_sweeps:
             return poses, landmarks, E, decision
         poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters)
-        E_new = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
+        E_new = out.energy_after + null_E(labels)  # H of the returned estimate (polish evaluates it)
         log.polishes.append({"sweep": n, **out.as_extra()})
         tol = p.energy_rtol * max(abs(E_start), 1e-300)  # sweep and polish together moved nothing (a rounding
         settled = abs(E_start - E_same) <= tol and E - E_new <= tol  # rise at the optimum included)
