@@ -254,11 +254,34 @@ def test_outlier_gate_nulls_the_misreads_and_reaches_the_clean_optimum(seed):
     assert np.abs(np.asarray(res.landmarks_xy) - m_ref).max() < 1e-3
 
 
+def test_preset_real_with_ids_polishes_every_sweep_to_the_clean_optimum():
+    """preset=real on data with ids: no joint Gauss-Newton steps (the polish ends every sweep, at most 6 LM
+    iterations each), yet the run stops converged at the joint optimum of the energy without the planted
+    misreads (reference: joint Gauss-Newton to convergence on the clean labels, from ICM's end)."""
+    from slamcli.solvers.icm import IcmSlam
+    from slamcli.solvers.icm.common import reported_labels
+
+    inp, bad = _loop_with_ids_and_outliers(0, 6)
+    res = IcmSlam(IcmParams.resolve({"preset": "real"}, inp)).solve(inp, rng=np.random.default_rng(0))
+    assert res.status.value == "converged"
+    assert res.extra["joint_steps_accepted"] == 0 and res.extra["joint_refinements"] == []
+    assert len(res.extra["polishes"]) == res.extra["sweeps"]
+    assert all(p["iterations"] <= 6 for p in res.extra["polishes"])
+    assert np.flatnonzero(np.asarray(res.assoc) < 0).tolist() == bad.tolist()
+    clean = reported_labels(inp.observations.reported_id)
+    clean[bad] = -1
+    p_ref, m_ref, _, _ = en.map_energy_fixed_assoc(en.Problem.from_inputs(inp), en.information_weights(inp),
+                                                   np.asarray(res.poses_xyt), np.asarray(res.landmarks_xy), clean)
+    assert np.abs(np.asarray(res.poses_xyt)[:, :2] - p_ref[:, :2]).max() < 1e-3
+    assert np.abs(np.asarray(res.landmarks_xy) - m_ref).max() < 1e-3
+
+
 def test_preset_real_rule_for_data_with_ids():
     inp, _ = _loop_with_ids_and_outliers(0, 0)
     q = IcmParams.resolve({"preset": "real"}, inp)
     assert (q.correspondences, q.weights, q.outlier_sigma, q.max_sweeps, q.init) == (
         "reported", "information", 7.0, 30, "online")
+    assert q.polish_rtol == 1.0 and q.polish_every_sweep and q.polish_iters == 6  # every sweep ends polished
     assert q.merge and q.accelerate == "joint"  # the rest of the preset is kept
     # without ids nothing changes; an explicit value wins, also one equal to the preset's or the paper's value
     no_ids = dataclasses.replace(inp, observations=dataclasses.replace(

@@ -157,7 +157,8 @@ class IcmParams:
                                                   "multi-robot solve (:mod:`slamcli.solvers.icm.team`) "
                                                   "ignores it.")
     polish_rtol: float = param(1e-3, "polish after a sweep that lowered the energy by a relative amount ≤ "
-                                     "this.")
+                                     "this; ≥ 1 = after every sweep, and then accelerate=joint takes no joint "
+                                     "steps in a one-robot solve (the polish reaches the optimum they approach).")
     polish_iters: int = param(100, "Levenberg-Marquardt iterations per polish at most.")
     opt_step_tol: float = param(1e-4, 'polish="none": a run is `converged` only when the Gauss-Newton '
                                       "step to the optimum has no component above this (m / rad) …")
@@ -203,6 +204,12 @@ class IcmParams:
                              f"birth_prob={self.birth_prob}")
         if self.trace_poses_every < 0:
             raise ValueError(f"trace_poses_every must be >= 0 (0 = no poses in the trace), got {self.trace_poses_every}")
+
+    @property
+    def polish_every_sweep(self) -> bool:
+        """Whether every sweep of a one-robot solve ends with the polish (``polish="nls"``, ``polish_rtol ≥ 1``:
+        a sweep's relative energy decrease never exceeds 1)."""
+        return self.polish == "nls" and self.polish_rtol >= 1.0
 
     @classmethod
     def paper(cls, **given) -> IcmParams:

@@ -183,7 +183,7 @@ class IcmSlam(BaseSolver):
                 labels[in_model] = mp.nearest_labels(pts[in_model], landmarks, W.Q, labels[in_model])
             elif tau is not None and landmarks.shape[0]:  # c-step with the null value (solvers/icm/gate.py)
                 labels = gate.gate_labels(prob.landmark_points(poses), fixed, landmarks, W.Q, tau)
-            if p.accelerate == "joint" and n % p.accelerate_every == 0:
+            if p.accelerate == "joint" and n % p.accelerate_every == 0 and not p.polish_every_sweep:
                 poses, landmarks = self._joint_step(prob, W, poses, landmarks, labels, n, log)
             # x_1..x_T (eq. 14)
             poses = self._pose_sweep(prob, W, poses, labels, landmarks)
@@ -317,7 +317,7 @@ class IcmSlam(BaseSolver):
         if drop > p.polish_rtol and n < p.max_sweeps:
             return poses, landmarks, E, decision
         poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters)
-        E_new = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
+        E_new = out.energy_after + null_E(labels)  # H of the returned estimate (polish evaluates it)
         log.polishes.append({"sweep": n, **out.as_extra()})
         tol = p.energy_rtol * max(abs(E_start), 1e-300)  # sweep and polish together moved nothing (a rounding
         settled = abs(E_start - E_same) <= tol and E - E_new <= tol  # rise at the optimum included)
