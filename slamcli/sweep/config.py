@@ -22,6 +22,8 @@ An experiment file::
     label = "ekf"                     # optional, unique per file (default: method)
     seed = 0                          # optional, extra solver stream id (default 0)
     oracle_association = false        # optional: hand the solver the true association (recorded)
+    init_from = "odometry"            # optional: start from the result of the [[solver]] with that label on the
+                                      # same dataset (run first; its run id enters this run's id)
     [solver.params]                   # optional, validated against the solver's Params dataclass
     gate_prob = 0.99                  # (`slamcli solvers ekf` documents every parameter)
 
@@ -67,7 +69,7 @@ _RANGE_RE = re.compile(r"^\s*range\(\s*(-?\d+)\s*(?:,\s*(-?\d+)\s*)?(?:,\s*(-?\d
 TOP_KEYS = ("experiment", "scenario", "data", "solver", "evaluate", "sweep", "quick")
 EXPERIMENT_KEYS = ("name", "description", "root_seed")
 SCENARIO_KEYS = ("name", "parameters")
-SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association")
+SOLVER_KEYS = ("method", "label", "params", "seed", "oracle_association", "init_from")
 SWEEP_KEYS = ("grid", "zip", "replicates", "seed", "absent", "dataset_seeds")
 #: what a sweep does with a registered recording that is not on this machine: stop before any run, or skip it
 ABSENT_CHOICES = ("fail", "skip")
@@ -90,6 +92,8 @@ class SolverSpec:
     params : dict               parameter overrides as written (resolved against ``Params`` at expansion).
     seed : int                  extra solver stream id (see :func:`slamcli.sweep.expand.solver_seed`).
     oracle_association : bool   give the solver the true data association (ground truth; recorded).
+    init_from : str             label of the ``[[solver]]`` whose result on the same dataset is this one's
+                                initial estimate ("" = none).
     """
 
     label: str
@@ -97,6 +101,7 @@ class SolverSpec:
     params: dict[str, Any] = field(default_factory=dict)
     seed: int = 0
     oracle_association: bool = False
+    init_from: str = ""
 
 
 @dataclass(frozen=True)
@@ -533,6 +538,29 @@ def _data_entry(c: _Checker, d: dict[str, Any], where: str) -> DataSpec:
                     options=rest if kind in ("recording", "graph") else {})
 
 
+def init_order(solvers, source: str) -> list[SolverSpec]:
+    """``solvers`` ordered so that each comes after the one its ``init_from`` names (file order otherwise);
+    one-line ConfigError for a label that names no ``[[solver]]`` or a cycle."""
+    by_label = {s.label: s for s in solvers}
+    order: list[SolverSpec] = []
+    for s in solvers:
+        chain: list[SolverSpec] = []
+        while s not in order and s not in chain:
+            chain.append(s)
+            if not s.init_from:
+                break
+            if s.init_from not in by_label:
+                raise ConfigError(f"{source}: solver {s.label!r} init_from: {s.init_from!r} is not the label of a "
+                                  f"[[solver]]{did_you_mean(s.init_from, by_label)}")
+            s = by_label[s.init_from]
+        else:
+            if s in chain:
+                raise ConfigError(f"{source}: solver {chain[0].label!r} init_from: cycle "
+                                  + " -> ".join(x.label for x in chain + [s]))
+        order += [x for x in reversed(chain) if x not in order]
+    return order
+
+
 def looks_like_path(name: str) -> bool:
     """Whether a graph entry names a file (a folder separator or a suffix) rather than a registered name."""
     return "/" in name or "\\" in name or bool(Path(name).suffix)
@@ -578,8 +606,10 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
                 params=dict(params),
                 seed=c.nonneg_int(s.get("seed", 0), f"{where}.seed"),
                 oracle_association=c.boolean(s.get("oracle_association", False), f"{where}.oracle_association"),
+                init_from=c.string(s.get("init_from", ""), f"{where}.init_from"),
             )
         )
+    init_order(solvers, source)
 
     evaluate = dict(c.table(raw.get("evaluate", {}), "[evaluate]"))
     if "against" in evaluate:  # a result file: resolved here, and it must stay beside the experiment
