@@ -4,14 +4,14 @@ Sections (paper 000 = "Iterated Conditional Modes to Solve SLAM in Markov Random
 order of :data:`SECTIONS`:
 
 * Fig. 5 (``fig5-sim1.toml``): ICM on ``paper-sim1``; maps at the initialisation and iterations 10/20/30;
-  min/mean/max landmark error per iteration with S = 0 and S = I.
+  min/mean/max landmark error per iteration with S = 0 and S = I; the post-radius study (``fig5-radius.toml``).
 * Initialisation study (``fig5-mobilesim.toml``): the same on ``paper-sim1-mobilesim``, MobileSim's documented
   Pioneer/SICK properties (``benchmarks/bench_icm_init.py`` varies them one at a time).
 * Fig. 6 (``fig6-kinematic.toml``): ICM from the kinematic-only initialisation, 100 iterations.
 * Fig. 7 (``fig7-sim2.toml``): ``paper-sim2`` (10 m laser), S = 0 and S = I.
 * Fig. 9 (``fig9-octagon.toml``): the octagon world; map change per iteration, on-line init time per sample.
-* ICM as a post-processor (paper abstract and §4): ICM started from odometry, EKF, FastSLAM and graph results
-  on several scenarios and seeds.
+* ICM as a post-processor (paper abstract and §4, ``postprocess.toml``): ICM started from odometry, EKF,
+  FastSLAM and graph results (``init_from``) on several scenarios and seeds.
 * Solver comparison (``compare.toml`` + every other registered solver with default parameters), including ICM
   with information weights.
 * Monte-Carlo NEES (``nees.toml``): average pose NEES with the 95 % χ² band.
