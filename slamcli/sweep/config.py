@@ -6,11 +6,11 @@ An experiment file::
     name = "ekf-vs-odometry"
     [[data]]                          # scenario = "loop" (+ [data.parameters]), recording = "mrclam7" (+ its
     scenario = "loop"                 # importer's options), graph = "dlr" or a path, file = "runs/day1.h5"
-    [[solver]]                        # SolverTable: method, label, seed, oracle_association, [solver.params]
-    method = "ekf"
+    [[solver]]                        # SolverTable: method, label, seed, oracle_association,
+    method = "ekf"                    # init_from (a solver label: start from its result), [solver.params]
     [evaluate]                        # slamcli.api.evaluate.EvaluateOptions
     cutoff_m = 1.0
-    [sweep]                           # SweepTable: replicates, grid, zip, absent
+    [sweep]                           # SweepTable: replicates, grid, zip, absent, dataset_seeds
     replicates = 50
     grid = { "scenario.sensor.max_range" = [5.0, 10.0], "solver.ekf.gate_prob" = [0.95, 0.99] }
     zip = { "scenario.sensor.range_std" = [0.01, 0.05], "scenario.sensor.bearing_std" = [0.01, 0.05] }
@@ -58,6 +58,8 @@ class SolverSpec:
     params : dict               parameter overrides as written (resolved against ``Params`` at expansion).
     seed : int                  extra solver stream id (see :func:`slamcli.sweep.expand.solver_seed`).
     oracle_association : bool   give the solver the true data association (ground truth; recorded).
+    init_from : str             label of the ``[[solver]]`` whose result on the same dataset is this one's
+                                initial estimate ("" = none).
     """
 
     label: str
@@ -65,6 +67,7 @@ class SolverSpec:
     params: dict[str, Any] = field(default_factory=dict)
     seed: int = 0
     oracle_association: bool = False
+    init_from: str = ""
 
 
 @dataclass(frozen=True)
@@ -128,6 +131,7 @@ class SolverTable:
     params: dict[str, Any] = field(default_factory=dict)
     seed: int = 0
     oracle_association: bool = False
+    init_from: str = ""
 
     def __post_init__(self) -> None:
         label = self.label or self.method
@@ -559,6 +563,29 @@ def _data_entry(c: _Rules, d: dict[str, Any], where: str) -> DataSpec:
                     options=rest if kind in ("recording", "graph") else {})
 
 
+def init_order(solvers, source: str) -> list[SolverSpec]:
+    """``solvers`` ordered so that each comes after the one its ``init_from`` names (file order otherwise);
+    one-line ConfigError for a label that names no ``[[solver]]`` or a cycle."""
+    by_label = {s.label: s for s in solvers}
+    order: list[SolverSpec] = []
+    for s in solvers:
+        chain: list[SolverSpec] = []
+        while s not in order and s not in chain:
+            chain.append(s)
+            if not s.init_from:
+                break
+            if s.init_from not in by_label:
+                raise ConfigError(f"{source}: solver {s.label!r} init_from: {s.init_from!r} is not the label of a "
+                                  f"[[solver]]{did_you_mean(s.init_from, by_label)}")
+            s = by_label[s.init_from]
+        else:
+            if s in chain:
+                raise ConfigError(f"{source}: solver {chain[0].label!r} init_from: cycle "
+                                  + " -> ".join(x.label for x in chain + [s]))
+        order += [x for x in reversed(chain) if x not in order]
+    return order
+
+
 def looks_like_path(name: str) -> bool:
     """Whether a graph entry names a file (a folder separator or a suffix) rather than a registered name."""
     return "/" in name or "\\" in name or bool(Path(name).suffix)
@@ -586,7 +613,8 @@ def parse_experiment(raw: dict[str, Any], *, source: str = "<experiment>") -> Ex
             raise c.fail(f"{where}.label", f"duplicate label {label!r}; give each [[solver]] a unique label")
         labels.add(label)
         solvers.append(SolverSpec(label=label, method=t.method, params=dict(t.params), seed=t.seed,
-                                  oracle_association=t.oracle_association))
+                                  oracle_association=t.oracle_association, init_from=t.init_from))
+    init_order(solvers, source)
 
     evaluate = dict(c.typed(raw.get("evaluate", {}), dict, "[evaluate]"))
     if "against" in evaluate:  # a result file: resolved here, and it must stay beside the experiment

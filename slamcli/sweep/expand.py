@@ -4,7 +4,7 @@ Order (deterministic, independent of execution order)::
 
     for point in [data entries, unless data is swept] × grid (cartesian, first key slowest) × zip groups:
         for replicate in replicates (a recording, graph or dataset file: the first replicate id only):
-            for solver in [[solver]] tables (file order):
+            for solver in [[solver]] tables (file order; one with ``init_from`` after the solver it names):
                 RunSpec
 
 A point's ``solver.<label>.*`` axes apply only to that solver, its ``scenario.*`` axes only to simulated
@@ -20,6 +20,9 @@ so every solver of a replicate sees the *same* dataset (common random numbers). 
 a content hash of importer, version, options and the source's sha256 (:meth:`DatasetSpec.config`). Run id =
 the first 12 hex digits of SHA-256 over the canonical JSON of the fully resolved run configuration (slamcli
 and schema versions included, output paths not).
+
+A run with ``init_from`` starts from the result of that solver's run on the same dataset and point: its
+``init_run`` is that run's id, part of its own configuration (so its id changes with the run it starts from).
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from slamcli.errors import ConfigError, SlamcliError
-from slamcli.sweep.config import DataSpec, ExperimentConfig, route_overrides
+from slamcli.sweep.config import DataSpec, ExperimentConfig, init_order, route_overrides
 
 STREAM_SIMULATION = 0
 STREAM_SOLVER = 1
@@ -313,6 +316,7 @@ class RunSpec:
     dataset : DatasetSpec
     point : dict                the sweep-axis values that apply to this run (key → value).
     versions : dict             slamcli / schema versions (part of the hash).
+    init_run : str              id of the run (same dataset) whose result is the initial estimate ("" = none).
     """
 
     run_id: str
@@ -328,6 +332,7 @@ class RunSpec:
     dataset: DatasetSpec
     point: dict[str, Any] = field(default_factory=dict)
     versions: dict[str, Any] = field(default_factory=dict)
+    init_run: str = ""
 
     @property
     def replicate(self) -> int:
@@ -335,7 +340,8 @@ class RunSpec:
 
     def config(self) -> dict[str, Any]:
         """The resolved configuration that defines the run (what is hashed; ``config.json`` adds the id)."""
-        return {
+        init = {"init_run": self.init_run} if self.init_run else {}  # (absent: the ids of other runs unchanged)
+        return {**init,
             "dataset": {"id": self.dataset.dataset_id, **self.dataset.config()},
             "solver": {
                 "label": self.label,
@@ -482,6 +488,7 @@ def expand(
             raise ConfigError(f"{cfg.source}: [[data]]: none of the experiment's datasets is on this machine ("
                               + "; ".join(skipped) + ")")
     axes = _swept(cfg)
+    solvers = init_order(cfg.solvers, cfg.source)
     scen_cache: dict[str, dict[str, Any]] = {}
     solver_cache: dict[str, dict[str, Any]] = {}
     runs: dict[str, RunSpec] = {}
@@ -496,7 +503,8 @@ def expand(
         resolved = scen_cache[skey] if entry.simulated else imported[entry.label]
         resolved_eval = resolver.evaluate(evaluate, f"{cfg.source}: [evaluate]")
         for ds in _datasets(cfg, entry, scen_over, resolved, vers):
-            for s in cfg.solvers:
+            ids: dict[str, str] = {}  # label -> run id on this dataset and point
+            for s in solvers:
                 pkey = canonical_json([s.method, solver_over[s.label]])
                 if pkey not in solver_cache:
                     solver_cache[pkey] = resolver.solver(
@@ -517,8 +525,9 @@ def expand(
                     dataset=ds,
                     point=_canonical(relevant),
                     versions=vers,
+                    init_run=ids[s.init_from] if s.init_from else "",
                 )
-                rid = content_hash(spec.config())
+                rid = ids[s.label] = content_hash(spec.config())
                 if rid not in runs:
                     runs[rid] = dataclasses.replace(spec, run_id=rid)
     return Expansion(experiment=cfg, runs=tuple(runs.values()), axes=axes, skipped=skipped)

@@ -76,7 +76,8 @@ class Pipeline(Protocol):
         facts to record beside it (``{"reference": "truth" | "gps" | "none"}``)."""
 
     def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> Any:
-        """Solve ``dataset_path`` with the run's solver configuration, writing ``result_path``.
+        """Solve ``dataset_path`` with the run's solver configuration, writing ``result_path``. A run with
+        ``init_run`` is called with the keyword ``init_path`` too: that run's ``result.h5``, the initial estimate.
 
         May return the result (anything with ``status`` and ``message``) so the runner can fail the run on a
         failed solver status."""
@@ -103,7 +104,7 @@ class WorkflowPipeline:
         )
         return {"reference": "truth"}
 
-    def solve(self, run: RunSpec, dataset_path: Path, result_path: Path) -> Any:
+    def solve(self, run: RunSpec, dataset_path: Path, result_path: Path, init_path: Path | None = None) -> Any:
         from slamcli.api.solve import solve_file
 
         return solve_file(
@@ -113,6 +114,7 @@ class WorkflowPipeline:
             result_path,
             seed=run.seed,
             oracle_association=run.oracle_association,
+            init_path=init_path,
         )
 
     def evaluate(self, run: RunSpec, dataset_path: Path, result_path: Path, out_dir: Path) -> dict[str, Any]:
@@ -378,8 +380,9 @@ def _execute_in(tmp: Path, final: Path, run: RunSpec, status: dict[str, Any], t0
                     f"simulating dataset {run.dataset.dataset_id} failed:\n{dataset_error.rstrip()}"
                 )
             _link_or_copy(dataset_path, tmp / "dataset.h5")
+            init = {"init_path": _init_result(final.parent, run)} if run.init_run else {}
             t1, c1 = time.perf_counter(), time.process_time()
-            solved = pipeline.solve(run, dataset_path, tmp / "result.h5")
+            solved = pipeline.solve(run, dataset_path, tmp / "result.h5", **init)
             t2, c2 = time.perf_counter(), time.process_time()
             rlog.info("solve (%s) took %.3f s", run.method, t2 - t1)
             _check_solver_status(status, solved, run)
@@ -406,6 +409,14 @@ def _execute_in(tmp: Path, final: Path, run: RunSpec, status: dict[str, Any], t0
         _remove(final)
     os.replace(tmp, final)
     return {k: status.get(k) for k in ("run_id", "status", "error", "wall_time_s")}
+
+
+def _init_result(exp_dir: Path, run: RunSpec) -> Path:
+    """``result.h5`` of the run whose result is ``run``'s initial estimate; RuntimeError when it did not complete."""
+    state = run_status(exp_dir, run.init_run)
+    if state != COMPLETED:
+        raise RuntimeError(f"its initial estimate, run {run.init_run}, is {state}: nothing to start from")
+    return exp_dir / run.init_run / "result.h5"
 
 
 class SolverFailed(SlamcliError):
@@ -734,9 +745,15 @@ def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resu
     if progress:
         progress(counts)
     by_id = {r.run_id: r for r in expansion.runs}
+    # a run that starts from another pending run's result waits for it: init run id -> [(run, dataset error)]
+    unfinished = {r.run_id for r in pending}
+    waiting: dict[str, list[tuple[RunSpec, str | None]]] = {}
 
     def record(records: list[dict]) -> None:
         for rec in records:
+            unfinished.discard(rec["run_id"])
+            for r, ds_error in waiting.pop(rec["run_id"], []):
+                submit_run(r, ds_error)
             if rec["status"] == COMPLETED:
                 counts.done += 1
             else:
@@ -779,7 +796,10 @@ def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resu
 
                 def finished_sim(g: Any, ds_error: str | None) -> None:
                     for r in g.runs:
-                        submit_run(r, ds_error)
+                        if r.init_run in unfinished:
+                            waiting.setdefault(r.init_run, []).append((r, ds_error))
+                        else:
+                            submit_run(r, ds_error)
 
                 for g in groups:
                     submit_sim(g)
@@ -917,6 +937,7 @@ def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
     """One row per run of the expansion: ids, labels, seeds, sweep point and on-disk status."""
     rows = []
     facts: dict[str, dict[str, Any]] = {}
+    with_init = any(r.init_run for r in expansion.runs)  # the column only then: other tables stay as they were
     for r in expansion.runs:
         st = read_json(exp_dir / r.run_id / "status.json") or {}
         status = run_status(exp_dir, r.run_id)
@@ -945,6 +966,8 @@ def manifest_rows(expansion: Expansion, exp_dir: Path) -> list[dict[str, Any]]:
             # time overstates the cost)
             "path": r.run_id,  # relative to the sweep folder: the same for -j 1, -j 2 and a moved folder
         }
+        if with_init:
+            row["init_run"] = r.init_run
         for axis in expansion.axes:
             row[axis] = _cell(r.point.get(axis))
         rows.append(row)
