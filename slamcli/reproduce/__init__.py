@@ -1,4 +1,4 @@
-"""Paper reproductions: the top application layer, above the generic sweep engine (issue 21).
+"""Paper reproductions: the top application layer, above the generic sweep engine.
 
 * :mod:`~slamcli.reproduce.report`      the ``slamcli reproduce`` driver: sections → figures + REPORT.md
 * :mod:`~slamcli.reproduce.outcomes`    every outcome sentence, computed from the numbers of the run

@@ -1,4 +1,4 @@
-"""Paper 001's claims measured beyond the map figures (issue 26): consistency over seeds, stored complexity
+"""Paper 001's claims measured beyond the map figures: consistency over seeds, stored complexity
 results, and the mapping with given poses that explains the noisy-sensor plateau.
 
 * :func:`nees_monte_carlo` — the Bayesian part (the EKF on the features) over N seeds; per step the average

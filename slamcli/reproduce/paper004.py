@@ -259,13 +259,13 @@ def _md(header, rows) -> str:
 
 #: the full operator set with the final 3B shaving and heading bisection (Table 1's last column)
 FULL_PASSES = {"narrow_theta": True, "shave_slices": 4, "bisect_leaves": 64}
-#: the LP contractor (2 rounds) and the hull pass with every leaf bounded by the LP relaxation (issue 26)
+#: the LP contractor (2 rounds) and the hull pass with every leaf bounded by the LP relaxation
 LP_PASSES = {"lp_rounds": 2, "hull_lp": True}
 #: leaves per end of the LP-bounded hull pass on the Table 1 data (quick, full) and with unknown correspondence
 HULL_LP_LEAVES, UNKNOWN_HULL_LP_LEAVES = (50, 100), 20
-#: issue 26's targets on the Table 1 data: box ≤ 1.05× the inner hull bound per coordinate, mean ≤ 3.35 m
+#: the targets on the Table 1 data: box ≤ 1.05× the inner hull bound per coordinate, mean ≤ 3.35 m
 HULL_RATIO_TARGET, HULL_MEAN_TARGET = 1.05, 3.35
-#: issue 26's target with unknown correspondence (seeds 0-9): box / inner hull ≤ 1.5 on every coordinate
+#: the target with unknown correspondence (seeds 0-9): box / inner hull ≤ 1.5 on every coordinate
 UNKNOWN_RATIO_TARGET = 1.5
 LANDMARK_COORDS = [("landmark", j, c) for j in range(4) for c in (0, 1)]
 

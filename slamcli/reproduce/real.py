@@ -17,13 +17,9 @@ sweeps wrote — ``results.csv``, each run's ``config.json``, ``result.h5`` and 
 ICM runs three ways on every recording — its paper defaults, the information weights and ``preset=real`` — and
 the section ends with one computed verdict per ``preset=real`` goal (:func:`icm_verdicts`). Solvers that do not
 support a recording refuse in one line (``cuik`` needs error bounds, ``hybrid`` walls and DDMR controls); the
-table shows that line. Quick mode (the experiments' ``[quick]`` tables) reads the excerpts shipped in
-``tests/data`` when they are there (:func:`excerpt_registry`): Victoria Park's first 20 s, 150 car-park scans,
-45 s of MRCLAM robot 1.
-
-Data: the registered recordings ``victoria-park``, ``mrclam7`` and ``acfr-carpark`` (``slamcli datasets add
-NAME DIR`` or ``slamcli datasets fetch NAME``); a missing one is one line naming that command. Every outcome
-sentence is computed from the numbers of the run.
+table shows that line. Quick mode reads the excerpts of ``tests/data`` when present (:func:`excerpt_registry`).
+Data: the registered recordings ``victoria-park``, ``mrclam7`` and ``acfr-carpark``; a missing one is one line
+naming its ``slamcli datasets fetch``/``add`` command.
 """
 
 from __future__ import annotations
@@ -324,7 +320,7 @@ def _find(rows, label, **where):
 
 
 def icm_verdicts(vp_rows, cp_rows, mr_rows, vp_label: str) -> list[str]:
-    """One computed verdict per "Done when" criterion of ``preset=real`` (issue 22) from the rows of this run:
+    """One computed verdict per "Done when" criterion of ``preset=real`` from the rows of this run:
     Victoria Park (the prefix run) ≤ :data:`GOAL_VP300_M`, car park ≤ :data:`GOAL_CP_M` with every surveyed
     beacon found, each MRCLAM robot's ATE within :data:`GOAL_MRCLAM_MARGIN` of graph's. A criterion whose rows
     are missing says so."""

@@ -114,7 +114,7 @@ def outcome_sentences(rows: list[dict], same: float = SAME_FRACTION) -> list[str
 
 
 def team_icm_verdict(rows: list[dict], icm_joint_status: str, margin: float = GOAL_TEAM_MARGIN) -> str:
-    """Issue 22's team-ICM criterion, computed: the joint ICM run stopped on its energy test (``converged``, not
+    """The team-ICM goal, computed: the joint ICM run stopped on its energy test (``converged``, not
     its sweep cap) and its mean ATE over the robots is within ``margin`` of graph joint's."""
     ic = float(np.mean([r["icm_joint"] for r in rows]))
     gr = float(np.mean([r["graph_joint"] for r in rows]))

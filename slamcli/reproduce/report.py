@@ -16,20 +16,11 @@ order of :data:`SECTIONS`:
   with information weights.
 * Monte-Carlo NEES (``nees.toml``): average pose NEES with the 95 % χ² band.
 
-Experiment files ship inside the package (:mod:`slamcli.experiments`); another directory is used only when
-given (``--experiments``). Every figure section runs several seeds and reports mean ± standard deviation.
-Every outcome sentence comes from :mod:`slamcli.reproduce.outcomes` with the numbers of this run, and every claim's
-verdict from the one rule of :mod:`slamcli.reproduce.verdicts`; ``REPORT.md`` opens with the verdict count and a
-table of every judged claim, and ``slamcli reproduce`` prints the count as its last line. A section whose
-solver is missing or whose runs fail is marked FAILED in the report, and ``slamcli reproduce`` then exits
-non-zero with a summary.
-
-Other papers' sections hook in with one line in :data:`SECTIONS`: ``("key", "module:function")`` where
-``function(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool)`` writes its own figures under
-``out_dir`` and returns its markdown (starting with its own ``## `` heading) and whether it succeeded;
-``progress`` is a :data:`slamcli.types.LogFn` (one-line messages). A function whose first parameter is ``rep``
-is a sweep-driven section instead: ``function(rep: Reproduction) -> Section`` runs its shipped experiments with
-:meth:`Reproduction.run` (resumable, ``-j N``) and renders them from the sweep folders alone.
+Experiment files ship in :mod:`slamcli.experiments` (another folder only with ``--experiments``). Outcome
+sentences come from :mod:`slamcli.reproduce.outcomes`, verdicts from the one rule of
+:mod:`slamcli.reproduce.verdicts`; ``REPORT.md`` opens with the verdict count, and a section whose runs fail
+is marked FAILED (non-zero exit). Other papers' sections hook in through :data:`SECTIONS` (see
+:func:`_external_section`).
 """
 
 from __future__ import annotations

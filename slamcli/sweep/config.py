@@ -19,11 +19,9 @@ An experiment file::
     [quick]                           # fixed overrides for `reproduce --quick` / `sweep --quick`
     replicates = 2
 
-Sweep keys live in three namespaces (the full reference is ``docs/experiments.md``): ``scenario.<dotted simulator key>``, ``solver.<label>.<param>`` and
-``evaluate.<option>``, plus ``data`` (entry labels). The tables are typed dataclasses converted through the
-configuration schema (:func:`typed_table`, :mod:`slamcli.params`); every error is one line naming the file and
-the TOML key, an unknown key with "did you mean" (:func:`check_keys` checks scenario, solver and evaluation
-keys against the real ones).
+Sweep keys: ``scenario.<dotted key>``, ``solver.<label>.<param>``, ``evaluate.<option>`` and ``data`` (entry
+labels); reference ``docs/experiments.md``. Tables are typed dataclasses converted by the schema
+(:func:`typed_table`); every error is one line naming file and key, unknown keys with "did you mean".
 """
 
 from __future__ import annotations

@@ -246,7 +246,7 @@ def resolve_init(params: GraphParams, inputs) -> str:
     fix, ``model=gtsam`` without control factors — else ``odometry`` (landmark graphs keep the odometry start
     and their stall restart from ``init=robust``, GraphParams.restart).
 
-    Why (``benchmarks/bench_graph_gtsam.py``, issue 25): from the odometry chain LM stalls on MIT at cost
+    Why (``benchmarks/bench_graph_gtsam.py``): from the odometry chain LM stalls on MIT at cost
     385.12 (GTSAM's LM too) and only the certificate's chordal restart reaches the certified 20.60, i.e. two
     solves; from the chordal start one solve reaches it (10 LM iterations), and on intel, CSAIL, manhattan,
     City10000 and KITTI 00 the chordal start reaches the same certified optimum in as many or fewer LM

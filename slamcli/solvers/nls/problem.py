@@ -114,76 +114,26 @@ class NlsProblem:
 class NlsParams:
     """Optimiser settings (defaults = GTSAM 4.3's ``LevenbergMarquardtParams`` / ``DoglegParams``).
 
-    Attributes
-    ----------
-    method : "lm" | "gn" | "dogleg"
-        Levenberg-Marquardt (default), Gauss-Newton (with step halving when the cost rises, and a damped
-        step when the undamped normal equations cannot be solved or give no descent direction), or Powell's
-        dogleg trust region (GTSAM's ``DoglegOptimizer``, Ceres's ``DOGLEG``).
-    max_iterations : int
-        Budget of iterations = accepted steps (an LM iteration may solve several damped systems, as in
-        GTSAM's ``LevenbergMarquardtOptimizer``; a dogleg iteration may shrink its region several times).
-    rel_cost_tol : float
-        Converged when an accepted step lowers the cost by less than ``rel_cost_tol · cost``.
-    pred_cost_tol : float
-        LM only (0 = off, the default): converged, before the trial step, when the step's predicted decrease
-        ``−gᵀh − ½hᵀHh`` (the Gauss-Newton decrement ``½gᵀH⁻¹g`` up to the damping) is below
-        ``pred_cost_tol · cost`` while λ is at most ``lambda_init``. Near the optimum that decrement is the
-        distance to the minimum in cost, so LM stops one or two iterations (a trial cost, a retraction and a
-        linearisation each) before ``rel_cost_tol`` would, at a point whose cost is within about
-        ``pred_cost_tol · cost`` of the optimum's. After a step that lowered the cost by at most 1e-6
-        (relative) the decrement is computed with the previous iterate's factorisation (one solve, no new
-        factorisation; ``optimize.LAST_FACTOR_REGIME``).
-    frozen_step_rel : float
-        LM only (0 = off, the default): after an accepted step that lowered the cost by at most this fraction,
-        the next step is first tried with the factorisation the linear solver still holds (an earlier
-        iterate's damped ``H``: simplified Newton, one solve instead of a factorisation; near the optimum ``H``
-        hardly moves, so the step converges at a rate of the order of the last relative change). It is kept
-        when it lowers the cost by at least half its model decrease ``−½gᵀh`` (``optimize.FROZEN_MIN_FIDELITY``), otherwise
-        the LM iteration runs as usual. The stopping tests are unchanged.
-    abs_cost_tol : float
-        Converged when the cost is below this value.
-    step_tol : float
-        Converged when ``‖h‖ ≤ step_tol · (‖x‖ + step_tol)``.
-    lambda_init : float
-        Initial damping λ₀ (absolute, GTSAM's ``lambdaInitial`` = 1e-5).
-    lambda_factor : float
-        λ is multiplied by this after a rejected trial and divided by it after an accepted step
-        (``lambda_update = "fixed"``; GTSAM's ``lambdaFactor`` = 10, ``useFixedLambdaFactor`` = true).
-    lambda_update : "fixed" | "nielsen"
-        λ schedule: GTSAM's fixed factor, or Nielsen's ``λ ← λ·max(1/3, 1 − (2ϱ − 1)³)`` on success and
-        ``λ ← λν, ν ← 2ν`` on failure (Madsen, Nielsen & Tingleff 2004, §3.2; Ceres's LM strategy).
-    lambda_min, lambda_max : float
-        Bounds of λ (GTSAM's ``lambdaLowerBound`` = 0 and ``lambdaUpperBound`` = 1e5). When a rejected trial
-        raises λ to ``lambda_max`` or above, LM stops as converged (no decrease possible) without trying that
-        λ, as GTSAM's ``tryLambda`` does.
-    min_model_fidelity : float
-        A trial step is accepted when the gain ratio ``ϱ = actual / predicted decrease`` exceeds this
-        (GTSAM's ``minModelFidelity`` = 1e-3).
-    damping : "levenberg" | "marquardt"
-        ``D = I`` (default, GTSAM's ``diagonalDamping = false``) or ``D = diag(H)`` clamped to
-        ``[1e-6, 1e32]`` (GTSAM's ``diagonalDamping = true`` with its min/max diagonal). Marquardt scaling
-        is what stalled LM on long real chains (Victoria Park): see the module docstring.
-    delta_init : float
-        Initial trust-region radius of the dogleg (GTSAM's ``deltaInitial`` = 1).
-    linear_solver : "auto" | "cholmod" | "superlu" | "chain"
-        Sparse Cholesky of CHOLMOD (CVXOPT's; symbolic analysis with its fill-reducing ordering
-        once per problem, numeric factorisation in place every solve); SciPy's SuperLU in symmetric mode
-        with a minimum-degree ordering computed once; or the banded chain + dense border Schur solver.
-        ``auto`` = CHOLMOD when it imports, else SuperLU. A factorisation that breaks down (pivot ≤ 0 of a
-        numerically indefinite ``H``) falls back to SuperLU for that system (noted in the result).
-    pose_chart : "body" | "world"
-        For the SE(2) pose columns of ``NlsProblem.se2_poses``: ``body`` (default) steps as GTSAM's Pose2
-        does, ``x ← x ⊕ Exp(ξ)`` with ``ξ`` in the body frame and the Jacobian columns of a pose rotated
-        into it (``∂/∂ξ = ∂/∂x · blkdiag(R(θ), 1)``), so that damping, trust region and the finite steps
-        follow GTSAM's path (on non-convex real problems another path can end in another local minimum);
-        ``world`` adds ``h`` to the world coordinates and wraps θ.
-    robust : "none" | "huber" | "cauchy" | "geman_mcclure"
-        Kernel applied to blocks with ``robust=True`` (:func:`robust_kernel`).
-    huber_k : float
-        Width ``k`` of the kernel on the whitened residual norm (Huber threshold, Cauchy scale, Geman-McClure c).
-    max_border : int
-        Largest border (non-chain) dimension for the chain/Schur linear solver (see ``NlsProblem.chain``).
+    method : "lm" | "gn" | "dogleg"   LM; Gauss-Newton with step halving; Powell's dogleg trust region.
+    max_iterations : int         accepted steps (an LM iteration may solve several damped systems, as GTSAM's).
+    rel_cost_tol : float         converged when an accepted step lowers the cost by < ``rel_cost_tol · cost``.
+    pred_cost_tol : float        LM, 0 = off: converged when the predicted decrease ``−gᵀh − ½hᵀHh`` is below
+                                 ``pred_cost_tol · cost`` while λ ≤ ``lambda_init`` (``optimize.LAST_FACTOR_REGIME``).
+    frozen_step_rel : float      LM, 0 = off: after a step lowering the cost by ≤ this fraction, first try the
+                                 held factorisation (simplified Newton; kept at ``optimize.FROZEN_MIN_FIDELITY``).
+    abs_cost_tol, step_tol : float       converged when cost < abs_cost_tol or ‖h‖ ≤ step_tol · (‖x‖ + step_tol).
+    lambda_init, lambda_factor : float   λ₀ (GTSAM 1e-5) and the fixed factor (GTSAM 10).
+    lambda_update : "fixed" | "nielsen"  GTSAM's fixed factor, or Nielsen's schedule (Madsen et al. 2004 §3.2).
+    lambda_min, lambda_max : float       bounds of λ; a rejected trial reaching ``lambda_max`` stops (GTSAM).
+    min_model_fidelity : float   accept a trial when actual / predicted decrease exceeds this (GTSAM 1e-3).
+    damping : "levenberg" | "marquardt"  ``D = I`` or ``D = diag(H)`` clamped to [1e-6, 1e32].
+    delta_init : float           initial dogleg trust-region radius (GTSAM 1).
+    linear_solver : "auto" | "cholmod" | "superlu" | "chain"   CHOLMOD (CVXOPT), SciPy's SuperLU, or the banded
+                                 chain + dense border Schur solver; ``auto`` = CHOLMOD when it imports.
+    pose_chart : "body" | "world"        SE(2) steps ``x ⊕ Exp(ξ)``, ξ in the body frame (GTSAM's Pose2), or world.
+    robust, huber_k : str, float kernel ("none" | "huber" | "cauchy" | "geman_mcclure") on blocks with
+                                 ``robust=True``, and its width on the whitened residual norm.
+    max_border : int             largest border dimension for the chain/Schur solver.
     """
 
     method: Literal["lm", "gn", "dogleg"] = "lm"
