@@ -41,7 +41,11 @@ from slamcli.types import LogFn
 
 _QUICK_OVERRIDES = {"walls.width": 40.0, "walls.height": 40.0, "walls.corridor": 8.0, "walls.resolution": 1.0,
                     "sensor.n_beams": 60, "walls.laps": 2}
-_QUICK_MAP4 = {"walls.laps": 0, "n_steps": 120, "walls.resolution": 1.0, "sensor.n_beams": 60}
+#: section ``paper001-map4``: its shipped experiment (``experiments/paper001-map4.toml``), the data entry and
+#: solver label of its one run, and the run's label in the report (full, quick)
+MAP4_EXPERIMENT, MAP4_DATA, MAP4_SOLVER = "paper001-map4", "map4-laser", "hybrid"
+MAP4_LABELS = ("Map 4 laser", "Map 4 laser, first 120 steps")
+MAP4_TITLE = "Paper 001, Map 4: hybrid SLAM on a 1 km × 200 m city-block map (Fig. 9)"
 
 
 @dataclass
@@ -55,23 +59,19 @@ class Run:
     study: str = ""  # "" = a figure run; "association", "ablation", "stabilising": the claim studies
 
 
-def planned_runs(quick: bool, part: str = "all") -> list[Run]:
-    """The runs (paper §III: Maps 1-3 with both sensors, Map 4 with the laser, 2 laps); ``part`` = ``"maps"``
-    (Maps 1-3 and the posts variant), ``"map4"`` or ``"all"``."""
+def planned_runs(quick: bool) -> list[Run]:
+    """The figure runs of section ``paper001`` (paper §III: Maps 1-3 with both sensors and the Map 3 posts
+    variant); Map 4 is the experiment :data:`MAP4_EXPERIMENT`."""
     if quick:
-        runs = [Run("Map 1 (small) laser", "hybrid-map1", "laser", 1, dict(_QUICK_OVERRIDES), {"resolution": 1.0}),
+        return [Run("Map 1 (small) laser", "hybrid-map1", "laser", 1, dict(_QUICK_OVERRIDES), {"resolution": 1.0}),
                 Run("Map 1 (small) noisy", "hybrid-map1-noisy", "noisy", 1, dict(_QUICK_OVERRIDES),
                     {"resolution": 1.0})]
-        map4 = [Run("Map 4 laser, first 120 steps", "hybrid-map4", "laser", 4, dict(_QUICK_MAP4),
-                    {"resolution": 1.0, "n_snapshots": 2})]
-    else:
-        runs = []
-        for k in (1, 2, 3):
-            runs.append(Run(f"Map {k} laser", f"hybrid-map{k}", "laser", k))
-            runs.append(Run(f"Map {k} noisy", f"hybrid-map{k}-noisy", "noisy", k))
-        runs.append(Run("Map 3 posts, laser", "hybrid-map3-posts", "laser", 3))
-        map4 = [Run("Map 4 laser", "hybrid-map4", "laser", 4, {"walls.laps": 2}, {"n_snapshots": 8})]
-    return {"maps": runs, "map4": map4, "all": runs + map4}[part]
+    runs = []
+    for k in (1, 2, 3):
+        runs.append(Run(f"Map {k} laser", f"hybrid-map{k}", "laser", k))
+        runs.append(Run(f"Map {k} noisy", f"hybrid-map{k}-noisy", "noisy", k))
+    runs.append(Run("Map 3 posts, laser", "hybrid-map3-posts", "laser", 3))
+    return runs
 
 
 #: the association study's perturbations: (label, scenario overrides, solver parameters, also on Map 3)
@@ -150,7 +150,9 @@ def _execute(run: Run, out: Path, seed: int = 1) -> tuple[Path, Path]:
     return dpath, rpath
 
 
-def _metrics(dpath: Path, rpath: Path) -> dict:
+def _metrics(dpath: Path, rpath: Path, cpu_time_s: float | None = None) -> dict:
+    """One run's numbers from its dataset and result files; ``cpu_time_s``: the solve's CPU time (the sweep's
+    ``solve_cpu_s``; default: the result's ``cpu_time_s`` extra)."""
     from slamcli.io import read_dataset, read_result
     from slamcli.metrics.occupancy import common_mask, error_at_lap_ends, pose_errors_3sigma, snapshot_errors
 
@@ -173,7 +175,7 @@ def _metrics(dpath: Path, rpath: Path) -> dict:
     out["pos_err_mean"] = float(np.mean(np.hypot(*(res.poses_xyt[:, :2] - tr.poses_xyt[:, :2]).T)))
     out["n_steps"] = ds.inputs.n_poses - 1
     out["wall_time_s"] = float(res.wall_time_s)
-    out["cpu_time_s"] = float(res.extra.get("cpu_time_s", float("nan")))
+    out["cpu_time_s"] = float(res.extra.get("cpu_time_s", float("nan")) if cpu_time_s is None else cpu_time_s)
     return out
 
 
@@ -375,12 +377,51 @@ DEVIATIONS = (
 
 def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
     """Section ``paper001``: Maps 1-3 (both sensors), the posts variant and Fig. 2 (see :func:`_run_part`)."""
-    return _run_part(out_dir, quick, progress, "maps")
+    return _run_part(out_dir, quick, progress)
 
 
-def run_section_map4(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
-    """Section ``paper001-map4``: Map 4 with the laser, 2 laps (the longest run; last in ``make reproduce``)."""
-    return _run_part(out_dir, quick, progress, "map4")
+def render_map4(exp_dir: Path, out_dir: Path, quick: bool) -> tuple[str, bool]:
+    """Section ``paper001-map4``'s markdown (without its heading) and whether its run completed, from the sweep
+    folder ``exp_dir`` of :data:`MAP4_EXPERIMENT` alone (``results.csv``: status and ``solve_cpu_s``; the run's
+    ``dataset.h5`` and ``result.h5``); the figure goes to ``out_dir`` (named relative to the report as
+    ``out_dir.name``)."""
+    from slamcli.reproduce.sweep_runs import SweepRuns
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lines = _quick_note("map4", quick)
+    run = Run(MAP4_LABELS[bool(quick)], "hybrid-map4", "laser", 4)
+    results = []
+    try:
+        row = SweepRuns(Path(exp_dir)).one(MAP4_SOLVER, MAP4_DATA)
+    except KeyError:
+        lines.append(f"- **{run.label}: failed** — no completed run in `{Path(exp_dir).name}/results.csv`")
+    else:
+        d = Path(row["path"])
+        m = _metrics(d / "dataset.h5", d / "result.h5", float(row["solve_cpu_s"]))
+        _figure(run, m, out_dir / f"{_slug(run.label)}.png")
+        results.append((run, m))
+    lines += _body(results, None, "map4", quick, out_dir.name, [], None)
+    return "\n".join(lines), bool(results)
+
+
+def section_map4(rep):
+    """Section ``paper001-map4``: Map 4 with the laser, 2 laps (the longest run; last in ``make reproduce``), run
+    through the sweep engine (``rep.run``: resumable, ``-j N``) and rendered by :func:`render_map4`; ``rep`` is
+    the :class:`~slamcli.reproduce.report.Reproduction`."""
+    from slamcli.reproduce.report import Section
+
+    sec = Section("paper001-map4", MAP4_TITLE)
+    outcome = rep.run(f"{MAP4_EXPERIMENT}.toml")
+    rep._missing_note(sec, outcome)
+    rep._failures_note(sec, outcome)
+    text, ok = render_map4(outcome.exp_dir, rep.out / "paper001-map4", rep.quick)
+    sec.add(text.strip())
+    if not ok:
+        sec.fail("the Map 4 run did not complete")
+    if not sec.ok:
+        sec.title += " — FAILED"
+    return sec
 
 
 def _claim_row(run: Run, m: dict) -> dict:
@@ -679,8 +720,9 @@ def _run_studies(out: Path, quick: bool, results: list, report) -> tuple[list[st
     return lines, {"complexity": pairs, "association": assoc or None, "consistency": ours}, ok
 
 
-def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> tuple[str, bool]:
-    """Run the paper 001 experiments of ``part`` into ``out_dir``; return the markdown section (figure paths
+def _run_part(out_dir: Path, quick: bool, progress: LogFn | None) -> tuple[str, bool]:
+    """Run the experiments of section ``paper001`` (:func:`planned_runs`, Fig. 2, the claim studies) into
+    ``out_dir``; return the markdown section (figure paths
     relative to ``out_dir``'s parent, where the report lives) and whether every run completed.
 
     ``progress`` gets one status line per finished run (the reproduce driver passes its line logger)."""
@@ -692,17 +734,8 @@ def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> 
         if progress is not None:
             progress(f"paper001: {done}/{total} runs")
 
-    runs = planned_runs(quick, part)
-    if part == "map4":
-        lines = ["## Paper 001, Map 4: hybrid SLAM on a 1 km × 200 m city-block map (Fig. 9)", ""]
-        if quick:
-            lines += ["> **QUICK MODE**: the first 120 steps of Map 4 at 1 m cells, 60 beams — a smoke check, "
-                      "not the paper's run.", ""]
-    else:
-        lines = ["## Paper 001: hybrid Bayesian/frequentist SLAM (Figs. 2-8)", ""]
-        if quick:
-            lines += ["> **QUICK MODE**: a small Map 1 (40 m square, 8 m corridors, 1 m cells, 60 beams), both "
-                      "sensors — a smoke check, not the paper's maps.", ""]
+    runs = planned_runs(quick)
+    lines = ["## Paper 001: hybrid Bayesian/frequentist SLAM (Figs. 2-8)", ""] + _quick_note("maps", quick)
     ok = True
     results: list[tuple[Run, dict]] = []
     total = len(runs) + 1
@@ -716,15 +749,31 @@ def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> 
         except Exception as exc:  # noqa: BLE001 - a failed run is reported, the section goes on
             ok = False
             lines.append(f"- **{run.label}: failed** — {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
-    ce = counterexample_figure(out / "fig2_counterexample.png") if part != "map4" else None
+    ce = counterexample_figure(out / "fig2_counterexample.png")
     report(total, total)
-    study_lines, verdict_kw = [], None
-    if part != "map4":
-        study_lines, verdict_kw, ok_s = _run_studies(
-            out, quick, results, lambda what: progress(f"paper001 studies: {what}") if progress else None)
-        ok = ok and ok_s
+    study_lines, verdict_kw, ok_s = _run_studies(
+        out, quick, results, lambda what: progress(f"paper001 studies: {what}") if progress else None)
+    lines += _body(results, ce, "maps", quick, rel, study_lines, verdict_kw)
+    ok = ok and ok_s
+    return "\n".join(lines), ok and len(results) == len(runs)
 
-    # ---- table ----
+
+def _quick_note(part: str, quick: bool) -> list[str]:
+    """The QUICK MODE banner of a part (none in full mode)."""
+    if not quick:
+        return []
+    if part == "map4":
+        return ["> **QUICK MODE**: the first 120 steps of Map 4 at 1 m cells, 60 beams — a smoke check, "
+                "not the paper's run.", ""]
+    return ["> **QUICK MODE**: a small Map 1 (40 m square, 8 m corridors, 1 m cells, 60 beams), both "
+            "sensors — a smoke check, not the paper's maps.", ""]
+
+
+def _body(results: list[tuple[Run, dict]], ce: dict | None, part: str, quick: bool, rel: str,
+          study_lines: list[str], verdict_kw: dict | None) -> list[str]:
+    """The run table, run times, claims, studies and setting of a part, from the runs' numbers
+    (:func:`_metrics`); figure paths are given relative to the report, under ``rel``."""
+    lines: list[str] = []
     hdr = ["run", "steps", "laps", "odometry max err (m)", "EKF mean pos err (m)", "pose NEES (mean, d=3)",
            "steps inside 3σ", "per-cell err lap 1 → last (freq.)", "final per-cell err freq. / log-odds",
            "accuracy freq. / log-odds", "solve wall / CPU (s)"]
@@ -754,4 +803,4 @@ def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> 
     lines += study_lines
     lines += ["", "Setting (the paper gives the sizes, robot, noise levels, 40 m range and laps); our deviations: "
               + "; ".join(DEVIATIONS) + " (see docs and `slamcli solvers hybrid`).", ""]
-    return "\n".join(lines), ok and len(results) == len(runs)
+    return lines

@@ -1081,7 +1081,7 @@ SECTIONS: list[tuple[str, str]] = [
     ("paper004", "slamcli.reproduce.paper004:section"),
     ("real", "slamcli.reproduce.real:run_section"),
     ("real-multi", "slamcli.reproduce.real_multi:run_section"),
-    ("paper001-map4", "slamcli.reproduce.paper001:run_section_map4"),
+    ("paper001-map4", "slamcli.reproduce.paper001:section_map4"),
 ]
 
 
