@@ -28,8 +28,6 @@ METADATA = {
 SOLVE_CALLS = frozenset({"solve", "solve_dataset", "solve_file", "make_solver"})
 #: modules still to convert to experiment files + renderers, and what in them still solves
 TO_CONVERT = {
-    "paper001.py": "paper 001's maps and studies build HybridSlam runs with their own cache",
-    "paper001_studies.py": "paper 001's claim studies solve through paper001's runner",
     "report.py": "paper 000's range-offset study and the post-processing section call make_solver(...).solve",
 }
 

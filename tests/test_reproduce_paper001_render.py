@@ -56,7 +56,7 @@ def _table_row(text: str, label: str) -> list[str]:
 
 def test_map4_renderer_writes_the_hand_worked_row(tmp_path):
     exp, ds = _sweep_folder(tmp_path)
-    text, ok = render_map4(exp, tmp_path / "out", quick=True)
+    text, ok = render_map4({"paper001-map4": exp}, tmp_path / "out", quick=True)
     assert ok
     odo = ds.inputs.odometry_xyt[:, :2] - ds.truth.poses_xyt[:, :2]
     row = _table_row(text, MAP4_LABELS[1])
@@ -72,6 +72,6 @@ def test_map4_renderer_writes_the_hand_worked_row(tmp_path):
 
 def test_map4_renderer_without_a_completed_run_says_so(tmp_path):
     exp, _ = _sweep_folder(tmp_path, "failed")
-    text, ok = render_map4(exp, tmp_path / "out", quick=False)
+    text, ok = render_map4({"paper001-map4": exp}, tmp_path / "out", quick=False)
     assert not ok
     assert f"**{MAP4_LABELS[0]}: failed**" in text and "results.csv" in text
