@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from slamcli.io import write_dataset, write_result
 from slamcli.reproduce.paper001 import MAP4_DATA, MAP4_LABELS, MAP4_SOLVER, render_map4
@@ -75,3 +76,36 @@ def test_map4_renderer_without_a_completed_run_says_so(tmp_path):
     text, ok = render_map4({"paper001-map4": exp}, tmp_path / "out", quick=False)
     assert not ok
     assert f"**{MAP4_LABELS[0]}: failed**" in text and "results.csv" in text
+
+
+def test_nees_monte_carlo_is_read_from_the_sweep_files(tmp_path):
+    """``consistency_study`` from a hand-written ``paper001-nees-map1`` folder: 2 seeds per stabilising scale, the
+    poses off by 0.1 m (3×) and 0.2 m (10×) in x with σ = 0.1 m: NEES 1 and 4 at every step; configurations
+    without rows (the noisy sensor, 1×) are left out; the band is scipy's χ²(3N)/N."""
+    from scipy.stats import chi2
+
+    from slamcli.reproduce.paper001 import NEES_SCALE_COLUMN, NEES_SOLVER, consistency_study
+    from slamcli.reproduce.sweep_runs import SweepRuns
+
+    ds = simulate_scenario("hybrid-map1", 1, {"walls.width": 40.0, "walls.height": 40.0, "walls.corridor": 8.0,
+                                              "walls.laps": 0, "n_steps": 10, "sensor.n_beams": 2})
+    exp = tmp_path / "paper001-nees-map1"
+    rows = []
+    for i, (scale, offset, rep) in enumerate([(3.0, 0.1, 0), (3.0, 0.1, 1), (10.0, 0.2, 0), (10.0, 0.2, 1)]):
+        d = exp / f"r{i}"
+        d.mkdir(parents=True)
+        write_dataset(d / "dataset.h5", ds)
+        T = ds.inputs.n_poses
+        write_result(d / "result.h5", SolverResult(
+            solver="hybrid", solver_version="0", params={}, status=Status.COMPLETED, message="",
+            poses_xyt=ds.truth.poses_xyt + np.array([offset, 0.0, 0.0]), landmarks_xy=np.zeros((0, 2)),
+            assoc=np.full(len(ds.inputs.observations), -1), pose_cov=np.broadcast_to(SD**2 * np.eye(3), (T, 3, 3)).copy()))
+        rows.append({"run_id": f"r{i}", "label": NEES_SOLVER, "data": "laser", "replicate": rep, "status": "completed",
+                     NEES_SCALE_COLUMN: scale, "solve_cpu_s": 0.1, "path": f"r{i}"})
+    pd.DataFrame(rows).to_csv(exp / "results.csv", index=False)
+    mc = consistency_study({"paper001-nees-map1": SweepRuns(exp)}, quick=True)
+    assert [c["label"] for c in mc] == ["Map 1 (small) laser, 3×", "Map 1 (small) laser, 10×"]
+    lo, hi = chi2.ppf([0.025, 0.975], 6) / 2
+    for c, anees in zip(mc, (1.0, 4.0)):
+        assert c["n_seeds"] == 2 and c["anees_mean"] == pytest.approx(anees)
+        assert c["lo"] == pytest.approx(lo) and c["hi"] == pytest.approx(hi) and c["inside"] == 1.0

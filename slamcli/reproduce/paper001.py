@@ -400,21 +400,11 @@ def _swept_section(rep, key: str, title: str, names: list[str], render_fn):
     """Run the experiments ``names`` with ``rep.run`` and render their folders with ``render_fn(dirs, out_dir,
     quick)`` into a :class:`~slamcli.reproduce.report.Section` ``key`` (figures under ``<report>/<key>``)."""
     from slamcli.reproduce.report import Section
+    from slamcli.reproduce.sweep_runs import finish_section, run_experiments
 
     sec = Section(key, title)
-    dirs = {}
-    for name in names:
-        outcome = rep.run(f"{name}.toml")
-        rep._missing_note(sec, outcome)
-        rep._failures_note(sec, outcome)
-        dirs[name] = outcome.exp_dir
-    text, ok = render_fn(dirs, rep.out / key, rep.quick)
-    sec.add(text.strip())
-    if not ok:
-        sec.fail("runs did not complete")
-    if not sec.ok:
-        sec.title += " — FAILED"
-    return sec
+    text, ok = render_fn(run_experiments(rep, sec, names), rep.out / key, rep.quick)
+    return finish_section(sec, text, ok, "runs did not complete")
 
 
 def render_map4(exp_dirs: dict[str, Path], out_dir: Path, quick: bool) -> tuple[str, bool]:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from slamcli.reproduce.sweep_runs import SweepRuns
+from slamcli.reproduce.sweep_runs import SweepRuns, finish_section, run_experiments
 from slamcli.sim.bounded import heading_from_paper004
 
 # Paper 004 Table 1 (unique correspondence): rows r1..r9, l1..l4 → [x_lo, x_hi, y_lo, y_hi, θ_lo, θ_hi]
@@ -696,21 +696,12 @@ def section(rep):
         sec.add("> **Section failed**: the `interval` extra (codac) is not installed: `pip install 'slamcli[interval]'`.")
         sec.fail("the interval extra (codac) is not installed")
     else:
-        dirs = {}
-        for name in EXPERIMENTS:
-            outcome = rep.run(f"{name}.toml")
-            rep._missing_note(sec, outcome)
-            if name != "paper004-wrong":  # there a failed run (every box empty) is the expected catch
-                rep._failures_note(sec, outcome)
-            dirs[name] = outcome.exp_dir
+        # in paper004-wrong a failed run (every box empty) is the expected catch
+        dirs = run_experiments(rep, sec, EXPERIMENTS, frozenset({"paper004-wrong"}))
         if sec.ok:
             text, ok = render(dirs, rep.out / "paper004", rep.quick, t0)
-            sec.add(text.strip())
-            if not ok:
-                sec.fail("guarantees not met or runs failed")
-    if not sec.ok:
-        sec.title += " — FAILED"
-    return sec
+            return finish_section(sec, text, ok, "guarantees not met or runs failed")
+    return finish_section(sec, None, True, "")
 
 
 def _verdicts(md: list[str], checks: dict, lm_mean: dict, hull: dict) -> tuple[str, bool]:

@@ -45,3 +45,30 @@ class SweepRuns:
         from slamcli.io import read_dataset
 
         return read_dataset(Path(self.one(label, data, replicate, completed)["path"]) / "dataset.h5")
+
+
+def run_experiments(rep, sec, names, expected_failures: frozenset[str] = frozenset()) -> dict[str, Path]:
+    """Run the shipped experiments ``names`` with ``rep.run`` (the
+    :class:`~slamcli.reproduce.report.Reproduction`: resumable, ``-j N``), noting missing solvers and failed runs
+    in section ``sec`` (not the failures of an experiment in ``expected_failures``); returns ``{name: sweep
+    folder}``."""
+    dirs = {}
+    for name in names:
+        outcome = rep.run(f"{name}.toml")
+        rep._missing_note(sec, outcome)
+        if name not in expected_failures:
+            rep._failures_note(sec, outcome)
+        dirs[name] = outcome.exp_dir
+    return dirs
+
+
+def finish_section(sec, text: str | None, ok: bool, why: str):
+    """Add a renderer's markdown ``text`` (None: nothing rendered) to section ``sec``, fail it with ``why`` when
+    not ``ok``, and mark a failed section's title; returns ``sec``."""
+    if text is not None:
+        sec.add(text.strip())
+    if not ok:
+        sec.fail(why)
+    if not sec.ok:
+        sec.title += " — FAILED"
+    return sec
