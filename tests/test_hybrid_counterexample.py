@@ -4,7 +4,7 @@ Bayesian alternatives without map-map correlations do not keep the truth as a fi
 import numpy as np
 import pytest
 
-from slamcli.solvers.hybrid.counterexample import (
+from slamcli.models.hybrid_counterexample import (
     frequentist_c,
     naive_bayes_p2_after_z1,
     naive_bayes_p2_after_z1_as_printed,

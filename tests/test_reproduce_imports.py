@@ -4,8 +4,7 @@ renderers read what the sweeps wrote.
 The check reads each module's AST: every import (module level or inside a function, relative ones resolved)
 and every call. A module breaks the rule when it imports ``slamcli.api.solve`` or a solver module (anything under
 ``slamcli.solvers`` but the read-only :data:`METADATA` modules), or calls a function or method named like a solve
-(:data:`SOLVE_CALLS`). :data:`TO_CONVERT` names the modules that still do, each with what is left; a module that
-no longer breaks the rule must leave that list.
+(:data:`SOLVE_CALLS`).
 """
 
 from __future__ import annotations
@@ -26,11 +25,6 @@ METADATA = {
 }
 #: calls that solve: the api's entry points and a solver object's method
 SOLVE_CALLS = frozenset({"solve", "solve_dataset", "solve_file", "make_solver"})
-#: modules still to convert to experiment files + renderers, and what in them still solves
-TO_CONVERT = {
-    "paper001.py": "paper 001's maps and studies build HybridSlam runs with their own cache",
-    "paper001_studies.py": "paper 001's claim studies solve through paper001's runner",
-}
 
 
 def _imports(tree: ast.AST, module: str) -> list[str]:
@@ -91,11 +85,4 @@ def test_the_checker_sees_imports_and_calls_that_solve():
 @pytest.mark.parametrize("path", _modules(), ids=lambda p: p.name)
 def test_reproduce_module_does_not_solve(path):
     found = violations(path.read_text(encoding="utf-8"), f"slamcli.reproduce.{path.stem}")
-    if path.name in TO_CONVERT:
-        assert found, f"{path.name} no longer solves: take it off TO_CONVERT"
-    else:
-        assert not found, f"{path.name}: " + "; ".join(found) + " (run it as an experiment; render from its files)"
-
-
-def test_to_convert_names_existing_modules():
-    assert set(TO_CONVERT) <= {p.name for p in _modules()}
+    assert not found, f"{path.name}: " + "; ".join(found) + " (run it as an experiment; render from its files)"

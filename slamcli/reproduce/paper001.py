@@ -1,27 +1,29 @@
-"""Reproduction section for paper 001 (Chakravorty & Saha, hybrid Bayesian/frequentist SLAM), Figs. 2-9.
+"""Reproduction sections for paper 001 (Chakravorty & Saha, hybrid Bayesian/frequentist SLAM), Figs. 2-9.
 
-``run_section(out_dir, quick, progress) -> (markdown, ok)`` simulates the paper's maps, runs the ``hybrid``
-solver (which also builds the log-odds baseline of eq. 24 from the same belief mean), draws subfigures (a)-(h)
-per run and the §II.D counterexample (Fig. 2), and writes a markdown section whose every outcome sentence is
-computed from the run's own numbers. Finished runs are reused (the result file is kept under ``out_dir``).
+The runs are shipped experiments (``experiments/paper001-*.toml``, each runnable with ``slamcli sweep NAME``):
+the ``hybrid`` solver (which also builds the log-odds baseline of eq. 24 from the same belief mean) on the
+paper's maps. :func:`section` and :func:`section_map4` run them through the sweep engine; :func:`render` and
+:func:`render_map4` write the markdown from the sweep folders alone (``results.csv``, each run's ``dataset.h5``
+and ``result.h5``) — they never solve: subfigures (a)-(h) per run, the §II.D counterexample (Fig. 2, a model
+calculation) and outcome sentences computed from the runs' own numbers.
 
 Two sections, so that the long Map 4 run comes last in ``make reproduce`` and can be run on its own:
-``run_section`` (key ``paper001``) — Maps 1-3 with both sensors, the Map 3 posts variant and Fig. 2;
-``run_section_map4`` (key ``paper001-map4``) — Map 4 with the laser, 2 laps, as the paper. Quick mode: a small
-Map 1 (40 m square, 8 m corridor, 1 m cells, 60 beams) with both sensors, and the first 120 steps of Map 4 —
+``paper001`` — Maps 1-3 with both sensors, the Map 3 posts variant, Fig. 2 and the claim studies;
+``paper001-map4`` — Map 4 with the laser, 2 laps, as the paper. Quick mode (the files' ``[quick]`` tables): a
+small Map 1 (40 m square, 8 m corridor, 1 m cells, 60 beams) with both sensors, and the first 120 steps of Map 4 —
 smoke checks, named as such. Each section states every run's wall and CPU time.
 
-The ``paper001`` section then runs the claim studies (:func:`study_runs`, :func:`consistency_study`,
-:func:`plateau_study`; helpers in :mod:`slamcli.reproduce.paper001_studies`) and feeds their numbers to
-:func:`claim_verdicts`: association faults (1 lap per map), the 20-seed NEES Monte-Carlo (quick: 5 seeds on the
-small map, not judged), the plain-likelihood ablation, the paper's 10× stabilising noise, the noisy plateau and
-the stored complexity table.
+The claim studies (:func:`study_runs`, :func:`consistency_study`, :func:`plateau_study`; helpers in
+:mod:`slamcli.reproduce.paper001_studies`) feed :func:`claim_verdicts`: association faults (1 lap per map), the
+20-seed NEES Monte-Carlo of the Bayesian part (quick: 5 seeds on the small map, not judged), the plain-likelihood
+ablation, the paper's 10× stabilising noise, the noisy plateau (maps from given poses) and the stored complexity
+table.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,57 +31,71 @@ import numpy as np
 from slamcli.reproduce.paper001_studies import (
     COMPLEXITY_CSV,
     NEES_MIN_SEEDS,
-    gamma_at_laps,
+    gamma_from_median,
     loglog_slope,
-    map_with_given_poses,
     nees_class,
-    nees_monte_carlo,
     nees_summary,
     read_complexity,
 )
-from slamcli.types import LogFn
 
-_QUICK_OVERRIDES = {"walls.width": 40.0, "walls.height": 40.0, "walls.corridor": 8.0, "walls.resolution": 1.0,
-                    "sensor.n_beams": 60, "walls.laps": 2}
-_QUICK_MAP4 = {"walls.laps": 0, "n_steps": 120, "walls.resolution": 1.0, "sensor.n_beams": 60}
+TITLE = "Paper 001: hybrid Bayesian/frequentist SLAM (Figs. 2-8)"
+#: section ``paper001-map4``: its shipped experiment (``experiments/paper001-map4.toml``), the data entry and
+#: solver label of its one run, and the run's label in the report (full, quick)
+MAP4_EXPERIMENT, MAP4_DATA, MAP4_SOLVER = "paper001-map4", "map4-laser", "hybrid"
+MAP4_LABELS = ("Map 4 laser", "Map 4 laser, first 120 steps")
+MAP4_TITLE = "Paper 001, Map 4: hybrid SLAM on a 1 km × 200 m city-block map (Fig. 9)"
+#: the plateau study's experiment; its solver label and data entries (the EKF mean's map, the true poses', the
+#: true poses' with a bearing-noise-free scan)
+PLATEAU_EXPERIMENT, PLATEAU_SOLVER = "paper001-plateau", "mapper"
+PLATEAU_DATA = ("noisy", "true-poses", "true-poses-no-bearing")
+#: the NEES Monte-Carlo's solver label (``mapping = false``) and its swept column in ``results.csv``
+NEES_SOLVER = "ekf"
+NEES_SCALE_COLUMN = f"solver.{NEES_SOLVER}.stabilising_scale"
 
 
 @dataclass
 class Run:
+    """One run as the report names it, and where the sweeps hold it: experiment, data entry, solver label."""
+
     label: str
-    scenario: str
     sensor: str
     map_no: int
-    overrides: dict = field(default_factory=dict)
-    params: dict = field(default_factory=dict)
+    experiment: str
+    data: str
+    solver: str = "hybrid"
     study: str = ""  # "" = a figure run; "association", "ablation", "stabilising": the claim studies
 
 
-def planned_runs(quick: bool, part: str = "all") -> list[Run]:
-    """The runs (paper §III: Maps 1-3 with both sensors, Map 4 with the laser, 2 laps); ``part`` = ``"maps"``
-    (Maps 1-3 and the posts variant), ``"map4"`` or ``"all"``."""
-    if quick:
-        runs = [Run("Map 1 (small) laser", "hybrid-map1", "laser", 1, dict(_QUICK_OVERRIDES), {"resolution": 1.0}),
-                Run("Map 1 (small) noisy", "hybrid-map1-noisy", "noisy", 1, dict(_QUICK_OVERRIDES),
-                    {"resolution": 1.0})]
-        map4 = [Run("Map 4 laser, first 120 steps", "hybrid-map4", "laser", 4, dict(_QUICK_MAP4),
-                    {"resolution": 1.0, "n_snapshots": 2})]
-    else:
-        runs = []
-        for k in (1, 2, 3):
-            runs.append(Run(f"Map {k} laser", f"hybrid-map{k}", "laser", k))
-            runs.append(Run(f"Map {k} noisy", f"hybrid-map{k}-noisy", "noisy", k))
-        runs.append(Run("Map 3 posts, laser", "hybrid-map3-posts", "laser", 3))
-        map4 = [Run("Map 4 laser", "hybrid-map4", "laser", 4, {"walls.laps": 2}, {"n_snapshots": 8})]
-    return {"maps": runs, "map4": map4, "all": runs + map4}[part]
+def _maps(quick: bool) -> list[tuple[int, str]]:
+    """(map number, name in the report) of the maps a mode runs (quick: the small Map 1)."""
+    return [(1, "Map 1 (small)")] if quick else [(k, f"Map {k}") for k in (1, 2, 3)]
 
 
-#: the association study's perturbations: (label, scenario overrides, solver parameters, also on Map 3)
+def experiments(quick: bool) -> list[str]:
+    """The shipped experiments (``experiments/<name>.toml``) of section ``paper001``: per map its figure runs,
+    association study and NEES Monte-Carlo, then the plateau study (quick: Map 1's, whose ``[quick]`` tables
+    make it the small map)."""
+    ks = [k for k, _ in _maps(quick)]
+    return [f"paper001-{kind}map{k}" for kind in ("", "assoc-", "nees-") for k in ks] + [PLATEAU_EXPERIMENT]
+
+
+def planned_runs(quick: bool) -> list[Run]:
+    """The figure runs of section ``paper001`` (paper §III: Maps 1-3 with both sensors and the Map 3 posts
+    variant); Map 4 is the experiment :data:`MAP4_EXPERIMENT`."""
+    runs = [Run(f"{name} {sens}", sens, k, f"paper001-map{k}", f"map{k}-{sens}")
+            for k, name in _maps(quick) for sens in ("laser", "noisy")]
+    if not quick:
+        runs.append(Run("Map 3 posts, laser", "laser", 3, "paper001-map3", "map3-posts"))
+    return runs
+
+
+#: the association study's perturbations: (label, data entry, solver label, also on Map 3) of the
+#: ``paper001-assoc-map<k>`` experiments
 ASSOCIATION_CASES = (
-    ("ML association", {}, {"association": "ml"}, False),
-    ("ML association + clutter 0.5/step", {"clutter.rate": 0.5}, {"association": "ml"}, False),
-    ("reported ids + clutter 0.5/step", {"clutter.rate": 0.5}, {}, True),
-    ("1 % wrong ids", {"walls.wrong_id_prob": 0.01}, {}, True),
+    ("ML association", "ids", "ml", False),
+    ("ML association + clutter 0.5/step", "clutter", "ml", False),
+    ("reported ids + clutter 0.5/step", "clutter", "ids", True),
+    ("1 % wrong ids", "wrong-ids", "ids", True),
 )
 #: the paper's stabilising noise (§III: the sensor noise "pumped up by a factor of approximately 10") beside our 3
 PAPER_STABILISING = 10.0
@@ -93,24 +109,16 @@ def study_runs(quick: bool) -> list[Run]:
     heading jumps by more than the angular gap of two features) and the lost filter then adds a landmark for
     almost every row — on Map 3's 108 features the EKF's cost grows past the section's time budget."""
     runs = []
-    if quick:
-        maps = [(1, "hybrid-map1", dict(_QUICK_OVERRIDES), {"resolution": 1.0}, "Map 1 (small)")]
-    else:
-        maps = [(k, f"hybrid-map{k}", {}, {}, f"Map {k}") for k in (1, 2, 3)]
-    for k, scen, ov, par, name in maps:
-        one = {**ov, "walls.laps": 1}
-        runs.append(Run(f"{name} laser, 1 lap, reported ids", scen, "laser", k, one, par, "association"))
-        for lab, o, pp, on3 in ASSOCIATION_CASES:
-            if k == 3 and not on3:
-                continue
-            runs.append(Run(f"{name} laser, 1 lap, {lab}", scen, "laser", k, {**one, **o}, {**par, **pp},
-                            "association"))
-    k, scen, ov, par, name = maps[0]
-    runs.append(Run(f"{name} laser, plain scan likelihood", scen, "laser", k, ov,
-                    {**par, "thin_wall_likelihood": False}, "ablation"))
-    for sens, sc in (("laser", scen), ("noisy", f"{scen}-noisy")):
-        runs.append(Run(f"{name} {sens}, {PAPER_STABILISING:g}× stabilising noise", sc, sens, k, ov,
-                        {**par, "stabilising_scale": PAPER_STABILISING}, "stabilising"))
+    for k, name in _maps(quick):
+        exp = f"paper001-assoc-map{k}"
+        runs.append(Run(f"{name} laser, 1 lap, reported ids", "laser", k, exp, "ids", "ids", "association"))
+        runs += [Run(f"{name} laser, 1 lap, {lab}", "laser", k, exp, data, solver, "association")
+                 for lab, data, solver, on3 in ASSOCIATION_CASES if k != 3 or on3]
+    k, name = _maps(quick)[0]
+    runs.append(Run(f"{name} laser, plain scan likelihood", "laser", k, "paper001-map1", "map1-laser", "plain",
+                    "ablation"))
+    runs += [Run(f"{name} {sens}, {PAPER_STABILISING:g}× stabilising noise", sens, k, "paper001-map1",
+                 f"map1-{sens}", "noise10", "stabilising") for sens in ("laser", "noisy")]
     return runs
 
 
@@ -118,39 +126,26 @@ def _slug(s: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in s.lower()).strip("-")
 
 
-def _execute(run: Run, out: Path, seed: int = 1) -> tuple[Path, Path]:
-    """Simulate + solve (reusing finished files); returns (dataset path, result path)."""
-    from slamcli.io import dataset_hash, read_result, write_dataset, write_result
-    from slamcli.sim.simulate import simulate_scenario
-    from slamcli.solvers.hybrid import HybridParams, HybridSlam
-
-    d = out / _slug(run.label)
-    d.mkdir(parents=True, exist_ok=True)
-    dpath, rpath = d / "data.h5", d / "result.h5"
-    if dpath.is_file() and rpath.is_file():
-        from slamcli.errors import SlamcliError
-
+def _load_runs(runs: list[Run], sweeps: dict, lines: list[str]) -> tuple[list[tuple[Run, dict]], bool]:
+    """:func:`_metrics` of every run from its sweep folder (``sweeps``: experiment name → :class:`SweepRuns`);
+    a run without a completed row gets a line in ``lines`` and makes the flag False."""
+    out, ok = [], True
+    for run in runs:
         try:
-            read_result(rpath)
-            return dpath, rpath
-        except SlamcliError:  # a broken file is simply redone
-            rpath.unlink()
-    ds = simulate_scenario(run.scenario, seed, run.overrides)
-    write_dataset(dpath, ds)
-    import time
-
-    cpu0 = time.process_time()
-    res = HybridSlam(HybridParams(**run.params)).solve(ds.inputs, rng=np.random.default_rng([1, seed]))
-    cpu = time.process_time() - cpu0
-    import dataclasses
-
-    res = dataclasses.replace(res, dataset_hash=dataset_hash(ds),
-                              extra={**res.extra, "dataset_path": "data.h5", "cpu_time_s": cpu})
-    write_result(rpath, res)
-    return dpath, rpath
+            row = sweeps[run.experiment].one(run.solver, run.data)
+        except KeyError:
+            ok = False
+            lines.append(f"- **{run.label}: failed** — no completed run `{run.solver}` on `{run.data}` in "
+                         f"`{run.experiment}/results.csv`")
+            continue
+        d = Path(row["path"])
+        out.append((run, _metrics(d / "dataset.h5", d / "result.h5", float(row["solve_cpu_s"]))))
+    return out, ok
 
 
-def _metrics(dpath: Path, rpath: Path) -> dict:
+def _metrics(dpath: Path, rpath: Path, cpu_time_s: float | None = None) -> dict:
+    """One run's numbers from its dataset and result files; ``cpu_time_s``: the solve's CPU time (the sweep's
+    ``solve_cpu_s``; default: the result's ``cpu_time_s`` extra)."""
     from slamcli.io import read_dataset, read_result
     from slamcli.metrics.occupancy import common_mask, error_at_lap_ends, pose_errors_3sigma, snapshot_errors
 
@@ -173,7 +168,7 @@ def _metrics(dpath: Path, rpath: Path) -> dict:
     out["pos_err_mean"] = float(np.mean(np.hypot(*(res.poses_xyt[:, :2] - tr.poses_xyt[:, :2]).T)))
     out["n_steps"] = ds.inputs.n_poses - 1
     out["wall_time_s"] = float(res.wall_time_s)
-    out["cpu_time_s"] = float(res.extra.get("cpu_time_s", float("nan")))
+    out["cpu_time_s"] = float(res.extra.get("cpu_time_s", float("nan")) if cpu_time_s is None else cpu_time_s)
     return out
 
 
@@ -236,8 +231,8 @@ def counterexample_figure(path: Path) -> dict:
     "n_steps": …}`` (distance of each end point to the true map (0, 1))."""
     from matplotlib.figure import Figure
 
+    from slamcli.models.hybrid_counterexample import run_frequentist
     from slamcli.plots import save_figure
-    from slamcli.solvers.hybrid.counterexample import run_frequentist
 
     fig = Figure(figsize=(5, 5))
     ax = fig.subplots()
@@ -373,14 +368,67 @@ DEVIATIONS = (
 )
 
 
-def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
-    """Section ``paper001``: Maps 1-3 (both sensors), the posts variant and Fig. 2 (see :func:`_run_part`)."""
-    return _run_part(out_dir, quick, progress, "maps")
+def render(exp_dirs: dict[str, Path], out_dir: Path, quick: bool) -> tuple[str, bool]:
+    """Section ``paper001``'s markdown (without its heading) and whether every run completed, from the finished
+    sweep folders ``{experiment name: folder}`` of :func:`experiments` alone (``results.csv``, each run's
+    ``dataset.h5`` and ``result.h5``); figures go to ``out_dir`` (named relative to the report as
+    ``out_dir.name``). Fig. 2 is a model calculation (:mod:`slamcli.models.hybrid_counterexample`), the
+    complexity table the stored benchmark file."""
+    from slamcli.reproduce.sweep_runs import SweepRuns
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    sweeps = {name: SweepRuns(Path(d)) for name, d in exp_dirs.items() if (Path(d) / "results.csv").is_file()}
+    lines = _quick_note("maps", quick)
+    results, ok = _load_runs(planned_runs(quick), sweeps, lines)
+    for run, m in results:
+        _figure(run, m, out / f"{_slug(run.label)}.png")
+    ce = counterexample_figure(out / "fig2_counterexample.png")
+    study_lines, verdict_kw, ok_s = _render_studies(sweeps, quick, results)
+    lines += _body(results, ce, "maps", quick, out.name, study_lines, verdict_kw)
+    return "\n".join(lines), ok and ok_s
 
 
-def run_section_map4(out_dir: Path, quick: bool, progress: LogFn | None = None) -> tuple[str, bool]:
-    """Section ``paper001-map4``: Map 4 with the laser, 2 laps (the longest run; last in ``make reproduce``)."""
-    return _run_part(out_dir, quick, progress, "map4")
+def section(rep):
+    """Section ``paper001``: Maps 1-3 (both sensors), the posts variant, Fig. 2 and the claim studies, run as
+    the experiments :func:`experiments` through the sweep engine (``rep.run``: resumable, ``-j N``) and rendered
+    by :func:`render`; ``rep`` is the :class:`~slamcli.reproduce.report.Reproduction`."""
+    return _swept_section(rep, "paper001", TITLE, experiments(rep.quick), render)
+
+
+def _swept_section(rep, key: str, title: str, names: list[str], render_fn):
+    """Run the experiments ``names`` with ``rep.run`` and render their folders with ``render_fn(dirs, out_dir,
+    quick)`` into a :class:`~slamcli.reproduce.report.Section` ``key`` (figures under ``<report>/<key>``)."""
+    from slamcli.reproduce.report import Section
+    from slamcli.reproduce.sweep_runs import finish_section, run_experiments
+
+    sec = Section(key, title)
+    text, ok = render_fn(run_experiments(rep, sec, names), rep.out / key, rep.quick)
+    return finish_section(sec, text, ok, "runs did not complete")
+
+
+def render_map4(exp_dirs: dict[str, Path], out_dir: Path, quick: bool) -> tuple[str, bool]:
+    """Section ``paper001-map4``'s markdown (without its heading) and whether its run completed, from the sweep
+    folder of :data:`MAP4_EXPERIMENT` in ``exp_dirs`` alone (``results.csv``: status and ``solve_cpu_s``; the
+    run's ``dataset.h5`` and ``result.h5``); the figure goes to ``out_dir`` (named relative to the report as
+    ``out_dir.name``)."""
+    from slamcli.reproduce.sweep_runs import SweepRuns
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lines = _quick_note("map4", quick)
+    run = Run(MAP4_LABELS[bool(quick)], "laser", 4, MAP4_EXPERIMENT, MAP4_DATA, MAP4_SOLVER)
+    results, ok = _load_runs([run], {MAP4_EXPERIMENT: SweepRuns(Path(exp_dirs[MAP4_EXPERIMENT]))}, lines)
+    for r, m in results:
+        _figure(r, m, out_dir / f"{_slug(r.label)}.png")
+    lines += _body(results, None, "map4", quick, out_dir.name, [], None)
+    return "\n".join(lines), ok
+
+
+def section_map4(rep):
+    """Section ``paper001-map4``: Map 4 with the laser, 2 laps (the longest run; last in ``make reproduce``), run
+    through the sweep engine (``rep.run``: resumable, ``-j N``) and rendered by :func:`render_map4`."""
+    return _swept_section(rep, "paper001-map4", MAP4_TITLE, [MAP4_EXPERIMENT], render_map4)
 
 
 def _claim_row(run: Run, m: dict) -> dict:
@@ -452,51 +500,34 @@ def _claim_lines(results: list, ce: dict | None, part: str, quick: bool, rel: st
     return lines
 
 
-def _mc_configs(quick: bool) -> list[tuple[str, str, dict, dict]]:
-    """(label, scenario, overrides, params) of the NEES Monte-Carlo: every map and sensor with our 3× and the
-    paper's 10× stabilising noise, and without any (1×: the paper says the filter then "rapidly becomes
+def _mc_configs(quick: bool) -> list[tuple[str, str, str, float]]:
+    """(label, experiment, data entry, stabilising scale) of the NEES Monte-Carlo: every map and sensor with our
+    3× and the paper's 10× stabilising noise, and without any (1×: the paper says the filter then "rapidly becomes
     overconfident") (quick: the small Map 1)."""
-    maps = [("Map 1 (small)", "hybrid-map1", dict(_QUICK_OVERRIDES))] if quick else \
-        [(f"Map {k}", f"hybrid-map{k}", {}) for k in (1, 2, 3)]
-    out = []
-    for scale in (3.0, PAPER_STABILISING, 1.0):
-        for name, scen, ov in maps:
-            for sens, suffix in (("laser", ""), ("noisy", "-noisy")):
-                out.append((f"{name} {sens}, {scale:g}×", scen + suffix, ov, {"stabilising_scale": scale}))
-    return out
+    return [(f"{name} {sens}, {scale:g}×", f"paper001-nees-map{k}", sens, scale)
+            for scale in (3.0, PAPER_STABILISING, 1.0) for k, name in _maps(quick) for sens in ("laser", "noisy")]
 
 
-def consistency_study(out: Path, quick: bool) -> list[dict]:
-    """:func:`nees_summary` per :func:`_mc_configs` entry over 20 seeds (quick: 5), cached in
-    ``out/nees_mc.csv`` (a configuration already there with the same seed count is not run again)."""
-    import csv
-    import io
+def consistency_study(sweeps: dict, quick: bool) -> list[dict]:
+    """:func:`nees_summary` per :func:`_mc_configs` entry over its completed seeds: the pose NEES of each run's
+    result against its dataset's truth, every seed cut to the shortest run (runs that end at a lap end differ
+    in length by a few steps); a configuration without a completed run is left out."""
+    from slamcli.io import read_dataset, read_result
+    from slamcli.metrics.consistency import pose_nees
 
-    n_seeds = 5 if quick else NEES_MIN_SEEDS
-    path = out / "nees_mc.csv"
-    cached = {}
-    if path.is_file():
-        try:
-            with open(path, newline="") as fh:
-                for r in csv.DictReader(fh):
-                    cached[(r["label"], int(r["n_seeds"]))] = {k: (r[k] if k == "label" else
-                                                                   int(r[k]) if k == "n_seeds" else float(r[k]))
-                                                               for k in r}
-        except (ValueError, KeyError, TypeError):  # an unreadable cache is simply recomputed
-            cached = {}
     rows = []
-    for label, scen, ov, par in _mc_configs(quick):
-        row = cached.get((label, n_seeds))
-        if row is None:
-            row = nees_summary(nees_monte_carlo(scen, range(n_seeds), ov, par), label)
-        rows.append(row)
-    from slamcli.io.atomic import write_bytes_atomic
-
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    w.writeheader()
-    w.writerows(rows)
-    write_bytes_atomic(path, buf.getvalue().encode())
+    for label, exp, data, scale in _mc_configs(quick):
+        if exp not in sweeps:
+            continue
+        t = sweeps[exp].rows(NEES_SOLVER, data)
+        t = t[np.isclose(t[NEES_SCALE_COLUMN].astype(float), scale)]
+        nees = []
+        for path in t["path"]:
+            res, ds = read_result(Path(path) / "result.h5"), read_dataset(Path(path) / "dataset.h5")
+            nees.append(pose_nees(res.poses_xyt, ds.truth.poses_xyt, res.pose_cov))
+        if nees:
+            n = min(len(r) for r in nees)
+            rows.append(nees_summary(np.stack([r[:n] for r in nees]), label))
     return rows
 
 
@@ -536,36 +567,38 @@ def _complexity_pairs() -> tuple[list[tuple[float, float]] | None, list[dict] | 
     return [(r["grid_cells"], r["cpu_ms_per_map_step"]) for r in rows], rows
 
 
-def plateau_study(results: list[tuple[Run, dict]]) -> dict | None:
-    """Map 1 with the noisy sensor, mapped again from one pose per step (:func:`map_with_given_poses`): the EKF
-    mean, the true pose and the true pose with a bearing-noise-free scan. Per-cell error at each lap end on the cells every one of these maps observed; γ of the median cell
-    at the lap ends; the noisy sensor's effective range σ at 40 m beside the cell size."""
+def plateau_study(results: list[tuple[Run, dict]], sweeps: dict) -> dict | None:
+    """Map 1 with the noisy sensor, mapped again from one pose per step (:data:`PLATEAU_EXPERIMENT`: the EKF
+    mean, the true pose and the true pose with a bearing-noise-free scan). Per-cell error at each lap end on the
+    cells every one of these maps observed; γ of the median cell at the lap ends; the noisy sensor's effective
+    range σ at 40 m beside the cell size. None when a run is missing."""
     from slamcli.metrics.occupancy import common_mask, error_at_lap_ends, snapshot_errors
-    from slamcli.sim.simulate import simulate_scenario
-    from slamcli.solvers.hybrid import HybridParams
 
-    by = {(r.map_no, r.sensor): (r, m) for r, m in results if not r.study and "posts" not in r.label}
-    if (1, "noisy") not in by:
+    by = {(r.map_no, r.sensor): m for r, m in results if not r.study and "posts" not in r.label}
+    if (1, "noisy") not in by or PLATEAU_EXPERIMENT not in sweeps:
         return None
-    run, m = by[(1, "noisy")]
+    m = by[(1, "noisy")]
     ds, res = m["ds"], m["res"]
     tr = ds.truth
     laps = np.asarray(tr.lap_end_step, np.int64)
-    grids = {"EKF belief, 7 weighted sigma points (the run)": res.grids["frequentist"]}
-    grids["EKF mean only"], _ = map_with_given_poses(ds, res.poses_xyt, run.params)
-    grids["true poses"], mp_true = map_with_given_poses(ds, tr.poses_xyt, run.params)
-    ds0 = simulate_scenario(run.scenario, 1, {**run.overrides, "sensor.bearing_std": 0.0})
-    grids["true poses, scan bearing σ = 0"], _ = map_with_given_poses(ds0, ds0.truth.poses_xyt, run.params)
+    try:
+        mean, true, nob = (sweeps[PLATEAU_EXPERIMENT].result(PLATEAU_SOLVER, d) for d in PLATEAU_DATA)
+    except KeyError:
+        return None
+    grids = {"EKF belief, 7 weighted sigma points (the run)": res.grids["frequentist"],
+             "EKF mean only": mean.grids["frequentist"], "true poses": true.grids["frequentist"],
+             "true poses, scan bearing σ = 0": nob.grids["frequentist"]}
+    at_laps = all(np.array_equal(r.grids["frequentist"].snapshot_step, laps) for r in (mean, true, nob))
     mask = common_mask(grids, tr.occupancy)
     errors = {k: error_at_lap_ends(snapshot_errors(g, tr.occupancy, laps, mask), laps, "mean_abs_error")
               for k, g in grids.items()}
-    hp = HybridParams(**run.params)
+    par = res.params
     nz = ds.inputs.noise
-    return {"errors": errors, "laps": len(laps), "n_cells": int(mask.sum()),
-            "gamma": gamma_at_laps(mp_true.clock, len(laps), hp.a, hp.alpha),
+    return {"errors": errors, "laps": len(laps), "n_cells": int(mask.sum()), "snapshots_at_laps": at_laps,
+            "gamma": gamma_from_median(true.extra.get("clock_median"), len(laps), par["a"], par["alpha"]),
             "sigma_eff": float(math.hypot(nz.range_std, ds.inputs.max_range * nz.bearing_std)),
             "range_std": float(nz.range_std), "bearing_std": float(nz.bearing_std),
-            "max_range": float(ds.inputs.max_range), "resolution": hp.resolution}
+            "max_range": float(ds.inputs.max_range), "resolution": float(par["resolution"])}
 
 
 #: a map error counts as a plateau when the last lap end gains less than this fraction on lap 1's
@@ -589,6 +622,9 @@ def _plateau_lines(pl: dict) -> list[str]:
     run = e["EKF belief, 7 weighted sigma points (the run)"]
     mean, true = e["EKF mean only"], e["true poses"]
     nob = e["true poses, scan bearing σ = 0"]
+    if not pl.get("snapshots_at_laps", True):
+        lines += ["", "- The given-pose maps' snapshots are not at this dataset's lap ends (the experiment's "
+                  "`snapshot_steps`): their errors are those of the nearest snapshot."]
     if len(true) < 2:
         return lines + ["", "- One lap only: the plateau cannot be judged.", ""]
     lines += ["", f"- The run: {_fmt(run[0])} → {_fmt(run[-1])} ("
@@ -656,75 +692,38 @@ def _wrong(m: dict) -> str:
     return f"{t} (heading error of the estimate after it {abs(float(err[t])):.2f} rad)"
 
 
-def _run_studies(out: Path, quick: bool, results: list, report) -> tuple[list[str], dict, bool]:
-    """Execute the claim studies; returns (markdown lines, keyword arguments of :func:`claim_verdicts`, ok)."""
-    studied, ok, lines = [], True, []
-    for run in study_runs(quick):
-        report(run.label)
-        try:
-            studied.append((run, _metrics(*_execute(run, out))))
-        except Exception as exc:  # noqa: BLE001 - a failed run is reported, the section goes on
-            ok = False
-            lines.append(f"- **{run.label}: failed** — {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
-    report("NEES Monte-Carlo")
-    mc = consistency_study(out, quick)
+def _render_studies(sweeps: dict, quick: bool, results: list) -> tuple[list[str], dict, bool]:
+    """The claim studies from their sweep folders; returns (markdown lines, keyword arguments of
+    :func:`claim_verdicts`, whether every study run completed)."""
+    lines: list[str] = []
+    studied, ok = _load_runs(study_runs(quick), sweeps, lines)
+    mc = consistency_study(sweeps, quick)
     assoc = _association_rows(studied)
     pairs, cx_rows = _complexity_pairs()
     lines += _study_lines(studied, results, mc, assoc, cx_rows)
-    report("noisy plateau")
-    pl = plateau_study(results)
+    pl = plateau_study(results, sweeps)
     if pl is not None:
         lines += _plateau_lines(pl)
     ours = [c for c in mc if c["label"].endswith(" 3×")]
     return lines, {"complexity": pairs, "association": assoc or None, "consistency": ours}, ok
 
 
-def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> tuple[str, bool]:
-    """Run the paper 001 experiments of ``part`` into ``out_dir``; return the markdown section (figure paths
-    relative to ``out_dir``'s parent, where the report lives) and whether every run completed.
-
-    ``progress`` gets one status line per finished run (the reproduce driver passes its line logger)."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    rel = out.name
-
-    def report(done: int, total: int) -> None:
-        if progress is not None:
-            progress(f"paper001: {done}/{total} runs")
-
-    runs = planned_runs(quick, part)
+def _quick_note(part: str, quick: bool) -> list[str]:
+    """The QUICK MODE banner of a part (none in full mode)."""
+    if not quick:
+        return []
     if part == "map4":
-        lines = ["## Paper 001, Map 4: hybrid SLAM on a 1 km × 200 m city-block map (Fig. 9)", ""]
-        if quick:
-            lines += ["> **QUICK MODE**: the first 120 steps of Map 4 at 1 m cells, 60 beams — a smoke check, "
-                      "not the paper's run.", ""]
-    else:
-        lines = ["## Paper 001: hybrid Bayesian/frequentist SLAM (Figs. 2-8)", ""]
-        if quick:
-            lines += ["> **QUICK MODE**: a small Map 1 (40 m square, 8 m corridors, 1 m cells, 60 beams), both "
-                      "sensors — a smoke check, not the paper's maps.", ""]
-    ok = True
-    results: list[tuple[Run, dict]] = []
-    total = len(runs) + 1
-    for i, run in enumerate(runs):
-        report(i, total)
-        try:
-            dpath, rpath = _execute(run, out)
-            m = _metrics(dpath, rpath)
-            _figure(run, m, out / f"{_slug(run.label)}.png")
-            results.append((run, m))
-        except Exception as exc:  # noqa: BLE001 - a failed run is reported, the section goes on
-            ok = False
-            lines.append(f"- **{run.label}: failed** — {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
-    ce = counterexample_figure(out / "fig2_counterexample.png") if part != "map4" else None
-    report(total, total)
-    study_lines, verdict_kw = [], None
-    if part != "map4":
-        study_lines, verdict_kw, ok_s = _run_studies(
-            out, quick, results, lambda what: progress(f"paper001 studies: {what}") if progress else None)
-        ok = ok and ok_s
+        return ["> **QUICK MODE**: the first 120 steps of Map 4 at 1 m cells, 60 beams — a smoke check, "
+                "not the paper's run.", ""]
+    return ["> **QUICK MODE**: a small Map 1 (40 m square, 8 m corridors, 1 m cells, 60 beams), both "
+            "sensors — a smoke check, not the paper's maps.", ""]
 
-    # ---- table ----
+
+def _body(results: list[tuple[Run, dict]], ce: dict | None, part: str, quick: bool, rel: str,
+          study_lines: list[str], verdict_kw: dict | None) -> list[str]:
+    """The run table, run times, claims, studies and setting of a part, from the runs' numbers
+    (:func:`_metrics`); figure paths are given relative to the report, under ``rel``."""
+    lines: list[str] = []
     hdr = ["run", "steps", "laps", "odometry max err (m)", "EKF mean pos err (m)", "pose NEES (mean, d=3)",
            "steps inside 3σ", "per-cell err lap 1 → last (freq.)", "final per-cell err freq. / log-odds",
            "accuracy freq. / log-odds", "solve wall / CPU (s)"]
@@ -754,4 +753,4 @@ def _run_part(out_dir: Path, quick: bool, progress: LogFn | None, part: str) -> 
     lines += study_lines
     lines += ["", "Setting (the paper gives the sizes, robot, noise levels, 40 m range and laps); our deviations: "
               + "; ".join(DEVIATIONS) + " (see docs and `slamcli solvers hybrid`).", ""]
-    return "\n".join(lines), ok and len(results) == len(runs)
+    return lines

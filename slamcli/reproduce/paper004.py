@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from slamcli.reproduce.sweep_runs import SweepRuns, finish_section, run_experiments
 from slamcli.sim.bounded import heading_from_paper004
 
 # Paper 004 Table 1 (unique correspondence): rows r1..r9, l1..l4 → [x_lo, x_hi, y_lo, y_hi, θ_lo, θ_hi]
@@ -294,44 +295,6 @@ TITLE = "Paper 004: CuikSLAM with unknown correspondence (interval boxes, `cuik`
 WRONG_SETS = {"paper": "paper", "full": "full", "full+3B": "full-3B"}
 #: the solver status of a run whose every box is empty (a refuted declaration: the expected catch)
 EMPTY = "failed"
-
-
-class SweepRuns:
-    """One finished sweep folder read the way ``evo_res`` reads result files: its ``results.csv`` rows by solver
-    label, data entry and replicate, and each run's ``result.h5`` / ``dataset.h5``."""
-
-    def __init__(self, exp_dir: Path) -> None:
-        from slamcli.sweep.runner import load_results
-
-        self.table = load_results(exp_dir)
-
-    def rows(self, label: str, data: str | None = None, completed: bool = True):
-        """Rows of solver ``label`` (and data entry ``data``), by replicate; only completed runs by default."""
-        t = self.table[self.table["label"] == label]
-        if data is not None:
-            t = t[t["data"] == data]
-        if completed:
-            t = t[t["status"] == "completed"]
-        return t.sort_values("replicate")
-
-    def one(self, label: str, data: str | None = None, replicate: int | None = None, completed: bool = True):
-        """The row of one run (the first replicate when ``replicate`` is None); KeyError when absent."""
-        t = self.rows(label, data, completed)
-        if replicate is not None:
-            t = t[t["replicate"] == replicate]
-        if t.empty:
-            raise KeyError(f"no {'completed ' if completed else ''}run {label!r} {data or ''} {replicate or ''}")
-        return t.iloc[0]
-
-    def result(self, label: str, data: str | None = None, replicate: int | None = None, completed: bool = True):
-        from slamcli.io import read_result
-
-        return read_result(Path(self.one(label, data, replicate, completed)["path"]) / "result.h5")
-
-    def dataset(self, label: str, data: str | None = None, replicate: int | None = None, completed: bool = True):
-        from slamcli.io import read_dataset
-
-        return read_dataset(Path(self.one(label, data, replicate, completed)["path"]) / "dataset.h5")
 
 
 def _table1(md: list[str], checks: dict, runs: SweepRuns):
@@ -733,21 +696,12 @@ def section(rep):
         sec.add("> **Section failed**: the `interval` extra (codac) is not installed: `pip install 'slamcli[interval]'`.")
         sec.fail("the interval extra (codac) is not installed")
     else:
-        dirs = {}
-        for name in EXPERIMENTS:
-            outcome = rep.run(f"{name}.toml")
-            rep._missing_note(sec, outcome)
-            if name != "paper004-wrong":  # there a failed run (every box empty) is the expected catch
-                rep._failures_note(sec, outcome)
-            dirs[name] = outcome.exp_dir
+        # in paper004-wrong a failed run (every box empty) is the expected catch
+        dirs = run_experiments(rep, sec, EXPERIMENTS, frozenset({"paper004-wrong"}))
         if sec.ok:
             text, ok = render(dirs, rep.out / "paper004", rep.quick, t0)
-            sec.add(text.strip())
-            if not ok:
-                sec.fail("guarantees not met or runs failed")
-    if not sec.ok:
-        sec.title += " — FAILED"
-    return sec
+            return finish_section(sec, text, ok, "guarantees not met or runs failed")
+    return finish_section(sec, None, True, "")
 
 
 def _verdicts(md: list[str], checks: dict, lm_mean: dict, hull: dict) -> tuple[str, bool]:

@@ -1016,7 +1016,7 @@ class Reproduction:
 
 # The report's sections, in order. An entry is (key, builder): a method name of Reproduction (paper 000), or
 # "module:function" with run_section(out_dir: Path, quick: bool, progress) -> (markdown: str, ok: bool).
-# Other papers hook in with one line each, e.g. ("paper001", "slamcli.reproduce.paper001:run_section").
+# Other papers hook in with one line each, e.g. ("paper001", "slamcli.reproduce.paper001:section").
 #: what each paper or data source is, for the report's title (a section's source: :func:`section_source`)
 SOURCES = {
     "000": "paper 000 (ICM-SLAM, Int. J. Automation and Computing 15(3), 2018)",
@@ -1050,11 +1050,11 @@ SECTIONS: list[tuple[str, str]] = [
     ("postprocess", "postprocess_section"),
     ("compare", "compare_section"),
     ("nees", "nees_section"),
-    ("paper001", "slamcli.reproduce.paper001:run_section"),
+    ("paper001", "slamcli.reproduce.paper001:section"),
     ("paper004", "slamcli.reproduce.paper004:section"),
     ("real", "slamcli.reproduce.real:run_section"),
     ("real-multi", "slamcli.reproduce.real_multi:run_section"),
-    ("paper001-map4", "slamcli.reproduce.paper001:run_section_map4"),
+    ("paper001-map4", "slamcli.reproduce.paper001:section_map4"),
 ]
 
 

@@ -74,6 +74,15 @@ class HybridParams:
     weighted_clock: bool = param(True, "with the cell clock: n advances by min(1, W_i), the weight of the "
                                        "samples that observe the cell (false: by 1 per update, however "
                                        "small W_i).")
+    mapping: bool = param(True, "False: the Bayesian part alone (the EKF on the feature rows, no grids), e.g. "
+                                "for a NEES Monte-Carlo of the filter.")
+    map_poses: Literal["belief", "mean", "odometry"] = param(
+        "belief", "what the frequentist part maps from: the belief's samples (`samples`), its mean alone (one "
+                  "pose per step, weight 1), or the dataset's odometry poses (mapping with given poses; the EKF "
+                  "is then not run and the result has no covariance or landmarks).")
+    snapshot_steps: tuple[int, ...] = param((), "grid snapshots after these steps (e.g. a route's lap ends) "
+                                                "instead of `n_snapshots` evenly spaced ones; empty = evenly "
+                                                "spaced.")
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution) and self.resolution > 0):
@@ -98,6 +107,8 @@ class HybridParams:
             raise ValueError(f"weight_floor must be in [0, 1e-3), got {self.weight_floor}")
         if self.n_snapshots < 1 or self.logodds_clamp <= 0:
             raise ValueError("n_snapshots must be >= 1 and logodds_clamp > 0")
+        if any(k < 0 for k in self.snapshot_steps):
+            raise ValueError(f"snapshot_steps must be >= 0, got {list(self.snapshot_steps)}")
 
 
 Params = HybridParams

@@ -132,8 +132,11 @@ def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeom
     min_trav = p.min_traversal * p.resolution
     n_upd, ess_sum, kept = 0, 0.0, 0
     report = max(1, n_poses // 200)
+    single = p.map_poses != "belief"  # one pose per step: mu itself
     for t in range(n_poses):
-        if p.samples == "sigma":
+        if single:
+            samples, w0 = mu[t : t + 1], np.ones(1)
+        elif p.samples == "sigma":
             samples, w0 = sigma_points(mu[t], cov[t], p.kappa)
         else:
             samples = rng.multivariate_normal(mu[t], cov[t] + 1e-12 * np.eye(3), size=p.n_samples)
@@ -160,7 +163,7 @@ def map_scans(mu: np.ndarray, cov: np.ndarray, ranges: np.ndarray, geo: ScanGeom
                            clock=clock)
         if p.baseline:
             # the belief mean's rays: sigma point 0 is the mean itself
-            rb0 = (rb.first_sample(B) if p.samples == "sigma"
+            rb0 = (rb.first_sample(B) if single or p.samples == "sigma"
                    else trace_scan(spec, mu[t : t + 1], ranges[t], geo, band, p.bearing_in_range))
             logodds_update(L, cnt_b, spec, rb0, mu[t, :2], eps=p.outlier_prob, max_range=geo.max_range,
                            min_traversal=min_trav, max_cell_dist=p.max_cell_dist, l_max=p.logodds_clamp,
@@ -217,24 +220,32 @@ class HybridSlam(BaseSolver):
         total = 2 * n_poses
 
         # ---- Bayesian part: the project's EKF on the feature rows ----
-        ekf_res = self.bayesian_part(inputs, rng, None if progress is None else (lambda d, n: progress(d, total)))
-        if ekf_res.status is Status.FAILED:
+        given = has_scan and p.mapping and p.map_poses == "odometry"  # mapping with given poses: no filter
+        ekf_res = None if given else self.bayesian_part(
+            inputs, rng, None if progress is None else (lambda d, n: progress(d, total)))
+        if ekf_res is not None and ekf_res.status is Status.FAILED:
             return dataclasses.replace(ekf_res, solver=self.name, message=f"EKF part failed: {ekf_res.message}")
-        mu, cov = ekf_res.poses_xyt, ekf_res.pose_cov
-        if not has_scan:  # nothing to map densely: the Bayesian part alone (no grids)
+        if ekf_res is not None and (not has_scan or not p.mapping):  # the Bayesian part alone, no grids
+            why = "mapping = false" if has_scan else f"no rows of scan sensor {p.scan_sensor}"
             return dataclasses.replace(ekf_res, solver=self.name, solver_version=self.version(),
                                        params=params_to_dict(p), wall_time_s=time.perf_counter() - t_start,
-                                       message=f"no rows of scan sensor {p.scan_sensor}: EKF part only, no grid; "
-                                               + ekf_res.message)
+                                       assoc=_all_rows(len(obs), feat_mask, ekf_res.assoc),
+                                       message=f"{why}: EKF part only, no grid; " + ekf_res.message)
+        if ekf_res is None:  # the result's poses are the given ones (no covariance, no landmarks)
+            mu, cov = np.asarray(inputs.odometry_xyt, float), np.zeros((n_poses, 3, 3))
+        else:
+            mu, cov = ekf_res.poses_xyt, ekf_res.pose_cov
+        map_mu = np.asarray(inputs.odometry_xyt, float) if p.map_poses == "odometry" else mu
 
         # ---- the grid (checked before the mapping starts) ----
-        spec = grid_for_trajectory(mu, inputs.max_range + p.grid_margin, p.resolution, p.grid_offset)
+        spec = grid_for_trajectory(map_mu, inputs.max_range + p.grid_margin, p.resolution, p.grid_offset)
         if spec.n_cells > p.max_cells:
             raise SolverError(f"resolution={p.resolution}: the grid would have {spec.n_cells} cells "
                               f"({spec.shape[0]}x{spec.shape[1]}), more than max_cells={p.max_cells}")
         geo = scan_geometry(inputs, alphas)
-        mp = map_scans(mu, cov, ranges, geo, spec, p, rng,
-                       progress=None if progress is None else (lambda d, n: progress(n_poses + d, total)))
+        mp = map_scans(map_mu, cov, ranges, geo, spec, p, rng,
+                       progress=None if progress is None else (lambda d, n: progress(n_poses + d, total)),
+                       snap_at=np.asarray(p.snapshot_steps, np.int64) if p.snapshot_steps else None)
         P, cnt, L, cnt_b, snap_steps, snaps, snaps_b = (mp.P, mp.count, mp.L, mp.count_b, mp.snap_steps, mp.snaps,
                                                        mp.snaps_b)
         n_upd, ess_sum, band = mp.n_updated, mp.ess_sum, mp.band
@@ -245,20 +256,37 @@ class HybridSlam(BaseSolver):
         if p.baseline:
             grids["logodds"] = OccupancyGrid(origin, spec.resolution, _prob(L).reshape(spec.shape).astype(np.float32),
                                              cnt_b.reshape(spec.shape), snap_steps, np.stack(snaps_b))
-        assoc = np.full(len(obs), -1, np.int64)
-        assoc[np.flatnonzero(feat_mask)] = ekf_res.assoc
-        extra = dict(ekf_res.extra)
+        assoc = _all_rows(len(obs), feat_mask, None if ekf_res is None else ekf_res.assoc)
+        extra = {} if ekf_res is None else dict(ekf_res.extra)
         extra.update({"grid_cells": spec.n_cells, "grid_shape": list(spec.shape), "band": band,
                       "cells_updated_per_step": n_upd / n_poses, "mean_sample_ess": ess_sum / n_poses,
                       "mean_samples_kept": mp.samples_kept / n_poses,
-                      "n_beams": int(len(alphas))})
+                      "n_beams": int(len(alphas)), "clock_median": _clock_median(mp.clock)})
         res = self.make_result(
-            status=Status.COMPLETED, poses_xyt=mu, landmarks_xy=ekf_res.landmarks_xy, assoc=assoc, t_start=t_start,
-            message=f"EKF on {int(feat_mask.sum())} feature rows; E2 over {n_poses} scans, grid "
+            status=Status.COMPLETED, poses_xyt=mu, assoc=assoc, t_start=t_start,
+            landmarks_xy=np.zeros((0, 2)) if ekf_res is None else ekf_res.landmarks_xy,
+            message=("given odometry poses, no filter" if ekf_res is None else
+                     f"EKF on {int(feat_mask.sum())} feature rows") + f"; E2 over {n_poses} scans, grid "
                     f"{spec.shape[0]}x{spec.shape[1]} at {p.resolution} m",
-            pose_cov=cov, landmark_cov=ekf_res.landmark_cov, extra=extra,
+            pose_cov=None if ekf_res is None else cov, landmark_cov=None if ekf_res is None else ekf_res.landmark_cov,
+            extra=extra,
         )
         return dataclasses.replace(res, grids=grids)
+
+
+def _all_rows(n_rows: int, feat_mask: np.ndarray, feat_assoc: np.ndarray | None) -> np.ndarray:
+    """The association of every observation row ``(n_rows,)``: the EKF's labels on the feature rows, -1 elsewhere
+    (everywhere when ``feat_assoc`` is None)."""
+    assoc = np.full(n_rows, -1, np.int64)
+    if feat_assoc is not None:
+        assoc[np.flatnonzero(feat_mask)] = feat_assoc
+    return assoc
+
+
+def _clock_median(clock: np.ndarray | None) -> float | None:
+    """Median of the per-cell clock n of γ = a·n^(−α) over the updated cells (None: no clock or no update)."""
+    c = None if clock is None else clock[clock > 0]
+    return None if c is None or not len(c) else float(np.median(c))
 
 
 def _prob(L: np.ndarray) -> np.ndarray:
