@@ -8,44 +8,16 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import car_world
 
 from slamcli.api.solve import solve_dataset
 from slamcli.errors import SolverError
 from slamcli.metrics.reference import trajectory_against
 from slamcli.models.ackermann import VICTORIA_PARK, VICTORIA_PARK_LASER_XY, integrate_ackermann
-from slamcli.models.observation import body_pose_from_sensor, range_bearing_offset, sensor_pose
-from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, SlamInputs
+from slamcli.models.observation import body_pose_from_sensor, sensor_pose
+from slamcli.types import Observations
 
 OFF = np.array(VICTORIA_PARK_LASER_XY)
-
-
-def car_world(seed: int = 0, T: int = 600, dt: float = 0.025) -> Dataset:
-    rng = np.random.default_rng(seed)
-    t = np.arange(T) * dt
-    cmd = np.column_stack([np.full(T, 4.0), 0.25 * np.sin(2 * np.pi * t / 10.0)])
-    sv, sa = 0.05, 0.005
-    executed = cmd + rng.normal(size=cmd.shape) * [sv, sa]
-    x0 = np.array([0.0, 0.0, 0.3])
-    true = integrate_ackermann(x0, executed, dt, VICTORIA_PARK)
-    lo, hi = true[:, :2].min(0) - 20, true[:, :2].max(0) + 20
-    lms = rng.uniform(lo, hi, size=(40, 2))
-    steps, zs, ids = [], [], []
-    for k in range(0, T + 1, 8):  # a scan every 0.2 s
-        z = range_bearing_offset(true[k], lms, OFF)
-        vis = np.flatnonzero((z[:, 0] < 30.0) & (np.abs(z[:, 1]) < np.pi / 2))
-        for j in vis:
-            steps.append(k)
-            zs.append(z[j] + rng.normal(size=2) * [0.05, 0.005])
-            ids.append(j)
-    obs = Observations.from_rows(steps, np.array(zs), T + 1, reported_id=ids)
-    odo = integrate_ackermann(x0, cmd, dt, VICTORIA_PARK)
-    noise = NoiseSpec(motion_std=np.array([sv, sa]), odometry_std=np.array([0.003, 0.002, 0.0005]),
-                      range_std=0.05, bearing_std=0.005)
-    inp = SlamInputs(dt=dt, timestamps=t.tolist() + [T * dt], x0=x0, controls=cmd, odometry_xyt=odo,
-                     observations=obs, noise=noise, motion_model="ackermann", vehicle=VICTORIA_PARK,
-                     sensor_offset_xy=OFF.copy())
-    inp = dataclasses.replace(inp, timestamps=np.asarray(inp.timestamps))
-    return Dataset(inputs=inp, truth=GroundTruth(true, lms, np.asarray(ids)), metadata={})
 
 
 @pytest.fixture(scope="module")

@@ -2,70 +2,17 @@
 
 import json
 
-import numpy as np
 import pandas as pd
 import pytest
+from conftest import make_dataset, make_result
 from typer.testing import CliRunner
 
 from slamcli.cli import app
 from slamcli.errors import SlamcliError
-from slamcli.io import dataset_hash, read_result, write_dataset, write_result
-from slamcli.models.motion import integrate
-from slamcli.models.observation import range_bearing
-from slamcli.types import (
-    Dataset,
-    GroundTruth,
-    IterationTrace,
-    NoiseSpec,
-    Observations,
-    SlamInputs,
-    SolverResult,
-    Status,
-)
+from slamcli.io import read_result, write_dataset, write_result
+from slamcli.types import SolverResult
 
 runner = CliRunner()
-
-
-def make_dataset(seed=0, T=40):
-    """A circle-ish drive past 6 landmarks; every landmark within 8 m is observed without noise."""
-    rng = np.random.default_rng(seed)
-    dt = 0.5
-    controls = np.column_stack([np.full(T, 1.0), np.full(T, 0.15)])
-    true = integrate(np.zeros(3), controls, dt)
-    odo = integrate(np.zeros(3), controls + rng.normal(0, [0.05, 0.02], (T, 2)), dt)
-    lms = np.array([[2.0, 3.0], [6.0, -1.0], [8.0, 5.0], [3.0, 9.0], [-2.0, 6.0], [5.0, 12.0]])
-    steps, z, ids = [], [], []
-    for t in range(T + 1):
-        zz = range_bearing(true[t][None], lms)
-        for j in np.flatnonzero(zz[:, 0] < 8.0):
-            steps.append(t)
-            z.append(zz[j])
-            ids.append(j)
-    steps = np.array(steps, np.int64)
-    z = np.array(z)
-    obs = Observations(steps, z[:, 0], z[:, 1], np.zeros(len(steps), np.int16), np.full(len(steps), -1, np.int64),
-                       Observations.offsets_from_steps(steps, T + 1))
-    noise = NoiseSpec(np.array([0.05, 0.02]), np.array([0.02, 0.02, 0.01]), 0.1, 0.02)
-    inputs = SlamInputs(dt, np.arange(T + 1) * dt, np.zeros(3), controls, odo, obs, noise, 8.0)
-    truth = GroundTruth(true, lms, np.array(ids, np.int64))
-    return Dataset(inputs, truth, {"seed": seed, "scenario": "test-circle"})
-
-
-def make_result(ds, data_path, *, offset=(0.0, 0.2), covariances=True, rng_seed=1):
-    rng = np.random.default_rng(rng_seed)
-    T1 = len(ds.truth.poses_xyt)
-    est = ds.truth.poses_xyt.copy()
-    est[:, :2] += offset
-    lm = ds.truth.landmarks_xy[:5] + rng.normal(0, 0.05, (5, 2))  # landmark 5 missed
-    trace = IterationTrace.from_lists([3.0, 2.0, 1.0], [0.0, 0.0, 0.0], [0.1, 0.1, 0.1],
-                                      [lm + 0.4, lm + 0.1, lm])
-    pc = lc = None
-    if covariances:
-        pc = np.broadcast_to(np.diag([0.04, 0.04, 0.01]), (T1, 3, 3)).copy()
-        lc = np.broadcast_to(np.eye(2) * 0.0025, (5, 2, 2)).copy()
-    return SolverResult("toy", "0", {}, Status.CONVERGED, "", est, lm, np.full(len(ds.inputs.observations), -1),
-                        pose_cov=pc, landmark_cov=lc, trace=trace, dataset_hash=dataset_hash(ds),
-                        extra={"dataset_path": str(data_path)})
 
 
 @pytest.fixture()

@@ -6,7 +6,7 @@ import dataclasses
 
 import h5py
 import numpy as np
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 from typer.testing import CliRunner
 
 from slamcli.cli import app

@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 import pytest
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 from typer.testing import CliRunner
 
 from slamcli.api.solve import solve_dataset, solve_file

@@ -1,13 +1,13 @@
 """EKF-SLAM: the pure-function core against hand-written Kalman algebra, and the solver's association logic.
 
-Worlds are built here directly with ``slamcli.models`` (truth is kept by the test, never passed to the
-solver).
+Worlds come from ``conftest.drive_world`` (truth is kept by the test, never passed to the solver).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import drive_world
 
 from slamcli.errors import SolverError
 from slamcli.models import motion, observation, se2
@@ -21,76 +21,23 @@ from slamcli.solvers.ekf import (
     predict,
     update,
 )
-from slamcli.types import NoiseSpec, Observations, SlamInputs, Status
+from slamcli.types import Observations, Status
 
 
 # ------------------------------------------------------------------------------------------------ world
-def make_world(
-    seed: int,
-    *,
-    T: int = 200,
-    dt: float = 0.1,
-    v: float = 1.0,
-    radius: float = 5.0,
-    landmarks_xy: np.ndarray | None = None,
-    motion_std=(0.05, 0.02),
-    odometry_std=(0.01, 0.01, 0.005),
-    range_std: float = 0.05,
-    bearing_std: float = 0.01,
-    max_range: float = 6.0,
-    clutter_per_step: float = 0.0,
-    report_ids: bool = True,
-):
-    """A robot driving a circle of ``radius`` around a ring of landmarks.
-
-    Returns ``(inputs, truth)`` where ``truth = dict(poses, landmarks, obs_landmark)``; clutter rows have
-    true landmark −1 and reported id −1.
+def make_world(seed: int, *, T: int = 200, v: float = 1.0, radius: float = 5.0, landmarks_xy=None, **noise):
+    """A robot driving a circle of ``radius`` around a ring of landmarks (:func:`conftest.drive_world`; ``noise``
+    its keywords). Returns ``(inputs, truth)`` where ``truth = dict(poses, landmarks, obs_landmark)``; clutter rows
+    have true landmark −1 and reported id −1.
     """
-    rng = np.random.default_rng(seed)
     if landmarks_xy is None:
         ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
         landmarks_xy = np.stack([np.r_[1.4 * radius * np.cos(ang), 0.5 * radius * np.cos(ang + 0.3)],
                                  np.r_[1.4 * radius * np.sin(ang), 0.5 * radius * np.sin(ang + 0.3)]], -1)
         landmarks_xy = landmarks_xy + np.array([0.0, radius])
-    x0 = np.array([0.0, 0.0, 0.0])
-    u_cmd = np.tile([v, v / radius], (T, 1))
-    u_true = u_cmd + rng.normal(0, motion_std, size=(T, 2))
-    poses = motion.integrate(x0, u_true, dt)
-    inc_true = motion.odometry_increments(poses)
-    inc_meas = inc_true + rng.normal(0, odometry_std, size=(T, 3))
-    odom = motion.chain_increments(x0, inc_meas)
-    steps, zs, ids = [], [], []
-    for t in range(T + 1):
-        zt = observation.range_bearing(poses[t][None], landmarks_xy)
-        vis = np.flatnonzero(zt[:, 0] <= max_range)
-        for k in vis:
-            z = zt[k] + rng.normal(0, [range_std, bearing_std])
-            steps.append(t)
-            zs.append(z)
-            ids.append(k)
-        for _ in range(rng.poisson(clutter_per_step)):
-            steps.append(t)
-            zs.append([rng.uniform(0.5, max_range), rng.uniform(-np.pi, np.pi)])
-            ids.append(-1)
-    zs = np.asarray(zs, float).reshape(-1, 2)
-    ids = np.asarray(ids, np.int64)
-    obs = Observations.from_rows(steps, zs, T + 1, reported_id=ids if report_ids else None)
-    inputs = SlamInputs(
-        dt=dt,
-        timestamps=dt * np.arange(T + 1),
-        x0=x0,
-        controls=u_cmd,
-        odometry_xyt=odom,
-        observations=obs,
-        noise=NoiseSpec(
-            motion_std=np.asarray(motion_std, float),
-            odometry_std=np.asarray(odometry_std, float),
-            range_std=range_std,
-            bearing_std=bearing_std,
-        ),
-        max_range=max_range,
-    )
-    return inputs, {"poses": poses, "landmarks": landmarks_xy, "obs_landmark": ids}
+    ds = drive_world(seed, landmarks_xy, T=T, v=v, omega=v / radius, **noise)
+    truth = {"poses": ds.truth.poses_xyt, "landmarks": ds.truth.landmarks_xy, "obs_landmark": ds.truth.obs_landmark}
+    return ds.inputs, truth
 
 
 def association_accuracy(assoc, true_lm):
@@ -538,7 +485,7 @@ def test_group_returns_equals_filtering_the_averaged_measurements(association):
 def test_the_covariance_a_dataset_makes_the_ekf_grow_to_is_checked_before_it_is_allocated(monkeypatch):
     """The joint covariance grows with the landmarks the data create: each growth goes through
     check_allocation, so a file that makes millions of landmarks is one line, not a 2 PiB request."""
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     from slamcli.errors import ConfigError
 

@@ -1,13 +1,14 @@
 """FastSLAM 1.0 / 2.0: the landmark EKF and the 2.0 proposal against hand-written algebra, particle-copy
 independence, association, landmark removal, determinism, and accuracy vs the EKF.
 
-Worlds are built here directly with ``slamcli.models``; the truth stays in the test, never goes to the solver.
+Worlds come from ``conftest.drive_world``; the truth stays in the test, never goes to the solver.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import drive_world
 from scipy import stats
 
 from slamcli.errors import ConfigError, SolverError
@@ -25,64 +26,15 @@ from slamcli.types import NoiseSpec, Observations, SlamInputs, Status
 
 
 # ------------------------------------------------------------------------------------------------ world
-def make_world(
-    seed: int,
-    *,
-    T: int = 150,
-    dt: float = 0.1,
-    v: float = 1.0,
-    omega: float = 0.2,
-    n_landmarks: int = 12,
-    motion_std=(0.05, 0.02),
-    odometry_std=(0.01, 0.01, 0.005),
-    range_std: float = 0.05,
-    bearing_std: float = 0.01,
-    max_range: float = 6.0,
-    clutter_per_step: float = 0.0,
-    report_ids: bool = True,
-):
-    """A robot circling (radius v/ω) among landmarks on two rings; returns ``(inputs, truth_poses,
-    truth_landmarks, obs_label)``."""
-    rng = np.random.default_rng(seed)
-    x0 = np.array([0.0, 0.0, 0.0])
-    controls = np.tile([v, omega], (T, 1))
-    motion_std = np.asarray(motion_std, float)
-    executed = controls + rng.standard_normal((T, 2)) * motion_std
-    poses = motion.integrate(x0, executed, dt)
-    odometry_std = np.asarray(odometry_std, float)
-    inc = motion.odometry_increments(poses) + rng.standard_normal((T, 3)) * odometry_std
-    odometry = motion.chain_increments(x0, inc)
+def make_world(seed: int, *, T: int = 150, v: float = 1.0, omega: float = 0.2, n_landmarks: int = 12, **noise):
+    """A robot circling (radius v/ω) among landmarks on two rings (:func:`conftest.drive_world`; ``noise`` its
+    keywords); returns ``(inputs, truth_poses, truth_landmarks, obs_label)``."""
     R0 = v / omega
     ang = np.linspace(0, 2 * np.pi, n_landmarks, endpoint=False)
     rad = np.where(np.arange(n_landmarks) % 2 == 0, R0 - 2.0, R0 + 2.0)
     lms = np.column_stack([rad * np.sin(ang), R0 - rad * np.cos(ang)])
-    steps, zs, labels = [], [], []
-    for t in range(T + 1):
-        z = observation.range_bearing(poses[t], lms)
-        for j in np.flatnonzero(z[:, 0] <= max_range):
-            zn = z[j] + rng.standard_normal(2) * [range_std, bearing_std]
-            steps.append(t)
-            zs.append([zn[0], observation.wrap_angle(zn[1])])
-            labels.append(j)
-        for _ in range(rng.poisson(clutter_per_step)):
-            steps.append(t)
-            zs.append([rng.uniform(0.5, max_range), rng.uniform(-np.pi, np.pi)])
-            labels.append(-1)
-    lab = np.asarray(labels, np.int64)
-    obs = Observations.from_rows(steps, zs, T + 1, reported_id=lab if report_ids else None)
-    inputs = SlamInputs(
-        dt=dt,
-        timestamps=np.arange(T + 1) * dt,
-        x0=x0,
-        controls=controls,
-        odometry_xyt=odometry,
-        observations=obs,
-        noise=NoiseSpec(
-            motion_std=motion_std, odometry_std=odometry_std, range_std=range_std, bearing_std=bearing_std
-        ),
-        max_range=max_range,
-    )
-    return inputs, poses, lms, lab
+    ds = drive_world(seed, lms, T=T, v=v, omega=omega, **noise)
+    return ds.inputs, ds.truth.poses_xyt, ds.truth.landmarks_xy, ds.truth.obs_landmark
 
 
 def landmark_rmse(est_xy, assoc, obs_label, truth_xy):

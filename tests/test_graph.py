@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 import scipy.stats
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 
 from slamcli.errors import SolverError
 from slamcli.params import build_params

@@ -25,7 +25,7 @@ def _dataset():
 
         return simulate_scenario("loop", seed=1, overrides={"sensor.report_ids": True})
     except ImportError:
-        from tiny_world import tiny_dataset
+        from conftest import tiny_dataset
 
         return tiny_dataset(T=200, n_landmarks=8, seed=1, report_ids=True, clutter_every=0)
 

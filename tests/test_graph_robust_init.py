@@ -135,7 +135,7 @@ def test_incremental_init_with_one_window_is_the_robust_solve_of_the_batch_assoc
     followed by one Cauchy solve from it — exactly ``robust_initial_poses`` on that association."""
     import dataclasses
 
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     inputs = tiny_dataset(T=60, n_landmarks=6, seed=3).inputs
     p = graph.GraphParams(incremental_window=1e3)

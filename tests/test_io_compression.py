@@ -6,7 +6,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 
 from slamcli.io import dataset_hash, read_dataset, read_result, schema, write_dataset, write_result
 from slamcli.solvers.odometry import OdometryParams, OdometrySolver

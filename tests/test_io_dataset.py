@@ -9,7 +9,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 
 from slamcli.errors import SchemaError
 from slamcli.io import atomic_path, dataset_hash, read_dataset, read_header, write_dataset

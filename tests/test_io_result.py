@@ -144,7 +144,7 @@ def replace(path, name, data):
 
 
 def test_dataset_file_is_not_a_result(tmp_path):
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     from slamcli.io import write_dataset
 

@@ -40,7 +40,7 @@ def test_labels_and_fallback():
 
 
 def test_evaluate_table_units_come_from_the_registry(tmp_path):
-    from test_cli_evaluate import make_dataset, make_result
+    from conftest import make_dataset, make_result
 
     from slamcli.cli.evaluate_cmd import _ROWS
     from slamcli.io import write_dataset, write_result

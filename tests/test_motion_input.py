@@ -100,7 +100,7 @@ def test_the_controls_lose_the_sideways_steps(sideways, method, key):
 
 
 def test_simulated_datasets_keep_their_controls():
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     inputs = tiny_dataset(T=20).inputs
     assert inputs.motion_source == "controls"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.optimize as so
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 
 from slamcli.models import se2
 from slamcli.solvers import graph, nls

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 
 from slamcli.datasets.g2o import import_graph
 from slamcli.solvers import frontend, graph, nls

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_cli_evaluate import make_dataset, make_result
+from conftest import make_dataset, make_result
 from typer.testing import CliRunner
 
 from slamcli.cli import app

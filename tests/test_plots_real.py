@@ -239,7 +239,7 @@ def test_api_pose_errors_fill_one_axes_with_three_panels():
 
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
-    from test_cli_evaluate import make_dataset, make_result
+    from conftest import make_dataset, make_result
 
     import slamcli as sc
 

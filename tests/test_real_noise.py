@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_ackermann_solvers import car_world
+from conftest import car_world
 from typer.testing import CliRunner
 
 from slamcli.api.calibrate import observation_noise, robust_std, scan_pair_residuals

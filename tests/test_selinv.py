@@ -217,7 +217,7 @@ def test_not_positive_definite_names_a_column():
 
 
 def _graph_problem(T=60, n_landmarks=8, seed=2):
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     from slamcli.solvers import frontend
 
@@ -249,7 +249,7 @@ def test_graph_marginals_selected_inverse_equals_dense_inverse_and_the_scipy_pat
 def test_graph_solver_result_marginals_same_with_and_without_cholmod(monkeypatch):
     """End to end: ``graph``'s result (default covariance=true) via the selected inverse equals the result
     via the SciPy fallback (the same optimum, so the same H) to 1e-9."""
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     ds = tiny_dataset(T=80, n_landmarks=10, seed=11, report_ids=True, clutter_every=0)
     params = graph.GraphParams(association="reported")

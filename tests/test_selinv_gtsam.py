@@ -29,7 +29,7 @@ pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (
 
 
 def test_selected_inverse_marginals_equal_gtsam_marginals_at_the_same_point():
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     ds = tiny_dataset(T=120, n_landmarks=10, seed=5, report_ids=True, clutter_every=0)
     obs, truth = ds.inputs.observations, ds.truth

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 from typer.testing import CliRunner
 
 import slamcli.solvers

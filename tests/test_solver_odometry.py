@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from tiny_world import tiny_dataset
+from conftest import tiny_dataset
 
 from slamcli.models import motion, observation, se2
 from slamcli.solvers.odometry import (

@@ -39,7 +39,7 @@ def test_solvers_command_imports_no_solver_and_no_numerics():
 
 
 def test_info_imports_no_solver_scipy_or_plotting(tmp_path):
-    from tiny_world import tiny_dataset
+    from conftest import tiny_dataset
 
     from slamcli.io import write_dataset
 
