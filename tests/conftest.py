@@ -3,8 +3,8 @@
 Paths: :data:`TESTS`, :data:`DATA` (the recording excerpts), :data:`ROOT` (the repository). Worlds, built directly
 from ``slamcli.models`` with a seeded generator (the truth stays with the test, never goes to a solver):
 :func:`drive_world` (the one generator), :func:`tiny_dataset`, :func:`car_world`, :func:`make_dataset` with
-:func:`make_result`. Test modules import them with ``from conftest import ...`` (``tests/`` is on ``sys.path``
-because this file is loaded from it).
+:func:`make_result`, and :func:`write_sweep_table` (a sweep's results table). Test modules import them with
+``from conftest import ...`` (pytest puts ``tests/`` on ``sys.path`` when it loads this file).
 
 The hooks: what a test reports is sent between pytest-xdist's processes as UTF-8, and the
 bad-input tests make file names that are not UTF-8 (legal on Linux, ``\\udcXX`` in Python strings); a report or
@@ -254,3 +254,27 @@ def make_result(ds, data_path, *, offset=(0.0, 0.2), covariances=True, rng_seed=
     return SolverResult("toy", "0", {}, Status.CONVERGED, "", est, lm, np.full(len(ds.inputs.observations), -1),
                         pose_cov=pc, landmark_cov=lc, trace=trace, dataset_hash=dataset_hash(ds),
                         extra={"dataset_path": str(data_path)})
+
+
+def write_sweep_table(d):
+    """``d/results.csv``, a hand-made sweep results table: ekf with an integer parameter (absent for odometry),
+    one failed run; returns the typed frame."""
+    from slamcli.metrics.aggregate import typed_frame
+
+    rows = []
+    ate = {("ekf", 2): [1.0, 2.0, 3.0, 4.0], ("ekf", 5): [0.5, 0.7], ("odometry", None): [10.0, 12.0, 14.0]}
+    k = 0
+    for (label, hits), values in ate.items():
+        for v in values:
+            row = {"run_id": f"r{k}", "label": label, "method": label, "replicate": k, "status": "completed",
+                   "ate_rmse_m": v, "solve_time_s": 0.1 * k}
+            if hits is not None:
+                row["solver.ekf.provisional_min_hits"] = hits
+            rows.append(row)
+            k += 1
+    rows.append({"run_id": "bad", "label": "ekf", "method": "ekf", "replicate": 99, "status": "failed",
+                 "solver.ekf.provisional_min_hits": 2, "ate_rmse_m": None})
+    df = typed_frame(rows)
+    d.mkdir(parents=True, exist_ok=True)
+    df.to_csv(d / "results.csv", index=False)
+    return df

@@ -6,38 +6,18 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import write_sweep_table
 from typer.testing import CliRunner
 
 from slamcli.cli import app
 from slamcli.errors import ConfigError
-from slamcli.metrics.aggregate import aggregate_dir, read_table, resolve_column, summarise, typed_frame
+from slamcli.metrics.aggregate import aggregate_dir, read_table, resolve_column, summarise
 
 runner = CliRunner()
 
 
-def _write_sweep(d):
-    """A hand-made results table: ekf with an integer parameter (absent for odometry), one failed run."""
-    rows = []
-    ate = {("ekf", 2): [1.0, 2.0, 3.0, 4.0], ("ekf", 5): [0.5, 0.7], ("odometry", None): [10.0, 12.0, 14.0]}
-    k = 0
-    for (label, hits), values in ate.items():
-        for v in values:
-            row = {"run_id": f"r{k}", "label": label, "method": label, "replicate": k, "status": "completed",
-                   "ate_rmse_m": v, "solve_time_s": 0.1 * k}
-            if hits is not None:
-                row["solver.ekf.provisional_min_hits"] = hits
-            rows.append(row)
-            k += 1
-    rows.append({"run_id": "bad", "label": "ekf", "method": "ekf", "replicate": 99, "status": "failed",
-                 "solver.ekf.provisional_min_hits": 2, "ate_rmse_m": None})
-    df = typed_frame(rows)
-    d.mkdir(parents=True, exist_ok=True)
-    df.to_csv(d / "results.csv", index=False)
-    return df
-
-
 def test_typed_frame_and_csv_keep_integer_columns(tmp_path):
-    df = _write_sweep(tmp_path / "exp")
+    df = write_sweep_table(tmp_path / "exp")
     assert str(df["solver.ekf.provisional_min_hits"].dtype) == "Int64"
     col = pd.read_csv(tmp_path / "exp" / "results.csv", dtype=str)["solver.ekf.provisional_min_hits"]
     assert col.dropna().tolist() == ["2", "2", "2", "2", "5", "5", "2"]  # written as 2, not 2.0
@@ -59,7 +39,7 @@ def test_summarise_matches_hand_computation():
 
 
 def test_aggregate_dir_writes_three_tables(tmp_path):
-    _write_sweep(tmp_path / "exp")
+    write_sweep_table(tmp_path / "exp")
     a = aggregate_dir(tmp_path / "exp", metrics=["ate_rmse"])
     s = a["summary"]
     assert a["n_excluded"] == 1 and a["n_runs"] == 10
@@ -90,7 +70,7 @@ def test_a_full_disk_while_writing_the_tables_leaves_none_of_them(tmp_path, monk
     written. The four tables are written together: the third failing leaves none (and no temporary)."""
     import pathlib
 
-    _write_sweep(tmp_path / "exp")
+    write_sweep_table(tmp_path / "exp")
     out = tmp_path / "agg"
     orig = pathlib.Path.write_text
 
@@ -110,7 +90,7 @@ def test_a_full_disk_while_writing_the_tables_leaves_none_of_them(tmp_path, monk
 
 
 def test_by_solver_and_cli(tmp_path):
-    _write_sweep(tmp_path / "exp")
+    write_sweep_table(tmp_path / "exp")
     r = runner.invoke(app, ["aggregate", str(tmp_path / "exp"), "--by", "solver", "-m", "ate_rmse_m",
                             "-o", str(tmp_path / "out")], env={"COLUMNS": "80"})
     assert r.exit_code == 0, r.output
@@ -136,7 +116,7 @@ def test_resolve_column_suffix_and_prefix():
 
 
 def test_plot_compare(tmp_path):
-    _write_sweep(tmp_path / "exp")
+    write_sweep_table(tmp_path / "exp")
     out = tmp_path / "c.png"
     r = runner.invoke(app, ["plot", "compare", str(tmp_path / "exp"), "--metric", "ate_rmse", "--by", "solver",
                             "-o", str(out)])
@@ -159,7 +139,7 @@ def test_plot_compare(tmp_path):
 
 def test_plot_compare_by_two_columns_as_aggregate(tmp_path):
     """`--by solver,provisional_min_hits` groups like aggregate does (it failed before: one column only)."""
-    _write_sweep(tmp_path / "exp")
+    write_sweep_table(tmp_path / "exp")
     out = tmp_path / "c.pdf"
     r = runner.invoke(app, ["plot", "compare", str(tmp_path / "exp"), "--by", "solver,provisional_min_hits",
                             "-o", str(out), "--label", "A", "--label", "B", "--label", "C"])

@@ -120,9 +120,9 @@ def _cli_cases(runs, sweep):
 @pytest.mark.parametrize("size,inches", [("3.5x2.6", COLUMN), ("page", (7.16, 3.2))])
 def test_every_cli_figure_keeps_its_labels_inside(runs, tmp_path, captured, size, inches):
     """One column (3.5 in) and both columns (7.16 in, ``--size page``)."""
-    from test_aggregate import _write_sweep
+    from conftest import write_sweep_table
 
-    _write_sweep(tmp_path / "exp")
+    write_sweep_table(tmp_path / "exp")
     for name, args in _cli_cases(runs, tmp_path / "exp").items():
         captured.clear()
         r = runner.invoke(app, ["plot", *args, "--size", size, "-q", "-o", str(tmp_path / "f.png")])
