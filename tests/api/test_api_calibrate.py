@@ -6,11 +6,9 @@ rejected detections into extra landmarks."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from conftest import car_world
+from conftest import DATA, car_world
 from typer.testing import CliRunner
 
 from slamcli.api.calibrate import observation_noise, robust_std, scan_pair_residuals
@@ -20,8 +18,6 @@ from slamcli.datasets import carpark, victoria_park
 from slamcli.io import read_dataset
 from slamcli.metrics.reference import mean_nis_band
 from slamcli.solvers.sensor_frame import to_sensor_frame
-
-DATA = Path(__file__).parent / "data"
 
 
 def test_scan_to_scan_estimator_recovers_simulated_sensor_noise():

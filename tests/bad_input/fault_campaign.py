@@ -1,5 +1,5 @@
 """The fault campaign of issue 23 ("nothing lost, ever"), re-runnable: ``python -m benchmarks.faults`` prints
-its totals, ``tests/test_bad_input_faults.py`` asserts them.
+its totals, ``tests/bad_input/test_bad_input_faults.py`` asserts them.
 
 Families (each case one CLI invocation in a forked child of :class:`test_bad_input_helpers.CliServer`):
 
@@ -48,7 +48,7 @@ from pathlib import Path
 import h5py
 
 HERE = Path(__file__).parent
-DATA = HERE / "data"
+DATA = HERE.parent / "data"  # tests/data
 PEAK_MB = 500.0
 #: the child's file-size limit in the RLIMIT_FSIZE family, bytes (every output here is larger)
 FSIZE_BYTES = 2048

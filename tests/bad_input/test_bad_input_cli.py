@@ -15,6 +15,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import DATA
 from test_bad_input_helpers import (
     CliServer,
     damaged,
@@ -31,7 +32,7 @@ from slamcli.api.simulate import simulate_to_file
 from slamcli.api.solve import solve_file
 
 HERE = Path(__file__).parent
-MRCLAM = HERE / "data" / "mrclam_excerpt"
+MRCLAM = DATA / "mrclam_excerpt"
 PEAK_MB = 500.0
 
 
@@ -179,7 +180,7 @@ def build_cases(w: Path, ds: Path, icm: Path, ekf: Path, odo: Path, ds2: Path) -
     cases.append(Case("recorded-dataset-missing", ["evaluate", res_moved, "-o", w / "rm_eval", "-q"],
                       "moved.h5", w / "rm_eval"))
     # evaluate options (ISSUE: --near-path -3 accepted); a value outside a choice (--rpe-unit, export --format)
-    # is a usage error refused by the parser: tests/test_cli_conventions.py
+    # is a usage error refused by the parser: tests/cli/test_cli_conventions.py
     for cid, opt, field in (("ISSUE-near-path-negative", ["--near-path", "-3"], "near_path"),
                             ("cutoff-zero", ["--cutoff", "0"], "cutoff"),
                             ("rpe-delta-nan", ["--rpe-delta", "nan"], "rpe_delta")):
@@ -352,7 +353,7 @@ def test_file_names_that_are_not_utf8_are_read_written_and_shown_escaped(world, 
     data.parent.mkdir()
     data.write_bytes(ds.read_bytes())
     g2o = tmp_path / f"{name('g')}.g2o"
-    g2o.write_bytes((HERE / "data" / "intel_excerpt.g2o").read_bytes())
+    g2o.write_bytes((DATA / "intel_excerpt.g2o").read_bytes())
     toml = tmp_path / "e.toml"
     toml.write_text('[experiment]\nname = "e"\n[scenario]\nname = "loop"\nparameters = {n_steps = 20}\n'
                     '[[solver]]\nmethod = "odometry"\n')

@@ -1,4 +1,4 @@
-"""Issue 23 ("nothing lost, ever"): the fault campaign (tests/fault_campaign.py) and the resume / table checks.
+"""Issue 23 ("nothing lost, ever"): the fault campaign (tests/bad_input/fault_campaign.py) and the resume / table checks.
 
 The campaign runs ≥ 150 cases in forked children; each must give one ``error:`` line naming the file or
 option, a non-zero exit (2 for the output guard), no traceback, no temporary left, every input byte-identical

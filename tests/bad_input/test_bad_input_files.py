@@ -15,6 +15,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import ROOT
 from test_bad_input_helpers import dead_pid
 from typer.testing import CliRunner
 
@@ -26,7 +27,6 @@ from slamcli.io import read_dataset, read_result
 from slamcli.io.atomic import clean_stale_temporaries
 from slamcli.io.schema import NONDETERMINISTIC_FIELDS
 
-ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
 
 

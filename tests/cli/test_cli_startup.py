@@ -10,13 +10,13 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.cli import app, app_for
 from slamcli.errors import PluginError
 from slamcli.solvers import nls
 
-DATA = Path(__file__).parent / "data"
 #: never needed to solve a pose graph with defaults: tables, plots, statistics, the JIT, the metrics
 NOT_ON_SOLVE_PATH = ("pandas", "matplotlib", "scipy.stats", "scipy.special", "scipy.optimize", "numba",
                      "slamcli.metrics", "slamcli.sim", "slamcli.sweep", "slamcli.plots", "dask")

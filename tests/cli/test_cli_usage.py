@@ -6,10 +6,10 @@ import re
 import struct
 import tomllib
 import typing
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from typer.testing import CliRunner
 
 from slamcli.api.simulate import simulate_to_file
@@ -23,7 +23,6 @@ from slamcli.solvers import registry
 from slamcli.sweep.config import load_experiment, parse_experiment
 from slamcli.sweep.expand import expand
 
-ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
 W80 = {"COLUMNS": "80"}
 

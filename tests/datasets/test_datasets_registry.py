@@ -14,12 +14,12 @@ from pathlib import Path
 
 import h5py
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.cli import app
 from slamcli.datasets import registry as reg
 
-DATA = Path(__file__).parent / "data"
 VP = DATA / "victoria_park_excerpt"
 runner = CliRunner()
 

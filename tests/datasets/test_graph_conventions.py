@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -25,7 +26,6 @@ from slamcli.solvers.graph.params import GraphParams
 from slamcli.solvers.nls.optimize import residual_vector
 
 gtsam = pytest.importorskip("gtsam")
-DATA = Path(__file__).parent / "data"
 COST_RTOL = 1e-9  # the same factors at the same values: only float summation order differs
 L = gtsam.symbol_shorthand.L
 runner = CliRunner()

@@ -4,11 +4,11 @@ hand, the import, and the evaluation against the surveyed beacons and GPS."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.io as sio
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -16,7 +16,7 @@ from slamcli.datasets import DatasetImportError
 from slamcli.datasets.carpark import extract_beacons, import_carpark
 from slamcli.io import read_dataset
 
-CP = Path(__file__).parent / "data" / "carpark_excerpt"
+CP = DATA / "carpark_excerpt"
 runner = CliRunner()
 
 # counted by hand from the raw rows (beam index: range m, intensity) of data_set.mat:

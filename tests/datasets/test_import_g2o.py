@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.api.solve import solve_dataset
@@ -24,7 +25,6 @@ from slamcli.models.motion import integrate
 from slamcli.models.observation import inverse_range_bearing, range_bearing
 from slamcli.models.se2 import between
 
-DATA = Path(__file__).parent / "data"
 DLR = DATA / "dlr_excerpt.g2o"
 VP = DATA / "victoria_park_excerpt.txt"
 runner = CliRunner()

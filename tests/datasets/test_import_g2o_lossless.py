@@ -10,10 +10,10 @@ own axes (no body-frame change).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from scipy.optimize import least_squares
 from typer.testing import CliRunner
 
@@ -23,7 +23,6 @@ from slamcli.datasets import DatasetImportError
 from slamcli.datasets.g2o import import_graph, read_graph
 from slamcli.io import read_dataset
 
-DATA = Path(__file__).parent / "data"
 DLR = DATA / "dlr_excerpt.g2o"
 INTEL = DATA / "intel_excerpt.g2o"
 runner = CliRunner()

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -31,7 +32,7 @@ from slamcli.models.angles import angle_diff
 from slamcli.models.motion import integrate
 from slamcli.models.se2 import interpolate_poses
 
-EXCERPT = Path(__file__).parent / "data" / "mrclam_excerpt"
+EXCERPT = DATA / "mrclam_excerpt"
 HEADER = "# UTIAS MRCLAM (test)\n# hand-written\n# format\n# columns\n"
 runner = CliRunner()
 
@@ -463,7 +464,7 @@ def test_team_import_counts_each_robots_repair(tmp_path):
     the unswapped excerpt gives them."""
     from slamcli.datasets.mrclam import import_mrclam_team
 
-    team_src = Path(__file__).parent / "data" / "mrclam_team_excerpt"
+    team_src = DATA / "mrclam_team_excerpt"
     d = tmp_path / "team"
     d.mkdir()
     for f in team_src.glob("*.dat"):

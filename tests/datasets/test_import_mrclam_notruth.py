@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -15,7 +16,7 @@ from slamcli.datasets.mrclam import import_mrclam
 from slamcli.io import read_dataset
 from slamcli.models.motion import integrate
 
-EXCERPT = Path(__file__).parent / "data" / "mrclam_excerpt"
+EXCERPT = DATA / "mrclam_excerpt"
 runner = CliRunner()
 
 

@@ -4,12 +4,11 @@ tag in the schema, the sensor-frame solve with the laser offset, one-line refusa
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-from conftest import tiny_dataset
+from conftest import DATA, tiny_dataset
 from typer.testing import CliRunner
 
 from slamcli.api.solve import solve_dataset
@@ -20,7 +19,7 @@ from slamcli.io import dataset_hash, read_dataset, write_dataset
 from slamcli.models.ackermann import VICTORIA_PARK, integrate_ackermann
 from slamcli.models.observation import inverse_range_bearing_offset
 
-VP = Path(__file__).parent / "data" / "victoria_park_excerpt"
+VP = DATA / "victoria_park_excerpt"
 runner = CliRunner()
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.api.interop import export_file
@@ -21,7 +22,6 @@ from slamcli.cli import app
 from slamcli.io import read_dataset, read_result
 from slamcli.models import motion
 
-DATA = Path(__file__).parent / "data"
 runner = CliRunner()
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from typer.testing import CliRunner
 
 from slamcli.api.simulate import simulate_to_file
@@ -21,7 +22,6 @@ from slamcli.cli import app
 from slamcli.io import read_dataset, read_result
 
 gtsam = pytest.importorskip("gtsam")
-DATA = Path(__file__).parent / "data"
 runner = CliRunner()
 COST_RTOL = 1e-9  # same factors, same numbers: only float summation order differs
 POSE_ATOL = 1e-6  # m / rad: two LM runs to the same optimum

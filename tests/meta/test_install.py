@@ -12,8 +12,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from conftest import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 HIDDEN = re.compile(r"^(apt|apt-get|apt-cache|aptitude|dpkg.*)$")
 pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
 

@@ -7,11 +7,11 @@ metric registry, and every figure kind still looks as its committed baseline ima
 * **Image comparison** (``matplotlib.testing.compare.compare_images``): the figures below are drawn from
   fixed arrays (no random draw; seeded where noise is wanted), on Agg, in DejaVu Sans (ships with matplotlib)
   without hinting, from matplotlib's default rc (whatever other tests changed), and compared with
-  ``tests/baseline_images/*.png`` at an RMS tolerance of :data:`IMAGE_TOL` (0-255 scale). The baselines are
-  tied to the matplotlib minor version named in ``tests/baseline_images/VERSION`` (text layout changes between
+  ``tests/plots/baseline_images/*.png`` at an RMS tolerance of :data:`IMAGE_TOL` (0-255 scale). The baselines are
+  tied to the matplotlib minor version named in ``tests/plots/baseline_images/VERSION`` (text layout changes between
   releases); under another version the comparison is skipped with that reason. To regenerate the baselines
   after an intended change of the style (or for a new matplotlib), run
-  ``SLAMCLI_UPDATE_BASELINES=1 pytest tests/test_plot_style.py`` and look at the new images before committing.
+  ``SLAMCLI_UPDATE_BASELINES=1 pytest tests/plots/test_plot_style.py`` and look at the new images before committing.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import make_dataset, make_result
+from conftest import DATA, make_dataset, make_result
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -127,9 +127,8 @@ def test_plot_map_legend_without_ground_truth():
 @pytest.fixture()
 def truthless(tmp_path):
     """The DLR excerpt imported from g2o (no ground truth) and solved by the graph solver, via the CLI."""
-    from pathlib import Path
 
-    g2o = Path(__file__).parent / "data" / "dlr_excerpt.g2o"
+    g2o = DATA / "dlr_excerpt.g2o"
     data, res = tmp_path / "dlr.h5", tmp_path / "dlr_graph.h5"
     r = runner.invoke(app, ["import", "g2o", str(g2o), "-q", "-o", str(data)])
     assert r.exit_code == 0, r.output

@@ -5,10 +5,9 @@ for tick labels, on the rendered pixels."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import DATA
 from test_plot_style import texts_outside
 from typer.testing import CliRunner
 
@@ -17,7 +16,6 @@ from slamcli.io import read_dataset, read_result
 from slamcli.plots import new_figure, style
 from slamcli.plots.maps import LANDMARK_PT_MAX, landmark_marker_pt
 
-DATA = Path(__file__).parent / "data"
 runner = CliRunner()
 #: the map must show the estimate's positions between these percentiles (its robust range)
 ROBUST_PCT = (1.0, 99.0)

@@ -9,12 +9,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import ROOT
 from typer.testing import CliRunner
 
 from slamcli.cli import app
 from slamcli.reproduce.report import Reproduction
 
-EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"  # the shipped files (a wheel: copies in the package)
+EXPERIMENTS = ROOT / "experiments"  # the shipped files (a wheel: copies in the package)
 
 
 def _table_rows(report: str, section: str) -> dict[str, list[str]]:
@@ -187,13 +188,13 @@ def test_packaged_experiments_are_the_default_not_the_cwd(tmp_path, monkeypatch)
                                                    "fig7-sim2.toml", "fig9-octagon.toml", "compare.toml", "nees.toml"}
     import tomllib
 
-    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     assert "*.toml" in pyproject["tool"]["setuptools"]["package-data"]["slamcli.experiments"]
 
 
 def test_report_cites_nothing_outside_the_repository(quick_report):
     out, report = quick_report
-    repo = Path(__file__).resolve().parents[1]
+    repo = ROOT
     for bad in ("EVALUATION-METHOD", "/work/", "shared/", "STYLE-ANCHORS"):
         assert bad not in report
     for ref in set(re.findall(r"`((?:slamcli|benchmarks|tests)/[^`\s]+)`", report)):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import DATA
 
 from slamcli.models import se2
 from slamcli.solvers import nls
@@ -214,12 +215,11 @@ def test_refinement_reaches_a_stationary_point_where_the_duality_gap_closes():
     """At a stationary point of F the multipliers make F = tr(Λ) (module docstring); the refinement must get
     there to rounding, not stop where F's decrease merely drops below its rounding (the intel excerpt, from
     a perturbed chordal start)."""
-    from pathlib import Path
 
     from slamcli.datasets.g2o import import_graph
     from slamcli.solvers.graph.init import initial_poses, pose_graph_edges
 
-    inp = import_graph(Path(__file__).parent / "data" / "intel_excerpt.g2o").inputs
+    inp = import_graph(DATA / "intel_excerpt.g2o").inputs
     ij, xyt, info = pose_graph_edges(inp, True)
     start = initial_poses(inp, "chordal") + np.random.default_rng(2).normal(scale=0.01, size=(inp.n_poses, 3))
     cert = certify.certify_pose_graph(start, ij, xyt, info)

@@ -8,10 +8,10 @@ PROVENANCE-graphs.txt. The GTSAM graph is built here from the imported dataset, 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 
 from slamcli.api.solve import solve_dataset
 from slamcli.datasets.g2o import import_graph
@@ -21,7 +21,6 @@ from slamcli.solvers import graph, nls
 from slamcli.solvers.graph import init as pose_init
 from slamcli.types import NoiseSpec, Observations, PoseConstraints, SlamInputs
 
-DATA = Path(__file__).parent / "data"
 INTEL = DATA / "intel_excerpt.g2o"
 MIT = DATA / "mit_excerpt.g2o"
 

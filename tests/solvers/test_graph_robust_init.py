@@ -12,17 +12,15 @@ test checks both passes against GTSAM's LM on the same graph.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import DATA
 
 from slamcli.datasets.g2o import import_graph
 from slamcli.errors import SolverError
 from slamcli.solvers import frontend, graph
 from slamcli.types import Status
 
-DATA = Path(__file__).parent / "data"
 #: the NoiseSpec bearing-range model (not the file's per-edge Cartesian one), as the GTSAM graph below
 PARAMS = dict(edge_info=False, covariance=False, rel_cost_tol=1e-10, max_iterations=500)
 

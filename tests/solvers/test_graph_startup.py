@@ -5,13 +5,11 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from conftest import DATA
 
 from slamcli.solvers.graph.solver import chi2_cdf, chi2_quantile
-
-DATA = Path(__file__).parent / "data"
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 6])

@@ -4,17 +4,16 @@ own estimate is checked against the batch optimum and its association against th
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import DATA
 
 from slamcli.models.angles import angle_diff
 from slamcli.sim import simulate_scenario
 from slamcli.solvers.graph import GraphParams, GraphSlam
 from slamcli.solvers.isam import IsamParams, IsamSlam
 
-EXCERPT = Path(__file__).parent / "data" / "mrclam_excerpt"
+EXCERPT = DATA / "mrclam_excerpt"
 TOL = 1e-6
 
 
@@ -172,7 +171,7 @@ def test_vce_noise_on_the_victoria_park_excerpt():
     from slamcli.datasets.victoria_park import import_victoria_park
     from slamcli.solvers.sensor_frame import to_sensor_frame
 
-    ds = import_victoria_park(Path(__file__).parent / "data" / "victoria_park_excerpt", duration=30.0)
+    ds = import_victoria_park(DATA / "victoria_park_excerpt", duration=30.0)
     vce = _check_vce(to_sensor_frame(ds.inputs))
     assert vce.extra["association"] == "nn"
 

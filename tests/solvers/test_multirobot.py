@@ -9,10 +9,10 @@ a hand-built two-robot world (:func:`two_robot_world`).
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 from scipy.optimize import least_squares
 
 from slamcli.api.solve import solve_dataset
@@ -25,7 +25,7 @@ from slamcli.solvers.graph import GraphParams, robot_range_bearing_error
 from slamcli.solvers.icm.solver import IcmParams
 from slamcli.types import Dataset, GroundTruth, NoiseSpec, Observations, RobotTeam, SlamInputs, solo_inputs
 
-EXCERPT = Path(__file__).parent / "data" / "mrclam_team_excerpt"
+EXCERPT = DATA / "mrclam_team_excerpt"
 
 
 # --------------------------------------------------------------------------------------------------------

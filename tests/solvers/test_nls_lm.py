@@ -9,17 +9,14 @@ reaches in 11.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from conftest import tiny_dataset
+from conftest import DATA, tiny_dataset
 
 from slamcli.datasets.g2o import import_graph
 from slamcli.solvers import frontend, graph, nls
 from slamcli.types import Status
 
-DATA = Path(__file__).parent / "data"
 #: the LM of slamcli ≤ 0.x (before issue 10): Marquardt's D = diag(H), λ₀ = 1e-5, Nielsen's update, any ϱ > 0
 OLD_LM = dict(damping="marquardt", lambda_update="nielsen", min_model_fidelity=0.0, lambda_max=1e16)
 

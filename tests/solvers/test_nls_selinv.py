@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import DATA
 
 from slamcli.solvers import graph, nls
 from slamcli.solvers.nls import marginals, selinv
@@ -145,12 +146,11 @@ def test_pose_graph_excerpt_marginals_reuse_the_lm_analysis(monkeypatch):
     triangle at the estimate in the body chart, factored with the LM's CHOLMOD analysis, the pose blocks
     rotated to the world chart afterwards — equal the blocks of the dense inverse of the full world-chart
     ``H``, and the marginals of that full ``H`` with a fresh analysis give the same blocks."""
-    from pathlib import Path
 
     from slamcli.datasets.g2o import import_graph
     from slamcli.solvers.graph import solver
 
-    inp = import_graph(Path(__file__).parent / "data" / "intel_excerpt.g2o").inputs
+    inp = import_graph(DATA / "intel_excerpt.g2o").inputs
     seen = {}
     inner = solver.laplace_marginals
 

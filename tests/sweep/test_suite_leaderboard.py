@@ -2,7 +2,7 @@
 overrides and the leaderboard of ``slamcli aggregate --leaderboard``.
 
 Recordings are the small excerpts of tests/data laid out as a shared datasets folder (as in
-tests/test_sweep_data.py). References: the leaderboard's numbers are computed here by hand from a hand-written
+tests/sweep/test_sweep_data.py). References: the leaderboard's numbers are computed here by hand from a hand-written
 results.csv with closed forms (Student t with 2 degrees of freedom: F(t) = 1/2 + t / (2 sqrt(2 + t²)), so the
 0.975 quantile is 0.95 sqrt(2 / (1 − 0.95²)) and the two-sided p of t is 1 − t / sqrt(2 + t²)); expected run
 lists are enumerated by brute force from the documented order.
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from conftest import ROOT
 from typer.testing import CliRunner
 
 from slamcli import experiments
@@ -27,7 +28,6 @@ from slamcli.solvers import registry as solvers
 from slamcli.sweep.config import apply_overrides, load_experiment, quick_variant
 from slamcli.sweep.expand import RegistryResolver, expand
 
-DATA = Path(__file__).parent / "data"
 runner = CliRunner()
 #: the suite's solver labels, in file order
 SUITE_SOLVERS = ["odometry", "ekf", "fastslam", "graph", "isam", "icm-real"]
@@ -166,7 +166,7 @@ def _tutorial_commands() -> list[list[str]]:
     import re
     import shlex
 
-    text = (Path(__file__).parent.parent / "docs" / "suite.md").read_text()
+    text = (ROOT / "docs" / "suite.md").read_text()
     block = re.findall(r"```bash\n(.*?)```", text, re.S)[-1]
     return [shlex.split(line)[1:] for line in block.splitlines() if line.startswith("slamcli ")]
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import DATA, ROOT
 from typer.testing import CliRunner
 
 import slamcli.datasets.options as importer_options
@@ -27,7 +28,6 @@ from slamcli.sweep.config import apply_overrides, load_experiment, parse_experim
 from slamcli.sweep.expand import LiteralResolver, expand
 from slamcli.sweep.runner import run_sweep
 
-DATA = Path(__file__).parent / "data"
 VERS = {"slamcli": "test", "schema": 1}
 runner = CliRunner()
 
@@ -270,7 +270,7 @@ def test_multi_robot_recording_takes_the_import_flags(tmp_path, monkeypatch, imp
 def test_docs_datasets_example_expands_as_it_says(shared):
     import re
 
-    text = (Path(__file__).parent.parent / "docs" / "experiments.md").read_text()
+    text = (ROOT / "docs" / "experiments.md").read_text()
     block = re.findall(r"```toml\n(.*?)```", text, re.S)[1]
     exp = shared / "docs.toml"
     exp.write_text(block)

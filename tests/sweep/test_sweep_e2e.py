@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import ROOT
 from typer.testing import CliRunner
 
 from slamcli.cli import app
@@ -122,7 +122,7 @@ def test_experiment_files_in_repo_validate():
     """Every shipped experiment file parses and expands against the registered solvers and scenarios."""
     from slamcli.solvers import registry
 
-    files = sorted((Path(__file__).resolve().parents[1] / "experiments").glob("*.toml"))
+    files = sorted((ROOT / "experiments").glob("*.toml"))
     assert files, "experiments/ holds no experiment files"
     have = set(registry.names())
     for f in files:

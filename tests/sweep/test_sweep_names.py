@@ -7,9 +7,8 @@ resulting runs equal those of a TOML file that spells the same overrides out (ha
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from conftest import ROOT
 from typer.testing import CliRunner
 
 from slamcli import experiments
@@ -17,7 +16,6 @@ from slamcli.cli import app
 from slamcli.sweep.config import apply_overrides, load_experiment
 from slamcli.sweep.expand import RegistryResolver, expand
 
-ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
 
 
