@@ -299,6 +299,7 @@ def build_cases(w: Path, ds: Path, icm: Path, ekf: Path, odo: Path, ds2: Path) -
     return cases, almost
 
 
+@pytest.mark.slow
 def test_malformed_inputs_fail_with_one_line_no_traceback_no_file_low_memory(world, tmp_path):
     d, ds, icm, ekf, odo, ds2 = world
     cases, almost = build_cases(tmp_path, ds, icm, ekf, odo, ds2)
@@ -339,6 +340,7 @@ def test_malformed_inputs_fail_with_one_line_no_traceback_no_file_low_memory(wor
     assert not [p for p in tmp_path.rglob("*") if ".tmp-" in p.name]
 
 
+@pytest.mark.slow
 def test_file_names_that_are_not_utf8_are_read_written_and_shown_escaped(world, tmp_path):
     """ISSUE: a file name with a byte that is not UTF-8 (``b'\\xff'``, legal on Linux) was a UnicodeEncodeError
     traceback when recorded in the HDF5 attributes (solve, import g2o, sweep)."""

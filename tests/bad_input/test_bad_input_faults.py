@@ -20,6 +20,7 @@ from slamcli.cli import app
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_fault_campaign_has_no_traceback_and_loses_nothing(tmp_path):
     t = run_campaign(tmp_path)
     assert t["cases"] >= 150, report(t)
@@ -36,6 +37,7 @@ def _tiny_sweep(tmp_path, name="tiny", replicates=2):
     return p
 
 
+@pytest.mark.slow
 def test_resume_redoes_a_run_whose_metrics_were_corrupted(tmp_path):
     toml = _tiny_sweep(tmp_path)
     assert runner.invoke(app, ["sweep", str(toml), "--out", str(tmp_path / "r"), "-q"]).exit_code == 0
@@ -58,6 +60,7 @@ def test_resume_redoes_a_run_whose_metrics_were_corrupted(tmp_path):
     assert runner.invoke(app, ["aggregate", str(exp), "-m", "ate_rmse_m", "-q"]).exit_code == 0
 
 
+@pytest.mark.slow
 def test_results_paths_are_relative_and_equal_for_one_and_two_workers(tmp_path):
     toml = _tiny_sweep(tmp_path, "paths")
     os.chdir(tmp_path)
@@ -116,6 +119,7 @@ def _flip_middle(p):
 
 @pytest.mark.parametrize("damage", ["config.json", "dataset.h5", "result.h5", "metrics.json", "shared-dataset",
                                     "shared-dataset-replaced", "old-status-truncated-result"])
+@pytest.mark.slow
 def test_resume_redoes_a_run_whose_kept_files_changed(tmp_path, damage):
     """ISSUE: resume kept runs "completed" over a corrupted dataset.h5 (the hard link of the shared
     datasets/<id>.h5) and over a truncated result.h5 when status.json (an older run) had no sha256. Every

@@ -68,6 +68,7 @@ def test_temporaries_of_dead_processes_are_removed_by_the_next_write(files, tmp_
     assert clean_stale_temporaries(tmp_path) == 0
 
 
+@pytest.mark.slow
 def test_kill9_during_write_then_next_run_cleans_up(files, tmp_path):
     """A real kill -9 in the middle of writing the result: while the HDF5 image is built in memory nothing is
     on disk; once its bytes are in the temporary (the writer SIGKILLs itself after its first os.write) one hidden
@@ -108,6 +109,7 @@ def _snapshot(d: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(d.iterdir())}
 
 
+@pytest.mark.slow
 def test_evaluate_killed_mid_write_leaves_the_previous_folder_intact(files, tmp_path):
     """ISSUE: kill -9 of evaluate left new files mixed with the previous run's CSVs."""
     _, ds, a, _ = files
@@ -219,6 +221,7 @@ def test_no_solver_puts_timings_into_extra(files, tmp_path, method, params):
     assert not timing_like, f"{method}: timing keys in extra: {timing_like}"
 
 
+@pytest.mark.slow
 def test_diff_same_seed_is_same_and_ignores_exactly_the_timings(files, tmp_path):
     _, ds, a, b = files
     res = diff(a, b)

@@ -35,6 +35,7 @@ def test_every_command_is_listed():
 
 
 @pytest.mark.parametrize("path", [p for p, _ in ALL], ids=lambda p: " ".join(p) or "slamcli")
+@pytest.mark.slow
 def test_dash_h_is_help_and_placeholders_are_click_style(path):
     long = runner.invoke(app, [*path, "--help"])
     short = runner.invoke(app, [*path, "-h"])
@@ -88,6 +89,7 @@ def test_library_accepts_what_the_help_lists():
         assert typing.get_args(typing.get_type_hints(fn)[name]) == listed[name]
 
 
+@pytest.mark.slow
 def test_shell_completion_offers_the_choices():
     """The bash completion protocol (README "Shell completion") answers with an option's choices."""
     import os

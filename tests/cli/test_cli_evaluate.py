@@ -112,6 +112,7 @@ def test_end_to_end_simulate_solve_evaluate(tmp_path):
     assert m["pose_nees_mean"] is None  # odometry stores no covariances
 
 
+@pytest.mark.slow
 def test_plot_nees_prints_summary(tmp_path):
     paths = []
     for k in range(2):

@@ -38,6 +38,7 @@ def _solve(dataset: Path, out: Path, log: Path, *extra: str) -> str:
     return text
 
 
+@pytest.mark.slow
 def test_solve_redirected_to_a_file_logs_progress_lines(dataset, tmp_path):
     text = _solve(dataset, tmp_path / "r.h5", tmp_path / "solve.log")
     lines = [ln for ln in text.splitlines() if PROGRESS_RE.match(ln)]
@@ -50,6 +51,7 @@ def test_solve_redirected_to_a_file_logs_progress_lines(dataset, tmp_path):
     assert "completed ekf" in text  # the summary still follows
 
 
+@pytest.mark.slow
 def test_quiet_silences_the_progress_lines(dataset, tmp_path):
     text = _solve(dataset, tmp_path / "r.h5", tmp_path / "solve.log", "--quiet")
     assert text == ""

@@ -244,6 +244,7 @@ def cli(*args):
                           timeout=120, check=False)
 
 
+@pytest.mark.slow
 def test_subprocess_solve_and_corrupt_input(data, tmp_path):
     ok = cli("solve", data, "--method", "odometry", "-o", tmp_path / "r.h5")
     assert ok.returncode == 0, ok.stderr

@@ -33,11 +33,13 @@ def _modules_after(cli_args: list[str], heavy: tuple[str, ...] = HEAVY) -> list[
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_solvers_command_imports_no_solver_and_no_numerics():
     # the listing; ``slamcli solvers NAME`` imports that one solver to document its Params docstring
     assert _modules_after(["solvers"]) == []
 
 
+@pytest.mark.slow
 def test_info_imports_no_solver_scipy_or_plotting(tmp_path):
     from conftest import tiny_dataset
 

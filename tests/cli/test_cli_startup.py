@@ -144,6 +144,7 @@ def _cli_solve(data: Path, method: str, out: Path) -> str:
     """
 
 
+@pytest.mark.slow
 def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_graph, tmp_path):
     out = tmp_path / "r.h5"
     present = _modules_after(_cli_solve(pose_graph, "graph", out))
@@ -156,6 +157,7 @@ def test_default_graph_solve_through_the_cli_imports_only_what_it_uses(pose_grap
     assert "<lazy modules>" in present
 
 
+@pytest.mark.slow
 def test_default_graph_solve_through_the_api_imports_only_what_it_uses(pose_graph, tmp_path):
     out = tmp_path / "r.h5"
     present = _modules_after(f"""
@@ -171,6 +173,7 @@ def test_default_graph_solve_through_the_api_imports_only_what_it_uses(pose_grap
 
 
 @pytest.mark.parametrize("numpy_first", [False, True])
+@pytest.mark.slow
 def test_deferred_numpy_submodules_are_the_real_ones_on_first_use(numpy_first):
     # registered before NumPy is imported (the command line) or after (a sweep worker that imported numpy first);
     # the references are the modules' documented behaviour and NumPy's own files, not slamcli output
@@ -226,6 +229,7 @@ def test_help_through_main_imports_no_numpy():
     assert out.returncode == 0, out.stderr
 
 
+@pytest.mark.slow
 def test_built_in_solve_without_scipy_reads_no_distribution_metadata(pose_graph, tmp_path):
     # odometry imports no SciPy, so nothing else brings importlib.metadata in: the registry (entry-point scan)
     # and the result's solver_version (importlib.metadata.version) would be the only ones
@@ -311,6 +315,7 @@ def _unused_numpy_executed_after_scipy_sparse() -> list[str]:
     return [m for m in NUMPY_UNUSED_DEPENDENCIES if m in sys.modules]
 
 
+@pytest.mark.slow
 def test_sweep_workers_defer_numpy_submodules_like_the_command():
     from slamcli.sweep.runner import LocalPool
 

@@ -93,6 +93,7 @@ def test_build_system_needs_setuptools_77():
 
 
 @pytest.mark.parametrize("method", ["ekf", "fastslam"])
+@pytest.mark.slow
 def test_auto_association_picks_reported_ids_or_ml(loop, tmp_path, method):
     extra = ["-p", "n_particles=10"] if method == "fastslam" else []
     r = runner.invoke(app, ["solve", str(loop / "loop.h5"), "-m", method, *extra, "-o", str(tmp_path / "a.h5"), "-q"])
@@ -190,6 +191,7 @@ def _png_size(path):
     return w, h
 
 
+@pytest.mark.slow
 def test_plot_dpi_size_formats_quiet(loop, tmp_path):
     ekf = tmp_path / "ekf.h5"
     solve_file(loop / "loop.h5", "ekf", {}, ekf)
@@ -203,6 +205,7 @@ def test_plot_dpi_size_formats_quiet(loop, tmp_path):
     assert r.exit_code == 1 and "--size" in r.output
 
 
+@pytest.mark.slow
 def test_plot_errors_of_a_filter_draws_sigma_bands(loop, tmp_path):
     from slamcli.api.plot import errors
     from slamcli.plots import new_figure
@@ -238,6 +241,7 @@ def test_nees_and_mapchange_use_log_axes_with_band_visible():
     np.testing.assert_allclose(ax.lines[0].get_ydata(), [1000.0, 10.0, 0.1])  # zeros left out, in mm
 
 
+@pytest.mark.slow
 def test_command_output_fits_80_columns(loop, tmp_path):
     d = str(tmp_path)
     ekf = tmp_path / "ekf.h5"

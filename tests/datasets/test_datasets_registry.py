@@ -84,6 +84,7 @@ def test_missing_dataset_is_one_line_naming_fetch(env):
     assert res.exit_code == 1 and "not a dataset name" in res.stderr
 
 
+@pytest.mark.slow
 def test_fetch_checks_sha256_and_import_by_name_equals_import_by_path(env):
     res = _run("datasets", "fetch", "vp-test", "-q")
     assert res.exit_code == 0, res.output
@@ -112,6 +113,7 @@ def test_fetch_with_wrong_sha256_fails_in_one_line_and_leaves_nothing(env):
     assert not list((env / "data").rglob("inputs.dat"))
 
 
+@pytest.mark.slow
 def test_fetch_unzips_and_reports_the_unknown_sha256(env):
     res = _run("datasets", "fetch", "mr-test")
     assert res.exit_code == 0, res.output
@@ -124,6 +126,7 @@ def test_fetch_unzips_and_reports_the_unknown_sha256(env):
     assert ref.exit_code == 0 and _run("diff", env / "m.h5", env / "ref.h5").exit_code == 0
 
 
+@pytest.mark.slow
 def test_add_registers_a_local_copy_and_checks_it(env):
     copy = env / "lab" / "vp_folder" / "ascii"
     copy.mkdir(parents=True)

@@ -53,6 +53,7 @@ def test_grouping_rules():
     np.testing.assert_allclose(z[:, 0], [5.05, 9.0])
 
 
+@pytest.mark.slow
 def test_import_and_evaluate(tmp_path):
     ds = import_carpark(CP)
     inp = ds.inputs

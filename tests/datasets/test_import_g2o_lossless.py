@@ -91,6 +91,7 @@ def _dlr_reference():
     return x, m, 0.5 * float(sol.fun @ sol.fun), lids, residuals, nP
 
 
+@pytest.mark.slow
 def test_dlr_excerpt_optimum_equals_direct_least_squares_of_the_per_edge_model():
     ds = import_graph(DLR)
     inp = ds.inputs
@@ -167,6 +168,7 @@ def test_bearing_range_rows_keep_their_sigmas(tmp_path):
     assert inp.noise.range_std == pytest.approx(0.2) and inp.noise.bearing_std == pytest.approx(0.03)
 
 
+@pytest.mark.slow
 def test_max_poses_keeps_a_prefix_and_its_closures(tmp_path):
     full = import_graph(INTEL)
     part = import_graph(INTEL, max_poses=280)

@@ -337,6 +337,7 @@ def test_cli_import_solve_evaluate_ekf_beats_dead_reckoning(tmp_path):
     assert m["n_landmarks_est"] <= 15
 
 
+@pytest.mark.slow
 def test_cli_import_options_and_errors(tmp_path):
     out = tmp_path / "a.h5"
     res = run("import", "mrclam", EXCERPT, "--start", "5", "--duration", "10", "--dt", "0.02",

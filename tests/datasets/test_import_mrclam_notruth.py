@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import DATA
 from typer.testing import CliRunner
 
@@ -43,6 +44,7 @@ def test_no_truth_import_matches_the_full_import_up_to_the_frame(tmp_path):
     np.testing.assert_array_equal(a.reported_id, b.reported_id)  # subjects >= 6 = the landmark file's subjects
     np.testing.assert_array_equal(a.z, b.z)
 
+@pytest.mark.slow
 def test_no_truth_cli_solve_evaluate(tmp_path):
     d = _copy_without_truth(tmp_path)
     data = tmp_path / "nt.h5"

@@ -88,6 +88,7 @@ def test_odometry_solver_uses_the_laser_offset(vp):
     assert res.extra["solved_in_sensor_frame"] == [3.78, 0.5]
 
 
+@pytest.mark.slow
 def test_cli_end_to_end_and_refusals(tmp_path):
     data = tmp_path / "vp.h5"
     r = runner.invoke(app, ["import", "victoria-park", str(VP), "--start", "5", "--duration", "25", "-o", str(data)])

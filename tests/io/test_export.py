@@ -57,6 +57,7 @@ def _evo_ape(ref_path, est_path, align):
     return ape.get_statistic(metrics.StatisticsType.rmse)
 
 
+@pytest.mark.slow
 def test_evo_ape_equals_our_ate(run, tmp_path):
     pytest.importorskip("evo")
     _, data, res = run

@@ -62,6 +62,7 @@ def cluttered(tmp_path_factory):
 
 
 @pytest.mark.parametrize("solver", ["ekf", "graph"])
+@pytest.mark.slow
 def test_gtsam_export_round_trip_keeps_every_sighting_and_the_objective(cluttered, solver):
     d, ds = cluttered
     res = read_result(d / f"{solver}.h5")

@@ -388,6 +388,7 @@ def test_group_where_dataset_expected(good):
     expect_error(good, "inputs/x0", "expected a dataset, found a group")
 
 
+@pytest.mark.slow
 def test_random_byte_corruption_gives_schema_error_or_valid_data(good):
     """Overwrite 16 random bytes at 80 random offsets: reading either succeeds (unused or plain data bytes)
     or raises a one-line SchemaError, never another exception or a traceback-worthy crash."""

@@ -203,6 +203,7 @@ def graph() -> dict[str, dict[str, int]]:
     return import_graph(PACKAGE_ROOT, "slamcli")
 
 
+@pytest.mark.slow
 def test_every_package_has_a_rank(graph):
     assert graph, "no slamcli module found"
     unranked = []

@@ -156,6 +156,7 @@ def test_plot_compare_by_two_columns_as_aggregate(tmp_path):
     assert r.exit_code == 1 and "1 label(s) for 3 group(s)" in r.output and not (tmp_path / "d.png").exists()
 
 
+@pytest.mark.slow
 def test_real_sweep_keeps_int_parameter(tmp_path):
     toml = tmp_path / "e.toml"
     toml.write_text("""

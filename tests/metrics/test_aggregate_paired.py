@@ -125,6 +125,7 @@ def _header_line(output: str, first: str) -> str:
     return lines[k]
 
 
+@pytest.mark.slow
 def test_terminal_tables_fit_100_columns_without_wrapped_headers(tmp_path):
     _paired_sweep(tmp_path / "exp")
     r = runner.invoke(app, ["aggregate", str(tmp_path / "exp"), "-o", str(tmp_path / "out")],

@@ -36,6 +36,7 @@ def test_ekf_closed_form_gate_equals_scipy_stats(q):
     assert _chi2_2dof_ppf(q) == pytest.approx(chi2.ppf(q, 2), rel=QUANTILE_RTOL)
 
 
+@pytest.mark.slow
 def test_evaluate_and_ml_ekf_import_no_scipy_stats(tmp_path):
     code = f"""
 import sys

@@ -44,6 +44,7 @@ def _cases(rng, n=12):
     return out
 
 
+@pytest.mark.slow
 def test_surface_range_matches_brute_force_ray_march():
     for x, m, b, rho in _cases(np.random.default_rng(3)):
         assert ob.surface_range(x, m, b, rho) == pytest.approx(_brute_range(x, m, b, rho), abs=BRUTE_TOL)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 
 import matplotlib
+import pytest
 
 matplotlib.use("Agg")
 
@@ -39,6 +40,7 @@ def test_matplotlib_default_would_embed_type3(tmp_path):
     assert b"Type3" in _font_subtypes(path.read_bytes())
 
 
+@pytest.mark.slow
 def test_save_figure_pdf_has_no_type3_font(tmp_path):
     path = save_figure(_figure(), tmp_path / "fig.pdf")
     pdf = path.read_bytes()

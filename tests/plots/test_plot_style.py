@@ -76,6 +76,7 @@ def texts_outside(fig) -> list[str]:
     return out
 
 
+@pytest.mark.slow
 def test_inside_check_catches_a_clipped_label():
     """The check is not vacuous: a label pushed off the figure is reported."""
     fig, ax = new_figure(*COLUMN)
@@ -118,6 +119,7 @@ def _cli_cases(runs, sweep):
 
 
 @pytest.mark.parametrize("size,inches", [("3.5x2.6", COLUMN), ("page", (7.16, 3.2))])
+@pytest.mark.slow
 def test_every_cli_figure_keeps_its_labels_inside(runs, tmp_path, captured, size, inches):
     """One column (3.5 in) and both columns (7.16 in, ``--size page``)."""
     from conftest import write_sweep_table
@@ -132,6 +134,7 @@ def test_every_cli_figure_keeps_its_labels_inside(runs, tmp_path, captured, size
         assert texts_outside(fig) == [], name
 
 
+@pytest.mark.slow
 def test_pose_errors_boxes_and_occupancy_keep_labels_inside():
     for make in (_fig_pose_errors, _fig_boxes, _fig_grid):
         fig = make()
@@ -153,6 +156,7 @@ def test_occupancy_map_has_a_colorbar_and_pose_errors_are_in_radians():
     np.testing.assert_allclose(fig.axes[2].lines[0].get_ydata(), _pose_err()[:, 2])
 
 
+@pytest.mark.slow
 def test_map_title_has_no_file_name_and_label_names_the_estimate(runs, tmp_path, captured):
     r = runner.invoke(app, ["plot", "map", str(runs[0]), "--label", "ICM", "-q", "-o", str(tmp_path / "m.png")])
     assert r.exit_code == 0, r.output
@@ -163,6 +167,7 @@ def test_map_title_has_no_file_name_and_label_names_the_estimate(runs, tmp_path,
     assert r.exit_code == 1 and "1 label(s) for 3 result(s)" in r.output
 
 
+@pytest.mark.slow
 def test_a_long_title_wraps_inside_one_column(runs, tmp_path, captured):
     title = "ICM on paper-sim1, information weights, gated initialisation, seeds 0-9, 30 sweeps"
     r = runner.invoke(app, ["plot", "errors", str(runs[0]), "--title", title, "--size", "column", "-q",
@@ -171,6 +176,7 @@ def test_a_long_title_wraps_inside_one_column(runs, tmp_path, captured):
     assert captured[0].axes[0].get_title() == title and texts_outside(captured[0]) == []
 
 
+@pytest.mark.slow
 def test_mapchange_default_labels_are_solver_names_numbered(runs, tmp_path, captured):
     r = runner.invoke(app, ["plot", "mapchange", *map(str, runs[:2]), "-q", "-o", str(tmp_path / "c.png")])
     assert r.exit_code == 0, r.output
@@ -178,6 +184,7 @@ def test_mapchange_default_labels_are_solver_names_numbered(runs, tmp_path, capt
     assert labels == ["toy (1)", "toy (2)"]  # not "toy: r0.h5"
 
 
+@pytest.mark.slow
 def test_cli_pdf_embeds_no_type3_font(runs, tmp_path):
     from test_plot_fonts import _font_subtypes
 
@@ -314,6 +321,7 @@ def _draw(make, path):
 
 
 @pytest.mark.parametrize("name", sorted(FIGURES))
+@pytest.mark.slow
 def test_figure_matches_baseline_image(name, tmp_path):
     from matplotlib.testing.compare import compare_images
 
@@ -333,6 +341,7 @@ def test_figure_matches_baseline_image(name, tmp_path):
     assert diff is None, diff
 
 
+@pytest.mark.slow
 def test_image_comparison_detects_a_style_change(tmp_path):
     """The comparison is not vacuous: the same figure with another colour for the estimate fails it."""
     from matplotlib.testing.compare import compare_images

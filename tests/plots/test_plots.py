@@ -55,6 +55,7 @@ def test_curves_draw_given_arrays():
     assert any("67% of steps inside" in t.get_text() for t in ax.get_legend().get_texts())
 
 
+@pytest.mark.slow
 def test_save_figure_formats_and_atomicity(tmp_path):
     fig, ax = new_figure()
     ax.plot([0, 1], [0, 1])
@@ -85,6 +86,7 @@ def runs(tmp_path):
 
 
 @pytest.mark.parametrize("kind,ext", [("map", "png"), ("errors", "pdf"), ("mapchange", "png"), ("nees", "png")])
+@pytest.mark.slow
 def test_plot_cli_kinds(runs, tmp_path, kind, ext):
     out = tmp_path / f"{kind}.{ext}"
     args = ["plot", kind, *(map(str, runs) if kind in ("nees", "mapchange") else [str(runs[0])]), "-o", str(out)]
@@ -137,6 +139,7 @@ def truthless(tmp_path):
     return data, res
 
 
+@pytest.mark.slow
 def test_plot_map_without_ground_truth_draws_estimate_and_odometry(truthless, tmp_path):
     from slamcli.cli.plot_cmd import _map
     from slamcli.io import read_dataset, read_result
@@ -161,6 +164,7 @@ def test_plot_map_without_ground_truth_draws_estimate_and_odometry(truthless, tm
     np.testing.assert_array_equal(lines["Estimated locations"].get_xydata(), res.landmarks_xy)
 
 
+@pytest.mark.slow
 def test_truth_metrics_on_a_truthless_dataset_are_one_line_errors(truthless, tmp_path):
     data, res_path = truthless
     for args in (["plot", "errors", str(res_path), "-o", str(tmp_path / "e.png")],

@@ -65,6 +65,7 @@ def _line(ax, label):
     return next(ln for ln in ax.lines if ln.get_label() == label)
 
 
+@pytest.mark.slow
 def test_victoria_park_map_shows_estimate_and_gps_with_small_markers(vp, tmp_path, captured):
     _cli("plot", "map", vp / "ekf.h5", "-q", "-o", tmp_path / "map.png")
     ax = captured[0].axes[0]
@@ -99,6 +100,7 @@ def test_a_diverging_baseline_is_clipped_and_said(vp):
     np.testing.assert_allclose(limits[0], limits[1])  # the baseline does not move the axes at all
 
 
+@pytest.mark.slow
 def test_mrclam_team_map_has_one_colour_per_robot(team, tmp_path, captured):
     _cli("plot", "map", team / "graph.h5", "-q", "-o", tmp_path / "team.png")
     ax = captured[0].axes[0]
@@ -179,6 +181,7 @@ def _label_masks(fig, ax):
 
 
 @pytest.mark.parametrize("log", [False, True])
+@pytest.mark.slow
 def test_compare_tick_labels_do_not_touch_and_log_axis(tmp_path, captured, log):
     from slamcli.plots.curves import tick_labels_overlap
 
@@ -200,6 +203,7 @@ def test_compare_tick_labels_do_not_touch_and_log_axis(tmp_path, captured, log):
     assert not any(np.any(a & b) for a, b in zip(masks, masks[1:]))
 
 
+@pytest.mark.slow
 def test_tick_label_overlap_is_detected(tmp_path):
     """The measure is not vacuous: eight long upright labels on one column do overlap, in pixels too."""
     from slamcli.plots.curves import tick_labels_overlap
@@ -291,6 +295,7 @@ def test_nees_log_axis_keeps_every_value_and_names_one_run():
     assert ax.get_title() == "Pose NEES of one run" and nees_title(50) == "Pose NEES over 50 runs"
 
 
+@pytest.mark.slow
 def test_ellipses_draw_above_the_markers_or_say_why_not(vp, team, tmp_path, captured):
     _cli("plot", "map", vp / "ekf.h5", "--ellipses", "-q", "-o", tmp_path / "e.png")
     ax = captured[0].axes[0]
@@ -301,6 +306,7 @@ def test_ellipses_draw_above_the_markers_or_say_why_not(vp, team, tmp_path, capt
     assert "stores no covariances" in r.output
 
 
+@pytest.mark.slow
 def test_crowded_box_names_do_not_overlap():
     """Twenty pose boxes 0.1 m apart at one column: names that would touch are hidden, the rest are disjoint
     in rendered pixels."""

@@ -45,6 +45,7 @@ def quick_report(tmp_path_factory):
     return out, report
 
 
+@pytest.mark.slow
 def test_quick_report_has_every_section_and_figure(quick_report):
     out, report = quick_report
     for title in ("Fig. 5", "Initialisation study", "Fig. 6", "Fig. 7", "Fig. 9", "ICM as a post-processor",
@@ -122,6 +123,7 @@ def test_missing_solver_is_reported_not_faked(tmp_path):
     assert not sec.ok and any("not run" in p for p in sec.problems)
 
 
+@pytest.mark.slow
 def test_snapshot_panels_draw_each_iterations_own_trajectory(quick_report, tmp_path):
     from slamcli.io import read_result
     from slamcli.reproduce.report import Section, snapshot_path_xy
@@ -201,6 +203,7 @@ def test_report_cites_nothing_outside_the_repository(quick_report):
         assert (repo / ref).exists(), ref
 
 
+@pytest.mark.slow
 def test_figures_reference_lines_panel_letters_log_nees(quick_report, monkeypatch):
     out, _ = quick_report
     rep = Reproduction(out, quick=True, workers=1, experiments_dir=EXPERIMENTS, log=lambda s: None)

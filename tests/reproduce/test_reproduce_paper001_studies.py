@@ -73,6 +73,7 @@ def test_gamma_at_laps_closed_form():
     assert gamma_at_laps(np.zeros(3), 2, 0.5, 0.6) == []
 
 
+@pytest.mark.slow
 def test_map_with_given_poses_snapshots_at_lap_ends_and_walls_occupied():
     """The laser (σ_r = 1 cm), true poses: snapshots at the lap ends; cells holding a wall end up occupied (P > 0.5) and
     the free corridor cells the beams cross empty (P < 0.5), the truth read by this test only."""

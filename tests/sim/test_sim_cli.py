@@ -25,6 +25,7 @@ def _same(a, b):
         np.testing.assert_array_equal(getattr(a.truth, k), getattr(b.truth, k), err_msg=k)
 
 
+@pytest.mark.slow
 def test_cli_simulate_writes_file_equal_to_library_run(tmp_path):
     out = tmp_path / "a.h5"
     res = runner.invoke(app, ["simulate", "--scenario", "loop", "--seed", "4", "--set", "sensor.max_range=6",

@@ -275,6 +275,7 @@ def test_fixed_world_seed_keeps_map_and_path_across_run_seeds():
         simulate(resolve_scenario("loop"), seed=-1)
 
 
+@pytest.mark.slow
 def test_progress_callback_reports_during_long_runs():
     calls = []
     simulate(resolve_scenario("loop", {"n_steps": 45_000}), seed=0, progress=lambda d, t: calls.append((d, t)))

@@ -36,6 +36,7 @@ def _interval_mode():
         yield
 
 
+@pytest.mark.slow
 def test_rounding_mode_is_upward_inside_and_restored_outside():
     third = I(1) / I(3)
     assert third.lb() < third.ub()  # outward rounding: 1/3 is not a float, so the bounds differ by an ulp

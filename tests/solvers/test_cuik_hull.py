@@ -45,6 +45,7 @@ def test_the_inner_bound_is_made_of_genuine_solutions():
     assert fs.violation(u) > 1e-3
 
 
+@pytest.mark.slow
 def test_porta_setting_reaches_the_hull_and_stays_below_1m_and_sound_over_200_seeds():
     # paper 004 §1/§6, Porta's setting: every landmark within 40 m reported with its identity. Exact readings:
     # the widest landmark coordinate (l3 x) is within 2 % of the inner bound of the hull
@@ -141,6 +142,7 @@ def test_paper_set_on_the_paper_legs_reproduces_table1_bound_for_bound():
         np.testing.assert_allclose(ours, [x_lo, y_lo, x_hi, y_hi], atol=2e-5, err_msg=f"l{j + 1}")
 
 
+@pytest.mark.slow
 def test_unknown_correspondence_true_graph_contains_the_feasible_extremes():
     # noisy seed 2, types only: the true hypothesis' boxes contain both feasible extremes of the widest
     # coordinates (l3 y, l4 x, l4 y), computed under the true association by the independent FeasibleSet

@@ -32,6 +32,7 @@ def _exact_dot(coef: dict[int, float], z) -> Fraction:
     return sum((Fraction(a) * Fraction(float(z[k])) for k, a in coef.items()), Fraction(0))
 
 
+@pytest.mark.slow
 def test_chord_cut_keeps_every_point_outside_the_disc():
     # closed form: box [0, 2]², disc of radius 1 at the origin → the chord from (1, 0) to (0, 1): x + y ≥ 1
     with interval_rounding():
@@ -75,6 +76,7 @@ def _samples(rng, n):
     return z[keep]
 
 
+@pytest.mark.slow
 def test_every_row_of_a_leg_holds_at_sampled_solutions():
     rng = np.random.default_rng(1)
     with interval_rounding():
@@ -140,6 +142,7 @@ def test_table1_boxes_reach_the_inner_hull_bound():
     assert np.mean([w for w, _r, _in in bh]) <= 3.35
 
 
+@pytest.mark.slow
 def test_unknown_correspondence_seed1_true_graph_within_1_5x_of_the_inner_hull():
     # seed 1 was the worst (box / inner 5.71 on l3 y with the default operators): with the LP rounds and the
     # LP-bounded hull pass the true hypothesis' boxes are within 1.5× of the inner bound on every landmark

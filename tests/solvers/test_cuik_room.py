@@ -31,6 +31,7 @@ def solve(inputs, **params):
     return solve_dataset(inputs, "cuik", params)
 
 
+@pytest.mark.slow
 def test_soundness_is_100_percent_over_200_bounded_noise_runs():
     n_sound, n_runs, widths = 0, 200, []
     for seed in range(n_runs):
@@ -45,6 +46,7 @@ def test_soundness_is_100_percent_over_200_bounded_noise_runs():
     assert 0.5 < np.mean(widths) < 10.0
 
 
+@pytest.mark.slow
 def test_unknown_correspondence_keeps_the_true_graph_over_50_seeds_and_counts_hypotheses():
     # types only (doors vs corridors), the room's declared 5 m landmark separation and the closest-landmark
     # sensor's negative information: measured 2 graphs in every one of 50 seeds (4 and 5 landmarks: the truth
@@ -68,6 +70,7 @@ def _refines(assoc, truth) -> bool:
     return all(truth[i] == truth[k] for i in range(len(assoc)) for k in range(len(assoc)) if assoc[i] == assoc[k])
 
 
+@pytest.mark.slow
 def test_without_a_separation_prior_no_sound_rule_can_prune_the_40_graphs():
     # sensor-only pruning (negative information on): still the 40 graphs — every one refines the true partition
     # (Bell(3)·2·2·2 = 40 ways to split l1's 3 and the other landmarks' 2 sightings), and a split is realised by
@@ -124,6 +127,7 @@ def test_an_error_beyond_its_bound_at_the_room_loop_closure_empties_every_box():
     assert solve(with_true_association(ds), association="reported").status is Status.COMPLETED
 
 
+@pytest.mark.slow
 def test_table1_paper_set_reproduced_and_full_set_narrower():
     exact = simulate_scenario("cuik-room", 0, {"bounded.exact_readings": True})
     known = with_true_association(exact)
@@ -148,6 +152,7 @@ def test_table1_paper_set_reproduced_and_full_set_narrower():
     assert lm_ours < 0.6 * lm_paper
 
 
+@pytest.mark.slow
 def test_no_sound_method_gets_below_1m_here_and_our_boxes_reach_the_feasible_spread():
     # two genuine solutions of the bounded-error problem per coordinate — now also obeying the closest-landmark
     # sensor (every other landmark at least as far as the reported one) — must both lie in every sound box, so
@@ -188,6 +193,7 @@ def test_graph_estimate_lies_inside_the_cuik_boxes():
     assert with_neg == [8 / 9, 1.0, 1.0, 1.0, 1.0, 1.0]
 
 
+@pytest.mark.slow
 def test_corridors_run_with_the_hypothesis_cap():
     ds = simulate_scenario("cuik-corridors", 1)
     assert len(ds.truth.landmarks_xy) >= 12 and ds.inputs.n_poses - 1 >= 40
@@ -233,6 +239,7 @@ def test_without_declared_bounds_cuik_fails_cleanly():
         solve(ds.inputs)
 
 
+@pytest.mark.slow
 def test_files_and_cli_round_trip(tmp_path):
     from typer.testing import CliRunner
 

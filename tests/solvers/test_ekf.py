@@ -241,6 +241,7 @@ def test_known_and_ml_agree_when_landmarks_far_apart_and_noise_small(motion_inpu
     np.testing.assert_allclose(ml.pose_cov, known.pose_cov, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_ml_association_accuracy_on_loop_world():
     inputs, truth = make_world(10, T=400, report_ids=False)
     res = EkfSlam(EkfParams(association="ml", provisional=False)).solve(inputs, rng=np.random.default_rng(0))
@@ -259,6 +260,7 @@ def n_spurious(assoc, true_lm, n_landmarks):
     return out
 
 
+@pytest.mark.slow
 def test_provisional_list_reduces_spurious_landmarks_under_clutter():
     inputs, truth = make_world(11, T=200, report_ids=False, clutter_per_step=0.3)
     true_lm = truth["obs_landmark"]
@@ -422,6 +424,7 @@ def test_auto_with_reported_ids_stays_known_under_the_default_provisional_list()
 
 
 # ------------------------------------------------------------------------------------------------ sim scenario
+@pytest.mark.slow
 def test_ml_association_accuracy_on_sim_loop_scenario():
     from slamcli.sim import simulate_scenario
 
@@ -434,6 +437,7 @@ def test_ml_association_accuracy_on_sim_loop_scenario():
         assert res.landmarks_xy.shape[0] == np.unique(ds.truth.obs_landmark).size
 
 
+@pytest.mark.slow
 def test_provisional_list_on_sim_loop_with_clutter():
     from slamcli.sim import simulate_scenario
 

@@ -28,6 +28,7 @@ def spurious_and_matched(est_xy, true_xy, cutoff=CUTOFF_M) -> tuple[int, int]:
 
 
 @pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.slow
 def test_default_ekf_spurious_landmarks_on_paper_laser_at_most_ten_percent(seed):
     ds = simulate_scenario("paper-sim1", seed=seed, overrides={"n_steps": 1000})
     tr = ds.truth
@@ -45,6 +46,7 @@ def test_default_ekf_spurious_landmarks_on_paper_laser_at_most_ten_percent(seed)
     assert spurious_off > 0.1 * n_seen, (spurious_off, n_seen)
 
 
+@pytest.mark.slow
 def test_size_gate_has_no_effect_without_declared_sizes():
     ds = simulate_scenario("loop", seed=0)
     assert ds.inputs.observations.diameter_m is None
@@ -73,6 +75,7 @@ def test_provisional_window_counts_sensor_frames_not_steps():
 
 
 @pytest.mark.parametrize("method", ["ekf", "fastslam", "odometry"])
+@pytest.mark.slow
 def test_one_pass_solvers_end_completed_with_every_step(method):
     """A filter or one-pass solver that processed every step reports ``completed`` (not an iteration status),
     with one pose per step of the dataset."""

@@ -14,6 +14,7 @@ coordinates), so the pose error lives in a 2-D subspace there and is not χ²(3)
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.stats import chi2
 
 from slamcli.models.angles import wrap_pose_error
@@ -44,6 +45,7 @@ def average_pose_nees(n_runs: int = N_RUNS, n_steps: int = N_STEPS, params: EkfP
     return eps / n_runs
 
 
+@pytest.mark.slow
 def test_monte_carlo_average_pose_nees_inside_chi2_band(record_property):
     eps_bar = average_pose_nees()
     lo, hi = chi2.ppf([0.025, 0.975], N_RUNS * 3) / N_RUNS

@@ -304,6 +304,7 @@ def test_v2_single_landmark_many_particles_matches_ekf(world_seed):
 
 
 # ------------------------------------------------------------------------------------------------ solver
+@pytest.mark.slow
 def test_known_association_on_loop_close_to_ekf_and_records_it():
     """``loop`` scenario, sensor-reported ids, 100 particles: landmark RMSE (vs truth, mean over 6 seeds)
     within a factor 2 of EKF-SLAM's on the same data.
@@ -352,6 +353,7 @@ def test_known_association_on_loop_close_to_ekf_and_records_it():
     assert np.mean(pos_fs) < 2.0 * np.mean(pos_ekf), (pos_fs, pos_ekf)
 
 
+@pytest.mark.slow
 def test_fastslam2_needs_fewer_particles_than_1():
     """Accurate sensor, noisy motion: the 1.0 proposal (motion model) is much wider than the likelihood and
     degenerates; 2.0 samples where the measurements point. 2.0 with 5 particles beats 1.0 with 25."""
@@ -370,6 +372,7 @@ def test_fastslam2_needs_fewer_particles_than_1():
 
 
 @pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.slow
 def test_ml_association_recovers_the_map(version):
     inputs, _, lms, lab = make_world(21, T=250, report_ids=False)
     # This run has one 4.3σ range outlier (row 681): with the default p0 (Mahalanobis² 18.4) it rightly starts
@@ -384,6 +387,7 @@ def test_ml_association_recovers_the_map(version):
     assert landmark_rmse(r.landmarks_xy, r.assoc, lab, lms) < 0.1
 
 
+@pytest.mark.slow
 def test_negative_evidence_removes_clutter_landmarks():
     inputs, _, lms, lab = make_world(31, T=250, report_ids=False, clutter_per_step=0.3)
     keep = solve(inputs, seed=4, association="ml", n_particles=20)
@@ -397,6 +401,7 @@ def test_negative_evidence_removes_clutter_landmarks():
     assert (drop.assoc[lab >= 0] >= 0).mean() > 0.99
 
 
+@pytest.mark.slow
 def test_same_seed_same_result_and_best_path_output():
     inputs, poses, _, _ = make_world(41, T=80)
     a = solve(inputs, seed=9, n_particles=30)

@@ -148,6 +148,7 @@ def test_size_gate_param_is_validated():
         FastSlamParams(size_gate_hide=1)
 
 
+@pytest.mark.slow
 def test_hidden_landmarks_leave_the_filter_unchanged():
     """size_gate_hide: the particles run exactly as without the gate (same path, same draws); the reported map
     is the ungated one without the landmarks born within 2ρ of another (each within 2ρ of one reported)."""

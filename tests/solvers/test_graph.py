@@ -279,6 +279,7 @@ def test_group_returns_averages_range_and_circular_bearing():
     np.testing.assert_allclose(zz[:2], [[1.0, 0.1], [5.0, 0.2]])
 
 
+@pytest.mark.slow
 def test_loop_closure_by_drift_gating_and_by_merging():
     from slamcli.sim import simulate_scenario
 
@@ -337,6 +338,7 @@ def test_co_observed_labels_are_never_merged(world):
     assert [0, 6] not in pairs
 
 
+@pytest.mark.slow
 def test_laplace_covariances_are_consistent_monte_carlo():
     """30 independent tiny worlds (known ids): the average NEES of the last pose (3 DoF, world frame) and of
     the first-seen landmark (2 DoF) lie inside the two-sided 95 % χ² band of the 30-run average

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from slamcli.sim import simulate_scenario
 from slamcli.solvers.graph import GraphParams, GraphSlam
@@ -28,6 +29,7 @@ def _wrong_rows(assoc: np.ndarray, true_label: np.ndarray) -> float:
     return bad / assoc.size
 
 
+@pytest.mark.slow
 def test_check_is_quiet_on_a_right_association_and_fires_on_a_wrong_one():
     out = {}
     for bias in (0.0, 0.2):

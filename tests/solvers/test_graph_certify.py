@@ -194,6 +194,7 @@ def test_certifies_the_global_minimum_and_refuses_the_local_one():
 
 
 @pytest.mark.parametrize("rank_deficit", [0, 4])
+@pytest.mark.slow
 def test_certified_lambda_min_by_inverse_iteration_equals_the_dense_eigenvalue(rank_deficit):
     """Above the dense size, a certified λ_min comes from inverse iteration with the factorisation of
     S + ηI the test made: against numpy's dense eigvalsh on PSD matrices with and without a null space."""

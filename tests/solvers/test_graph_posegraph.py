@@ -103,6 +103,7 @@ def test_pose_graph_lm_stops_on_the_predicted_decrease_within_1e_10_of_gtsams_op
     assert res.extra["certificate"]["certified"] is True
 
 
+@pytest.mark.slow
 def test_mit_excerpt_lm_from_odometry_stalls_chordal_does_not():
     """LM from the odometry chain ends in a local minimum on MIT; chordal initialisation reaches GTSAM's
     optimum from the same start (and GTSAM from the odometry start stalls too: the minimum is real)."""

@@ -74,6 +74,7 @@ def _gtsam_lm(inputs, assoc, p, start_poses, cauchy: bool):
     return opt, g, opt.optimize()
 
 
+@pytest.mark.slow
 def test_robust_warm_start_equals_gtsams_cauchy_lm(victoria):
     gtsam = pytest.importorskip("gtsam")
     from gtsam.symbol_shorthand import X
@@ -91,6 +92,7 @@ def test_robust_warm_start_equals_gtsams_cauchy_lm(victoria):
     assert np.max(np.abs(gt_poses - poses[:, :2])) < 1e-6
 
 
+@pytest.mark.slow
 def test_init_robust_reaches_the_gaussian_optimum_from_inside_its_basin(victoria):
     inputs, _ = victoria
     odo = _solve(inputs)
@@ -153,6 +155,7 @@ def test_incremental_init_with_one_window_is_the_robust_solve_of_the_batch_assoc
     np.testing.assert_allclose(inc, ref, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_incremental_init_on_the_victoria_park_excerpt(tmp_path):
     """End to end on the first 60 s of Victoria Park (tests/data/victoria_park_excerpt): windows of 3 s,
     GPS ATE (aligned) below dead reckoning's 1.37 m and at the batch front end's level (0.85 m measured; on
@@ -218,6 +221,7 @@ def test_stalled_landmark_graph_is_re_solved_from_init_robust(victoria, monkeypa
     assert capped.extra["final_cost"] == pytest.approx(reference.extra["final_cost"], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_a_restart_that_cannot_help_is_skipped_and_said(victoria, monkeypatch):
     """A converged run judged stalled: init=robust's start costs more than the estimate and the cost rises all
     the way to it (its basin), so the solve stops and says why — and forcing that restart indeed ends at the

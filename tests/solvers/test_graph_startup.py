@@ -22,6 +22,7 @@ def test_chi2_quantile_matches_scipy(k):
         assert chi2_cdf(x, k) == pytest.approx(chi2.cdf(x, k), rel=1e-12, abs=1e-15)
 
 
+@pytest.mark.slow
 def test_default_graph_solve_imports_no_scipy_stats(tmp_path):
     """`slamcli import g2o` + `slamcli solve --method graph` (defaults, χ² outlier counts included) in a
     fresh interpreter: scipy.stats and scipy.special stay unimported."""

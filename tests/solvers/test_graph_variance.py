@@ -38,6 +38,7 @@ def told_wrong():
     return dataclasses.replace(ds.inputs, noise=noise_with_sigmas(ds.inputs.noise, TRUE_SIGMA * WRONG))
 
 
+@pytest.mark.slow
 def test_iterated_vce_recovers_the_simulators_sigmas(told_wrong):
     inp = told_wrong
     g = GraphSlam(GraphParams(association="reported", robust="none", covariance=False)).solve(

@@ -13,6 +13,7 @@ the 2-lap run). Two causes, each pinned here with numbers:
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from slamcli.models.observation import inverse_range_bearing
 from slamcli.sim import raycast, walls
@@ -95,6 +96,7 @@ def test_map4_route_always_sees_two_features():
     assert len(build_world(get_scenario("hybrid-map1"))[1]) == len(walls.corner_features(s1, True)) == 16
 
 
+@pytest.mark.slow
 def test_map4_segment_ekf_stays_accurate():
     """The first 1500 steps (≈ 940 m) of Map 4 with the scenario's noise, 4 beams (the scan is not used by
     the EKF; the feature rows are drawn before it): measured EKF mean position error 0.106 m, max 0.288 m

@@ -1,6 +1,7 @@
 """Estimator E1 (eq. 12 / E2 with the true pose as the only sample) recovers a known wall map."""
 
 import numpy as np
+import pytest
 
 from slamcli.metrics.occupancy import grid_errors
 from slamcli.models.occupancy import band_for
@@ -11,6 +12,7 @@ from slamcli.solvers.hybrid.solver import grid_for_trajectory, scan_table
 from slamcli.types import OccupancyGrid
 
 
+@pytest.mark.slow
 def test_e1_with_known_pose_recovers_the_map():
     # a small square corridor (30 m, corridor 6 m), laser, one lap
     cfg = resolve_scenario("hybrid-map1", {"walls.width": 30, "walls.height": 30, "walls.corridor": 6,

@@ -30,6 +30,7 @@ def run_map1():
     return ds, res
 
 
+@pytest.mark.slow
 def test_map_error_falls_with_laps_and_beats_logodds(run_map1):
     """Measured (seed 0, 60 beams): total error 427 → 254 → 205 at the lap ends; final per-cell error E2
     0.0136 vs log-odds 0.0906 (the log-odds map keeps rarely hit cells near 0.5). The full scenario (180 beams)
@@ -83,6 +84,7 @@ def _one_line_error(res, fragment):
     assert "Traceback" not in res.output
 
 
+@pytest.mark.slow
 def test_bad_grid_parameters_fail_in_one_line_before_work(tmp_path):
     out = tmp_path / "x.h5"
     _one_line_error(runner.invoke(app, ["simulate", "-s", "hybrid-map1", "--set", "walls.resolution=0", "-o", str(out)]),
@@ -101,6 +103,7 @@ def test_bad_grid_parameters_fail_in_one_line_before_work(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_cli_end_to_end(tmp_path):
     d, r, png = tmp_path / "m1.h5", tmp_path / "h.h5", tmp_path / "m.png"
     args = [a for k, v in {**SMALL_MAP1, "walls.laps": 1, "sensor.n_beams": 30}.items() for a in ("--set", f"{k}={v}")]

@@ -180,6 +180,7 @@ def test_icm_car_reaches_its_map_optimum_and_agrees_with_graph(world):
     assert ag["against_lm_rmse_m"] < 0.1, ag
 
 
+@pytest.mark.slow
 def test_icm_car_unknown_association(world):
     """Unknown association (the ICM machinery unchanged): every true landmark found once, poses as good as
     dead reckoning's class, and ignoring the 3.8 m laser offset fails visibly."""

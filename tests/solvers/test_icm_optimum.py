@@ -115,6 +115,7 @@ def _check_at_optimum(ds, res, start_poses, start_landmarks, lsmr_tol=1e-14):
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.slow
 def test_loop_known_correspondences_default_ends_at_the_optimum(seed):
     ds = simulate_scenario("loop", seed=seed)
     assert ds.inputs.gps_step.size == 0 and ds.inputs.motion_model == "ddmr"  # the energy written above

@@ -132,6 +132,7 @@ def test_label_cost_prefers_the_true_map_on_a_toy():
     assert e_true - e_split == pytest.approx(6 * 6 / 12 * q * float(d @ d), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_joint_refine_reaches_a_stationary_point():
     """After the refinement the finite-difference gradient of the energy (independent of the Jacobian) is
     negligible against its value at the start."""

@@ -139,6 +139,7 @@ def _reference_init(prob, W, radius, kinematic, iters):
 @pytest.mark.parametrize(
     "radius, kinematic, clutter", [(1.0, False, 0.0), (0.4, False, 0.1), (2.0, False, 0.0), (1.0, True, 0.1)]
 )
+@pytest.mark.slow
 def test_online_init_equals_brute_force(radius, kinematic, clutter):
     prob = en.Problem.from_inputs(_street(clutter=clutter))
     W = en.Weights.from_params((2.0, 2.0, 1.0), (0.5, 0.5, 0.2), 1.0)
@@ -180,6 +181,7 @@ def test_last_pose_conditional_skips_nothing_that_counts():
             np.testing.assert_allclose(scalar, vector, rtol=1e-13, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_compiled_kernels_equal_python_kernels(monkeypatch):
     """numba's copies of the pose kernels (optional extra ``fast``) give the Python kernels' floats, bit for bit:
     the sequential sweep (Algorithm 2's visit order) and the on-line init."""

@@ -35,6 +35,7 @@ def test_paper_scenarios_declare_the_post_radius(sim1_short):
     assert simulate_scenario("loop", seed=0, overrides={"n_steps": 20}).inputs.observations.diameter_m is None
 
 
+@pytest.mark.slow
 def test_surface_model_removes_the_surface_bias(sim1_short):
     rng = np.random.default_rng(0)
     exact = make_solver("icm", PAPER).solve(sim1_short.inputs, rng=rng)
@@ -92,6 +93,7 @@ def test_surface_offsets_put_every_return_on_its_centres_foot():
     assert np.linalg.norm(tr.landmarks_xy[labels[ok]] - pts[ok], axis=1).max() <= 0.25 + 1e-9
 
 
+@pytest.mark.slow
 def test_graph_surface_option_reads_the_declared_radius(sim1_short):
     rng = np.random.default_rng(0)
     plain = make_solver("graph", {}).solve(sim1_short.inputs, rng=rng)
@@ -103,6 +105,7 @@ def test_graph_surface_option_reads_the_declared_radius(sim1_short):
 
 
 @pytest.mark.parametrize("seed", [1])
+@pytest.mark.slow
 def test_octagon_default_drop_map_change_falls_and_map_not_worse_than_init(seed):
     """Issue 22, Fig. 9 with the default filtered="drop": against the simulator's true cones, the final map is no
     worse than the init's and the map change per sweep falls; the paper's re-matching (eq. 13) makes it worse."""
@@ -122,6 +125,7 @@ def test_octagon_default_drop_map_change_falls_and_map_not_worse_than_init(seed)
 
 
 @pytest.mark.parametrize("polish", ["none", "nls"])
+@pytest.mark.slow
 def test_energy_increases_counts_every_rise_of_the_trace_with_surface(sim1_short, polish):
     """The offsets refreshed at the start of a sweep change the energy itself: the recorded trace rises (here
     once in 8 sweeps) although every sweep lowers the energy of its own offsets — and the counter says so."""

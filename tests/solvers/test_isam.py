@@ -30,6 +30,7 @@ def loop_ids():
     return simulate_scenario("loop", seed=1, overrides={"sensor.report_ids": True})
 
 
+@pytest.mark.slow
 def test_final_batch_equals_graph_lm_on_loop_with_reported_ids(loop_ids):
     rng = np.random.default_rng(0)
     inc = IsamSlam(IsamParams(final_batch=True)).solve(loop_ids.inputs, rng=rng)
@@ -45,6 +46,7 @@ def loop_nn():
     return ds, IsamSlam(IsamParams(final_batch=True)).solve(ds.inputs, rng=np.random.default_rng(0))
 
 
+@pytest.mark.slow
 def test_unknown_association_on_loop_finds_every_landmark_once_and_ends_at_graphs_optimum(loop_nn):
     ds, inc = loop_nn
     rng = np.random.default_rng(0)
@@ -58,6 +60,7 @@ def test_unknown_association_on_loop_finds_every_landmark_once_and_ends_at_graph
     _same_optimum(inc, bat)
 
 
+@pytest.mark.slow
 def test_smoother_estimate_without_final_batch_is_near_the_batch_optimum(loop_ids):
     """Keyframes end at the keyframe graph's optimum (end batch step); the poses between keyframes follow
     odometry, so they are near, not at, the full graph's optimum."""
@@ -107,6 +110,7 @@ def _brute_force_window_system(sm, x):
     return H[np.ix_(win, win)] - H[np.ix_(win, out)] @ X[:, :-1], g[win] - H[np.ix_(win, out)] @ X[:, -1]
 
 
+@pytest.mark.slow
 def test_window_prior_is_the_exact_schur_complement_of_the_marginalised_factors(loop_ids):
     """Never relinearising (threshold ∞) keeps every factor at the point it was created at; the window's
     system (its factors + the Schur prior built one keyframe at a time) must then equal the closed-form
@@ -162,11 +166,13 @@ def _check_vce(inputs, plain=None):
     return vce
 
 
+@pytest.mark.slow
 def test_vce_noise_on_loop_keeps_the_association_and_is_the_batch_optimum_of_its_sigmas(loop_nn):
     ds, plain = loop_nn
     _check_vce(ds.inputs, plain)
 
 
+@pytest.mark.slow
 def test_vce_noise_on_the_victoria_park_excerpt():
     from slamcli.datasets.victoria_park import import_victoria_park
     from slamcli.solvers.sensor_frame import to_sensor_frame

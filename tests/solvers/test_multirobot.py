@@ -315,6 +315,7 @@ def _reference_vector(res, ds, free):
     return order, np.concatenate([res.poses_xyt[free].ravel(), lm.ravel()])
 
 
+@pytest.mark.slow
 def test_joint_icm_reaches_the_minimum_of_its_energy():
     ds = two_robot_world()
     p = IcmParams(correspondences="reported", R=(1.0,), S=(4.0,), Q=(1.0,), max_sweeps=3000, energy_rtol=1e-13,
@@ -374,6 +375,7 @@ def test_per_robot_metrics_hand_computed():
     assert m["rpe_trans_rmse_m"] == pytest.approx(np.sqrt(2 * 0.09 / 4))
 
 
+@pytest.mark.slow
 def test_excerpt_joint_graph_and_evaluate(tmp_path):
     from slamcli.api.evaluate import evaluate_files
     from slamcli.api.solve import solve_file
@@ -399,6 +401,7 @@ def test_excerpt_joint_graph_and_evaluate(tmp_path):
     assert dataclasses.replace(solo.inputs).robots is None
 
 
+@pytest.mark.slow
 def test_cli_import_all_robots_solo_dir_and_refusals(tmp_path):
     from typer.testing import CliRunner
 
@@ -445,6 +448,7 @@ def test_reproduce_outcome_sentences_follow_the_numbers():
     assert s[3] == "icm joint mean ATE is within ±2 % of the dead-reckoning mean (1.000 m)."
 
 
+@pytest.mark.slow
 def test_team_joint_steps_converge_to_the_least_squares_optimum():
     """accelerate=joint on a team (issue 22 item 2): the team residuals square to the team energy, their Jacobian
     matches finite differences, and ICM with joint steps stops on its energy test, well before its sweep cap, at
@@ -533,6 +537,7 @@ def test_team_cauchy_kernel_weights_match_scipy_cauchy_loss():
     assert np.sum(c) == pytest.approx(2 * ref.cost, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_team_robust_range_weighted_odometry_only_icm_reaches_its_minimum():
     """robust=cauchy, team_range_weights, team_odometry_only: ICM ends at the minimum of that energy, written here
     from the potentials and minimised by scipy (BFGS)."""

@@ -52,6 +52,7 @@ def small():
     return ds.inputs, assoc, gp
 
 
+@pytest.mark.slow
 def test_lm_converges_on_the_victoria_park_prefix_where_marquardt_scaling_stalled(victoria, victoria_solved):
     _, _, gp = victoria
     gn, lm, dl = victoria_solved["gn"], victoria_solved["lm"], victoria_solved["dogleg"]
@@ -71,6 +72,7 @@ def test_lm_converges_on_the_victoria_park_prefix_where_marquardt_scaling_stalle
     assert abs(world.cost - gn.cost) <= 1e-9 * gn.cost
 
 
+@pytest.mark.slow
 def test_lm_and_dogleg_match_gtsam_on_the_victoria_park_prefix(victoria, victoria_solved):
     gtsam = pytest.importorskip("gtsam")
     from test_graph_gtsam import _gtsam_graph, _unpack, _values
@@ -161,6 +163,7 @@ def test_lm_stops_as_converged_when_lambda_exceeds_lambda_max():
 
 
 @pytest.mark.parametrize("kind", ["superlu", "chain"] + (["cholmod"] if nls.cholmod_available() else []))
+@pytest.mark.slow
 def test_linear_solvers_equal_the_dense_solve_and_reuse_their_analysis(small, kind):
     _, _, gp = small
     asm = nls.Assembler(gp.problem)

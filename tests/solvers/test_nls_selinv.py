@@ -82,6 +82,7 @@ def test_any_bucketing_gives_the_dense_inverse(monkeypatch, overhead, ratio):
 
 
 @pytest.mark.parametrize("max_width, max_zeros", [(0, 0.5), (6, 0.0), (12, 0.5), (48, 1.0)])
+@pytest.mark.slow
 def test_any_relaxed_supernodes_give_the_dense_inverse(monkeypatch, max_width, max_zeros):
     """Fundamental supernodes only (width 0), merges without any explicit zero, the default and merges
     along whole chains (widths ≤ 48, any zeros): the selected inverse equals the dense inverse on the

@@ -29,6 +29,7 @@ def _hat_redundancy(J, group, G):
 
 
 @pytest.mark.parametrize("dense", [True, False])
+@pytest.mark.slow
 def test_redundancy_matches_hat_matrix(dense):
     if not dense and not cholmod_available():
         pytest.skip("CHOLMOD (scikit-sparse) not installed")
@@ -74,6 +75,7 @@ def _linear_two_groups(rng, sigma_true, m_g, n=25):
     return sigma0, solve_at
 
 
+@pytest.mark.slow
 def test_iterated_vce_recovers_true_sigmas():
     sigma_true = np.array([0.3, 2.0])
     sigma0, solve_at = _linear_two_groups(np.random.default_rng(2026), sigma_true, (3000, 2000))
@@ -85,6 +87,7 @@ def test_iterated_vce_recovers_true_sigmas():
     assert np.all(np.abs(sigma0 * it.scale / sigma_true - 1) < 4 * rel_sd)
 
 
+@pytest.mark.slow
 def test_one_round_scales_by_the_square_root_of_the_first_factors():
     """``max_reweights=1``: the second solve's σ are the first solve's ``σ·√r`` (the closed form of one round);
     nothing converges at a tolerance no round can meet, and exactly two rounds are measured."""

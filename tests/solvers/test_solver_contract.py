@@ -200,10 +200,12 @@ def test_ast_scan_catches_a_violation(tmp_path):
 
 
 @pytest.mark.parametrize("path", solver_source_files(), ids=lambda p: p.relative_to(SOLVERS_DIR).as_posix())
+@pytest.mark.slow
 def test_solver_modules_cannot_reach_ground_truth(path):
     assert _violations(path) == []
 
 
+@pytest.mark.slow
 def test_solver_imports_pull_in_no_io_or_ui_in_a_fresh_interpreter():
     targets = [ep.value.split(":")[0] for ep in metadata.entry_points(group=registry.GROUP)]
     code = (
@@ -256,6 +258,7 @@ def test_cli_solve_with_broken_plugin_is_one_line(with_fake_plugins, tmp_path):
     assert not (tmp_path / "r.h5").exists()
 
 
+@pytest.mark.slow
 def test_cli_solvers_lists_every_solver_with_parameters():
     res = CliRunner().invoke(app, ["solvers"], terminal_width=400)
     assert res.exit_code == 0, res.output

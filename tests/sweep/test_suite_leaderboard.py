@@ -171,6 +171,7 @@ def _tutorial_commands() -> list[list[str]]:
     return [shlex.split(line)[1:] for line in block.splitlines() if line.startswith("slamcli ")]
 
 
+@pytest.mark.slow
 def test_plugin_on_the_suite_then_leaderboard(shared, mine_plugin, monkeypatch):
     """The tutorial's smoke check (docs/suite.md) as written, on the car-park excerpt: the plugin is the
     odometry solver under another name, so against the odometry baseline its difference is exactly 0."""

@@ -264,6 +264,7 @@ def test_simulation_failure_fails_every_run_of_the_dataset(tmp_path):
     assert not any(p.name.startswith(".") for p in (tmp_path / "fake" / "datasets").iterdir())
 
 
+@pytest.mark.slow
 def test_process_pool_matches_serial_and_survives_a_dying_worker(tmp_path):
     cfg = fake_experiment(replicates=3)
     exp = _expand(cfg)
@@ -286,6 +287,7 @@ RUN_S = 1.2
 
 
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["kill-9", "ctrl-c"])
+@pytest.mark.slow
 def test_interrupt_leaves_no_half_run_and_resume_finishes(tmp_path, sig):
     env = dict(os.environ, PYTHONPATH=str(HERE) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     # runs of 1.2 s: the poll below must see two finished runs and signal before the next two finish, which
@@ -317,6 +319,7 @@ def test_interrupt_leaves_no_half_run_and_resume_finishes(tmp_path, sig):
     assert set(pd.read_csv(exp_dir / "manifest.csv")["status"]) == {"completed"}
 
 
+@pytest.mark.slow
 def test_dask_existing_cluster_gives_the_same_numbers(tmp_path):
     """The sweep runs unchanged on an existing Dask cluster (here a LocalCluster reached by its address)."""
     pytest.importorskip("dask.distributed")

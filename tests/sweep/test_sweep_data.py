@@ -75,6 +75,7 @@ def _folder_sha(folder: Path) -> str:
 # -- recordings through the registry and the cache ---------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_recording_entry_resolves_through_registry_and_is_imported_once(shared, import_calls):
     from slamcli.datasets.mrclam import import_mrclam
     from slamcli.io import read_dataset
@@ -247,6 +248,7 @@ def test_bad_data_entries_are_one_line(data, message):
                           "solver": SOLVERS}, source="x.toml")
 
 
+@pytest.mark.slow
 def test_multi_robot_recording_takes_the_import_flags(tmp_path, monkeypatch, import_calls):
     from slamcli.datasets.mrclam import import_mrclam_team
     from slamcli.io import read_dataset

@@ -51,6 +51,7 @@ def swept(tmp_path_factory):
     return root, path, exp, summary
 
 
+@pytest.mark.slow
 def test_real_pipeline_completes_and_shares_one_dataset_per_replicate(swept):
     root, _, exp, summary = swept
     assert summary.ok, summary.failures
@@ -118,6 +119,7 @@ def test_cli_config_errors_are_one_line(tmp_path):
     assert res.exit_code == 2 and "--executor" in res.output and "'local', 'dask'" in res.output
 
 
+@pytest.mark.slow
 def test_experiment_files_in_repo_validate():
     """Every shipped experiment file parses and expands against the registered solvers and scenarios."""
     from slamcli.solvers import registry

@@ -92,6 +92,7 @@ def test_fixed_override_replaces_an_axis_and_arrays_stay_one_value():
     assert cfg.solver("ekf").params["gate_prob"] == 0.95 and cfg.solver("icm").params["S"] == [2.0]
 
 
+@pytest.mark.slow
 def test_sweep_compare_runs_with_two_workers(tmp_path):
     """The shipped comparison by name through the process pool (-j 2), shortened by overrides."""
     res = _run("sweep", "compare", "-j", "2", "--quick", "replicates=1", "scenario.n_steps=40", "-q",

@@ -92,6 +92,7 @@ def _workers_of(pid: int) -> list[int]:
 # -- a failed solver status fails the run -------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_failed_solver_status_fails_the_run_is_excluded_and_redone(tmp_path):
     """ISSUE High 1: an EKF whose result says ``failed`` was a completed run with an ATE in results.csv."""
     exp = tmp_path / "div.toml"
@@ -133,6 +134,7 @@ params = { max_sweeps = 2 }
 # -- kill tests ------------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_kill9_single_worker_sweep_leaves_complete_runs_and_resumes(tmp_path):
     proc = _start(tmp_path, "one", 5, 0.3, 1)
     exp_dir = tmp_path / "one"
@@ -148,6 +150,7 @@ def test_kill9_single_worker_sweep_leaves_complete_runs_and_resumes(tmp_path):
     assert not _run_tmps(exp_dir)
 
 
+@pytest.mark.slow
 def test_kill9_of_coordinator_takes_its_workers_down(tmp_path):
     """ISSUE High 3: after kill -9 of a -j 2 sweep its workers kept starting queued runs and then hung."""
     proc = _start(tmp_path, "orphans", 8, 0.5, 2)
@@ -165,6 +168,7 @@ def test_kill9_of_coordinator_takes_its_workers_down(tmp_path):
     assert summary.ok  # the lock died with the coordinator
 
 
+@pytest.mark.slow
 def test_killed_worker_fails_only_its_run_and_the_pool_is_rebuilt(tmp_path):
     """ISSUE High 3: one killed worker turned every remaining run into 'failed' (BrokenProcessPool)."""
     exp = _slow_exp("victim", 6, 0.4)
@@ -197,6 +201,7 @@ def test_killed_worker_fails_only_its_run_and_the_pool_is_rebuilt(tmp_path):
     assert not _run_tmps(exp_dir)
 
 
+@pytest.mark.slow
 def test_concurrent_sweeps_on_one_folder_second_is_refused(tmp_path):
     """ISSUE High 4: two sweeps on one folder computed every run twice and broke each other's temp files."""
     proc = _start(tmp_path, "shared", 4, 0.3, 1)
