@@ -46,6 +46,7 @@ def test_anything_but_a_command_name_first_runs_the_whole_app(argv):
 
 
 @pytest.mark.parametrize("name", _names())
+@pytest.mark.slow
 def test_narrowed_app_helps_and_fails_like_the_whole_app(name):
     narrow = app_for([name, "--help"])
     assert [c.name for c in narrow.registered_commands] + [g.name for g in narrow.registered_groups] == [name]

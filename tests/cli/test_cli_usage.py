@@ -170,6 +170,7 @@ def test_config_docstring_example_is_valid():
     (('association = "ml"', 'association = "mle"'), "solver[1].params.association: 'mle' is not one of auto, known, ml"),
     (("[0.95, 0.99]", '[0.95, "high"]'), "sweep.grid 'solver.ekf-ml.gate_prob': expected a number, got 'high'"),
 ])
+@pytest.mark.slow
 def test_toml_errors_name_toml_keys_with_did_you_mean(tmp_path, edit, message):
     text = _toml_block((ROOT / "docs" / "experiments.md").read_text())
     assert edit[0] in text

@@ -174,6 +174,7 @@ def test_a_broken_registry_file_is_one_line(env, monkeypatch):
                                           ("marker", "a/../../b"), ("folder", ".."), ("folder", "../x"),
                                           ("folder", "a/b"), ("folder", "/etc"), ("name", "x\\n"),
                                           ("marker", "in\\u001b[31mputs.dat")])
+@pytest.mark.slow
 def test_registry_entries_that_would_leave_the_data_folder_are_refused(env, monkeypatch, field, value):
     """A registry entry's name, marker and folder are joined onto the data folder: each must stay inside it."""
     table = {"name": "evil", "importer": "victoria-park", "marker": "inputs.dat", "folder": "evil"}

@@ -78,6 +78,7 @@ def _landmark_ids(path: Path, convention: str) -> list[int]:
     ("intel_excerpt.g2o", "g2o", "NoiseFormatG2O"),
     ("intel_excerpt.g2o", "auto", "NoiseFormatG2O"),
 ])
+@pytest.mark.slow
 def test_cost_equals_gtsam_load2d(name, convention, fmt):
     path = DATA / name
     graph, _ = gtsam.load2D(str(path), noiseFormat=getattr(gtsam.NoiseFormat, fmt))

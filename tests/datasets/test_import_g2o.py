@@ -191,6 +191,7 @@ def test_bad_arguments(tmp_path):
         import_graph(DLR, dt=-1.0)
 
 
+@pytest.mark.slow
 def test_cli_import_g2o_solve_and_evaluate_says_no_truth(tmp_path):
     data = tmp_path / "vp.h5"
     res = runner.invoke(app, ["import", "g2o", str(VP), "-o", str(data)])

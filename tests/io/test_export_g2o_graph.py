@@ -46,6 +46,7 @@ def exported(request, tmp_path_factory):
     return orig, res, out, summary, back
 
 
+@pytest.mark.slow
 def test_reimport_gives_back_every_constraint_and_information(exported):
     orig, res, _, summary, back = exported
     a, b = orig.inputs, back.inputs

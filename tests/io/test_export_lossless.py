@@ -119,6 +119,7 @@ def test_g2o_export_of_an_xy_landmark_graph_round_trips(tmp_path):
     assert ours_back == pytest.approx(ours_orig, rel=COST_RTOL)
 
 
+@pytest.mark.slow
 def test_messages_say_what_each_format_holds(cluttered):
     d, _ = cluttered
     r = _invoke(["export", d / "ekf.h5", "--format", "tum", "-o", d / "e.tum"])

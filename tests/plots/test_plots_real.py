@@ -81,6 +81,7 @@ def test_victoria_park_map_shows_estimate_and_gps_with_small_markers(vp, tmp_pat
     assert texts_outside(captured[0]) == []
 
 
+@pytest.mark.slow
 def test_a_diverging_baseline_is_clipped_and_said(vp):
     """Odometry drifting 20× away from the estimate does not set the limits; the legend names the clipping."""
     from slamcli.plots.maps import plot_map

@@ -77,6 +77,7 @@ def test_quick_report_has_every_section_and_figure(quick_report):
     assert "0.148" in report and "432.24" in report and "< 35" in report  # the paper's numbers, beside ours
 
 
+@pytest.mark.slow
 def test_quick_report_numbers_come_from_the_runs(quick_report):
     out, report = quick_report
     tidy = pd.read_csv(out / "runs" / "compare" / "results.csv")
@@ -194,6 +195,7 @@ def test_packaged_experiments_are_the_default_not_the_cwd(tmp_path, monkeypatch)
     assert "*.toml" in pyproject["tool"]["setuptools"]["package-data"]["slamcli.experiments"]
 
 
+@pytest.mark.slow
 def test_report_cites_nothing_outside_the_repository(quick_report):
     out, report = quick_report
     repo = ROOT

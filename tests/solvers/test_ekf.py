@@ -474,6 +474,7 @@ def _duplicated_returns(seed):
 
 
 @pytest.mark.parametrize("association", ["known", "ml"])
+@pytest.mark.slow
 def test_group_returns_equals_filtering_the_averaged_measurements(association):
     dup, avg, rep = _duplicated_returns(19)
     grouped = EkfSlam(EkfParams(association=association, group_returns=True, range_offset=0.1)).solve(

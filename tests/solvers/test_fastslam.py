@@ -273,6 +273,7 @@ def _single_landmark_inputs(seed: int, T: int = 6):
 
 
 @pytest.mark.parametrize("world_seed", [0, 1, 2])
+@pytest.mark.slow
 def test_v2_single_landmark_many_particles_matches_ekf(world_seed):
     """One landmark, 6 steps, 20 000 particles: the FastSLAM 2.0 posterior (moment-matched landmark, weighted
     final pose) equals EKF-SLAM's joint Gaussian to a few % — a check of the proposal (motion noise R from

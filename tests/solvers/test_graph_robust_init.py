@@ -206,6 +206,7 @@ def test_stall_rule_on_hand_built_traces():
     assert not gs._stalled(flat)  # converged runs are never re-solved
 
 
+@pytest.mark.slow
 def test_stalled_landmark_graph_is_re_solved_from_init_robust(victoria, monkeypatch):
     """The restart wiring: a run judged stalled is re-solved from init=robust, the lower cost is kept and the
     message says so; the result is the Gaussian optimum that the converged run from the chain reaches."""

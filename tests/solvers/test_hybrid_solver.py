@@ -55,6 +55,7 @@ def test_map_error_falls_with_laps_and_beats_logodds(run_map1):
     assert err.max() < 1.0 < odo.max()
 
 
+@pytest.mark.slow
 def test_grids_round_trip_and_old_files_read(run_map1, tmp_path):
     ds, res = run_map1
     p = write_dataset(tmp_path / "d.h5", ds)

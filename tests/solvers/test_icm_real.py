@@ -69,6 +69,7 @@ def test_sighting_cov_closed_form():
 
 
 @pytest.mark.parametrize("seed", range(20))
+@pytest.mark.slow
 def test_merge_never_joins_two_true_landmarks_on_loop(seed):
     ds = simulate_scenario("loop", seed=seed)
     inp, truth = ds.inputs, ds.truth

@@ -44,6 +44,7 @@ def _block_spd(n_blocks: int, k: int, seed: int) -> sp.csc_matrix:
      _block_spd(90, 2, 4)],
     ids=["n40", "n120", "n200", "blocks3", "blocks2"],
 )
+@pytest.mark.slow
 def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
     Hinv = np.linalg.inv(H.toarray())
     scale = np.abs(Hinv).max()
@@ -65,6 +66,7 @@ def test_selected_inverse_equals_dense_inverse_on_the_pattern(H):
 
 
 @pytest.mark.parametrize("overhead, ratio", [(0.0, 1.01), (1e18, 1.25), (4e4, 2.0)])
+@pytest.mark.slow
 def test_any_bucketing_gives_the_dense_inverse(monkeypatch, overhead, ratio):
     """Supernodes of one level batched one size class per bucket (no merging), all in one bucket padded to
     the largest (merge always) and the default cost model: every stored entry equals the dense inverse's."""
