@@ -10,7 +10,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from conftest import DATA
+from conftest import DATA, ROOT
 from typer.testing import CliRunner
 
 from slamcli.cli import app, app_for
@@ -244,7 +244,7 @@ def test_the_installed_entry_points_are_pyprojects():
 
     from slamcli.solvers import registry
 
-    declared = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())["project"][
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
         "entry-points"][registry.GROUP]
     ours = {ep.name: ep.value for ep in metadata.entry_points(group=registry.GROUP) if ep.dist.name == "slamcli"}
     assert ours == declared

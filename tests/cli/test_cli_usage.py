@@ -150,7 +150,7 @@ def test_docs_example_loads_and_expands(tmp_path):
 def test_config_docstring_example_is_valid():
     import slamcli.sweep.config as config
 
-    text = config.__doc__.split("An experiment file::")[1].split("Sweep keys live")[0]
+    text = config.__doc__.split("An experiment file::")[1].split("Sweep keys:")[0]
     body = "\n".join(line[4:] for line in text.splitlines())
     cfg = parse_experiment(tomllib.loads(body), source="docstring")
     assert len(expand(cfg).runs) == 50 * 2 * 2 * 2

@@ -3,9 +3,8 @@ build those rows from a sweep folder alone (a hand-written results.csv and the r
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from conftest import DATA
 
 from slamcli.reproduce import real as pr
 
@@ -127,7 +126,7 @@ def test_multi_robot_renderer_reads_the_team_run_files(tmp_path):
     from slamcli.reproduce import real_multi as rm
     from slamcli.types import SolverResult, Status
 
-    data = Path(__file__).parent / "data" / "mrclam_team_excerpt"
+    data = DATA / "mrclam_team_excerpt"
     team = import_mrclam_team(data, [1, 2, 3, 4, 5])
     exp = tmp_path / "real-multi"
     rows = []
@@ -166,7 +165,7 @@ def test_excerpt_registry_points_the_registry_at_the_excerpts_and_restores_it(tm
     monkeypatch.delenv(registry.ENV_DATA_DIR, raising=False)
     with pr.excerpt_registry(tmp_path / "q", {"acfr_carpark": "carpark_excerpt"}) as source:
         how, where = registry.where("acfr-carpark")
-        assert where.resolve() == (Path(__file__).parent / "data" / "carpark_excerpt").resolve()
+        assert where.resolve() == (DATA / "carpark_excerpt").resolve()
         assert how == "$SLAMCLI_DATASETS" and registry.data_dir() == tmp_path / "q" / "cache"
     assert source == "the excerpts shipped in `tests/data` (`tests/data/carpark_excerpt`)"
     assert os.environ[registry.ENV_SHARED] == "/nowhere" and registry.ENV_DATA_DIR not in os.environ
