@@ -87,8 +87,10 @@ class PolishOutcome:
                 "distance_to_optimum_rad": self.moved_rad}
 
 
-def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_iters: int):
+def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_iters: int,
+           workspace: nls.Workspace | None = None):
     """Minimise H over x_1..x_T and m with ``labels`` fixed, from ``poses (T+1, 3)``, ``landmarks (L, 2)``.
+    ``workspace``: the engine's pattern and factor analysis kept across the polishes of one solve.
 
     Returns ``(poses, landmarks, PolishOutcome)``; the input is returned unchanged when the engine does not
     lower the energy (its accepted steps always do).
@@ -97,7 +99,7 @@ def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_ite
     problem = nls_problem(prob, W, landmarks.shape[0], labels)
     x0 = np.concatenate([poses.ravel(), landmarks.ravel()])
     res = nls.solve(problem, x0, nls.NlsParams(method="lm", max_iterations=max_iters,
-                                               rel_cost_tol=POLISH_REL_COST_TOL))
+                                               rel_cost_tol=POLISH_REL_COST_TOL), workspace=workspace)
     P = 3 * (prob.T + 1)
     new_poses = res.x[:P].reshape(-1, 3).copy()
     new_lm = res.x[P:].reshape(-1, 2).copy()
