@@ -98,8 +98,7 @@ def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_ite
     E0 = en.energy(prob, W, poses, landmarks, labels)
     problem = nls_problem(prob, W, landmarks.shape[0], labels)
     x0 = np.concatenate([poses.ravel(), landmarks.ravel()])
-    res = nls.solve(problem, x0, nls.NlsParams(method="lm", max_iterations=max_iters,
-                                               rel_cost_tol=POLISH_REL_COST_TOL), workspace=workspace)
+    res = nls.solve(problem, x0, _nls_params(max_iters), workspace=workspace)
     P = 3 * (prob.T + 1)
     new_poses = res.x[:P].reshape(-1, 3).copy()
     new_lm = res.x[P:].reshape(-1, 2).copy()
@@ -111,6 +110,17 @@ def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_ite
                   float(np.abs(new_lm - landmarks).max(initial=0.0)))
     moved_rad = float(np.abs(wrap_angle(new_poses[:, 2] - poses[:, 2])).max(initial=0.0))
     return new_poses, new_lm, PolishOutcome(res.iterations, status, E0, E1, moved_m, moved_rad)
+
+
+def _nls_params(max_iters: int) -> nls.NlsParams:
+    return nls.NlsParams(method="lm", max_iterations=max_iters, rel_cost_tol=POLISH_REL_COST_TOL)
+
+
+def prime_workspace(prob: en.Problem, W: en.Weights, L: int, candidate_labels, workspace: nls.Workspace) -> None:
+    """Analyse, once, the pattern of H under every candidate matching ``candidate_labels (N,)`` (e.g. the
+    sensor ids behind a null-matching gate) in ``workspace``: a polish whose matchings are any subset of them
+    then reuses that pattern and CHOLMOD analysis, however the gate moves sightings in and out."""
+    workspace.setup(nls_problem(prob, W, L, candidate_labels), _nls_params(1))
 
 
 def nls_problem(prob: en.Problem, W: en.Weights, L: int, labels) -> nls.NlsProblem:

@@ -43,7 +43,7 @@ from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
 from slamcli.solvers.icm.params import IcmParams
-from slamcli.solvers.icm.polish import optimality, polish
+from slamcli.solvers.icm.polish import optimality, polish, prime_workspace
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -168,6 +168,8 @@ class IcmSlam(BaseSolver):
         if log.every:
             log.pose_iters, log.pose_snaps = [0], [poses.copy()]
         timings["init_s"] = log.times[0]
+        if tau is not None and p.polish == "nls":  # the gate moves sightings in and out of the polish's pattern
+            prime_workspace(prob, W, landmarks.shape[0], fixed, log.workspace)
 
         # ---- step 2: ICM sweeps ----------------------------------------------------------------------------
         status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
