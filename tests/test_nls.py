@@ -516,7 +516,7 @@ def test_a_workspace_reuses_the_last_pattern_and_analysis_and_still_reaches_scip
     x0 = gp.x0 + 0.02 * np.random.default_rng(6).normal(size=gp.x0.size)
     x0[:3] = gp.x0[:3]
     res = nls.solve(sub, x0, nls.NlsParams(rel_cost_tol=1e-14), workspace=ws)
-    assert (ws.reused_pattern, ws.reused_factor) == (1, 1) and ws.lin.F is first
+    assert (ws.solves, ws.analyses) == (2, 1) and ws.lin.F is first
     free = np.arange(3, gp.x0.size)
 
     def full(v):
@@ -533,7 +533,7 @@ def test_a_workspace_reuses_the_last_pattern_and_analysis_and_still_reaches_scip
     far = nls.FactorBlock("far", np.array([[a, b]]), lambda v: (v[None, [a, b]], np.ones((1, 2, 2))), np.eye(2))
     nls.solve(nls.NlsProblem(sub.n_vars, [*sub.blocks, far], sub.angle_cols, fixed_cols=np.arange(3)), x0,
               workspace=ws)
-    assert ws.reused_factor == 1 and ws.lin.F is not first
+    assert (ws.solves, ws.analyses) == (3, 2) and ws.lin.F is not first
 
 
 def test_residual_only_evaluation_equals_the_residuals_of_evaluate():

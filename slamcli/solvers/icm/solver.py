@@ -322,7 +322,7 @@ class IcmSlam(BaseSolver):
         if drop > p.polish_rtol and n < p.max_sweeps:
             return poses, landmarks, E, decision
         poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters,
-                                       workspace=log.workspace)
+                                       extrapolate=p.polish_extrapolate, workspace=log.workspace)
         E_new = out.energy_after + null_E(labels)  # H of the returned estimate (polish evaluates it)
         log.polishes.append({"sweep": n, **out.as_extra()})
         tol = p.energy_rtol * max(abs(E_start), 1e-300)  # sweep and polish together moved nothing (a rounding
@@ -385,7 +385,7 @@ class IcmSlam(BaseSolver):
             energy_increases_same_terms=log.increases,
             polish=p.polish,
             polishes=log.polishes,
-            polish_analyses_reused=log.workspace.reused_factor,
+            polish_factor_analyses=log.workspace.analyses,
             converged_unconfirmed=log.unconfirmed,
             gradient_norm=opt.gradient_norm,
             newton_step_max=None if math.isnan(opt.step_max) else opt.step_max,

@@ -697,21 +697,21 @@ class Workspace:
 
     asm: Assembler | None = None
     lin: object | None = None
-    #: solves that reused the last pattern / the last CHOLMOD analysis
-    reused_pattern: int = 0
-    reused_factor: int = 0
+    #: solves set up by this workspace, and linear solvers it built (each a new ordering / analysis)
+    solves: int = 0
+    analyses: int = 0
 
     def setup(self, problem: NlsProblem, params: NlsParams):
         """``(assembler, linear solver)`` for ``problem``, reusing this workspace's where the pattern allows."""
         like = self.asm if self.asm is not None and self.asm.D == problem.n_vars else None
         asm = Assembler(problem, like=like)
         same = like is not None and asm.lo_indices is like.lo_indices
-        self.reused_pattern += same
+        self.solves += 1
         if same and isinstance(self.lin, _CholmodFactor) and params.linear_solver in ("auto", "cholmod"):
             lin = _CholmodFactor(asm, factor=self.lin.F)
-            self.reused_factor += 1
         else:
             lin = make_linear_solver(asm, params)
+            self.analyses += 1
         self.asm, self.lin = asm, lin
         return asm, lin
 
