@@ -164,7 +164,8 @@ class IcmParams:
                                             "each chunk's displacement Δ to the lowest energy of x + βΔ, β = "
                                             "1, 2, 4 … 32 (:func:`slamcli.solvers.icm.polish.polish`): a "
                                             "weakly held mode that LM moves a few per cent per iteration "
-                                            "gets there in a few chunks. Default off (one LM run).")
+                                            "gets there in a few chunks. Default off (one LM run). "
+                                            "Single-robot solves.")
     opt_step_tol: float = param(1e-4, 'polish="none": a run is `converged` only when the Gauss-Newton '
                                       "step to the optimum has no component above this (m / rad) …")
     opt_rtol: float = param(1e-8, "… and the energy decrease it predicts is at most this · H.")
