@@ -154,3 +154,27 @@ def test_paper_sim1_default_ends_at_the_optimum_under_its_final_matchings():
     E_icm, E_start, E_ls = ref.energy(q_icm), ref.energy(q_start), ref.energy(ls.x)
     assert E_start > 1.05 * E_icm
     assert abs(E_ls - E_icm) <= ENERGY_RTOL * E_icm, (E_icm, E_ls)
+
+
+def test_extrapolated_polish_ends_at_the_optimum_too():
+    """``polish_extrapolate`` (LM in chunks, each chunk's displacement extrapolated to the lowest energy along
+    it) ends at scipy's optimum of the independent energy as well, and so does the polish alone from the
+    paper-exact Gauss-Seidel estimate."""
+    from slamcli.solvers.icm import energy as en
+    from slamcli.solvers.icm.polish import polish
+
+    ds = simulate_scenario("loop", seed=1)
+    inputs = dataclasses.replace(ds.inputs, observations=dataclasses.replace(
+        ds.inputs.observations, reported_id=ds.truth.obs_landmark.copy()))
+    rng = np.random.default_rng(0)
+    gs = make_solver("icm", {"correspondences": "reported", "polish": "none"}).solve(inputs, rng=rng)
+    res = make_solver("icm", {"correspondences": "reported", "polish_extrapolate": True}).solve(inputs, rng=rng)
+    assert res.status == Status.CONVERGED
+    _check_at_optimum(ds, res, gs.poses_xyt, gs.landmarks_xy)
+    prob, labels = en.Problem.from_inputs(inputs), np.asarray(gs.assoc)
+    W = en.Weights.from_params([1.0], [0.0], [1.0])
+    poses, landmarks, out = polish(prob, W, gs.poses_xyt, gs.landmarks_xy, labels, max_iters=100, extrapolate=True)
+    ref = PaperEnergy(inputs, labels, landmarks.shape[0])
+    E_ls = ref.energy(_scipy_optimum(ref, gs.poses_xyt, gs.landmarks_xy, 1e-14))
+    assert out.status == "converged" and abs(out.energy_after - E_ls) <= ENERGY_RTOL * E_ls
+    assert out.energy_before > (1 + 10 * ENERGY_RTOL) * E_ls  # the polish had something to do

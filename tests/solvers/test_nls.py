@@ -502,6 +502,40 @@ def test_assembler_on_stacked_blocks_of_another_pattern_gives_the_same_normal_eq
     np.testing.assert_allclose(g, J.T @ nls.residual_vector(gp.problem, x), rtol=1e-12, atol=1e-9)
 
 
+@pytest.mark.skipif(not nls.cholmod_available(), reason="needs CVXOPT's CHOLMOD")
+def test_a_workspace_reuses_the_last_pattern_and_analysis_and_still_reaches_scipys_optimum():
+    """``nls.solve(..., workspace=ws)``: a second problem whose H fits in the first one's pattern (the problem
+    without its prior block) is solved on the first one's pattern and CHOLMOD analysis, and reaches scipy's
+    ``least_squares`` optimum of its own residuals; a problem with a new entry gets a fresh analysis."""
+    _, gp = _small_problem("gtsam", T=12, n_landmarks=4)
+    sub = nls.NlsProblem(gp.problem.n_vars, [b for b in gp.problem.blocks if b.name != "prior"],
+                         gp.problem.angle_cols, fixed_cols=np.arange(3))
+    ws = nls.Workspace()
+    nls.solve(gp.problem, gp.x0, workspace=ws)
+    first = ws.lin.F
+    x0 = gp.x0 + 0.02 * np.random.default_rng(6).normal(size=gp.x0.size)
+    x0[:3] = gp.x0[:3]
+    res = nls.solve(sub, x0, nls.NlsParams(rel_cost_tol=1e-14), workspace=ws)
+    assert (ws.solves, ws.analyses) == (2, 1) and ws.lin.F is first
+    free = np.arange(3, gp.x0.size)
+
+    def full(v):
+        x = x0.copy()
+        x[free] = v
+        return x
+
+    ref = so.least_squares(lambda v: nls.residual_vector(sub, full(v)), x0[free],
+                           jac=lambda v: nls.jacobian_matrix(sub, full(v)).toarray()[:, free], method="lm",
+                           xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    assert res.status == Status.CONVERGED and abs(ref.cost - res.cost) <= 1e-9 * ref.cost
+    np.testing.assert_allclose(res.x[free], ref.x, atol=1e-7)
+    a, b = np.argwhere(ws.asm.matrix(np.ones(ws.asm.nnz)).toarray() == 0)[0]  # two columns no factor couples
+    far = nls.FactorBlock("far", np.array([[a, b]]), lambda v: (v[None, [a, b]], np.ones((1, 2, 2))), np.eye(2))
+    nls.solve(nls.NlsProblem(sub.n_vars, [*sub.blocks, far], sub.angle_cols, fixed_cols=np.arange(3)), x0,
+              workspace=ws)
+    assert (ws.solves, ws.analyses) == (3, 2) and ws.lin.F is not first
+
+
 def test_residual_only_evaluation_equals_the_residuals_of_evaluate():
     """The Jacobian-free residuals LM's trial steps use are the ones ``evaluate`` returns, bit for bit
     (odometry, loop closures, bearing-range with a landmark on top of a pose)."""
