@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 from conftest import DATA
 from typer.testing import CliRunner
 
@@ -22,6 +23,7 @@ POLL_S = 0.02
 TIMEOUT_S = 300
 
 
+@pytest.mark.slow
 def test_victoria_park_solve_logs_progress_while_it_runs(tmp_path):
     r = CliRunner().invoke(app, ["import", "victoria-park", str(DATA / "victoria_park_excerpt"), "-q",
                                  "-o", str(tmp_path / "vp.h5")])

@@ -30,6 +30,9 @@ SOLVERS = ("odometry", "ekf", "graph")
 #: m: ATE values as drawn (float64 through results.csv) against the ones recomputed here
 ATE_TOL = 1e-9
 
+#: solves real excerpts in its fixtures: slow for the edit loop (make test runs it)
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def mrclam_sweep(tmp_path_factory):

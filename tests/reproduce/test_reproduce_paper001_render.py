@@ -55,6 +55,7 @@ def _table_row(text: str, label: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
+@pytest.mark.slow
 def test_map4_renderer_writes_the_hand_worked_row(tmp_path):
     exp, ds = _sweep_folder(tmp_path)
     text, ok = render_map4({"paper001-map4": exp}, tmp_path / "out", quick=True)

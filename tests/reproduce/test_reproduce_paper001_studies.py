@@ -108,6 +108,7 @@ def test_gamma_from_median_is_gamma_at_laps_of_the_clock():
     assert gamma_from_median(None, 2, 0.5, 0.6) == []
 
 
+@pytest.mark.slow
 def test_mapping_false_is_the_bayesian_part_and_mean_mode_maps_the_ekf_mean():
     """``mapping = false`` returns the EKF part alone (no grids); ``map_poses = "mean"`` maps from the EKF mean,
     the same grid as ``map_poses = "odometry"`` on inputs whose odometry is replaced by that mean."""

@@ -156,6 +156,7 @@ def test_paper_sim1_default_ends_at_the_optimum_under_its_final_matchings():
     assert abs(E_ls - E_icm) <= ENERGY_RTOL * E_icm, (E_icm, E_ls)
 
 
+@pytest.mark.slow
 def test_extrapolated_polish_ends_at_the_optimum_too():
     """``polish_extrapolate`` (LM in chunks, each chunk's displacement extrapolated to the lowest energy along
     it) ends at scipy's optimum of the independent energy as well, and so does the polish alone from the

@@ -396,6 +396,7 @@ def test_progress_lines_count_finished_runs_and_a_resume_reports_only_skips(tmp_
     assert len(again) == 1 and again[0].startswith("sweep fake: 100% (6/6 runs; 0 done, 0 failed, 6 skipped)")
 
 
+@pytest.mark.slow
 def test_local_pool_workers_spawned_on_demand_inherit_one_blas_thread(monkeypatch):
     """The pool spawns workers at submit time, after it is built: they must still see one BLAS thread (a
     worker with the machine's default thread count gives other numbers than a one-thread Dask worker)."""

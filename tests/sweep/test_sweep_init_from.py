@@ -95,6 +95,7 @@ def test_solver_selection_that_drops_the_initial_solver_is_one_line():
         _expand(kept)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_the_dependent_runs_on_its_initial_result(tmp_path, workers):
     # with -j 2 the initial run is slow: a dependent submitted beside it would find no result.h5 and fail
@@ -111,6 +112,7 @@ def test_the_dependent_runs_on_its_initial_result(tmp_path, workers):
     assert t.loc[[r.run_id for r in exp.runs if not r.init_run], "init_run"].isna().all()
 
 
+@pytest.mark.slow
 def test_serial_and_two_workers_give_the_same_values(tmp_path):
     exp = _expand(fake_experiment(replicates=2, solvers=_solvers()))
     run_sweep(exp, tmp_path / "serial", pipeline=InitPipeline())
@@ -119,6 +121,7 @@ def test_serial_and_two_workers_give_the_same_values(tmp_path):
     np.testing.assert_array_equal(s.loc[p.index, "value"].to_numpy(), p["value"].to_numpy())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_resume_reruns_only_the_dependent_from_the_initial_result_on_disk(tmp_path, workers):
     exp = _expand(fake_experiment(replicates=1, solvers=_solvers()))
@@ -133,6 +136,7 @@ def test_resume_reruns_only_the_dependent_from_the_initial_result_on_disk(tmp_pa
     assert (tmp_path / "fake" / post.init_run / "status.json").stat().st_mtime_ns == base_mtime
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_failed_initial_run_fails_its_dependent_with_one_line(tmp_path, workers):
     exp = _expand(fake_experiment(replicates=1, solvers=_solvers(base_fail=True)))
