@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: install test bench reproduce reproduce-quick lint clean-results docs docs-serve
+.PHONY: install test test-fast bench reproduce reproduce-quick lint clean-results docs docs-serve
 
 # every extra the tests use; CHOLMOD comes with the core dependencies (CVXOPT's wheel), no system package
 EXTRAS := test,gtsam,dask,parquet,dev,interval,fast,docs
@@ -17,6 +17,9 @@ install:  ## create the venv and install slamcli with every extra the tests use
 
 test:  ## the whole test suite (what CI runs)
 	$(BIN)/pytest -q -n 2 --dist loadfile
+
+test-fast:  ## everything but the tests marked slow, for the edit-test loop (tests/README.md)
+	$(BIN)/pytest -q -n 2 --dist loadfile -m "not slow"
 
 bench:  ## speed/memory benchmarks; writes benchmarks/results/*.csv and prints a table
 	$(BIN)/python -m benchmarks

@@ -1,8 +1,8 @@
 """``python -m benchmarks.faults``: the fault campaign of issue 23, with its totals (cases, clean errors,
 tracebacks, data loss) printed and written to ``benchmarks/results/faults.csv``.
 
-The cases live in ``tests/fault_campaign.py`` (the test suite runs the same campaign, see
-``tests/test_bad_input_faults.py``); this entry point only runs them outside pytest.
+The cases live in ``tests/bad_input/fault_campaign.py`` (the test suite runs the same campaign, see
+``tests/bad_input/test_bad_input_faults.py``); this entry point only runs them outside pytest.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-TESTS = Path(__file__).resolve().parent.parent / "tests"
+TESTS = Path(__file__).resolve().parent.parent / "tests" / "bad_input"
 
 
 def run(quick: bool = False) -> list[dict]:

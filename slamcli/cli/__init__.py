@@ -30,7 +30,7 @@ def app_for(argv: list[str]):
 
     typer turns every registered command into a click command (signature, type hints, parameters) before it
     parses anything, which costs CPU for every command although one is run. Every command parses, helps and
-    fails the same either way (``tests/test_cli_startup.py``).
+    fails the same either way (``tests/cli/test_cli_startup.py``).
     """
     import copy
 

@@ -27,7 +27,7 @@ def chi2_ppf(q, dof):
     """Quantile of the χ²(dof) distribution, ``F⁻¹(q) = 2 P⁻¹(dof/2, q)`` with ``P`` the regularised lower
     incomplete gamma function (``F(x) = P(dof/2, x/2)``), by ``scipy.special.gammaincinv``.
 
-    Equal to ``scipy.stats.chi2.ppf(q, dof)`` (``tests/test_metrics_lazy_imports.py``) without importing
+    Equal to ``scipy.stats.chi2.ppf(q, dof)`` (``tests/metrics/test_metrics_lazy_imports.py``) without importing
     ``scipy.stats``, which costs ≈ 0.4-1 s and most of ``slamcli.metrics``' import in every sweep worker and
     ``evaluate``.
     """

@@ -8,5 +8,5 @@
 * :mod:`~slamcli.reproduce.real_multi`  the multi-robot (MRCLAM) section
 
 These modules may import every lower layer (sweep, api, plots, metrics, io, solvers, sim); nothing below imports
-them (``tests/test_layering.py``). Importing this package is cheap: the modules are imported on use.
+them (``tests/meta/test_layering.py``). Importing this package is cheap: the modules are imported on use.
 """

@@ -3,8 +3,8 @@
 Every function takes the measured numbers and returns one sentence whose wording follows from a stated
 condition (the condition is part of the sentence, so a reader can check it against the tables). The ``*_claim``
 functions judge a claim by the rule of :mod:`slamcli.reproduce.verdicts` and return its
-:class:`~slamcli.reproduce.verdicts.Judgement`. Nothing here reads files; ``tests/test_reproduce_outcomes.py``
-and ``tests/test_reproduce_claims.py`` feed numbers on both sides of every condition and check that the wording
+:class:`~slamcli.reproduce.verdicts.Judgement`. Nothing here reads files; ``tests/reproduce/test_reproduce_outcomes.py``
+and ``tests/reproduce/test_reproduce_claims.py`` feed numbers on both sides of every condition and check that the wording
 and the verdict flip.
 """
 

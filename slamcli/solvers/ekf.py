@@ -562,7 +562,7 @@ def update_inplace(x, P, z, j, obs_cov):
           = P − U S⁻¹ Uᵀ = P − V Vᵀ,   V = U L⁻ᵀ,  S = L Lᵀ     (for the gain K = U S⁻¹, P symmetric)
 
     The last line is one in-place BLAS ``dgemm`` (``beta = 1``, :func:`_rank2_downdate`): one read and one
-    write of ``P``, no (n, n) temporary. It equals the Joseph form to round-off (``tests/test_ekf_inplace.py``);
+    write of ``P``, no (n, n) temporary. It equals the Joseph form to round-off (``tests/solvers/test_ekf_inplace.py``);
     ``gemm`` leaves a round-off asymmetry, so the solver symmetrises the covariance blocks it reports.
 
     Parameters
@@ -621,7 +621,7 @@ def _sqrt_downdate_factor(U, S):
 
 def _innovation_and_jacobian(px, py, th, mx, my, r, b):
     """Scalar twin of ``observation.range_bearing`` / ``range_bearing_jacobians`` / ``measurement_residual``
-    for one pose-landmark pair (the filter's hot loop; ``tests/test_ekf.py`` checks it against the models).
+    for one pose-landmark pair (the filter's hot loop; ``tests/solvers/test_ekf.py`` checks it against the models).
 
     ::
 

@@ -1,7 +1,7 @@
 """Batch graph SLAM (``--method graph``): all poses ``x_0..x_T`` and landmarks ``m_0..m_{L-1}`` at once.
 
 Factors (``model="gtsam"``, default) are GTSAM's, so the optimum is checked against
-``gtsam.LevenbergMarquardtOptimizer`` (``tests/test_graph_gtsam.py``)::
+``gtsam.LevenbergMarquardtOptimizer`` (``tests/solvers/test_graph_gtsam.py``)::
 
     prior      e = Log(p⁻¹ ⊕ x_0)                               PriorFactorPose2,     Σ = diag(prior_std²)
     odometry   e = Log(d_t⁻¹ ⊕ (x_{t-1}⁻¹ ⊕ x_t))                BetweenFactorPose2,   Σ = diag(odometry_std²)

@@ -235,7 +235,7 @@ def component_roots(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
     larger-labelled end onto the smaller root (roots only decrease, so no cycle forms), then compresses every
     pointer to its root; it stops when no edge joins two roots. A chain needs one round. Written in numpy
     because ``scipy.sparse.csgraph`` imports ``scipy.sparse.linalg`` (a start-up cost of every default
-    pose-graph solve: benchmarks/results/design_notes.md); ``tests/test_graph_chordal_components.py`` checks
+    pose-graph solve: benchmarks/results/design_notes.md); ``tests/solvers/test_graph_chordal_components.py`` checks
     it against csgraph.
     """
     i = np.asarray(i, np.int64)

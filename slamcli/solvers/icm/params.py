@@ -160,6 +160,12 @@ class IcmParams:
                                      "this; ≥ 1 = after every sweep, and then accelerate=joint takes no joint "
                                      "steps in a one-robot solve (the polish reaches the optimum they approach).")
     polish_iters: int = param(100, "Levenberg-Marquardt iterations per polish at most.")
+    polish_extrapolate: bool = param(False, "the polish runs LM in chunks of two iterations and extrapolates "
+                                            "each chunk's displacement Δ to the lowest energy of x + βΔ, β = "
+                                            "1, 2, 4 … 32 (:func:`slamcli.solvers.icm.polish.polish`): a "
+                                            "weakly held mode that LM moves a few per cent per iteration "
+                                            "gets there in a few chunks. Default off (one LM run). "
+                                            "Single-robot solves.")
     opt_step_tol: float = param(1e-4, 'polish="none": a run is `converged` only when the Gauss-Newton '
                                       "step to the optimum has no component above this (m / rad) …")
     opt_rtol: float = param(1e-8, "… and the energy decrease it predicts is at most this · H.")

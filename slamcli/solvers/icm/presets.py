@@ -37,7 +37,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 WITH_IDS: dict[str, dict[str, Any]] = {
     "paper": {},
     "real": {"correspondences": "reported", "init": "online", "weights": "information", "outlier_sigma": 7.0,
-             "max_sweeps": 30, "polish_rtol": 1.0, "polish_iters": 6, "team_range_weights": True,
+             "max_sweeps": 30, "polish_rtol": 1.0, "polish_iters": 6, "polish_extrapolate": True,
+             "team_range_weights": True,
              "team_odometry_only": True},
 }
 

@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from slamcli.solvers import nls
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import resolve_motion_input
 from slamcli.solvers.icm import energy as en
@@ -42,7 +43,7 @@ from slamcli.solvers.icm.init_gated import gated_init
 from slamcli.solvers.icm.joint import joint_refine
 from slamcli.solvers.icm.merge import label_cost_energy, label_covariances, merge_labels
 from slamcli.solvers.icm.params import IcmParams
-from slamcli.solvers.icm.polish import optimality, polish
+from slamcli.solvers.icm.polish import optimality, polish, prime_workspace
 from slamcli.solvers.surface import require_radius
 from slamcli.types import IterationTrace, SlamInputs, SolverResult, Status
 
@@ -86,6 +87,8 @@ class _SweepLog:
     joint_errors: list = dataclasses.field(default_factory=list)
     joint_log: list = dataclasses.field(default_factory=list)
     polishes: list = dataclasses.field(default_factory=list)
+    #: the polishes' least-squares pattern and CHOLMOD analysis, reused while the matchings keep the pattern
+    workspace: nls.Workspace = dataclasses.field(default_factory=nls.Workspace)
     rejected: int = 0
     increases: int = 0
     unconfirmed: int = 0
@@ -165,6 +168,8 @@ class IcmSlam(BaseSolver):
         if log.every:
             log.pose_iters, log.pose_snaps = [0], [poses.copy()]
         timings["init_s"] = log.times[0]
+        if tau is not None and p.polish == "nls":  # the gate moves sightings in and out of the polish's pattern
+            prime_workspace(prob, W, landmarks.shape[0], fixed, log.workspace)
 
         # ---- step 2: ICM sweeps ----------------------------------------------------------------------------
         status = Status.MAX_ITERATIONS if p.max_sweeps > 0 else Status.COMPLETED
@@ -316,7 +321,8 @@ class IcmSlam(BaseSolver):
         drop = (E_start - E_same) / max(abs(E_start), 1e-300)
         if drop > p.polish_rtol and n < p.max_sweeps:
             return poses, landmarks, E, decision
-        poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters)
+        poses, landmarks, out = polish(prob, W, poses, landmarks, labels, max_iters=p.polish_iters,
+                                       extrapolate=p.polish_extrapolate, workspace=log.workspace)
         E_new = out.energy_after + null_E(labels)  # H of the returned estimate (polish evaluates it)
         log.polishes.append({"sweep": n, **out.as_extra()})
         tol = p.energy_rtol * max(abs(E_start), 1e-300)  # sweep and polish together moved nothing (a rounding
@@ -379,6 +385,7 @@ class IcmSlam(BaseSolver):
             energy_increases_same_terms=log.increases,
             polish=p.polish,
             polishes=log.polishes,
+            polish_factor_analyses=log.workspace.analyses,
             converged_unconfirmed=log.unconfirmed,
             gradient_norm=opt.gradient_norm,
             newton_step_max=None if math.isnan(opt.step_max) else opt.step_max,

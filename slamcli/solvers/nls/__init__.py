@@ -35,6 +35,7 @@ from slamcli.solvers.nls.linear import (  # noqa: F401
     Assembler,
     ChainSolver,
     SuperLUFactor,
+    Workspace,
     cholmod_available,
     cholmod_spd_factor,
     factorize_lower,

@@ -5,6 +5,7 @@ and CHOLMOD / SuperLU / banded-chain factorisations refilled in place (see :mod:
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -582,11 +583,13 @@ class _CholmodFactor:
 
     name = "cholmod"
 
-    def __init__(self, asm: Assembler, mode: str = "auto") -> None:
+    def __init__(self, asm: Assembler, mode: str = "auto", factor=None) -> None:
+        """``factor``: a :class:`~slamcli.solvers.nls.cholmod.CholmodFactor` already analysed for ``asm``'s lower
+        pattern (:class:`Workspace`), reused instead of a new ordering and symbolic factorisation."""
         from slamcli.solvers.nls.cholmod import CholmodFactor
 
         self.asm = asm
-        self.F = CholmodFactor(asm.lower_matrix(np.ones(asm.lo_nnz)), mode=mode)
+        self.F = factor if factor is not None else CholmodFactor(asm.lower_matrix(np.ones(asm.lo_nnz)), mode=mode)
 
     def factorize(self, data: np.ndarray) -> bool:
         """Factorise ``H`` given by data of the full pattern (:meth:`Assembler.linearize`)."""
@@ -682,6 +685,35 @@ FACTOR_NAMES = {
     "chain": "banded Cholesky of the pose chain",
     "superlu": "SuperLU",
 }
+
+
+@dataclass
+class Workspace:
+    """The assembler and linear solver of the last :func:`~slamcli.solvers.nls.solve` given this workspace, for
+    the next solve of a problem on the same ``D`` variables (e.g. the same energy under a few changed
+    matchings): when every entry of the new ``H`` lies in the last pattern, its scatter positions are looked up
+    in that pattern (no sort) and a CHOLMOD solver keeps its fill-reducing ordering and symbolic factorisation
+    (only numeric refactorisations). Otherwise both are built anew and kept for the next solve."""
+
+    asm: Assembler | None = None
+    lin: object | None = None
+    #: solves set up by this workspace, and linear solvers it built (each a new ordering / analysis)
+    solves: int = 0
+    analyses: int = 0
+
+    def setup(self, problem: NlsProblem, params: NlsParams):
+        """``(assembler, linear solver)`` for ``problem``, reusing this workspace's where the pattern allows."""
+        like = self.asm if self.asm is not None and self.asm.D == problem.n_vars else None
+        asm = Assembler(problem, like=like)
+        same = like is not None and asm.lo_indices is like.lo_indices
+        self.solves += 1
+        if same and isinstance(self.lin, _CholmodFactor) and params.linear_solver in ("auto", "cholmod"):
+            lin = _CholmodFactor(asm, factor=self.lin.F)
+        else:
+            lin = make_linear_solver(asm, params)
+            self.analyses += 1
+        self.asm, self.lin = asm, lin
+        return asm, lin
 
 
 def make_linear_solver(asm: Assembler, params: NlsParams):

@@ -17,6 +17,7 @@ from slamcli.solvers.nls.linear import (
     FACTOR_NAMES,
     Assembler,
     SuperLUFactor,
+    Workspace,
     factorize_lower,
     make_linear_solver,
 )
@@ -69,18 +70,21 @@ def solve(
     x0: np.ndarray,
     params: NlsParams | None = None,
     callback: Callable[[int, np.ndarray, float], None] | None = None,
+    workspace: Workspace | None = None,
 ) -> NlsResult:
     """Minimise the problem's cost from ``x0 (D,)``.
 
     ``callback(k, x, cost)`` is called with the start (k = 0) and after every accepted step (k = iteration).
+    ``workspace``: the pattern and linear-solver analysis of an earlier solve to reuse (:class:`Workspace`).
     """
     params = params or NlsParams()
-    asm = Assembler(problem)
+    asm, lin = (workspace.setup(problem, params) if workspace is not None
+                else (Assembler(problem), None))
     x = np.array(x0, dtype=float, copy=True)
     if x.shape != (problem.n_vars,):
         raise ValueError(f"x0 has shape {x.shape}, expected ({problem.n_vars},)")
     stats: dict = {"fallbacks": 0, "damped_gn": 0, "solves": 0, "marquardt_trials": 0}
-    lin = make_linear_solver(asm, params)
+    lin = lin if lin is not None else make_linear_solver(asm, params)
     backup: list = []  # SuperLU, created on the first breakdown of the primary factorisation
 
     def lin_solve(data: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
