@@ -14,6 +14,7 @@ from slamcli.cli.app import (
     echo_stderr,
     fail,
     handle_errors,
+    one_blas_thread,
     rich_progress,
     stderr_console,
     stderr_is_terminal,
@@ -57,6 +58,7 @@ def sweep_command(
     ),
 ) -> None:
     """Run every configuration of an experiment: results/<experiment>/<run_id>/ + manifest.csv + results.csv."""
+    one_blas_thread()
     with handle_errors():
         from slamcli.sweep.config import apply_overrides, load_experiment, quick_variant
         from slamcli.sweep.expand import RegistryResolver, expand

@@ -4,6 +4,7 @@ runs (:func:`slamcli.cli.app_for`). Times are measured in ``benchmarks/bench_gra
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -320,3 +321,20 @@ def test_sweep_workers_defer_numpy_submodules_like_the_command():
         assert pool.submit(_unused_numpy_executed_after_scipy_sparse).result(timeout=120) == []
     finally:
         pool.shutdown()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", [["sweep", "--list"], ["reproduce", "--section", "nope"]])
+def test_sweep_and_reproduce_pin_one_blas_thread_before_numpy_loads(command):
+    """A sweep's runs compute with one BLAS thread in the command's own process (-j 1) as in its workers
+    (-j N, Dask): the command sets the thread variables, a value the user exported wins, and the CLI has not
+    loaded NumPy before the command runs (the variables are read when it loads)."""
+    script = ("import os, sys\nfrom slamcli.cli import app\nbefore = 'numpy' in sys.modules\n"
+              f"try:\n    app({command!r})\nexcept SystemExit:\n    pass\n"
+              "print(before, os.environ.get('OPENBLAS_NUM_THREADS'), os.environ.get('OMP_NUM_THREADS'))")
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.split()[-3:] == ["False", "1", "1"], out.stdout + out.stderr
+    env["OMP_NUM_THREADS"] = "2"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.split()[-3:] == ["False", "1", "2"], out.stdout + out.stderr
