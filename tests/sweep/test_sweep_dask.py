@@ -71,6 +71,41 @@ def _wait_for_workers(address: str, n: int) -> None:
         client.wait_for_workers(n, timeout=START_TIMEOUT_S)
 
 
+@contextlib.contextmanager
+def _dask_cluster(scheduler_dir: Path, worker_dirs: list[Path]):
+    """A ``dask scheduler`` and one ``dask worker --nthreads 1 --no-nanny`` per folder (its working directory)
+    on 127.0.0.1; yields ``(address, processes)`` (scheduler first) and stops them all, by PID, on exit.
+    Without a nanny the process started here runs the tasks (its pid names the run's temporary folder), so
+    killing it kills a worker mid-run."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    procs: list[subprocess.Popen] = []
+    try:
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+             "--no-dashboard"], cwd=scheduler_dir, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_port(port, procs[0])
+        for d in worker_dirs:
+            d.mkdir(exist_ok=True)
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "dask", "worker", address, "--nthreads", "1", "--no-nanny",
+                 "--host", "127.0.0.1", "--no-dashboard"],
+                cwd=d, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_workers(address, len(worker_dirs))
+        yield address, procs
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout=30)
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+
+
 def _sweep(cwd: Path, *args: str, wait: bool = True):
     cmd = [sys.executable, "-m", "slamcli", "sweep", "exp.toml", "-o", "res", "--quiet", *args]
     proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -102,32 +137,26 @@ def _kill_when_running(proc: subprocess.Popen, sweep: subprocess.Popen, exp_dir:
     raise AssertionError("the sweep ended before the worker could be killed mid-run")
 
 
+def _numbers_equal(a_csv: Path, b_csv: Path) -> None:
+    """Two sweeps' results.csv: the same runs, all completed, every column equal but the volatile ones."""
+    a = pd.read_csv(a_csv).set_index("run_id").sort_index()
+    b = pd.read_csv(b_csv).set_index("run_id").sort_index()
+    assert list(a.index) == list(b.index) and set(a["status"]) == {"completed"}
+    compared = [c for c in b.columns if c not in VOLATILE]
+    numeric = [c for c in compared if pd.api.types.is_numeric_dtype(b[c])]
+    np.testing.assert_array_equal(a[numeric].to_numpy(float), b[numeric].to_numpy(float))
+    text_cols = [c for c in compared if c not in numeric]
+    pd.testing.assert_frame_equal(a[text_cols], b[text_cols])
+
+
 @pytest.mark.slow
 def test_dask_sweep_with_relative_out_keeps_results_survives_a_killed_worker_and_resumes(tmp_path):
     client_dir = tmp_path / "client"
     client_dir.mkdir()
     (client_dir / "exp.toml").write_text(EXPERIMENT)
     worker_dirs = [tmp_path / f"worker{i}" for i in range(2)]
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    procs: list[subprocess.Popen] = []
-    try:
-        procs.append(subprocess.Popen(
-            [sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
-             "--no-dashboard"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        _wait_for_port(port, procs[0])
-        for d in worker_dirs:
-            d.mkdir()
-            # --no-nanny: the process started here is the one that runs the tasks (its pid names the run's
-            # temporary folder), so killing it kills a worker mid-run
-            procs.append(subprocess.Popen(
-                [sys.executable, "-m", "dask", "worker", address, "--nthreads", "1", "--no-nanny",
-                 "--host", "127.0.0.1", "--no-dashboard"],
-                cwd=d, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        _wait_for_workers(address, 2)
-
-        exp_dir = client_dir / "res" / "dask-relative"
+    exp_dir = client_dir / "res" / "dask-relative"
+    with _dask_cluster(tmp_path, worker_dirs) as (address, procs):
         sweep = _sweep(client_dir, "--executor", "dask", "--scheduler", address, wait=False)
         _kill_when_running(procs[2], sweep, exp_dir)
         out, err = sweep.communicate(timeout=SWEEP_TIMEOUT_S)
@@ -139,16 +168,6 @@ def test_dask_sweep_with_relative_out_keeps_results_survives_a_killed_worker_and
         rc, text = _sweep(client_dir, "--executor", "dask", "--scheduler", address)
         assert rc == 0, text
         assert _counts(text) == (0, 0, 6, 6)  # the resume finds every finished run
-    finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p in procs:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                p.wait(timeout=30)
-            if p.poll() is None:
-                p.kill()
-                p.wait()
 
     assert not any(".tmp-" in p.name for p in exp_dir.iterdir())  # the killed worker's run folder is gone
     serial_dir = tmp_path / "serial"
@@ -156,16 +175,9 @@ def test_dask_sweep_with_relative_out_keeps_results_survives_a_killed_worker_and
     (serial_dir / "exp.toml").write_text(EXPERIMENT)
     rc, text = _sweep(serial_dir, "-j", "1")
     assert rc == 0 and _counts(text) == (6, 0, 0, 6), text
-    dask_table = pd.read_csv(exp_dir / "results.csv").set_index("run_id").sort_index()
-    serial_table = pd.read_csv(serial_dir / "res" / "dask-relative" / "results.csv").set_index("run_id").sort_index()
-    assert list(dask_table.index) == list(serial_table.index)
-    assert set(dask_table["status"]) == {"completed"}
-    compared = [c for c in serial_table.columns if c not in VOLATILE]
-    numeric = [c for c in compared if pd.api.types.is_numeric_dtype(serial_table[c])]
-    assert "ate_rmse_m" in numeric and serial_table["ate_rmse_m"].notna().all()
-    np.testing.assert_array_equal(dask_table[numeric].to_numpy(float), serial_table[numeric].to_numpy(float))
-    text_cols = [c for c in compared if c not in numeric]
-    pd.testing.assert_frame_equal(dask_table[text_cols], serial_table[text_cols])
+    serial_csv = serial_dir / "res" / "dask-relative" / "results.csv"
+    assert pd.read_csv(serial_csv)["ate_rmse_m"].notna().all()
+    _numbers_equal(exp_dir / "results.csv", serial_csv)
 
 
 # -- one experiment file over recordings and a simulation: -j 2 with a kill, then the same file on Dask -----
@@ -229,17 +241,6 @@ def _kill_sweep_after_first_run(sweep: subprocess.Popen, exp_dir: Path) -> None:
     raise AssertionError("the sweep ended before it could be killed mid-run")
 
 
-def _numbers_equal(a_csv: Path, b_csv: Path) -> None:
-    a = pd.read_csv(a_csv).set_index("run_id").sort_index()
-    b = pd.read_csv(b_csv).set_index("run_id").sort_index()
-    assert list(a.index) == list(b.index) and set(a["status"]) == {"completed"}
-    compared = [c for c in b.columns if c not in VOLATILE]
-    numeric = [c for c in compared if pd.api.types.is_numeric_dtype(b[c])]
-    np.testing.assert_array_equal(a[numeric].to_numpy(float), b[numeric].to_numpy(float))
-    text_cols = [c for c in compared if c not in numeric]
-    pd.testing.assert_frame_equal(a[text_cols], b[text_cols])
-
-
 @pytest.mark.slow
 def test_recordings_and_a_simulation_in_one_file_local_kill_resume_leaderboard_then_dask(tmp_path,
                                                                                        shared_datasets):
@@ -280,30 +281,7 @@ def test_recordings_and_a_simulation_in_one_file_local_kill_resume_leaderboard_t
     remote = tmp_path / "remote"
     remote.mkdir()
     (remote / "exp.toml").write_text(MIXED)
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    procs: list[subprocess.Popen] = []
-    try:
-        procs.append(subprocess.Popen(
-            [sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
-             "--no-dashboard"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        _wait_for_port(port, procs[0])
-        for _ in range(2):
-            procs.append(subprocess.Popen(
-                [sys.executable, "-m", "dask", "worker", address, "--nthreads", "1", "--host", "127.0.0.1",
-                 "--no-dashboard"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        _wait_for_workers(address, 2)
+    with _dask_cluster(tmp_path, [tmp_path / "worker0", tmp_path / "worker1"]) as (address, _):
         rc, text = _sweep(remote, "--executor", "dask", "--scheduler", address)
         assert rc == 0 and _counts(text) == (MIXED_RUNS, 0, 0, MIXED_RUNS), text
-    finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p in procs:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                p.wait(timeout=30)
-            if p.poll() is None:
-                p.kill()
-                p.wait()
     _numbers_equal(remote / "res" / "real-mixed" / "results.csv", exp_dir / "results.csv")
