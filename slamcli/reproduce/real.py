@@ -443,24 +443,15 @@ def render_cp(records: list[dict], params: dict[str, str], out: Path) -> tuple[l
 TITLES = {"vp": "Victoria Park", "mr": "MRCLAM", "cp": "Car park"}
 
 
-def default_runner(out_dir: Path, quick: bool, progress: LogFn | None) -> Callable:
-    """``Reproduction.run`` of a report in ``out_dir``'s parent (the section called on its own)."""
-    from slamcli.reproduce.report import Reproduction, default_experiments_dir
-
-    return Reproduction(Path(out_dir).parent, quick=quick, workers=1, experiments_dir=default_experiments_dir(),
-                        log=progress or (lambda s: None)).run
-
-
 def run_section(out_dir: Path, quick: bool, progress: LogFn | None = None, *,
-                run: Callable | None = None) -> tuple[str, bool]:
-    """Run the three experiments (``run(file)`` → :class:`~slamcli.reproduce.report.SweepOutcome`, by default a
-    :class:`~slamcli.reproduce.report.Reproduction`'s) and render the section into ``out_dir``; return the
+                run: Callable) -> tuple[str, bool]:
+    """Run the three experiments (``run(file)`` → :class:`~slamcli.reproduce.report.SweepOutcome`:
+    :meth:`~slamcli.reproduce.report.Reproduction.run`) and render the section into ``out_dir``; return the
     markdown (figure paths relative to the report's folder, ``out_dir``'s parent) and whether every recording
     ran."""
     t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    run = run or default_runner(out, quick, progress)
     outcomes, ok, failed = {}, True, []
     with quick_data(out, quick, EXCERPTS) as source:
         for key, file in EXPERIMENTS.items():

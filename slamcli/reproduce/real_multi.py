@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from slamcli.reproduce.real import default_runner, import_options, quick_data, refusal, sweep_records
+from slamcli.reproduce.real import import_options, quick_data, refusal, sweep_records
 
 EXPERIMENT = "real-multi.toml"
 #: the label of the joint (all-robots) entry of the experiment; the others are the solo entries
@@ -126,14 +126,13 @@ def team_icm_verdict(rows: list[dict], icm_joint_status: str, margin: float = GO
 
 
 def run_section(out_dir: Path, quick: bool, progress: Callable[[str], None] | None = None, *,
-                run: Callable | None = None) -> tuple[str, bool]:
-    """Run the experiment (``run(file)`` → :class:`~slamcli.reproduce.report.SweepOutcome`, by default a
-    :class:`~slamcli.reproduce.report.Reproduction`'s) and render the section; writes ``real_multi_ate.csv``
+                run: Callable) -> tuple[str, bool]:
+    """Run the experiment (``run(file)`` → :class:`~slamcli.reproduce.report.SweepOutcome`:
+    :meth:`~slamcli.reproduce.report.Reproduction.run`) and render the section; writes ``real_multi_ate.csv``
     under ``out_dir``. Returns the markdown and whether every run completed."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     md = ["## Real data: MRCLAM Dataset 7, five robots jointly vs each alone (`graph`, `icm`)", ""]
-    run = run or default_runner(out_dir, quick, progress)
     t0 = time.perf_counter()
     try:
         with quick_data(out_dir, quick, EXCERPTS) as source:

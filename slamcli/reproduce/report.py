@@ -1106,22 +1106,20 @@ def verdict_summary(sections: list[Section]) -> list[str]:
     return lines
 
 
-def _external_section(key: str, target: str, out: Path, quick: bool, log, rep: Reproduction | None = None) -> Section:
-    """Another paper's section: ``module:run_section(out_dir, quick, progress) -> (markdown, ok)`` with
-    ``out_dir = <report dir>/<key>``; the markdown brings its own ``## `` heading (used as the title). A function
-    whose first parameter is ``rep`` is a sweep-driven section: ``function(rep) -> Section``, running its
-    experiments with ``rep.run`` and rendering them from the sweep folders; a function with a keyword ``run``
-    also gets :meth:`Reproduction.run` (its experiments run through the sweep engine like paper 000's)."""
+def _external_section(key: str, target: str, rep: Reproduction) -> Section:
+    """Another paper's or the real data's section, ``module:function``, sweep-driven: a function whose first
+    parameter is ``rep`` returns its :class:`Section` (``function(rep)``); otherwise
+    ``function(out_dir, quick, progress, *, run) -> (markdown, ok)`` with ``out_dir = <report dir>/<key>`` and
+    ``run`` = :meth:`Reproduction.run`, the markdown opening with its own ``## `` heading (the title). Either way
+    the experiments run through the sweep engine and the section renders from the sweep folders."""
     import importlib
     import inspect
 
     mod_name, _, fn_name = target.partition(":")
-    fn = getattr(importlib.import_module(mod_name), fn_name or "run_section")
-    params = inspect.signature(fn).parameters
-    if rep is not None and next(iter(params), "") == "rep":
+    fn = getattr(importlib.import_module(mod_name), fn_name)
+    if next(iter(inspect.signature(fn).parameters), "") == "rep":
         return fn(rep)
-    extra = {"run": rep.run} if rep is not None and "run" in params else {}
-    markdown, ok = fn(out / key, quick, log, **extra)
+    markdown, ok = fn(rep.out / key, rep.quick, rep.log, run=rep.run)
     head, _, body = str(markdown).partition("\n")
     sec = Section(key, head.removeprefix("## ").strip() + ("" if ok else " — FAILED"))
     sec.add(body.strip())
@@ -1165,7 +1163,7 @@ def reproduce(
             continue
         try:
             if ":" in target:
-                sec = _external_section(key, target, rep.out, quick, log, rep)
+                sec = _external_section(key, target, rep)
             else:
                 sec = getattr(rep, target)()
         except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run
