@@ -278,18 +278,6 @@ def progress_bar(description: str, *, quiet: bool = False) -> Iterator[Callable[
         yield update
 
 
-#: the BLAS/OpenMP thread-count variables a sweep sets to one thread (its parallelism is over runs)
-BLAS_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def one_blas_thread() -> None:
-    """Every run of a sweep computes with one BLAS/OpenMP thread, in this process (``-j 1``) as in its workers,
-    so that ``-j 1``, ``-j N`` and Dask give the same numbers; a value the user exported is kept. Call it before
-    NumPy loads (commands import it lazily)."""
-    for key in BLAS_THREAD_VARS:
-        os.environ.setdefault(key, "1")
-
-
 def fail(message: str) -> None:
     """Print a one-line error and exit 1 (for CLI-level argument problems)."""
     typer.echo(f"error: {one_line(message)}", err=True)

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from slamcli.cli.app import app, check_output, fail, handle_errors, one_blas_thread, stderr_console
+from slamcli.cli.app import app, check_output, fail, handle_errors, stderr_console
 from slamcli.cli.sweep_cmd import ExecutorOption, SchedulerOption
 
 
@@ -34,6 +34,8 @@ def reproduce_command(
 ) -> None:
     """Run the paper experiments (Figs. 5, 6, 7, 9, post-processing, solver comparison, Monte-Carlo NEES) and
     write REPORT.md; exits 1 with a summary when any section fails."""
+    from slamcli.sweep.threads import one_blas_thread  # before NumPy loads
+
     one_blas_thread()
     with handle_errors():
         from slamcli.reproduce.report import reproduce

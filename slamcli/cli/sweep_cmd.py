@@ -14,7 +14,6 @@ from slamcli.cli.app import (
     echo_stderr,
     fail,
     handle_errors,
-    one_blas_thread,
     rich_progress,
     stderr_console,
     stderr_is_terminal,
@@ -58,6 +57,8 @@ def sweep_command(
     ),
 ) -> None:
     """Run every configuration of an experiment: results/<experiment>/<run_id>/ + manifest.csv + results.csv."""
+    from slamcli.sweep.threads import one_blas_thread  # before NumPy loads
+
     one_blas_thread()
     with handle_errors():
         from slamcli.sweep.config import apply_overrides, load_experiment, quick_variant

@@ -51,6 +51,7 @@ from slamcli.errors import ConfigError, SlamcliError
 from slamcli.io.atomic import write_bytes_atomic
 from slamcli.io.schema import utc_now, write_json
 from slamcli.sweep.expand import DatasetSpec, Expansion, RunSpec, canonical_json
+from slamcli.sweep.threads import single_threaded_blas
 
 ARTEFACTS = ("config.json", "dataset.h5", "result.h5", "metrics.json", "status.json", "run.log")
 COMPLETED = "completed"
@@ -607,7 +608,7 @@ def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
             return
         # the pool spawns its workers on demand (at submit, again after a rebuild): the one-thread BLAS
         # environment they inherit must last the pool's whole life, not only its construction
-        with _single_threaded_blas():
+        with single_threaded_blas():
             ex = LocalPool(workers)
             try:
                 yield ex
@@ -631,7 +632,7 @@ def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
         except (OSError, TimeoutError) as exc:
             raise ConfigError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
     else:
-        with _single_threaded_blas():
+        with single_threaded_blas():
             cluster = LocalCluster(
                 n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
             )
@@ -642,23 +643,6 @@ def make_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
         client.close()
         if cluster is not None:
             cluster.close()
-
-
-@contextlib.contextmanager
-def _single_threaded_blas() -> Iterator[None]:
-    """Child processes inherit one BLAS/OpenMP thread each (no oversubscription with N workers)."""
-    keys = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-    old = {k: os.environ.get(k) for k in keys}
-    for k in keys:
-        os.environ.setdefault(k, "1")
-    try:
-        yield
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 ProgressCallback = Callable[[Counts], None]
