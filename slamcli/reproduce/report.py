@@ -185,6 +185,7 @@ class Reproduction:
     def __init__(self, out_dir: Path, *, quick: bool, workers: int, experiments_dir: Path,
                  log: LogFn, executor: str = "local", scheduler: str | None = None) -> None:
         self.executor, self.scheduler = executor, scheduler  # run_sweep's: local pool or Dask (scheduler address)
+        self.pool = None  # the executor every section's sweep shares, opened by :func:`reproduce`
         self.out = Path(out_dir)
         self.runs_dir = self.out / "runs"
         self.fig_dir = self.out / "figures"
@@ -251,7 +252,7 @@ class Reproduction:
         expansion = expand(cfg)
         self.log(f"{cfg.name}: {len(expansion.runs)} runs")
         summary = run_sweep(expansion, self.runs_dir, workers=self.workers, executor=self.executor,
-                            scheduler=self.scheduler, progress=progress_lines(cfg.name, self.log))
+                            scheduler=self.scheduler, progress=progress_lines(cfg.name, self.log), pool=self.pool)
         table = load_results(summary.exp_dir)  # path columns joined onto the sweep folder
         return SweepOutcome(cfg, expansion, summary, table, summary.exp_dir, missing)
 
@@ -1128,6 +1129,27 @@ def _external_section(key: str, target: str, rep: Reproduction) -> Section:
     return sec
 
 
+def _run_section(key: str, target: str, rep: Reproduction, t0: float) -> Section:
+    """Section ``key`` (``target``: a method of :class:`Reproduction` or ``module:function``); a crashing section
+    is returned as a failed one, so that the others still run."""
+    try:
+        if ":" in target:
+            sec = _external_section(key, target, rep)
+        else:
+            sec = getattr(rep, target)()
+    except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run
+        sec = Section(key, key)
+        msg = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
+        sec.add(f"> **Section failed**: {msg}")
+        sec.fail(msg)
+    if ":" not in target and not any(b.startswith("Section status") for b in sec.markdown):
+        from slamcli.reproduce.outcomes import section_status
+
+        sec.add(section_status(sec.ok, sec.problems))
+    rep.log(f"section {key} {'ok' if sec.ok else 'FAILED'} ({time.perf_counter() - t0:.0f} s)")
+    return sec
+
+
 def reproduce(
     out_dir: str | Path,
     *,
@@ -1157,26 +1179,10 @@ def reproduce(
         unknown = [k for k in only if k not in keys]
         if unknown:
             raise ConfigError(f"--section: unknown section(s) {', '.join(unknown)}; known: {', '.join(keys)}")
-    sections: list[Section] = []
-    for key, target in SECTIONS:
-        if only and key not in only:
-            continue
-        try:
-            if ":" in target:
-                sec = _external_section(key, target, rep)
-            else:
-                sec = getattr(rep, target)()
-        except Exception as exc:  # noqa: BLE001 - a crashing section is reported, the others still run
-            sec = Section(key, key)
-            msg = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
-            sec.add(f"> **Section failed**: {msg}")
-            sec.fail(msg)
-        if ":" not in target and not any(b.startswith("Section status") for b in sec.markdown):
-            from slamcli.reproduce.outcomes import section_status
+    from slamcli.sweep.runner import make_executor
 
-            sec.add(section_status(sec.ok, sec.problems))
-        sections.append(sec)
-        log(f"section {key} {'ok' if sec.ok else 'FAILED'} ({time.perf_counter() - t0:.0f} s)")
+    with make_executor(executor, workers, scheduler) as rep.pool:  # one pool for every section's sweeps
+        sections = [_run_section(key, target, rep, t0) for key, target in SECTIONS if not only or key in only]
     elapsed = time.perf_counter() - t0
 
     import slamcli

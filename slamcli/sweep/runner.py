@@ -672,8 +672,13 @@ def run_sweep(
     scheduler: str | None = None,
     resume: bool = True,
     progress: ProgressCallback | None = None,
+    pool: cf.Executor | None = None,
 ) -> SweepSummary:
     """Run every pending run of ``expansion`` under ``out_dir/<experiment>/`` and write the tables.
+
+    ``pool``: an executor the caller opened with :func:`make_executor` and shares across several sweeps (its
+    workers start once); ``executor``, ``workers`` and ``scheduler`` then go unused. ``None``: this sweep opens
+    its own.
 
     Returns a :class:`SweepSummary`; failures are recorded, never raised. ``KeyboardInterrupt`` stops the
     sweep after writing the tables of what finished (``summary.interrupted``), then re-raises.
@@ -691,7 +696,8 @@ def run_sweep(
     if not os.access(exp_dir, os.W_OK | os.X_OK):
         raise ConfigError(f"{exp_dir}: results folder is not writable")
     with sweep_lock(exp_dir):
-        return _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress)
+        opened = contextlib.nullcontext(pool) if pool is not None else make_executor(executor, workers, scheduler)
+        return _run_locked(expansion, exp_dir, pipeline, opened, resume, progress)
 
 
 #: ``[evaluate]`` options that name a file (relative to the directory the sweep is started from)
@@ -713,7 +719,7 @@ def _paths_for_workers(expansion: Expansion) -> Expansion:
     return dataclasses.replace(expansion, runs=tuple(absolute(r) for r in expansion.runs))
 
 
-def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resume, progress) -> SweepSummary:
+def _run_locked(expansion, exp_dir, pipeline, opened, resume, progress) -> SweepSummary:
     clean_temporaries(exp_dir)
     since = utc_now()
     t0 = time.perf_counter()
@@ -754,7 +760,7 @@ def _run_locked(expansion, exp_dir, pipeline, executor, workers, scheduler, resu
         return {"run_id": run.run_id, "status": FAILED, "error": f"worker failed: {type(exc).__name__}: {exc}"}
 
     try:
-        with make_executor(executor, workers, scheduler) as ex:
+        with opened as ex:
             if ex is None:
                 for g in groups:  # in this process: simulate once, then record run by run (progress per run)
                     ds_path, ds_error = _ensure_dataset(g.dataset, exp_dir, pipeline, not resume)

@@ -296,6 +296,23 @@ def test_process_pool_matches_serial_and_survives_a_dying_worker(tmp_path):
     assert summary.counts.failed == 1 and "worker failed" in summary.failures[0]["error"]
 
 
+
+@pytest.mark.slow
+def test_sweeps_sharing_one_pool_start_its_workers_once(tmp_path):
+    from slamcli.sweep.runner import make_executor
+
+    first, second = (_expand(fake_experiment(name, replicates=3)) for name in ("first", "second"))
+    with make_executor("local", 2) as pool:
+        for exp in (first, second):
+            assert run_sweep(exp, tmp_path / "shared", pipeline=FakePipeline(), pool=pool).ok
+    run_sweep(second, tmp_path / "serial", pipeline=FakePipeline())
+    shared = [pd.read_csv(tmp_path / "shared" / name / "results.csv") for name in ("first", "second")]
+    pids = set(shared[0]["nested.pid"]) | set(shared[1]["nested.pid"])
+    assert len(pids) <= 2 and os.getpid() not in pids  # the second sweep ran on the first one's two workers
+    serial = pd.read_csv(tmp_path / "serial" / "second" / "results.csv")
+    np.testing.assert_array_equal(serial["value"].to_numpy(), shared[1]["value"].to_numpy())
+
+
 RUN_S = 1.2
 
 
