@@ -48,13 +48,16 @@ def test_icm_verdicts_follow_the_rows():
         return [{"solver": pr.ICM_PRESET_ROW, "refused": None, "gps_ate": ate, "survey_matched": found,
                  "n_survey": 15}]
 
-    def mr(icm, graph):
-        return [{"robot": 1, "solver": pr.ICM_PRESET_ROW, "refused": None, "ate": icm},
-                {"robot": 1, "solver": "graph", "refused": None, "ate": graph}]
+    def mr(icm, graph, other_graph=0.1):
+        # the goal's baseline is graph's defaults row, not another graph configuration (here a better one)
+        return [{"robot": 1, "solver": pr.ICM_PRESET_ROW, "refused": None, "ate": icm, "wall_s": 3.0},
+                {"robot": 1, "solver": "graph", "refused": None, "ate": other_graph, "wall_s": 1.0},
+                {"robot": 1, "solver": pr.GRAPH_BASELINE_ROW, "refused": None, "ate": graph, "wall_s": 2.0}]
 
     good = pr.icm_verdicts(gps(1.39), gps(0.44), mr(0.33, 0.31), "VP")
     assert [("**met**" in v) for v in good] == [True, True, True]
-    assert "GPS ATE 1.390 m, goal ≤ 1.4 m" in good[0] and "robot 1 0.330 vs 0.310 m" in good[2]
+    assert "GPS ATE 1.390 m, goal ≤ 1.4 m" in good[0]
+    assert "robot 1 0.3300 vs 0.3100 m, ratio 1.065, solve time 1.50×" in good[2] and "graph (defaults)" in good[2]
     bad = pr.icm_verdicts(gps(1.41), gps(0.44, found=14), mr(0.35, 0.31), "VP")  # 0.35 > 1.1 · 0.31 = 0.341
     assert [("**not met**" in v) for v in bad] == [True, True, True]
     missing = pr.icm_verdicts([], None, [], "VP")
@@ -105,9 +108,10 @@ def test_mrclam_renderer_table_from_a_hand_written_results_csv(tmp_path):
                   "b2,ekf,ekf,mrclam7-r3,completed,completed,,1.26,b2,0.3,0.25,0.5,7.0,15.0,7"])
     _config(exp / "b1", robot=2, dt=0.1)
     _config(exp / "b2", robot=3)
-    assert pr._mrclam_table(pr.mrclam_rows(pr.sweep_records(exp)))[2:] == [
-        "| 2 | `graph` | converged | 0.12 | 0.25 | 8 / 15 | 0.34 | 0.3 |",
-        "| 3 | `ekf` | completed | 0.30 | 0.25 | 7 / 15 | 0.50 | 1.3 |"]
+    rows = pr.mrclam_rows(pr.sweep_records(exp), {"graph": "association=reported, robust=huber"})
+    assert pr._mrclam_table(rows)[2:] == [
+        "| 2 | `graph` | association=reported, robust=huber | converged | 0.12 | 0.25 | 8 / 15 | 0.34 | 0.3 |",
+        "| 3 | `ekf` | defaults | completed | 0.30 | 0.25 | 7 / 15 | 0.50 | 1.3 |"]
 
 
 def test_refusal_strips_the_exception_class_and_the_dataset_path():
