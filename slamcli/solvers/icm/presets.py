@@ -38,6 +38,7 @@ WITH_IDS: dict[str, dict[str, Any]] = {
     "paper": {},
     "real": {"correspondences": "reported", "init": "online", "weights": "information", "outlier_sigma": 7.0,
              "max_sweeps": 30, "polish_rtol": 1.0, "polish_iters": 6, "polish_extrapolate": True,
+             "observation": "range_bearing", "odometry_only": True,
              "team_range_weights": True,
              "team_odometry_only": True},
 }
