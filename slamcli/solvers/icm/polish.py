@@ -6,7 +6,10 @@ optimum of H(x, m, c) for the current matchings c and stop, by any energy rule, 
 minimises that same energy over all poses x_1..x_T and map points m at once, with c fixed, by the project's
 least-squares engine (:func:`slamcli.solvers.nls.solve`, Levenberg-Marquardt). Its problem (:func:`nls_problem`)
 is the energy of :mod:`slamcli.solvers.icm.energy` written as factor blocks — motion (R), odometry (S),
-observations (Q), GPS (K) — each whitened by ``√(2W)`` so that the engine's cost ``½ Σ ‖L r‖²`` equals H.
+observations (Q), GPS (K) — each whitened by ``√(2W)`` so that the engine's cost ``½ Σ ‖L r‖²`` equals H. With ``observation=range_bearing``
+the observation block is the range-bearing residual ``h(x_t, m) − z`` whitened by ``√2 diag(σ_r, σ_b)⁻¹`` under
+the engine's Cauchy kernel of width ``√2 k`` (IRLS, as graph applies its kernel): its ``½ k'² log(1 + s'²/k'²)``
+is :func:`~slamcli.solvers.icm.energy.range_bearing_energy`'s ``k² log(1 + s²/k²)``, so the cost is again H.
 
 :func:`optimality` measures an estimate against the optimum without moving it: the gradient ∇H over
 x_1..x_T and m, and the Gauss-Newton step δ = −(JᵀJ)⁻¹Jᵀr to the optimum of the local quadratic model with the
