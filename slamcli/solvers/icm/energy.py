@@ -12,9 +12,7 @@ and ``‖a‖²_Σ = aᵀ Σ a``::
 see :mod:`slamcli.solvers.icm.map_step`). Observations labelled ``-1`` are out of the energy. A zero weight drops
 its potential (paper §3.1). The GPS potential is the one paper 000 writes down in §4 and then leaves out of its
 experiments ("to highlight the ICM ability to solve SLAM ... regardless of the GPS data availability");
-K = k·I is a design matrix like R, S, Q. Beyond the paper, ``Weights.obs_model = "range_bearing"`` replaces the
-observation sum by :func:`range_bearing_energy` (graph's bearing-range factor under its Cauchy kernel); the
-conditional-mode kernels below stay Cartesian (the solver uses them as a proposal, see its module docstring).
+K = k·I is a design matrix like R, S, Q. ``Weights.obs_model = "range_bearing"``: :func:`range_bearing_energy`.
 
 Three independent evaluations of the same function live here:
 

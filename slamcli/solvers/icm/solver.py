@@ -21,13 +21,8 @@ Further options, default off: ``schedule="parallel"`` (odd/even pose classes), `
 ``weights="information"``, ``range_offset``, and for long real runs (``preset="real"``) ``init="gated"``
 (:mod:`.init_gated`), ``joint_iters`` (:mod:`.joint`), ``merge`` / ``label_cost`` (:mod:`.merge`) and
 ``outlier_sigma`` (:mod:`.gate`). The GPS potential of §4 is used whenever the dataset has fixes.
-
-``observation="range_bearing"`` (sensor ids, one robot) replaces eq. (5)'s observation potential by graph's
-bearing-range factor under its Cauchy kernel (:func:`.energy.range_bearing_energy`). That H is what is recorded,
-tested for convergence and minimised by the polish; a sweep's pose and map steps still solve the quadratic
-Cartesian conditionals (eq. 14, eq. 17) and serve as a proposal, kept only when it lowers H
-(``extra["sweep_proposals_rejected"]`` counts the others), so every recorded energy is H's and the run stops at
-H's optimum for the fixed matchings.
+``observation="range_bearing"``: H's observation term is graph's Cauchy bearing-range factor; it is recorded,
+stop-tested and polished, and a sweep's Cartesian pose / map steps are a proposal kept only when they lower it.
 """
 
 from __future__ import annotations
