@@ -190,8 +190,22 @@ def test_preset_real_stops_at_scipys_optimum_of_the_independent_energy(seed):
 def test_range_bearing_refuses_what_it_does_not_support():
     inp = _world()
     for given in ({"correspondences": "nearest"}, {"polish": "none"}, {"covariance": True}):
-        p = IcmParams.resolve({"preset": "real", **given}, inp)
-        with pytest.raises(ConfigError, match="observation=range_bearing needs"):
+        p = IcmParams.resolve({"preset": "real", "observation": "range_bearing", **given}, inp)
+        with pytest.raises(ConfigError, match=f"observation=range_bearing needs .*got {next(iter(given))}="):
             IcmSlam(p).solve(inp, rng=np.random.default_rng(0))
     with pytest.raises(ValueError, match="observation must be"):
         IcmParams(observation="polar")
+
+
+def test_preset_leaves_range_bearing_unset_when_given_what_it_cannot_run_with():
+    """preset=real's data rule sets observation=range_bearing and odometry_only only when the given values allow
+    it; otherwise both keep their defaults and the resolve note says why (a given polish=nls changes nothing)."""
+    inp = _world()
+    for given in ({"correspondences": "nearest"}, {"polish": "none"}, {"covariance": True}):
+        q = IcmParams.resolve({"preset": "real", **given}, inp)
+        assert (q.observation, q.odometry_only) == ("cartesian", False)
+        note = IcmParams.resolve_note({"preset": "real", **given}, inp)
+        assert note.startswith("preset=real: observation=range_bearing, odometry_only=true not applied")
+        assert next(iter(given)) in note
+    assert IcmParams.resolve({"preset": "real", "polish": "nls"}, inp).observation == "range_bearing"
+    assert IcmParams.resolve_note({"preset": "real"}, inp) == ""

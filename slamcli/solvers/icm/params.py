@@ -258,8 +258,12 @@ class IcmParams:
 
     @classmethod
     def resolve_note(cls, given: dict, inputs: SlamInputs) -> str:
-        """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
-        return presets.weights_note(given.get("preset", "paper"), given, _has_ids(inputs))
+        """The lines :func:`~slamcli.solvers.icm.presets.weights_note` and
+        :func:`~slamcli.solvers.icm.presets.range_bearing_note` give for this dataset, joined by ``"; "``
+        (``""`` if none)."""
+        name, ids = given.get("preset", "paper"), _has_ids(inputs)
+        return "; ".join(n for n in (presets.weights_note(name, given, ids),
+                                     presets.range_bearing_note(name, given, ids)) if n)
 
     def design_weights(self) -> en.Weights:
         """R, S, Q, K as given (``weights="design"``)."""
