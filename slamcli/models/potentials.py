@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from slamcli.models import motion, observation, se2
-from slamcli.models.angles import wrap_pose_error
+from slamcli.models.angles import wrap_angle, wrap_pose_error
 
 
 def motion_residual(x_prev, u_prev, x, dt: float):
@@ -45,6 +45,27 @@ def observation_residual_jacobians(x, z):
     M_x, _ = observation.inverse_range_bearing_jacobians(x, z)
     J_m = np.broadcast_to(-np.eye(2), M_x.shape[:-2] + (2, 2)).copy()
     return M_x, J_m
+
+
+def range_bearing_residual(x, z, m):
+    """``r = h(x_t, m_{c_{t,i}}) − z_{t,i} (..., 2)``: the measurement-space residual ``[r̂ − r, wrap(b̂ − b)]``
+    of the range-bearing model :func:`slamcli.models.observation.range_bearing`."""
+    e = observation.range_bearing(x, m) - np.asarray(z, float)
+    e[..., 1] = wrap_angle(e[..., 1])
+    return e
+
+
+def range_bearing_residual_jacobians(x, m):
+    """``(∂r/∂x (..., 2, 3), ∂r/∂m (..., 2, 2))`` of :func:`range_bearing_residual` (those of ``h``)."""
+    return observation.range_bearing_jacobians(x, m)
+
+
+def cauchy_sum(s2, k: float) -> float:
+    """``Σ k² log(1 + s²/k²)`` over whitened squared norms ``s2 (F,)``: twice the Cauchy kernel
+    ``ρ(s) = ½ k² log(1 + s²/k²)`` (GTSAM's ``mEstimator.Cauchy``), so that it equals ``Σ s²`` to second order
+    — the scale of a quadratic potential ``rᵀ Σ⁻¹ r`` of the ICM energy."""
+    k2 = float(k) * float(k)
+    return float(k2 * np.sum(np.log1p(np.asarray(s2, float) / k2)))
 
 
 def weighted_sq(r, W):

@@ -257,14 +257,16 @@ def test_outlier_gate_nulls_the_misreads_and_reaches_the_clean_optimum(seed):
 
 
 def test_preset_real_with_ids_polishes_every_sweep_to_the_clean_optimum():
-    """preset=real on data with ids: no joint Gauss-Newton steps (the polish ends every sweep, at most 6 LM
-    iterations each, all on one CHOLMOD analysis), yet the run stops converged at the joint optimum of the energy without the planted
+    """preset=real on data with ids, with the paper's Cartesian observation potential (and its motion
+    potential): no joint Gauss-Newton steps (the polish ends every sweep, at most 6 LM iterations each, all on
+    one CHOLMOD analysis), yet the run stops converged at the joint optimum of the energy without the planted
     misreads (reference: joint Gauss-Newton to convergence on the clean labels, from ICM's end)."""
     from slamcli.solvers.icm import IcmSlam
     from slamcli.solvers.icm.common import reported_labels
 
     inp, bad = _loop_with_ids_and_outliers(0, 6)
-    res = IcmSlam(IcmParams.resolve({"preset": "real"}, inp)).solve(inp, rng=np.random.default_rng(0))
+    given = {"preset": "real", "observation": "cartesian", "odometry_only": False}
+    res = IcmSlam(IcmParams.resolve(given, inp)).solve(inp, rng=np.random.default_rng(0))
     assert res.status.value == "converged"
     assert res.extra["joint_steps_accepted"] == 0 and res.extra["joint_refinements"] == []
     assert len(res.extra["polishes"]) == res.extra["sweeps"]
@@ -289,6 +291,7 @@ def test_preset_real_rule_for_data_with_ids():
         "reported", "information", 7.0, 30, "online")
     assert q.polish_rtol == 1.0 and q.polish_every_sweep and q.polish_iters == 6  # every sweep ends polished
     assert q.merge and q.accelerate == "joint"  # the rest of the preset is kept
+    assert q.observation == "range_bearing" and q.odometry_only  # graph's observation factor and odometry
     # without ids nothing changes; an explicit value wins, also one equal to the preset's or the paper's value
     no_ids = dataclasses.replace(inp, observations=dataclasses.replace(
         inp.observations, reported_id=np.full(len(inp.observations.range_m), -1, np.int64)))

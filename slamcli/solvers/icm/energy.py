@@ -12,7 +12,7 @@ and ``‖a‖²_Σ = aᵀ Σ a``::
 see :mod:`slamcli.solvers.icm.map_step`). Observations labelled ``-1`` are out of the energy. A zero weight drops
 its potential (paper §3.1). The GPS potential is the one paper 000 writes down in §4 and then leaves out of its
 experiments ("to highlight the ICM ability to solve SLAM ... regardless of the GPS data availability");
-K = k·I is a design matrix like R, S, Q.
+K = k·I is a design matrix like R, S, Q. ``Weights.obs_model = "range_bearing"``: :func:`range_bearing_energy`.
 
 Three independent evaluations of the same function live here:
 
@@ -65,6 +65,16 @@ class Weights:
     S: tuple[float, float, float]
     Q: tuple[float, float]
     K: float = 0.0  # GPS weight, K = k·I (0 drops the GPS potential)
+    #: the observation potential of H: ``"cartesian"`` (eq. 5, weight Q) or ``"range_bearing"``
+    #: (:func:`range_bearing_energy`, σ ``obs_sigma`` and Cauchy scale ``cauchy_k``; Q then only weights the
+    #: sweep's pose conditionals, a surrogate)
+    obs_model: str = "cartesian"
+    obs_sigma: tuple[float, float] = (0.0, 0.0)  # σ_r m, σ_b rad of the range_bearing potential
+    cauchy_k: float = 0.0  # Cauchy scale of the range_bearing potential, whitened units
+
+    @property
+    def range_bearing(self) -> bool:
+        return self.obs_model == "range_bearing"
 
     @staticmethod
     def from_params(R, S, Q, K: float = 0.0) -> Weights:
@@ -292,13 +302,40 @@ def energy_terms(prob: Problem, W: Weights, poses_xyt, landmarks_xy, labels) -> 
         r = wrap_angle_last(se2.between(poses[:-1], poses[1:]) - prob.odo_inc)
         out["odometry"] = potentials.weighted_sq(r, np.diag(W.S))
     ok = np.asarray(labels) >= 0
-    if ok.any():
+    if ok.any() and W.range_bearing:
+        out["observation"] = range_bearing_energy(prob, W, poses, landmarks_xy, labels)
+    elif ok.any():
         r = potentials.observation_residual(
             poses[prob.step[ok]], prob.z[ok], np.asarray(landmarks_xy, float)[np.asarray(labels)[ok]]
         )
         out["observation"] = potentials.weighted_sq(r, np.diag(W.Q))
     out["total"] = out["motion"] + out["odometry"] + out["observation"] + out["gps"]
     return out
+
+
+def range_bearing_energy(prob: Problem, W: Weights, poses_xyt, landmarks_xy, labels) -> float:
+    """The ``"range_bearing"`` observation potential (beyond the paper)::
+
+        Σ_{t,i: c_{t,i} ≥ 0} k² log(1 + s²/k²),   s² = ((r̂ − r)/σ_r)² + (wrap(b̂ − b)/σ_b)²,  [r̂, b̂] = h(x_t, m_c)
+
+    twice ``graph``'s Cauchy kernel on its whitened bearing-range factors, so that it equals ``Σ s²`` (the
+    Gaussian ``rᵀ Σ⁻¹ r`` on H's scale, see :func:`information_weights`) for small residuals. 0 without
+    matched observations."""
+    ok = np.asarray(labels) >= 0
+    if not ok.any():
+        return 0.0
+    e = potentials.range_bearing_residual(np.asarray(poses_xyt, float)[prob.step[ok]], prob.z[ok],
+                                          np.asarray(landmarks_xy, float)[np.asarray(labels)[ok]])
+    e = e / np.asarray(W.obs_sigma, float)
+    return potentials.cauchy_sum(np.einsum("ij,ij->i", e, e), W.cauchy_k)
+
+
+def observation_term(prob: Problem, W: Weights, poses_xyt, points_xy, labels, landmarks_xy) -> float:
+    """The observation part of H: :func:`observation_energy` of the precomputed ``points_xy = h⁻¹(x_t, z)``
+    (eq. 5) or, with ``W.range_bearing``, :func:`range_bearing_energy` of ``poses_xyt``."""
+    if W.range_bearing:
+        return range_bearing_energy(prob, W, poses_xyt, landmarks_xy, labels)
+    return observation_energy(points_xy, labels, landmarks_xy, W.Q)
 
 
 def gps_energy(prob: Problem, W: Weights, poses_xyt) -> float:

@@ -131,6 +131,16 @@ class IcmParams:
                                                       "MRCLAM Dataset 7 team, preset=real: mean ATE 0.152 "
                                                       "m against 0.136 m without.")
     cauchy_k: float = param(2.3849, "the Cauchy scale (`graph`'s default 2.3849).")
+    observation: Literal["cartesian", "range_bearing"] = param("cartesian",
+        "the observation potential of a one-robot solve: the paper's ‖h⁻¹(x_t, z) − m‖²_Q (eq. 5, default), "
+        "or (beyond the paper) `graph`'s bearing-range factor under its Cauchy kernel, Σ k² log(1 + s²/k²) "
+        "with s² = ((r̂ − r)/σ_r)² + ((b̂ − b)/σ_b)², [r̂, b̂] = h(x_t, m), σ the dataset's noise and k = "
+        "`cauchy_k` (:func:`slamcli.solvers.icm.energy.range_bearing_energy`). range_bearing needs "
+        "correspondences=reported and polish=nls: the recorded energy, the stopping rule and the polish "
+        "(IRLS Levenberg-Marquardt) are on it; each sweep's pose and map steps keep the paper's quadratic "
+        "conditionals as a proposal, kept only when it lowers the energy. The kernel replaces the null "
+        "matching (`outlier_sigma` is not used) and `covariance`, `surface` and `range_bias` are refused. "
+        "Multi-robot solves ignore it (see `robust`).")
     team_range_weights: bool = param(False, "multi-robot solves only: each sighting's (and robot "
                                             "reading's) isotropic weight from its own range, `q(r) = 2 / "
                                             "(σ_r² + r² σ_b²)`, instead of one q at the median range "
@@ -141,6 +151,10 @@ class IcmParams:
                                             "the odometry potential is on (on MRCLAM the odometry is the "
                                             "integral of the controls, so both count the same motion "
                                             "twice; `graph` uses the odometry alone).")
+    odometry_only: bool = param(False, "one-robot solves: drop the motion potential R when the odometry "
+                                       "potential is on (`team_odometry_only`'s rule for one robot: where the "
+                                       "odometry is the integral of the controls both count the same motion "
+                                       "twice; `graph` uses the odometry alone).")
     preset: Literal["paper", "real"] = param("paper", "named setting (:mod:`slamcli.solvers.icm.presets`), "
                                              "built by `IcmParams.real(**given)`: keys given explicitly keep their "
                                              "values; " + "; ".join(f"{name} = {presets.expansion_text(name)}"
@@ -199,6 +213,8 @@ class IcmParams:
             raise ValueError(f"cauchy_k must be a finite number > 0, got {self.cauchy_k}")
         if not (0.0 < self.merge_prob < 1.0):
             raise ValueError(f"merge_prob must be in (0, 1), got {self.merge_prob}")
+        if self.observation not in ("cartesian", "range_bearing"):
+            raise ValueError(f"observation must be cartesian or range_bearing, got {self.observation!r}")
         if self.polish not in ("none", "nls"):
             raise ValueError(f"polish must be none or nls, got {self.polish!r}")
         for name in ("joint_step_tol", "label_cost", "polish_rtol", "opt_step_tol", "opt_rtol"):
@@ -242,8 +258,12 @@ class IcmParams:
 
     @classmethod
     def resolve_note(cls, given: dict, inputs: SlamInputs) -> str:
-        """The line :func:`slamcli.solvers.icm.presets.weights_note` gives for this dataset (``""`` if none)."""
-        return presets.weights_note(given.get("preset", "paper"), given, _has_ids(inputs))
+        """The lines :func:`~slamcli.solvers.icm.presets.weights_note` and
+        :func:`~slamcli.solvers.icm.presets.range_bearing_note` give for this dataset, joined by ``"; "``
+        (``""`` if none)."""
+        name, ids = given.get("preset", "paper"), _has_ids(inputs)
+        return "; ".join(n for n in (presets.weights_note(name, given, ids),
+                                     presets.range_bearing_note(name, given, ids)) if n)
 
     def design_weights(self) -> en.Weights:
         """R, S, Q, K as given (``weights="design"``)."""
@@ -252,10 +272,23 @@ class IcmParams:
         return en.Weights.from_params(self.R, self.S, self.Q, self.K)
 
     def weights_for(self, inputs: SlamInputs) -> en.Weights:
-        """The weights a solve uses: the design matrices, or the dataset's information matrices."""
+        """The weights a solve uses: the design matrices, or the dataset's information matrices; in a one-robot
+        solve with ``observation=range_bearing`` also that potential's σ and Cauchy scale, and R = 0 with
+        ``odometry_only``."""
         from slamcli.solvers.icm import energy as en
 
-        return en.information_weights(inputs) if self.weights == "information" else self.design_weights()
+        W = en.information_weights(inputs) if self.weights == "information" else self.design_weights()
+        solo = getattr(inputs, "robots", None) is None
+        if self.odometry_only and solo and W.use_odometry:
+            W = dataclasses.replace(W, R=(0.0, 0.0, 0.0))
+        if self.observation == "range_bearing" and solo:
+            nz = inputs.noise
+            sigma = (float(nz.range_std), float(nz.bearing_std))
+            if not (min(sigma) > 0 and all(math.isfinite(v) for v in sigma)):
+                raise ValueError(f"observation=range_bearing: noise.range_std, noise.bearing_std = {list(sigma)} "
+                                 "must be positive")
+            W = dataclasses.replace(W, obs_model="range_bearing", obs_sigma=sigma, cauchy_k=float(self.cauchy_k))
+        return W
 
 
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(IcmParams)}

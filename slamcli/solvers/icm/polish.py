@@ -6,7 +6,10 @@ optimum of H(x, m, c) for the current matchings c and stop, by any energy rule, 
 minimises that same energy over all poses x_1..x_T and map points m at once, with c fixed, by the project's
 least-squares engine (:func:`slamcli.solvers.nls.solve`, Levenberg-Marquardt). Its problem (:func:`nls_problem`)
 is the energy of :mod:`slamcli.solvers.icm.energy` written as factor blocks — motion (R), odometry (S),
-observations (Q), GPS (K) — each whitened by ``√(2W)`` so that the engine's cost ``½ Σ ‖L r‖²`` equals H.
+observations (Q), GPS (K) — each whitened by ``√(2W)`` so that the engine's cost ``½ Σ ‖L r‖²`` equals H. With ``observation=range_bearing``
+the observation block is the range-bearing residual ``h(x_t, m) − z`` whitened by ``√2 diag(σ_r, σ_b)⁻¹`` under
+the engine's Cauchy kernel of width ``√2 k`` (IRLS, as graph applies its kernel): its ``½ k'² log(1 + s'²/k'²)``
+is :func:`~slamcli.solvers.icm.energy.range_bearing_energy`'s ``k² log(1 + s²/k²)``, so the cost is again H.
 
 :func:`optimality` measures an estimate against the optimum without moving it: the gradient ∇H over
 x_1..x_T and m, and the Gauss-Newton step δ = −(JᵀJ)⁻¹Jᵀr to the optimum of the local quadratic model with the
@@ -19,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from slamcli.models import potentials, se2
 from slamcli.models.angles import wrap_angle
@@ -55,8 +59,13 @@ class Optimality:
 
 
 def optimality(prob: en.Problem, W: en.Weights, poses, landmarks, labels) -> Optimality:
-    """:class:`Optimality` of ``poses (T+1, 3)``, ``landmarks (L, 2)`` under ``labels (N,)``."""
-    r, J = en.joint_residuals(prob, W, poses, landmarks, labels)
+    """:class:`Optimality` of ``poses (T+1, 3)``, ``landmarks (L, 2)`` under ``labels (N,)``. With
+    ``W.range_bearing`` the gradient is exact and the step and gap are those of the IRLS model (the Cauchy
+    weights taken at the estimate, as graph's Gauss-Newton linearises its kernel)."""
+    if W.range_bearing:
+        r, J = _irls_system(prob, W, poses, landmarks, labels)
+    else:
+        r, J = en.joint_residuals(prob, W, poses, landmarks, labels)
     if J.shape[1] == 0:
         return Optimality(0.0, 0.0, 0.0)
     g = 2.0 * (J.T @ r)
@@ -69,6 +78,32 @@ def optimality(prob: en.Problem, W: en.Weights, poses, landmarks, labels) -> Opt
     model = r + J @ delta
     return Optimality(float(np.linalg.norm(g)), float(np.abs(delta).max(initial=0.0)),
                       max(float(r @ r - model @ model), 0.0))
+
+
+def _irls_system(prob: en.Problem, W: en.Weights, poses, landmarks, labels):
+    """``(r (M,), J (M, D') csr)`` of :func:`nls_problem` at the estimate in :func:`en.joint_residuals`'
+    convention (``2 Jᵀr = ∇H``; the columns held fixed dropped): the engine's whitened rows scaled by
+    ``√(w/2)``, w the Cauchy kernel's IRLS weight of each robust factor (1 elsewhere)."""
+    problem = nls_problem(prob, W, landmarks.shape[0], labels)
+    x = np.concatenate([poses.ravel(), landmarks.ravel()])
+    J, r = nls.whitened_system(problem, x)
+    scale = np.full(r.size, np.sqrt(0.5))
+    off = 0
+    for b in problem.blocks:
+        F, k = b.n_factors, b.sqrt_info.shape[-1]
+        if b.robust:
+            rw = r[off:off + F * k].reshape(F, k)
+            _, w = nls.robust_kernel(np.einsum("fk,fk->f", rw, rw), "cauchy", _kernel_width(W))
+            scale[off:off + F * k] *= np.repeat(np.sqrt(w), k)
+        off += F * k
+    keep = np.setdiff1d(np.arange(problem.n_vars), problem.fixed_cols)
+    return scale * r, (sp.diags(scale) @ J).tocsc()[:, keep].tocsr()
+
+
+def _kernel_width(W: en.Weights) -> float:
+    """The engine's Cauchy width on the ``√2``-whitened range-bearing residuals: ``√2 k`` (then its
+    ``½ k'² log(1 + s'²/k'²)`` is :func:`en.range_bearing_energy`'s ``k² log(1 + s²/k²)``)."""
+    return float(np.sqrt(2.0) * W.cauchy_k)
 
 
 @dataclass(frozen=True)
@@ -110,9 +145,10 @@ def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_ite
     x, its, status = np.concatenate([poses.ravel(), landmarks.ravel()]), 0, Status.MAX_ITERATIONS
     chunk = POLISH_CHUNK if extrapolate else max_iters
     while its < max_iters and status != Status.CONVERGED:
-        res = nls.solve(problem, x, _nls_params(min(chunk, max_iters - its)), workspace=workspace)
+        params = _nls_params(W, min(chunk, max_iters - its))
+        res = nls.solve(problem, x, params, workspace=workspace)
         its, status = its + res.iterations, res.status
-        x = _extrapolate(problem, x, res.x, res.cost) if extrapolate and res.iterations else res.x
+        x = _extrapolate(problem, params, x, res.x, res.cost) if extrapolate and res.iterations else res.x
         if not (extrapolate and res.iterations):
             break
     P = 3 * (prob.T + 1)
@@ -130,22 +166,31 @@ def polish(prob: en.Problem, W: en.Weights, poses, landmarks, labels, *, max_ite
     return new_poses, new_lm, PolishOutcome(its, status, E0, E1, moved_m, moved_rad)
 
 
-def _extrapolate(problem: nls.NlsProblem, x_start, x_end, cost_end: float):
+def _extrapolate(problem: nls.NlsProblem, params: nls.NlsParams, x_start, x_end, cost_end: float):
     """The lowest-cost point of ``x_end + β (x_end − x_start)``, β ∈ {0} ∪ :data:`EXTRAPOLATION_FACTORS`
-    (cost ``½‖r‖²`` of ``problem``, = H; the factors are tried in order until the cost stops falling)."""
+    (the engine's cost of ``problem`` under ``params``' kernel, = H; the factors are tried in order until the
+    cost stops falling)."""
     step = x_end - x_start
     best, best_cost = x_end, cost_end
     for beta in EXTRAPOLATION_FACTORS:
         trial = x_end + beta * step
-        r = nls.residual_vector(problem, trial)
-        c = 0.5 * float(r @ r)
+        if params.robust == "none":
+            r = nls.residual_vector(problem, trial)
+            c = 0.5 * float(r @ r)
+        else:  # Σ ρ per block (nls.evaluate_cost builds an assembler per call)
+            c = sum(float(nls.kernel_cost(nls.whiten(b.sqrt_info, b.residuals(trial)), b.robust, params)[0].sum())
+                    for b in problem.blocks)
         if not c < best_cost:
             break
         best, best_cost = trial, c
     return best
 
 
-def _nls_params(max_iters: int) -> nls.NlsParams:
+def _nls_params(W: en.Weights, max_iters: int) -> nls.NlsParams:
+    """The engine's LM settings; with ``W.range_bearing`` the Cauchy kernel on the observation block."""
+    if W.range_bearing:
+        return nls.NlsParams(method="lm", max_iterations=max_iters, rel_cost_tol=POLISH_REL_COST_TOL,
+                             robust="cauchy", huber_k=_kernel_width(W))
     return nls.NlsParams(method="lm", max_iterations=max_iters, rel_cost_tol=POLISH_REL_COST_TOL)
 
 
@@ -153,7 +198,7 @@ def prime_workspace(prob: en.Problem, W: en.Weights, L: int, candidate_labels, w
     """Analyse, once, the pattern of H under every candidate matching ``candidate_labels (N,)`` (e.g. the
     sensor ids behind a null-matching gate) in ``workspace``: a polish whose matchings are any subset of them
     then reuses that pattern and CHOLMOD analysis, however the gate moves sightings in and out."""
-    workspace.setup(nls_problem(prob, W, L, candidate_labels), _nls_params(1))
+    workspace.setup(nls_problem(prob, W, L, candidate_labels), _nls_params(W, 1))
 
 
 def nls_problem(prob: en.Problem, W: en.Weights, L: int, labels) -> nls.NlsProblem:
@@ -185,6 +230,11 @@ def nls_problem(prob: en.Problem, W: en.Weights, L: int, labels) -> nls.NlsProbl
         r = potentials.observation_residual(p, z, x[P:].reshape(-1, 2)[lab])
         return r, np.concatenate(potentials.observation_residual_jacobians(p, z), axis=2)
 
+    def ev_range_bearing(x):
+        p, m = poses_of(x)[st], x[P:].reshape(-1, 2)[lab]
+        r = potentials.range_bearing_residual(p, z, m)
+        return r, np.concatenate(potentials.range_bearing_residual_jacobians(p, m), axis=2)
+
     g = prob.gps_step
     J_gps = np.zeros((g.size, 2, 3))
     J_gps[:, 0, 0] = J_gps[:, 1, 1] = 1.0
@@ -197,13 +247,16 @@ def nls_problem(prob: en.Problem, W: en.Weights, L: int, labels) -> nls.NlsProbl
         blocks.append(nls.FactorBlock("motion", pair, ev_motion, np.diag(np.sqrt(2.0 * np.array(W.R)))))
     if W.use_odometry and prob.T > 0:
         blocks.append(nls.FactorBlock("odometry", pair, ev_odometry, np.diag(np.sqrt(2.0 * np.array(W.S)))))
-    if lab.size and any(W.Q):
-        blocks.append(nls.FactorBlock("observation", np.concatenate([pc[st], lc[lab]], axis=1), ev_obs,
-                                      np.diag(np.sqrt(2.0 * np.array(W.Q)))))
+    obs_cols = np.concatenate([pc[st], lc[lab]], axis=1)
+    if lab.size and W.range_bearing:  # robust: the engine's Cauchy of width √2 k (_nls_params)
+        blocks.append(nls.FactorBlock("observation", obs_cols, ev_range_bearing,
+                                      np.diag(np.sqrt(2.0) / np.array(W.obs_sigma)), robust=True))
+    elif lab.size and any(W.Q):
+        blocks.append(nls.FactorBlock("observation", obs_cols, ev_obs, np.diag(np.sqrt(2.0 * np.array(W.Q)))))
     if W.K and g.size:
         blocks.append(nls.FactorBlock("gps", pc[g], ev_gps, np.sqrt(2.0 * W.K) * np.eye(2)))
     seen = np.zeros(L, bool)
-    seen[lab] = any(W.Q)
+    seen[lab] = W.range_bearing or any(W.Q)
     fixed = np.concatenate([pc[0], lc[~seen].ravel()])
     return nls.NlsProblem(n_vars=P + 2 * L, blocks=blocks, angle_cols=pc[:, 2].copy(), fixed_cols=fixed,
                           chain=(prob.T + 1, 3))

@@ -38,6 +38,7 @@ WITH_IDS: dict[str, dict[str, Any]] = {
     "paper": {},
     "real": {"correspondences": "reported", "init": "online", "weights": "information", "outlier_sigma": 7.0,
              "max_sweeps": 30, "polish_rtol": 1.0, "polish_iters": 6, "polish_extrapolate": True,
+             "observation": "range_bearing", "odometry_only": True,
              "team_range_weights": True,
              "team_odometry_only": True},
 }
@@ -56,6 +57,17 @@ def expansion_text(name: str) -> str:
 
 #: the design weight matrices that ``weights=information`` replaces
 WEIGHT_KEYS = ("R", "S", "Q", "K")
+
+#: what ``observation=range_bearing`` needs (the solver refuses other values); a rule that would set it leaves
+#: it, and ``odometry_only`` chosen with it, unset when one of these is given otherwise (:func:`range_bearing_note`)
+RANGE_BEARING_NEEDS: dict[str, Any] = {"correspondences": "reported", "polish": "nls", "covariance": False,
+                                       "surface": False, "range_bias": "none"}
+RANGE_BEARING_KEYS = ("observation", "odometry_only")
+
+
+def _range_bearing_conflicts(given: Mapping[str, Any]) -> list[str]:
+    return [f"{k}={given[k]}" for k, need in RANGE_BEARING_NEEDS.items()
+            if k in given and str(given[k]).lower() != str(need).lower()]
 
 
 def check_name(name: str) -> None:
@@ -77,8 +89,21 @@ def resolve(name: str, given: Mapping[str, Any], has_ids: bool) -> dict[str, Any
         rule = dict(WITH_IDS[name])
         if any(k in given for k in WEIGHT_KEYS) and rule.get("weights") == "information":
             del rule["weights"]  # the user's R, S, Q, K win over the dataset's noise model
+        if rule.get("observation") == "range_bearing" and _range_bearing_conflicts(given):
+            for k in RANGE_BEARING_KEYS:
+                rule.pop(k, None)
         filled |= rule
     return {k: v for k, v in filled.items() if k not in given} | dict(given) | {"preset": name}
+
+
+def range_bearing_note(name: str, given: Mapping[str, Any], has_ids: bool) -> str:
+    """One line when the preset's data rule would have set ``observation=range_bearing`` but a value it cannot
+    run with was given (:data:`RANGE_BEARING_NEEDS`); ``""`` otherwise."""
+    bad = _range_bearing_conflicts(given)
+    if not (has_ids and bad and "observation" not in given
+            and WITH_IDS[name].get("observation") == "range_bearing"):
+        return ""
+    return f"preset={name}: observation=range_bearing, odometry_only=true not applied, {', '.join(bad)} given"
 
 
 def weights_note(name: str, given: Mapping[str, Any], has_ids: bool) -> str:

@@ -21,6 +21,8 @@ Further options, default off: ``schedule="parallel"`` (odd/even pose classes), `
 ``weights="information"``, ``range_offset``, and for long real runs (``preset="real"``) ``init="gated"``
 (:mod:`.init_gated`), ``joint_iters`` (:mod:`.joint`), ``merge`` / ``label_cost`` (:mod:`.merge`) and
 ``outlier_sigma`` (:mod:`.gate`). The GPS potential of §4 is used whenever the dataset has fixes.
+``observation="range_bearing"``: H's observation term is graph's Cauchy bearing-range factor; it is recorded,
+stop-tested and polished, and a sweep's Cartesian pose / map steps are a proposal kept only when they lower it.
 """
 
 from __future__ import annotations
@@ -90,6 +92,8 @@ class _SweepLog:
     #: the polishes' least-squares pattern and CHOLMOD analysis, reused while the matchings keep the pattern
     workspace: nls.Workspace = dataclasses.field(default_factory=nls.Workspace)
     rejected: int = 0
+    #: observation=range_bearing: sweeps whose pose and map steps were not kept (they raised H)
+    proposals_rejected: int = 0
     increases: int = 0
     unconfirmed: int = 0
     joint_accepted: int = 0
@@ -146,9 +150,10 @@ class IcmSlam(BaseSolver):
         if self.config_note:
             extra["preset_note"] = self.config_note
         rematch = p.filtered == "rematch" and not reported
-        # null matching behind a gate (outlier_sigma > 0, reported ids only): τ_i per observation, or None
+        # null matching behind a gate (outlier_sigma > 0, reported ids only; not under observation=range_bearing,
+        # whose Cauchy kernel takes its place): τ_i per observation, or None
         tau = (gate.null_costs(prob, W, inputs.noise.range_std, inputs.noise.bearing_std, p.outlier_sigma)
-               if reported and p.outlier_sigma > 0 else None)
+               if reported and p.outlier_sigma > 0 and not W.range_bearing else None)
         extra["outlier_gate"] = p.outlier_sigma if tau is not None else "off"
 
         def null_E(lab) -> float:
@@ -180,7 +185,7 @@ class IcmSlam(BaseSolver):
                                           landmarks, labels)
                 E = en.energy(prob, W, poses, landmarks, labels) + null_E(labels)
             E_start = E
-            prev_landmarks = landmarks
+            prev_poses, prev_landmarks = poses, landmarks
             # c_0..c_T (eqs. 12-13): nearest map point to h⁻¹(x_t^{(n-1)}, z_{t,i}), every observation in the model
             if not reported and landmarks.shape[0]:
                 pts = prob.landmark_points(poses)
@@ -200,12 +205,16 @@ class IcmSlam(BaseSolver):
             # the energy over the observations in the model at the start of this sweep (the stopping rule's
             # comparison), then the model of the next sweep
             lab_same = labels if reported else _fill_nearest(prob, poses, labels, landmarks, W, in_model, pts)
-            E_same = E_pose + en.observation_energy(pts, lab_same, landmarks, W.Q) + null_E(lab_same)
+            E_same = E_pose + en.observation_term(prob, W, poses, pts, lab_same, landmarks) + null_E(lab_same)
             if rematch:
                 labels = lab_same
             elif not reported:  # reported ids: the model keeps every observation with an id (null or not)
                 in_model = labels >= 0
-            E = E_same if rematch else E_pose + en.observation_energy(pts, labels, landmarks, W.Q) + null_E(labels)
+            E = E_same if rematch else E_pose + en.observation_term(prob, W, poses, pts, labels, landmarks) + null_E(
+                labels)
+            if W.range_bearing and E_same > E_start:  # the quadratic conditionals' proposal raised H: not taken
+                poses, landmarks, E_same, E = prev_poses, prev_landmarks, E_start, E_start
+                log.proposals_rejected += 1
             decision = stop_decision(E_start, E_same, p.energy_rtol)
             poses, landmarks, E, decision = self._polish_or_confirm(prob, W, poses, landmarks, labels, E, E_start,
                                                                     E_same, decision, n, log, null_E)
@@ -246,6 +255,8 @@ class IcmSlam(BaseSolver):
                 W.gps_obs_weight()  # the GPS pseudo-observation needs an isotropic Q
         except ValueError as exc:
             raise ConfigError(f"icm: {exc}") from None
+        if W.range_bearing:
+            self._check_range_bearing()
         rho, base_z, bias = self._surface_setup(inputs, prob)  # surface=true / range_bias=estimate
         if base_z is not None:
             prob = surf.with_range_offsets(prob, base_z, surf.initial_offsets(rho, prob.n_obs))
@@ -380,6 +391,7 @@ class IcmSlam(BaseSolver):
         extra.update(
             sweeps=len(objective) - 1,
             map_steps_rejected=log.rejected,
+            sweep_proposals_rejected=log.proposals_rejected,
             map_step_parts=log.parts_log,
             energy_increases=increases,
             energy_increases_same_terms=log.increases,
@@ -438,6 +450,21 @@ class IcmSlam(BaseSolver):
         )
 
     # -- helpers ---------------------------------------------------------------------------------------------
+    def _check_range_bearing(self) -> None:
+        """One-line :class:`~slamcli.errors.ConfigError` when ``observation=range_bearing`` is combined with what
+        it does not support (its energy is minimised by the polish, on fixed sensor-reported matchings)."""
+        from slamcli.errors import ConfigError
+
+        p: IcmParams = self.params
+        bad = [f"{k}={v}" for k, v, ok in (("correspondences", p.correspondences, p.correspondences == "reported"),
+                                           ("polish", p.polish, p.polish == "nls"),
+                                           ("covariance", "true", not p.covariance),
+                                           ("surface", "true", not p.surface),
+                                           ("range_bias", p.range_bias, p.range_bias == "none")) if not ok]
+        if bad:
+            raise ConfigError(f"icm: observation=range_bearing needs correspondences=reported and polish=nls, "
+                              f"without covariance, surface or range_bias; got {', '.join(bad)}")
+
     def _surface_setup(self, inputs, prob):
         """``(ρ (N,) | None, the unshifted z (N, 2) | None, bias 0.0)``; None, None when the paper-exact model
         is used. One-line refusal when ``surface`` is asked for on a dataset that declares no radius."""
