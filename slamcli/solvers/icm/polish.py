@@ -177,9 +177,8 @@ def _extrapolate(problem: nls.NlsProblem, params: nls.NlsParams, x_start, x_end,
         if params.robust == "none":
             r = nls.residual_vector(problem, trial)
             c = 0.5 * float(r @ r)
-        else:  # Σ ρ per block (nls.evaluate_cost builds an assembler per call)
-            c = sum(float(nls.kernel_cost(nls.whiten(b.sqrt_info, b.residuals(trial)), b.robust, params)[0].sum())
-                    for b in problem.blocks)
+        else:
+            c = nls.evaluate_cost(problem, trial, params)
         if not c < best_cost:
             break
         best, best_cost = trial, c

@@ -182,11 +182,7 @@ class Assembler:
         return sp.csc_matrix((lo_data, self.lo_indices, self.lo_indptr), shape=(self.D, self.D))
 
     def cost(self, x: np.ndarray, params: NlsParams) -> float:
-        total = 0.0
-        for b, identity in zip(self.problem.blocks, self.identity_info):
-            r = b.residuals(x)
-            total += float(np.sum(kernel_cost(r if identity else whiten(b.sqrt_info, r), b.robust, params)[0]))
-        return total
+        return problem_cost(self.problem, x, params, self.identity_info)
 
     def linearize(self, x: np.ndarray, params: NlsParams):
         """Cost, ``H`` data (nnz,) of the full pattern and gradient ``g (D,)`` at ``x``."""
@@ -296,6 +292,19 @@ def _local_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     ia, ib = np.triu_indices(n)
     ia.flags.writeable = ib.flags.writeable = False
     return ia, ib
+
+
+def problem_cost(problem: NlsProblem, x: np.ndarray, params: NlsParams, identity_info: list[bool] | None = None) -> float:
+    """``Σ ρ(‖L r‖)`` over every factor at ``x`` (``½ ‖L r‖²`` where no kernel applies), block by block, without a
+    pattern: ``identity_info[i]`` says that block ``i`` has ``L = I`` (its whitening is skipped), found here when
+    None."""
+    if identity_info is None:
+        identity_info = [_is_identity(b.sqrt_info) for b in problem.blocks]
+    total = 0.0
+    for b, identity in zip(problem.blocks, identity_info):
+        r = b.residuals(x)
+        total += float(np.sum(kernel_cost(r if identity else whiten(b.sqrt_info, r), b.robust, params)[0]))
+    return total
 
 
 def _is_identity(L) -> bool:

@@ -20,6 +20,7 @@ from slamcli.solvers.nls.linear import (
     Workspace,
     factorize_lower,
     make_linear_solver,
+    problem_cost,
 )
 from slamcli.solvers.nls.problem import NlsParams, NlsProblem, NlsResult, retract
 from slamcli.types import Status
@@ -29,8 +30,8 @@ from slamcli.types import Status
 # optimiser
 # ----------------------------------------------------------------------------------------------------------
 def evaluate_cost(problem: NlsProblem, x: np.ndarray, params: NlsParams | None = None) -> float:
-    """``½ Σ ρ(‖L r‖)`` at ``x``."""
-    return Assembler(problem).cost(np.asarray(x, float), params or NlsParams())
+    """``½ Σ ρ(‖L r‖)`` at ``x`` (:func:`~slamcli.solvers.nls.linear.problem_cost`: no pattern is built)."""
+    return problem_cost(problem, np.asarray(x, float), params or NlsParams())
 
 
 def residual_vector(problem: NlsProblem, x: np.ndarray) -> np.ndarray:
