@@ -65,9 +65,13 @@ RANGE_BEARING_NEEDS: dict[str, Any] = {"correspondences": "reported", "polish": 
 RANGE_BEARING_KEYS = ("observation", "odometry_only")
 
 
+def range_bearing_conflicts(values: Mapping[str, Any]) -> list[str]:
+    """The keys of :data:`RANGE_BEARING_NEEDS` whose value in ``values`` is not the one it needs."""
+    return [k for k, need in RANGE_BEARING_NEEDS.items() if k in values and str(values[k]).lower() != str(need).lower()]
+
+
 def _range_bearing_conflicts(given: Mapping[str, Any]) -> list[str]:
-    return [f"{k}={given[k]}" for k, need in RANGE_BEARING_NEEDS.items()
-            if k in given and str(given[k]).lower() != str(need).lower()]
+    return [f"{k}={given[k]}" for k in range_bearing_conflicts(given)]
 
 
 def check_name(name: str) -> None:

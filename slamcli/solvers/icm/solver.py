@@ -37,7 +37,7 @@ from slamcli.solvers import nls
 from slamcli.solvers.base import BaseSolver, ProgressFn
 from slamcli.solvers.frontend import resolve_motion_input
 from slamcli.solvers.icm import energy as en
-from slamcli.solvers.icm import gate
+from slamcli.solvers.icm import gate, presets
 from slamcli.solvers.icm import map_step as mp
 from slamcli.solvers.icm import surface as surf
 from slamcli.solvers.icm.common import online_init, reported_labels, stop_decision
@@ -455,12 +455,8 @@ class IcmSlam(BaseSolver):
         it does not support (its energy is minimised by the polish, on fixed sensor-reported matchings)."""
         from slamcli.errors import ConfigError
 
-        p: IcmParams = self.params
-        bad = [f"{k}={v}" for k, v, ok in (("correspondences", p.correspondences, p.correspondences == "reported"),
-                                           ("polish", p.polish, p.polish == "nls"),
-                                           ("covariance", "true", not p.covariance),
-                                           ("surface", "true", not p.surface),
-                                           ("range_bias", p.range_bias, p.range_bias == "none")) if not ok]
+        values = {k: getattr(self.params, k) for k in presets.RANGE_BEARING_NEEDS}
+        bad = [f"{k}={str(values[k]).lower()}" for k in presets.range_bearing_conflicts(values)]
         if bad:
             raise ConfigError(f"icm: observation=range_bearing needs correspondences=reported and polish=nls, "
                               f"without covariance, surface or range_bias; got {', '.join(bad)}")
