@@ -25,9 +25,11 @@ is marked FAILED (non-zero exit). Other papers' sections hook in through :data:`
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -186,6 +188,8 @@ class Reproduction:
                  log: LogFn, executor: str = "local", scheduler: str | None = None) -> None:
         self.executor, self.scheduler = executor, scheduler  # run_sweep's: local pool or Dask (scheduler address)
         self.pool = None  # the executor every section's sweep shares, opened by :func:`reproduce`
+        self.turn: threading.Lock | None = None  # overlapped sections: held by a section unless its sweep runs
+        self._local = threading.local()  # overlapped sections: the running section's start signal
         self.out = Path(out_dir)
         self.runs_dir = self.out / "runs"
         self.fig_dir = self.out / "figures"
@@ -251,10 +255,27 @@ class Reproduction:
             return SweepOutcome(cfg, None, None, pd.DataFrame(), self.runs_dir / cfg.name, missing)
         expansion = expand(cfg)
         self.log(f"{cfg.name}: {len(expansion.runs)} runs")
-        summary = run_sweep(expansion, self.runs_dir, workers=self.workers, executor=self.executor,
-                            scheduler=self.scheduler, progress=progress_lines(cfg.name, self.log), pool=self.pool)
+        with self._turn_given_up():
+            summary = run_sweep(expansion, self.runs_dir, workers=self.workers, executor=self.executor,
+                                scheduler=self.scheduler, progress=progress_lines(cfg.name, self.log), pool=self.pool)
         table = load_results(summary.exp_dir)  # path columns joined onto the sweep folder
         return SweepOutcome(cfg, expansion, summary, table, summary.exp_dir, missing)
+
+    @contextlib.contextmanager
+    def _turn_given_up(self):
+        """With overlapped sections (:func:`_run_sections_overlapped`): another section may take the turn while
+        this one's sweep is in the shared pool; the first time, the next section is signalled to start."""
+        if self.turn is None:
+            yield
+            return
+        self.turn.release()
+        started = getattr(self._local, "started", None)
+        if started is not None:
+            started.set()
+        try:
+            yield
+        finally:
+            self.turn.acquire()
 
     # -- report pieces ---------------------------------------------------------------------------------------------
 
@@ -1155,6 +1176,51 @@ def _run_section(key: str, target: str, rep: Reproduction, t0: float) -> Section
     return sec
 
 
+def _run_sections_overlapped(todo: list[tuple[str, str]], rep: Reproduction, t0: float, *,
+                             in_flight: int) -> list[Section]:
+    """The sections of ``todo`` (``[(key, target)]``), up to ``in_flight`` at once, one thread each, so that the
+    shared pool's workers run the next section's runs while a section waits for its last long runs or draws
+    its figures; returns them in the order of ``todo``.
+
+    A section holds ``rep.turn`` except while its sweep is in the pool, so the coordinator's own work (planning
+    a sweep, reading its tables, matplotlib) is done by one section at a time. Sections start in order, each once
+    the one before has handed its first sweep to the pool or ended. Numbers do not depend on the overlap: every
+    run's result is a function of its configuration alone.
+    """
+    rep.turn = threading.Lock()
+    slots = threading.Semaphore(in_flight)
+    sections: list[Section | None] = [None] * len(todo)
+    escaped: list[BaseException] = []  # what a section let through (Ctrl-C reaching it from a worker)
+
+    def section(i: int, key: str, target: str, started: threading.Event) -> None:
+        rep._local.started = started
+        try:
+            with rep.turn:
+                sections[i] = _run_section(key, target, rep, t0)
+        except BaseException as exc:  # noqa: BLE001 - handed to the coordinating thread, raised there
+            escaped.append(exc)
+        finally:
+            started.set()
+            slots.release()
+
+    threads = []
+    for i, (key, target) in enumerate(todo):
+        slots.acquire()
+        if escaped:
+            break
+        started = threading.Event()
+        th = threading.Thread(target=section, args=(i, key, target, started), name=f"slamcli-section-{key}",
+                              daemon=True)  # a Ctrl-C in this thread ends the command without waiting for them
+        th.start()
+        threads.append(th)
+        started.wait()
+    for th in threads:
+        th.join()
+    if escaped:
+        raise escaped[0]
+    return [s for s in sections if s is not None]
+
+
 def reproduce(
     out_dir: str | Path,
     *,
@@ -1168,7 +1234,9 @@ def reproduce(
 ) -> ReproduceOutcome:
     """Run the sections of :data:`SECTIONS` (or the keys in ``only``), write figures and ``REPORT.md`` into
     ``out_dir``; returns the report path and the failed sections. ``executor``/``scheduler``: where the sweeps
-    of the sections run (:func:`slamcli.sweep.runner.make_executor`)."""
+    of the sections run (:func:`slamcli.sweep.runner.make_executor`). On a local pool of ``workers`` processes,
+    up to ``workers + 1`` sections overlap (:func:`_run_sections_overlapped`); on one worker or Dask they run one
+    after the other."""
     from slamcli.io import atomic_path
     from slamcli.sweep.runner import git_revision
 
@@ -1184,10 +1252,14 @@ def reproduce(
         unknown = [k for k in only if k not in keys]
         if unknown:
             raise ConfigError(f"--section: unknown section(s) {', '.join(unknown)}; known: {', '.join(keys)}")
-    from slamcli.sweep.runner import make_executor
+    from slamcli.sweep.runner import LocalPool, make_executor
 
+    todo = [(key, target) for key, target in SECTIONS if not only or key in only]
     with make_executor(executor, workers, scheduler) as rep.pool:  # one pool for every section's sweeps
-        sections = [_run_section(key, target, rep, t0) for key, target in SECTIONS if not only or key in only]
+        if isinstance(rep.pool, LocalPool) and len(todo) > 1:
+            sections = _run_sections_overlapped(todo, rep, t0, in_flight=workers + 1)
+        else:
+            sections = [_run_section(key, target, rep, t0) for key, target in todo]
     elapsed = time.perf_counter() - t0
 
     import slamcli

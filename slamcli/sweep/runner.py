@@ -525,13 +525,19 @@ class LocalPool:
     """A spawn ``ProcessPoolExecutor`` whose workers die with the coordinator and that can be rebuilt.
 
     When a worker dies (``kill -9``, out of memory, ``os._exit``), ``concurrent.futures`` breaks the whole
-    pool and fails every pending future; :meth:`rebuild` starts a fresh pool, and :meth:`dead_workers` tells
-    which worker processes died on their own (not terminated by the executor while it broke the pool).
+    pool and fails every pending future; :meth:`rebuild` starts a fresh pool and tells which worker processes
+    died on their own (not terminated by the executor while it broke the pool).
+
+    Several sweeps may share one pool from several threads (``reproduce`` overlaps its sections): the pool
+    is rebuilt once per break, by whichever sweep asks first; once shut down it is never rebuilt.
     """
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
         self._procs: dict[int, Any] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+        self._last_dead: dict[int, int] = {}
         self._start()
 
     def _start(self) -> None:
@@ -542,29 +548,47 @@ class LocalPool:
         self._procs = {}
 
     def submit(self, fn: Callable[..., Any], /, *args: Any) -> cf.Future:
-        fut = self.ex.submit(fn, *args)
-        self._procs.update(getattr(self.ex, "_processes", None) or {})  # pid -> Process, spawned on submit
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the worker pool is shut down")
+            fut = self.ex.submit(fn, *args)
+            self._procs.update(getattr(self.ex, "_processes", None) or {})  # pid -> Process, spawned on submit
         return fut
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        with self._lock:
+            self._closed = True
         self.ex.shutdown(wait=wait, cancel_futures=cancel_futures)
 
     def terminate(self) -> None:
-        """SIGTERM every live worker of the current pool (its runs are abandoned, not recorded)."""
+        """SIGTERM every live worker of the current pool (its runs are abandoned, not recorded); the pool is
+        not rebuilt after."""
+        with self._lock:
+            self._closed = True
         for proc in (getattr(self.ex, "_processes", None) or {}).values():
             if proc.is_alive():
                 proc.terminate()
 
     def rebuild(self) -> dict[int, int]:
-        """Shut the broken pool down, start a new one; returns ``{pid: exit code}`` of workers that died."""
-        self.ex.shutdown(wait=True, cancel_futures=True)  # joins the manager thread: exit codes are final
-        dead = {}
-        for pid, proc in self._procs.items():
-            code = proc.exitcode
-            if code not in (None, 0, -signal.SIGTERM):  # the executor SIGTERMs the survivors of a broken pool
-                dead[int(pid)] = int(code)
-        self._start()
-        return dead
+        """Shut the broken pool down, start a new one; returns ``{pid: exit code}`` of workers that died.
+
+        A sweep sharing the pool that asks after another one rebuilt it gets the same answer, and the new pool
+        is left running. Raises ``RuntimeError`` once the pool is shut down (the coordinator is stopping).
+        """
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the worker pool is shut down")
+            if not getattr(self.ex, "_broken", True):  # rebuilt already, for another sweep's futures
+                return dict(self._last_dead)
+            self.ex.shutdown(wait=True, cancel_futures=True)  # joins the manager thread: exit codes are final
+            dead = {}
+            for pid, proc in self._procs.items():
+                code = proc.exitcode
+                if code not in (None, 0, -signal.SIGTERM):  # the executor SIGTERMs the survivors of a broken pool
+                    dead[int(pid)] = int(code)
+            self._start()
+            self._last_dead = dead
+            return dict(dead)
 
 
 def describe_exit(code: int) -> str:

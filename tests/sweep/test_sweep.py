@@ -313,6 +313,37 @@ def test_sweeps_sharing_one_pool_start_its_workers_once(tmp_path):
     np.testing.assert_array_equal(serial["value"].to_numpy(), shared[1]["value"].to_numpy())
 
 
+@pytest.mark.slow
+def test_two_threads_sharing_a_pool_survive_a_dying_worker_with_one_rebuild(tmp_path):
+    """``reproduce`` overlaps sections: two sweeps in two threads on one pool, and a run of one kills its worker.
+    The pool is rebuilt once (a second rebuild would cancel the runs the first sweep handed to the new pool),
+    the dying run fails naming its exit, and the other sweep completes with the serial numbers."""
+    import threading
+
+    from slamcli.sweep.runner import make_executor
+
+    slow = _expand(fake_experiment("slow", replicates=4, solvers=[{"method": "a", "params": {"sleep": 0.5}}]))
+    dying = _expand(fake_experiment("dying", replicates=1,
+                                    solvers=[{"method": "a", "params": {"sleep": 0.2, "die": True}}]))
+    out, starts = {}, []
+    with make_executor("local", 2) as pool:
+        start = pool._start
+        pool._start = lambda: (starts.append(1), start())[1]  # counts the rebuilds
+        threads = [threading.Thread(target=lambda e=e: out.__setitem__(
+            e.experiment.name, run_sweep(e, tmp_path / "shared", pipeline=FakePipeline(), pool=pool)))
+            for e in (slow, dying)]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join(timeout=120)
+    assert len(starts) == 1
+    assert out["dying"].counts.failed == 1 and "exited with code 3" in out["dying"].failures[0]["error"]
+    assert out["slow"].ok and out["slow"].counts.done == 4
+    run_sweep(slow, tmp_path / "serial", pipeline=FakePipeline())
+    serial, shared = (pd.read_csv(tmp_path / d / "slow" / "results.csv") for d in ("serial", "shared"))
+    np.testing.assert_array_equal(serial["value"].to_numpy(), shared["value"].to_numpy())
+
+
 RUN_S = 1.2
 
 
