@@ -190,6 +190,7 @@ class Reproduction:
         self.pool = None  # the executor every section's sweep shares, opened by :func:`reproduce`
         self.turn: threading.Lock | None = None  # overlapped sections: held by a section unless its sweep runs
         self._local = threading.local()  # overlapped sections: the running section's start signal
+        self._ended: dict[str, threading.Event] = {}  # overlapped sections: set when section ``key`` has ended
         self.out = Path(out_dir)
         self.runs_dir = self.out / "runs"
         self.fig_dir = self.out / "figures"
@@ -276,6 +277,15 @@ class Reproduction:
             yield
         finally:
             self.turn.acquire()
+
+    def wait_for(self, key: str) -> None:
+        """Return once section ``key`` (one before the caller in :data:`SECTIONS`) has ended, when it runs beside
+        the caller (overlapped sections; the turn is given up meanwhile); at once when it ended or is not run.
+        A section that reads what another one found calls this first."""
+        ended = self._ended.get(key)
+        if ended is not None and not ended.is_set():
+            with self._turn_given_up():
+                ended.wait()
 
     # -- report pieces ---------------------------------------------------------------------------------------------
 
@@ -689,6 +699,7 @@ class Reproduction:
 
         self._icm_checks(sec, stats, done, paper_final=PAPER["sim1_final_mean_err_m"], close_rel=0.1)
         s0 = stats.get("icm-S0", [])
+        self.wait_for("fig5")  # its initial maps (fig5_init_errs)
         # paired by replicate: paper-sim1's initial map (Fig. 5's runs) should be the better one
         sec.add_claim(oc.better_initial_claim(getattr(self, "fig5_init_errs", []), [x["init_err"] for x in s0],
                                               "the paper's visibly wrong initial map (Fig. 5a) comes from MobileSim's "
@@ -736,6 +747,7 @@ class Reproduction:
         if st:
             reason = (f"with the 10 m laser ICM ends with {oc.pm([x['n_est'] for x in st], 1)} landmarks estimated "
                       f"of {oc.pm([x['n_true'] for x in st], 0)}, {oc.pm([x['missed'] for x in st], 1)} missed")
+        self.wait_for("fig5")  # its initial maps (fig5_init_errs)
         sec.add_claim(oc.better_initial_claim([x["init_err"] for x in st], getattr(self, "fig5_init_errs", []),
                                               "the 10 m laser gives a better initial map (Fig. 7 vs Fig. 5)",
                                               reason=reason))
@@ -1184,10 +1196,12 @@ def _run_sections_overlapped(todo: list[tuple[str, str]], rep: Reproduction, t0:
 
     A section holds ``rep.turn`` except while its sweep is in the pool, so the coordinator's own work (planning
     a sweep, reading its tables, matplotlib) is done by one section at a time. Sections start in order, each once
-    the one before has handed its first sweep to the pool or ended. Numbers do not depend on the overlap: every
-    run's result is a function of its configuration alone.
+    the one before has handed its first sweep to the pool or ended; one that reads what an earlier one found waits
+    for it (:meth:`Reproduction.wait_for`). Numbers do not depend on the overlap: every run's result is a
+    function of its configuration alone.
     """
     rep.turn = threading.Lock()
+    rep._ended = {key: threading.Event() for key, _ in todo}
     slots = threading.Semaphore(in_flight)
     sections: list[Section | None] = [None] * len(todo)
     escaped: list[BaseException] = []  # what a section let through (Ctrl-C reaching it from a worker)
@@ -1200,6 +1214,7 @@ def _run_sections_overlapped(todo: list[tuple[str, str]], rep: Reproduction, t0:
         except BaseException as exc:  # noqa: BLE001 - handed to the coordinating thread, raised there
             escaped.append(exc)
         finally:
+            rep._ended[key].set()
             started.set()
             slots.release()
 
