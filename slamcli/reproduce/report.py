@@ -281,11 +281,17 @@ class Reproduction:
     def wait_for(self, key: str) -> None:
         """Return once section ``key`` (one before the caller in :data:`SECTIONS`) has ended, when it runs beside
         the caller (overlapped sections; the turn is given up meanwhile); at once when it ended or is not run.
-        A section that reads what another one found calls this first."""
+        :meth:`found_by` reads what another section found through it."""
         ended = self._ended.get(key)
         if ended is not None and not ended.is_set():
             with self._turn_given_up():
                 ended.wait()
+
+    def found_by(self, key: str, name: str, default: Any = None) -> Any:
+        """The attribute ``name`` that section ``key`` (one before the caller in :data:`SECTIONS`) sets on this
+        reproduction, read once that section has ended (:meth:`wait_for`); ``default`` when it did not set it."""
+        self.wait_for(key)
+        return getattr(self, name, default)
 
     # -- report pieces ---------------------------------------------------------------------------------------------
 
@@ -699,9 +705,8 @@ class Reproduction:
 
         self._icm_checks(sec, stats, done, paper_final=PAPER["sim1_final_mean_err_m"], close_rel=0.1)
         s0 = stats.get("icm-S0", [])
-        self.wait_for("fig5")  # its initial maps (fig5_init_errs)
         # paired by replicate: paper-sim1's initial map (Fig. 5's runs) should be the better one
-        sec.add_claim(oc.better_initial_claim(getattr(self, "fig5_init_errs", []), [x["init_err"] for x in s0],
+        sec.add_claim(oc.better_initial_claim(self.found_by("fig5", "fig5_init_errs", []), [x["init_err"] for x in s0],
                                               "the paper's visibly wrong initial map (Fig. 5a) comes from MobileSim's "
                                               "robot and laser properties",
                                               names=("paper-sim1", "paper-sim1-mobilesim"), kind=vd.FINDING),
@@ -747,8 +752,7 @@ class Reproduction:
         if st:
             reason = (f"with the 10 m laser ICM ends with {oc.pm([x['n_est'] for x in st], 1)} landmarks estimated "
                       f"of {oc.pm([x['n_true'] for x in st], 0)}, {oc.pm([x['missed'] for x in st], 1)} missed")
-        self.wait_for("fig5")  # its initial maps (fig5_init_errs)
-        sec.add_claim(oc.better_initial_claim([x["init_err"] for x in st], getattr(self, "fig5_init_errs", []),
+        sec.add_claim(oc.better_initial_claim([x["init_err"] for x in st], self.found_by("fig5", "fig5_init_errs", []),
                                               "the 10 m laser gives a better initial map (Fig. 7 vs Fig. 5)",
                                               reason=reason))
 

@@ -108,7 +108,7 @@ def test_overlapped_sections_give_the_one_worker_report(tmp_path):
 
 class Reader(StandIn):
     """``s0`` finds a value while drawing, after ``s2`` has finished its sweep; ``s2`` reads it after its own
-    sweep, through :meth:`Reproduction.wait_for` (``wait=True``) or not."""
+    sweep, through :meth:`Reproduction.found_by` (``wait=True``) or directly."""
 
     def __init__(self, wait: bool) -> None:
         super().__init__(3)
@@ -126,9 +126,7 @@ class Reader(StandIn):
             self.found = "s0's value"
         if i == 2:
             self.s2_swept.set()
-            if self.wait:
-                self.wait_for("s0")
-            self.read = self.found
+            self.read = self.found_by("s0", "found") if self.wait else self.found
         return Section(f"s{i}", f"section {i}")
 
 
