@@ -316,7 +316,9 @@ def earlier_iterate_claim(series: Sequence[Sequence[float]], what: str, *, kind:
         v = [float(x) for x in s]
         if len(v) >= 3 and all(math.isfinite(x) for x in v[1:]):
             k = min(range(1, len(v) - 1), key=lambda i: v[i])
-            finals.append(v[-1]), bests.append(v[k]), where.append(k)
+            finals.append(v[-1])
+            bests.append(v[k])
+            where.append(k)
     ev = vd.evidence([f - b for f, b in zip(finals, bests)])
     if not finals:
         return vd.judge(what, ev, "no seed has two or more iterations", unit="m", kind=kind)

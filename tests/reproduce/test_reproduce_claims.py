@@ -53,7 +53,6 @@ def test_bound_and_falls_claims():
     assert oc.falls_claim([[4, 3, 2, 1], [1, 1, 2, 5]], "x", quantity="q", unit="mm").verdict == N  # 1 of 2
 
 
-
 def test_earlier_iterate_claim_compares_the_end_with_the_best_sweep_before_it():
     # init 0.5, best after a sweep 0.30, final 0.34: an earlier iterate was closer to the truth in every seed
     worse_end = [[0.5, 0.30, 0.32, 0.34], [0.5, 0.31, 0.33, 0.35], [0.6, 0.29, 0.31, 0.34]]
@@ -63,6 +62,7 @@ def test_earlier_iterate_claim_compares_the_end_with_the_best_sweep_before_it():
     # the initialisation (iteration 0) is not an "earlier iterate": lower than the end, yet not counted
     assert oc.earlier_iterate_claim([[0.1, 0.4, 0.3, 0.2], [0.1, 0.5, 0.3, 0.2]], "x").verdict == N
     assert "no seed" in oc.earlier_iterate_claim([[0.5, 0.4]], "x").numbers
+
 
 def test_faster_claim_counts_never_reached_as_one_more_than_the_maximum():
     assert oc.faster_claim([5, 6, 7], [20, 22, 21], "S = I", "S = 0", 30, "x", "c").verdict == R
