@@ -1260,17 +1260,17 @@ def reproduce(
     from slamcli.sweep.runner import git_revision
 
     t0 = time.perf_counter()
+    keys = [k for k, _ in SECTIONS]
+    if only:  # before anything is created: bad input leaves no output folder
+        unknown = [k for k in only if k not in keys]
+        if unknown:
+            raise ConfigError(f"--section: unknown section(s) {', '.join(unknown)}; known: {', '.join(keys)}")
     if workers is None:
         workers = 1 if quick else max(1, min(2, os.cpu_count() or 1))
     rep = Reproduction(Path(out_dir), quick=quick, workers=workers,
                        experiments_dir=Path(experiments_dir) if experiments_dir else default_experiments_dir(),
                        log=log, executor=executor, scheduler=scheduler)
     rep.out.mkdir(parents=True, exist_ok=True)
-    keys = [k for k, _ in SECTIONS]
-    if only:
-        unknown = [k for k in only if k not in keys]
-        if unknown:
-            raise ConfigError(f"--section: unknown section(s) {', '.join(unknown)}; known: {', '.join(keys)}")
     from slamcli.sweep.runner import LocalPool, make_executor
 
     todo = [(key, target) for key, target in SECTIONS if not only or key in only]

@@ -177,6 +177,7 @@ def test_failed_section_makes_reproduce_exit_nonzero_with_a_summary(tmp_path):
     assert "**1 section(s) FAILED**" in report and "Section status: **FAILED**" in report
     bad = CliRunner().invoke(app, ["reproduce", "--quick", "--out", str(tmp_path / "o2"), "--section", "nope"])
     assert bad.exit_code == 1 and "unknown section" in bad.output
+    assert "Traceback" not in bad.output and not (tmp_path / "o2").exists()  # nothing created
 
 
 def test_packaged_experiments_are_the_default_not_the_cwd(tmp_path, monkeypatch):
